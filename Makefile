@@ -1,0 +1,34 @@
+# Two commands for a newcomer: `make demo` and `make test`. Both create .venv
+# and install the project into it (from the package registry) when missing.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+OUT    ?= out
+
+.PHONY: demo test bench lint clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p $(OUT)
+	$(BIN)/python -m data_synth $(OUT)/demo.binary --model ggx \
+		--param kd=0.12,0.08,0.05 --param ks=0.9,0.8,0.6 --param alpha=0.12 --param f0=0.7 \
+		--noise 0.03 --missing 0.05
+	$(BIN)/brdffit fit $(OUT)/demo.binary --model ggx
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python -m bench
+
+lint: $(STAMP)
+	$(BIN)/ruff check brdffit api data_synth tests bench
+
+clean:
+	rm -rf $(OUT) .pytest_cache

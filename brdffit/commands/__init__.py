@@ -1,0 +1,1 @@
+"""One module per ``brdffit`` subcommand, each with ``register(subparsers)``."""

@@ -1,0 +1,20 @@
+"""The exceptions brdffit raises on bad input. Shells turn them into messages."""
+
+from __future__ import annotations
+
+
+class BrdffitError(Exception):
+    """Base of every error that is the input's fault, not a bug."""
+
+
+class MerlFormatError(BrdffitError, ValueError):
+    """A file or buffer that is not a valid MERL ``.binary`` table."""
+
+    def __init__(self, source: str, problem: str):
+        self.source = source
+        self.problem = problem
+        super().__init__(f"{source}: {problem}")
+
+
+class FitInputError(BrdffitError, ValueError):
+    """Fit options or a table that a fit cannot work with (explained in the message)."""

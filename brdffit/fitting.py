@@ -1,0 +1,317 @@
+"""Fit an analytic model to a MERL table: ``fit(table, "ggx") -> FitResult``.
+
+The pipeline, and where each decision is documented:
+
+1. usable bins and solid-angle weights (``brdffit.sampling``, ``brdffit.grid``);
+2. a fixed-size stratified subsample for the solver (``brdffit.sampling``);
+3. data-driven start candidates scored in one batched call
+   (``brdffit.initialisation``), the best ``starts`` kept;
+4. an optimistix least-squares solve from each start, batched with ``vmap``,
+   on the compressed loss of ``brdffit.loss``; failures stay values
+   (``throw=False``) and are reported, never raised;
+5. the error metrics of the best solution on **every** usable bin of the table.
+
+Compiled functions are keyed on (model, solver, sample count, precision) only:
+the data always travels through ``args``, so the second table with the same
+settings reuses the compiled fit, and the persistent cache (``brdffit.runtime``)
+carries it over to the next process.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import time
+from dataclasses import asdict, dataclass, field
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from . import initialisation, models
+from .errors import FitInputError
+from .grid import bin_grid
+from .loss import LossData, error_metrics, normal_equations, residuals, sum_squares
+from .merl import MerlTable
+from .models.frame import Frame, shading_frame
+from .sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
+from .solvers import NormalLevenbergMarquardt
+
+PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
+
+
+def _make_solver(name: str, precision: str):
+    # float32 cannot resolve relative changes much below 1e-6: looser tolerances
+    # there stop the solver at its attainable accuracy instead of at max_steps.
+    rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-8)
+    return {
+        "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol),
+        "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
+        "dogleg": lambda: optx.Dogleg(rtol=rtol, atol=atol),
+        "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
+    }[name]()
+
+
+#: "lm" is brdffit's normal-equations Levenberg-Marquardt (``brdffit.solvers``);
+#: "optx-lm" is optimistix's own, kept for comparison.
+SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
+#: Built once per (name, precision) and passed to the compiled solve as static.
+_SOLVER_CACHE = {(s, p): _make_solver(s, p) for s in SOLVERS for p in PRECISIONS}
+
+_RESULT_NAMES = {
+    int(item._value): name for name, item in optx.RESULTS._name_to_item.items()
+}
+
+
+# -- compiled pieces -----------------------------------------------------------
+
+
+@eqx.filter_jit
+def _score(model, u_batch, data):
+    return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
+
+
+@eqx.filter_jit
+def _solve_batch(model, solver, u_batch, data, max_steps):
+    def one(u0):
+        options = (
+            {"normal_equations": normal_equations}
+            if isinstance(solver, NormalLevenbergMarquardt)
+            else None
+        )
+        sol = optx.least_squares(
+            residuals, solver, u0, args=(model, data), options=options,
+            max_steps=max_steps, throw=False,
+        )
+        # Return values, not the Solution: its state holds a jaxpr.
+        return sol.value, sol.result._value, sol.stats["num_steps"], sum_squares(
+            sol.value, model, data
+        )
+
+    return jax.vmap(one)(u_batch)
+
+
+@eqx.filter_jit
+def _metrics(model, u, data):
+    return error_metrics(u, model, data)
+
+
+# -- data preparation --------------------------------------------------------------
+
+
+@functools.cache
+def _device_frames(dtype_name: str) -> Frame:
+    """The shading frame of every bin centre, on the device, computed once per
+    process: only targets and weights travel per table."""
+    g = bin_grid()
+    return jax.jit(shading_frame)(jnp.asarray(g.wi, dtype_name), jnp.asarray(g.wo, dtype_name))
+
+
+@functools.cache
+def _above_horizon_index() -> np.ndarray:
+    return np.flatnonzero(bin_grid().above_horizon)
+
+
+@functools.cache
+def _device_above_horizon_frames(dtype_name: str) -> Frame:
+    idx = jnp.asarray(_above_horizon_index())
+    return jax.tree_util.tree_map(lambda a: a[idx], _device_frames(dtype_name))
+
+
+def _make_loss_data(table, index, weight, dtype, frame: Frame) -> LossData:
+    values = table.rgb.reshape(3, -1)[:, index].T
+    target = np.log1p(values * bin_grid().cos_i[index][:, None])
+    return LossData(frame=frame, target=jnp.asarray(target, dtype),
+                    weight=jnp.asarray(weight, dtype))
+
+
+def sample_data(table: MerlTable, index: np.ndarray, weight: np.ndarray, dtype=jnp.float64) -> LossData:
+    """The bins ``index`` (flat) of ``table`` with their ``weight``s, ready for a loss."""
+    idx = jnp.asarray(index)
+    frame = jax.tree_util.tree_map(lambda a: a[idx], _device_frames(jnp.dtype(dtype).name))
+    return _make_loss_data(table, index, weight, dtype, frame)
+
+
+def full_table_data(table: MerlTable, weight: np.ndarray, dtype=jnp.float64) -> LossData:
+    """Every bin above the horizon (a fixed shape), weighted by ``weight`` (flat)."""
+    index = _above_horizon_index()
+    frame = _device_above_horizon_frames(jnp.dtype(dtype).name)
+    return _make_loss_data(table, index, weight[index], dtype, frame)
+
+
+def _every(data: LossData, k: int) -> LossData:
+    return jax.tree_util.tree_map(lambda a: a[::k], data)
+
+
+# -- the result ----------------------------------------------------------------------
+
+
+@dataclass
+class FitResult:
+    """The outcome of one fit, failed or not, as plain Python values.
+
+    ``params`` uses the MODELS.md names: RGB parameters are lists of 3 floats,
+    shape parameters floats. ``error`` holds ``log_rmse`` (see ``brdffit.loss``)
+    and friends, on the full table. ``result`` is optimistix's result code name
+    (``"successful"``, ``"nonlinear_max_steps_reached"``, ...); ``converged`` is
+    True only for ``"successful"``.
+    """
+
+    model: str
+    params: dict[str, float | list[float]]
+    error: dict[str, float]
+    converged: bool
+    result: str
+    steps: int
+    time_s: float
+    samples: dict[str, int | dict[str, int]]
+    solver: str = "lm"
+    precision: str = "float64"
+    starts: int = 1
+    table: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def log_rmse(self) -> float:
+        return self.error["log_rmse"]
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def to_json(self, **kw) -> str:
+        return json.dumps(self.to_dict(), **kw)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FitResult:
+        return cls(**d)
+
+    def param_arrays(self) -> dict[str, np.ndarray]:
+        """Params as numpy arrays, ready for ``model(params, wi, wo)``."""
+        return {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
+
+
+def _plain(params: dict) -> dict:
+    out = {}
+    for k, v in params.items():
+        a = np.asarray(v, dtype=np.float64)
+        out[k] = a.tolist() if a.ndim else float(a)
+    return out
+
+
+# -- the front door ------------------------------------------------------------------
+
+
+def fit(
+    table: MerlTable,
+    model: str | models.AbstractBRDFModel = "ggx",
+    *,
+    solver: str = "lm",
+    samples: int | None = DEFAULT_SAMPLES,
+    precision: str = "float64",
+    starts: int = 2,
+    max_steps: int = 256,
+    seed: int = 0,
+    init: dict | None = None,
+    bin_weight: np.ndarray | None = None,
+) -> FitResult:
+    """Fit ``model`` to ``table``; see the module docstring for the pipeline.
+
+    Args:
+        table: the measured table (``brdffit.merl.read``).
+        model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
+        solver: ``"lm"`` (Levenberg-Marquardt, default), ``"dogleg"`` or ``"bfgs"``.
+        samples: bins the solver sees (stratified subsample), ``None`` for all.
+            The reported error is always on the full table.
+        precision: ``"float64"`` (default) or ``"float32"`` for the solve.
+        starts: how many of the best-scoring start candidates to refine.
+        max_steps: solver step limit per start.
+        seed: subsample seed (fits are deterministic for a given seed).
+        init: optional starting params (MODELS.md names), used as the only start.
+        bin_weight: optional flat weight per bin (90*90*180, >= 0) multiplying the
+            solid-angle weight: a scene's use of directions. Bins with weight 0
+            are excluded from the loss and from the error.
+    """
+    t0 = time.perf_counter()
+    m = models.get(model)
+    if solver not in SOLVERS:
+        raise FitInputError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    if precision not in PRECISIONS:
+        raise FitInputError(f"unknown precision {precision!r}; choose float64 or float32")
+    if samples is not None and (not isinstance(samples, int) or samples < 64):
+        raise FitInputError(f"samples must be an integer >= 64 or None, got {samples!r}")
+    if not isinstance(starts, int) or starts < 1:
+        raise FitInputError(f"starts must be a positive integer, got {starts!r}")
+    if not isinstance(max_steps, int) or max_steps < 1:
+        raise FitInputError(f"max_steps must be a positive integer, got {max_steps!r}")
+    if bin_weight is not None:
+        bin_weight = np.asarray(bin_weight, dtype=np.float64).ravel()
+        if bin_weight.size != table.mask.size or not np.all(np.isfinite(bin_weight)):
+            raise FitInputError("bin_weight needs one finite value per MERL bin")
+        if np.any(bin_weight < 0):
+            raise FitInputError("bin_weight must be >= 0")
+
+    counts = usable_bins(table, bin_weight)
+    n_usable = int(np.count_nonzero(counts.usable))
+    if n_usable < m.n_params * 4:
+        raise FitInputError(
+            f"{table.source}: only {n_usable} usable bins (measured, finite, above the "
+            f"horizon{', weighted by the scene' if bin_weight is not None else ''}); "
+            f"{m.name} needs at least {m.n_params * 4}"
+        )
+    weight = bin_weights(counts.usable, bin_weight)
+    sample_set = stratified_sample(weight, samples, seed)
+    dtype = PRECISIONS[precision]
+    data = sample_data(table, sample_set.index, sample_set.weight, dtype)
+
+    if init is not None:
+        u_candidates = m.unconstrain(m.check_params(init))[None]
+    else:
+        u_candidates = initialisation.candidates(m, table, counts.usable)
+    # Score candidates on every 8th sample: ranking starts needs no more.
+    scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), _every(data, 8)))
+    scores = np.where(np.isfinite(scores), scores, np.inf)
+    k = min(starts, len(u_candidates))
+    best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+
+    values, codes, steps, losses = _solve_batch(
+        m, _SOLVER_CACHE[solver, precision], jnp.asarray(best_starts, dtype), data, max_steps
+    )
+    values = np.asarray(values, np.float64)
+    codes, steps, losses = np.asarray(codes), np.asarray(steps), np.asarray(losses, np.float64)
+    finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
+    if finite.any():
+        i = int(np.argmin(np.where(finite, losses, np.inf)))
+        u_best, result = values[i], _RESULT_NAMES.get(int(codes[i]), "unknown")
+    else:  # every start diverged: report the best start itself, flagged as such
+        i = 0
+        u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
+
+    full = full_table_data(table, weight)
+    metrics = {k: float(v) for k, v in _metrics(m, jnp.asarray(u_best), full).items()}
+    metrics["sample_log_rmse"] = float(np.sqrt(max(losses[i], 0.0) / 3.0)) if finite.any() else float("nan")
+    params = _plain(m.constrain(jnp.asarray(u_best)))
+    return FitResult(
+        model=m.name,
+        params=params,
+        error=metrics,
+        converged=result == "successful",
+        result=result,
+        steps=int(steps[i]),
+        time_s=time.perf_counter() - t0,
+        samples={
+            "used": sample_set.n_used,
+            "usable": n_usable,
+            "measured": counts.measured,
+            "dropped": {
+                "unmeasured": counts.unmeasured,
+                "nonfinite": counts.nonfinite,
+                "below_horizon": counts.below_horizon,
+            },
+        },
+        solver=solver,
+        precision=precision,
+        starts=k,
+        table=table.source,
+    )

@@ -1,0 +1,172 @@
+"""What every BRDF model is: named, bounded parameters and a vectorised evaluation.
+
+A model is an immutable :class:`equinox.Module` (its configuration, if any, as
+static fields). ``model(params, wi, wo)`` evaluates one batch of direction pairs;
+batching over parameters or tables is the caller's ``jax.vmap``.
+
+Parameters are a ``dict`` keyed by the MODELS.md names; RGB parameters have shape
+``(3,)``, shape parameters are scalars. Fitting works on an unconstrained vector
+``u`` and maps it to the bounded parameters with :meth:`ParamSpec.constrain`.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .frame import Frame, shading_frame
+
+Params = dict[str, Array]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: its MODELS.md name, range, and how a fit keeps it in range.
+
+    ``scale="log"`` spaces a bounded interval logarithmically (``alpha``, ``n``):
+    a step of the optimiser then changes the parameter by a ratio, which is what
+    lobe widths need. An interval with no upper bound uses a softplus.
+    """
+
+    name: str
+    doc: str
+    lower: float = 0.0
+    upper: float | None = None
+    rgb: bool = False
+    scale: str = "linear"
+
+    @property
+    def size(self) -> int:
+        return 3 if self.rgb else 1
+
+    def describe_range(self) -> str:
+        hi = "inf" if self.upper is None else f"{self.upper:g}"
+        return f"[{self.lower:g}, {hi}]" + (" (log)" if self.scale == "log" else "")
+
+    def constrain(self, u: Array) -> Array:
+        """Unconstrained -> parameter value, smooth and strictly inside the range."""
+        if self.upper is None:
+            return self.lower + jax.nn.softplus(u)
+        s = jax.nn.sigmoid(u)
+        if self.scale == "log":
+            lo, hi = math.log(self.lower), math.log(self.upper)
+            return jnp.exp(lo + (hi - lo) * s)
+        return self.lower + (self.upper - self.lower) * s
+
+    def unconstrain(self, value) -> np.ndarray:
+        """Inverse of :meth:`constrain` (numpy, for initial values); clips into range."""
+        v = np.asarray(value, dtype=np.float64)
+        if self.upper is None:
+            x = np.maximum(v - self.lower, 1e-12)
+            # inverse softplus, stable for large x
+            return x + np.log(-np.expm1(-x))
+        if self.scale == "log":
+            lo, hi = math.log(self.lower), math.log(self.upper)
+            s = (np.log(np.clip(v, self.lower, self.upper)) - lo) / (hi - lo)
+        else:
+            s = (v - self.lower) / (self.upper - self.lower)
+        s = np.clip(s, 1e-9, 1 - 1e-9)
+        return np.log(s) - np.log1p(-s)
+
+
+KD = ParamSpec("kd", "diffuse albedo (RGB)", 0.0, None, rgb=True)
+KS = ParamSpec("ks", "specular scale (RGB)", 0.0, None, rgb=True)
+
+
+class AbstractBRDFModel(eqx.Module):
+    """A BRDF f_r(wi, wo) in 1/sr, RGB, never multiplied by the cosine."""
+
+    name: ClassVar[str]
+    param_specs: ClassVar[tuple[ParamSpec, ...]]
+    #: Shape-parameter values tried when seeding a fit (see brdffit.initialisation).
+    shape_grid: ClassVar[tuple[dict[str, float], ...]] = ({},)
+
+    @abc.abstractmethod
+    def eval_frame(self, params: Params, frame: Frame) -> Float[Array, "... 3"]:
+        """The BRDF on precomputed frame quantities."""
+
+    def __call__(
+        self, params: Params, wi: Float[Array, "... 3"], wo: Float[Array, "... 3"]
+    ) -> Float[Array, "... 3"]:
+        return self.eval_frame(params, shading_frame(wi, wo))
+
+    # -- parameter vectors -------------------------------------------------------
+
+    @property
+    def n_params(self) -> int:
+        return sum(s.size for s in self.param_specs)
+
+    def constrain(self, u: Float[Array, " n"]) -> Params:
+        """Unconstrained vector -> parameter dict."""
+        out, i = {}, 0
+        for spec in self.param_specs:
+            chunk = u[i : i + spec.size]
+            out[spec.name] = spec.constrain(chunk if spec.rgb else chunk[0])
+            i += spec.size
+        return out
+
+    def unconstrain(self, params: dict) -> np.ndarray:
+        """Parameter dict (floats, lists or arrays) -> unconstrained numpy vector."""
+        parts = []
+        for spec in self.param_specs:
+            v = np.broadcast_to(np.asarray(params[spec.name], np.float64), (spec.size,))
+            parts.append(spec.unconstrain(v))
+        return np.concatenate(parts)
+
+    def check_params(self, params: dict) -> dict:
+        """Validate a user-given parameter dict; returns it with numpy values.
+
+        Raises ``ValueError`` naming the parameter for a missing, unknown, badly
+        shaped, non-finite or out-of-range value.
+        """
+        names = {s.name for s in self.param_specs}
+        unknown = set(params) - names
+        if unknown:
+            raise ValueError(
+                f"{self.name}: unknown parameter(s) {sorted(unknown)}; "
+                f"expected {sorted(names)}"
+            )
+        out = {}
+        for spec in self.param_specs:
+            if spec.name not in params:
+                raise ValueError(f"{self.name}: missing parameter {spec.name!r}")
+            v = np.asarray(params[spec.name], dtype=np.float64)
+            if v.size == 1 and spec.rgb:
+                v = np.full(3, float(v.reshape(())))
+            if v.shape not in ((spec.size,), ()) or v.size != spec.size:
+                raise ValueError(
+                    f"{self.name}: {spec.name} needs {spec.size} value(s), got {v.size}"
+                )
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"{self.name}: {spec.name} is not finite")
+            hi = np.inf if spec.upper is None else spec.upper
+            if np.any(v < spec.lower) or np.any(v > hi):
+                raise ValueError(
+                    f"{self.name}: {spec.name}={v.tolist()} outside {spec.describe_range()}"
+                )
+            out[spec.name] = v if spec.rgb else v.reshape(())
+        return out
+
+
+class AbstractLobeModel(AbstractBRDFModel):
+    """``f = kd/pi + ks * lobe``: a Lambertian base plus one specular lobe.
+
+    Subclasses define :meth:`lobe` (a scalar field over the batch) and the
+    lobe's shape parameters after ``kd`` and ``ks``.
+    """
+
+    @abc.abstractmethod
+    def lobe(self, params: Params, frame: Frame) -> Float[Array, "..."]:
+        """The lobe's value (1/sr) for unit ``ks``; shared by the three channels."""
+
+    def eval_frame(self, params: Params, frame: Frame) -> Float[Array, "... 3"]:
+        lobe = self.lobe(params, frame)[..., None]
+        return params["kd"] / jnp.pi + params["ks"] * lobe

@@ -1,0 +1,43 @@
+"""Beckmann microfacet lobe, height-correlated Smith.
+
+D = exp(-tan^2(theta_h) / alpha^2) / (pi alpha^2 cos_h^4),
+Lambda(w) = (erf(m) - 1)/2 + exp(-m^2) / (2 m sqrt(pi)),  m = 1 / (alpha tan theta_w).
+
+| name  | range        | meaning                                   |
+|-------|--------------|-------------------------------------------|
+| kd    | [0, inf)     | diffuse albedo, RGB                       |
+| ks    | [0, inf)     | specular scale, RGB                       |
+| alpha | [1e-3, 2]    | RMS slope (log scale in the fit)          |
+| f0    | [0, 1]       | Schlick reflectance at normal incidence   |
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+from jax.scipy.special import erfc
+
+from .guarded import safe_div, safe_sqrt
+from .microfacet import AbstractMicrofacetModel
+
+_SQRT_PI = math.sqrt(math.pi)
+
+
+class Beckmann(AbstractMicrofacetModel):
+    name = "beckmann"
+
+    def ndf(self, alpha, cos_h, sin2_h):
+        a2 = alpha * alpha
+        c2 = cos_h * cos_h
+        tan2 = safe_div(sin2_h, c2, 1e-300)
+        # exp(-tan^2/a^2) / cos^4 in log space: both factors blow up at grazing h.
+        log_d = -tan2 / a2 - 2.0 * jnp.log(jnp.maximum(c2, 1e-300)) - jnp.log(jnp.pi * a2)
+        return jnp.exp(jnp.minimum(log_d, 700.0))
+
+    def cos_lambda(self, alpha, cos, sin2):
+        # cos * Lambda = -cos erfc(m)/2 + (cos/m) exp(-m^2)/(2 sqrt(pi)), with
+        # cos/m = alpha sin: bounded at grazing (m -> 0) and at the normal (m -> inf).
+        a_sin = alpha * safe_sqrt(sin2)
+        m = jnp.minimum(safe_div(cos, a_sin, 1e-300), 1e4)
+        return -cos * erfc(m) / 2.0 + a_sin * jnp.exp(-m * m) / (2.0 * _SQRT_PI)

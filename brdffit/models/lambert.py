@@ -1,0 +1,22 @@
+"""Lambert: f = kd / pi.
+
+| name | range   | meaning                  |
+|------|---------|--------------------------|
+| kd   | [0, inf)| diffuse albedo, RGB      |
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .base import KD, AbstractBRDFModel
+
+
+class Lambert(AbstractBRDFModel):
+    name = "lambert"
+    param_specs = (KD,)
+
+    def eval_frame(self, params, frame):
+        return jnp.broadcast_to(
+            params["kd"] / jnp.pi, frame.cos_i.shape + (3,)
+        ).astype(frame.cos_i.dtype)

@@ -1,0 +1,43 @@
+"""Oren-Nayar (qualitative model, Oren & Nayar 1994), as in MODELS.md.
+
+f = kd/pi * (A + B max(0, cos(phi_i - phi_o)) sin(a) tan(b)),
+A = 1 - s^2 / (2 (s^2 + 0.33)), B = 0.45 s^2 / (s^2 + 0.09),
+a = max(theta_i, theta_o), b = min(theta_i, theta_o).
+
+| name  | range      | meaning                               |
+|-------|------------|---------------------------------------|
+| kd    | [0, inf)   | diffuse albedo, RGB                   |
+| sigma | [0, pi/2]  | facet slope std. deviation, radians   |
+
+Why the rewrite below: sin(a) tan(b) = max(sin) min(sin) / max(cos)
+= sin_i sin_o / max(cos_i, cos_o), and cos(phi_i - phi_o) sin_i sin_o is the dot
+product of the tangent-plane projections of wi and wo. So the whole B term is
+``max(0, wi_xy . wo_xy) / max(cos_i, cos_o)``: no angle, no tan, no atan2, and
+finite everywhere except both directions exactly grazing (floored there).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+
+from .base import KD, AbstractBRDFModel, ParamSpec
+from .guarded import safe_div
+
+SIGMA = ParamSpec("sigma", "facet slope std. deviation (radians)", 0.0, math.pi / 2)
+
+
+class OrenNayar(AbstractBRDFModel):
+    name = "oren_nayar"
+    param_specs = (KD, SIGMA)
+    shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
+
+    def eval_frame(self, params, frame):
+        s2 = params["sigma"] ** 2
+        a = 1.0 - s2 / (2.0 * (s2 + 0.33))
+        b = 0.45 * s2 / (s2 + 0.09)
+        term = safe_div(
+            jnp.maximum(frame.dot_xy, 0.0), jnp.maximum(frame.cos_i, frame.cos_o), 1e-12
+        )
+        return params["kd"] / jnp.pi * (a + b * term)[..., None]

@@ -1,0 +1,130 @@
+"""Levenberg-Marquardt on the fused normal equations, as an optimistix solver.
+
+Why our own: optimistix's ``LevenbergMarquardt`` keeps the Jacobian as a lazy
+linear operator and solves the damped problem by QR of the stacked
+``[J; sqrt(lambda) I]``: robust, but on a BRDF fit (~10^5 residuals, <= 16
+parameters) each step costs ~15x one forward-mode Jacobian. Here each trial
+point costs one ``jacfwd`` (all parameter tangents in one vectorised pass),
+then ``J^T J`` (p x p) and ``J^T r``, and the damped step is a p x p solve.
+For p this small the normal equations lose nothing that matters: the fit's
+parameters are well scaled by their transforms, and the damping keeps the
+system positive definite.
+
+It plugs into ``optimistix.least_squares`` like any solver: same ``rtol`` /
+``atol`` Cauchy termination, ``throw=False`` results, ``num_steps`` stats.
+
+Damping follows Nielsen (1999): lambda *= max(1/3, 1 - (2 rho - 1)^3) on an
+accepted step, lambda *= nu, nu *= 2 on a rejected one; Marquardt's scaling
+by diag(J^T J) makes the damping invariant to parameter scale.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jax.flatten_util import ravel_pytree
+from jaxtyping import Array, Bool, Float
+
+#: Damping beyond which no step can change the parameters at float precision:
+#: the iterate is as good as it gets, and the solve stops.
+_LAMBDA_MAX = 1e14
+
+
+class _LMState(eqx.Module):
+    loss: Float[Array, ""]
+    jtj: Float[Array, "p p"]
+    jtr: Float[Array, " p"]
+    lam: Float[Array, ""]
+    nu: Float[Array, ""]
+    terminate: Bool[Array, ""]
+    result: optx.RESULTS
+
+
+def _residual_and_normal(fn, y, args, options):
+    """sum r^2, J^T J and J^T r at y.
+
+    ``options["normal_equations"]``, when given, computes them from (y, args)
+    exploiting the problem's structure; otherwise one forward-mode pass.
+    """
+    if options and "normal_equations" in options:
+        return options["normal_equations"](y, args)
+    flat, unravel = ravel_pytree(y)
+
+    def flat_fn(v):
+        out, _ = fn(unravel(v), args)
+        r, _ = ravel_pytree(out)
+        return r, r
+
+    jac, r = jax.jacfwd(flat_fn, has_aux=True)(flat)
+    return jnp.sum(r * r), jac.T @ jac, jac.T @ r
+
+
+class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
+    """Levenberg-Marquardt for small parameter vectors and many residuals."""
+
+    rtol: float
+    atol: float
+    norm: Callable = optx.max_norm
+    lambda0: float = 1e-3
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        loss, jtj, jtr = _residual_and_normal(fn, y, args, options)
+        finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(jtr))
+        dtype = loss.dtype
+        return _LMState(
+            loss=loss,
+            jtj=jtj,
+            jtr=jtr,
+            lam=jnp.asarray(self.lambda0, dtype),
+            nu=jnp.asarray(2.0, dtype),
+            terminate=~finite,
+            result=optx.RESULTS.where(finite, optx.RESULTS.successful, optx.RESULTS.nonfinite),
+        )
+
+    def step(self, fn, y, args, options, state: _LMState, tags):
+        flat, unravel = ravel_pytree(y)
+        p = flat.size
+        diag = jnp.maximum(jnp.diag(state.jtj), 1e-12 * jnp.max(jnp.diag(state.jtj)) + 1e-300)
+        system = state.jtj + state.lam * jnp.diag(diag)
+        delta = jnp.linalg.solve(system, -state.jtr)
+        delta = jnp.where(jnp.all(jnp.isfinite(delta)), delta, jnp.zeros(p, flat.dtype))
+        y_new_flat = flat + delta
+        loss_new, jtj_new, jtr_new = _residual_and_normal(fn, unravel(y_new_flat), args, options)
+
+        predicted = -(2.0 * delta @ state.jtr + delta @ state.jtj @ delta)
+        actual = state.loss - loss_new
+        ok = jnp.isfinite(loss_new) & jnp.all(jnp.isfinite(jtr_new)) & jnp.all(jnp.isfinite(jtj_new))
+        rho = jnp.where(predicted > 0, actual / jnp.where(predicted > 0, predicted, 1.0), -1.0)
+        accept = ok & (rho > 1e-4)
+
+        lam_acc = state.lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        lam = jnp.where(accept, lam_acc, state.lam * state.nu)
+        nu = jnp.where(accept, 2.0, state.nu * 2.0)
+
+        y_scale = self.atol + self.rtol * jnp.abs(y_new_flat)
+        small_step = self.norm(jnp.abs(delta) / y_scale) < 1
+        small_change = jnp.abs(actual) < self.atol + self.rtol * jnp.abs(state.loss)
+        converged = accept & small_step & small_change
+        stuck = lam > _LAMBDA_MAX  # no representable step improves the loss
+        keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
+        state = _LMState(
+            loss=keep(loss_new, state.loss),
+            jtj=keep(jtj_new, state.jtj),
+            jtr=keep(jtr_new, state.jtr),
+            lam=jnp.minimum(lam, 2 * _LAMBDA_MAX),
+            nu=nu,
+            terminate=converged | stuck,
+            result=optx.RESULTS.successful,
+        )
+        return unravel(keep(y_new_flat, flat)), state, None
+
+    def terminate(self, fn, y, args, options, state: _LMState, tags):
+        return state.terminate, state.result
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result) -> tuple[Any, Any, dict]:
+        return y, aux, {"loss": state.loss, "damping": state.lam}

@@ -1,0 +1,161 @@
+"""Write MERL tables from the analytic models of ``brdffit.models``.
+
+Each bin holds the model's value at the bin centre (MODELS.md's sample
+position); bins whose centre is below the horizon are written unmeasured
+(raw -1), as MERL does. Optional degradations, in this order:
+
+- ``noise``: multiplicative Gaussian, value * max(0, 1 + noise * N(0, 1));
+- ``missing``: that fraction of the measured bins, chosen at random, unmeasured;
+- ``keep``: a boolean mask over the flat bins (a preset's region, e.g. grazing only).
+
+A table may sum several components (two lobes): ``Component(model, params)``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+import brdffit  # noqa: F401  (JAX runtime settings: float64)
+from brdffit import merl, models
+from brdffit.grid import bin_grid
+
+DEFAULT_PARAMS: dict[str, dict] = {
+    "lambert": {"kd": [0.5, 0.35, 0.2]},
+    "oren_nayar": {"kd": [0.5, 0.35, 0.2], "sigma": 0.5},
+    "phong": {"kd": [0.2, 0.15, 0.1], "ks": [0.3, 0.3, 0.3], "n": 80.0},
+    "blinn_phong": {"kd": [0.2, 0.15, 0.1], "ks": [0.3, 0.3, 0.3], "n": 120.0},
+    "ggx": {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6},
+    "beckmann": {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6},
+}
+
+
+@dataclass(frozen=True)
+class Component:
+    model: str
+    params: dict
+
+
+def render_values(components: list[Component]) -> np.ndarray:
+    """Model values at every bin centre, flat (3, 90*90*180); 0 below the horizon."""
+    g = bin_grid()
+    idx = np.flatnonzero(g.above_horizon)
+    wi, wo = jnp.asarray(g.wi[idx]), jnp.asarray(g.wo[idx])
+    total = np.zeros((idx.size, 3))
+    for c in components:
+        m = models.get(c.model)
+        p = {k: jnp.asarray(v) for k, v in m.check_params(c.params).items()}
+        total += np.asarray(m(p, wi, wo))
+    out = np.zeros((3, g.weight.size))
+    out[:, idx] = total.T
+    return out
+
+
+def make_table(
+    model: str | list[Component],
+    params: dict | None = None,
+    *,
+    noise: float = 0.0,
+    missing: float = 0.0,
+    keep: np.ndarray | None = None,
+    seed: int = 0,
+    source: str = "<synthetic>",
+) -> tuple[merl.MerlTable, dict]:
+    """A synthetic table and the truth that made it (JSON-ready dict)."""
+    if isinstance(model, str):
+        components = [Component(model, {**DEFAULT_PARAMS.get(model, {}), **(params or {})})]
+    else:
+        components = list(model)
+    if not 0 <= noise < 10 or not 0 <= missing < 1:
+        raise ValueError("noise must be in [0, 10) and missing in [0, 1)")
+    values = render_values(components)
+    g = bin_grid()
+    mask = g.above_horizon.copy()
+    rng = np.random.default_rng(seed)
+    if noise > 0:
+        values = values * np.maximum(0.0, 1.0 + noise * rng.standard_normal(values.shape))
+    if missing > 0:
+        mask &= rng.random(mask.size) >= missing
+    if keep is not None:
+        mask &= np.asarray(keep, dtype=bool).ravel()
+    table = merl.MerlTable.from_values(values, mask, source=source)
+    truth = {
+        "model": components[0].model if len(components) == 1 else "+".join(c.model for c in components),
+        "params": _plain(components[0].params) if len(components) == 1 else None,
+        "components": [{"model": c.model, "params": _plain(c.params)} for c in components],
+        "noise": noise,
+        "missing": missing,
+        "seed": seed,
+        "measured_bins": table.n_measured,
+    }
+    return table, truth
+
+
+def _plain(params: dict) -> dict:
+    return {k: (np.asarray(v, float).tolist()) for k, v in params.items()}
+
+
+def _grazing_keep() -> np.ndarray:
+    g = bin_grid()
+    return (g.cos_i < 0.35) | (g.cos_o < 0.35)
+
+
+#: Named hard cases: (components, make_table keyword arguments).
+PRESETS: dict[str, tuple[list[Component], dict]] = {
+    "near-mirror": (
+        [Component("ggx", {"kd": [0.02, 0.02, 0.02], "ks": [1.0, 1.0, 1.0], "alpha": 0.01, "f0": 0.9})],
+        {},
+    ),
+    "pure-diffuse": (
+        [Component("ggx", {"kd": [0.6, 0.4, 0.3], "ks": [0.0, 0.0, 0.0], "alpha": 0.2, "f0": 0.5})],
+        {},
+    ),
+    "strong-fresnel": (
+        [Component("ggx", {"kd": [0.1, 0.1, 0.1], "ks": [1.0, 1.0, 1.0], "alpha": 0.1, "f0": 0.02})],
+        {},
+    ),
+    "two-lobes": (
+        [
+            Component("ggx", {"kd": [0.1, 0.08, 0.05], "ks": [0.5, 0.5, 0.5], "alpha": 0.03, "f0": 1.0}),
+            Component("ggx", {"kd": [0.0, 0.0, 0.0], "ks": [0.4, 0.4, 0.4], "alpha": 0.3, "f0": 1.0}),
+        ],
+        {},
+    ),
+    "grazing-heavy": (
+        [Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.2})],
+        {"keep": "grazing"},
+    ),
+    "noisy-missing": (
+        [Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6})],
+        {"noise": 0.2, "missing": 0.5},
+    ),
+    "sharp-phong": (
+        [Component("phong", {"kd": [0.1, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "n": 1e4})],
+        {},
+    ),
+}
+
+
+def make_preset(name: str, seed: int = 0) -> tuple[merl.MerlTable, dict]:
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    components, kw = PRESETS[name]
+    kw = dict(kw)
+    if kw.get("keep") == "grazing":
+        kw["keep"] = _grazing_keep()
+    table, truth = make_table(components, seed=seed, source=f"<preset {name}>", **kw)
+    truth["preset"] = name
+    return table, truth
+
+
+def write_table(path: str, table: merl.MerlTable, truth: dict) -> str:
+    """Write the table and its ``<path>.json`` sidecar; returns the sidecar path."""
+    merl.write(path, table)
+    sidecar = os.fspath(path) + ".json"
+    with open(sidecar, "w") as f:
+        json.dump(truth, f, indent=2)
+    return sidecar
