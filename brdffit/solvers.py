@@ -109,7 +109,10 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         y_scale = self.atol + self.rtol * jnp.abs(y_new_flat)
         small_step = self.norm(jnp.abs(delta) / y_scale) < 1
         small_change = jnp.abs(actual) < self.atol + self.rtol * jnp.abs(state.loss)
-        converged = accept & small_step & small_change
+        # A nearly undamped (Gauss-Newton-like) step below resolution means the
+        # gradient is zero to working precision: converged, accepted or not (at an
+        # exact optimum the predicted reduction rounds to <= 0 and rho is noise).
+        converged = (accept & small_step & small_change) | (small_step & (state.lam <= 1.0))
         stuck = lam > _LAMBDA_MAX  # no representable step improves the loss
         keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
         state = _LMState(

@@ -1,0 +1,85 @@
+"""Half/difference parameterisation and the reference bin lookup (MODELS.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdffit import angles, merl
+from brdffit.grid import bin_grid
+
+
+def test_every_bin_centre_maps_back_to_its_own_bin():
+    i_th, i_td, i_pd = np.meshgrid(np.arange(90), np.arange(90), np.arange(180), indexing="ij")
+    th, td, pd = angles.bin_centres(i_th, i_td, i_pd)
+    j_th, j_td, j_pd = angles.half_diff_to_bins(th, td, pd)
+    np.testing.assert_array_equal(j_th, i_th)
+    np.testing.assert_array_equal(j_td, i_td)
+    np.testing.assert_array_equal(j_pd, i_pd)
+
+
+def test_bin_centres_round_trip_through_directions():
+    """centre -> (wi, wo) -> half/diff angles -> the same bin, for every bin."""
+    g = bin_grid()
+    th, td, pd = angles.dirs_to_half_diff(g.wi, g.wo)
+    bins = angles.half_diff_to_bins(th, td, pd)
+    flat = angles.flat_index(*bins)
+    np.testing.assert_array_equal(flat, np.arange(flat.size))
+
+
+def test_directions_round_trip_random():
+    rng = np.random.default_rng(0)
+    n = 2000
+    th = rng.uniform(0, np.pi / 2, n)
+    td = rng.uniform(0, np.pi / 2, n)
+    pd = rng.uniform(-np.pi, np.pi, n)
+    ph = rng.uniform(-np.pi, np.pi, n)
+    wi, wo = angles.half_diff_to_dirs(th, td, pd, ph)
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(wo, axis=1), 1, atol=1e-12)
+    th2, td2, pd2 = angles.dirs_to_half_diff(wi, wo)
+    np.testing.assert_allclose(th2, th, atol=1e-9)
+    np.testing.assert_allclose(td2, td, atol=1e-9)
+    ok = (td > 1e-6) & (th > 1e-6)  # phi_d undefined at theta_d = 0
+    np.testing.assert_allclose(np.angle(np.exp(1j * (pd2 - pd)))[ok], 0, atol=1e-8)
+
+
+def test_reference_lookup_edges():
+    # theta_h <= 0 -> 0; phi_d < 0 folds by +pi; everything clamps to range
+    i = angles.half_diff_to_bins(np.array([0.0, -0.1, 10.0]), np.array([0.0, 2.0, -1.0]),
+                                 np.array([-0.001, np.pi, 4.0]))
+    assert i[0].tolist() == [0, 0, 89]
+    assert i[1].tolist() == [0, 89, 0]
+    assert i[2].tolist() == [179, 179, 179]
+
+
+def test_swapping_wi_and_wo_hits_the_same_bin():
+    """Reciprocity of the lookup: (wo, wi) is phi_d + pi, folded back."""
+    g = bin_grid()
+    sel = np.flatnonzero(g.above_horizon)[::997]
+    a = angles.half_diff_to_bins(*angles.dirs_to_half_diff(g.wi[sel], g.wo[sel]))
+    b = angles.half_diff_to_bins(*angles.dirs_to_half_diff(g.wo[sel], g.wi[sel]))
+    assert np.mean(angles.flat_index(*a) == angles.flat_index(*b)) > 0.99
+
+
+def test_table_from_formula_reads_back_the_formula(tmp_path):
+    """A table written from f(theta_h, theta_d, phi_d) gives f at the bin centres."""
+    g = bin_grid()
+    f = 1.0 + g.theta_h + 2 * g.theta_d + 0.5 * np.cos(g.phi_d)
+    table = merl.MerlTable.from_values(np.stack([f, 2 * f, 3 * f]))
+    merl.write(tmp_path / "f.binary", table)
+    back = merl.read(tmp_path / "f.binary")
+    rng = np.random.default_rng(3)
+    idx = rng.choice(f.size, 500, replace=False)
+    vals = back.lookup(g.wi[idx], g.wo[idx])
+    np.testing.assert_allclose(vals[:, 0], f[idx], rtol=1e-12)
+    np.testing.assert_allclose(vals[:, 2], 3 * f[idx], rtol=1e-12)
+
+
+@pytest.mark.parametrize("i_th", [0, 1, 45, 89])
+def test_solid_angle_weights_are_positive_above_horizon(i_th):
+    g = bin_grid()
+    rows = slice(i_th * 90 * 180, (i_th + 1) * 90 * 180)
+    w, above = g.weight[rows], g.above_horizon[rows]
+    assert np.all(w[above] > 0) and np.all(w[~above] == 0)
+    assert g.weight.sum() == pytest.approx(1.0)

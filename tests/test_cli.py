@@ -1,0 +1,77 @@
+"""`brdffit fit` / `brdffit models` as a user runs them: real processes."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import pytest
+
+from .cli_helpers import run
+from .truths import TRUTH, assert_params_close
+
+
+@pytest.fixture(scope="module")
+def ggx_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "ggx.binary"
+    params = [f"--param={k}={','.join(map(str, v)) if isinstance(v, list) else v}"
+              for k, v in TRUTH["ggx"].items()]
+    r = run("data_synth", str(path), "--model", "ggx", *params)
+    assert r.returncode == 0, r.stderr
+    return path
+
+
+def test_fit_json_is_one_object_with_the_schema(ggx_file):
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--json")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 1
+    d = json.loads(lines[0])
+    for key in ("table", "model", "params", "error", "converged", "result", "steps",
+                "time_s", "samples"):
+        assert key in d, key
+    assert d["table"] == str(ggx_file) and d["model"] == "ggx"
+    assert_params_close(d["params"], TRUTH["ggx"], rel=0.02)
+    assert "log_rmse" in d["error"]
+
+
+def test_fit_human_summary(ggx_file):
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "beckmann")
+    assert r.returncode == 0, r.stderr
+    assert "beckmann fit" in r.stdout and "alpha" in r.stdout and "log_rmse" in r.stdout
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "empty file"),
+        (b"not a table at all\n", "text file"),
+        (struct.pack("<3i", 90, 90, 180) + b"\0" * 100, "truncated"),
+        (struct.pack("<3i", -1, 90, 180), "not positive"),
+    ],
+)
+def test_malformed_table_is_one_line_no_traceback(tmp_path, content, message):
+    p = tmp_path / "bad.binary"
+    p.write_bytes(content)
+    r = run("brdffit.cli", "fit", str(p))
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and message in err[0] and str(p) in err[0]
+
+
+def test_unknown_model_and_missing_file(tmp_path, ggx_file):
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "cook_torrance")
+    assert r.returncode == 2 and "unknown model" in r.stderr and "Traceback" not in r.stderr
+    r = run("brdffit.cli", "fit", str(tmp_path / "missing.binary"))
+    assert r.returncode == 2 and "cannot read" in r.stderr
+
+
+def test_models_lists_every_model_with_ranges():
+    r = run("brdffit.cli", "models")
+    assert r.returncode == 0
+    for name in TRUTH:
+        assert name in r.stdout
+    assert "alpha" in r.stdout and "[0.001, 2]" in r.stdout
+    d = json.loads(run("brdffit.cli", "models", "--json").stdout)
+    assert {m["name"] for m in d} >= set(TRUTH)

@@ -1,0 +1,119 @@
+"""MERL reader/writer: round trips and every malformed-file case, with its message."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from brdffit import merl
+from brdffit.errors import MerlFormatError
+
+N = merl.N_BINS
+
+
+def _raw_file(path, dims=(90, 90, 180), body=None, n_values=3 * N):
+    if body is None:
+        body = np.full(n_values, 150.0)
+    path.write_bytes(struct.pack("<3i", *dims) + np.asarray(body, "<f8").tobytes())
+    return path
+
+
+@pytest.fixture(scope="module")
+def good_raw():
+    rng = np.random.default_rng(1)
+    raw = rng.uniform(0, 3000, 3 * N)
+    raw[rng.random(3 * N) < 0.1] = -1.0
+    return raw
+
+
+def test_round_trip_is_exact(tmp_path, good_raw):
+    p = _raw_file(tmp_path / "a.binary", body=good_raw)
+    t = merl.read(p)
+    assert t.rgb.shape == (3, 90, 90, 180) and t.mask.shape == (90, 90, 180)
+    merl.write(tmp_path / "b.binary", t)
+    t2 = merl.read(tmp_path / "b.binary")
+    np.testing.assert_array_equal(t.mask, t2.mask)
+    np.testing.assert_allclose(t.rgb, t2.rgb, rtol=1e-15)
+    assert (tmp_path / "b.binary").stat().st_size == merl.FILE_BYTES == 12 + 34_992_000
+
+
+def test_values_scaled_and_channel_major(tmp_path):
+    body = np.zeros(3 * N)
+    body[:N], body[N : 2 * N], body[2 * N :] = 1500.0, 1500.0, 1500.0
+    # one recognisable bin: i_th=2, i_td=3, i_pd=4 in the R channel
+    ind = 4 + 180 * 3 + 180 * 90 * 2
+    body[ind] = 3000.0
+    t = merl.read(_raw_file(tmp_path / "s.binary", body=body))
+    np.testing.assert_allclose(t.rgb[:, 0, 0, 0], [1.0, 1.15, 1.66])
+    assert t.rgb[0, 2, 3, 4] == pytest.approx(2.0)
+
+
+def test_negative_values_are_unmeasured(tmp_path, good_raw):
+    t = merl.read(_raw_file(tmp_path / "a.binary", body=good_raw))
+    neg = np.any(good_raw.reshape(3, 90, 90, 180) < 0, axis=0)
+    np.testing.assert_array_equal(t.mask, ~neg)
+    assert np.all(t.rgb[:, ~t.mask] == 0)
+
+
+def test_nonfinite_values_are_masked_and_counted(tmp_path):
+    body = np.full(3 * N, 100.0)
+    body[[0, 5, N + 7]] = [np.nan, np.inf, -np.inf]
+    t = merl.read(_raw_file(tmp_path / "n.binary", body=body))
+    assert t.n_nonfinite == 3
+    assert t.n_measured == N - 3
+    assert np.all(np.isfinite(t.rgb))
+    assert t.summary()["nonfinite_bins"] == 3
+
+
+def test_from_bytes_matches_read(tmp_path, good_raw):
+    p = _raw_file(tmp_path / "a.binary", body=good_raw)
+    a, b = merl.read(p), merl.from_bytes(p.read_bytes(), "upload")
+    np.testing.assert_array_equal(a.rgb, b.rgb)
+
+
+@pytest.mark.parametrize(
+    "name, make, message",
+    [
+        ("empty", lambda p: p.write_bytes(b""), "empty file"),
+        ("short", lambda p: p.write_bytes(b"\x5a\x00\x00"), "shorter than the 12-byte header"),
+        ("text", lambda p: p.write_text("theta_h,theta_d,phi_d,r,g,b\n0,0,0,1,1,1\n"), "text file"),
+        ("truncated", lambda p: _raw_file(p, n_values=3 * N - 10), "truncated"),
+        ("trailing", lambda p: p.write_bytes(
+            struct.pack("<3i", 90, 90, 180) + np.zeros(3 * N + 1).tobytes()), "trailing bytes"),
+        ("negative dims", lambda p: _raw_file(p, dims=(90, -90, 180), n_values=10), "not positive"),
+        ("zero dims", lambda p: _raw_file(p, dims=(0, 90, 180), n_values=10), "not positive"),
+        ("wrong dims", lambda p: _raw_file(p, dims=(45, 90, 180), n_values=3 * 45 * 90 * 180),
+         "not the MERL grid"),
+        ("absurd dims", lambda p: _raw_file(p, dims=(2**30, 2**30, 2**30), n_values=10),
+         "not the MERL grid"),
+        ("no measured bin", lambda p: _raw_file(p, body=np.full(3 * N, -1.0)), "no measured bin"),
+        ("all nan", lambda p: _raw_file(p, body=np.full(3 * N, np.nan)), "no measured bin"),
+    ],
+)
+def test_malformed_files_raise_clear_errors(tmp_path, name, make, message):
+    p = tmp_path / "bad.binary"
+    make(p)
+    with pytest.raises(MerlFormatError) as e:
+        merl.read(p)
+    assert message in str(e.value)
+    assert str(p) in str(e.value)
+    if p.stat().st_size >= 12:  # same verdict for an upload of the same bytes
+        with pytest.raises(MerlFormatError, match=message):
+            merl.from_bytes(p.read_bytes(), "upload")
+
+
+def test_missing_file_and_directory(tmp_path):
+    with pytest.raises(MerlFormatError, match="cannot read"):
+        merl.read(tmp_path / "nope.binary")
+    with pytest.raises(MerlFormatError, match="directory"):
+        merl.read(tmp_path)
+
+
+def test_absurd_dims_do_not_allocate(tmp_path, monkeypatch):
+    """The size check happens before any body read: fromfile must never be called."""
+    p = _raw_file(tmp_path / "huge.binary", dims=(90, 90, 180), n_values=10)
+    monkeypatch.setattr(np, "fromfile", lambda *a, **k: pytest.fail("body was read"))
+    with pytest.raises(MerlFormatError, match="truncated"):
+        merl.read(p)
