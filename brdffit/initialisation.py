@@ -57,6 +57,9 @@ def candidates(
 ) -> np.ndarray:
     """Unconstrained start vectors (K, n_params), one per ``shape_grid`` entry."""
     kd = diffuse_estimate(table, usable)
+    # A model that is not one lobe over a diffuse base may seed itself (ggx2).
+    if hasattr(model, "start_candidates"):
+        return np.asarray(model.start_candidates(table, usable, kd))
     starts = []
     if isinstance(model, AbstractLobeModel):
         g = bin_grid()

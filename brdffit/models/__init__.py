@@ -5,23 +5,31 @@ A new model is one module plus one line in ``REGISTRY``.
 
 from __future__ import annotations
 
+from ..errors import BrdffitError
 from .base import AbstractBRDFModel, AbstractLobeModel, ParamSpec, Params
 from .beckmann import Beckmann
 from .blinn_phong import BlinnPhong
 from .ggx import GGX
+from .ggx2 import GGX2
 from .lambert import Lambert
+from .mono_ks import SUFFIX as _MONO
+from .mono_ks import MonoKs, specular_colour_specs
 from .oren_nayar import OrenNayar
 from .phong import Phong
 
 #: Ordered cheapest to richest.
 REGISTRY: dict[str, AbstractBRDFModel] = {
     m.name: m
-    for m in (Lambert(), OrenNayar(), BlinnPhong(), Phong(), Beckmann(), GGX())
+    for m in (
+        Lambert(), OrenNayar(), BlinnPhong(), Phong(),
+        Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
+        GGX2(),
+    )
 }
 
 
-class UnknownModelError(KeyError):
-    """A model name that is not in the registry."""
+class UnknownModelError(BrdffitError, KeyError):
+    """A model name that is not in the registry (a KeyError for mapping-style callers)."""
 
     def __str__(self) -> str:  # KeyError quotes its message otherwise
         return self.args[0]
@@ -31,18 +39,21 @@ def get(name: str | AbstractBRDFModel) -> AbstractBRDFModel:
     """The model called ``name`` (a model instance is returned as is)."""
     if isinstance(name, AbstractBRDFModel):
         return name
-    try:
+    if name in REGISTRY:
         return REGISTRY[name]
-    except KeyError:
-        raise UnknownModelError(
-            f"unknown model {name!r}; choose one of {', '.join(REGISTRY)}"
-        ) from None
+    # "ggx_mono": the registered model with a grey specular scale (models/mono_ks.py)
+    if isinstance(name, str) and name.endswith(_MONO):
+        base = REGISTRY.get(name.removesuffix(_MONO))
+        if base is not None and specular_colour_specs(base):
+            return MonoKs(base)
+    raise UnknownModelError(f"unknown model {name!r}; choose one of {', '.join(REGISTRY)}")
 
 
 __all__ = [
     "REGISTRY",
     "AbstractBRDFModel",
     "AbstractLobeModel",
+    "MonoKs",
     "ParamSpec",
     "Params",
     "UnknownModelError",

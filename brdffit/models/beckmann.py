@@ -9,6 +9,8 @@ Lambda(w) = (erf(m) - 1)/2 + exp(-m^2) / (2 m sqrt(pi)),  m = 1 / (alpha tan the
 | ks    | [0, inf)     | specular scale, RGB                       |
 | alpha | [1e-3, 2]    | RMS slope (log scale in the fit)          |
 | f0    | [0, 1]       | Schlick reflectance at normal incidence   |
+| eta   | [1, 3]       | index of refraction, instead of f0 with   |
+|       |              | ``fresnel="dielectric"`` (microfacet.py)  |
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ _SQRT_PI = math.sqrt(math.pi)
 
 
 class Beckmann(AbstractMicrofacetModel):
-    name = "beckmann"
+    family = "beckmann"
 
     def ndf(self, alpha, cos_h, sin2_h):
         a2 = alpha * alpha

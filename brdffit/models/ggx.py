@@ -9,6 +9,8 @@ Lambda(w) = (-1 + sqrt(1 + alpha^2 tan^2 theta_w)) / 2.
 | ks    | [0, inf)     | specular scale, RGB                       |
 | alpha | [1e-3, 2]    | roughness (log scale in the fit)          |
 | f0    | [0, 1]       | Schlick reflectance at normal incidence   |
+| eta   | [1, 3]       | index of refraction, instead of f0 with   |
+|       |              | ``fresnel="dielectric"`` (microfacet.py)  |
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from .microfacet import AbstractMicrofacetModel
 
 
 class GGX(AbstractMicrofacetModel):
-    name = "ggx"
+    family = "ggx"
 
     def ndf(self, alpha, cos_h, sin2_h):
         a2 = alpha * alpha

@@ -1,0 +1,113 @@
+"""Two GGX lobes over a Lambertian base, sharing one Schlick Fresnel term.
+
+f = kd/pi + F(cos_d) * (ks1 DG(alpha1) + ks2 DG(alpha2)),
+DG(alpha) = D_alpha G_alpha / (4 cos_i cos_o) (GGX, height-correlated Smith, see
+microfacet.py), F = f0 + (1 - f0)(1 - cos_d)^5.
+
+| name   | range      | meaning                                          |
+|--------|------------|--------------------------------------------------|
+| kd     | [0, inf)   | diffuse albedo, RGB                              |
+| ks1    | [0, inf)   | scale of the first lobe, RGB                     |
+| alpha1 | [1e-3, 2]  | roughness of the first lobe (log scale in a fit) |
+| ks2    | [0, inf)   | scale of the second lobe, RGB                    |
+| alpha2 | [1e-3, 2]  | roughness of the second lobe (log scale)         |
+| f0     | [0, 1]     | Schlick reflectance at normal incidence          |
+
+Measured coatings and metallic paints show a sharp highlight on a broad haze
+(Ngan et al. 2005 fit two lobes for that reason). By convention lobe 1 is the
+sharper one: fits start with alpha1 < alpha2, but nothing forces it, and a
+single-lobe material is the degenerate case ks2 = 0.
+
+Seeding: the two scales enter linearly, so instead of a fixed grid of ks values
+(which could be off by decades) :meth:`GGX2.start_candidates` solves, for each
+(alpha1, alpha2, f0) on ``shape_grid``, a small weighted least-squares problem
+for (kd, ks1, ks2) on a few hundred bins of the table.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..grid import bin_grid
+from .base import KD, AbstractBRDFModel, ParamSpec
+from .frame import Frame, shading_frame
+from .ggx import GGX
+from .microfacet import ALPHA_GRID, F0, schlick_fresnel
+
+KS1 = ParamSpec("ks1", "scale of the first (sharper) lobe (RGB)", 0.0, None, rgb=True)
+ALPHA1 = ParamSpec("alpha1", "roughness of the first lobe", 1e-3, 2.0, scale="log")
+KS2 = ParamSpec("ks2", "scale of the second (broader) lobe (RGB)", 0.0, None, rgb=True)
+ALPHA2 = ParamSpec("alpha2", "roughness of the second lobe", 1e-3, 2.0, scale="log")
+
+_GGX = GGX()
+#: Bins the seeding least squares looks at (a few hundred are plenty for 9 unknowns).
+_SEED_BINS = 512
+
+
+class GGX2(AbstractBRDFModel):
+    name = "ggx2"
+    param_specs = (KD, KS1, ALPHA1, KS2, ALPHA2, F0)
+    # Lobe pairs at least 3x apart in roughness: closer pairs are one lobe twice.
+    # f0 starts below 1: at the bound the sigmoid is flat and a fit could not leave it.
+    shape_grid = tuple(
+        {"alpha1": a1, "alpha2": a2, "f0": f0}
+        for a1 in ALPHA_GRID
+        for a2 in ALPHA_GRID
+        if a2 >= 3.0 * a1
+        for f0 in (0.3, 0.95)
+    )
+
+    def eval_frame(self, params, frame: Frame):
+        fresnel = schlick_fresnel(params["f0"], frame.cos_d)[..., None]
+        lobe1 = _GGX.shadowed_ndf(params["alpha1"], frame)[..., None]
+        lobe2 = _GGX.shadowed_ndf(params["alpha2"], frame)[..., None]
+        return params["kd"] / jnp.pi + fresnel * (params["ks1"] * lobe1 + params["ks2"] * lobe2)
+
+    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
+        """Unconstrained start vectors (K, 12), one per ``shape_grid`` entry.
+
+        Called by ``brdffit.initialisation.candidates``. ``kd`` (the diffuse
+        estimate) is the fallback where the least squares leaves nothing.
+        """
+        g = bin_grid()
+        # Away from grazing, where the lobes (not the Fresnel rise) make the values.
+        sel = np.flatnonzero(usable & (g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6))
+        if sel.size < 16:
+            sel = np.flatnonzero(usable)
+        # Flat order is theta_h-major with sqrt-spaced rows: a stride keeps the
+        # bins dense near the peak, where a sharp lobe lives.
+        sel = sel[:: max(1, sel.size // _SEED_BINS)]
+        f_meas = table.rgb.reshape(3, -1)[:, sel].T  # (n, 3)
+        alphas = np.array(sorted({s[k] for s in self.shape_grid for k in ("alpha1", "alpha2")}))
+        f0s = np.array(sorted({s["f0"] for s in self.shape_grid}))
+        # lobes[a, f, n]: F DG at the chosen bins for every alpha and f0 on the grid
+        lobes = np.asarray(_lobes_at(jnp.asarray(alphas), jnp.asarray(f0s),
+                                     jnp.asarray(g.wi[sel]), jnp.asarray(g.wo[sel])))
+        # Relative residuals: the haze must count as much as the peak.
+        w = 1.0 / np.maximum(f_meas.mean(axis=1), 1e-6)
+        starts = []
+        for shape in self.shape_grid:
+            j1 = int(np.searchsorted(alphas, shape["alpha1"]))
+            j2 = int(np.searchsorted(alphas, shape["alpha2"]))
+            k = int(np.searchsorted(f0s, shape["f0"]))
+            design = np.stack(
+                [np.full(sel.size, 1.0 / np.pi), lobes[j1, k], lobes[j2, k]], axis=1
+            )
+            coef, *_ = np.linalg.lstsq(design * w[:, None], f_meas * w[:, None], rcond=None)
+            coef = np.clip(coef, 1e-6, 1e6)  # a negative scale is no start; floor it
+            starts.append(self.unconstrain({
+                "kd": coef[0] if np.any(coef[0] > 1e-6) else kd,
+                "ks1": coef[1], "ks2": coef[2], **shape,
+            }))
+        return np.stack(starts)
+
+
+@eqx.filter_jit
+def _lobes_at(alphas, f0s, wi, wo):
+    frame = shading_frame(wi, wo)
+    dg = jax.vmap(lambda a: _GGX.shadowed_ndf(a, frame))(alphas)  # (A, n)
+    fresnel = jax.vmap(lambda f0: schlick_fresnel(f0, frame.cos_d))(f0s)  # (F, n)
+    return dg[:, None, :] * fresnel[None, :, :]

@@ -1,0 +1,77 @@
+"""A model's variant with a grey (monochrome) specular scale: ``MonoKs(GGX())``.
+
+Every RGB parameter except ``kd`` (``ks``; ``ks1`` and ``ks2`` of ggx2) becomes
+one value shared by R, G and B; the rest of the model is unchanged. Its name is
+the base's plus ``_mono`` (``"ggx_mono"``), which ``brdffit.models.get`` resolves.
+
+| name        | range    | meaning                                   |
+|-------------|----------|-------------------------------------------|
+| ks (ks1...) | [0, inf) | specular scale, one value for R, G and B  |
+| others      |          | as in the base model                      |
+
+Why: a dielectric's highlight has the light's colour, so its ``ks`` is grey and
+two of the three values a renderer stores and interpolates are redundant
+(``brdffit.selection`` reports when a fitted ``ks`` is grey within a tolerance).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+
+from .base import AbstractBRDFModel, ParamSpec
+
+SUFFIX = "_mono"
+
+
+def specular_colour_specs(model: AbstractBRDFModel) -> tuple[ParamSpec, ...]:
+    """The RGB parameters of ``model`` that scale a specular lobe (all but kd)."""
+    return tuple(s for s in model.param_specs if s.rgb and s.name != "kd")
+
+
+class MonoKs(AbstractBRDFModel):
+    base: AbstractBRDFModel
+
+    def __check_init__(self):
+        if not specular_colour_specs(self.base):
+            raise ValueError(f"{self.base.name} has no specular colour to make grey")
+
+    @property
+    def name(self) -> str:
+        return self.base.name + SUFFIX
+
+    @property
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        grey = {s.name for s in specular_colour_specs(self.base)}
+        return tuple(
+            dataclasses.replace(s, rgb=False, doc=s.doc.replace("(RGB)", "(grey)"))
+            if s.name in grey else s
+            for s in self.base.param_specs
+        )
+
+    @property
+    def shape_grid(self):
+        return self.base.shape_grid
+
+    def expand(self, params: dict) -> dict:
+        """Params of the base model: each grey scale repeated over R, G, B."""
+        out = dict(params)
+        for s in specular_colour_specs(self.base):
+            out[s.name] = jnp.broadcast_to(jnp.asarray(params[s.name]), (3,))
+        return out
+
+    def eval_frame(self, params, frame):
+        return self.base.eval_frame(self.expand(params), frame)
+
+    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
+        """The base model's starts with each specular scale averaged over R, G, B."""
+        from ..initialisation import candidates  # imports brdffit.models: not at load time
+
+        grey = [s.name for s in specular_colour_specs(self.base)]
+        starts = []
+        for u in candidates(self.base, table, usable):
+            p = {k: np.asarray(v) for k, v in self.base.constrain(jnp.asarray(u)).items()}
+            starts.append(self.unconstrain({**p, **{k: p[k].mean() for k in grey}}))
+        return np.stack(starts)
