@@ -21,6 +21,8 @@ def register(sub) -> None:
     p.add_argument("--precision", choices=list(PRECISIONS), default="float64")
     p.add_argument("--starts", type=int, default=2, help="solver starts (best kept)")
     p.add_argument("--max-steps", type=int, default=256)
+    p.add_argument("--plots", metavar="DIR",
+                   help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
     p.set_defaults(run=run)
 
 
@@ -60,5 +62,11 @@ def run(args) -> int:
         sys.stdout.write("\n")
     else:
         print(format_result(result))
+    if args.plots:
+        from .. import plots  # matplotlib only when asked for
+
+        for path in plots.save_all(table, result, args.plots):
+            # stderr: with --json, stdout stays one JSON object
+            print(f"wrote {path}", file=sys.stderr)
     # A fit that ran is a result, converged or not: `converged` says which.
     return 0

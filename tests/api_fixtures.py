@@ -1,0 +1,172 @@
+"""Helpers for the service tests: synthetic tables, and a real server on loopback.
+
+:class:`Server` runs ``python -m brdffit.cli serve`` as a subprocess on
+127.0.0.1 and a free port, with its own data dir (a real SQLite file), in its own
+process group so that stopping it stops its worker processes too. Every wait is
+bounded.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+from brdffit import merl
+from data_synth import make_table
+
+#: name -> (model, params) of the synthetic tables the service tests share.
+TABLES = {
+    "ggx": ("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.2, "f0": 0.6}),
+    "lambert": ("lambert", {"kd": [0.5, 0.35, 0.2]}),
+}
+
+#: Fit options that keep a test's fit to a second or so.
+FAST = {"samples": 2048, "starts": 1}
+
+
+@functools.cache
+def table(name: str) -> merl.MerlTable:
+    """A synthetic table (made once per test session: about a second each)."""
+    model, params = TABLES[name]
+    t, _ = make_table(model, params, source=f"{name}.binary")
+    return t
+
+
+@functools.cache
+def table_bytes(name: str) -> bytes:
+    return merl.to_bytes(table(name))
+
+
+def scaled_table_bytes(name: str, scale: float) -> bytes:
+    """The table with every value times ``scale`` (a distinct table, made fast)."""
+    t = table(name)
+    return merl.to_bytes(merl.MerlTable.from_values(t.rgb * scale, t.mask))
+
+
+def write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """``brdffit serve`` in a subprocess; use as a context manager."""
+
+    def __init__(self, data_dir: Path, *, workers: int = 1, env: dict | None = None):
+        self.data_dir = Path(data_dir)
+        self.workers = workers
+        self.extra_env = env or {}
+        self.proc: subprocess.Popen | None = None
+        self.port = 0
+        self.log_path = self.data_dir / "server.log"
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self, timeout: float = 120.0) -> Server:
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        env = {k: v for k, v in os.environ.items() if k != "BRDFFIT_API_TOKEN"}
+        env.update({"BRDFFIT_DATA_DIR": str(self.data_dir), "BRDFFIT_WORKERS": str(self.workers),
+                    "PYTHONUNBUFFERED": "1"})
+        env.update(self.extra_env)
+        self.port = free_port()
+        log = open(self.log_path, "ab")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "brdffit.cli", "serve", "--host", "127.0.0.1",
+             "--port", str(self.port), "--log-level", "info"],
+            env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        )
+        log.close()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log()}")
+            try:
+                if httpx.get(f"{self.url}/healthz", timeout=2.0).status_code == 200:
+                    return self
+            except httpx.TransportError:
+                pass
+            time.sleep(0.2)
+        self.stop()
+        raise RuntimeError(f"server not up after {timeout} s:\n{self.log()}")
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+    def kill(self) -> None:
+        """SIGKILL the server process alone, as a crash would (its workers are
+        left to notice on their own)."""
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=30)
+
+    def group_alive(self) -> bool:
+        """Is any process of the server's group (server, workers) still there?"""
+        try:
+            os.killpg(self.proc.pid, 0)
+            return True
+        except ProcessLookupError:
+            return False
+
+    def wait_group_gone(self, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if not self.group_alive():
+                return True
+            time.sleep(0.2)
+        return False
+
+    def stop(self, timeout: float = 30.0) -> None:
+        """SIGTERM (a clean shutdown), then SIGKILL to whatever of the group is left."""
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                pass
+        if not self.wait_group_gone(5.0):
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if self.proc.poll() is None:
+            self.proc.wait(timeout=10)
+
+    def __enter__(self) -> Server:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def wait_status(http: httpx.Client, job_id: str, statuses: tuple[str, ...],
+                timeout: float = 180.0, poll: float = 0.05) -> dict:
+    """Poll ``GET /v1/fits/{id}`` until its status is one of ``statuses``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        job = http.get(f"/v1/fits/{job_id}").json()
+        if job["status"] in statuses:
+            return job
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"job {job_id} still {job['status']} after {timeout} s")
+        time.sleep(poll)
+
+
+def header(dims) -> bytes:
+    return np.asarray(dims, dtype="<i4").tobytes()

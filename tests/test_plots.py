@@ -1,0 +1,100 @@
+"""brdffit.plots: every kind renders a readable PNG, from the library and the CLI."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from brdffit import fit, merl, plots
+from brdffit.cli import main as cli_main
+from brdffit.fitting import FitResult
+
+from .api_fixtures import FAST, table
+
+
+def decode_png(data: bytes) -> np.ndarray:
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return imread(io.BytesIO(data), format="png")
+
+
+def assert_sane_png(data: bytes) -> None:
+    """A real picture: decodes, a few hundred pixels a side, not blank, not huge."""
+    image = decode_png(data)
+    h, w = image.shape[:2]
+    assert 300 <= h <= 1600 and 500 <= w <= 2000, (h, w)
+    assert 10_000 < len(data) < 2_000_000
+    assert image[..., :3].std() > 0.05  # something is drawn
+
+
+@pytest.fixture(scope="module")
+def ggx():
+    t = table("ggx")
+    return t, fit(t, "ggx", **FAST)
+
+
+@pytest.mark.parametrize("kind", plots.KINDS)
+def test_each_kind_renders(ggx, kind):
+    t, result = ggx
+    assert_sane_png(plots.render(kind, t, result))
+
+
+def test_accepts_the_json_form_of_a_result(ggx):
+    t, result = ggx
+    as_json = json.loads(result.to_json())
+    assert plots.render("polar", t, as_json) == plots.render("polar", t, result)
+
+
+def test_unknown_kind_is_refused(ggx):
+    with pytest.raises(ValueError, match="unknown plot kind"):
+        plots.render("histogram", *ggx)
+
+
+def test_sparse_table_and_null_metrics_still_plot(ggx):
+    """Half the bins unmeasured shows as grey, a result with a null (NaN) metric
+    still gets a title: the service stores non-finite metrics as null."""
+    t, result = ggx
+    keep = np.random.default_rng(0).random(t.mask.shape) < 0.5
+    sparse = merl.MerlTable.from_values(t.rgb, t.mask & keep, source="sparse")
+    d = result.to_dict()
+    d["error"] = {**d["error"], "log_rmse": None}
+    for kind in plots.KINDS:
+        assert_sane_png(plots.render(kind, sparse, FitResult.from_dict(d)))
+
+
+def test_evaluate_is_nan_below_the_horizon(ggx):
+    _, result = ggx
+    wi = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, -0.8]])
+    wo = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    f = plots.evaluate(result, wi, wo)
+    assert np.all(np.isfinite(f[0])) and np.all(f[0] > 0)
+    assert np.all(np.isnan(f[1]))
+
+
+def test_error_map_residual_matches_log_rmse(ggx):
+    """The map shows the loss's own residual: its weighted RMS is log_rmse."""
+    from brdffit.grid import bin_grid
+
+    t, result = ggx
+    r = plots.bin_residuals(t, result).reshape(3, -1)
+    w = np.where(np.isfinite(r[0]), bin_grid().weight, 0.0)
+    w = w / w.sum()
+    rmse = np.sqrt(np.nansum(w * r * r) / 3.0)
+    assert rmse == pytest.approx(result.log_rmse, rel=1e-6, abs=1e-12)
+
+
+def test_cli_fit_writes_plots(tmp_path, capsys):
+    path = tmp_path / "lambert.binary"
+    merl.write(path, table("lambert"))
+    out = tmp_path / "plots"
+    code = cli_main(["fit", str(path), "--model", "lambert", "--json", "--samples", "2048",
+                     "--starts", "1", "--plots", str(out)])
+    assert code == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["model"] == "lambert"  # stdout stays pure JSON
+    for kind in plots.KINDS:
+        assert f"{kind}.png" in captured.err
+        assert_sane_png((out / f"{kind}.png").read_bytes())
