@@ -1,0 +1,1 @@
+"""One router per resource: tables, fits, models; plus health and the API docs."""

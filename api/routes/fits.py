@@ -1,0 +1,227 @@
+"""``/v1/fits``: queue a fit of a table, follow it, fetch its result and plots.
+
+A request is checked completely before it is queued (table known, models known,
+every option in range): a job that fails later fails for what only the fit can
+find out (say, too few usable bins), and says so in ``reason``.
+"""
+
+from __future__ import annotations
+
+import os
+from datetime import UTC, datetime
+from enum import Enum
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
+from fastapi.concurrency import run_in_threadpool
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from brdffit import models
+from brdffit.angles import N_PHI_D, N_THETA_D, N_THETA_H
+from brdffit.fitting import PRECISIONS, SOLVERS
+from brdffit.plots import KINDS
+from brdffit.sampling import DEFAULT_SAMPLES
+
+from .. import tasks
+from ..deps import QueueDep, RunnerDep, StoreDep, require_token
+from ..errors import ERROR_RESPONSES, ErrorMessage
+from ..store import JobRecord, Store
+
+router = APIRouter(prefix="/v1/fits", tags=["fits"], dependencies=[Depends(require_token)],
+                   responses=ERROR_RESPONSES)
+
+JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="the id POST /v1/fits gave")]
+N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
+
+PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[misc]
+
+
+class FitOptions(BaseModel):
+    """Keywords of ``brdffit.fit`` (same names, same defaults as ``brdffit fit``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    solver: Literal[SOLVERS] = "lm"  # type: ignore[valid-type]
+    samples: int | None = Field(
+        DEFAULT_SAMPLES, ge=64, le=N_BINS,
+        description="bins the solver sees; null for every bin (slow)",
+    )
+    precision: Literal[tuple(PRECISIONS)] = "float64"  # type: ignore[valid-type]
+    starts: int = Field(2, ge=1, le=32, description="solver starts, the best kept")
+    max_steps: int = Field(256, ge=1, le=10_000)
+    seed: int = Field(0, ge=0, le=2**32 - 1, description="subsample seed")
+
+
+class FitRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    table_id: str = Field(pattern=r"^[0-9a-f]{64}$", description="from POST /v1/tables")
+    model: str | list[str] = Field(
+        "ggx", description="a model name (GET /v1/models) or a list of them: each is fitted, "
+        "the best (lowest log_rmse) is the job's `result`",
+    )
+    options: FitOptions = FitOptions()
+
+    @field_validator("model")
+    @classmethod
+    def _known_models(cls, v: str | list[str]) -> str | list[str]:
+        names = [v] if isinstance(v, str) else v
+        if not names:
+            raise ValueError("give at least one model")
+        if len(names) > len(models.REGISTRY):
+            raise ValueError(f"at most {len(models.REGISTRY)} models per job")
+        for name in names:
+            if name not in models.REGISTRY:
+                raise ValueError(
+                    f"unknown model {name!r}; choose from {', '.join(models.REGISTRY)}"
+                )
+        return v
+
+
+class FitResultOut(BaseModel):
+    """``FitResult.to_dict()``: the JSON of ``brdffit fit --json`` (NaN as null)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    model: str
+    params: dict[str, float | list[float]]
+    error: dict[str, float | None]
+    converged: bool
+    result: str
+    steps: int
+    time_s: float
+    samples: dict
+    solver: str
+    precision: str
+    starts: int
+    table: str | None = None
+    extra: dict = {}
+
+
+class JobOut(BaseModel):
+    id: str
+    status: Literal["queued", "running", "done", "failed"]
+    table_id: str
+    models: list[str]
+    options: FitOptions
+    attempts: int = Field(description="runs started so far (a server restart may re-run a job)")
+    reason: str | None = Field(None, description="why the job failed")
+    note: str | None = Field(None, description="what happened on the way, e.g. a re-run")
+    created_at: datetime
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
+    result: FitResultOut | None = Field(None, description="the best fit, once done")
+    results: list[FitResultOut] | None = Field(None, description="every model's fit, in order")
+
+
+def _time(t: float | None) -> datetime | None:
+    return None if t is None else datetime.fromtimestamp(t, UTC)
+
+
+def best_result(results: list[dict]) -> dict:
+    """The fit with the lowest log_rmse (a null one counts as worst)."""
+    def key(r):
+        e = r["error"].get("log_rmse")
+        return float("inf") if e is None else e
+
+    return min(results, key=key)
+
+
+def _out(job: JobRecord) -> JobOut:
+    return JobOut(
+        id=job.id, status=job.status, table_id=job.table_id, models=job.models,
+        options=FitOptions(**job.options), attempts=job.attempts, reason=job.reason,
+        note=job.note, created_at=_time(job.created_at), started_at=_time(job.started_at),
+        finished_at=_time(job.finished_at),
+        result=best_result(job.results) if job.results else None, results=job.results,
+    )
+
+
+def _job_or_404(store: Store, job_id: str) -> JobRecord:
+    job = store.get_job(job_id)
+    if job is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no fit job {job_id}")
+    return job
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    summary="Queue a fit",
+    responses={
+        202: {"description": "queued", "links": {
+            "GetFit": {"operationId": "get_fit", "parameters": {"job_id": "$response.body#/id"}},
+            "GetPlot": {"operationId": "get_plot", "parameters": {"job_id": "$response.body#/id"}},
+        }},
+        404: {"model": ErrorMessage, "description": "no such table"},
+    },
+)
+def create_fit(body: FitRequest, response: Response, store: StoreDep,
+               queue: QueueDep) -> JobOut:
+    if store.get_table(body.table_id) is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND,
+                            f"no table {body.table_id}; upload it with POST /v1/tables")
+    names = [body.model] if isinstance(body.model, str) else body.model
+    names = list(dict.fromkeys(names))  # a model twice is fitted once
+    job = store.create_job(body.table_id, names, body.options.model_dump())
+    queue.notify()
+    response.headers["Location"] = f"/v1/fits/{job.id}"
+    return _out(job)
+
+
+@router.get("/{job_id}", summary="A fit job: status, and the result once done",
+            responses={404: {"model": ErrorMessage, "description": "no such job"}})
+def get_fit(job_id: JobId, store: StoreDep) -> JobOut:
+    return _out(_job_or_404(store, job_id))
+
+
+@router.get(
+    "/{job_id}/plots/{kind}.png",
+    summary="A plot of a finished fit (PNG)",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/png": {}}, "description": "the plot"},
+        404: {"model": ErrorMessage, "description": "no such job, or no such model in it"},
+        409: {"model": ErrorMessage, "description": "the job is not done (queued, running,"
+                                                    " failed)"},
+    },
+)
+async def get_plot(
+    job_id: JobId,
+    kind: PlotKind,
+    store: StoreDep,
+    runner: RunnerDep,
+    model: Annotated[str | None, Query(max_length=64,
+                                       description="which model's fit (default: the best)")] = None,
+) -> Response:
+    job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status != "done":
+        why = f": {job.reason}" if job.reason else ""
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} is {job.status}{why}; plots exist once it is done")
+    if model is None:
+        result = best_result(job.results)
+    else:
+        result = next((r for r in job.results if r["model"] == model), None)
+        if result is None:
+            raise HTTPException(
+                status.HTTP_404_NOT_FOUND,
+                f"fit job {job_id} has no {model!r} fit; it has {', '.join(job.models)}",
+            )
+    path = store.plot_path(job_id, result["model"], kind.value)
+    if not path.exists():
+        # Rendered on first request, in a worker (a second or two of matplotlib
+        # and JAX), then served from the data dir.
+        table = await run_in_threadpool(store.get_table, job.table_id)
+        png = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
+                               table.name, result, kind.value)
+        await run_in_threadpool(_write_atomic, path, png)
+        return Response(png, media_type="image/png")
+    return Response(await run_in_threadpool(path.read_bytes), media_type="image/png")
+
+
+def _write_atomic(path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{id(data)}")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)

@@ -1,0 +1,85 @@
+"""The library calls a worker runs for the service: thin, picklable, top-level.
+
+They take paths and plain data, not tables (a table is 35 MB; the worker reads
+it from the data dir itself), and they return values rather than raise for bad
+input: a job's failure is an outcome to store, and exceptions that cross a
+process boundary must unpickle (``MerlFormatError``'s two-argument constructor
+does not).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import threading
+import time
+import traceback
+
+# The service refuses NaN in JSON (it is not JSON): non-finite metrics become null.
+
+
+def json_safe(value):
+    """``value`` with every non-finite float replaced by None (recursively)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    return value
+
+
+def _read(table_path: str, source: str):
+    from brdffit import merl
+
+    table = merl.read(table_path)
+    # Name it as the uploader did: the name shows in results and plot titles.
+    return dataclasses.replace(table, source=source)
+
+
+def fit_models(table_path: str, source: str, models: list[str], options: dict) -> dict:
+    """Fit each model to the table: ``{"ok": True, "results": [FitResult dict, ...]}``
+    or ``{"ok": False, "reason": "..."}``."""
+    from brdffit import BrdffitError, fit
+    from brdffit.models import UnknownModelError
+
+    try:
+        table = _read(table_path, source)
+        results = [json_safe(fit(table, m, **options).to_dict()) for m in models]
+        return {"ok": True, "results": results}
+    except (BrdffitError, UnknownModelError, ValueError) as e:
+        return {"ok": False, "reason": str(e)}
+    except Exception as e:  # a bug, not the input's fault: keep the evidence
+        return {"ok": False, "reason": f"internal error: {type(e).__name__}: {e}",
+                "traceback": traceback.format_exc()}
+
+
+def render_plot(table_path: str, source: str, result: dict, kind: str) -> bytes:
+    """One plot of a finished fit as PNG bytes (``brdffit.plots.render``)."""
+    from brdffit import plots
+
+    return plots.render(kind, _read(table_path, source), result)
+
+
+def warm_up() -> int:
+    """Import the library (JAX, matplotlib) before the first job needs it."""
+    import brdffit  # noqa: F401
+    import brdffit.plots  # noqa: F401
+
+    return os.getpid()
+
+
+def start_worker(parent_pid: int) -> None:
+    """Worker initialiser: exit when the server is gone.
+
+    A server killed with SIGKILL cannot stop its pool; without this its workers
+    would finish (and compete with) fits nobody will collect.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()

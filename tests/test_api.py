@@ -1,0 +1,371 @@
+"""The REST API against a real server on loopback: uploads, bad input, tokens,
+restarts, and a bounded schemathesis run. (The client's view: test_client.py.)"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+from api.store import Store
+from brdffit import merl
+
+from .api_fixtures import FAST, Server, header, table, table_bytes, wait_status
+
+#: Small enough to test with a body a bit over it, big enough for one table.
+CAP = 40_000_000
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with Server(tmp_path_factory.mktemp("api"), workers=1,
+                env={"BRDFFIT_MAX_UPLOAD_BYTES": str(CAP)}) as s:
+        yield s
+        # After everything this module threw at it: still serving, and no 5xx.
+        assert httpx.get(f"{s.url}/healthz", timeout=10).json()["status"] == "ok"
+        assert '" 500 ' not in s.log() and "Traceback" not in s.log(), s.log()[-5000:]
+
+
+@pytest.fixture(scope="module")
+def http(server):
+    with httpx.Client(base_url=server.url, timeout=120) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def table_id(http):
+    r = http.post("/v1/tables", content=table_bytes("ggx"), params={"name": "ggx.binary"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code in (200, 201), r.text
+    return r.json()["id"]
+
+
+def assert_error(r: httpx.Response, status: int, *words: str) -> None:
+    assert r.status_code == status, (r.status_code, r.text)
+    assert r.headers["content-type"].startswith("application/json")
+    detail = r.json()["detail"]
+    assert isinstance(detail, str) and detail
+    for w in words:
+        assert w.lower() in detail.lower(), detail
+
+
+# -- basics ---------------------------------------------------------------------------
+
+
+def test_health_models_and_openapi(http):
+    assert http.get("/healthz").json()["status"] == "ok"
+    names = [m["name"] for m in http.get("/v1/models").json()]
+    assert {"lambert", "ggx", "beckmann"} <= set(names)
+    doc = http.get("/openapi.json").json()
+    for path in ("/v1/tables", "/v1/tables/{table_id}", "/v1/fits", "/v1/fits/{job_id}",
+                 "/v1/fits/{job_id}/plots/{kind}.png", "/v1/models", "/healthz"):
+        assert path in doc["paths"], path
+    assert "swagger" in http.get("/docs").text.lower()
+
+
+def test_upload_is_content_addressed_and_idempotent(http, table_id):
+    data = table_bytes("ggx")
+    import hashlib
+
+    assert table_id == hashlib.sha256(data).hexdigest()
+    again = http.post("/v1/tables", content=data,
+                      headers={"Content-Type": "application/octet-stream"})
+    assert again.status_code == 200 and again.json()["id"] == table_id
+    multipart = http.post("/v1/tables", files={"file": ("again.binary", data)})
+    assert multipart.status_code == 200 and multipart.json()["id"] == table_id
+    info = http.get(f"/v1/tables/{table_id}").json()
+    t = table("ggx")
+    assert info["name"] == "ggx.binary" and info["size_bytes"] == len(data)
+    assert info["summary"]["measured_bins"] == t.n_measured
+    assert info["summary"]["max"] == pytest.approx(t.summary()["max"])
+
+
+# -- malformed tables (every case of the core issue) -------------------------------------
+
+GOOD_HEADER = header((90, 90, 180))
+
+
+def _body():
+    return table_bytes("ggx")[12:]
+
+
+MALFORMED = {
+    "empty": (lambda: b"", "empty"),
+    "header only": (lambda: GOOD_HEADER, "truncated"),
+    "short": (lambda: b"\x01\x02\x03", "shorter than the 12-byte header"),
+    "truncated": (lambda: GOOD_HEADER + _body()[:-800], "truncated"),
+    "trailing bytes": (lambda: GOOD_HEADER + _body() + b"\0" * 16, "trailing"),
+    "text file": (lambda: b"theta_h theta_d phi_d value\n0 0 0 0.5\n" * 50, "text"),
+    "wrong dims": (lambda: header((90, 90, 90)) + _body(), "not the MERL grid"),
+    "negative dims": (lambda: header((-90, 90, 180)) + _body(), "not positive"),
+    "absurd dims": (lambda: header((2**30, 2**30, 2**30)) + b"\0" * 64, "not the MERL grid"),
+    "no measured bin": (lambda: GOOD_HEADER + np.full(3 * 90 * 90 * 180, -1.0).tobytes(),
+                        "no measured bin"),
+}
+
+
+@pytest.mark.parametrize("case", list(MALFORMED))
+def test_malformed_tables_are_422_with_a_reason(http, case):
+    make, words = MALFORMED[case]
+    r = http.post("/v1/tables", content=make(), params={"name": f"{case}.binary"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert_error(r, 422, words, f"{case}.binary")
+
+
+def test_malformed_multipart_upload(http):
+    r = http.post("/v1/tables", files={"file": ("bad.binary", b"this is a text file\n" * 9)})
+    assert_error(r, 422, "bad.binary", "text")
+    r = http.post("/v1/tables", files={"other": ("x.binary", b"1234")})
+    assert_error(r, 422, "'file' field")
+    r = http.post("/v1/tables", content=b"--xyz\r\ngarbage",
+                  headers={"Content-Type": "multipart/form-data; boundary=xyz"})
+    assert 400 <= r.status_code < 500 and isinstance(r.json()["detail"], str)
+    r = http.post("/v1/tables", content=b"abc", headers={"Content-Type": "multipart/form-data"})
+    assert_error(r, 400, "boundary")
+
+
+def test_nonfinite_values_are_masked_not_refused(http):
+    raw = np.frombuffer(table_bytes("ggx")[12:], dtype="<f8").copy()
+    measured = np.flatnonzero(raw >= 0)
+    raw[measured[:7]] = np.nan
+    raw[measured[7:10]] = np.inf
+    r = http.post("/v1/tables", content=GOOD_HEADER + raw.tobytes(),
+                  headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code == 201, r.text
+    summary = r.json()["summary"]
+    assert summary["nonfinite_bins"] == 10
+    assert all(np.isfinite(summary["max"]))
+
+
+def test_wrong_content_type_is_415(http):
+    for ctype in ("application/json", "text/plain", "application/x-www-form-urlencoded"):
+        r = http.post("/v1/tables", content=table_bytes("ggx"), headers={"Content-Type": ctype})
+        assert_error(r, 415, "application/octet-stream")
+
+
+def test_oversized_body_is_413(http):
+    """A body over the cap, streamed without a length: read up to a bounded
+    excess, then refused with a message naming the cap."""
+    def chunks():
+        piece = b"\0" * (1 << 20)
+        for _ in range(CAP // len(piece) + 2):
+            yield piece
+
+    r = http.post("/v1/tables", content=chunks(),
+                  headers={"Content-Type": "application/octet-stream"})
+    assert_error(r, 413, "BRDFFIT_MAX_UPLOAD_BYTES", f"{CAP:,}")
+
+
+def test_huge_declared_length_is_refused_before_the_body(server):
+    """Content-Length far past the cap: answered before a byte of body is sent
+    (what curl sees, with its Expect: 100-continue)."""
+    with socket.create_connection(("127.0.0.1", server.port), timeout=30) as s:
+        s.sendall(b"POST /v1/tables HTTP/1.1\r\nHost: x\r\n"
+                  b"Content-Type: application/octet-stream\r\nContent-Length: 10000000000\r\n"
+                  b"Expect: 100-continue\r\n\r\n")
+        reply = b""
+        while b"\r\n\r\n" not in reply or not reply.rstrip().endswith(b"}"):
+            chunk = s.recv(65536)
+            if not chunk:
+                break
+            reply += chunk
+    status_line, _, rest = reply.partition(b"\r\n")
+    assert b" 413 " in status_line, reply
+    assert b"BRDFFIT_MAX_UPLOAD_BYTES" in rest
+
+
+# -- fits: validation before queueing ----------------------------------------------------
+
+UNKNOWN_TABLE = "0" * 64
+UNKNOWN_JOB = "f" * 32
+
+
+def test_unknown_ids_are_404(http):
+    assert_error(http.get(f"/v1/tables/{UNKNOWN_TABLE}"), 404, "no table")
+    assert_error(http.get(f"/v1/fits/{UNKNOWN_JOB}"), 404, "no fit job")
+    assert_error(http.get(f"/v1/fits/{UNKNOWN_JOB}/plots/slices.png"), 404, "no fit job")
+    assert_error(http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE}), 404, "no table")
+
+
+def test_malformed_ids_are_422(http):
+    assert_error(http.get("/v1/tables/not-a-hash"), 422, "table_id")
+    assert_error(http.get("/v1/fits/x"), 422, "job_id")
+    assert_error(http.post("/v1/fits", json={"table_id": "abc"}), 422, "table_id")
+
+
+@pytest.mark.parametrize("model, words", [
+    ("phong2", "unknown model 'phong2'"),
+    (["ggx", "nope"], "unknown model 'nope'"),
+    ([], "at least one model"),
+    (42, "model"),
+])
+def test_unknown_model_is_422(http, table_id, model, words):
+    assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": model}), 422, words)
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"starts": 0}, "options.starts"),
+    ({"samples": 10}, "options.samples"),
+    ({"samples": "many"}, "options.samples"),
+    ({"solver": "newton"}, "options.solver"),
+    ({"precision": "float16"}, "options.precision"),
+    ({"max_steps": 0}, "options.max_steps"),
+    ({"seed": -1}, "options.seed"),
+    ({"init": {"alpha": 0.1}}, "options.init"),  # not an allowed key
+    ({"bin_weight": [1, 2]}, "options.bin_weight"),
+    ([1, 2], "options"),
+])
+def test_bad_options_are_422_before_queueing(http, table_id, options, words):
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert", "options": options})
+    assert_error(r, 422, words)
+
+
+def test_malformed_fit_bodies_are_422(http):
+    r = http.post("/v1/fits", content=b"{not json", headers={"Content-Type": "application/json"})
+    assert_error(r, 422, "json")
+    assert_error(http.post("/v1/fits", json=[1, 2, 3]), 422)
+    assert_error(http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, "colour": "red"}), 422,
+                 "colour")
+    r = http.post("/v1/fits", content=b"table_id=1", headers={"Content-Type": "text/plain"})
+    assert 400 <= r.status_code < 500
+
+
+def test_fit_runs_and_plots_wait_for_it(http, table_id):
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": ["lambert", "lambert"],
+                                    "options": FAST})
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert r.headers["location"] == f"/v1/fits/{job['id']}"
+    assert job["status"] in ("queued", "running") and job["models"] == ["lambert"]
+    plot = http.get(f"/v1/fits/{job['id']}/plots/slices.png")
+    if plot.status_code != 200:  # fast machines may already be done
+        assert_error(plot, 409, "plots exist once it is done")
+    done = wait_status(http, job["id"], ("done", "failed"))
+    assert done["status"] == "done", done
+    assert done["attempts"] == 1 and done["reason"] is None
+    result = done["result"]
+    assert result == done["results"][0]
+    assert result["model"] == "lambert" and result["table"] == "ggx.binary"
+    assert set(result) >= {"params", "error", "converged", "result", "steps", "samples"}
+    assert_error(http.get(f"/v1/fits/{job['id']}/plots/spheres.png", params={"model": "ggx"}),
+                 404, "no 'ggx' fit")
+    assert_error(http.get(f"/v1/fits/{job['id']}/plots/histogram.png"), 422, "kind")
+
+
+# -- bearer token ------------------------------------------------------------------------
+
+
+def test_token_guards_every_route_but_healthz(tmp_path):
+    with Server(tmp_path, env={"BRDFFIT_API_TOKEN": "s3cret"}) as s, \
+            httpx.Client(base_url=s.url, timeout=30) as http:
+        assert http.get("/healthz").status_code == 200
+        for method, path in [("GET", "/v1/models"), ("GET", f"/v1/tables/{UNKNOWN_TABLE}"),
+                             ("POST", "/v1/tables"), ("POST", "/v1/fits"),
+                             ("GET", f"/v1/fits/{UNKNOWN_JOB}"),
+                             ("GET", f"/v1/fits/{UNKNOWN_JOB}/plots/polar.png"),
+                             ("GET", "/openapi.json"), ("GET", "/docs")]:
+            assert_error(http.request(method, path), 401, "bearer")
+            wrong = http.request(method, path, headers={"Authorization": "Bearer guess"})
+            assert_error(wrong, 401, "wrong bearer token")
+        ok = {"Authorization": "Bearer s3cret"}
+        assert http.get("/v1/models", headers=ok).status_code == 200
+        assert_error(http.get(f"/v1/fits/{UNKNOWN_JOB}", headers=ok), 404)
+        assert http.get("/openapi.json", headers=ok).json()["info"]["title"] == "brdffit"
+
+
+# -- restarts: nothing silently lost -----------------------------------------------------
+
+
+def test_sigkill_with_a_job_running_and_one_queued_loses_nothing(tmp_path):
+    data = tmp_path / "data"
+    path = tmp_path / "ggx.binary"
+    path.write_bytes(table_bytes("ggx"))
+    server = Server(data, workers=1).start()
+    try:
+        with httpx.Client(base_url=server.url, timeout=60) as http:
+            with open(path, "rb") as f:
+                tid = http.post("/v1/tables", content=f).json()["id"]
+            # The first job is slow enough to be caught running.
+            slow = http.post("/v1/fits", json={"table_id": tid, "model": "ggx",
+                                               "options": {"samples": 65536, "starts": 2}}).json()
+            quick = http.post("/v1/fits", json={"table_id": tid, "model": "lambert",
+                                                "options": FAST}).json()
+            wait_status(http, slow["id"], ("running",), timeout=60, poll=0.02)
+            assert http.get(f"/v1/fits/{quick['id']}").json()["status"] == "queued"
+        server.kill()
+        # Its worker notices the server is gone and exits by itself.
+        assert server.wait_group_gone(20.0), "orphaned worker processes"
+    finally:
+        server.stop()
+
+    # Same data dir, a new server: the running job runs again, the queued one runs.
+    with Server(data, workers=1) as again, httpx.Client(base_url=again.url, timeout=60) as http:
+        slow_done = wait_status(http, slow["id"], ("done", "failed"))
+        quick_done = wait_status(http, quick["id"], ("done", "failed"))
+    assert slow_done["status"] == "done", slow_done
+    assert slow_done["attempts"] == 2 and "interrupted" in slow_done["note"]
+    assert quick_done["status"] == "done" and quick_done["attempts"] == 1, quick_done
+    assert "re-queued" in again.log()
+
+
+def test_recovery_fails_a_job_out_of_attempts(tmp_path):
+    """With BRDFFIT_MAX_ATTEMPTS=1 an interrupted job is failed, with the reason."""
+    store = Store(tmp_path)
+    tmp = tmp_path / "t.binary"
+    merl.write(tmp, table("lambert"))
+    store.add_table("a" * 64, tmp, 1, "t.binary", {})
+    running = store.create_job("a" * 64, ["lambert"], {})
+    queued = store.create_job("a" * 64, ["lambert"], {})
+    assert store.claim_next().id == running.id
+    requeued, failed = Store(tmp_path).recover(max_attempts=1)  # "the next server"
+    assert (requeued, failed) == ([], [running.id])
+    job = store.get_job(running.id)
+    assert job.status == "failed" and "server stopped" in job.reason
+    assert "BRDFFIT_MAX_ATTEMPTS=1" in job.reason
+    assert store.get_job(queued.id).status == "queued"
+    assert store.claim_next().id == queued.id and store.claim_next() is None
+
+
+def test_clean_shutdown_requeues_without_spending_an_attempt(tmp_path):
+    store = Store(tmp_path)
+    tmp = tmp_path / "t.binary"
+    merl.write(tmp, table("lambert"))
+    store.add_table("b" * 64, tmp, 1, "t.binary", {})
+    job = store.create_job("b" * 64, ["lambert"], {})
+    store.claim_next()
+    assert store.release_running() == 1
+    again = store.get_job(job.id)
+    assert again.status == "queued" and again.attempts == 0 and "shut down" in again.note
+
+
+# -- fuzzing -------------------------------------------------------------------------------
+
+
+def test_schemathesis_finds_no_server_error(server, tmp_path):
+    """A bounded property-based run over every operation of the OpenAPI document."""
+    exe = Path(sys.executable).with_name("schemathesis")
+    if not exe.exists():
+        pytest.skip("schemathesis is not installed (pip install -e '.[test]')")
+    proc = subprocess.run(
+        [str(exe), "run", f"{server.url}/openapi.json", "--checks", "not_a_server_error",
+         "--max-examples", "25", "--phases", "examples,coverage,fuzzing", "--workers", "2",
+         "--request-timeout", "30", "--seed", "1", "--generation-database", "none",
+         "--no-color", "--suppress-health-check", "all"],
+        capture_output=True, text=True, timeout=240, cwd=tmp_path,
+    )
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out[-6000:]
+
+
+def test_results_are_plain_json(http, table_id):
+    """NaN never reaches the wire (it is not JSON): the document parses strictly."""
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert", "options": FAST})
+    done = wait_status(http, r.json()["id"], ("done", "failed"))
+    text = http.get(f"/v1/fits/{done['id']}").text
+    json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
