@@ -1,0 +1,226 @@
+"""A Python client for the brdffit service (``brdffit serve``), over httpx.
+
+    from brdffit.client import Client
+
+    with Client("http://127.0.0.1:8000") as c:
+        job = c.fit(c.upload("gold-metallic-paint.binary"), "ggx", samples=8192)
+        result = c.result(c.wait(job, timeout=300))   # a brdffit.FitResult
+        print(result.params, result.log_rmse)
+        open("spheres.png", "wb").write(c.plot(job, "spheres"))
+
+Every error the server reports arrives as :class:`ApiError` with the server's
+message (``.detail``) and status; a fit that failed raises :class:`FitFailed`
+with its reason; a wait that runs out raises ``TimeoutError``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from datetime import datetime
+
+import httpx
+
+from .fitting import FitResult
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+
+
+class ClientError(Exception):
+    """Base of what :class:`Client` raises (besides ``TimeoutError``)."""
+
+
+class ApiError(ClientError):
+    """The server answered with an error: ``status_code`` and its ``detail``."""
+
+    def __init__(self, status_code: int, detail: str, method: str = "", url: str = ""):
+        self.status_code = status_code
+        self.detail = detail
+        self.method = method
+        self.url = url
+        super().__init__(f"{status_code} from {method} {url}: {detail}".replace("  ", " "))
+
+
+class FitFailed(ClientError):
+    """The fit job ended in ``failed``; ``reason`` is the server's explanation."""
+
+    def __init__(self, job: FitJob):
+        self.job = job
+        self.reason = job.reason or "no reason given"
+        super().__init__(f"fit job {job.id} failed: {self.reason}")
+
+
+@dataclass(frozen=True)
+class TableInfo:
+    """An uploaded table (``GET /v1/tables/{id}``)."""
+
+    id: str
+    name: str
+    size_bytes: int
+    created_at: datetime
+    summary: dict
+
+    @classmethod
+    def from_json(cls, d: dict) -> TableInfo:
+        return cls(d["id"], d["name"], d["size_bytes"],
+                   datetime.fromisoformat(d["created_at"].replace("Z", "+00:00")), d["summary"])
+
+
+@dataclass(frozen=True)
+class FitJob:
+    """A fit job as the server last described it (``GET /v1/fits/{id}``)."""
+
+    id: str
+    status: str  # queued, running, done, failed
+    table_id: str
+    models: list[str]
+    options: dict
+    attempts: int
+    reason: str | None
+    note: str | None
+    result: FitResult | None  # the best fit, once done
+    results: list[FitResult]  # every model's fit, once done
+
+    @property
+    def finished(self) -> bool:
+        return self.status in ("done", "failed")
+
+    @classmethod
+    def from_json(cls, d: dict) -> FitJob:
+        return cls(
+            id=d["id"], status=d["status"], table_id=d["table_id"], models=d["models"],
+            options=d["options"], attempts=d["attempts"], reason=d.get("reason"),
+            note=d.get("note"),
+            result=FitResult.from_dict(d["result"]) if d.get("result") else None,
+            results=[FitResult.from_dict(r) for r in d.get("results") or []],
+        )
+
+
+JobRef = FitJob | str
+
+
+def _job_id(job: JobRef) -> str:
+    return job.id if isinstance(job, FitJob) else job
+
+
+class Client:
+    """Talk to one brdffit server. ``token``: its ``BRDFFIT_API_TOKEN``, if any
+    (default: the ``BRDFFIT_API_TOKEN`` environment variable)."""
+
+    def __init__(self, base_url: str = DEFAULT_URL, *, token: str | None = None,
+                 timeout: float = 120.0, transport: httpx.BaseTransport | None = None):
+        token = token if token is not None else os.environ.get("BRDFFIT_API_TOKEN") or None
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers,
+                                  timeout=timeout, transport=transport)
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._http.close()
+
+    # -- plumbing ---------------------------------------------------------------------
+
+    def _request(self, method: str, url: str, **kw) -> httpx.Response:
+        response = self._http.request(method, url, **kw)
+        if response.is_error:
+            raise ApiError(response.status_code, _detail(response), method,
+                           str(response.request.url))
+        return response
+
+    # -- the service ------------------------------------------------------------------
+
+    def health(self) -> dict:
+        return self._request("GET", "/healthz").json()
+
+    def models(self) -> list[dict]:
+        """The models the server fits, with their parameters (``GET /v1/models``)."""
+        return self._request("GET", "/v1/models").json()
+
+    def upload(self, path: str | os.PathLike) -> str:
+        """Upload a MERL ``.binary`` file; returns its table id (its sha256).
+
+        Streams the file; the same bytes uploaded twice give the same id.
+        """
+        return self.upload_table(path).id
+
+    def upload_table(self, path: str | os.PathLike) -> TableInfo:
+        """As :meth:`upload`, returning the table's summary too."""
+        with open(path, "rb") as f:  # httpx streams a file in chunks, with its length
+            response = self._request(
+                "POST", "/v1/tables", content=f,
+                params={"name": os.path.basename(os.fspath(path))},
+                headers={"Content-Type": "application/octet-stream"},
+            )
+        return TableInfo.from_json(response.json())
+
+    def table(self, table_id: str) -> TableInfo:
+        return TableInfo.from_json(self._request("GET", f"/v1/tables/{table_id}").json())
+
+    def fit(self, table_id: str, model: str | list[str] = "ggx", **options) -> FitJob:
+        """Queue a fit; ``options`` are ``brdffit.fit``'s (solver, samples, precision,
+        starts, max_steps, seed). Returns at once: see :meth:`wait`."""
+        body = {"table_id": table_id, "model": model, "options": options}
+        return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
+
+    def job(self, job: JobRef) -> FitJob:
+        """The job's current state."""
+        return FitJob.from_json(self._request("GET", f"/v1/fits/{_job_id(job)}").json())
+
+    def wait(self, job: JobRef, timeout: float = 600.0, *, poll: float = 0.25) -> FitJob:
+        """Poll until the job is done or failed; returns it either way.
+
+        Raises ``TimeoutError`` after ``timeout`` seconds.
+        """
+        deadline = time.monotonic() + timeout
+        delay = min(poll, 0.1)
+        while True:
+            current = self.job(job)
+            if current.finished:
+                return current
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError(f"fit job {current.id} still {current.status} "
+                                   f"after {timeout:g} s")
+            time.sleep(min(delay, left))
+            delay = min(delay * 1.5, max(poll, 2.0))  # quick at first, then gentle
+
+    def result(self, job: JobRef, model: str | None = None) -> FitResult:
+        """The fit of a finished job: the best one, or ``model``'s.
+
+        Raises :class:`FitFailed` if the job failed, :class:`ClientError` if it is
+        not finished yet (call :meth:`wait` first).
+        """
+        current = job if isinstance(job, FitJob) and job.finished else self.job(job)
+        if current.status == "failed":
+            raise FitFailed(current)
+        if current.status != "done":
+            raise ClientError(f"fit job {current.id} is {current.status}; wait() for it first")
+        if model is None:
+            return current.result
+        for r in current.results:
+            if r.model == model:
+                return r
+        raise ClientError(f"fit job {current.id} has no {model!r} fit; it has {current.models}")
+
+    def plot(self, job: JobRef, kind: str, model: str | None = None) -> bytes:
+        """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,
+        ``spheres`` or ``polar`` (see ``brdffit.plots``)."""
+        params = {"model": model} if model else None
+        return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
+                             params=params).content
+
+
+def _detail(response: httpx.Response) -> str:
+    try:
+        body = response.json()
+    except ValueError:
+        return response.text.strip()[:500] or response.reason_phrase
+    if isinstance(body, dict) and isinstance(body.get("detail"), str):
+        return body["detail"]
+    return str(body)[:500]

@@ -1,0 +1,177 @@
+"""brdffit.client.Client against a real server: the whole round trip, errors that
+carry the server's message, and twenty clients at once."""
+
+from __future__ import annotations
+
+import io
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from brdffit import FitResult, merl
+from brdffit.client import ApiError, Client, ClientError, FitFailed, FitJob
+from brdffit.grid import bin_grid
+from brdffit.plots import KINDS
+
+from .api_fixtures import FAST, TABLES, Server, scaled_table_bytes, table, table_bytes, write
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with Server(tmp_path_factory.mktemp("client"), workers=2) as s:
+        yield s
+        assert '" 500 ' not in s.log() and "Traceback" not in s.log(), s.log()[-5000:]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tables")
+    return {name: write(d / f"{name}.binary", table_bytes(name)) for name in TABLES}
+
+
+@pytest.fixture
+def client(server):
+    with Client(server.url, timeout=60) as c:
+        yield c
+
+
+def test_upload_fit_wait_result_plot(client, files):
+    table_id = client.upload(files["ggx"])
+    assert client.upload(files["ggx"]) == table_id  # idempotent
+    info = client.table(table_id)
+    assert info.name == "ggx.binary" and info.summary["measured_bins"] == table("ggx").n_measured
+
+    job = client.fit(table_id, ["ggx", "lambert"], **FAST)
+    assert isinstance(job, FitJob) and job.status in ("queued", "running")
+    done = client.wait(job, timeout=240)
+    assert done.status == "done" and done.attempts == 1
+
+    best = client.result(job)
+    assert isinstance(best, FitResult) and best.model == "ggx"
+    truth = TABLES["ggx"][1]
+    assert best.params["alpha"] == pytest.approx(truth["alpha"], rel=0.02)
+    assert best.params["kd"] == pytest.approx(truth["kd"], rel=0.02)
+    assert client.result(job, model="lambert").log_rmse > best.log_rmse
+    assert [r.model for r in done.results] == ["ggx", "lambert"]
+
+    for kind in KINDS:
+        png = client.plot(job, kind)
+        image = imread(io.BytesIO(png), format="png")
+        h, w = image.shape[:2]
+        assert 300 <= h <= 1600 and 500 <= w <= 2000, (kind, h, w)
+        assert 10_000 < len(png) < 2_000_000
+    assert client.plot(job, "spheres") == client.plot(job, "spheres")  # served from the cache
+    assert client.plot(job.id, "polar", model="lambert")[:4] == b"\x89PNG"
+
+
+def test_errors_carry_the_servers_message(client, files, tmp_path):
+    table_id = client.upload(files["lambert"])
+    with pytest.raises(ApiError) as e:
+        client.fit("0" * 64, "ggx")
+    assert e.value.status_code == 404 and "no table" in e.value.detail
+    with pytest.raises(ApiError) as e:
+        client.fit(table_id, "torrance")
+    assert e.value.status_code == 422 and "unknown model 'torrance'" in e.value.detail
+    with pytest.raises(ApiError) as e:
+        client.fit(table_id, "lambert", starts=0)
+    assert e.value.status_code == 422 and "options.starts" in e.value.detail
+    with pytest.raises(ApiError) as e:
+        client.fit(table_id, "lambert", bin_weight=[1.0])
+    assert "options.bin_weight" in e.value.detail
+    text = tmp_path / "notes.binary"
+    text.write_text("not a table\n" * 20)
+    with pytest.raises(ApiError) as e:
+        client.upload(text)
+    assert e.value.status_code == 422 and "notes.binary: looks like a text file" in e.value.detail
+    with pytest.raises(ApiError) as e:
+        client.plot("f" * 32, "slices")
+    assert e.value.status_code == 404
+    assert "404" in str(e.value) and "no fit job" in str(e.value)
+
+
+def test_failed_fit_raises_with_its_reason(client, tmp_path):
+    """A table the reader accepts but no fit can use (every measured bin below
+    the horizon) fails as a job, with the fit's own explanation."""
+    t = table("lambert")
+    below = ~bin_grid().above_horizon.reshape(t.mask.shape)
+    rgb = np.where(below, 0.1, t.rgb)
+    path = write(tmp_path / "below.binary",
+                 merl.to_bytes(merl.MerlTable.from_values(rgb, below, source="below")))
+    job = client.wait(client.fit(client.upload(path), "lambert", **FAST), timeout=120)
+    assert job.status == "failed" and "usable bins" in job.reason
+    with pytest.raises(FitFailed, match="usable bins") as e:
+        client.result(job)
+    assert e.value.job.id == job.id
+    with pytest.raises(ApiError) as e:
+        client.plot(job, "slices")
+    assert e.value.status_code == 409 and "failed" in e.value.detail
+
+
+def test_wait_times_out_and_result_wants_a_finished_job(client, files):
+    table_id = client.upload(files["lambert"])
+    # Reading the table alone takes longer than this test's first two requests.
+    job = client.fit(table_id, "lambert", seed=7, **FAST)
+    with pytest.raises(ClientError, match="wait"):
+        client.result(job)
+    with pytest.raises(TimeoutError, match=job.id):
+        client.wait(job, timeout=0.001)
+    assert client.wait(job, timeout=240).status == "done"
+
+
+def test_token_is_sent_and_a_401_explained():
+    """The header the server checks (its own 401s: test_api.py), without a server."""
+    seen = []
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        seen.append(request.headers.get("authorization"))
+        if request.headers.get("authorization") != "Bearer tok":
+            return httpx.Response(401, json={"detail": "wrong bearer token"})
+        return httpx.Response(200, json=[{"name": "ggx"}])
+
+    with Client("http://brdffit.test", token="tok", transport=httpx.MockTransport(handler)) as c:
+        assert c.models() == [{"name": "ggx"}]
+    with Client("http://brdffit.test", token="nope", transport=httpx.MockTransport(handler)) as c:
+        with pytest.raises(ApiError) as e:
+            c.models()
+    assert e.value.status_code == 401 and e.value.detail == "wrong bearer token"
+    assert seen == ["Bearer tok", "Bearer nope"]
+
+
+def test_non_json_errors_are_still_explained():
+    transport = httpx.MockTransport(lambda r: httpx.Response(502, text="<h1>Bad Gateway</h1>"))
+    with Client("http://brdffit.test", token="", transport=transport) as c:
+        with pytest.raises(ApiError) as e:
+            c.health()
+    assert e.value.status_code == 502 and "Bad Gateway" in e.value.detail
+
+
+N_CLIENTS = 20
+N_TABLES = 5
+
+
+def test_twenty_concurrent_clients(server, tmp_path):
+    """Twenty clients, each uploading (five distinct tables, so uploads of the
+    same bytes race too) and fitting at once: every one gets its own table's answer."""
+    kd = np.array(TABLES["lambert"][1]["kd"])
+    scales = [0.5 + 0.25 * i for i in range(N_TABLES)]
+    paths = [write(tmp_path / f"lambert-{i}.binary", scaled_table_bytes("lambert", s))
+             for i, s in enumerate(scales)]
+
+    def one(i: int):
+        with Client(server.url, timeout=120) as c:
+            table_id = c.upload(paths[i % N_TABLES])
+            job = c.wait(c.fit(table_id, "lambert", **FAST), timeout=240)
+            return table_id, job.id, c.result(job)
+
+    with ThreadPoolExecutor(N_CLIENTS) as pool:
+        futures = [pool.submit(one, i) for i in range(N_CLIENTS)]
+        outcomes = [f.result(timeout=300) for f in futures]
+
+    assert len({job_id for _, job_id, _ in outcomes}) == N_CLIENTS
+    assert len({table_id for table_id, _, _ in outcomes}) == N_TABLES
+    for i, (_, _, result) in enumerate(outcomes):
+        assert result.model == "lambert" and result.converged
+        np.testing.assert_allclose(result.params["kd"], scales[i % N_TABLES] * kd, rtol=1e-3)
