@@ -15,6 +15,8 @@ start in the right basin.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import numpy as np
@@ -25,36 +27,49 @@ from .models import AbstractBRDFModel, AbstractLobeModel
 from .models.frame import shading_frame
 
 
-def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
-    """kd estimate (3,) from bins far from the highlight."""
+@functools.cache
+def _diffuse_region() -> np.ndarray:
+    """Flat bins far from the highlight and from grazing Fresnel; every 3rd is plenty
+    for a percentile and keeps this cheap."""
     g = bin_grid()
     sel = (
-        usable
-        & (g.theta_h > 0.5)
+        (g.theta_h > 0.5)
         & (g.theta_h < 1.2)
         & (g.theta_d < 0.9)
         & (g.cos_i > 0.2)
         & (g.cos_o > 0.2)
     )
-    if np.count_nonzero(sel) < 50:  # tiny or oddly masked table: use what there is
-        sel = usable
-    values = table.rgb.reshape(3, -1)[:, sel]
+    return np.flatnonzero(sel)[::3]
+
+
+@functools.cache
+def _peak_region() -> np.ndarray:
+    """Flat bins with both directions well above grazing and small theta_d."""
+    g = bin_grid()
+    return np.flatnonzero((g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6))
+
+
+def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
+    """kd estimate (3,) from bins far from the highlight."""
+    idx = _diffuse_region()
+    idx = idx[usable[idx]]
+    if idx.size < 50:  # tiny or oddly masked table: use what there is
+        idx = np.flatnonzero(usable)
+    values = table.rgb.reshape(3, -1)[:, idx]
     return np.pi * np.percentile(values, 20, axis=1)
 
 
 def peak_bin(table: MerlTable, usable: np.ndarray) -> int:
     """Flat index of the brightest usable bin with both directions well above grazing."""
-    g = bin_grid()
-    sel = usable & (g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6)
-    if not sel.any():
-        sel = usable
-    lum = table.rgb.reshape(3, -1).sum(axis=0)
-    return int(np.argmax(np.where(sel, lum, -np.inf)))
+    idx = _peak_region()
+    idx = idx[usable[idx]]
+    if idx.size == 0:
+        idx = np.flatnonzero(usable)
+    lum = table.rgb.reshape(3, -1)[:, idx].sum(axis=0)
+    return int(idx[np.argmax(lum)])
 
 
-def candidates(
-    model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray
-) -> np.ndarray:
+def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray) -> np.ndarray:
     """Unconstrained start vectors (K, n_params), one per ``shape_grid`` entry."""
     kd = diffuse_estimate(table, usable)
     # A model that is not one lobe over a diffuse base may seed itself (ggx2).

@@ -108,8 +108,11 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
         raise MerlFormatError(
             source,
             f"header dims {dims} are not the MERL grid {list(SHAPE)}"
-            + (f" (they would need {expected:,} bytes, the file has {body:,})"
-               if expected != body else ""),
+            + (
+                f" (they would need {expected:,} bytes, the file has {body:,})"
+                if expected != body
+                else ""
+            ),
         )
     if body < expected:
         raise MerlFormatError(

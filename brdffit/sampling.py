@@ -70,9 +70,7 @@ def bin_weights(usable: np.ndarray, scene_weight: np.ndarray | None = None) -> n
     return w / total if total > 0 else w
 
 
-def stratified_sample(
-    weight: np.ndarray, samples: int | None, seed: int = 0
-) -> SampleSet:
+def stratified_sample(weight: np.ndarray, samples: int | None, seed: int = 0) -> SampleSet:
     """Pick at most ``samples`` bins with weight > 0, an equal quota per theta_h row.
 
     ``samples=None`` keeps every usable bin (padded to the grid size so the shape
@@ -87,21 +85,19 @@ def stratified_sample(
         w[: candidates.size] = weight[candidates]
         return SampleSet(index, w / w.sum(), int(candidates.size))
 
-    rows = candidates // (N_THETA_D * N_PHI_D)  # candidates are sorted: rows contiguous
-    row_count = np.bincount(rows, minlength=N_THETA_H)
+    row_count = np.bincount(candidates // (N_THETA_D * N_PHI_D), minlength=N_THETA_H)
     quota = _row_quota(row_count, samples)
-    # Systematic sampling inside each row: keep the positions where
-    # floor((pos + offset) q / n) steps up, i.e. exactly q bins spread evenly over
-    # the row's (theta_d, phi_d) sheet, with a random offset per row. Vectorised
-    # over all rows at once (no per-row loop, no sort).
+    # Systematic sampling inside each row: the k-th of a row's q picks sits at
+    # position floor((k + offset) n / q) among its n candidates (sorted, so rows are
+    # contiguous), i.e. q bins spread evenly over the row's (theta_d, phi_d)
+    # sheet, with a random offset per row. O(samples) work after one flatnonzero.
     offset = np.random.default_rng(seed).random(N_THETA_H)
     row_start = np.concatenate([[0], np.cumsum(row_count)[:-1]])
-    pos = np.arange(candidates.size) - row_start[rows]
-    n, q, o = row_count[rows], quota[rows], offset[rows]
-    keep = np.floor((pos + o) * q / n) != np.floor((pos - 1 + o) * q / n)
-    index = candidates[keep]
-    r = rows[keep]
-    w = weight[index] * row_count[r] / np.maximum(quota[r], 1)
+    r = np.repeat(np.arange(N_THETA_H), quota)
+    k = np.arange(r.size) - np.repeat(np.cumsum(quota) - quota, quota)
+    pos = np.floor((k + offset[r]) * row_count[r] / quota[r]).astype(np.int64)
+    index = candidates[row_start[r] + pos]
+    w = weight[index] * row_count[r] / quota[r]
     padded_index = np.zeros(samples, dtype=np.int64)
     padded_w = np.zeros(samples)
     padded_index[: index.size] = index

@@ -17,7 +17,9 @@ def _parse_param(text: str) -> tuple[str, object]:
     try:
         numbers = [float(v) for v in value.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--param {name}: {value!r} is not a number list") from None
+        raise argparse.ArgumentTypeError(
+            f"--param {name}: {value!r} is not a number list"
+        ) from None
     return name.strip(), numbers[0] if len(numbers) == 1 else numbers
 
 
@@ -30,8 +32,14 @@ def main(argv: list[str] | None = None) -> int:
     src = ap.add_mutually_exclusive_group()
     src.add_argument("--model", choices=list(models.REGISTRY), default="ggx")
     src.add_argument("--preset", choices=list(PRESETS), help="a named hard case")
-    ap.add_argument("--param", action="append", type=_parse_param, default=[],
-                    metavar="NAME=V[,V,V]", help="model parameter (repeatable); others default")
+    ap.add_argument(
+        "--param",
+        action="append",
+        type=_parse_param,
+        default=[],
+        metavar="NAME=V[,V,V]",
+        help="model parameter (repeatable); others default",
+    )
     ap.add_argument("--noise", type=float, default=0.0, help="multiplicative noise std (e.g. 0.05)")
     ap.add_argument("--missing", type=float, default=0.0, help="fraction of bins to drop")
     ap.add_argument("--seed", type=int, default=0)
@@ -40,8 +48,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.preset:
             table, truth = make_preset(args.preset, seed=args.seed)
         else:
-            table, truth = make_table(args.model, dict(args.param), noise=args.noise,
-                                      missing=args.missing, seed=args.seed, source=args.out)
+            table, truth = make_table(
+                args.model,
+                dict(args.param),
+                noise=args.noise,
+                missing=args.missing,
+                seed=args.seed,
+                source=args.out,
+            )
         sidecar = write_table(args.out, table, truth)
     except (ValueError, OSError) as e:
         print(f"data_synth: error: {e}", file=sys.stderr)

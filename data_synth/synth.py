@@ -33,8 +33,14 @@ DEFAULT_PARAMS: dict[str, dict] = {
     "beckmann": {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6},
     "beckmann_dielectric": {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5},
     "ggx_dielectric": {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5},
-    "ggx2": {"kd": [0.1, 0.08, 0.05], "ks1": [0.5, 0.5, 0.5], "alpha1": 0.03,
-             "ks2": [0.4, 0.4, 0.4], "alpha2": 0.3, "f0": 0.8},
+    "ggx2": {
+        "kd": [0.1, 0.08, 0.05],
+        "ks1": [0.5, 0.5, 0.5],
+        "alpha1": 0.03,
+        "ks2": [0.4, 0.4, 0.4],
+        "alpha2": 0.3,
+        "f0": 0.8,
+    },
 }
 
 
@@ -88,7 +94,9 @@ def make_table(
         mask &= np.asarray(keep, dtype=bool).ravel()
     table = merl.MerlTable.from_values(values, mask, source=source)
     truth = {
-        "model": components[0].model if len(components) == 1 else "+".join(c.model for c in components),
+        "model": components[0].model
+        if len(components) == 1
+        else "+".join(c.model for c in components),
         "params": _plain(components[0].params) if len(components) == 1 else None,
         "components": [{"model": c.model, "params": _plain(c.params)} for c in components],
         "noise": noise,
@@ -111,7 +119,11 @@ def _grazing_keep() -> np.ndarray:
 #: Named hard cases: (components, make_table keyword arguments).
 PRESETS: dict[str, tuple[list[Component], dict]] = {
     "near-mirror": (
-        [Component("ggx", {"kd": [0.02, 0.02, 0.02], "ks": [1.0, 1.0, 1.0], "alpha": 0.01, "f0": 0.9})],
+        [
+            Component(
+                "ggx", {"kd": [0.02, 0.02, 0.02], "ks": [1.0, 1.0, 1.0], "alpha": 0.01, "f0": 0.9}
+            )
+        ],
         {},
     ),
     "pure-diffuse": (
@@ -119,22 +131,38 @@ PRESETS: dict[str, tuple[list[Component], dict]] = {
         {},
     ),
     "strong-fresnel": (
-        [Component("ggx", {"kd": [0.1, 0.1, 0.1], "ks": [1.0, 1.0, 1.0], "alpha": 0.1, "f0": 0.02})],
+        [
+            Component(
+                "ggx", {"kd": [0.1, 0.1, 0.1], "ks": [1.0, 1.0, 1.0], "alpha": 0.1, "f0": 0.02}
+            )
+        ],
         {},
     ),
     "two-lobes": (
         [
-            Component("ggx", {"kd": [0.1, 0.08, 0.05], "ks": [0.5, 0.5, 0.5], "alpha": 0.03, "f0": 1.0}),
-            Component("ggx", {"kd": [0.0, 0.0, 0.0], "ks": [0.4, 0.4, 0.4], "alpha": 0.3, "f0": 1.0}),
+            Component(
+                "ggx", {"kd": [0.1, 0.08, 0.05], "ks": [0.5, 0.5, 0.5], "alpha": 0.03, "f0": 1.0}
+            ),
+            Component(
+                "ggx", {"kd": [0.0, 0.0, 0.0], "ks": [0.4, 0.4, 0.4], "alpha": 0.3, "f0": 1.0}
+            ),
         ],
         {},
     ),
     "grazing-heavy": (
-        [Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.2})],
+        [
+            Component(
+                "ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.2}
+            )
+        ],
         {"keep": "grazing"},
     ),
     "noisy-missing": (
-        [Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6})],
+        [
+            Component(
+                "ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6}
+            )
+        ],
         {"noise": 0.2, "missing": 0.5},
     ),
     "sharp-phong": (

@@ -20,7 +20,9 @@ SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
 def _rot_y(t):
     c, s = np.cos(t), np.sin(t)
     z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    return np.stack(
+        [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2
+    )
 
 
 def bin_centre_directions():

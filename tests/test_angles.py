@@ -46,8 +46,9 @@ def test_directions_round_trip_random():
 
 def test_reference_lookup_edges():
     # theta_h <= 0 -> 0; phi_d < 0 folds by +pi; everything clamps to range
-    i = angles.half_diff_to_bins(np.array([0.0, -0.1, 10.0]), np.array([0.0, 2.0, -1.0]),
-                                 np.array([-0.001, np.pi, 4.0]))
+    i = angles.half_diff_to_bins(
+        np.array([0.0, -0.1, 10.0]), np.array([0.0, 2.0, -1.0]), np.array([-0.001, np.pi, 4.0])
+    )
     assert i[0].tolist() == [0, 0, 89]
     assert i[1].tolist() == [0, 89, 0]
     assert i[2].tolist() == [179, 179, 179]

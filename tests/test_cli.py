@@ -14,8 +14,10 @@ from .truths import TRUTH, assert_params_close
 @pytest.fixture(scope="module")
 def ggx_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("cli") / "ggx.binary"
-    params = [f"--param={k}={','.join(map(str, v)) if isinstance(v, list) else v}"
-              for k, v in TRUTH["ggx"].items()]
+    params = [
+        f"--param={k}={','.join(map(str, v)) if isinstance(v, list) else v}"
+        for k, v in TRUTH["ggx"].items()
+    ]
     r = run("data_synth", str(path), "--model", "ggx", *params)
     assert r.returncode == 0, r.stderr
     return path
@@ -27,8 +29,17 @@ def test_fit_json_is_one_object_with_the_schema(ggx_file):
     lines = r.stdout.strip().splitlines()
     assert len(lines) == 1
     d = json.loads(lines[0])
-    for key in ("table", "model", "params", "error", "converged", "result", "steps",
-                "time_s", "samples"):
+    for key in (
+        "table",
+        "model",
+        "params",
+        "error",
+        "converged",
+        "result",
+        "steps",
+        "time_s",
+        "samples",
+    ):
         assert key in d, key
     assert d["table"] == str(ggx_file) and d["model"] == "ggx"
     assert_params_close(d["params"], TRUTH["ggx"], rel=0.02)

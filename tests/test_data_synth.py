@@ -17,8 +17,22 @@ from .cli_helpers import run
 
 def test_cli_writes_table_and_truth_sidecar(tmp_path):
     out = tmp_path / "t.binary"
-    r = run("data_synth", str(out), "--model", "ggx", "--param", "alpha=0.2",
-            "--param", "kd=0.1,0.2,0.3", "--noise", "0.05", "--missing", "0.1", "--seed", "3")
+    r = run(
+        "data_synth",
+        str(out),
+        "--model",
+        "ggx",
+        "--param",
+        "alpha=0.2",
+        "--param",
+        "kd=0.1,0.2,0.3",
+        "--noise",
+        "0.05",
+        "--missing",
+        "0.1",
+        "--seed",
+        "3",
+    )
     assert r.returncode == 0, r.stderr
     truth = json.loads((tmp_path / "t.binary.json").read_text())
     assert truth["model"] == "ggx" and truth["params"]["alpha"] == 0.2
@@ -28,12 +42,15 @@ def test_cli_writes_table_and_truth_sidecar(tmp_path):
     assert t.n_measured == truth["measured_bins"]
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--param", "alpha"], "NAME=VALUE"),
-    (["--param", "alpha=abc"], "not a number"),
-    (["--param", "alpha=-1"], "alpha"),
-    (["--param", "beta=1"], "unknown parameter"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--param", "alpha"], "NAME=VALUE"),
+        (["--param", "alpha=abc"], "not a number"),
+        (["--param", "alpha=-1"], "alpha"),
+        (["--param", "beta=1"], "unknown parameter"),
+    ],
+)
 def test_cli_rejects_bad_params(tmp_path, args, message):
     r = run("data_synth", str(tmp_path / "x.binary"), "--model", "ggx", *args)
     assert r.returncode == 2

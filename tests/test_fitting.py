@@ -55,8 +55,18 @@ def test_recovers_params_with_noise_and_missing_bins(name):
 def test_result_is_plain_json_with_the_documented_schema(synth_tables):
     r = fit(synth_tables["ggx"], "ggx")
     d = json.loads(r.to_json())
-    for key in ("table", "model", "params", "error", "converged", "result", "steps",
-                "time_s", "samples", "solver"):
+    for key in (
+        "table",
+        "model",
+        "params",
+        "error",
+        "converged",
+        "result",
+        "steps",
+        "time_s",
+        "samples",
+        "solver",
+    ):
         assert key in d
     assert set(d["params"]) == {"kd", "ks", "alpha", "f0"}
     assert len(d["params"]["kd"]) == 3 and isinstance(d["params"]["alpha"], float)

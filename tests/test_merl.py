@@ -80,14 +80,25 @@ def test_from_bytes_matches_read(tmp_path, good_raw):
         ("short", lambda p: p.write_bytes(b"\x5a\x00\x00"), "shorter than the 12-byte header"),
         ("text", lambda p: p.write_text("theta_h,theta_d,phi_d,r,g,b\n0,0,0,1,1,1\n"), "text file"),
         ("truncated", lambda p: _raw_file(p, n_values=3 * N - 10), "truncated"),
-        ("trailing", lambda p: p.write_bytes(
-            struct.pack("<3i", 90, 90, 180) + np.zeros(3 * N + 1).tobytes()), "trailing bytes"),
+        (
+            "trailing",
+            lambda p: p.write_bytes(
+                struct.pack("<3i", 90, 90, 180) + np.zeros(3 * N + 1).tobytes()
+            ),
+            "trailing bytes",
+        ),
         ("negative dims", lambda p: _raw_file(p, dims=(90, -90, 180), n_values=10), "not positive"),
         ("zero dims", lambda p: _raw_file(p, dims=(0, 90, 180), n_values=10), "not positive"),
-        ("wrong dims", lambda p: _raw_file(p, dims=(45, 90, 180), n_values=3 * 45 * 90 * 180),
-         "not the MERL grid"),
-        ("absurd dims", lambda p: _raw_file(p, dims=(2**30, 2**30, 2**30), n_values=10),
-         "not the MERL grid"),
+        (
+            "wrong dims",
+            lambda p: _raw_file(p, dims=(45, 90, 180), n_values=3 * 45 * 90 * 180),
+            "not the MERL grid",
+        ),
+        (
+            "absurd dims",
+            lambda p: _raw_file(p, dims=(2**30, 2**30, 2**30), n_values=10),
+            "not the MERL grid",
+        ),
         ("no measured bin", lambda p: _raw_file(p, body=np.full(3 * N, -1.0)), "no measured bin"),
         ("all nan", lambda p: _raw_file(p, body=np.full(3 * N, np.nan)), "no measured bin"),
     ],

@@ -24,18 +24,23 @@ def _jnp(params):
 
 def _random_pairs(n, seed=0):
     rng = np.random.default_rng(seed)
+
     def hemi(k):
         u, v = rng.random(k), rng.random(k)
         z = u
         r = np.sqrt(1 - z * z)
         return np.stack([r * np.cos(2 * np.pi * v), r * np.sin(2 * np.pi * v), z], -1)
+
     return hemi(n), hemi(n)
 
 
 def test_registry_names_and_parameters_match_models_md():
     want = {
-        "lambert": ["kd"], "oren_nayar": ["kd", "sigma"], "phong": ["kd", "ks", "n"],
-        "blinn_phong": ["kd", "ks", "n"], "ggx": ["kd", "ks", "alpha", "f0"],
+        "lambert": ["kd"],
+        "oren_nayar": ["kd", "sigma"],
+        "phong": ["kd", "ks", "n"],
+        "blinn_phong": ["kd", "ks", "n"],
+        "ggx": ["kd", "ks", "alpha", "f0"],
         "beckmann": ["kd", "ks", "alpha", "f0"],
     }
     for name, params in want.items():
@@ -64,6 +69,7 @@ def test_helmholtz_reciprocity(name):
 
 
 # -- energy ------------------------------------------------------------------------
+
 
 def _albedo(model, params, theta_i, n_theta=600, n_phi=600):
     """Directional albedo int f cos_o dw_o, midpoint rule in (cos_o, phi_o)."""
@@ -122,6 +128,7 @@ def test_ggx_lobe_is_normalised(alpha):
 
 # -- NaN-free on the closed hemisphere ------------------------------------------------
 
+
 def _edge_directions():
     cosines = [0.0, 1e-6, 1e-3, 0.5, 1.0 - 1e-9, 1.0]
     dirs = []
@@ -140,10 +147,16 @@ EDGE_PARAMS = {
     "oren_nayar": [{"kd": 0.5, "sigma": 0.0}, {"kd": 0.5, "sigma": math.pi / 2}],
     "phong": [{"kd": 0.1, "ks": 0.5, "n": n} for n in (0.1, 1.0, 1e3, 1e5)],
     "blinn_phong": [{"kd": 0.1, "ks": 0.5, "n": n} for n in (0.1, 1.0, 1e3, 1e5)],
-    "ggx": [{"kd": 0.1, "ks": 0.5, "alpha": a, "f0": f} for a in (1e-3, 0.02, 1.0, 2.0)
-            for f in (0.0, 1.0)],
-    "beckmann": [{"kd": 0.1, "ks": 0.5, "alpha": a, "f0": f} for a in (1e-3, 0.02, 1.0, 2.0)
-                 for f in (0.0, 1.0)],
+    "ggx": [
+        {"kd": 0.1, "ks": 0.5, "alpha": a, "f0": f}
+        for a in (1e-3, 0.02, 1.0, 2.0)
+        for f in (0.0, 1.0)
+    ],
+    "beckmann": [
+        {"kd": 0.1, "ks": 0.5, "alpha": a, "f0": f}
+        for a in (1e-3, 0.02, 1.0, 2.0)
+        for f in (0.0, 1.0)
+    ],
 }
 
 
@@ -152,8 +165,11 @@ def test_finite_values_and_gradients_on_the_closed_hemisphere(name):
     m = models.get(name)
     wi, wo = _edge_directions()
     for params in EDGE_PARAMS[name]:
-        p = {k: jnp.asarray(v, jnp.float64) * (jnp.ones(3) if s.rgb else 1.0)
-             for s in m.param_specs for k, v in [(s.name, params[s.name])]}
+        p = {
+            k: jnp.asarray(v, jnp.float64) * (jnp.ones(3) if s.rgb else 1.0)
+            for s in m.param_specs
+            for k, v in [(s.name, params[s.name])]
+        }
         f = m(p, wi, wo)
         assert bool(jnp.all(jnp.isfinite(f))), params
         assert bool(jnp.all(f >= 0)), params

@@ -20,8 +20,14 @@ def describe() -> list[dict]:
         {
             "name": m.name,
             "params": [
-                {"name": s.name, "size": s.size, "range": s.describe_range(),
-                 "lower": s.lower, "upper": s.upper, "doc": s.doc}
+                {
+                    "name": s.name,
+                    "size": s.size,
+                    "range": s.describe_range(),
+                    "lower": s.lower,
+                    "upper": s.upper,
+                    "doc": s.doc,
+                }
                 for s in m.param_specs
             ],
             "n_params": m.n_params,

@@ -73,7 +73,7 @@ class ParamSpec:
             s = (np.log(np.clip(v, self.lower, self.upper)) - lo) / (hi - lo)
         else:
             s = (v - self.lower) / (self.upper - self.lower)
-        s = np.clip(s, 1e-9, 1 - 1e-9)
+        s = np.clip(s, 1e-6, 1 - 1e-6)  # |u| <= 14: a start at a bound can still move
         return np.log(s) - np.log1p(-s)
 
 
@@ -92,6 +92,11 @@ class AbstractBRDFModel(eqx.Module):
     @abc.abstractmethod
     def eval_frame(self, params: Params, frame: Frame) -> Float[Array, "... 3"]:
         """The BRDF on precomputed frame quantities."""
+
+    def eval_channels(self, params: Params, frame: Frame) -> Float[Array, "3 ..."]:
+        """The BRDF channel-major, (3, ...): the layout the fitting loss uses
+        (vectorises along the bins). Models with structure override it."""
+        return jnp.moveaxis(self.eval_frame(params, frame), -1, 0)
 
     def __call__(
         self, params: Params, wi: Float[Array, "... 3"], wo: Float[Array, "... 3"]
@@ -131,8 +136,7 @@ class AbstractBRDFModel(eqx.Module):
         unknown = set(params) - names
         if unknown:
             raise ValueError(
-                f"{self.name}: unknown parameter(s) {sorted(unknown)}; "
-                f"expected {sorted(names)}"
+                f"{self.name}: unknown parameter(s) {sorted(unknown)}; expected {sorted(names)}"
             )
         out = {}
         for spec in self.param_specs:
@@ -164,9 +168,15 @@ class AbstractLobeModel(AbstractBRDFModel):
     """
 
     @abc.abstractmethod
-    def lobe(self, params: Params, frame: Frame) -> Float[Array, "..."]:
+    def lobe(self, params: Params, frame: Frame) -> Float[Array, ...]:
         """The lobe's value (1/sr) for unit ``ks``; shared by the three channels."""
 
     def eval_frame(self, params: Params, frame: Frame) -> Float[Array, "... 3"]:
         lobe = self.lobe(params, frame)[..., None]
         return params["kd"] / jnp.pi + params["ks"] * lobe
+
+    def eval_channels(self, params: Params, frame: Frame) -> Float[Array, "3 ..."]:
+        lobe = self.lobe(params, frame)
+        kd, ks = params["kd"], params["ks"]
+        expand = (slice(None),) + (None,) * lobe.ndim
+        return kd[expand] / jnp.pi + ks[expand] * lobe[None]

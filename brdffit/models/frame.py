@@ -22,17 +22,17 @@ class Frame(NamedTuple):
     the geometry alone) and the models never touch the direction vectors.
     """
 
-    cos_i: Float[Array, "..."]
-    cos_o: Float[Array, "..."]
-    cos_h: Float[Array, "..."]
-    cos_d: Float[Array, "..."]
+    cos_i: Float[Array, ...]
+    cos_o: Float[Array, ...]
+    cos_h: Float[Array, ...]
+    cos_d: Float[Array, ...]
     #: sin^2 from the tangent-plane components, not 1 - cos^2: exact near the
     #: normal, where a sharp lobe lives and 1 - cos^2 cancels (badly in float32).
-    sin2_i: Float[Array, "..."]
-    sin2_o: Float[Array, "..."]
-    sin2_h: Float[Array, "..."]
+    sin2_i: Float[Array, ...]
+    sin2_o: Float[Array, ...]
+    sin2_h: Float[Array, ...]
     #: wi_xy . wo_xy = sin_i sin_o cos(phi_i - phi_o)
-    dot_xy: Float[Array, "..."]
+    dot_xy: Float[Array, ...]
 
 
 def shading_frame(wi: Float[Array, "... 3"], wo: Float[Array, "... 3"]) -> Frame:

@@ -18,19 +18,19 @@ from jaxtyping import Array, Float
 TINY = 1e-30
 
 
-def safe_sqrt(x: Float[Array, "..."]) -> Float[Array, "..."]:
+def safe_sqrt(x: Float[Array, ...]) -> Float[Array, ...]:
     """sqrt(max(x, 0)) with a zero (not infinite) gradient at x <= 0."""
     positive = x > TINY
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
 
 
-def safe_div(num: Float[Array, "..."], den: Float[Array, "..."], floor: float = TINY):
+def safe_div(num: Float[Array, ...], den: Float[Array, ...], floor: float = TINY):
     """num / den with |den| floored at ``floor`` (sign kept, den >= 0 in our uses)."""
     ok = den > floor
     return num / jnp.where(ok, den, floor)
 
 
-def safe_pow(base: Float[Array, "..."], exponent) -> Float[Array, "..."]:
+def safe_pow(base: Float[Array, ...], exponent) -> Float[Array, ...]:
     """max(base, 0) ** exponent for exponent > 0, with finite gradients in both.
 
     ``0 ** n`` is 0 and its derivative in ``n`` (``x**n log x``) is taken as 0,
@@ -49,6 +49,6 @@ def safe_normalize(v: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
     return jnp.where(ok, unit, jnp.array([0.0, 0.0, 1.0], dtype=v.dtype))
 
 
-def sin_from_cos(c: Float[Array, "..."]) -> Float[Array, "..."]:
+def sin_from_cos(c: Float[Array, ...]) -> Float[Array, ...]:
     """sin(theta) from cos(theta) for theta in [0, pi/2]: finite gradient at c = 1."""
     return safe_sqrt(1.0 - c * c)

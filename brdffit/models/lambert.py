@@ -16,7 +16,13 @@ class Lambert(AbstractBRDFModel):
     name = "lambert"
     param_specs = (KD,)
 
-    def eval_frame(self, params, frame):
+    def eval_channels(self, params, frame):
+        kd = params["kd"] / jnp.pi
         return jnp.broadcast_to(
-            params["kd"] / jnp.pi, frame.cos_i.shape + (3,)
+            kd.reshape((3,) + (1,) * frame.cos_i.ndim), (3,) + frame.cos_i.shape
         ).astype(frame.cos_i.dtype)
+
+    def eval_frame(self, params, frame):
+        return jnp.broadcast_to(params["kd"] / jnp.pi, frame.cos_i.shape + (3,)).astype(
+            frame.cos_i.dtype
+        )

@@ -33,11 +33,18 @@ class OrenNayar(AbstractBRDFModel):
     param_specs = (KD, SIGMA)
     shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
 
-    def eval_frame(self, params, frame):
+    def _shape(self, params, frame):
         s2 = params["sigma"] ** 2
         a = 1.0 - s2 / (2.0 * (s2 + 0.33))
         b = 0.45 * s2 / (s2 + 0.09)
         term = safe_div(
             jnp.maximum(frame.dot_xy, 0.0), jnp.maximum(frame.cos_i, frame.cos_o), 1e-12
         )
-        return params["kd"] / jnp.pi * (a + b * term)[..., None]
+        return a + b * term
+
+    def eval_frame(self, params, frame):
+        return params["kd"] / jnp.pi * self._shape(params, frame)[..., None]
+
+    def eval_channels(self, params, frame):
+        g = self._shape(params, frame)
+        return params["kd"].reshape((3,) + (1,) * g.ndim) / jnp.pi * g[None]
