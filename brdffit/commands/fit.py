@@ -6,14 +6,18 @@ import json
 import sys
 
 from .. import merl
-from ..fitting import PRECISIONS, SOLVERS, FitResult, fit
+from ..fitting import PRECISIONS, SOLVERS, FitResult
 from ..sampling import DEFAULT_SAMPLES
+from ..scene import PRESETS as SCENE_PRESETS
+from ..scene import Scene, fit_in_scene
+from ..selection import DEFAULT_CANDIDATES, DEFAULT_TOLERANCE, format_selection, select
 
 
 def register(sub) -> None:
     p = sub.add_parser("fit", help="fit a model to a MERL .binary table")
     p.add_argument("table", help="path to a MERL .binary file")
-    p.add_argument("--model", default="ggx", help="model name (see `brdffit models`)")
+    p.add_argument("--model", default="ggx",
+                   help="model name (see `brdffit models`), or 'auto' to choose one")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.add_argument("--solver", choices=SOLVERS, default="lm")
     p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
@@ -23,6 +27,24 @@ def register(sub) -> None:
     p.add_argument("--max-steps", type=int, default=256)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
+    auto = p.add_argument_group("--model auto (docs/selection.md)")
+    auto.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE,
+                      help="choose the cheapest model within this log_rmse of the best, in "
+                           f"quadrature (default {DEFAULT_TOLERANCE})")
+    auto.add_argument("--budget", type=float,
+                      help="choose the cheapest model with log_rmse under this budget")
+    auto.add_argument("--candidates", type=lambda t: [c for c in t.split(",") if c],
+                      default=list(DEFAULT_CANDIDATES),
+                      help=f"comma-separated models (default {','.join(DEFAULT_CANDIDATES)})")
+    auto.add_argument("--mono-ks", action="store_true",
+                      help="refit the chosen model with a grey ks when its ks is grey")
+    scene = p.add_argument_group("scene: only the directions a scene uses count")
+    scene.add_argument("--scene", metavar="FILE", help="scene description: .json, .npy, .csv")
+    scene.add_argument("--scene-preset", choices=list(SCENE_PRESETS))
+    scene.add_argument("--max-theta", type=float, metavar="DEG",
+                       help="largest incidence and view angle (degrees)")
+    scene.add_argument("--max-theta-i", type=float, metavar="DEG", help="largest incidence angle")
+    scene.add_argument("--max-theta-o", type=float, metavar="DEG", help="largest view angle")
     p.set_defaults(run=run)
 
 
@@ -43,7 +65,11 @@ def format_result(r: FitResult) -> str:
         val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
         lines.append(f"  {name:<6} = {val}")
     e = r.error
-    lines.append(f"  log_rmse = {e['log_rmse']:.4g} (full table)   rmse_cos = {e['rmse_cos']:.4g} 1/sr")
+    on = "scene" if "scene" in r.extra else "full table"
+    lines.append(f"  log_rmse = {e['log_rmse']:.4g} ({on})   rmse_cos = {e['rmse_cos']:.4g} 1/sr")
+    if "full_table_error" in r.extra:
+        lines.append(f"  log_rmse = {r.extra['full_table_error']['log_rmse']:.4g} (full table)   "
+                     f"scene {r.extra['scene']['description']}")
     s = r.samples
     d = s["dropped"]
     lines.append(
@@ -55,8 +81,13 @@ def format_result(r: FitResult) -> str:
 
 def run(args) -> int:
     table = merl.read(args.table)
-    result = fit(table, args.model, solver=args.solver, samples=args.samples,
-                 precision=args.precision, starts=args.starts, max_steps=args.max_steps)
+    scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
+                               max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
+    options = dict(solver=args.solver, samples=args.samples, precision=args.precision,
+                   starts=args.starts, max_steps=args.max_steps)
+    if args.model == "auto":
+        return _run_auto(args, table, scene, options)
+    result = fit_in_scene(table, args.model, scene, **options)
     if args.json:
         json.dump(result.to_dict(), sys.stdout)
         sys.stdout.write("\n")
@@ -69,4 +100,20 @@ def run(args) -> int:
             # stderr: with --json, stdout stays one JSON object
             print(f"wrote {path}", file=sys.stderr)
     # A fit that ran is a result, converged or not: `converged` says which.
+    return 0
+
+
+def _run_auto(args, table, scene, options) -> int:
+    selection = select(table, args.candidates, tolerance=args.tolerance, budget=args.budget,
+                       scene=scene, mono_ks=args.mono_ks, **options)
+    if args.json:
+        json.dump(selection.to_dict(), sys.stdout)
+        sys.stdout.write("\n")
+    else:
+        print(format_selection(selection))
+    if args.plots:
+        from .. import plots
+
+        for path in plots.save_all(table, selection.result, args.plots):
+            print(f"wrote {path}", file=sys.stderr)
     return 0

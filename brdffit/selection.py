@@ -1,0 +1,390 @@
+"""Which model is enough for this material (and this scene), and why: ``select``.
+
+Every candidate is fitted once, cheapest first (the registry's order:
+lambert, oren_nayar, blinn_phong, phong, beckmann, ggx, ggx2 by default), and the
+ranking reports for each: the parameters, ``log_rmse`` (on the scene's bins when
+a scene is given, beside the full-table error), the PSNR of its sphere renders
+against the table's (``brdffit.render``), its parameter count, its measured
+evaluation cost per sample, a BIC, and whether its specular colour is grey.
+
+The choice (docs/selection.md):
+
+- **tolerance** (default ``DEFAULT_TOLERANCE`` = 0.005): the cheapest candidate
+  whose error is within ``tolerance`` of the best candidate's, measured *in
+  quadrature*: ``excess = sqrt(err^2 - best^2) <= tolerance``. Errors that no
+  model can fit (measurement noise, binning) add in quadrature to each model's own
+  misfit, so the excess is that misfit and a noisy table does not make every model
+  look alike. 0.005 in ``log_rmse`` is ~0.5 % RMS at the highlight, below the
+  repeatability of a MERL measurement.
+- **budget** (optional): the cheapest candidate with ``err <= budget``; when
+  none reaches it, the tolerance rule decides and the reason says so.
+
+BIC (Schwarz 1978), reported, not used for the choice: ``n ln(log_rmse^2) + k ln n``
+with ``n`` = 3 x the bins the error is taken over and ``k`` the parameter count; a
+Gaussian pseudo-likelihood of the compressed residual. With a million bins it
+prefers the richest model as soon as it is measurably better, which is why the
+choice uses a tolerance a person can read.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import models
+from .errors import FitInputError
+from .fitting import FitResult, full_table_data
+from .merl import MerlTable
+from .models.mono_ks import MonoKs, specular_colour_specs
+from .render import SphereReference
+from .sampling import bin_weights, usable_bins
+from .scene import Scene, fit_in_scene
+
+DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
+DEFAULT_TOLERANCE = 0.005
+#: A specular colour is grey when (max - min) / max over R, G, B is at most this.
+DEFAULT_GREY_TOLERANCE = 0.05
+#: Options of ``fit`` that ``select`` passes on; the others it sets itself.
+FIT_OPTIONS = ("solver", "samples", "precision", "starts", "max_steps", "seed")
+
+
+@dataclass
+class Selection:
+    """The outcome of :func:`select` as plain data (``to_dict`` is JSON-ready).
+
+    ``ranking`` has one row per candidate, cheapest first; ``fits`` holds the
+    :class:`FitResult` behind each row that fitted (the very fits the ranking
+    reports: nothing is fitted twice); ``result`` is the chosen one.
+    """
+
+    chosen: str
+    reason: str
+    ranking: list[dict]
+    tolerance: float
+    budget: float | None
+    scene: dict | None
+    mono: dict | None
+    time_s: float
+    table: str | None
+    fits: dict[str, FitResult] = field(default_factory=dict, repr=False)
+
+    @property
+    def result(self) -> FitResult:
+        return self.fits[self.chosen]
+
+    @property
+    def row(self) -> dict:
+        return next(r for r in self.ranking if r["model"] == self.chosen)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d.pop("fits")
+        d["fit"] = self.result.to_dict()
+        return d
+
+
+# -- measured evaluation cost -------------------------------------------------------------
+
+
+@functools.cache
+def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
+    """Median wall time (ns) per direction pair of ``model(params, wi, wo)``.
+
+    Measured once per model per process: the model jitted over ``n`` random pairs
+    in float32 (what a renderer uses), shading frame included (a renderer pays for
+    it too), after one warm-up call. Absolute values depend on the machine; the
+    ratios between models are what the ranking is for.
+    """
+    m = models.get(model_name)
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(2, n, 3))
+    v[..., 2] = np.abs(v[..., 2])
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    wi, wo = (jnp.asarray(a, jnp.float32) for a in v)
+    params = jax.tree_util.tree_map(
+        lambda a: a.astype(jnp.float32), m.constrain(jnp.zeros(m.n_params))
+    )
+    run = jax.jit(lambda p, a, b: m(p, a, b))
+    run(params, wi, wo).block_until_ready()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run(params, wi, wo).block_until_ready()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) / n * 1e9)
+
+
+# -- helpers -----------------------------------------------------------------------------
+
+
+def grey_spread(model: models.AbstractBRDFModel, params: dict) -> float | None:
+    """(max - min) / max over R, G, B of the specular scales (worst of ks, ks1, ks2);
+    0 for no specular at all; ``None`` for a model without a specular colour."""
+    specs = specular_colour_specs(model) if not isinstance(model, MonoKs) else ()
+    if not specs:
+        return None
+    spread = 0.0
+    for s in specs:
+        v = np.asarray(params[s.name], dtype=np.float64)
+        top = float(v.max())
+        if top > 1e-12:
+            spread = max(spread, (top - float(v.min())) / top)
+    return spread
+
+
+def bic(log_rmse: float, n_bins: int, n_params: int) -> float:
+    n = 3 * max(n_bins, 1)
+    return float(n * math.log(max(log_rmse, 1e-150) ** 2) + n_params * math.log(n))
+
+
+def _order(candidates) -> list[models.AbstractBRDFModel]:
+    """Candidates as models, cheapest first in the registry's order (a grey-ks variant
+    just before its base model); unknown names raise ``UnknownModelError``."""
+    ms = [models.get(c) for c in candidates]
+    if not ms:
+        raise FitInputError("select needs at least one candidate model")
+    names = [m.name for m in ms]
+    if len(set(names)) != len(names):
+        raise FitInputError(f"duplicate candidates in {names}")
+    position = {name: i for i, name in enumerate(models.REGISTRY)}
+
+    def rank(m):
+        if isinstance(m, MonoKs):
+            return position.get(m.base.name, len(position)) - 0.5
+        return position.get(m.name, len(position))
+
+    return sorted(ms, key=rank)
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}"
+
+
+# -- the front door ------------------------------------------------------------------------
+
+
+def select(
+    table: MerlTable,
+    candidates=DEFAULT_CANDIDATES,
+    *,
+    tolerance: float = DEFAULT_TOLERANCE,
+    budget: float | None = None,
+    scene: Scene | None = None,
+    mono_ks: bool = False,
+    grey_tolerance: float = DEFAULT_GREY_TOLERANCE,
+    image_size: int = 96,
+    **fit_options,
+) -> Selection:
+    """Fit every candidate and choose the cheapest that is good enough.
+
+    Args:
+        table: the measured table.
+        candidates: model names (or instances); fitted cheapest first.
+        tolerance: how far (in ``log_rmse``, in quadrature) above the best
+            candidate a cheaper one may be and still be chosen.
+        budget: optional absolute ``log_rmse`` budget: the cheapest candidate
+            under it wins (the tolerance rule decides when none is).
+        scene: optional :class:`brdffit.scene.Scene`: the loss, the errors the
+            choice uses, and the ranking are on its bins; the full-table error is
+            reported beside.
+        mono_ks: also fit the chosen model with a grey ``ks`` (``<model>_mono``)
+            when its fitted specular colour is grey within ``grey_tolerance``.
+        grey_tolerance: ``(max - min) / max`` of ks over R, G, B that counts as grey.
+        image_size: pixels per side of the sphere renders behind ``psnr_db``.
+        **fit_options: passed to :func:`brdffit.fit` (``solver``, ``samples``,
+            ``precision``, ``starts``, ``max_steps``, ``seed``).
+    """
+    t0 = time.perf_counter()
+    unknown = set(fit_options) - set(FIT_OPTIONS)
+    if unknown:
+        raise FitInputError(
+            f"select passes only {', '.join(FIT_OPTIONS)} to fit, not {sorted(unknown)}"
+        )
+    for name, v in (("tolerance", tolerance), ("grey_tolerance", grey_tolerance)):
+        if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+            raise FitInputError(f"{name} must be a number >= 0, got {v!r}")
+    if budget is not None and not (isinstance(budget, int | float) and budget > 0):
+        raise FitInputError(f"budget must be a number > 0, got {budget!r}")
+    ordered = _order(candidates)
+    full_data = None
+    if scene is not None:
+        full_data = full_table_data(table, bin_weights(usable_bins(table).usable))
+    reference = SphereReference(table, image_size)
+
+    rows, fits = [], {}
+    for m in ordered:
+        row = {"model": m.name, "n_params": m.n_params}
+        try:
+            r = fit_in_scene(table, m, scene, full_data=full_data, **fit_options)
+        except FitInputError as e:  # e.g. a scene with too few bins for this model
+            rows.append({**row, "status": "failed", "message": str(e)})
+            continue
+        fits[m.name] = r
+        err = r.error["log_rmse"]
+        full = r.extra["full_table_error"]["log_rmse"] if scene is not None else err
+        row.update(
+            params=r.params,
+            log_rmse=err,
+            full_log_rmse=full,
+            psnr_db=reference.psnr(m, r.params),
+            cost_ns=eval_cost_ns(m.name),
+            bic=bic(err, r.samples["usable"], m.n_params),
+            ks_grey_spread=grey_spread(m, r.params),
+            converged=r.converged,
+            result=r.result,
+            steps=r.steps,
+            fit_time_s=r.time_s,
+            status="fitted" if math.isfinite(err) else "failed",
+        )
+        rows.append(row)
+
+    ok = [row for row in rows if row["status"] == "fitted"]
+    if not ok:
+        raise FitInputError(
+            "no candidate could be fitted: "
+            + "; ".join(f"{row['model']}: {row.get('message', row.get('result'))}" for row in rows)
+        )
+    best = min(ok, key=lambda row: row["log_rmse"])
+    for row in ok:
+        row["excess"] = math.sqrt(max(row["log_rmse"] ** 2 - best["log_rmse"] ** 2, 0.0))
+    for i, row in enumerate(sorted(ok, key=lambda row: row["log_rmse"])):
+        row["rank"] = i + 1
+    chosen, reason = _choose(ok, best, tolerance, budget)
+    for row in ok:
+        if row is chosen:
+            row["status"] = "chosen"
+        elif budget is not None and row["log_rmse"] <= budget:
+            row["status"] = "under budget"
+        else:
+            row["status"] = "within tolerance" if row["excess"] <= tolerance else "too far"
+
+    for row in ok:
+        spread = row["ks_grey_spread"]
+        row["ks_grey"] = None if spread is None else bool(spread <= grey_tolerance)
+    mono = None
+    spread = chosen["ks_grey_spread"]
+    if spread is not None:
+        if chosen["ks_grey"]:
+            reason += (f" Its specular colour is grey (ks spread {100 * spread:.1f}% <= "
+                       f"{100 * grey_tolerance:g}%): a monochrome ks would do")
+            if mono_ks:
+                mono = _fit_mono(table, models.get(chosen["model"]), fits[chosen["model"]],
+                                 scene, full_data, tolerance, fit_options)
+                fits[mono["model"]] = mono.pop("fit")
+                reason += (f"; refitted as {mono['model']} ({mono['n_params']} values): "
+                           f"log_rmse {_fmt(mono['log_rmse'])}, "
+                           + ("within" if mono["accepted"] else "NOT within")
+                           + " tolerance of the RGB fit.")
+            else:
+                reason += f" ({chosen['n_params'] - 2} values instead of {chosen['n_params']}; "
+                reason += "mono_ks=True fits it)."
+        else:
+            reason += f" Its specular colour is not grey (ks spread {100 * spread:.1f}%)."
+    if scene is not None:
+        reason = (f"On scene {scene.describe()}: " + reason[0].lower() + reason[1:]
+                  + f" Full-table log_rmse of {chosen['model']}: {_fmt(chosen['full_log_rmse'])}.")
+    return Selection(
+        chosen=chosen["model"],
+        reason=reason,
+        ranking=rows,
+        tolerance=float(tolerance),
+        budget=None if budget is None else float(budget),
+        scene=None if scene is None else scene.to_dict(),
+        mono=mono,
+        time_s=time.perf_counter() - t0,
+        table=table.source,
+        fits=fits,
+    )
+
+
+def _choose(ok: list[dict], best: dict, tolerance: float, budget: float | None):
+    """The chosen row (``ok`` is cheapest first) and the reason, in words."""
+    prefix = ""
+    if budget is not None:
+        under = [row for row in ok if row["log_rmse"] <= budget]
+        if under:
+            c = under[0]
+            cheaper = ", ".join(f"{r['model']} {_fmt(r['log_rmse'])}" for r in ok[: ok.index(c)])
+            return c, (
+                f"Chose {c['model']}: the cheapest candidate with log_rmse "
+                f"{_fmt(c['log_rmse'])} <= budget {_fmt(budget)}"
+                + (f" (cheaper ones miss it: {cheaper})" if cheaper else "")
+                + "."
+            )
+        prefix = (f"No candidate reaches the budget {_fmt(budget)} (best: {best['model']} "
+                  f"{_fmt(best['log_rmse'])}), so the tolerance rule decides. ")
+    c = next(row for row in ok if row["excess"] <= tolerance)
+    cheaper = ok[: ok.index(c)]
+    if c is best:
+        why = (f"Chose {c['model']}: the best log_rmse ({_fmt(c['log_rmse'])}) and no cheaper "
+               f"candidate within tolerance {_fmt(tolerance)} of it")
+    else:
+        why = (f"Chose {c['model']}: the cheapest candidate within tolerance {_fmt(tolerance)} "
+               f"of the best ({best['model']}, log_rmse {_fmt(best['log_rmse'])}): its "
+               f"log_rmse {_fmt(c['log_rmse'])} is {_fmt(c['excess'])} above it in quadrature")
+    if cheaper:
+        why += "; cheaper ones are further off (" + ", ".join(
+            f"{r['model']} +{_fmt(r['excess'])}" for r in cheaper) + ")"
+    return c, prefix + why + "."
+
+
+def _fit_mono(table, model, rgb_fit: FitResult, scene, full_data, tolerance, fit_options):
+    """The chosen model refitted with a grey ks, started from its RGB fit."""
+    mono_model = MonoKs(model)
+    init = dict(rgb_fit.params)
+    for s in specular_colour_specs(model):
+        init[s.name] = float(np.mean(init[s.name]))
+    r = fit_in_scene(table, mono_model, scene, full_data=full_data, init=init, **fit_options)
+    err, rgb_err = r.error["log_rmse"], rgb_fit.error["log_rmse"]
+    excess = math.sqrt(max(err**2 - rgb_err**2, 0.0))
+    return {
+        "model": mono_model.name,
+        "n_params": mono_model.n_params,
+        "params": r.params,
+        "log_rmse": err,
+        "full_log_rmse": r.extra["full_table_error"]["log_rmse"] if scene is not None else err,
+        "excess_over_rgb": excess,
+        "accepted": bool(math.isfinite(err) and excess <= tolerance),
+        "converged": r.converged,
+        "fit": r,
+    }
+
+
+def format_selection(sel: Selection) -> str:
+    """The ranking as a text table, then the reason (what ``brdffit fit --model auto``
+    prints)."""
+    scene = sel.scene is not None
+    head = (f"{'model':<14}{'k':>3} {'log_rmse':>10} "
+            + (f"{'full':>10} " if scene else "")
+            + f"{'excess':>9} {'PSNR dB':>8} {'ns/eval':>8} {'BIC':>12}  status")
+    lines = [f"{sel.table}: model selection ({sel.time_s:.1f} s)", head]
+    for r in sel.ranking:
+        if r["status"] == "failed":
+            lines.append(f"{r['model']:<14}{r['n_params']:>3}  failed: "
+                         f"{r.get('message', r.get('result'))}")
+            continue
+        lines.append(
+            f"{r['model']:<14}{r['n_params']:>3} {r['log_rmse']:>10.3g} "
+            + (f"{r['full_log_rmse']:>10.3g} " if scene else "")
+            + f"{r['excess']:>9.3g} {r['psnr_db']:>8.1f} {r['cost_ns']:>8.1f} {r['bic']:>12.4g}"
+            + f"  {r['status']}" + ("" if r["converged"] else " (not converged)")
+        )
+    lines.append("")
+    lines.append(sel.reason)
+    chosen = sel.row
+    lines.append(f"{sel.chosen} params:")
+    for name, v in chosen["params"].items():
+        val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
+        lines.append(f"  {name:<6} = {val}")
+    if sel.mono is not None:
+        lines.append(f"{sel.mono['model']} params:")
+        for name, v in sel.mono["params"].items():
+            val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
+            lines.append(f"  {name:<6} = {val}")
+    return "\n".join(lines)

@@ -1,0 +1,187 @@
+"""Scene descriptions -> per-bin weights, scene-aware fits, and the CLI options."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from brdffit import cli, merl
+from brdffit.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
+from brdffit.grid import bin_grid
+from brdffit.sampling import bin_weights
+from brdffit.scene import Scene, SceneError, fit_in_scene, full_table_error, read_pairs
+from data_synth.synth import make_preset
+
+FAST = {"samples": 8192, "starts": 1}
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _bin_of(wi, wo) -> int:
+    return int(flat_index(*half_diff_to_bins(*dirs_to_half_diff(np.asarray(wi), np.asarray(wo)))))
+
+
+# -- angle limits and presets ------------------------------------------------------------
+
+
+def test_camera_normal_preset_keeps_near_normal_views():
+    g = bin_grid()
+    w = Scene.preset("camera-normal").bin_weight()
+    assert w.shape == g.weight.shape and np.all(w >= 0)
+    used = w > 0
+    near = math.cos(math.radians(10.0)) - 1e-12
+    # by reciprocity a bin also stands for the swapped pair: either direction may be the view
+    assert np.all((g.cos_o[used] >= near) | (g.cos_i[used] >= near))
+    assert not np.any(used & ~g.above_horizon)
+    assert 10_000 < used.sum() < 0.2 * g.above_horizon.sum()
+
+
+def test_angle_limits_and_the_whole_hemisphere():
+    g = bin_grid()
+    w = Scene(max_theta_i=30, max_theta_o=60).bin_weight() > 0
+    ci, co = math.cos(math.radians(30)) - 1e-12, math.cos(math.radians(60)) - 1e-12
+    either = ((g.cos_i >= ci) & (g.cos_o >= co)) | ((g.cos_o >= ci) & (g.cos_i >= co))
+    assert w.any() and np.all(either[w])
+    assert np.array_equal(Scene().bin_weight() > 0, g.above_horizon)
+    with pytest.raises(SceneError, match="max_theta_i"):
+        Scene(max_theta_i=0)
+    with pytest.raises(SceneError, match="unknown scene preset"):
+        Scene.preset("sunset")
+
+
+# -- direction pairs ------------------------------------------------------------------------
+
+
+def test_one_pair_without_spread_is_its_reference_bin():
+    wi, wo = _unit([0.3, 0.1, 0.9]), _unit([-0.2, 0.4, 0.8])
+    w = Scene(pairs=[[wi, wo]], spread=0).bin_weight()
+    assert np.flatnonzero(w).tolist() == [_bin_of(wi, wo)]
+
+
+def test_sampled_pairs_weight_the_loss_by_their_own_distribution():
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(4000, 2, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 0.05
+    v = _unit(v)
+    w = Scene(pairs=v, spread=0).bin_weight()
+    counts = np.bincount([_bin_of(a, b) for a, b in v], minlength=w.size).astype(float)
+    usable = bin_grid().above_horizon & (w > 0)
+    # the fit's loss weight (solid angle x scene) is the pairs' histogram
+    np.testing.assert_allclose(bin_weights(usable, w), counts / counts.sum(), atol=1e-12)
+
+
+def test_spread_covers_a_neighbourhood_and_drops_pairs_below_the_horizon():
+    good = [_unit([0.0, 0.0, 1.0]), _unit([0.5, 0.0, 0.8])]
+    bad = [_unit([0.0, 0.0, 1.0]), _unit([1.0, 0.0, -0.1])]
+    s = Scene(pairs=[good, bad], spread=3.0)
+    assert s.dropped_pairs == 1 and len(s.pairs) == 1
+    assert s.n_bins > 20 and s.bin_weight()[_bin_of(*good)] > 0
+    with pytest.raises(SceneError, match="horizon"):
+        Scene(pairs=[bad])
+
+
+def test_lights_and_views_are_every_combination():
+    s = Scene.from_dict({"lights": [[0, 0, 1], [1, 0, 1]], "views": [[0, 0, 1], [0, 1, 2]],
+                         "spread": 0})
+    assert len(s.pairs) == 4
+    with pytest.raises(SceneError, match="both 'lights' and 'views'"):
+        Scene.from_dict({"lights": [[0, 0, 1]]})
+    with pytest.raises(SceneError, match="unknown scene key"):
+        Scene.from_dict({"light": [[0, 0, 1]]})
+
+
+# -- files ----------------------------------------------------------------------------------
+
+
+def test_pair_files_npy_csv_json(tmp_path):
+    pairs = _unit(np.array([[[0.1, 0.2, 0.9], [0.3, -0.1, 0.8]],
+                            [[0.0, 0.5, 0.7], [0.2, 0.2, 0.9]]]))
+    np.save(tmp_path / "p6.npy", pairs.reshape(-1, 6))
+    np.save(tmp_path / "p23.npy", pairs)
+    with open(tmp_path / "p.csv", "w") as f:
+        f.write("wi_x,wi_y,wi_z,wo_x,wo_y,wo_z\n# two pairs\n")
+        for p in pairs.reshape(-1, 6):
+            f.write(",".join(f"{x:.17g}" for x in p) + "\n")
+    for name in ("p6.npy", "p23.npy", "p.csv"):
+        np.testing.assert_allclose(read_pairs(str(tmp_path / name)), pairs, atol=1e-15)
+    (tmp_path / "scene.json").write_text(json.dumps(
+        {"preset": "camera-normal", "max_theta_i": 45, "pairs_file": "p.csv", "spread": 0}))
+    s = Scene.from_file(tmp_path / "scene.json")
+    assert (s.max_theta_i, s.max_theta_o, len(s.pairs)) == (45, 10.0, 2)
+    assert s.name == "camera-normal"
+    s2 = Scene.from_file(tmp_path / "p23.npy")
+    assert s2.pairs.shape == (2, 2, 3)
+
+
+def test_bad_scene_files(tmp_path):
+    (tmp_path / "s.txt").write_text("1,2,3")
+    with pytest.raises(SceneError, match="json, .npy or .csv"):
+        Scene.from_file(tmp_path / "s.txt")
+    (tmp_path / "s.csv").write_text("0,0,1,0,0,1\n0,0,1,oops,0,1\n")
+    with pytest.raises(SceneError, match="s.csv:2"):
+        Scene.from_file(tmp_path / "s.csv")
+    np.save(tmp_path / "s.npy", np.zeros((3, 5)))
+    with pytest.raises(SceneError, match="shape"):
+        Scene.from_file(tmp_path / "s.npy")
+    (tmp_path / "s.json").write_text("{not json")
+    with pytest.raises(SceneError, match="not valid JSON"):
+        Scene.from_file(tmp_path / "s.json")
+    with pytest.raises(SceneError, match="no such"):
+        Scene.from_file(tmp_path / "missing.csv")
+
+
+def test_from_options_combines_and_overrides():
+    assert Scene.from_options() is None
+    s = Scene.from_options(preset="camera-normal", max_theta_i=40)
+    assert (s.name, s.max_theta_i, s.max_theta_o) == ("camera-normal", 40, 10.0)
+    s = Scene.from_options(max_theta=20)
+    assert (s.max_theta_i, s.max_theta_o) == (20, 20)
+    with pytest.raises(SceneError, match="not both"):
+        Scene.from_options({"preset": "camera-normal"}, preset="camera-normal")
+
+
+# -- fits on a scene ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def fresnel_table():
+    return make_preset("strong-fresnel")[0]
+
+
+def test_scene_fit_reports_scene_and_full_table_error(fresnel_table):
+    scene = Scene.preset("camera-normal")
+    on_scene = fit_in_scene(fresnel_table, "blinn_phong", scene, **FAST)
+    everywhere = fit_in_scene(fresnel_table, "blinn_phong", None, **FAST)
+    full_of_scene_fit = on_scene.extra["full_table_error"]["log_rmse"]
+    assert on_scene.extra["scene"]["name"] == "camera-normal"
+    assert on_scene.samples["usable"] == scene.n_bins
+    # The scene fit is better where the scene looks, worse elsewhere: the trade.
+    assert on_scene.log_rmse < 0.3 * everywhere.log_rmse
+    assert full_of_scene_fit > everywhere.log_rmse
+    # full_table_error of the plain fit is the plain fit's own reported error
+    again = full_table_error(fresnel_table, "blinn_phong", everywhere.params)["log_rmse"]
+    assert again == pytest.approx(everywhere.log_rmse, rel=1e-6)
+
+
+def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):
+    path = str(tmp_path / "fresnel.binary")
+    merl.write(path, fresnel_table)
+    args = ["fit", path, "--model", "auto", "--candidates", "lambert,blinn_phong,ggx",
+            "--samples", "8192", "--starts", "1"]
+    assert cli.main(args + ["--scene-preset", "camera-normal"]) == 0
+    out = capsys.readouterr().out
+    assert "blinn_phong" in out and "chosen" in out and "camera-normal" in out
+    assert cli.main(args + ["--json", "--tolerance", "0.001"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["chosen"] == "ggx" and d["tolerance"] == 0.001 and d["scene"] is None
+    assert [r["model"] for r in d["ranking"]] == ["lambert", "blinn_phong", "ggx"]
+    assert cli.main(["fit", path, "--model", "ggx", "--max-theta", "30", "--samples", "8192"]) == 0
+    out = capsys.readouterr().out
+    assert "(scene)" in out and "(full table)" in out
+    assert cli.main(["fit", path, "--model", "auto", "--scene", str(tmp_path / "no.json")]) == 2

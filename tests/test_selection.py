@@ -1,0 +1,185 @@
+"""Automatic model selection (issue 6): each 'Done when' case on synthetic tables.
+
+Every selection here fits the candidates with 8192 samples and one start: the
+synthetic tables are exact, so that is plenty, and it keeps the module fast.
+Tables and selections are built once per module.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import brdffit.fitting
+from brdffit import models
+from brdffit.errors import FitInputError
+from brdffit.scene import Scene
+from brdffit.selection import DEFAULT_CANDIDATES, format_selection, select
+from data_synth import Component, make_table
+from data_synth.synth import make_preset
+
+FAST = {"samples": 8192, "starts": 1}
+ROW_FIELDS = {"model", "n_params", "params", "log_rmse", "full_log_rmse", "psnr_db", "cost_ns",
+              "bic", "excess", "rank", "status", "converged", "ks_grey"}
+
+
+@pytest.fixture(scope="module")
+def ggx_table():
+    return make_table("ggx")[0]
+
+
+@pytest.fixture(scope="module")
+def ggx_selection(ggx_table):
+    return select(ggx_table, **FAST)
+
+
+@pytest.fixture(scope="module")
+def fresnel_table():
+    """A material with a strong grazing Fresnel rise: f0 = 0.02, F -> 1 at grazing."""
+    return make_preset("strong-fresnel")[0]
+
+
+def _position(name: str) -> int:
+    return DEFAULT_CANDIDATES.index(name)
+
+
+def test_lambert_table_selects_lambert():
+    table, _ = make_table("lambert")
+    sel = select(table, **FAST)
+    assert sel.chosen == "lambert", sel.reason
+    assert sel.row["ks_grey"] is None
+
+
+def test_oren_nayar_table_selects_oren_nayar():
+    table, _ = make_table("oren_nayar", {"sigma": 0.5})
+    sel = select(table, **FAST)
+    assert sel.chosen == "oren_nayar", format_selection(sel)
+    lambert = next(r for r in sel.ranking if r["model"] == "lambert")
+    assert lambert["status"] == "too far" and "lambert" in sel.reason
+
+
+def test_ggx_table_selects_ggx(ggx_selection):
+    assert ggx_selection.chosen == "ggx", format_selection(ggx_selection)
+    beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
+    assert beckmann["excess"] > ggx_selection.tolerance
+    assert "beckmann +" in ggx_selection.reason  # why the cheaper one lost
+
+
+def test_beckmann_is_chosen_only_within_tolerance(ggx_table, ggx_selection):
+    beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
+    loose = beckmann["excess"] * 1.5
+    sel = select(ggx_table, ("beckmann", "ggx"), tolerance=loose, **FAST)
+    assert sel.chosen == "beckmann"
+    assert "within tolerance" in sel.reason and "(ggx," in sel.reason
+    tight = select(ggx_table, ("beckmann", "ggx"), tolerance=beckmann["excess"] / 1.5, **FAST)
+    assert tight.chosen == "ggx"
+
+
+def test_two_lobe_table_selects_ggx2():
+    table, _ = make_table([
+        Component("ggx", {"kd": [0.1, 0.08, 0.05], "ks": [0.5] * 3, "alpha": 0.03, "f0": 1.0}),
+        Component("ggx", {"kd": [0.0] * 3, "ks": [0.4] * 3, "alpha": 0.3, "f0": 1.0}),
+    ])
+    sel = select(table, **FAST)
+    assert sel.chosen == "ggx2", format_selection(sel)
+    p = sel.result.params
+    assert sorted([p["alpha1"], p["alpha2"]]) == pytest.approx([0.03, 0.3], rel=1e-3)
+
+
+def test_near_normal_scene_selects_a_cheaper_model(fresnel_table):
+    full = select(fresnel_table, **FAST)
+    scene = select(fresnel_table, scene=Scene.preset("camera-normal"), **FAST)
+    assert _position(scene.chosen) < _position(full.chosen), (full.reason, scene.reason)
+    # The Fresnel rise needs a microfacet model on the whole hemisphere ...
+    assert full.chosen in ("beckmann", "ggx")
+    # ... and the trade is visible: the cheap model is poor on the full table.
+    row = scene.row
+    assert row["log_rmse"] <= scene.tolerance < row["full_log_rmse"]
+    assert "camera-normal" in scene.reason and "Full-table log_rmse" in scene.reason
+    assert scene.scene["name"] == "camera-normal"
+
+
+# -- what the ranking reports -----------------------------------------------------------------
+
+
+def test_ranking_reports_every_candidate(ggx_selection):
+    sel = ggx_selection
+    assert [r["model"] for r in sel.ranking] == list(DEFAULT_CANDIDATES)
+    for row in sel.ranking:
+        assert ROW_FIELDS <= set(row), row["model"]
+        assert row["n_params"] == models.get(row["model"]).n_params
+        assert row["cost_ns"] > 0 and np.isfinite(row["bic"]) and np.isfinite(row["psnr_db"])
+        assert row["full_log_rmse"] == row["log_rmse"]  # no scene
+    assert sorted(r["rank"] for r in sel.ranking) == list(range(1, 8))
+    by_name = {r["model"]: r for r in sel.ranking}
+    # The rendered error agrees with the table error: the truth model renders best.
+    psnr = {name: row["psnr_db"] for name, row in by_name.items()}
+    assert psnr["ggx"] > psnr["beckmann"] > psnr["lambert"]
+    assert by_name["ggx"]["bic"] < by_name["beckmann"]["bic"]
+    d = json.loads(json.dumps(sel.to_dict(), allow_nan=False))
+    assert d["chosen"] == "ggx" and d["fit"]["model"] == "ggx" and d["reason"]
+    text = format_selection(sel)
+    assert "ggx2" in text and sel.reason in text
+
+
+def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
+    calls = []
+    real_fit = brdffit.fitting.fit
+
+    def counting_fit(table, model, **kw):
+        calls.append(models.get(model).name)
+        return real_fit(table, model, **kw)
+
+    monkeypatch.setattr(brdffit.fitting, "fit", counting_fit)
+    sel = select(ggx_table, ("ggx", "lambert"), **FAST)
+    assert calls == ["lambert", "ggx"]  # cheapest first, once each
+    for row in sel.ranking:
+        assert sel.fits[row["model"]].params == row["params"]
+
+
+def test_budget_picks_the_cheapest_under_it(ggx_table, ggx_selection):
+    errors = {r["model"]: r["log_rmse"] for r in ggx_selection.ranking}
+    budget = (errors["beckmann"] + errors["phong"]) / 2  # beckmann under, phong over
+    cands = ("lambert", "phong", "beckmann", "ggx")
+    sel = select(ggx_table, cands, budget=budget, **FAST)
+    assert sel.chosen == "beckmann" and "budget" in sel.reason
+    sel = select(ggx_table, cands, budget=1e-30, **FAST)
+    assert sel.chosen == "ggx" and sel.reason.startswith("No candidate reaches the budget")
+
+
+# -- colour only where needed ---------------------------------------------------------------
+
+
+def test_grey_ks_is_reported_and_can_be_fitted(ggx_table, ggx_selection):
+    assert ggx_selection.row["ks_grey"] is True
+    assert "grey" in ggx_selection.reason
+    sel = select(ggx_table, ("ggx",), mono_ks=True, **FAST)
+    assert sel.mono["model"] == "ggx_mono" and sel.mono["accepted"]
+    assert sel.mono["n_params"] == sel.row["n_params"] - 2
+    assert sel.mono["params"]["ks"] == pytest.approx(0.8, rel=1e-4)
+    assert "ggx_mono" in sel.fits
+
+
+def test_coloured_ks_is_not_called_grey():
+    table, _ = make_table("ggx", {"ks": [0.9, 0.6, 0.3]})
+    sel = select(table, ("ggx",), mono_ks=True, **FAST)
+    assert sel.row["ks_grey"] is False and sel.mono is None
+    assert "not grey" in sel.reason
+
+
+# -- bad input ------------------------------------------------------------------------------
+
+
+def test_bad_options_are_input_errors(ggx_table):
+    with pytest.raises(FitInputError, match="passes only"):
+        select(ggx_table, ("lambert",), bin_weight=np.ones(3))
+    with pytest.raises(FitInputError, match="tolerance"):
+        select(ggx_table, ("lambert",), tolerance=-1)
+    with pytest.raises(FitInputError, match="budget"):
+        select(ggx_table, ("lambert",), budget=0)
+    with pytest.raises(models.UnknownModelError):
+        select(ggx_table, ("lambert", "nope"))
+    with pytest.raises(FitInputError, match="duplicate"):
+        select(ggx_table, ("lambert", "lambert"))
