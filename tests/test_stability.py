@@ -30,7 +30,8 @@ CASES = {
         [Component("ggx", {"kd": [0.05] * 3, "ks": [1.0] * 3, "alpha": 0.001, "f0": 0.9})],
         {}, ["kd", "ks", "alpha"], 0.02),
     "phong n=1e4": (
-        [Component("phong", {"kd": [0.1] * 3, "ks": [0.5] * 3, "n": 1e4})], {}, ["kd", "ks", "n"], 0.02),
+        [Component("phong", {"kd": [0.1] * 3, "ks": [0.5] * 3, "n": 1e4})], {},
+        ["kd", "ks", "n"], 0.02),
     "blinn_phong n=1e4": (
         [Component("blinn_phong", {"kd": [0.1] * 3, "ks": [0.5] * 3, "n": 1e4})], {},
         ["kd", "ks", "n"], 0.02),
