@@ -55,11 +55,16 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
                 "traceback": traceback.format_exc()}
 
 
-def render_plot(table_path: str, source: str, result: dict, kind: str) -> bytes:
-    """One plot of a finished fit as PNG bytes (``brdffit.plots.render``)."""
+def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:
+    """One plot of a finished fit: ``{"ok": True, "png": bytes}`` (``brdffit.plots``)
+    or ``{"ok": False, "reason": "..."}``."""
     from brdffit import plots
 
-    return plots.render(kind, _read(table_path, source), result)
+    try:
+        return {"ok": True, "png": plots.render(kind, _read(table_path, source), result)}
+    except Exception as e:  # a stored table gone bad, or a plotting bug
+        return {"ok": False, "reason": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc()}
 
 
 def warm_up() -> int:

@@ -114,6 +114,19 @@ class Server:
         self.proc.send_signal(signal.SIGKILL)
         self.proc.wait(timeout=30)
 
+    def worker_pids(self) -> list[int]:
+        """The server's worker processes (its 'spawn' children), from /proc."""
+        pids = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+                if int(fields[1]) == self.proc.pid and b"spawn_main" in (
+                        stat.parent / "cmdline").read_bytes():
+                    pids.append(int(stat.parent.name))
+            except (OSError, IndexError, ValueError):
+                continue  # a process that ended while we looked
+        return pids
+
     def group_alive(self) -> bool:
         """Is any process of the server's group (server, workers) still there?"""
         try:

@@ -4,6 +4,8 @@ restarts, and a bounded schemathesis run. (The client's view: test_client.py.)""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -258,6 +260,23 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
     assert_error(http.get(f"/v1/fits/{job['id']}/plots/histogram.png"), 422, "kind")
 
 
+def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, table_id):
+    """A worker that dies (OOM killer, say) breaks the pool: the pool is replaced
+    and the job runs again, saying why."""
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "ggx",
+                                    "options": {"samples": 8192, "starts": 2, "seed": 3}})
+    job = wait_status(http, r.json()["id"], ("running", "done", "failed"), poll=0.02)
+    assert job["status"] == "running", job
+    workers = server.worker_pids()
+    assert workers, "no worker process found"
+    for pid in workers:
+        os.kill(pid, signal.SIGKILL)
+    done = wait_status(http, job["id"], ("done", "failed"))
+    assert done["status"] == "done", done
+    assert done["attempts"] == 2 and "worker process died" in done["note"], done
+    assert "a worker process died" in server.log()
+
+
 # -- bearer token ------------------------------------------------------------------------
 
 
@@ -374,3 +393,16 @@ def test_results_are_plain_json(http, table_id):
     done = wait_status(http, r.json()["id"], ("done", "failed"))
     text = http.get(f"/v1/fits/{done['id']}").text
     json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+
+
+def test_worker_tasks_return_failures_as_values(tmp_path):
+    """What crosses the process boundary is a value: exceptions such as
+    MerlFormatError do not unpickle, and would break the worker pool."""
+    from api import tasks
+
+    missing = str(tmp_path / "gone.binary")
+    out = tasks.fit_models(missing, "gone.binary", ["lambert"], FAST)
+    assert out["ok"] is False and "cannot read" in out["reason"]
+    out = tasks.render_plot(missing, "gone.binary", {}, "slices")
+    assert out["ok"] is False and "MerlFormatError" in out["reason"]
+    assert tasks.json_safe({"a": [float("nan"), 1.0, float("inf")]}) == {"a": [None, 1.0, None]}

@@ -7,6 +7,7 @@ find out (say, too few usable bins), and says so in ``reason``.
 
 from __future__ import annotations
 
+import logging
 import os
 from datetime import UTC, datetime
 from enum import Enum
@@ -25,7 +26,10 @@ from brdffit.sampling import DEFAULT_SAMPLES
 from .. import tasks
 from ..deps import QueueDep, RunnerDep, StoreDep, require_token
 from ..errors import ERROR_RESPONSES, ErrorMessage
+from ..runner import WorkerLost
 from ..store import JobRecord, Store
+
+log = logging.getLogger("brdffit.api")
 
 router = APIRouter(prefix="/v1/fits", tags=["fits"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -184,6 +188,7 @@ def get_fit(job_id: JobId, store: StoreDep) -> JobOut:
         404: {"model": ErrorMessage, "description": "no such job, or no such model in it"},
         409: {"model": ErrorMessage, "description": "the job is not done (queued, running,"
                                                     " failed)"},
+        503: {"model": ErrorMessage, "description": "the worker died; try again"},
     },
 )
 async def get_plot(
@@ -213,10 +218,18 @@ async def get_plot(
         # Rendered on first request, in a worker (a second or two of matplotlib
         # and JAX), then served from the data dir.
         table = await run_in_threadpool(store.get_table, job.table_id)
-        png = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
-                               table.name, result, kind.value)
-        await run_in_threadpool(_write_atomic, path, png)
-        return Response(png, media_type="image/png")
+        try:
+            outcome = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
+                                       table.name, result, kind.value)
+        except WorkerLost as e:
+            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
+                                headers={"Retry-After": "5"}) from None
+        if not outcome["ok"]:  # the server's fault, not the request's
+            log.error("plot %s of job %s failed:\n%s", kind.value, job_id, outcome["traceback"])
+            raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
+                                f"rendering the {kind.value} plot failed: {outcome['reason']}")
+        await run_in_threadpool(_write_atomic, path, outcome["png"])
+        return Response(outcome["png"], media_type="image/png")
     return Response(await run_in_threadpool(path.read_bytes), media_type="image/png")
 
 

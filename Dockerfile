@@ -1,0 +1,40 @@
+# The brdffit fitting service: `brdffit serve` on port 8000, data in the /data volume.
+#
+#   docker build -t brdffit .
+#   docker run -d -p 8000:8000 -v brdffit-data:/data [-e BRDFFIT_API_TOKEN=...] brdffit
+FROM python:3.11-slim
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    # Tables, the job database and cached plots; JAX's compile cache beside them,
+    # so a restarted container does not compile its fits again.
+    BRDFFIT_DATA_DIR=/data \
+    BRDFFIT_JAX_CACHE=/data/jax-cache \
+    # matplotlib wants a writable config dir; the image's home is not one.
+    MPLCONFIGDIR=/tmp/matplotlib
+
+WORKDIR /src
+# Only what the package needs (see .dockerignore): the metadata first, then code.
+COPY pyproject.toml README.md ./
+COPY brdffit ./brdffit
+COPY api ./api
+COPY data_synth ./data_synth
+RUN pip install . \
+    && useradd --system --uid 10001 --home-dir /nonexistent --shell /usr/sbin/nologin brdffit \
+    && mkdir -p /data \
+    && chown brdffit /data
+WORKDIR /
+USER brdffit
+
+# Declared after the chown: a fresh named volume starts owned by the service user.
+VOLUME ["/data"]
+EXPOSE 8000
+
+HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
+    CMD ["python", "-c", "import sys, httpx; sys.exit(httpx.get('http://127.0.0.1:8000/healthz', timeout=4).status_code != 200)"]
+
+# Exec form: brdffit (uvicorn) is PID 1 and gets docker stop's SIGTERM, so running
+# jobs go back to the queue before the container exits.
+CMD ["brdffit", "serve", "--host", "0.0.0.0", "--port", "8000"]
