@@ -363,41 +363,15 @@ def _pair_weight(pairs: np.ndarray, spread: float) -> np.ndarray:
 # -- fitting in a scene --------------------------------------------------------------------
 
 
-def full_table_error(table, model, params: dict, data=None) -> dict[str, float]:
-    """Error metrics (``brdffit.loss.error_metrics``) of ``params`` on every usable bin
-    of ``table``, solid-angle weighted, whatever scene the fit used.
+def full_table_error(table, model, params: dict) -> dict[str, float]:
+    """Error metrics (``brdffit.loss``) of ``params`` on every usable bin of ``table``,
+    solid-angle weighted, whatever scene the fit used."""
+    from .fitting import table_error
 
-    ``data`` may carry ``full_table_data`` of the table already built (it depends on
-    the table only), to score several models without rebuilding it.
-    """
-    import jax.numpy as jnp
-
-    from . import models
-    from .fitting import full_table_data
-    from .sampling import bin_weights, usable_bins
-
-    m = models.get(model)
-    if data is None:
-        data = full_table_data(table, bin_weights(usable_bins(table).usable))
-    u = jnp.asarray(m.unconstrain(m.check_params(params)))
-    return {k: float(v) for k, v in _metrics(m, u, data).items()}
+    return table_error(table, model, params)
 
 
-@functools.cache
-def _compiled_metrics():
-    import equinox as eqx
-
-    from .loss import error_metrics
-
-    # compiled once per model: eager, a million-bin evaluation is ~20 dispatches
-    return eqx.filter_jit(error_metrics)
-
-
-def _metrics(model, u, data):
-    return _compiled_metrics()(u, model, data)
-
-
-def fit_in_scene(table, model, scene: Scene | None, *, full_data=None, **fit_options):
+def fit_in_scene(table, model, scene: Scene | None, **fit_options):
     """``fit`` with the scene's bin weights; the full-table error goes beside the scene's.
 
     The result's ``error`` is on the scene (the loss and the reported error use the
@@ -411,5 +385,5 @@ def fit_in_scene(table, model, scene: Scene | None, *, full_data=None, **fit_opt
         return fit(table, model, **fit_options)
     result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
     result.extra["scene"] = scene.to_dict()
-    result.extra["full_table_error"] = full_table_error(table, model, result.params, full_data)
+    result.extra["full_table_error"] = full_table_error(table, model, result.params)
     return result

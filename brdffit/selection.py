@@ -39,11 +39,10 @@ import numpy as np
 
 from . import models
 from .errors import FitInputError
-from .fitting import FitResult, full_table_data
+from .fitting import FitResult
 from .merl import MerlTable
 from .models.mono_ks import MonoKs, specular_colour_specs
 from .render import SphereReference
-from .sampling import bin_weights, usable_bins
 from .scene import Scene, fit_in_scene
 
 DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
@@ -212,16 +211,13 @@ def select(
     if budget is not None and not (isinstance(budget, int | float) and budget > 0):
         raise FitInputError(f"budget must be a number > 0, got {budget!r}")
     ordered = _order(candidates)
-    full_data = None
-    if scene is not None:
-        full_data = full_table_data(table, bin_weights(usable_bins(table).usable))
     reference = SphereReference(table, image_size)
 
     rows, fits = [], {}
     for m in ordered:
         row = {"model": m.name, "n_params": m.n_params}
         try:
-            r = fit_in_scene(table, m, scene, full_data=full_data, **fit_options)
+            r = fit_in_scene(table, m, scene, **fit_options)
         except FitInputError as e:  # e.g. a scene with too few bins for this model
             rows.append({**row, "status": "failed", "message": str(e)})
             continue
@@ -275,7 +271,7 @@ def select(
                        f"{100 * grey_tolerance:g}%): a monochrome ks would do")
             if mono_ks:
                 mono = _fit_mono(table, models.get(chosen["model"]), fits[chosen["model"]],
-                                 scene, full_data, tolerance, fit_options)
+                                 scene, tolerance, fit_options)
                 fits[mono["model"]] = mono.pop("fit")
                 reason += (f"; refitted as {mono['model']} ({mono['n_params']} values): "
                            f"log_rmse {_fmt(mono['log_rmse'])}, "
@@ -334,13 +330,13 @@ def _choose(ok: list[dict], best: dict, tolerance: float, budget: float | None):
     return c, prefix + why + "."
 
 
-def _fit_mono(table, model, rgb_fit: FitResult, scene, full_data, tolerance, fit_options):
+def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):
     """The chosen model refitted with a grey ks, started from its RGB fit."""
     mono_model = MonoKs(model)
     init = dict(rgb_fit.params)
     for s in specular_colour_specs(model):
         init[s.name] = float(np.mean(init[s.name]))
-    r = fit_in_scene(table, mono_model, scene, full_data=full_data, init=init, **fit_options)
+    r = fit_in_scene(table, mono_model, scene, init=init, **fit_options)
     err, rgb_err = r.error["log_rmse"], rgb_fit.error["log_rmse"]
     excess = math.sqrt(max(err**2 - rgb_err**2, 0.0))
     return {

@@ -6,7 +6,7 @@ A new model is one module plus one line in ``REGISTRY``.
 from __future__ import annotations
 
 from ..errors import BrdffitError
-from .base import AbstractBRDFModel, AbstractLobeModel, ParamSpec, Params
+from .base import AbstractBRDFModel, AbstractLobeModel, Params, ParamSpec
 from .beckmann import Beckmann
 from .blinn_phong import BlinnPhong
 from .ggx import GGX

@@ -66,6 +66,15 @@ class GGX2(AbstractBRDFModel):
         lobe2 = _GGX.shadowed_ndf(params["alpha2"], frame)[..., None]
         return params["kd"] / jnp.pi + fresnel * (params["ks1"] * lobe1 + params["ks2"] * lobe2)
 
+    def eval_channels(self, params, frame: Frame):
+        # channel-major (3, ...), the fitting loss's layout: colours broadcast, lobes once
+        fresnel = schlick_fresnel(params["f0"], frame.cos_d)
+        lobe1 = fresnel * _GGX.shadowed_ndf(params["alpha1"], frame)
+        lobe2 = fresnel * _GGX.shadowed_ndf(params["alpha2"], frame)
+        expand = (slice(None),) + (None,) * lobe1.ndim
+        kd, ks1, ks2 = (params[k][expand] for k in ("kd", "ks1", "ks2"))
+        return kd / jnp.pi + ks1 * lobe1[None] + ks2 * lobe2[None]
+
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """Unconstrained start vectors (K, 12), one per ``shape_grid`` entry.
 

@@ -51,7 +51,7 @@ FRESNELS: dict[str, tuple[ParamSpec, tuple[float, ...]]] = {
 }
 
 
-def schlick_fresnel(f0, cos_d: Float[Array, "..."]) -> Float[Array, "..."]:
+def schlick_fresnel(f0, cos_d: Float[Array, ...]) -> Float[Array, ...]:
     return f0 + (1.0 - f0) * (1.0 - cos_d) ** 5
 
 
@@ -107,11 +107,11 @@ class AbstractMicrofacetModel(AbstractLobeModel):
         return tuple({"alpha": a, spec.name: v} for a in ALPHA_GRID for v in values)
 
     @abc.abstractmethod
-    def ndf(self, alpha, cos_h, sin2_h) -> Float[Array, "..."]:
+    def ndf(self, alpha, cos_h, sin2_h) -> Float[Array, ...]:
         """D(h) in 1/sr (projected-area normalised)."""
 
     @abc.abstractmethod
-    def cos_lambda(self, alpha, cos, sin2) -> Float[Array, "..."]:
+    def cos_lambda(self, alpha, cos, sin2) -> Float[Array, ...]:
         """cos(theta) * Lambda(theta): Smith's Lambda times the cosine, bounded."""
 
     def shadowed_ndf(self, alpha, frame: Frame) -> Array:

@@ -65,6 +65,9 @@ class MonoKs(AbstractBRDFModel):
     def eval_frame(self, params, frame):
         return self.base.eval_frame(self.expand(params), frame)
 
+    def eval_channels(self, params, frame):
+        return self.base.eval_channels(self.expand(params), frame)
+
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """The base model's starts with each specular scale averaged over R, G, B."""
         from ..initialisation import candidates  # imports brdffit.models: not at load time
