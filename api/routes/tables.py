@@ -22,6 +22,7 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
+from starlette.requests import ClientDisconnect
 
 from brdffit import merl
 from brdffit.errors import MerlFormatError
@@ -203,6 +204,8 @@ async def upload_table(
         raise _too_large(cap) from None
     except MultiPartException as e:
         raise HTTPException(status.HTTP_400_BAD_REQUEST, f"malformed multipart body: {e}") from None
+    except ClientDisconnect:  # nobody to answer; not a server error either
+        raise HTTPException(status.HTTP_400_BAD_REQUEST, "client disconnected mid-upload") from None
     finally:
         if form is not None:
             await form.close()
