@@ -41,18 +41,44 @@ def _read(table_path: str, source: str):
 def fit_models(table_path: str, source: str, models: list[str], options: dict) -> dict:
     """Fit each model to the table: ``{"ok": True, "results": [FitResult dict, ...]}``
     or ``{"ok": False, "reason": "..."}``."""
-    from brdffit import BrdffitError, fit
+    from brdffit import BrdffitError
     from brdffit.models import UnknownModelError
+    from brdffit.scene import Scene, fit_in_scene
 
     try:
         table = _read(table_path, source)
-        results = [json_safe(fit(table, m, **options).to_dict()) for m in models]
+        options = dict(options)
+        rule = {"tolerance": options.pop("tolerance", None), "budget": options.pop("budget", None)}
+        scene = options.pop("scene", None)
+        scene = None if scene is None else Scene.from_dict(scene)
+        if models == ["auto"]:
+            return {"ok": True, "results": _select(table, scene, rule, options)}
+        results = [json_safe(fit_in_scene(table, m, scene, **options).to_dict()) for m in models]
         return {"ok": True, "results": results}
     except (BrdffitError, UnknownModelError, ValueError) as e:
         return {"ok": False, "reason": str(e)}
     except Exception as e:  # a bug, not the input's fault: keep the evidence
         return {"ok": False, "reason": f"internal error: {type(e).__name__}: {e}",
                 "traceback": traceback.format_exc()}
+
+
+def _select(table, scene, rule: dict, options: dict) -> list[dict]:
+    """``model="auto"``: every candidate's fit, the chosen one carrying the selection
+    (ranking, reason) in ``extra["selection"]``."""
+    from brdffit.selection import DEFAULT_TOLERANCE, select
+
+    tolerance = DEFAULT_TOLERANCE if rule["tolerance"] is None else rule["tolerance"]
+    sel = select(table, tolerance=tolerance, budget=rule["budget"], scene=scene, **options)
+    results = []
+    for row in sel.ranking:
+        if row["model"] in sel.fits:
+            d = sel.fits[row["model"]].to_dict()
+            if row["model"] == sel.chosen:
+                summary = sel.to_dict()
+                summary.pop("fit")  # it is this very result
+                d["extra"]["selection"] = summary
+            results.append(json_safe(d))
+    return results
 
 
 def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:

@@ -86,6 +86,12 @@ class FitJob:
     def finished(self) -> bool:
         return self.status in ("done", "failed")
 
+    @property
+    def selection(self) -> dict | None:
+        """For a ``model="auto"`` job once done: the ranking, the choice and its reason
+        (``brdffit.selection.Selection.to_dict()``); else None."""
+        return self.result.extra.get("selection") if self.result else None
+
     @classmethod
     def from_json(cls, d: dict) -> FitJob:
         return cls(
@@ -164,7 +170,11 @@ class Client:
 
     def fit(self, table_id: str, model: str | list[str] = "ggx", **options) -> FitJob:
         """Queue a fit; ``options`` are ``brdffit.fit``'s (solver, samples, precision,
-        starts, max_steps, seed). Returns at once: see :meth:`wait`."""
+        starts, max_steps, seed). Returns at once: see :meth:`wait`.
+
+        ``model="auto"`` chooses the model (``brdffit.selection``; options
+        ``tolerance`` and ``budget``); ``scene`` (a scene JSON object, see
+        docs/selection.md) restricts the directions that count, for any model."""
         body = {"table_id": table_id, "model": model, "options": options}
         return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
 

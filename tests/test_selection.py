@@ -183,3 +183,43 @@ def test_bad_options_are_input_errors(ggx_table):
         select(ggx_table, ("lambert", "nope"))
     with pytest.raises(FitInputError, match="duplicate"):
         select(ggx_table, ("lambert", "lambert"))
+
+
+# -- the service and the client -------------------------------------------------------------
+
+
+def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path):
+    from api import tasks
+    from api.routes.fits import FitOptions, FitRequest, best_result
+    from brdffit import merl
+    from brdffit.client import FitJob
+
+    assert FitRequest(table_id="0" * 64, model="auto").model == "auto"
+    for bad in (["auto"], ["ggx", "auto"]):
+        with pytest.raises(ValueError):
+            FitRequest(table_id="0" * 64, model=bad)
+    with pytest.raises(ValueError, match="pairs_file"):
+        FitOptions(scene={"pairs_file": "/etc/passwd"})
+    with pytest.raises(ValueError, match="unknown scene preset"):
+        FitOptions(scene={"preset": "sunset"})
+
+    path = tmp_path / "ggx.binary"
+    merl.write(path, ggx_table)
+    options = FitOptions(samples=8192, starts=1, tolerance=0.005).model_dump()
+    out = tasks.fit_models(str(path), "ggx.binary", ["auto"], options)
+    assert out["ok"], out
+    assert [r["model"] for r in out["results"]] == list(DEFAULT_CANDIDATES)
+    chosen = best_result(out["results"])  # what the job reports as its result
+    assert chosen["model"] == "ggx"
+    selection = chosen["extra"]["selection"]
+    assert selection["chosen"] == "ggx" and "tolerance" in selection["reason"]
+    assert len(selection["ranking"]) == len(DEFAULT_CANDIDATES)
+    json.dumps(out["results"], allow_nan=False)
+    job = FitJob.from_json({"id": "1" * 32, "status": "done", "table_id": "0" * 64,
+                            "models": ["auto"], "options": options, "attempts": 1,
+                            "result": chosen, "results": out["results"]})
+    assert job.selection["chosen"] == "ggx"
+    # A scene goes to single-model jobs too: the full-table error comes beside.
+    options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
+    out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
+    assert out["ok"] and "full_table_error" in out["results"][0]["extra"]

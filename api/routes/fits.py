@@ -22,6 +22,8 @@ from brdffit.angles import N_PHI_D, N_THETA_D, N_THETA_H
 from brdffit.fitting import PRECISIONS, SOLVERS
 from brdffit.plots import KINDS
 from brdffit.sampling import DEFAULT_SAMPLES
+from brdffit.scene import Scene, SceneError
+from brdffit.selection import DEFAULT_TOLERANCE
 
 from .. import tasks
 from ..deps import QueueDep, RunnerDep, StoreDep, require_token
@@ -54,6 +56,30 @@ class FitOptions(BaseModel):
     starts: int = Field(2, ge=1, le=32, description="solver starts, the best kept")
     max_steps: int = Field(256, ge=1, le=10_000)
     seed: int = Field(0, ge=0, le=2**32 - 1, description="subsample seed")
+    tolerance: float = Field(
+        DEFAULT_TOLERANCE, ge=0, le=10,
+        description="model 'auto': the cheapest model within this log_rmse of the best "
+        "(in quadrature) is chosen (docs/selection.md)",
+    )
+    budget: float | None = Field(
+        None, gt=0, le=10, description="model 'auto': the cheapest model under this log_rmse"
+    )
+    scene: dict | None = Field(
+        None, description="only the directions a scene uses count (docs/selection.md): "
+        "preset, max_theta_i, max_theta_o, pairs, lights, views, spread, name",
+    )
+
+    @field_validator("scene")
+    @classmethod
+    def _valid_scene(cls, v: dict | None) -> dict | None:
+        if v is not None:
+            if "pairs_file" in v:  # a path on the server: not the client's to name
+                raise ValueError("scene: pairs_file is not accepted here; send pairs")
+            try:
+                Scene.from_dict(v).bin_weight()
+            except SceneError as e:
+                raise ValueError(str(e)) from None
+        return v
 
 
 class FitRequest(BaseModel):
@@ -62,13 +88,16 @@ class FitRequest(BaseModel):
     table_id: str = Field(pattern=r"^[0-9a-f]{64}$", description="from POST /v1/tables")
     model: str | list[str] = Field(
         "ggx", description="a model name (GET /v1/models) or a list of them: each is fitted, "
-        "the best (lowest log_rmse) is the job's `result`",
+        "the best (lowest log_rmse) is the job's `result`; or 'auto': the candidates are "
+        "fitted and the cheapest good enough is the `result`, its `extra.selection` says why",
     )
     options: FitOptions = FitOptions()
 
     @field_validator("model")
     @classmethod
     def _known_models(cls, v: str | list[str]) -> str | list[str]:
+        if v == "auto":
+            return v
         names = [v] if isinstance(v, str) else v
         if not names:
             raise ValueError("give at least one model")
@@ -123,7 +152,12 @@ def _time(t: float | None) -> datetime | None:
 
 
 def best_result(results: list[dict]) -> dict:
-    """The fit with the lowest log_rmse (a null one counts as worst)."""
+    """The fit with the lowest log_rmse (a null one counts as worst); for a
+    ``model="auto"`` job, the chosen one."""
+    for r in results:
+        if "selection" in (r.get("extra") or {}):
+            return r
+
     def key(r):
         e = r["error"].get("log_rmse")
         return float("inf") if e is None else e
