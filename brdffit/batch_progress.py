@@ -1,0 +1,79 @@
+"""A batch's progress line on stderr: tables done, fits/s, ETA.
+
+On a terminal the line redraws in place; otherwise (a log file, CI) it prints a
+plain line at most every ``interval_s`` seconds, so logs stay short.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def format_duration(seconds: float) -> str:
+    if seconds != seconds or seconds == float("inf"):  # NaN or inf: nothing measured yet
+        return "?"
+    s = int(round(seconds))
+    if s < 60:
+        return f"{s}s"
+    if s < 3600:
+        return f"{s // 60}m{s % 60:02d}s"
+    return f"{s // 3600}h{s % 3600 // 60:02d}m"
+
+
+class Progress:
+    """Counts tables and fits as they finish and draws the line."""
+
+    def __init__(self, total_tables: int, *, skipped: int = 0, stream=None,
+                 interval_s: float = 30.0, enabled: bool = True):
+        self.total = total_tables
+        self.skipped = skipped
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.interval_s = interval_s if not self.tty else 0.2
+        self.enabled = enabled
+        self.tables = 0
+        self.fits = 0
+        self.failed_tables = 0
+        self.t0 = time.monotonic()
+        self._last_draw = float("-inf")
+
+    def update(self, *, fits: int, failed: bool) -> None:
+        self.tables += 1
+        self.fits += fits
+        self.failed_tables += failed
+        self.draw()
+
+    def line(self) -> str:
+        elapsed = time.monotonic() - self.t0
+        rate = self.fits / elapsed if elapsed > 0 else 0.0
+        per_table = elapsed / self.tables if self.tables else float("nan")
+        eta = per_table * (self.total - self.tables)
+        width = 24
+        filled = int(width * self.tables / self.total) if self.total else width
+        parts = [f"[{'#' * filled}{'.' * (width - filled)}] {self.tables}/{self.total} tables",
+                 f"{rate:.2f} fits/s", f"elapsed {format_duration(elapsed)}",
+                 f"ETA {format_duration(eta) if self.tables < self.total else '0s'}"]
+        if self.failed_tables:
+            parts.append(f"{self.failed_tables} failed")
+        if self.skipped:
+            parts.append(f"{self.skipped} already done")
+        return "  ".join(parts)
+
+    def draw(self, force: bool = False) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if not force and now - self._last_draw < self.interval_s and self.tables < self.total:
+            return
+        self._last_draw = now
+        if self.tty:
+            self.stream.write("\r\x1b[2K" + self.line())
+        else:
+            self.stream.write(self.line() + "\n")
+        self.stream.flush()
+
+    def finish(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()

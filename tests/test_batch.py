@@ -1,0 +1,430 @@
+"""Batch fitting: a real Dask LocalCluster, bad tables, the HDF5 layout, kill and resume.
+
+Tables are made once per module (about 1 s each plus 35 MB on disk). Fits use
+small options (4096 samples, one start) so the file runs in a few minutes on
+two cores; noise-free tables fitted with their own model still recover their
+parameters to well under 2 %.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from brdffit import MerlFormatError, models
+from brdffit.batch import BatchInputError, FitOptions, find_tables, run_batch
+from brdffit.batch_cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
+from brdffit.batch_report import format_ranking, plot_summary, rank
+from brdffit.batch_store import BatchFileError, BatchStore, read_results
+from brdffit.batch_tasks import TableRecord
+from brdffit.cli import main as cli_main
+from brdffit.models import UnknownModelError
+
+MODELS = ["ggx", "beckmann", "lambert"]
+OPTIONS = FitOptions(samples=4096, starts=1)
+CLI_OPTIONS = ["--samples", "4096", "--starts", "1"]
+TRUTHS = {
+    "a_ggx": ("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.2, "f0": 0.6}),
+    "b_beckmann": ("beckmann", {"kd": [0.1, 0.15, 0.2], "ks": [0.6, 0.6, 0.5], "alpha": 0.15,
+                                "f0": 0.8}),
+    "c_lambert": ("lambert", {"kd": [0.5, 0.35, 0.2]}),
+}
+BAD = {"d_truncated": "truncated", "e_text": "text file", "f_dims": "not the MERL grid"}
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module")
+def table_dir(tmp_path_factory):
+    from data_synth import make_table
+    from data_synth.synth import write_table
+
+    d = tmp_path_factory.mktemp("tables")
+    for name, (model, params) in TRUTHS.items():
+        table, truth = make_table(model, params, source=name)
+        write_table(str(d / f"{name}.binary"), table, truth)
+    good = (d / "a_ggx.binary").read_bytes()
+    (d / "d_truncated.binary").write_bytes(good[: len(good) // 3])
+    (d / "e_text.binary").write_text("# not a table\n0.1 0.2 0.3\n")
+    dims = np.asarray([90, 90, 90], "<i4").tobytes()
+    (d / "f_dims.binary").write_bytes(dims + good[12: 12 + 3 * 8 * 90 * 90 * 90])
+    return d
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    from distributed import LocalCluster
+
+    c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                     dashboard_address=None, env=local_worker_env(2))
+    try:
+        yield c
+    finally:
+        c.close(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def cluster_batch(table_dir, cluster, tmp_path_factory):
+    """One batch of every table x 3 models on the LocalCluster, uninterrupted."""
+    out = tmp_path_factory.mktemp("out") / "results.h5"
+    summary = run_batch([str(table_dir)], MODELS, out, options=OPTIONS,
+                        scheduler=cluster.scheduler_address, progress=False, timeout_s=600)
+    return out, summary
+
+
+def _tables(out) -> dict[str, dict]:
+    return {t["name"]: t for t in read_results(out)["tables"]}
+
+
+def _close(fit_value, true_value, rtol):
+    return np.allclose(np.asarray(fit_value), np.asarray(true_value), rtol=rtol, atol=1e-4)
+
+
+# -- the cluster batch ---------------------------------------------------------------------
+
+
+def test_cluster_batch_records_every_table_and_model(cluster_batch, table_dir):
+    out, summary = cluster_batch
+    assert summary.tables == 6 and summary.skipped == 0
+    assert summary.fits == 3 * len(MODELS)
+    assert sorted(os.path.basename(p) for p, _ in summary.failed_tables) == [
+        f"{n}.binary" for n in sorted(BAD)]
+    assert not summary.failed_fits and not summary.ok
+
+    results = read_results(out)
+    attrs = results["attrs"]
+    assert attrs["format"] == "brdffit-batch" and attrs["format_version"] == 1
+    assert json.loads(attrs["models"]) == MODELS
+    assert json.loads(attrs["options"]) == OPTIONS.to_dict()
+    assert attrs["n_tables"] == 6 and attrs["n_tables_failed"] == 3
+    assert attrs["n_fits"] == 9 and attrs["n_fits_failed"] == 0
+    assert not os.path.exists(str(out) + ".journal"), "a clean finish removes the journal"
+
+    tables = _tables(out)
+    assert sorted(tables) == sorted([*TRUTHS, *BAD])
+    workers = set()
+    for name, (true_model, _) in TRUTHS.items():
+        t = tables[name]
+        path = str(table_dir / f"{name}.binary")
+        assert t["path"] == path and t["status"] == "ok" and t["message"] == ""
+        assert t["sha256"] == _sha256(path)
+        assert t["measured_bins"] > 0 and t["size_bytes"] == 34_992_012
+        assert t["worker"] and t["worker"] != f"{os.uname().nodename}:{os.getpid()}"
+        workers.add(t["worker"])
+        truth = json.loads((table_dir / f"{name}.binary.json").read_text())
+        assert truth["model"] == true_model
+        assert sorted(t["fits"]) == sorted(MODELS)
+        for model, f in t["fits"].items():
+            assert f["status"] == "ok" and f["message"] == ""
+            assert f["sha256"] == t["sha256"]
+            assert json.loads(f["options"]) == OPTIONS.to_dict()
+            assert f["samples"] == 4096 and f["starts"] == 1 and f["solver"] == "lm"
+            assert f["result"] and f["steps"] >= 0 and f["time_s"] > 0
+            assert isinstance(f["converged"], bool)
+            assert set(f["error"]) >= {"log_rmse", "rmse_cos", "rel_peak_error", "sample_log_rmse"}
+            assert all(np.isfinite(v) for v in f["error"].values())
+            spec = {s.name: s.size for s in models.get(model).param_specs}
+            assert {k: np.size(v) for k, v in f["params"].items()} == spec
+            assert all(np.all(np.isfinite(v)) for v in f["params"].values())
+            if model == true_model:
+                assert f["converged"], (name, f["result"])
+                for p, v in truth["params"].items():
+                    assert _close(f["params"][p], v, 0.02), (name, p, f["params"][p], v)
+                assert f["error"]["log_rmse"] < 1e-3
+            else:  # another model cannot beat a table's own (it may tie: GGX with ks=0)
+                own = t["fits"][true_model]["error"]["log_rmse"]
+                assert f["error"]["log_rmse"] >= own - 1e-9
+    for name, words in BAD.items():
+        t = tables[name]
+        assert t["status"] == "failed" and words in t["message"], t["message"]
+        assert t["fits"] == {}
+    assert len(workers) >= 1
+
+
+def test_rerun_skips_everything_finished(cluster_batch, table_dir, cluster):
+    out, _ = cluster_batch
+    before = _tables(out)
+    summary = run_batch([str(table_dir)], MODELS, out, options=OPTIONS,
+                        scheduler=cluster.scheduler_address, progress=False, timeout_s=300)
+    assert summary.skipped == 3 and summary.fits == 0
+    assert len(summary.failed_tables) == 3  # bad tables are tried again: they may be fixed
+    after = _tables(out)
+    for name in TRUTHS:
+        for model in MODELS:
+            assert after[name]["fits"][model]["finished_at"] == \
+                before[name]["fits"][model]["finished_at"]
+
+
+def test_report_ranks_each_table_own_model_first(cluster_batch, tmp_path):
+    out, _ = cluster_batch
+    r = rank(out)
+    best = {t.name: t.best for t in r.tables}
+    for name, (model, _) in TRUTHS.items():
+        assert best[name] == model  # a tie (GGX, ks=0, on Lambert) goes to fewer params
+    assert {t.name for t in r.failed_tables} == set(BAD)
+    by_model = {s.model: s for s in r.summary}
+    assert all(by_model[m].fitted == 3 and by_model[m].wins == 1 for m in MODELS)
+    text = format_ranking(r, "results.h5")
+    assert "a_ggx" in text and "FAILED" in text and "mean log_rmse" in text
+    png = plot_summary(r, tmp_path / "summary.png")
+    assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_report_cli(cluster_batch, tmp_path, capsys):
+    out, _ = cluster_batch
+    png = tmp_path / "s.png"
+    assert cli_main(["batch-report", str(out), "--png", str(png)]) == 0
+    text = capsys.readouterr().out
+    assert "beckmann" in text and "wins" in text
+    assert png.stat().st_size > 1000
+
+
+# -- the service runner ---------------------------------------------------------------------
+
+
+def test_dask_runner_fits_and_raises_like_fit(cluster, table_dir):
+    with DaskRunner(cluster.scheduler_address) as runner:
+        result = runner.fit(str(table_dir / "c_lambert.binary"), "lambert", timeout_s=300,
+                            samples=4096, starts=1)
+        assert _close(result.params["kd"], TRUTHS["c_lambert"][1]["kd"], 0.02)
+        with pytest.raises(MerlFormatError, match="truncated"):
+            runner.fit(str(table_dir / "d_truncated.binary"), "lambert", timeout_s=300)
+        with pytest.raises(UnknownModelError):
+            runner.submit(str(table_dir / "c_lambert.binary"), "no-such-model")
+        # bytes for a service whose storage the workers cannot see
+        data = (table_dir / "c_lambert.binary").read_bytes()
+        result = runner.fit(data, "lambert", timeout_s=300, samples=4096, starts=1)
+        assert result.table == "<upload>"
+    assert DaskRunner.from_env({}) is None
+    runner = DaskRunner.from_env({SCHEDULER_ENV: cluster.scheduler_address})
+    assert runner is not None and runner.address == cluster.scheduler_address
+    runner.close()
+
+
+# -- kill and resume -------------------------------------------------------------------------
+
+
+def _batch_cmd(table_dir, out, *extra):
+    return [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models",
+            ",".join(MODELS), "--out", str(out), *CLI_OPTIONS, *extra]
+
+
+def test_sigkill_then_resume_gives_the_same_results(cluster_batch, table_dir, tmp_path):
+    reference, _ = cluster_batch
+    out = tmp_path / "killed.h5"
+    journal = str(out) + ".journal"
+    proc = subprocess.Popen(_batch_cmd(table_dir, out, "--workers", "0", "--checkpoint", "0"),
+                            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            if _journaled_fits(journal) + _h5_fits(out) >= len(MODELS):
+                break  # the first good table is done: the other two are not
+            time.sleep(0.05)
+        assert proc.poll() is None, "the batch finished before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+
+    killed = _tables(out)  # readable: a kill never leaves a half-written file
+    done_before = {(n, m) for n, t in killed.items() for m, f in t["fits"].items()
+                   if f["status"] == "ok"}
+    assert len(done_before) + _journaled_fits(journal) >= len(MODELS)
+    assert len(done_before) < 3 * len(MODELS)
+
+    resumed = subprocess.run(_batch_cmd(table_dir, out, "--workers", "0"), cwd=REPO,
+                             capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 1, resumed.stderr
+    assert "3 of 6 tables failed" in resumed.stderr
+    final, ref = _tables(out), _tables(reference)
+    assert sorted(final) == sorted(ref)
+    for name in TRUTHS:
+        for model in MODELS:
+            a, b = final[name]["fits"][model], ref[name]["fits"][model]
+            assert a["status"] == b["status"] == "ok"
+            assert a["result"] == b["result"] and a["sha256"] == b["sha256"]
+            for p in b["params"]:
+                np.testing.assert_allclose(a["params"][p], b["params"][p], rtol=1e-6)
+            np.testing.assert_allclose(a["error"]["log_rmse"], b["error"]["log_rmse"],
+                                       rtol=1e-6, atol=1e-12)
+    # the fits finished before the kill were kept, not made again
+    for name, model in done_before:
+        assert final[name]["fits"][model]["finished_at"] == \
+            killed[name]["fits"][model]["finished_at"]
+    assert not os.path.exists(journal)
+
+
+def _journaled_fits(journal: str) -> int:
+    try:
+        with open(journal, "rb") as f:
+            return sum(b'"kind":"fit"' in line and line.endswith(b"\n") for line in f)
+    except FileNotFoundError:
+        return 0
+
+
+def _h5_fits(out) -> int:
+    try:
+        return read_results(out)["attrs"].get("n_fits", 0)
+    except (BatchFileError, OSError, KeyError):
+        return 0
+
+
+_STORE_WRITER = """
+import sys, time
+from brdffit.batch_store import BatchStore
+from brdffit.batch_tasks import FitOptions, FitRecord, TableRecord
+out, n = sys.argv[1], int(sys.argv[2])
+fit = {"model": "lambert", "params": {"kd": [0.5, 0.4, 0.3]}, "error": {"log_rmse": 0.01},
+       "converged": True, "result": "successful", "steps": 3, "time_s": 0.1, "starts": 1,
+       "samples": {"used": 1, "usable": 1, "measured": 1,
+                   "dropped": {"unmeasured": 0, "nonfinite": 0, "below_horizon": 0}}}
+with BatchStore(out) as store:
+    start = store.counts()["n_tables"]
+    print("ready", flush=True)
+    for i in range(start, start + n):
+        path = f"/tables/t{i:05d}.binary"
+        store.add(TableRecord(path=path, status="ok", sha256=str(i)),
+                  [FitRecord(path=path, model="lambert", sha256=str(i),
+                             options=FitOptions().to_dict(), status="ok", fit=fit)])
+        store.checkpoint({"models": ["lambert"]})
+"""
+
+
+def test_store_survives_sigkill_at_random_moments(tmp_path):
+    """Kill a writer that checkpoints after every record, at arbitrary moments:
+    the file always opens, and nothing journaled is lost."""
+    out = tmp_path / "stress.h5"
+    rng = np.random.default_rng(1)
+    seen = 0
+    for _ in range(4):
+        proc = subprocess.Popen([sys.executable, "-c", _STORE_WRITER, str(out), "100000"],
+                                stdout=subprocess.PIPE, start_new_session=True)
+        try:
+            assert proc.stdout.readline().strip() == b"ready"
+            time.sleep(rng.uniform(0.2, 1.0))
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+        n_file = read_results(out)["attrs"]["n_tables"]  # opens: never half-written
+        assert n_file >= seen
+        with BatchStore(out) as store:  # the journal tops up what the file lacks
+            n_all = store.counts()["n_tables"]
+            assert n_all >= n_file and n_all >= seen
+            store.checkpoint()
+        seen = n_all
+        assert read_results(out)["attrs"]["n_tables"] == seen
+        assert not os.path.exists(str(out) + ".journal")
+    assert seen > 0
+
+
+def test_torn_journal_line_is_dropped(tmp_path):
+    out = tmp_path / "torn.h5"
+    rec = {"kind": "table", **TableRecord(path="/x.binary", status="ok", sha256="1").__dict__}
+    with open(str(out) + ".journal", "w") as f:
+        f.write(json.dumps(rec) + "\n" + json.dumps(rec)[:17])
+    with BatchStore(out) as store:
+        assert store.recovered == 1
+        store.add(TableRecord(path="/y.binary", status="ok", sha256="2"), [])
+        with open(str(out) + ".journal") as f:
+            assert [json.loads(line)["path"] for line in f] == ["/x.binary", "/y.binary"]
+        store.checkpoint()
+    assert sorted(t["path"] for t in read_results(out)["tables"]) == ["/x.binary", "/y.binary"]
+
+
+def test_a_second_writer_is_refused(tmp_path):
+    out = tmp_path / "locked.h5"
+    with BatchStore(out):
+        with pytest.raises(BatchFileError, match="another batch"):
+            BatchStore(out).open()
+
+
+def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
+    from brdffit import merl
+    from data_synth import make_table
+
+    d = tmp_path / "t"
+    d.mkdir()
+    for i, kd in enumerate(([0.5, 0.3, 0.2], [0.2, 0.3, 0.4])):
+        merl.write(d / f"m{i}.binary", make_table("lambert", {"kd": kd})[0])
+    out = tmp_path / "r.h5"
+    opts = FitOptions(samples=1024, starts=1)
+    first = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+    assert first.ok and first.fits == 2
+    merl.write(d / "m1.binary", make_table("lambert", {"kd": [0.1, 0.1, 0.1]})[0])
+    second = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+    assert second.skipped == 1 and second.fits == 1
+    t = _tables(out)["m1"]
+    assert t["sha256"] == _sha256(str(d / "m1.binary"))
+    assert _close(t["fits"]["lambert"]["params"]["kd"], [0.1, 0.1, 0.1], 0.02)
+    # other options are another fit; --refit makes them again regardless
+    third = run_batch([str(d)], ["lambert"], out, options=FitOptions(samples=2048, starts=1),
+                      workers=0, progress=False)
+    assert third.fits == 2
+    fourth = run_batch([str(d)], ["lambert"], out, options=FitOptions(samples=2048, starts=1),
+                       workers=0, progress=False, refit=True)
+    assert fourth.fits == 2 and fourth.skipped == 0
+
+
+# -- arguments, exit codes ---------------------------------------------------------------------
+
+
+def test_find_tables(table_dir):
+    every = find_tables([str(table_dir)])
+    assert [os.path.basename(p) for p in every] == sorted(
+        f"{n}.binary" for n in [*TRUTHS, *BAD])  # sidecars (.json) are not tables
+    assert find_tables([str(table_dir / "a_*.binary"), str(table_dir / "a_ggx.binary")]) == [
+        str(table_dir / "a_ggx.binary")]
+    with pytest.raises(BatchInputError, match="no such file"):
+        find_tables([str(table_dir / "nope.binary")])
+    with pytest.raises(BatchInputError, match="no file matches"):
+        find_tables([str(table_dir / "zz*.binary")])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--models", "ggx,nope"], "unknown model 'nope'"),
+    (["--models", "ggx", "--samples", "10"], "samples must be an integer >= 64"),
+    (["--models", "ggx", "--workers", "-1"], "workers must be an integer >= 0"),
+])
+def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
+    code = cli_main(["batch", str(table_dir), "--out", str(tmp_path / "r.h5"), *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_bad_outputs_exit_2(table_dir, tmp_path, capsys):
+    assert cli_main(["batch", str(table_dir), "--models", "ggx", "--out",
+                     str(tmp_path / "no" / "r.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    not_h5 = tmp_path / "notes.h5"
+    not_h5.write_text("my notes")
+    assert cli_main(["batch", str(table_dir), "--models", "ggx", "--out", str(not_h5)]) == 2
+    assert "not a readable HDF5 file" in capsys.readouterr().err
+    assert not_h5.read_text() == "my notes"
+
+
+def test_only_bad_tables_exit_1_with_a_count(table_dir, tmp_path, capsys):
+    bad = [str(table_dir / f"{n}.binary") for n in BAD]
+    code = cli_main(["batch", *bad, "--models", "lambert", "--out", str(tmp_path / "r.h5"),
+                     "--workers", "0", "--quiet", *CLI_OPTIONS])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "3 of 3 tables failed" in err
+    assert all(f"{n}.binary" in err for n in BAD)
+
+
+def _sha256(path: str) -> str:
+    import hashlib
+
+    return hashlib.sha256(open(path, "rb").read()).hexdigest()
