@@ -15,6 +15,11 @@ class MerlFormatError(BrdffitError, ValueError):
         self.problem = problem
         super().__init__(f"{source}: {problem}")
 
+    def __reduce__(self):
+        # Exceptions pickle as cls(*args); args holds only the message here, so
+        # say how to rebuild it (worker processes send these back to the parent).
+        return (type(self), (self.source, self.problem))
+
 
 class FitInputError(BrdffitError, ValueError):
     """Fit options or a table that a fit cannot work with (explained in the message)."""

@@ -128,3 +128,12 @@ def test_absurd_dims_do_not_allocate(tmp_path, monkeypatch):
     monkeypatch.setattr(np, "fromfile", lambda *a, **k: pytest.fail("body was read"))
     with pytest.raises(MerlFormatError, match="truncated"):
         merl.read(p)
+
+
+def test_format_error_survives_pickling():
+    """Worker processes (service, batch, Dask) send errors back pickled."""
+    import pickle
+
+    e = pickle.loads(pickle.dumps(MerlFormatError("a.binary", "truncated")))
+    assert isinstance(e, MerlFormatError) and str(e) == "a.binary: truncated"
+    assert e.source == "a.binary" and e.problem == "truncated"
