@@ -26,7 +26,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 from . import models
 from .batch_cluster import DaskRunner, connect
@@ -178,16 +178,17 @@ def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: di
     try:
         for fut in as_completed(futures, loop=client.loop, timeout=timeout_s):
             t = futures[fut]
-            if fut.status == "error":
-                # The worker process died on it (Dask retried it elsewhere first).
-                exc = fut.exception()
-                yield {"table": TableRecord(
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - the task failed, not the batch
+                # fit_table returns failures as records, so this is a worker that
+                # died on the table (after Dask's retries) or a lost cluster.
+                result = {"table": asdict(TableRecord(
                     path=t.path, status="failed", worker=worker_name(), finished_at=now(),
                     message=f"worker failed on this table: {type(exc).__name__}: {exc}",
-                ).__dict__, "fits": []}
-            else:
-                yield fut.result()
+                )), "fits": []}
             fut.release()
+            yield result
     finally:
         client.cancel(list(futures))
 

@@ -59,7 +59,7 @@ def connect(workers: int = 1, scheduler: str | None = None,
         raise ValueError(f"a local cluster needs at least 1 worker, got {workers}")
     cluster = LocalCluster(
         n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-        dashboard_address=None, silence_logs=logging.ERROR, env=local_worker_env(workers),
+        dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, env=local_worker_env(workers),
     )
     try:
         with Client(cluster, set_as_default=False) as client:
@@ -68,15 +68,24 @@ def connect(workers: int = 1, scheduler: str | None = None,
         cluster.close()
 
 
+class WorkerLost(RuntimeError):
+    """The Dask worker running a call died under it (killed, out of memory, crashed),
+    and the scheduler gave up on it (``distributed.KilledWorker``)."""
+
+
 class DaskRunner:
-    """Single fits on a Dask cluster, for a service's job runner.
+    """Calls on a Dask cluster, for a job runner that is not a batch (the REST service).
 
-        runner = DaskRunner.from_env()          # None when BRDFFIT_DASK_SCHEDULER is unset
-        future = runner.submit("/shared/gold.binary", "ggx", samples=8192)
-        result: FitResult = future.result()     # raises MerlFormatError etc. as fit would
+        runner = DaskRunner.from_env()         # None when BRDFFIT_DASK_SCHEDULER is unset
+        fut = runner.submit_fit("/shared/gold.binary", "ggx", samples=8192)
+        result: FitResult = fut.result()       # raises MerlFormatError etc. as fit would
+        fut = runner.submit_call(some_module.top_level_fn, arg1, arg2)
 
-    ``submit`` returns a ``concurrent.futures.Future``; bad models and options
-    raise at once, as a local ``fit`` call would.
+    Both return ``concurrent.futures.Future`` (``asyncio.wrap_future`` makes them
+    awaitable). A worker that dies under a call raises :class:`WorkerLost`. Bad
+    models and options raise at once, as a local ``fit`` call would. Tables
+    travel as paths the workers can read (shared storage) or, failing that, as
+    bytes.
     """
 
     def __init__(self, address: str, *, timeout_s: float = 30.0):
@@ -93,10 +102,17 @@ class DaskRunner:
         address = environ.get(SCHEDULER_ENV, "").strip()
         return cls(address) if address else None
 
-    def submit(self, source: str | bytes, model: str, **fit_options) -> concurrent.futures.Future:
+    def submit_call(self, fn, /, *args) -> concurrent.futures.Future:
+        """``fn(*args)`` on a worker; ``fn`` must be importable there (a top-level
+        function of an installed module) and its result picklable."""
+        return self._bridge(self._client.submit(fn, *args, pure=False), lambda value: value)
+
+    def submit_fit(self, source: str | bytes, model: str,
+                   **fit_options) -> concurrent.futures.Future:
         """Fit ``model`` to the table at ``source`` (a path the workers can read, or
         the file's bytes). ``fit_options`` are ``fit``'s keyword arguments
-        (solver, samples, precision, starts, max_steps, seed)."""
+        (solver, samples, precision, starts, max_steps, seed). The future's
+        result is a :class:`brdffit.FitResult`."""
         name = models.get(model).name
         options = FitOptions(**fit_options).validate()
         if isinstance(source, os.PathLike):
@@ -105,14 +121,30 @@ class DaskRunner:
             # 35 MB travels once, as data, not inside the task description.
             source = self._client.scatter(bytes(source), direct=True)
         remote = self._client.submit(fit_one, source, name, options.to_dict(), pure=False)
+
+        def to_result(payload: dict) -> FitResult:
+            if not payload["ok"]:
+                raise_remote_error(payload["error"])
+            return FitResult.from_dict(payload["fit"])
+
+        return self._bridge(remote, to_result)
+
+    def fit(self, source: str | bytes, model: str, *, timeout_s: float | None = None,
+            **fit_options) -> FitResult:
+        """Blocking form of :meth:`submit_fit`."""
+        return self.submit_fit(source, model, **fit_options).result(timeout=timeout_s)
+
+    @staticmethod
+    def _bridge(remote, convert) -> concurrent.futures.Future:
+        from distributed import KilledWorker
+
         done: concurrent.futures.Future = concurrent.futures.Future()
 
         def settle(f):
             try:
-                payload = f.result()
-                if not payload["ok"]:
-                    raise_remote_error(payload["error"])
-                done.set_result(FitResult.from_dict(payload["fit"]))
+                done.set_result(convert(f.result()))
+            except KilledWorker as e:
+                done.set_exception(WorkerLost(f"the Dask worker running it died: {e}"))
             except BaseException as e:  # noqa: BLE001 - handed to the waiting caller
                 done.set_exception(e)
             finally:
@@ -120,11 +152,6 @@ class DaskRunner:
 
         remote.add_done_callback(settle)
         return done
-
-    def fit(self, source: str | bytes, model: str, *, timeout_s: float | None = None,
-            **fit_options) -> FitResult:
-        """Blocking form of :meth:`submit`."""
-        return self.submit(source, model, **fit_options).result(timeout=timeout_s)
 
     def close(self) -> None:
         self._client.close()

@@ -265,7 +265,7 @@ class BatchStore:
                 f.attrs["format_version"] = FORMAT_VERSION
                 f.attrs["created"] = now()
                 f.create_group("tables")
-                f.create_dataset("index", shape=(0,), maxshape=(None,), chunks=(1024,),
+                f.create_dataset("index", shape=(0,), maxshape=(None,), chunks=(256,),
                                  dtype=_INDEX_DTYPE)
             with f:
                 for r in self._pending:

@@ -123,20 +123,33 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableRecord]:
     """Read and hash ``path`` from one read of its bytes.
 
     Hashing the very bytes that are parsed means the recorded sha256 is the
-    content that was fitted, even if the file changes during the batch.
+    content that was fitted, even if the file changes during the batch. A
+    file of the wrong size is only streamed through the hash, never held in
+    memory (a batch may sweep up a 10 GB file by mistake), and ``merl.read``
+    says what is wrong with it.
     """
     t0 = time.perf_counter()
     record = TableRecord(path=path, status="failed", worker=worker_name())
+    h = hashlib.sha256()
+    data = None
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            record.size_bytes = os.fstat(f.fileno()).st_size
+            if record.size_bytes == merl.FILE_BYTES:
+                data = f.read()
+                h.update(data)
+            else:
+                while chunk := f.read(1 << 22):
+                    h.update(chunk)
     except OSError as e:
         record.message = str(MerlFormatError(path, f"cannot read: {e.strerror or e}"))
         record.finished_at = now()
         return None, record
-    record.sha256 = hashlib.sha256(data).hexdigest()
-    record.size_bytes = len(data)
+    record.sha256 = h.hexdigest()
     try:
+        if data is None:
+            merl.read(path)  # raises, naming the problem
+            raise MerlFormatError(path, "changed size while being read")
         table = merl.from_bytes(data, source=path)
     except Exception as e:  # noqa: BLE001 - any failure is this table's, recorded
         record.message = _describe(e)

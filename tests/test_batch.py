@@ -62,7 +62,7 @@ def cluster():
     from distributed import LocalCluster
 
     c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                     dashboard_address=None, env=local_worker_env(2))
+                     dashboard_address="127.0.0.1:0", env=local_worker_env(2))
     try:
         yield c
     finally:
@@ -196,7 +196,10 @@ def test_dask_runner_fits_and_raises_like_fit(cluster, table_dir):
         with pytest.raises(MerlFormatError, match="truncated"):
             runner.fit(str(table_dir / "d_truncated.binary"), "lambert", timeout_s=300)
         with pytest.raises(UnknownModelError):
-            runner.submit(str(table_dir / "c_lambert.binary"), "no-such-model")
+            runner.submit_fit(str(table_dir / "c_lambert.binary"), "no-such-model")
+        # any importable function, as the service's job runner needs
+        assert runner.submit_call(os.path.getsize, str(table_dir / "e_text.binary")).result(
+            timeout=60) == (table_dir / "e_text.binary").stat().st_size
         # bytes for a service whose storage the workers cannot see
         data = (table_dir / "c_lambert.binary").read_bytes()
         result = runner.fit(data, "lambert", timeout_s=300, samples=4096, starts=1)
@@ -205,6 +208,20 @@ def test_dask_runner_fits_and_raises_like_fit(cluster, table_dir):
     runner = DaskRunner.from_env({SCHEDULER_ENV: cluster.scheduler_address})
     assert runner is not None and runner.address == cluster.scheduler_address
     runner.close()
+
+
+def test_dask_runner_reports_a_dead_worker():
+    import dask
+    from distributed import LocalCluster
+
+    from brdffit.batch_cluster import WorkerLost
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address="127.0.0.1:0") as c, \
+                DaskRunner(c.scheduler_address) as r:
+            with pytest.raises(WorkerLost, match="died"):
+                r.submit_call(os._exit, 3).result(timeout=120)
 
 
 # -- kill and resume -------------------------------------------------------------------------
