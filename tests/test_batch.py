@@ -8,6 +8,7 @@ parameters to well under 2 %.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -233,25 +234,36 @@ def _batch_cmd(table_dir, out, *extra):
 
 
 def test_sigkill_then_resume_gives_the_same_results(cluster_batch, table_dir, tmp_path):
+    """SIGKILL ``brdffit batch`` (default engine: local Dask workers) once some fits
+    are done; the file stays readable, the workers go with it, and a second run
+    finishes with what an uninterrupted batch gives."""
     reference, _ = cluster_batch
     out = tmp_path / "killed.h5"
     journal = str(out) + ".journal"
-    proc = subprocess.Popen(_batch_cmd(table_dir, out, "--workers", "0", "--checkpoint", "0"),
+    proc = subprocess.Popen(_batch_cmd(table_dir, out, "--workers", "1", "--checkpoint", "0"),
                             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
+    workers: set[int] = set()
     try:
         deadline = time.monotonic() + 240
         while time.monotonic() < deadline and proc.poll() is None:
+            workers |= _descendants(proc.pid)
             if _journaled_fits(journal) + _h5_fits(out) >= len(MODELS):
                 break  # the first good table is done: the other two are not
             time.sleep(0.05)
         assert proc.poll() is None, "the batch finished before it could be killed"
-        os.killpg(proc.pid, signal.SIGKILL)
+        workers |= _descendants(proc.pid)
+        os.kill(proc.pid, signal.SIGKILL)  # the batch process alone, as `kill -9` would
         proc.wait(timeout=30)
+        assert workers, "the batch ran no worker process"
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and any(_alive(p) for p in workers):
+            time.sleep(0.2)
+        assert not any(_alive(p) for p in workers), "worker processes outlived the batch"
     finally:
-        if proc.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
+        proc.wait(timeout=30)
     assert proc.returncode == -signal.SIGKILL
 
     killed = _tables(out)  # readable: a kill never leaves a half-written file
@@ -280,6 +292,31 @@ def test_sigkill_then_resume_gives_the_same_results(cluster_batch, table_dir, tm
         assert final[name]["fits"][model]["finished_at"] == \
             killed[name]["fits"][model]["finished_at"]
     assert not os.path.exists(journal)
+
+
+def _descendants(pid: int) -> set[int]:
+    """Live descendants of ``pid``, from /proc."""
+    parent = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    parent[int(entry)] = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {p for p, pp in parent.items() if pp in frontier} - found
+        found |= frontier
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
 
 
 def _journaled_fits(journal: str) -> int:
