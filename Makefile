@@ -19,7 +19,8 @@ demo: $(STAMP)
 	$(BIN)/python -m data_synth $(OUT)/demo.binary --model ggx \
 		--param kd=0.12,0.08,0.05 --param ks=0.9,0.8,0.6 --param alpha=0.12 --param f0=0.7 \
 		--noise 0.03 --missing 0.05
-	$(BIN)/brdffit fit $(OUT)/demo.binary --model ggx
+	$(BIN)/brdffit fit $(OUT)/demo.binary --model ggx --plots $(OUT)/plots
+	@echo "plots: $(OUT)/plots/*.png"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

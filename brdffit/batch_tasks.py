@@ -23,7 +23,7 @@ from datetime import UTC, datetime
 
 from . import __version__, merl
 from .errors import BrdffitError, FitInputError, MerlFormatError
-from .fitting import PRECISIONS, SOLVERS, fit
+from .fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
 from .sampling import DEFAULT_SAMPLES
 
 
@@ -38,7 +38,7 @@ class FitOptions:
     solver: str = "lm"
     samples: int | None = DEFAULT_SAMPLES
     precision: str = "float64"
-    starts: int = 2
+    starts: int = DEFAULT_STARTS
     max_steps: int = 256
     seed: int = 0
 

@@ -44,9 +44,11 @@ def _diffuse_region() -> np.ndarray:
 
 @functools.cache
 def _peak_region() -> np.ndarray:
-    """Flat bins with both directions well above grazing and small theta_d."""
+    """Flat bins near the mirror direction (theta_h < ~6 deg), both directions well
+    above grazing, small theta_d: where any lobe peaks, and only ~5% of the table."""
     g = bin_grid()
-    return np.flatnonzero((g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6))
+    near = (g.theta_h < 0.1) & (g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6)
+    return np.flatnonzero(near)
 
 
 def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:

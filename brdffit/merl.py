@@ -125,14 +125,19 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
 
 
 def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
+    """Raw file values -> physical values and mask, in few passes over 35 MB."""
     raw = raw.reshape(3, *SHAPE)
-    finite = np.isfinite(raw)
-    all_finite = finite.all(axis=0)
-    mask = all_finite & np.all(np.where(finite, raw, -1.0) >= 0, axis=0)
-    if not mask.any():
+    # Per bin, the smallest and largest channel: min propagates NaN and is < 0 for
+    # any negative (unmeasured) or -inf channel; max catches +inf. Two reductions
+    # instead of elementwise masks over all 4.4M values.
+    lowest, highest = raw.min(axis=0), raw.max(axis=0)
+    unmeasured = ~(lowest >= 0) | (highest == np.inf)
+    if unmeasured.all():
         raise MerlFormatError(source, "no measured bin: every value is negative or non-finite")
-    rgb = np.where(mask, raw * SCALE[:, None, None, None], 0.0)
-    return MerlTable(rgb, mask, source, int(np.count_nonzero(~all_finite)))
+    n_nonfinite = int(np.count_nonzero(~np.isfinite(raw[:, unmeasured]).all(axis=0)))
+    rgb = raw * SCALE[:, None, None, None]
+    np.copyto(rgb, 0.0, where=unmeasured[None])
+    return MerlTable(rgb, ~unmeasured, source, n_nonfinite)
 
 
 def read(path: str | os.PathLike) -> MerlTable:

@@ -10,7 +10,7 @@ import sys
 from ..batch import FitOptions, run_batch
 from ..batch_progress import format_duration
 from ..batch_report import format_ranking, plot_summary, rank
-from ..fitting import PRECISIONS, SOLVERS
+from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS
 from ..sampling import DEFAULT_SAMPLES
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
@@ -37,7 +37,8 @@ def register(sub) -> None:
     p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
                    help=f"bins the solver sees (default {DEFAULT_SAMPLES}; 'all' for every bin)")
     p.add_argument("--precision", choices=list(PRECISIONS), default="float64")
-    p.add_argument("--starts", type=int, default=2, help="solver starts (best kept)")
+    p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
+                   help="solver starts refined (best kept)")
     p.add_argument("--max-steps", type=int, default=256)
     p.add_argument("--seed", type=int, default=0, help="subsample seed")
     p.add_argument("--refit", action="store_true",

@@ -6,7 +6,7 @@ import json
 import sys
 
 from .. import merl
-from ..fitting import PRECISIONS, SOLVERS, FitResult
+from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, FitResult
 from ..sampling import DEFAULT_SAMPLES
 from ..scene import PRESETS as SCENE_PRESETS
 from ..scene import Scene, fit_in_scene
@@ -23,7 +23,8 @@ def register(sub) -> None:
     p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
                    help=f"bins the solver sees (default {DEFAULT_SAMPLES}; 'all' for every bin)")
     p.add_argument("--precision", choices=list(PRECISIONS), default="float64")
-    p.add_argument("--starts", type=int, default=2, help="solver starts (best kept)")
+    p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
+                   help="solver starts refined (best kept)")
     p.add_argument("--max-steps", type=int, default=256)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")

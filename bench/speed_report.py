@@ -1,0 +1,157 @@
+"""Markdown and plots for bench/speed.py's results (kept apart: no timing code here)."""
+
+from __future__ import annotations
+
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+TARGETS_MS = 150.0
+
+
+def _fmt(v, spec=".3g"):
+    if v is None:
+        return "–"
+    if isinstance(v, bool):
+        return "yes" if v else "NO"
+    if isinstance(v, float):
+        return format(v, spec)
+    return str(v)
+
+
+def headline(report: dict) -> dict:
+    """The figures the README quotes, from one run."""
+    fits = report["fits"]
+    default = [r for r in fits if r["model"] == "ggx" and r["solver"] == "lm"
+               and r["samples"] == 16384 and r["precision"] == "float64"
+               and r["table"] in ("ggx-clean", "ggx-noisy")]
+    ratios = [s["ratio"] for s in report["scipy"]
+              if s["brdffit_log_rmse"] <= s["scipy_log_rmse"] * 1.01]
+    return {
+        "ggx_warm_ms": {r["table"]: r["warm_ms"] for r in default},
+        "ggx_excess": {r["table"]: r["excess"] for r in default},
+        "scipy_ratio_min": min(ratios) if ratios else None,
+        "scipy_ratio_max": max(ratios) if ratios else None,
+        "second_process_s": report["second_process"].get("warm_cache_s"),
+        "library": report["library"],
+        "nonfinite_fits": sum(
+            1 for r in fits if r["log_rmse"] != r["log_rmse"]) + report["library"][
+                "nonfinite_params"],
+    }
+
+
+def write_markdown(report: dict, path: str) -> None:
+    h = headline(report)
+    m = report["machine"]
+    lines = [
+        "# Speed vs error (bench/speed.py)",
+        "",
+        f"Machine: {m['cpu']} ({m['cores']} cores), JAX {m['jax']} on {m['device']}, "
+        f"Python {m['python']}, brdffit {m['brdffit']}, {m['date']}. "
+        f"Load average at start {m['loadavg']}, at end {m.get('loadavg_end')}."
+        + (" **Quick run.**" if report.get("quick") else ""),
+        "",
+        "Every time is wall clock, median of the stated repeats, measured in one process;",
+        "`warm` = read the table from disk + fit + full-table error, compiled fits reused.",
+        "`excess` = log_rmse / log_rmse of the full-table optimum - 1 (all bins, 4 starts).",
+        "`param err` = max over parameters of |fit - truth| / max(|truth|, 0.05).",
+        "",
+        "## Targets",
+        "",
+        "| target | measured | met |",
+        "|---|---|---|",
+    ]
+    for table, ms in h["ggx_warm_ms"].items():
+        ex = h["ggx_excess"][table]
+        lines.append(f"| warm GGX (Lambert+GGX) fit of `{table}` <= 150 ms, log_rmse within 1% "
+                     f"of the optimum | {ms:.0f} ms, excess {100 * ex:.2f}% | "
+                     f"{_fmt(ms <= TARGETS_MS and ex <= 0.01)} |")
+    if h["scipy_ratio_min"] is not None:
+        lines.append(f"| >= 100x faster than scipy least_squares at equal or lower log_rmse | "
+                     f"{h['scipy_ratio_min']:.0f}x - {h['scipy_ratio_max']:.0f}x | "
+                     f"{_fmt(h['scipy_ratio_min'] >= 100)} |")
+    sp = h["second_process_s"]
+    if sp is not None:
+        lines.append(f"| second process, first table <= 3 s end to end | {sp:.2f} s | "
+                     f"{_fmt(sp <= 3.0)} |")
+    lib = h["library"]
+    lines.append(f"| {lib['tables']} tables x {lib['models']} models <= 3 min "
+                 f"(one process) | {lib['wall_s']:.0f} s ({lib['fits_per_s']:.1f} fits/s) | "
+                 f"{_fmt(lib['wall_s'] <= 180 * lib['tables'] / 100)} |")
+    lines.append(f"| zero NaN params | {h['nonfinite_fits']} | {_fmt(h['nonfinite_fits'] == 0)} |")
+    lines += ["", "## brdffit vs scipy.optimize.least_squares (same loss, same tables)", "",
+              "| table | model | scipy | scipy log_rmse | brdffit (default) | brdffit log_rmse "
+              "| ratio | scipy param err |",
+              "|---|---|---|---|---|---|---|---|"]
+    for s in report["scipy"]:
+        lines.append(f"| {s['table']} | {s['model']} | {s['scipy_s']:.1f} s ({s['scipy_nfev']} "
+                     f"evals) | {s['scipy_log_rmse']:.4g} | {s['brdffit_ms']:.0f} ms | "
+                     f"{s['brdffit_log_rmse']:.4g} | {s['ratio']:.0f}x | "
+                     f"{_fmt(s['scipy_param_error'])} |")
+    sp = report["second_process"]
+    lines += ["", "## A new process fitting its first table (GGX, end to end)", "",
+              "| persistent compile cache | wall |", "|---|---|"]
+    for k in ("cold_cache_s", "warm_cache_s", "warm_cache_again_s"):
+        if k in sp:
+            lines.append(f"| {k[:-2].replace('_', ' ')} | {sp[k]:.2f} s |")
+    lines += ["", "## Every configuration", "",
+              "| table | model | solver | samples | precision | warm ms | compile s | steps "
+              "| log_rmse | excess | param err | result |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in report["fits"]:
+        lines.append(
+            f"| {r['table']} | {r['model']} | {r['solver']} | {r['samples']} | "
+            f"{r['precision']} | {r['warm_ms']:.0f} | {_fmt(r['compile_s'], '.2f')} | "
+            f"{r['steps']} | {r['log_rmse']:.4g} | {100 * r['excess']:.2f}% | "
+            f"{_fmt(r['param_error'])} | {r['result']} |")
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def write_plots(report: dict, out_dir: str) -> None:
+    """speed_pareto.png: per model, warm time vs full-table log_rmse, Pareto front."""
+    fits = report["fits"]
+    models = list(dict.fromkeys(r["model"] for r in fits))
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5), squeeze=False)
+    markers = {"lm": "o", "optx-lm": "s", "dogleg": "^", "bfgs": "v"}
+    for ax, model in zip(axes.ravel(), models):
+        labels = [r["table"] for r in fits if r["model"] == model]
+        table = next((t for t in labels if t.endswith("-noisy")), labels[0])
+        rows = [r for r in fits if r["model"] == model and r["table"] == table]
+        for r in rows:
+            colour = "tab:blue" if r["precision"] == "float64" else "tab:orange"
+            ax.scatter(r["warm_ms"], r["log_rmse"], marker=markers.get(r["solver"], "o"),
+                       color=colour, s=50, zorder=3)
+            ax.annotate(f"{r['solver']} {r['samples']}", (r["warm_ms"], r["log_rmse"]),
+                        fontsize=7, xytext=(4, 3), textcoords="offset points")
+        front, best = [], float("inf")
+        for r in sorted(rows, key=lambda r: r["warm_ms"]):
+            if r["log_rmse"] < best:
+                best = r["log_rmse"]
+                front.append((r["warm_ms"], r["log_rmse"]))
+        if front:
+            xs, ys = zip(*front)
+            ax.step(xs, ys, where="post", color="tab:blue", alpha=0.5, label="Pareto front")
+        ax.axhline(rows[0]["optimum_log_rmse"], color="grey", ls="--", lw=1,
+                   label="full-table optimum")
+        for s in report["scipy"]:
+            if s["model"] == model and s["table"] == table:
+                ax.scatter(s["scipy_s"] * 1000, s["scipy_log_rmse"], marker="*", s=180,
+                           color="tab:red", zorder=4, label="scipy least_squares")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(f"{model} on {table}")
+        ax.set_xlabel("warm read + fit + full-table error (ms)")
+        ax.set_ylabel("full-table log_rmse")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    for ax in axes.ravel()[len(models):]:
+        ax.axis("off")
+    fig.suptitle("brdffit speed vs error (blue: float64, orange: float32; "
+                 "lower-left is better)", fontsize=13)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "speed_pareto.png"), dpi=90)
+    plt.close(fig)
