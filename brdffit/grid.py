@@ -15,11 +15,12 @@ normalised to sum to 1 over the bins above the horizon.
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from . import angles
+from . import angles, runtime
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,40 @@ class BinGrid:
     above_horizon: np.ndarray  # bool
 
 
+_CACHE_VERSION = 1
+
+
 @functools.cache
 def bin_grid() -> BinGrid:
+    """The grid, from the on-disk cache beside JAX's (about 20x faster than computing
+    it, which matters for a new process's first fit) or computed and stored there."""
+    directory = runtime.cache_dir()
+    path = os.path.join(directory, f"merl-grid-v{_CACHE_VERSION}.npz") if directory else None
+    if path and os.path.exists(path):
+        try:
+            with np.load(path) as z:
+                arrays = {k: z[k] for k in z.files}
+            return _freeze(BinGrid(**arrays))
+        except (OSError, ValueError, KeyError, TypeError):
+            pass  # damaged or from another layout: recompute below
+    grid = _compute_grid()
+    if path:
+        try:
+            tmp = f"{path}.{os.getpid()}.tmp.npz"
+            np.savez(tmp, **{k: getattr(grid, k) for k in grid.__dataclass_fields__})
+            os.replace(tmp, path)
+        except OSError:
+            pass  # a read-only cache only costs speed
+    return grid
+
+
+def _freeze(grid: BinGrid) -> BinGrid:
+    for k in grid.__dataclass_fields__:
+        getattr(grid, k).setflags(write=False)
+    return grid
+
+
+def _compute_grid() -> BinGrid:
     i_th, i_td, i_pd = np.meshgrid(
         np.arange(angles.N_THETA_H),
         np.arange(angles.N_THETA_D),
@@ -54,6 +87,4 @@ def bin_grid() -> BinGrid:
     weight = np.cos(theta_d) * np.sin(theta_h) * np.sin(theta_d) * d_theta_h
     weight = np.where(above, weight, 0.0)
     weight /= weight.sum()
-    for a in (theta_h, theta_d, phi_d, wi, wo, cos_i, cos_o, weight, above):
-        a.setflags(write=False)
-    return BinGrid(theta_h, theta_d, phi_d, wi, wo, cos_i, cos_o, weight, above)
+    return _freeze(BinGrid(theta_h, theta_d, phi_d, wi, wo, cos_i, cos_o, weight, above))

@@ -16,15 +16,21 @@ import jax
 _configured = False
 
 
+def cache_dir() -> str | None:
+    """brdffit's on-disk cache (JAX's compiled code, the bin grid), or None if off."""
+    path = os.environ.get(
+        "BRDFFIT_JAX_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "brdffit", "jax")
+    )
+    return path or None
+
+
 def configure() -> None:
     global _configured
     if _configured:
         return
     _configured = True
     jax.config.update("jax_enable_x64", True)
-    cache = os.environ.get(
-        "BRDFFIT_JAX_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "brdffit", "jax")
-    )
+    cache = cache_dir()
     if cache:
         try:
             os.makedirs(cache, exist_ok=True)

@@ -84,3 +84,25 @@ def test_solid_angle_weights_are_positive_above_horizon(i_th):
     w, above = g.weight[rows], g.above_horizon[rows]
     assert np.all(w[above] > 0) and np.all(w[~above] == 0)
     assert g.weight.sum() == pytest.approx(1.0)
+
+
+def test_grid_cache_round_trip(tmp_path, monkeypatch):
+    """The on-disk grid equals the computed one; a damaged cache file is recomputed."""
+    from brdffit import grid
+
+    monkeypatch.setenv("BRDFFIT_JAX_CACHE", str(tmp_path))
+    grid.bin_grid.cache_clear()
+    try:
+        first = grid.bin_grid()  # computes and stores
+        stored = list(tmp_path.glob("merl-grid-*.npz"))
+        assert len(stored) == 1
+        grid.bin_grid.cache_clear()
+        loaded = grid.bin_grid()
+        for k in first.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(first, k), getattr(loaded, k))
+        stored[0].write_bytes(b"garbage")
+        grid.bin_grid.cache_clear()
+        again = grid.bin_grid()
+        np.testing.assert_array_equal(again.weight, first.weight)
+    finally:
+        grid.bin_grid.cache_clear()
