@@ -116,11 +116,18 @@ def find_tables(inputs: Iterable[str]) -> list[str]:
 
 
 def parse_models(names: Iterable[str]) -> list[str]:
-    """Registry names, deduplicated in order; an unknown name is an input error."""
+    """Registry names, deduplicated in order; an unknown name is an input error.
+    ``auto`` stands for the selection's candidates (``brdffit.selection``): each is
+    fitted and stored like any model, and ``batch-report`` shows the choice."""
+    from .selection import DEFAULT_CANDIDATES
+
     out: dict[str, None] = {}
     for name in names:
         name = name.strip()
         if not name:
+            continue
+        if name == "auto":
+            out.update(dict.fromkeys(DEFAULT_CANDIDATES))
             continue
         if name not in models.REGISTRY:
             raise BatchInputError(

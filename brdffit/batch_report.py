@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 from . import models
 from .batch_store import read_attrs, read_index
+from .selection import DEFAULT_TOLERANCE, choose
 
 METRIC = "log_rmse"
 TIE = 1e-6  # in log_rmse: far below any difference a reader would act on
@@ -39,6 +40,17 @@ class TableRanking:
         lowest = min(finite.values())
         tied = [m for m, e in finite.items() if e <= lowest + TIE]
         return min(tied, key=lambda m: (_n_params(m), finite[m]))
+
+    def chosen(self, tolerance: float = DEFAULT_TOLERANCE) -> tuple[str | None, str]:
+        """What ``model="auto"`` picks from these fits, and why: the cheapest model
+        within ``tolerance`` of the best, in quadrature (``brdffit.selection.choose``)."""
+        order = list(models.REGISTRY)
+        rows = [{"model": m, "log_rmse": e} for m, e in self.errors.items() if math.isfinite(e)]
+        if not rows:
+            return None, "no successful fit"
+        rows.sort(key=lambda r: order.index(r["model"]) if r["model"] in order else len(order))
+        row, reason = choose(rows, tolerance)
+        return row["model"], reason
 
 
 @dataclass
@@ -96,15 +108,17 @@ def rank(path: str | os.PathLike) -> Ranking:
     return Ranking(attrs, list(models), tables, summary)
 
 
-def format_ranking(r: Ranking, source: str = "") -> str:
-    """The ranking as a plain-text report: one row per table, then one per model."""
+def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLERANCE) -> str:
+    """The ranking as a plain-text report: one row per table, then one per model.
+    Column ``auto``: the model selection's choice at ``tolerance`` (docs/selection.md)."""
     n_failed = len(r.failed_tables)
     lines = [f"{source or 'batch'}: {len(r.tables)} tables ({n_failed} with failures), "
              f"{len(r.models)} models, brdffit {r.attrs.get('brdffit_version', '?')}",
-             f"{METRIC} on the full table, lower is better; * marks each table's best", ""]
+             f"{METRIC} on the full table, lower is better; * marks each table's best; "
+             f"auto: the cheapest within {tolerance:g} of it (in quadrature)", ""]
     width = max([len("table")] + [len(t.name) for t in r.tables])
     cols = max([10] + [len(m) + 1 for m in r.models])
-    lines.append(f"{'table':<{width}}  {'best':<{cols}}"
+    lines.append(f"{'table':<{width}}  {'best':<{cols}}{'auto':<{cols}}"
                  + "".join(f"{m:>{cols + 1}}" for m in r.models))
     for t in r.tables:
         if t.status != "ok":
@@ -118,7 +132,8 @@ def format_ranking(r: Ranking, source: str = "") -> str:
                 cells.append("failed ")
             else:
                 cells.append("- ")
-        lines.append(f"{t.name:<{width}}  {t.best or '-':<{cols}}"
+        auto = t.chosen(tolerance)[0]
+        lines.append(f"{t.name:<{width}}  {t.best or '-':<{cols}}{auto or '-':<{cols}}"
                      + "".join(f"{c:>{cols + 1}}" for c in cells))
     lines += ["", f"{'model':<{cols}} {'fitted':>7} {'failed':>7} {'wins':>6} "
                   f"{'mean ' + METRIC:>14} {'median':>10} {'not conv.':>10}"]

@@ -246,12 +246,7 @@ def select(
             "no candidate could be fitted: "
             + "; ".join(f"{row['model']}: {row.get('message', row.get('result'))}" for row in rows)
         )
-    best = min(ok, key=lambda row: row["log_rmse"])
-    for row in ok:
-        row["excess"] = math.sqrt(max(row["log_rmse"] ** 2 - best["log_rmse"] ** 2, 0.0))
-    for i, row in enumerate(sorted(ok, key=lambda row: row["log_rmse"])):
-        row["rank"] = i + 1
-    chosen, reason = _choose(ok, best, tolerance, budget)
+    chosen, reason = choose(ok, tolerance, budget)
     for row in ok:
         if row is chosen:
             row["status"] = "chosen"
@@ -299,8 +294,16 @@ def select(
     )
 
 
-def _choose(ok: list[dict], best: dict, tolerance: float, budget: float | None):
-    """The chosen row (``ok`` is cheapest first) and the reason, in words."""
+def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tuple[dict, str]:
+    """The rule alone: the chosen row of fitted ranking rows ``ok`` (cheapest first,
+    each with ``model`` and ``log_rmse``) and the reason, in words. Sets each row's
+    ``excess`` and ``rank``. Re-running it with another tolerance or budget re-decides
+    without refitting."""
+    best = min(ok, key=lambda row: row["log_rmse"])
+    for row in ok:
+        row["excess"] = math.sqrt(max(row["log_rmse"] ** 2 - best["log_rmse"] ** 2, 0.0))
+    for i, row in enumerate(sorted(ok, key=lambda row: row["log_rmse"])):
+        row["rank"] = i + 1
     prefix = ""
     if budget is not None:
         under = [row for row in ok if row["log_rmse"] <= budget]

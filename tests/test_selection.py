@@ -223,3 +223,24 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
     out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
     assert out["ok"] and "full_table_error" in out["results"][0]["extra"]
+
+
+def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_path, capsys):
+    from brdffit import cli, merl
+    from brdffit.batch import FitOptions, parse_models, run_batch
+    from brdffit.batch_report import format_ranking, rank
+
+    assert parse_models(["auto"]) == list(DEFAULT_CANDIDATES)
+    assert parse_models(["ggx", "auto"])[0] == "ggx"  # no model twice
+    merl.write(tmp_path / "g.binary", ggx_table)
+    out = tmp_path / "r.h5"
+    summary = run_batch([str(tmp_path / "g.binary")], ["auto"], out, workers=0, progress=False,
+                        options=FitOptions(samples=8192, starts=1))
+    assert summary.ok and summary.fits == len(DEFAULT_CANDIDATES)
+    table = rank(out).tables[0]
+    chosen, reason = table.chosen()
+    assert chosen == "ggx" and "tolerance" in reason
+    assert table.chosen(tolerance=1.0)[0] == "lambert"
+    assert "auto" in format_ranking(rank(out))
+    assert cli.main(["batch-report", str(out), "--json", "--no-png"]) == 0
+    assert json.loads(capsys.readouterr().out)["tables"][0]["auto"] == "ggx"

@@ -12,6 +12,7 @@ from ..batch_progress import format_duration
 from ..batch_report import format_ranking, plot_summary, rank
 from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS
 from ..sampling import DEFAULT_SAMPLES
+from ..selection import DEFAULT_TOLERANCE
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
 
@@ -25,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="table files, directories (every *.binary below) or glob patterns")
     p.add_argument("--models", required=True, type=_models,
-                   help="comma-separated model names, e.g. ggx,beckmann,lambert")
+                   help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
+                        "for the selection's candidates (batch-report shows the choice)")
     p.add_argument("--out", required=True, help="results file (.h5), created or resumed")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=_default_workers(),
@@ -54,6 +56,9 @@ def register(sub) -> None:
     r.add_argument("--png", help="summary figure (default: RESULTS without .h5 + .summary.png)")
     r.add_argument("--no-png", action="store_true", help="print only")
     r.add_argument("--json", action="store_true", help="print the ranking as JSON")
+    r.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE,
+                   help="the 'auto' column: cheapest model within this log_rmse of the best "
+                        f"(default {DEFAULT_TOLERANCE}, docs/selection.md)")
     r.set_defaults(run=run_report)
 
 
@@ -116,13 +121,15 @@ def run_report(args) -> int:
         json.dump(_finite_or_none({
             "attrs": ranking.attrs,
             "tables": [{"name": t.name, "path": t.path, "status": t.status, "best": t.best,
+                        "auto": t.chosen(args.tolerance)[0],
+                        "auto_reason": t.chosen(args.tolerance)[1],
                         "log_rmse": t.errors, "message": t.message,
                         "failed_models": t.failed_models} for t in ranking.tables],
             "models": [vars(s) for s in ranking.summary],
         }), sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")
     else:
-        print(format_ranking(ranking, args.results))
+        print(format_ranking(ranking, args.results, args.tolerance))
     if not args.no_png:
         png = args.png or (args.results.removesuffix(".h5") + ".summary.png")
         plot_summary(ranking, png)

@@ -106,9 +106,11 @@ class GGX2(AbstractBRDFModel):
                 [np.full(sel.size, 1.0 / np.pi), lobes[j1, k], lobes[j2, k]], axis=1
             )
             coef, *_ = np.linalg.lstsq(design * w[:, None], f_meas * w[:, None], rcond=None)
-            coef = np.clip(coef, 1e-6, 1e6)  # a negative scale is no start; floor it
+            # A negative scale is no start. Floor it where the softplus still has a
+            # slope (1e-3, not 1e-6): a lobe started at ~0 takes LM hundreds of steps.
+            coef = np.clip(coef, 1e-3, 1e6)
             starts.append(self.unconstrain({
-                "kd": coef[0] if np.any(coef[0] > 1e-6) else kd,
+                "kd": coef[0] if np.any(coef[0] > 1e-3) else kd,
                 "ks1": coef[1], "ks2": coef[2], **shape,
             }))
         return np.stack(starts)
