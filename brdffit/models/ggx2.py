@@ -26,10 +26,13 @@ for (kd, ks1, ks2) on a few hundred bins of the table.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from ..grid import bin_grid
 from .base import KD, AbstractBRDFModel, ParamSpec
@@ -61,16 +64,12 @@ class GGX2(AbstractBRDFModel):
     )
 
     def eval_frame(self, params, frame: Frame):
-        fresnel = schlick_fresnel(params["f0"], frame.cos_d)[..., None]
-        lobe1 = _GGX.shadowed_ndf(params["alpha1"], frame)[..., None]
-        lobe2 = _GGX.shadowed_ndf(params["alpha2"], frame)[..., None]
-        return params["kd"] / jnp.pi + fresnel * (params["ks1"] * lobe1 + params["ks2"] * lobe2)
+        return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
 
     def eval_channels(self, params, frame: Frame):
         # channel-major (3, ...), the fitting loss's layout: colours broadcast, lobes once
-        fresnel = schlick_fresnel(params["f0"], frame.cos_d)
-        lobe1 = fresnel * _GGX.shadowed_ndf(params["alpha1"], frame)
-        lobe2 = fresnel * _GGX.shadowed_ndf(params["alpha2"], frame)
+        shape = jnp.stack([params["alpha1"], params["alpha2"], params["f0"]])
+        lobe1, lobe2 = _lobes(shape.astype(frame.cos_d.dtype), frame)
         expand = (slice(None),) + (None,) * lobe1.ndim
         kd, ks1, ks2 = (params[k][expand] for k in ("kd", "ks1", "ks2"))
         return kd / jnp.pi + ks1 * lobe1[None] + ks2 * lobe2[None]
@@ -114,6 +113,37 @@ class GGX2(AbstractBRDFModel):
                 "ks1": coef[1], "ks2": coef[2], **shape,
             }))
         return np.stack(starts)
+
+
+@jax.custom_jvp
+def _lobes(shape, frame: Frame):
+    """(2, ...): F DG(alpha1) and F DG(alpha2) for ``shape = (alpha1, alpha2, f0)``."""
+    fresnel = schlick_fresnel(shape[2], frame.cos_d)
+    return jnp.stack([fresnel * _GGX.shadowed_ndf(shape[0], frame),
+                      fresnel * _GGX.shadowed_ndf(shape[1], frame)])
+
+
+@functools.partial(_lobes.defjvp, symbolic_zeros=True)
+def _lobes_jvp(primals, tangents):
+    # Why: the fit's Jacobian pushes all 12 parameter tangents through the model at
+    # once, but the lobes depend on 3 of them (the 9 colour tangents are zero there).
+    # Forming the lobes' Jacobian in their 3 inputs once and contracting it with each
+    # tangent makes the fit's normal equations ~4x cheaper (exact, not approximate).
+    shape, frame = primals
+    t_shape, t_frame = tangents
+    value = _lobes.fun(shape, frame)
+    tangent = jnp.zeros_like(value)
+    if not isinstance(t_shape, SymbolicZero):
+        jac = jax.jacfwd(_lobes.fun)(shape, frame)  # (2, ..., 3)
+        tangent = tangent + jac @ t_shape
+    frame_tangents = jax.tree_util.tree_leaves(t_frame)
+    if not all(isinstance(t, SymbolicZero) for t in frame_tangents):  # d/d(directions)
+        dense = jax.tree_util.tree_map(
+            lambda t, p: jnp.zeros_like(p) if isinstance(t, SymbolicZero) else t,
+            t_frame, frame, is_leaf=lambda t: isinstance(t, SymbolicZero),
+        )
+        tangent = tangent + jax.jvp(lambda fr: _lobes.fun(shape, fr), (frame,), (dense,))[1]
+    return value, tangent
 
 
 @eqx.filter_jit
