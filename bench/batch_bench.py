@@ -33,7 +33,7 @@ from brdffit.batch import FitOptions, run_batch
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")
 
-#: Table k uses model TABLE_MODELS[k % 3] with a parameter stepped by k, so
+#: Table k uses model TABLE_MODELS[k % 3] with parameters stepped by k, so
 #: tables differ (the solver takes different paths) but stay easy to recover.
 TABLE_MODELS = ("ggx", "beckmann", "lambert")
 
@@ -45,10 +45,11 @@ def make_tables(directory: str, n: int) -> list[str]:
     paths = []
     for k in range(n):
         model = TABLE_MODELS[k % len(TABLE_MODELS)]
+        j = (k // len(TABLE_MODELS)) % 10  # keeps every parameter inside its range
         params = {
-            "ggx": {"alpha": 0.08 + 0.03 * k, "kd": [0.1 + 0.02 * k, 0.15, 0.2]},
-            "beckmann": {"alpha": 0.1 + 0.03 * k, "f0": 0.5 + 0.04 * k},
-            "lambert": {"kd": [0.5, 0.3 + 0.02 * k, 0.2]},
+            "ggx": {"alpha": 0.06 + 0.03 * j, "kd": [0.1 + 0.02 * j, 0.15, 0.2]},
+            "beckmann": {"alpha": 0.1 + 0.03 * j, "f0": 0.5 + 0.05 * j},
+            "lambert": {"kd": [0.5, 0.3 + 0.02 * j, 0.2]},
         }[model]
         table, truth = make_table(model, params, source=f"bench-{k}")
         path = os.path.join(directory, f"bench{k:03d}_{model}.binary")
@@ -57,15 +58,35 @@ def make_tables(directory: str, n: int) -> list[str]:
     return paths
 
 
+def cpu_idle_pct(seconds: float = 3.0) -> float | None:
+    """Share of CPU time idle over ``seconds`` (Linux /proc/stat): how much of the
+    machine was free for the run that follows."""
+    def sample():
+        with open("/proc/stat") as f:
+            values = [int(v) for v in f.readline().split()[1:9]]
+        return values[3], sum(values)
+
+    try:
+        idle0, total0 = sample()
+        time.sleep(seconds)
+        idle1, total1 = sample()
+    except OSError:
+        return None
+    return round(100.0 * (idle1 - idle0) / max(1, total1 - total0), 1)
+
+
 def measure(paths: list[str], models: list[str], options: FitOptions, workers: int,
             out: str) -> dict:
     finished: list[tuple[float, str, int]] = []  # (time, worker, fits)
+    idle_before = cpu_idle_pct()
     load_before = os.getloadavg()
+    cpu0 = _cpu_s()
     t0 = time.monotonic()
     summary = run_batch(paths, models, out, options=options, workers=workers, progress=False,
                         on_result=lambda t, fits: finished.append(
                             (time.monotonic(), t.worker, len(fits))))
     wall = time.monotonic() - t0
+    cpu = _cpu_s() - cpu0
     first = {}
     for t, w, _ in finished:
         first.setdefault(w, t)
@@ -85,9 +106,23 @@ def measure(paths: list[str], models: list[str], options: FitOptions, workers: i
         "steady_fits": steady_fits,
         "steady_fits_per_min": round(60 * steady_fits / steady_s, 1) if later else None,
         "workers_seen": len(first),
+        "cpu_s": round(cpu, 1),
+        "cpu_s_per_fit": round(cpu / max(1, summary.fits), 2),
+        "cpu_idle_before_pct": idle_before,
         "loadavg_before": [round(x, 2) for x in load_before],
         "loadavg_after": [round(x, 2) for x in os.getloadavg()],
     }
+
+
+def _cpu_s() -> float:
+    """CPU seconds of this process and its finished children: the local workers
+    are children, joined when their cluster closes, so a run's delta is the
+    whole batch's CPU, start-up included, whoever else shares the machine."""
+    import resource
+
+    me, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
+        resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _git_commit() -> str:
@@ -111,21 +146,24 @@ def to_markdown(report: dict) -> str:
         f"brdffit {report['brdffit_version']} ({report['commit']}), {report['date']}.",
         "",
         "| workers | wall (s) | fits/min end to end | fits/min steady | first result (s) "
-        "| load avg before/after |",
-        "|---|---|---|---|---|---|",
+        "| CPU s per fit | CPU idle before | load avg before/after |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in report["runs"]:
         lines.append(
             f"| {r['workers']} | {r['wall_s']} | {r['fits_per_min']} | "
-            f"{r['steady_fits_per_min']} | {r['first_result_s']} | "
+            f"{r['steady_fits_per_min']} | {r['first_result_s']} | {r['cpu_s_per_fit']} | "
+            f"{r['cpu_idle_before_pct']} % | "
             f"{r['loadavg_before'][0]} / {r['loadavg_after'][0]} |")
     lines += [
         "",
         "End to end includes starting the local cluster and each worker's first fits "
         "(JAX tracing; XLA binaries come from the persistent compilation cache). Steady "
         "counts only results after every worker has finished its first table.",
-        "A load average above the CPU count means other processes shared the machine "
-        "during the run.",
+        "CPU s per fit: CPU time of the batch process and its workers (start-up included) "
+        "per fit, which other load on the machine does not inflate much. CPU idle is "
+        "measured over 3 s just before each run; a load average above the CPU count means "
+        "other processes shared the machine during the run.",
     ]
     return "\n".join(lines) + "\n"
 
@@ -135,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     that ``bench/__main__.py`` can call ``main()`` whatever its own arguments)."""
     ap = argparse.ArgumentParser(prog="python -m bench.batch_bench", description=__doc__.split(
         "\n\n")[0])
-    ap.add_argument("--tables", type=int, default=8)
+    ap.add_argument("--tables", type=int, default=24)
     ap.add_argument("--models", default="ggx,beckmann,lambert")
     ap.add_argument("--workers", default="1,2", help="comma-separated worker counts")
     ap.add_argument("--samples", type=int, default=8192)
