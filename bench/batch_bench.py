@@ -2,17 +2,17 @@
 
     python -m bench.batch_bench            # writes bench/results/batch.{json,md}
 
-Each worker count runs the same batch (synthetic noise-free tables x models)
-into a fresh results file on a fresh LocalCluster, so every run pays the same
-start-up: worker processes, JAX import, tracing the fits (XLA compilation comes
-from the persistent cache after the first run). Two figures per run:
+Each run (by default 1, 2, 1, 2 workers, 24 tables x 3 models) fits the same
+synthetic noise-free tables into a fresh results file on a fresh LocalCluster,
+so every run pays the same start-up: worker processes, JAX import, tracing the
+fits (XLA compilation comes from the persistent cache after the first run). Two figures per run:
 
 - end to end: fits / wall time of the whole ``run_batch`` call;
 - steady: fits / time once every worker has finished its first table, i.e.
   with compiled fits in every worker: what a long batch approaches.
 
-The machine may be shared; the load average before and after each run is
-recorded beside the figures.
+The machine may be shared: CPU idle before each run, the load average before
+and after, and the CPU seconds the batch used are recorded beside the figures.
 """
 
 from __future__ import annotations
@@ -155,6 +155,10 @@ def to_markdown(report: dict) -> str:
             f"{r['steady_fits_per_min']} | {r['first_result_s']} | {r['cpu_s_per_fit']} | "
             f"{r['cpu_idle_before_pct']} % | "
             f"{r['loadavg_before'][0]} / {r['loadavg_after'][0]} |")
+    lines += ["", "Mean per worker count:", "",
+              "| workers | runs | fits/min end to end | fits/min steady |", "|---|---|---|---|"]
+    for w, m in report["mean_by_workers"].items():
+        lines.append(f"| {w} | {m['runs']} | {m['fits_per_min']} | {m['steady_fits_per_min']} |")
     lines += [
         "",
         "End to end includes starting the local cluster and each worker's first fits "
@@ -171,11 +175,13 @@ def to_markdown(report: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; ``argv`` as on the command line (None: the defaults, so
     that ``bench/__main__.py`` can call ``main()`` whatever its own arguments)."""
-    ap = argparse.ArgumentParser(prog="python -m bench.batch_bench", description=__doc__.split(
-        "\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m bench.batch_bench",
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("--tables", type=int, default=24)
     ap.add_argument("--models", default="ggx,beckmann,lambert")
-    ap.add_argument("--workers", default="1,2", help="comma-separated worker counts")
+    ap.add_argument("--workers", default="1,2,1,2",
+                    help="comma-separated worker counts, run in this order (alternating "
+                         "spreads the drift of a shared machine's load over both)")
     ap.add_argument("--samples", type=int, default=8192)
     ap.add_argument("--starts", type=int, default=1)
     ap.add_argument("--out-dir", default=RESULTS)
@@ -186,12 +192,22 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="brdffit-batch-bench-") as tmp:
         print(f"making {args.tables} synthetic tables in {tmp}", file=sys.stderr)
         paths = make_tables(tmp, args.tables)
-        for w in (int(x) for x in args.workers.split(",")):
-            r = measure(paths, models, options, w, os.path.join(tmp, f"w{w}.h5"))
+        for i, w in enumerate(int(x) for x in args.workers.split(",")):
+            # a fresh file per run: the same file again would resume, with nothing to do
+            r = measure(paths, models, options, w, os.path.join(tmp, f"run{i}-w{w}.h5"))
             print(f"{w} worker(s): {r['fits']} fits in {r['wall_s']} s, "
                   f"{r['fits_per_min']} fits/min end to end, "
                   f"{r['steady_fits_per_min']} steady", file=sys.stderr)
             runs.append(r)
+    by_workers = {}
+    for w in sorted({r["workers"] for r in runs}):
+        mine = [r for r in runs if r["workers"] == w]
+        steady = [r["steady_fits_per_min"] for r in mine if r["steady_fits_per_min"]]
+        by_workers[str(w)] = {
+            "runs": len(mine),
+            "fits_per_min": round(sum(r["fits_per_min"] for r in mine) / len(mine), 1),
+            "steady_fits_per_min": round(sum(steady) / len(steady), 1) if steady else None,
+        }
     report = {
         "benchmark": "batch",
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -203,6 +219,7 @@ def main(argv: list[str] | None = None) -> int:
         "models": models,
         "options": options.to_dict(),
         "runs": runs,
+        "mean_by_workers": by_workers,
     }
     os.makedirs(args.out_dir, exist_ok=True)
     with open(os.path.join(args.out_dir, "batch.json"), "w") as f:
