@@ -51,7 +51,7 @@ DEFAULT_STARTS = 1
 def _make_solver(name: str, precision: str):
     # float32 cannot resolve relative changes much below 1e-6: looser tolerances
     # there stop the solver at its attainable accuracy instead of at max_steps.
-    rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-8)
+    rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
     return {
         "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol),
         "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),

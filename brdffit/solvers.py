@@ -41,6 +41,7 @@ class _LMState(eqx.Module):
     jtr: Float[Array, " p"]
     lam: Float[Array, ""]
     nu: Float[Array, ""]
+    stall: Array  # consecutive accepted steps that changed the loss by < ftol
     terminate: Bool[Array, ""]
     result: optx.RESULTS
 
@@ -92,6 +93,13 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     norm: Callable = optx.max_norm
     lambda0: float = 1e-3
     max_step: float = 2.0
+    #: An over-parameterised fit (a second lobe a table does not have, a lobe on a
+    #: diffuse table) can crawl along a flat valley for hundreds of steps while the
+    #: loss no longer moves. ``patience`` accepted steps in a row that each change
+    #: the loss by less than ``ftol`` (relative) end the solve: the loss has
+    #: converged, the parameters along the flat direction are not identified.
+    ftol: float = 1e-6
+    patience: int = 5
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         loss, jtj, jtr = _residual_and_normal(fn, y, args, options)
@@ -103,6 +111,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             jtr=jtr,
             lam=jnp.asarray(self.lambda0, dtype),
             nu=jnp.asarray(2.0, dtype),
+            stall=jnp.asarray(0),
             terminate=~finite,
             result=optx.RESULTS.where(finite, optx.RESULTS.successful, optx.RESULTS.nonfinite),
         )
@@ -145,6 +154,9 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # exact optimum the predicted reduction rounds to <= 0 and rho is noise).
         converged = (accept & small_step & small_change) | (small_step & (state.lam <= 1.0))
         stuck = lam > _LAMBDA_MAX  # no representable step improves the loss
+        no_progress = jnp.abs(actual) < self.ftol * jnp.abs(state.loss)
+        stall = jnp.where(accept, jnp.where(no_progress, state.stall + 1, 0), state.stall)
+        perfect = accept & (loss_new <= self.atol)
         keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
         state = _LMState(
             loss=keep(loss_new, state.loss),
@@ -152,7 +164,9 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             jtr=keep(jtr_new, state.jtr),
             lam=jnp.minimum(lam, 2 * _LAMBDA_MAX),
             nu=nu,
-            terminate=converged | stuck,
+            stall=stall,
+            # a residual at the tolerance itself cannot be improved meaningfully
+            terminate=converged | stuck | (stall >= self.patience) | perfect,
             result=optx.RESULTS.successful,
         )
         return unravel(keep(y_new_flat, flat)), state, None
