@@ -9,7 +9,17 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from brdffit.sampling import DEFAULT_SAMPLES
+
 TARGETS_MS = 150.0
+#: The full-table error is evaluated in float32: two fits whose log_rmse differ by
+#: less than this are equally good (noise-free tables reach ~1e-7).
+LOG_RMSE_FLOOR = 1e-6
+
+
+def as_good(a: float, b: float) -> bool:
+    """log_rmse a is equal or lower than b: within 1% or below the float32 floor."""
+    return a <= b * 1.01 + LOG_RMSE_FLOOR
 
 
 def _fmt(v, spec=".3g"):
@@ -26,13 +36,14 @@ def headline(report: dict) -> dict:
     """The figures the README quotes, from one run."""
     fits = report["fits"]
     default = [r for r in fits if r["model"] == "ggx" and r["solver"] == "lm"
-               and r["samples"] == 16384 and r["precision"] == "float64"
+               and r["samples"] == DEFAULT_SAMPLES and r["precision"] == "float64"
                and r["table"] in ("ggx-clean", "ggx-noisy")]
-    ratios = [s["ratio"] for s in report["scipy"]
-              if s["brdffit_log_rmse"] <= s["scipy_log_rmse"] * 1.01]
+    ratios = [s["ratio"] for s in report["scipy"] if s.get("start", "brdffit") == "brdffit"
+              and as_good(s["brdffit_log_rmse"], s["scipy_log_rmse"])]
     return {
         "ggx_warm_ms": {r["table"]: r["warm_ms"] for r in default},
         "ggx_excess": {r["table"]: r["excess"] for r in default},
+        "ggx_log_rmse": {r["table"]: r["log_rmse"] for r in default},
         "scipy_ratio_min": min(ratios) if ratios else None,
         "scipy_ratio_max": max(ratios) if ratios else None,
         "second_process_s": report["second_process"].get("warm_cache_s"),
@@ -56,7 +67,7 @@ def write_markdown(report: dict, path: str) -> None:
         "",
         "Every time is wall clock, median of the stated repeats, measured in one process;",
         "`warm` = read the table from disk + fit + full-table error, compiled fits reused.",
-        "`excess` = log_rmse / log_rmse of the full-table optimum - 1 (all bins, 4 starts).",
+        "`excess` = log_rmse / log_rmse of the full-table optimum - 1 (all bins, 2 starts).",
         "`param err` = max over parameters of |fit - truth| / max(|truth|, 0.05).",
         "",
         "## Targets",
@@ -66,11 +77,18 @@ def write_markdown(report: dict, path: str) -> None:
     ]
     for table, ms in h["ggx_warm_ms"].items():
         ex = h["ggx_excess"][table]
-        lines.append(f"| warm GGX (Lambert+GGX) fit of `{table}` <= 150 ms, log_rmse within 1% "
-                     f"of the optimum | {ms:.0f} ms, excess {100 * ex:.2f}% | "
-                     f"{_fmt(ms <= TARGETS_MS and ex <= 0.01)} |")
+        if table.endswith("-noisy"):
+            lines.append(f"| warm GGX (Lambert+GGX) fit of `{table}` <= 150 ms, log_rmse within "
+                         f"1% of the full-table optimum | {ms:.0f} ms, {100 * ex:+.2f}% | "
+                         f"{_fmt(ms <= TARGETS_MS and ex <= 0.01)} |")
+        else:  # noise-free: both errors are ~0 and a ratio of them means nothing
+            err = h["ggx_log_rmse"][table]
+            lines.append(f"| warm GGX fit of noise-free `{table}` <= 150 ms, log_rmse <= "
+                         f"{LOG_RMSE_FLOOR:g} | {ms:.0f} ms, {err:.2g} | "
+                         f"{_fmt(ms <= TARGETS_MS and err <= LOG_RMSE_FLOOR)} |")
     if h["scipy_ratio_min"] is not None:
-        lines.append(f"| >= 100x faster than scipy least_squares at equal or lower log_rmse | "
+        lines.append(f"| >= 100x faster than scipy least_squares at equal or lower log_rmse "
+                     f"(within 1% or {LOG_RMSE_FLOOR:g}), per table | "
                      f"{h['scipy_ratio_min']:.0f}x - {h['scipy_ratio_max']:.0f}x | "
                      f"{_fmt(h['scipy_ratio_min'] >= 100)} |")
     sp = h["second_process_s"]
@@ -83,11 +101,15 @@ def write_markdown(report: dict, path: str) -> None:
                  f"{_fmt(lib['wall_s'] <= 180 * lib['tables'] / 100)} |")
     lines.append(f"| zero NaN params | {h['nonfinite_fits']} | {_fmt(h['nonfinite_fits'] == 0)} |")
     lines += ["", "## brdffit vs scipy.optimize.least_squares (same loss, same tables)", "",
-              "| table | model | scipy | scipy log_rmse | brdffit (default) | brdffit log_rmse "
-              "| ratio | scipy param err |",
-              "|---|---|---|---|---|---|---|---|"]
+              "scipy starts from brdffit's best start candidate after one LM step (`brdffit`: the fairest "
+              "race, scipy gets our initialisation for free) or from one fixed generic "
+              "guess (`generic`: what a user without our initialisation would write).", "",
+              "| table | model | scipy start | scipy | scipy log_rmse | brdffit (default) "
+              "| brdffit log_rmse | ratio | scipy param err |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for s in report["scipy"]:
-        lines.append(f"| {s['table']} | {s['model']} | {s['scipy_s']:.1f} s ({s['scipy_nfev']} "
+        lines.append(f"| {s['table']} | {s['model']} | {s.get('start', 'brdffit')} "
+                     f"| {s['scipy_s']:.1f} s ({s['scipy_nfev']} "
                      f"evals) | {s['scipy_log_rmse']:.4g} | {s['brdffit_ms']:.0f} ms | "
                      f"{s['brdffit_log_rmse']:.4g} | {s['ratio']:.0f}x | "
                      f"{_fmt(s['scipy_param_error'])} |")
@@ -107,6 +129,12 @@ def write_markdown(report: dict, path: str) -> None:
             f"{r['precision']} | {r['warm_ms']:.0f} | {_fmt(r['compile_s'], '.2f')} | "
             f"{r['steps']} | {r['log_rmse']:.4g} | {100 * r['excess']:.2f}% | "
             f"{_fmt(r['param_error'])} | {r['result']} |")
+    selection = os.path.join(os.path.dirname(path), "selection.md")
+    if os.path.exists(selection):  # bench/selection_bench.py's figures, same machine
+        with open(selection) as f:
+            body = f.read().split("\n", 1)[-1]  # its own title replaced by ours
+        lines += ["", "## Model selection (`auto`): time and hit rate "
+                  "(from bench/selection_bench.py)", body]
     with open(path, "w") as f:
         f.write("\n".join(lines) + "\n")
 

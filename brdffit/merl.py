@@ -178,6 +178,9 @@ def write(path: str | os.PathLike, table: MerlTable) -> None:
     directory = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix=".merl-", dir=directory)
     try:
+        # mkstemp makes the file 0600; a table is data to share (cluster workers
+        # may run as another user), so give it the permissions open() would.
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
             f.write(to_bytes(table))
         os.replace(tmp, path)
@@ -185,3 +188,9 @@ def write(path: str | os.PathLike, table: MerlTable) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

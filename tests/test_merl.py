@@ -137,3 +137,16 @@ def test_format_error_survives_pickling():
     e = pickle.loads(pickle.dumps(MerlFormatError("a.binary", "truncated")))
     assert isinstance(e, MerlFormatError) and str(e) == "a.binary: truncated"
     assert e.source == "a.binary" and e.problem == "truncated"
+
+
+def test_written_tables_respect_the_umask(tmp_path, good_raw):
+    import os
+    import stat
+
+    t = merl.read(_raw_file(tmp_path / "a.binary", body=good_raw))
+    old = os.umask(0o022)
+    try:
+        merl.write(tmp_path / "b.binary", t)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "b.binary").stat().st_mode) == 0o644
