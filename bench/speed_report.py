@@ -101,7 +101,7 @@ def write_markdown(report: dict, path: str) -> None:
                  f"{_fmt(lib['wall_s'] <= 180 * lib['tables'] / 100)} |")
     lines.append(f"| zero NaN params | {h['nonfinite_fits']} | {_fmt(h['nonfinite_fits'] == 0)} |")
     lines += ["", "## brdffit vs scipy.optimize.least_squares (same loss, same tables)", "",
-              "scipy starts from brdffit's best start candidate after one LM step (`brdffit`: the fairest "
+              "scipy starts from brdffit's best start after one LM step (`brdffit`: the fairest "
               "race, scipy gets our initialisation for free) or from one fixed generic "
               "guess (`generic`: what a user without our initialisation would write).", "",
               "| table | model | scipy start | scipy | scipy log_rmse | brdffit (default) "
