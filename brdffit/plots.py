@@ -37,6 +37,7 @@ from .angles import N_PHI_D, N_THETA_D, N_THETA_H, bin_centres, half_diff_to_bin
 from .fitting import FitResult
 from .grid import bin_grid
 from .merl import MerlTable
+from .render import LIGHTS, sphere_disc
 
 KINDS = ("slices", "error_map", "spheres", "polar")
 
@@ -220,32 +221,8 @@ def _with_bad(name: str):
 # -- spheres ------------------------------------------------------------------------
 
 SPHERE_BACKGROUND = "#33404f"
-#: (label, light direction in camera space: x right, y up, z towards the viewer)
-LIGHTS = (
-    ("key light 45° above-left", np.array([-0.5, 0.5, 0.7071])),
-    ("grazing light from the right (80°)", np.array([0.9848, 0.0, 0.1736])),
-)
-
-
-def _sphere_dirs(size: int, light: np.ndarray):
-    """Per-pixel local (wi, wo) on a unit sphere seen orthographically along -z.
-
-    The tangent frame at each pixel is arbitrary about the normal: the tables are
-    isotropic, so only the angles between wi, wo and the normal matter.
-    """
-    s = (np.arange(size) + 0.5) / size * 2.0 - 1.0
-    x, y = np.meshgrid(s, -s)
-    inside = x * x + y * y < 1.0
-    n = np.stack([x, y, np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))], axis=-1)
-    up = np.where(np.abs(n[..., 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-    t = np.cross(up, n)
-    t /= np.linalg.norm(t, axis=-1, keepdims=True)
-    b = np.cross(n, t)
-    frame = np.stack([t, b, n], axis=-2)  # rows: local x, y, z axes
-    light = light / np.linalg.norm(light)
-    wi = frame @ light
-    wo = frame @ np.array([0.0, 0.0, 1.0])
-    return wi, wo, inside
+# The lights and the sphere geometry are brdffit.render's: the plots show what the
+# selection's PSNR measures.
 
 
 def _radiance(f: np.ndarray, wi: np.ndarray) -> np.ndarray:
@@ -269,7 +246,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> b
     no_data = np.array(to_rgb(NO_DATA))
     ratio_img = None
     for row, (label, light) in enumerate(LIGHTS):
-        wi, wo, inside = _sphere_dirs(size, light)
+        wi, wo, inside = sphere_disc(size, light)
         lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
         measured = np.zeros((size, size, 3))
         fitted = np.zeros((size, size, 3))

@@ -30,8 +30,8 @@ from .models import AbstractBRDFModel
 
 #: (label, light direction in camera space: x right, y up, z towards the viewer)
 LIGHTS = (
-    ("key light 45 deg above-left", np.array([-0.5, 0.5, 0.7071])),
-    ("grazing light from the right (80 deg)", np.array([0.9848, 0.0, 0.1736])),
+    ("key light 45° above-left", np.array([-0.5, 0.5, 0.7071])),
+    ("grazing light from the right (80°)", np.array([0.9848, 0.0, 0.1736])),
 )
 #: Rec. 709 luminance weights, for the exposure.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -39,7 +39,14 @@ PSNR_CAP_DB = 100.0
 
 
 def sphere_directions(size: int, light: np.ndarray):
-    """Per-pixel local (wi, wo) (size, size, 3) and the mask of lit, visible pixels.
+    """Per-pixel local (wi, wo) (size, size, 3) and the mask of lit, visible pixels."""
+    wi, wo, inside = sphere_disc(size, light)
+    lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    return wi, wo, lit
+
+
+def sphere_disc(size: int, light: np.ndarray):
+    """Per-pixel local (wi, wo) and the mask of pixels on the sphere's disc.
 
     The tangent frame at each pixel is arbitrary about the normal: the tables are
     isotropic, so only the angles between wi, wo and the normal matter.
@@ -55,8 +62,7 @@ def sphere_directions(size: int, light: np.ndarray):
     frame = np.stack([t, b, n], axis=-2)  # rows: local x, y, z axes
     wi = frame @ (light / np.linalg.norm(light))
     wo = frame @ np.array([0.0, 0.0, 1.0])
-    lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    return wi, wo, lit
+    return wi, wo, inside
 
 
 def radiance(f: np.ndarray, wi: np.ndarray) -> np.ndarray:

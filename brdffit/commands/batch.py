@@ -10,9 +10,8 @@ import sys
 from ..batch import FitOptions, run_batch
 from ..batch_progress import format_duration
 from ..batch_report import format_ranking, plot_summary, rank
-from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS
-from ..sampling import DEFAULT_SAMPLES
 from ..selection import DEFAULT_TOLERANCE
+from .fit import add_fit_options
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
 
@@ -35,13 +34,7 @@ def register(sub) -> None:
                             f"{_default_workers()} here); 0 fits in this process")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of local workers")
-    p.add_argument("--solver", choices=SOLVERS, default="lm")
-    p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
-                   help=f"bins the solver sees (default {DEFAULT_SAMPLES}; 'all' for every bin)")
-    p.add_argument("--precision", choices=list(PRECISIONS), default="float64")
-    p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
-                   help="solver starts refined (best kept)")
-    p.add_argument("--max-steps", type=int, default=256)
+    add_fit_options(p)
     p.add_argument("--seed", type=int, default=0, help="subsample seed")
     p.add_argument("--refit", action="store_true",
                    help="fit again what the file already holds (e.g. after a model changed)")
@@ -71,15 +64,6 @@ def _default_workers() -> int:
 
 def _models(text: str) -> list[str]:
     return [m.strip() for m in text.split(",") if m.strip()]
-
-
-def _samples(text: str) -> int | None:
-    if text == "all":
-        return None
-    try:
-        return int(text)
-    except ValueError:
-        raise ValueError(f"--samples wants an integer or 'all', got {text!r}") from None
 
 
 def run(args) -> int:

@@ -13,12 +13,8 @@ from ..scene import Scene, fit_in_scene
 from ..selection import DEFAULT_CANDIDATES, DEFAULT_TOLERANCE, format_selection, select
 
 
-def register(sub) -> None:
-    p = sub.add_parser("fit", help="fit a model to a MERL .binary table")
-    p.add_argument("table", help="path to a MERL .binary file")
-    p.add_argument("--model", default="ggx",
-                   help="model name (see `brdffit models`), or 'auto' to choose one")
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+def add_fit_options(p) -> None:
+    """The options of ``brdffit.fit`` (shared by ``fit`` and ``batch``)."""
     p.add_argument("--solver", choices=SOLVERS, default="lm")
     p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
                    help=f"bins the solver sees (default {DEFAULT_SAMPLES}; 'all' for every bin)")
@@ -26,6 +22,15 @@ def register(sub) -> None:
     p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
                    help="solver starts refined (best kept)")
     p.add_argument("--max-steps", type=int, default=256)
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fit", help="fit a model to a MERL .binary table")
+    p.add_argument("table", help="path to a MERL .binary file")
+    p.add_argument("--model", default="ggx",
+                   help="model name (see `brdffit models`), or 'auto' to choose one")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
     auto = p.add_argument_group("--model auto (docs/selection.md)")
