@@ -35,7 +35,7 @@ from jaxtyping import Array, Float
 from . import initialisation, models
 from .errors import FitInputError
 from .grid import bin_grid
-from .loss import LossData, error_metrics, normal_equations, residuals, sum_squares
+from .loss import LossData, normal_equations, residuals, sum_squares
 from .merl import MerlTable
 from .models.frame import Frame, shading_frame
 from .sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
@@ -103,11 +103,6 @@ def _solve_batch(model, solver, u_batch, data, max_steps):
         )
 
     return jax.vmap(one)(u_batch)
-
-
-@eqx.filter_jit
-def _metrics(model, u, data):
-    return error_metrics(u, model, data)
 
 
 # -- data preparation --------------------------------------------------------------
