@@ -37,7 +37,7 @@ from .angles import N_PHI_D, N_THETA_D, N_THETA_H, bin_centres, half_diff_to_bin
 from .fitting import FitResult
 from .grid import bin_grid
 from .merl import MerlTable
-from .render import LIGHTS, sphere_disc
+from .render import LIGHTS, radiance, sphere_disc, tonemap
 
 KINDS = ("slices", "error_map", "spheres", "polar")
 
@@ -225,18 +225,6 @@ SPHERE_BACKGROUND = "#33404f"
 # selection's PSNR measures.
 
 
-def _radiance(f: np.ndarray, wi: np.ndarray) -> np.ndarray:
-    # Irradiance pi: a white Lambertian surface facing the light has radiance 1.
-    return f * np.pi * np.clip(wi[..., 2:3], 0.0, None)
-
-
-def _tonemap(radiance: np.ndarray, exposure: float) -> np.ndarray:
-    """Reinhard, then the sRGB curve: highlights compress, nothing clips."""
-    x = np.maximum(radiance * exposure, 0.0)
-    x = x / (1.0 + x)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
 def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> bytes:
     """Table and fit on a sphere under two lights, and log2(fit / measured)."""
     result = _as_result(result)
@@ -252,7 +240,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> b
         fitted = np.zeros((size, size, 3))
         measured[lit] = table.lookup(wi[lit], wo[lit])
         fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
-        measured, fitted = _radiance(measured, wi), _radiance(fitted, wi)
+        measured, fitted = radiance(measured, wi), radiance(fitted, wi)
         unmeasured = lit & ~np.all(np.isfinite(measured), axis=-1)
         lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
         ok = lit & ~unmeasured
@@ -262,7 +250,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> b
         exposure = 0.35 / max(typical, 1e-6)
         images = []
         for rad in (measured, fitted):
-            img = _tonemap(np.nan_to_num(rad), exposure)
+            img = tonemap(np.nan_to_num(rad), exposure)
             img[~inside] = background
             images.append(img)
         images[0][unmeasured] = no_data

@@ -94,11 +94,23 @@ def run(args) -> int:
     if args.model == "auto":
         return _run_auto(args, table, scene, options)
     result = fit_in_scene(table, args.model, scene, **options)
+    return _report(args, table, result, result.to_dict(), format_result(result))
+
+
+def _run_auto(args, table, scene, options) -> int:
+    selection = select(table, args.candidates, tolerance=args.tolerance, budget=args.budget,
+                       scene=scene, mono_ks=args.mono_ks, **options)
+    return _report(args, table, selection.result, selection.to_dict(),
+                   format_selection(selection))
+
+
+def _report(args, table, result, as_dict: dict, as_text: str) -> int:
+    """Print JSON or text, write the plots of ``result`` if asked."""
     if args.json:
-        json.dump(result.to_dict(), sys.stdout)
+        json.dump(as_dict, sys.stdout)
         sys.stdout.write("\n")
     else:
-        print(format_result(result))
+        print(as_text)
     if args.plots:
         from .. import plots  # matplotlib only when asked for
 
@@ -106,20 +118,4 @@ def run(args) -> int:
             # stderr: with --json, stdout stays one JSON object
             print(f"wrote {path}", file=sys.stderr)
     # A fit that ran is a result, converged or not: `converged` says which.
-    return 0
-
-
-def _run_auto(args, table, scene, options) -> int:
-    selection = select(table, args.candidates, tolerance=args.tolerance, budget=args.budget,
-                       scene=scene, mono_ks=args.mono_ks, **options)
-    if args.json:
-        json.dump(selection.to_dict(), sys.stdout)
-        sys.stdout.write("\n")
-    else:
-        print(format_selection(selection))
-    if args.plots:
-        from .. import plots
-
-        for path in plots.save_all(table, selection.result, args.plots):
-            print(f"wrote {path}", file=sys.stderr)
     return 0
