@@ -112,10 +112,8 @@ def _solve_batch(model, solver, u_batch, data, max_steps):
 def _device_frames(dtype_name: str) -> Frame:
     """The shading frame of every bin centre, on the device, computed once per
     process: only targets and weights travel per table."""
-    if dtype_name != "float64":  # a cast of the float64 frame: no second trace/compile
-        return jax.tree_util.tree_map(lambda a: a.astype(dtype_name), _device_frames("float64"))
     g = bin_grid()
-    return jax.jit(shading_frame)(jnp.asarray(g.wi), jnp.asarray(g.wo))
+    return jax.jit(shading_frame)(jnp.asarray(g.wi, dtype_name), jnp.asarray(g.wo, dtype_name))
 
 
 def _make_loss_data(table, index, weight, dtype, frame: Frame) -> LossData:
