@@ -8,7 +8,7 @@ import struct
 import pytest
 
 from .cli_helpers import run
-from .truths import TRUTH, assert_params_close
+from .truths import FIT_JSON_KEYS, TRUTH, assert_params_close
 
 
 @pytest.fixture(scope="module")
@@ -29,17 +29,7 @@ def test_fit_json_is_one_object_with_the_schema(ggx_file):
     lines = r.stdout.strip().splitlines()
     assert len(lines) == 1
     d = json.loads(lines[0])
-    for key in (
-        "table",
-        "model",
-        "params",
-        "error",
-        "converged",
-        "result",
-        "steps",
-        "time_s",
-        "samples",
-    ):
+    for key in FIT_JSON_KEYS:
         assert key in d, key
     assert d["table"] == str(ggx_file) and d["model"] == "ggx"
     assert_params_close(d["params"], TRUTH["ggx"], rel=0.02)

@@ -13,7 +13,7 @@ from brdffit.fitting import FitResult
 from data_synth import make_table
 
 from . import reference_merl
-from .truths import TRUTH, assert_params_close
+from .truths import FIT_JSON_KEYS, TRUTH, assert_params_close
 
 MODELS = list(TRUTH)
 
@@ -55,19 +55,8 @@ def test_recovers_params_with_noise_and_missing_bins(name):
 def test_result_is_plain_json_with_the_documented_schema(synth_tables):
     r = fit(synth_tables["ggx"], "ggx")
     d = json.loads(r.to_json())
-    for key in (
-        "table",
-        "model",
-        "params",
-        "error",
-        "converged",
-        "result",
-        "steps",
-        "time_s",
-        "samples",
-        "solver",
-    ):
-        assert key in d
+    for key in (*FIT_JSON_KEYS, "solver"):
+        assert key in d, key
     assert set(d["params"]) == {"kd", "ks", "alpha", "f0"}
     assert len(d["params"]["kd"]) == 3 and isinstance(d["params"]["alpha"], float)
     assert d["error"]["log_rmse"] >= 0

@@ -10,6 +10,11 @@ TRUTH = {
 }
 
 
+#: The keys of ``brdffit fit --json`` / ``FitResult.to_dict()`` that issue 2 documents.
+FIT_JSON_KEYS = ("table", "model", "params", "error", "converged", "result", "steps",
+                 "time_s", "samples")
+
+
 def assert_params_close(got: dict, want: dict, rel: float, abs_small: float = 0.002):
     """Each value within ``rel`` relative, or ``abs_small`` absolute for values < 0.1."""
     import numpy as np
