@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from brdffit import models
+from brdffit import merl, models
 
 from .synth import PRESETS, make_preset, make_table, write_table
 
@@ -23,10 +23,43 @@ def _parse_param(text: str) -> tuple[str, object]:
     return name.strip(), numbers[0] if len(numbers) == 1 else numbers
 
 
+def nbrdf_main(argv: list[str]) -> int:
+    """``python -m data_synth nbrdf NAME -o OUT``: a real material's table."""
+    from . import nbrdf
+
+    ap = argparse.ArgumentParser(
+        prog="python -m data_synth nbrdf",
+        description="Write the MERL .binary table of a real material, rebuilt from its "
+        "published neural BRDF (data_synth/nbrdf/README.md).",
+    )
+    ap.add_argument("name", nargs="?", help="material name, e.g. chrome, gold-metallic-paint")
+    ap.add_argument("-o", "--out", help="output .binary path (default NAME.binary)")
+    ap.add_argument("--list", action="store_true", help="print the material names and exit")
+    args = ap.parse_args(argv)
+    if args.list:
+        print("\n".join(nbrdf.material_names()))
+        return 0
+    if not args.name:
+        ap.error("give a material NAME (or --list)")
+    out = args.out or f"{args.name}.binary"
+    try:
+        table = nbrdf.make_table(args.name)
+        merl.write(out, table)
+    except (ValueError, OSError) as e:
+        print(f"data_synth: error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} ({table.n_measured:,} measured bins, real material {args.name})")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["nbrdf"]:
+        return nbrdf_main(argv[1:])
     ap = argparse.ArgumentParser(
         prog="python -m data_synth",
-        description="Write a synthetic MERL .binary table (and OUT.json with the true params).",
+        description="Write a synthetic MERL .binary table (and OUT.json with the true params). "
+        "`python -m data_synth nbrdf NAME -o OUT` writes a real material instead.",
     )
     ap.add_argument("out", help="output .binary path")
     src = ap.add_mutually_exclusive_group()
