@@ -30,6 +30,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from brdffit import jsonout
+
 STATUSES = ("queued", "running", "done", "failed")
 
 _SCHEMA = """
@@ -156,7 +158,7 @@ class Store:
             cur = con.execute(
                 "INSERT OR IGNORE INTO tables (id, size, name, summary, created_at) "
                 "VALUES (?, ?, ?, ?, ?)",
-                (table_id, size, name, json.dumps(summary), time.time()),
+                (table_id, size, name, jsonout.dumps(summary), time.time()),
             )
             created = cur.rowcount == 1
             row = con.execute("SELECT * FROM tables WHERE id = ?", (table_id,)).fetchone()
@@ -175,7 +177,7 @@ class Store:
             con.execute(
                 "INSERT INTO jobs (id, table_id, models, options, status, created_at) "
                 "VALUES (?, ?, ?, ?, 'queued', ?)",
-                (job_id, table_id, json.dumps(models), json.dumps(options), time.time()),
+                (job_id, table_id, jsonout.dumps(models), jsonout.dumps(options), time.time()),
             )
             row = con.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return _job(row)
@@ -201,7 +203,7 @@ class Store:
             con.execute(
                 "UPDATE jobs SET status = 'done', results = ?, reason = NULL, finished_at = ? "
                 "WHERE id = ? AND status = 'running'",
-                (json.dumps(results, allow_nan=False), time.time(), job_id),
+                (jsonout.dumps(results), time.time(), job_id),
             )
 
     def fail(self, job_id: str, reason: str) -> None:

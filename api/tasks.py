@@ -10,24 +10,10 @@ does not).
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import threading
 import time
 import traceback
-
-# The service refuses NaN in JSON (it is not JSON): non-finite metrics become null.
-
-
-def json_safe(value):
-    """``value`` with every non-finite float replaced by None (recursively)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    return value
 
 
 def _read(table_path: str, source: str):
@@ -42,6 +28,7 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
     """Fit each model to the table: ``{"ok": True, "results": [FitResult dict, ...]}``
     or ``{"ok": False, "reason": "..."}``."""
     from brdffit import BrdffitError
+    from brdffit.jsonout import strict
     from brdffit.models import UnknownModelError
     from brdffit.scene import Scene, fit_in_scene
 
@@ -53,7 +40,8 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
         scene = None if scene is None else Scene.from_dict(scene)
         if models == ["auto"]:
             return {"ok": True, "results": _select(table, scene, rule, options)}
-        results = [json_safe(fit_in_scene(table, m, scene, **options).to_dict()) for m in models]
+        # Strict before it is stored and served: a metric a fit could not measure is null.
+        results = [strict(fit_in_scene(table, m, scene, **options).to_dict()) for m in models]
         return {"ok": True, "results": results}
     except (BrdffitError, UnknownModelError, ValueError) as e:
         return {"ok": False, "reason": str(e)}
@@ -65,6 +53,7 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
 def _select(table, scene, rule: dict, options: dict) -> list[dict]:
     """``model="auto"``: every candidate's fit, the chosen one carrying the selection
     (ranking, reason) in ``extra["selection"]``."""
+    from brdffit.jsonout import strict
     from brdffit.selection import DEFAULT_TOLERANCE, select
 
     tolerance = DEFAULT_TOLERANCE if rule["tolerance"] is None else rule["tolerance"]
@@ -77,7 +66,7 @@ def _select(table, scene, rule: dict, options: dict) -> list[dict]:
                 summary = sel.to_dict()
                 summary.pop("fit")  # it is this very result
                 d["extra"]["selection"] = summary
-            results.append(json_safe(d))
+            results.append(strict(d))
     return results
 
 

@@ -18,7 +18,6 @@ and after, and the CPU seconds the batch used are recorded beside the figures.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import subprocess
@@ -27,7 +26,7 @@ import tempfile
 import time
 from datetime import UTC, datetime
 
-from brdffit import __version__
+from brdffit import __version__, jsonout
 from brdffit.batch import FitOptions, run_batch
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -223,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     os.makedirs(args.out_dir, exist_ok=True)
     with open(os.path.join(args.out_dir, "batch.json"), "w") as f:
-        json.dump(report, f, indent=2)
+        jsonout.dump(report, f, indent=2)
         f.write("\n")
     with open(os.path.join(args.out_dir, "batch.md"), "w") as f:
         f.write(to_markdown(report))

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import inspect
-import json
 import os
 import platform
 import time
@@ -29,7 +28,7 @@ from datetime import UTC, datetime
 
 import jax
 
-from brdffit import __version__, fit
+from brdffit import __version__, fit, jsonout
 from brdffit.scene import Scene
 from brdffit.selection import DEFAULT_CANDIDATES, DEFAULT_TOLERANCE, choose, select
 from data_synth import Component, make_table
@@ -213,7 +212,7 @@ def main(argv=None) -> int:
     res = run(quick=args.quick)
     os.makedirs(RESULTS, exist_ok=True)
     with open(os.path.join(RESULTS, "selection.json"), "w") as f:
-        json.dump(res, f, indent=2)
+        jsonout.dump(res, f, indent=2)
     with open(os.path.join(RESULTS, "selection.md"), "w") as f:
         f.write(markdown(res))
     print(markdown(res))

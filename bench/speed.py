@@ -24,7 +24,6 @@ its first table (persistent cache warm), and 100 tables x 6 models.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -41,7 +40,7 @@ os.environ["BRDFFIT_JAX_CACHE"] = ""
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from brdffit import __version__, fit, merl  # noqa: E402
+from brdffit import __version__, fit, jsonout, merl  # noqa: E402
 from data_synth import Component, make_table  # noqa: E402
 from data_synth.synth import DEFAULT_PARAMS, write_table  # noqa: E402
 
@@ -264,7 +263,7 @@ def main(argv=None) -> int:
         report["library"] = bench_library(tables, 10 if args.quick else args.library_tables)
     report["machine"]["loadavg_end"] = os.getloadavg()
     with open(os.path.join(args.out, "speed.json"), "w") as f:
-        json.dump(report, f, indent=1)
+        jsonout.dump(report, f, indent=1)
     from bench.speed_report import write_markdown, write_plots
 
     write_markdown(report, os.path.join(args.out, "speed.md"))

@@ -54,7 +54,7 @@ from dataclasses import asdict, dataclass, field
 import h5py
 import numpy as np
 
-from . import __version__
+from . import __version__, jsonout
 from .batch_tasks import FitOptions, FitRecord, TableRecord, now
 from .errors import BrdffitError
 
@@ -115,7 +115,7 @@ def _index_row(r: dict, name: str) -> dict:
         row.update(options=FitOptions.from_dict(r["options"]).key(),
                    result=fit.get("result", ""), converged=bool(fit.get("converged", False)),
                    steps=int(fit.get("steps", -1)),
-                   log_rmse=float(fit.get("error", {}).get("log_rmse", float("nan"))))
+                   log_rmse=_float(fit.get("error", {}).get("log_rmse")))
     return row
 
 
@@ -232,7 +232,8 @@ class BatchStore:
         """Journal one table's results (fsynced before returning), then apply them."""
         records = [{"kind": "table", **asdict(table)}]
         records += [{"kind": "fit", **asdict(f)} for f in fits]
-        data = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in records).encode()
+        # Strict JSON: a metric a fit could not measure is null here, NaN again in HDF5.
+        data = "".join(jsonout.dumps(r, separators=(",", ":")) + "\n" for r in records).encode()
         _write_all(self._journal_fd, data)
         os.fsync(self._journal_fd)
         for r in records:
@@ -279,7 +280,7 @@ class BatchStore:
                         del f["inputs"]
                     f.create_dataset("inputs", data=list(inputs), dtype=h5py.string_dtype())
                 for k, v in (attrs or {}).items():
-                    f.attrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v)
+                    f.attrs[k] = v if isinstance(v, (str, int, float)) else jsonout.dumps(v)
                 f.attrs["brdffit_version"] = __version__
                 f.attrs["updated"] = now()
                 for k, v in self.counts().items():
@@ -379,7 +380,7 @@ class BatchStore:
             params[name] = np.asarray(v, dtype=np.float64)
         error = g.create_group("error")
         for name, v in fit["error"].items():
-            error[name] = np.float64(v)
+            error[name] = np.float64(_float(v))
 
     def _replay_journal(self) -> None:
         os.lseek(self._journal_fd, 0, os.SEEK_SET)
@@ -467,6 +468,11 @@ def _plain(v):
 
 def _int(v, none: int = -1) -> int:
     return none if v is None else int(v)
+
+
+def _float(v) -> float:
+    """A metric from a journal record: null there (strict JSON) is NaN in HDF5."""
+    return float("nan") if v is None else float(v)
 
 
 def _lock(journal_path: str, results_path: str) -> int:

@@ -14,14 +14,13 @@ compiles each (model, options) once and reuses it for every later table.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import socket
 import time
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 
-from . import __version__, merl
+from . import __version__, jsonout, merl
 from .errors import BrdffitError, FitInputError, MerlFormatError
 from .fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
 from .sampling import DEFAULT_SAMPLES
@@ -47,7 +46,7 @@ class FitOptions:
 
     def key(self) -> str:
         """Canonical JSON of the options: equal options, equal key."""
-        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return jsonout.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
     @classmethod
     def from_dict(cls, d: dict) -> FitOptions:

@@ -11,7 +11,12 @@ Bad input policy (every case raises :class:`MerlFormatError` naming the source):
   zero, negative, absurd or not (90, 90, 180), a body shorter (truncated) or
   longer (trailing bytes) than the header promises: refused *before* the body
   is allocated, from the file size alone;
-- a table with no measured bin: refused.
+- a table with no measured bin: refused;
+- values outside the physical range (:data:`MAX_VALUE`, :data:`MIN_PEAK`): refused,
+  the message naming how many bins and the extreme value. A bin above 1e12 1/sr is
+  a corrupt value or another unit, not a reflectance, and one such bin would
+  dominate every error metric; a table whose brightest bin is below 1e-5 1/sr
+  (all zeros, all denormals) holds nothing a fit could recover.
 - NaN / Inf values: **masked, not refused**, and counted in
   :attr:`MerlTable.n_nonfinite` (real captures do contain a few). A bin is
   measured only when all three channels are finite and >= 0.
@@ -32,6 +37,17 @@ SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 HEADER_BYTES = 12
 N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 FILE_BYTES = HEADER_BYTES + 3 * N_BINS * 8  # 34,992,012
+
+#: Largest physical value (1/sr) a table may hold. Measured MERL tables peak near
+#: 1e4 1/sr; the sharpest lobe the models allow (GGX or Beckmann, alpha 1e-3, ks 1)
+#: reaches 1e9 1/sr in the grazing bins of the mirror direction (its 1/(4 cos_i
+#: cos_o)). 1e12 leaves room above both and keeps the float32 full-table error
+#: (``brdffit.fitting``) clear of overflow: (1e12)^2 = 1e24 < 3e38.
+MAX_VALUE = 1e12
+#: Smallest brightest-bin value (1/sr) of a table: the blackest coatings made
+#: (~0.04% reflectance) are near 1e-4 1/sr. Below this a table is blank (all
+#: zeros, all denormals) or in the wrong unit, and a fit of it is noise.
+MIN_PEAK = 1e-5
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +76,12 @@ class MerlTable:
         n_nonfinite = int(np.count_nonzero(~np.all(np.isfinite(rgb), axis=0)))
         if mask is not None:
             ok &= np.asarray(mask, dtype=bool).reshape(SHAPE)
-        return cls(np.where(ok, rgb, 0.0), ok, source, n_nonfinite)
+        if not ok.any():
+            raise MerlFormatError(source, "no measured bin: every value is negative, "
+                                          "non-finite or masked")
+        rgb = np.where(ok, rgb, 0.0)
+        _check_range(rgb, source)
+        return cls(rgb, ok, source, n_nonfinite)
 
     @property
     def n_measured(self) -> int:
@@ -124,6 +145,34 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
         )
 
 
+def _check_range(rgb: np.ndarray, source: str, raw: np.ndarray | None = None,
+                 measured: np.ndarray | None = None) -> None:
+    """Refuse physical values ``rgb`` (0 where unmeasured) outside MAX_VALUE / MIN_PEAK.
+
+    ``raw`` and ``measured``, the file's values and its measured bins, let the
+    message quote what the file holds: raw 5e-324 is 0 1/sr once scaled."""
+    peak = float(rgb.max())  # one pass; the details are worked out only to refuse
+    if peak > MAX_VALUE:
+        n = int(np.count_nonzero((rgb > MAX_VALUE).any(axis=0)))
+        c = np.unravel_index(int(np.argmax(rgb)), rgb.shape)[0]
+        raise MerlFormatError(
+            source,
+            f"{n:,} bin{'s' if n != 1 else ''} above {MAX_VALUE:g} 1/sr, the largest "
+            f"{peak:.3g} 1/sr (raw {peak / SCALE[c]:.3g}); measured BRDFs peak near 1e4 "
+            "1/sr: a corrupt file, or values in another unit",
+        )
+    if peak < MIN_PEAK:
+        raw_peak = ""
+        if raw is not None:
+            raw_peak = f" (largest raw value {float(raw[:, measured].max()):.3g})"
+        raise MerlFormatError(
+            source,
+            f"the brightest measured bin is {peak:.3g} 1/sr{raw_peak}, below {MIN_PEAK:g} 1/sr "
+            "and darker than any material: a blank table (zeros, denormals) or values in "
+            "another unit; there is no reflectance to fit",
+        )
+
+
 def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     """Raw file values -> physical values and mask, in few passes over 35 MB."""
     raw = raw.reshape(3, *SHAPE)
@@ -137,6 +186,7 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     n_nonfinite = int(np.count_nonzero(~np.isfinite(raw[:, unmeasured]).all(axis=0)))
     rgb = raw * SCALE[:, None, None, None]
     np.copyto(rgb, 0.0, where=unmeasured[None])
+    _check_range(rgb, source, raw=raw, measured=~unmeasured)
     return MerlTable(rgb, ~unmeasured, source, n_nonfinite)
 
 

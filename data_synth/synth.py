@@ -13,7 +13,6 @@ A table may sum several components (two lobes): ``Component(model, params)``.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 
@@ -21,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import brdffit  # noqa: F401  (JAX runtime settings: float64)
-from brdffit import merl, models
+from brdffit import jsonout, merl, models
 from brdffit.grid import bin_grid
 
 DEFAULT_PARAMS: dict[str, dict] = {
@@ -189,5 +188,5 @@ def write_table(path: str, table: merl.MerlTable, truth: dict) -> str:
     merl.write(path, table)
     sidecar = os.fspath(path) + ".json"
     with open(sidecar, "w") as f:
-        json.dump(truth, f, indent=2)
+        jsonout.dump(truth, f, indent=2)
     return sidecar

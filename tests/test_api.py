@@ -109,7 +109,30 @@ MALFORMED = {
     "absurd dims": (lambda: header((2**30, 2**30, 2**30)) + b"\0" * 64, "not the MERL grid"),
     "no measured bin": (lambda: GOOD_HEADER + np.full(3 * 90 * 90 * 180, -1.0).tobytes(),
                         "no measured bin"),
+    # Absurd values (docs/fitting.md): beyond the physical bounds, refused at upload.
+    "a bin at 1e300": (lambda: GOOD_HEADER + _with_raw(1e300, one_bin=True), "1 bin above 1e+12"),
+    "every bin 1e300": (lambda: GOOD_HEADER + _with_raw(1e300), "bins above 1e+12"),
+    "every bin denormal": (lambda: GOOD_HEADER + _with_raw(5e-324), "blank table"),
+    "every bin zero": (lambda: GOOD_HEADER + _with_raw(0.0), "blank table"),
 }
+
+
+N_BINS = 90 * 90 * 180
+
+
+def _with_raw(value: float, one_bin: bool = False, rest: float | None = None) -> bytes:
+    """The ggx table's body with one measured bin (its three channels), or every
+    one, set to ``value``; ``rest`` replaces the other measured values."""
+    raw = np.frombuffer(_body(), dtype="<f8").copy()
+    measured = raw >= 0
+    if rest is not None:
+        raw[measured] = rest
+    if one_bin:
+        b = np.flatnonzero(measured[:N_BINS])[N_BINS // 4]
+        raw[[b, b + N_BINS, b + 2 * N_BINS]] = value
+    else:
+        raw[measured] = value
+    return raw.tobytes()
 
 
 @pytest.mark.parametrize("case", list(MALFORMED))
@@ -395,6 +418,24 @@ def test_results_are_plain_json(http, table_id):
     json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
 
 
+def test_a_single_hot_bin_table_fits_to_finite_metrics(http):
+    """Everything 0 but one bin: odd but physical, so fitted; every metric of the
+    result is a finite number on the wire, the job done, not failed."""
+    r = http.post("/v1/tables", content=GOOD_HEADER + _with_raw(1000.0, one_bin=True, rest=0.0),
+                  params={"name": "hot.binary"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code == 201, r.text
+    r = http.post("/v1/fits", json={"table_id": r.json()["id"], "model": ["lambert", "ggx"],
+                                    "options": FAST})
+    done = wait_status(http, r.json()["id"], ("done", "failed"))
+    assert done["status"] == "done", done["reason"]
+    text = http.get(f"/v1/fits/{done['id']}").text
+    job = json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+    for result in job["results"]:
+        for name, v in result["error"].items():
+            assert isinstance(v, float) and np.isfinite(v), (result["model"], name, v)
+
+
 def test_worker_tasks_return_failures_as_values(tmp_path):
     """What crosses the process boundary is a value: exceptions such as
     MerlFormatError do not unpickle, and would break the worker pool."""
@@ -405,4 +446,6 @@ def test_worker_tasks_return_failures_as_values(tmp_path):
     assert out["ok"] is False and "cannot read" in out["reason"]
     out = tasks.render_plot(missing, "gone.binary", {}, "slices")
     assert out["ok"] is False and "MerlFormatError" in out["reason"]
-    assert tasks.json_safe({"a": [float("nan"), 1.0, float("inf")]}) == {"a": [None, 1.0, None]}
+    from brdffit.jsonout import strict
+
+    assert strict({"a": [float("nan"), 1.0, float("inf")]}) == {"a": [None, 1.0, None]}

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import sys
 
+from .. import jsonout
 from ..batch import FitOptions, run_batch
 from ..batch_progress import format_duration
 from ..batch_report import format_ranking, plot_summary, rank
@@ -88,21 +87,11 @@ def run(args) -> int:
     return EXIT_FAILED_TABLES
 
 
-def _finite_or_none(v):
-    """JSON has no NaN: a metric that was not measured becomes null."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _finite_or_none(x) for k, x in v.items()}
-    if isinstance(v, list):
-        return [_finite_or_none(x) for x in v]
-    return v
-
-
 def run_report(args) -> int:
     ranking = rank(args.results)
     if args.json:
-        json.dump(_finite_or_none({
+        # A model with no successful fit has mean and median NaN: null in JSON.
+        jsonout.dump({
             "attrs": ranking.attrs,
             "tables": [{"name": t.name, "path": t.path, "status": t.status, "best": t.best,
                         "auto": t.chosen(args.tolerance)[0],
@@ -110,7 +99,7 @@ def run_report(args) -> int:
                         "log_rmse": t.errors, "message": t.message,
                         "failed_models": t.failed_models} for t in ranking.tables],
             "models": [vars(s) for s in ranking.summary],
-        }), sys.stdout, indent=2, default=str)
+        }, sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")
     else:
         print(format_ranking(ranking, args.results, args.tolerance))

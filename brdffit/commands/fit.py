@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
-from .. import merl
+from .. import jsonout, merl
 from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, FitResult
 from ..sampling import DEFAULT_SAMPLES
 from ..scene import PRESETS as SCENE_PRESETS
@@ -107,7 +106,7 @@ def _run_auto(args, table, scene, options) -> int:
 def _report(args, table, result, as_dict: dict, as_text: str) -> int:
     """Print JSON or text, write the plots of ``result`` if asked."""
     if args.json:
-        json.dump(as_dict, sys.stdout)
+        jsonout.dump(as_dict, sys.stdout)  # a metric a fit could not measure is null
         sys.stdout.write("\n")
     else:
         print(as_text)

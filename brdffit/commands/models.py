@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
-from .. import models
+from .. import jsonout, models
 
 
 def register(sub) -> None:
@@ -46,7 +45,7 @@ def _summary(model) -> str:
 def run(args) -> int:
     info = describe()
     if args.json:
-        print(json.dumps(info, indent=2))
+        print(jsonout.dumps(info, indent=2))
         return 0
     for m in info:
         print(f"{m['name']}  ({m['n_params']} values)  {m['doc']}")
