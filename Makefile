@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench bench-real lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -27,6 +27,11 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench
+
+# every model on the 100 real MERL materials against a best-effort reference
+# (tables and references cached in .bench-cache/; the first run takes ~1.5 h on 2 cores)
+bench-real: $(STAMP)
+	$(BIN)/python -m bench.real_materials
 
 lint: $(STAMP)
 	$(BIN)/ruff check brdffit api data_synth tests bench

@@ -20,7 +20,6 @@ carries it over to the next process.
 from __future__ import annotations
 
 import functools
-import json
 import time
 import weakref
 from dataclasses import asdict, dataclass, field
@@ -32,7 +31,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from . import initialisation, models
+from . import initialisation, jsonout, merl, models, solvers
 from .errors import FitInputError
 from .grid import bin_grid
 from .loss import LossData, normal_equations, residuals, sum_squares
@@ -46,14 +45,18 @@ PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
 #: on a lobe-shape grid first, so the best one is already in the right basin.
 #: More starts (refined side by side with vmap) cost ~linearly more.
 DEFAULT_STARTS = 1
+#: Steps per start. A default fit of a real material converges in 3-80 steps
+#: (bench/results/real_materials.md); the limit only ends a fit that cannot.
+DEFAULT_MAX_STEPS = 256
 
 
 def _make_solver(name: str, precision: str):
     # float32 cannot resolve relative changes much below 1e-6: looser tolerances
     # there stop the solver at its attainable accuracy instead of at max_steps.
     rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
+    gtol = solvers.gtol_for(PRECISIONS[precision])
     return {
-        "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol),
+        "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
         "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
         "dogleg": lambda: optx.Dogleg(rtol=rtol, atol=atol),
         "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
@@ -66,8 +69,6 @@ SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 #: Built once per (name, precision) and passed to the compiled solve as static.
 _SOLVER_CACHE = {(s, p): _make_solver(s, p) for s in SOLVERS for p in PRECISIONS}
 
-_RESULT_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
-
 
 # -- compiled pieces -----------------------------------------------------------
 
@@ -77,14 +78,19 @@ def _score(model, u_batch, data):
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
+def _bound_side(u, args):
+    model, _ = args
+    return model.bound_side(u)
+
+
 @eqx.filter_jit
 def _solve_batch(model, solver, u_batch, data, max_steps):
+    # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
+    floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
+    options = {"normal_equations": normal_equations, "bound_side": _bound_side,
+               "loss_floor": floor}
+
     def one(u0):
-        options = (
-            {"normal_equations": normal_equations}
-            if isinstance(solver, NormalLevenbergMarquardt)
-            else None
-        )
         sol = optx.least_squares(
             residuals,
             solver,
@@ -94,13 +100,14 @@ def _solve_batch(model, solver, u_batch, data, max_steps):
             max_steps=max_steps,
             throw=False,
         )
-        # Return values, not the Solution: its state holds a jaxpr.
-        return (
-            sol.value,
-            sol.result._value,
-            sol.stats["num_steps"],
-            sum_squares(sol.value, model, data),
+        # Whatever the solver and however it stopped, "successful" means the
+        # optimality test holds at the point it returns (brdffit.solvers).
+        loss, jtj, jtr = normal_equations(sol.value, (model, data))
+        optimal = solvers.is_optimal(
+            loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
         )
+        # Return values, not the Solution: its state holds a jaxpr.
+        return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
 
     return jax.vmap(one)(u_batch)
 
@@ -232,13 +239,26 @@ def full_table_metrics(
     dtype=FULL_TABLE_DTYPE,
 ) -> dict[str, float]:
     """``brdffit.loss.error_metrics`` of unconstrained params ``u`` over every bin of
-    ``table`` with weight > 0."""
-    frame = _device_frames(jnp.dtype(dtype).name)
-    dev = _device_table(table, dtype)
-    u, w = jnp.asarray(u, dtype), jnp.asarray(weight, dtype)
-    log_rmse = _full_log_rmse(model, u, dev, w, frame)
-    linear = _full_linear_errors(model, u, dev, w, frame, jnp.asarray(_peak_bin(table, weight)))
-    return {"log_rmse": float(log_rmse), **{k: float(v) for k, v in linear.items()}}
+    ``table`` with weight > 0.
+
+    Evaluated in ``dtype`` (float32 by default, for speed). Table values are bounded
+    (``brdffit.merl.MAX_VALUE``, 1e12 1/sr), so float32 holds every measured term; a
+    model far off that scale (a diverged ``ks``) can still overflow it, and then the
+    metrics are evaluated again in float64 rather than reported as inf. A metric that
+    is not finite even in float64 is returned as it is (NaN or inf): the caller must
+    not report such a fit as a success.
+    """
+    peak = jnp.asarray(_peak_bin(table, weight))
+    for dt in (dtype, jnp.float64):
+        frame = _device_frames(jnp.dtype(dt).name)
+        dev = _device_table(table, dt)
+        ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
+        log_rmse = _full_log_rmse(model, ut, dev, w, frame)
+        linear = _full_linear_errors(model, ut, dev, w, frame, peak)
+        metrics = {"log_rmse": float(log_rmse), **{k: float(v) for k, v in linear.items()}}
+        if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
+            break
+    return metrics
 
 
 def table_error(
@@ -296,7 +316,8 @@ class FitResult:
         return asdict(self)
 
     def to_json(self, **kw) -> str:
-        return json.dumps(self.to_dict(), **kw)
+        """Strict JSON (``brdffit.jsonout``): a metric that is NaN or inf here is null."""
+        return jsonout.dumps(self.to_dict(), **kw)
 
     @classmethod
     def from_dict(cls, d: dict) -> FitResult:
@@ -326,10 +347,11 @@ def fit(
     samples: int | None = DEFAULT_SAMPLES,
     precision: str = "float64",
     starts: int = DEFAULT_STARTS,
-    max_steps: int = 256,
+    max_steps: int = DEFAULT_MAX_STEPS,
     seed: int = 0,
     init: dict | None = None,
     bin_weight: np.ndarray | None = None,
+    parent_fit: FitResult | None = None,
 ) -> FitResult:
     """Fit ``model`` to ``table``; see the module docstring for the pipeline.
 
@@ -347,6 +369,12 @@ def fit(
         bin_weight: optional flat weight per bin (90*90*180, >= 0) multiplying the
             solid-angle weight: a scene's use of directions. Bins with weight 0
             are excluded from the loss and from the error.
+        parent_fit: for a model that contains another (``model.parent``: ggx2
+            contains ggx, oren_nayar contains lambert), that model's fit to the same
+            table with the same settings; fitted here when not given. Its optimum,
+            embedded, is always one of the starts, and the solver only accepts
+            steps that lower the loss: the richer model never ends worse on the
+            fit's samples than the one it contains.
     """
     t0 = time.perf_counter()
     m = models.get(model)
@@ -375,6 +403,11 @@ def fit(
             f"horizon{', weighted by the scene' if bin_weight is not None else ''}); "
             f"{m.name} needs at least {m.n_params * 4}"
         )
+    if table.rgb.reshape(3, -1)[:, counts.usable].max(initial=0.0) < merl.MIN_PEAK:
+        raise FitInputError(
+            f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
+            f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
+        )
     weight = bin_weights(counts.usable, bin_weight)
     sample_set = stratified_sample(weight, samples, seed)
     dtype = PRECISIONS[precision]
@@ -389,6 +422,13 @@ def fit(
     scores = np.where(np.isfinite(scores), scores, np.inf)
     k = min(starts, len(u_candidates))
     best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+    if init is None and m.parent is not None:
+        if parent_fit is None or parent_fit.model != m.parent:
+            parent_fit = fit(table, m.parent, solver=solver, samples=samples,
+                             precision=precision, starts=starts, max_steps=max_steps,
+                             seed=seed, bin_weight=bin_weight)
+        embedded = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
+        best_starts = np.concatenate([embedded[None], best_starts])
 
     values, codes, steps, losses = _solve_batch(
         m, _SOLVER_CACHE[solver, precision], jnp.asarray(best_starts, dtype), data, max_steps
@@ -398,7 +438,7 @@ def fit(
     finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
     if finite.any():
         i = int(np.argmin(np.where(finite, losses, np.inf)))
-        u_best, result = values[i], _RESULT_NAMES.get(int(codes[i]), "unknown")
+        u_best, result = values[i], solvers.STATUS_NAMES[int(codes[i])]
     else:  # every start diverged: report the best start itself, flagged as such
         i = 0
         u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
@@ -407,6 +447,8 @@ def fit(
     metrics["sample_log_rmse"] = (
         float(np.sqrt(max(losses[i], 0.0) / 3.0)) if finite.any() else float("nan")
     )
+    if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
+        result = "nonfinite"  # an error that cannot be measured is no success
     params = _plain(m.constrain(jnp.asarray(u_best)))
     return FitResult(
         model=m.name,
@@ -428,6 +470,6 @@ def fit(
         },
         solver=solver,
         precision=precision,
-        starts=k,
+        starts=len(best_starts),
         table=table.source,
     )

@@ -217,7 +217,7 @@ def select(
     for m in ordered:
         row = {"model": m.name, "n_params": m.n_params}
         try:
-            r = fit_in_scene(table, m, scene, **fit_options)
+            r = _fit_converged(table, m, scene, fits, fit_options)
         except FitInputError as e:  # e.g. a scene with too few bins for this model
             rows.append({**row, "status": "failed", "message": str(e)})
             continue
@@ -247,6 +247,13 @@ def select(
             + "; ".join(f"{row['model']}: {row.get('message', row.get('result'))}" for row in rows)
         )
     chosen, reason = choose(ok, tolerance, budget)
+    best = min(ok, key=lambda row: row["log_rmse"])
+    doubtful = [row for row in ok if (row is chosen or row is best) and not row["converged"]]
+    if doubtful:
+        reason += " " + "; ".join(
+            f"{row['model']} did not converge ({row['result']}) even when refitted with more "
+            "starts and steps: its error is an upper bound, not an optimum" for row in doubtful
+        ) + "."
     for row in ok:
         if row is chosen:
             row["status"] = "chosen"
@@ -292,6 +299,26 @@ def select(
         table=table.source,
         fits=fits,
     )
+
+
+def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:
+    """The candidate's fit, seeded from its parent's when it has one; refitted once
+    with more starts and steps when it did not converge, so that the choice rests
+    on optima (an unconverged error would make a model look worse than it is)."""
+    from .fitting import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+
+    parent = {"parent_fit": fits[m.parent]} if m.parent in fits else {}
+    r = fit_in_scene(table, m, scene, **parent, **fit_options)
+    if r.converged:
+        return r
+    retry_options = {
+        **fit_options,
+        "starts": max(4, fit_options.get("starts", DEFAULT_STARTS)),
+        "max_steps": 4 * fit_options.get("max_steps", DEFAULT_MAX_STEPS),
+    }
+    retry = fit_in_scene(table, m, scene, **parent, **retry_options)
+    better = retry.converged or retry.error["log_rmse"] < r.error["log_rmse"]
+    return retry if better else r
 
 
 def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tuple[dict, str]:

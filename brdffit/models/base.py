@@ -27,6 +27,11 @@ from .frame import Frame, shading_frame
 Params = dict[str, Array]
 
 
+#: |u| beyond which softplus and sigmoid have slope < 1e-5: a parameter there is at
+#: its bound for every purpose of a fit (kd = 1e-5 is black; f0 = 1 - 1e-5 is 1).
+_TAIL_U = 11.5
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One parameter: its MODELS.md name, range, and how a fit keeps it in range.
@@ -61,6 +66,18 @@ class ParamSpec:
             return jnp.exp(lo + (hi - lo) * s)
         return self.lower + (self.upper - self.lower) * s
 
+    def bound_side(self, u: Array) -> Array:
+        """-1 or +1 where ``u`` sits in a flat tail of the transform (the parameter
+        is at its lower or upper bound to ~1e-5 of its scale), else 0.
+
+        A fit cannot reach a bound, only approach it along a tail where the
+        transform's slope vanishes; the solver treats such a coordinate as at the
+        bound (``brdffit.solvers``) instead of chasing it there step by step.
+        """
+        if self.upper is None:  # softplus: only u -> -inf is a bound
+            return jnp.where(u < -_TAIL_U, -1, 0).astype(jnp.int32)
+        return jnp.where(jnp.abs(u) > _TAIL_U, jnp.sign(u), 0).astype(jnp.int32)
+
     def unconstrain(self, value) -> np.ndarray:
         """Inverse of :meth:`constrain` (numpy, for initial values); clips into range."""
         v = np.asarray(value, dtype=np.float64)
@@ -88,6 +105,14 @@ class AbstractBRDFModel(eqx.Module):
     param_specs: ClassVar[tuple[ParamSpec, ...]]
     #: Shape-parameter values tried when seeding a fit (see brdffit.initialisation).
     shape_grid: ClassVar[tuple[dict[str, float], ...]] = ({},)
+    #: The registry name of a model this one contains as a special case (ggx2
+    #: contains ggx), or None. A fit seeds itself from the parent's optimum
+    #: (:meth:`embed_parent`), so it can never end worse than its parent.
+    parent: ClassVar[str | None] = None
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        """The parent's parameters as a point of this model with the same values."""
+        raise NotImplementedError(f"{self.name} contains no other model")
 
     @abc.abstractmethod
     def eval_frame(self, params: Params, frame: Frame) -> Float[Array, "... 3"]:
@@ -125,6 +150,15 @@ class AbstractBRDFModel(eqx.Module):
             v = np.broadcast_to(np.asarray(params[spec.name], np.float64), (spec.size,))
             parts.append(spec.unconstrain(v))
         return np.concatenate(parts)
+
+    def bound_side(self, u: Float[Array, " n"]) -> Array:
+        """Per coordinate of ``u``: -1 / +1 at the lower / upper bound, else 0
+        (:meth:`ParamSpec.bound_side`)."""
+        parts, i = [], 0
+        for spec in self.param_specs:
+            parts.append(jnp.broadcast_to(spec.bound_side(u[i : i + spec.size]), (spec.size,)))
+            i += spec.size
+        return jnp.concatenate(parts).astype(jnp.int32)
 
     def check_params(self, params: dict) -> dict:
         """Validate a user-given parameter dict; returns it with numpy values.

@@ -63,6 +63,16 @@ class GGX2(AbstractBRDFModel):
         for f0 in (0.3, 0.95)
     )
 
+    parent = "ggx"
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        """GGX as lobe 1, lobe 2 off (ks2 = 0) and three times broader, ready to grow."""
+        alpha = float(np.asarray(parent_params["alpha"]))
+        return {
+            "kd": parent_params["kd"], "ks1": parent_params["ks"], "alpha1": alpha,
+            "ks2": np.zeros(3), "alpha2": min(2.0, 3.0 * alpha), "f0": parent_params["f0"],
+        }
+
     def eval_frame(self, params, frame: Frame):
         return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
 

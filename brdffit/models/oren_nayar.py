@@ -32,6 +32,11 @@ class OrenNayar(AbstractBRDFModel):
     name = "oren_nayar"
     param_specs = (KD, SIGMA)
     shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
+    parent = "lambert"
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        """Lambert is Oren-Nayar with sigma = 0."""
+        return {"kd": parent_params["kd"], "sigma": 0.0}
 
     def _shape(self, params, frame):
         s2 = params["sigma"] ** 2
