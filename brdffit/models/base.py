@@ -63,7 +63,8 @@ class ParamSpec:
         s = jax.nn.sigmoid(u)
         if self.scale == "log":
             lo, hi = math.log(self.lower), math.log(self.upper)
-            return jnp.exp(lo + (hi - lo) * s)
+            # exp(log(hi)) can round above hi: a fitted value must pass check_params
+            return jnp.clip(jnp.exp(lo + (hi - lo) * s), self.lower, self.upper)
         return self.lower + (self.upper - self.lower) * s
 
     def bound_side(self, u: Array) -> Array:

@@ -1,0 +1,123 @@
+"""brdffit.solvers on small least-squares problems with known answers: the stop rule
+(optimality, not small steps), bound-pinned coordinates, and honest failure codes."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+
+from brdffit import solvers
+from brdffit.solvers import NormalLevenbergMarquardt
+
+T = jnp.linspace(0.0, 1.0, 64)
+
+
+def _solve(fn, y0, options=None, max_steps=200):
+    solver = NormalLevenbergMarquardt(rtol=1e-8, atol=1e-12)
+    sol = optx.least_squares(fn, solver, y0, options=options, max_steps=max_steps, throw=False)
+    return sol
+
+
+def _bounds(y, args):
+    # coordinate 0 is a softplus-constrained scale: at its bound far down its tail
+    return jnp.array([jnp.where(y[0] < -11.5, -1, 0), 0, 0], jnp.int32)
+
+
+TARGET = 2.0 * jnp.exp(-3.0 * T) + 0.2 - 0.3 * T
+
+
+def _pinned_problem(y, args):
+    """A ramp of slope a = softplus(y0) >= 0 where the data has slope -0.3: the
+    constrained optimum holds a at 0, and b, c must still be found."""
+    return jax.nn.softplus(y[0]) * T + 2.0 * jnp.exp(-y[1] * T) + y[2] - TARGET
+
+
+def test_a_coordinate_heading_for_its_bound_does_not_slow_the_others():
+    from scipy.optimize import least_squares
+
+    # the constrained optimum, independently: scipy with a as a bounded variable
+    ref = least_squares(
+        lambda p: np.asarray(p[0] * T + 2.0 * np.exp(-p[1] * T) + p[2] - TARGET),
+        [0.5, 1.0, 0.0], bounds=([0.0, -np.inf, -np.inf], np.inf), xtol=1e-15, ftol=1e-15,
+    )
+    assert ref.x[0] == pytest.approx(0.0, abs=1e-8)
+    y0 = jnp.array([-20.0, 1.0, 0.0])  # a already deep in its tail, as a dark ks channel
+    sol = _solve(_pinned_problem, y0, options={"bound_side": _bounds})
+    assert sol.result == optx.RESULTS.successful
+    assert int(sol.stats["stop"]) == solvers.OPTIMAL
+    # optimal to the test's promise: the loss within 1e-6 of the constrained optimum
+    loss = float(jnp.sum(_pinned_problem(sol.value, None) ** 2))
+    assert loss <= (1 + 1e-6) * 2 * ref.cost
+    np.testing.assert_allclose(sol.value[1:], ref.x[1:], rtol=1e-2)
+    assert int(sol.stats["num_steps"]) < 60
+
+
+def test_without_bound_information_the_optimality_test_does_not_hold_there():
+    """The decrement keeps promising what crossing the bound would give: the test
+    alone (without pinning) must not call that point optimal."""
+    sol = _solve(_pinned_problem, jnp.array([-20.0, 1.0, 0.0]),
+                 options={"bound_side": _bounds})
+    y = sol.value.at[0].set(-30.0)  # a = 1e-13: at its bound for every purpose
+    loss, jtj, jtr = solvers._residual_and_normal(
+        lambda v, a: (_pinned_problem(v, a), None), y, None, None)
+    free = jnp.zeros(3, jnp.int32)
+    assert not bool(solvers.is_optimal(loss, jtj, jtr, free, 1e-7, 0.0))
+    assert bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
+    # still in the tail but not yet at the bound: the pinned gain is counted
+    y = y.at[0].set(-13.0)
+    loss, jtj, jtr = solvers._residual_and_normal(
+        lambda v, a: (_pinned_problem(v, a), None), y, None, None)
+    assert not bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
+
+
+def test_exact_fit_converges_through_the_floor_not_the_decrement():
+    def fn(y, args):
+        return y[0] * jnp.exp(-y[1] * T) - 1.5 * jnp.exp(-2.0 * T)
+
+    sol = _solve(fn, jnp.array([1.0, 1.0]), options={"loss_floor": 1e-24})
+    assert sol.result == optx.RESULTS.successful
+    np.testing.assert_allclose(sol.value, [1.5, 2.0], rtol=1e-9)
+
+
+def test_step_limit_is_not_success():
+    def fn(y, args):
+        return y[0] * jnp.exp(-y[1] * T) - 1.5 * jnp.exp(-2.0 * T) + 0.01 * jnp.sin(9 * T)
+
+    sol = _solve(fn, jnp.array([0.1, 8.0]), max_steps=2)
+    assert sol.result == optx.RESULTS.nonlinear_max_steps_reached
+    loss, jtj, jtr = solvers._residual_and_normal(
+        lambda v, a: (fn(v, a), None), sol.value, None, None)
+    status = solvers.status(sol.result, solvers.is_optimal(loss, jtj, jtr, jnp.zeros(2, jnp.int32),
+                                                           1e-7, 0.0))
+    assert solvers.STATUS_NAMES[int(status)] == "nonlinear_max_steps_reached"
+
+
+def test_a_kink_stalls_and_says_so():
+    """|y| has no derivative at its minimum: the linear model keeps promising, no
+    step delivers, the damping runs away. That is a stall, never a success."""
+
+    def fn(y, args):
+        return jnp.abs(y) + 1.0
+
+    sol = _solve(fn, jnp.array([0.3]), max_steps=500)
+    assert int(sol.stats["stop"]) in (solvers.STUCK, solvers.STALLED)
+    loss, jtj, jtr = solvers._residual_and_normal(
+        lambda v, a: (fn(v, a), None), sol.value, None, None)
+    optimal = solvers.is_optimal(loss, jtj, jtr, jnp.zeros(1, jnp.int32), 1e-7, 0.0)
+    assert solvers.STATUS_NAMES[int(solvers.status(sol.result, optimal))] == "stalled"
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_gtol_and_floor_are_relative(dtype):
+    """Scaling every residual by 1e-6 changes neither the decrement test nor the
+    exact-fit floor's verdict (both are relative to the problem's own scale)."""
+    jtj = jnp.array([[2.0, 0.3], [0.3, 1.0]], dtype)
+    jtr = jnp.array([1e-3, -2e-3], dtype)
+    side = jnp.zeros(2, jnp.int32)
+    for s in (1.0, 1e-6):
+        dec = solvers.decrement(jtj * s**2, jtr * s**2, side)
+        np.testing.assert_allclose(float(dec) / s**2, float(solvers.decrement(jtj, jtr, side)),
+                                   rtol=1e-3)
