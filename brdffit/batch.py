@@ -233,7 +233,7 @@ def run_batch(
     """
     t0 = time.monotonic()
     model_names = parse_models(model_names)
-    options = (options or FitOptions()).validate()
+    options = options or FitOptions()  # validated when it was built
     if not scheduler and (not isinstance(workers, int) or workers < 0):
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
     paths = find_tables(inputs)
@@ -279,10 +279,11 @@ def run_batch(
 
         try:
             if tasks and workers == 0 and not scheduler:
-                take(_run_in_process(tasks, model_names, options.to_dict()))
+                take(_run_in_process(tasks, model_names, options.fit_keywords()))
             elif tasks:
                 with connect(workers, scheduler) as client:
-                    take(_run_on_dask(client, tasks, model_names, options.to_dict(), timeout_s))
+                    take(_run_on_dask(client, tasks, model_names, options.fit_keywords(),
+                                      timeout_s))
         finally:
             bar.finish()
             # Interrupted or not, what was journaled goes into the file now; if

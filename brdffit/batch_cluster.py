@@ -114,13 +114,13 @@ class DaskRunner:
         (solver, samples, precision, starts, max_steps, seed). The future's
         result is a :class:`brdffit.FitResult`."""
         name = models.get(model).name
-        options = FitOptions(**fit_options).validate()
+        options = FitOptions.from_dict(fit_options)
         if isinstance(source, os.PathLike):
             source = os.fspath(source)
         elif isinstance(source, (bytes, bytearray, memoryview)):
             # 35 MB travels once, as data, not inside the task description.
             source = self._client.scatter(bytes(source), direct=True)
-        remote = self._client.submit(fit_one, source, name, options.to_dict(), pure=False)
+        remote = self._client.submit(fit_one, source, name, options.fit_keywords(), pure=False)
 
         def to_result(payload: dict) -> FitResult:
             if not payload["ok"]:

@@ -112,7 +112,7 @@ def _index_row(r: dict, name: str) -> dict:
            "log_rmse": float("nan"), "measured_bins": _int(r.get("measured_bins"))}
     if r["kind"] == "fit":
         fit = r["fit"] or {}
-        row.update(options=FitOptions.from_dict(r["options"]).key(),
+        row.update(options=FitOptions.key_of(r["options"]),
                    result=fit.get("result", ""), converged=bool(fit.get("converged", False)),
                    steps=int(fit.get("steps", -1)),
                    log_rmse=_float(fit.get("error", {}).get("log_rmse")))
@@ -346,7 +346,7 @@ class BatchStore:
             "status": r["status"],
             "message": r["message"],
             "sha256": r["sha256"],
-            "options": FitOptions.from_dict(o).key(),
+            "options": FitOptions.key_of(o),
             "solver": o["solver"],
             "samples": _int(o["samples"], none=0),
             "precision": o["precision"],

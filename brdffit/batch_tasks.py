@@ -20,52 +20,10 @@ import time
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 
-from . import __version__, jsonout, merl
+from . import __version__, merl
 from .errors import BrdffitError, FitInputError, MerlFormatError
-from .fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
-from .sampling import DEFAULT_SAMPLES
-
-
-@dataclass(frozen=True)
-class FitOptions:
-    """The ``fit`` keyword arguments a batch applies to every table x model.
-
-    Part of a fit's identity: a finished fit is reused on resume only when the
-    table's sha256, the model and these options all match.
-    """
-
-    solver: str = "lm"
-    samples: int | None = DEFAULT_SAMPLES
-    precision: str = "float64"
-    starts: int = DEFAULT_STARTS
-    max_steps: int = 256
-    seed: int = 0
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    def key(self) -> str:
-        """Canonical JSON of the options: equal options, equal key."""
-        return jsonout.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
-
-    @classmethod
-    def from_dict(cls, d: dict) -> FitOptions:
-        return cls(**d)
-
-    def validate(self) -> FitOptions:
-        """Refuse bad options before any table is read (``fit`` would, once per table)."""
-        if self.solver not in SOLVERS:
-            raise FitInputError(
-                f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
-        if self.precision not in PRECISIONS:
-            raise FitInputError(f"unknown precision {self.precision!r}; choose float64 or float32")
-        for name, least in (("samples", 64), ("starts", 1), ("max_steps", 1), ("seed", 0)):
-            v = getattr(self, name)
-            if name == "samples" and v is None:
-                continue
-            if not isinstance(v, int) or isinstance(v, bool) or v < least:
-                raise FitInputError(f"{name} must be an integer >= {least}, got {v!r}")
-        return self
+from .fitting import fit
+from .options import FitOptions  # a batch's options are the library's, key() and all
 
 
 @dataclass
@@ -100,7 +58,7 @@ class FitRecord:
 
     @property
     def options_key(self) -> str:
-        return FitOptions.from_dict(self.options).key()
+        return FitOptions.key_of(self.options)
 
 
 def worker_name() -> str:
@@ -165,9 +123,9 @@ def fit_record(table: merl.MerlTable, record: TableRecord, model: str,
                options: FitOptions) -> FitRecord:
     """Fit one model to a table that was read; a failure is recorded, not raised."""
     out = FitRecord(path=record.path, model=model, sha256=record.sha256 or "",
-                    options=options.to_dict(), status="failed", worker=record.worker)
+                    options=options.fit_keywords(), status="failed", worker=record.worker)
     try:
-        result = fit(table, model, **options.to_dict())
+        result = fit(table, model, **options.fit_keywords())
     except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
         out.message = _describe(e)
     else:
@@ -212,7 +170,7 @@ def fit_one(source: str | bytes, model: str, options: dict) -> dict:
         else:
             data = source
             table = merl.from_bytes(data, source="<upload>")
-        result = fit(table, model, **FitOptions.from_dict(options).to_dict())
+        result = fit(table, model, **FitOptions.from_dict(options).fit_keywords())
     except Exception as e:  # noqa: BLE001 - crosses the wire as a value
         return {"ok": False, "error": {
             "type": type(e).__name__, "message": str(e),

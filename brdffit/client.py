@@ -168,14 +168,18 @@ class Client:
     def table(self, table_id: str) -> TableInfo:
         return TableInfo.from_json(self._request("GET", f"/v1/tables/{table_id}").json())
 
-    def fit(self, table_id: str, model: str | list[str] = "ggx", **options) -> FitJob:
-        """Queue a fit; ``options`` are ``brdffit.fit``'s (solver, samples, precision,
-        starts, max_steps, seed). Returns at once: see :meth:`wait`.
+    def fit(self, table_id: str, model: str | list[str] | None = None, **options) -> FitJob:
+        """Queue a fit; ``options`` are ``brdffit.options.FitOptions``' (solver,
+        samples, precision, starts, max_steps, seed). Returns at once: see :meth:`wait`.
 
-        ``model="auto"`` chooses the model (``brdffit.selection``; options
-        ``tolerance`` and ``budget``); ``scene`` (a scene JSON object, see
-        docs/selection.md) restricts the directions that count, for any model."""
-        body = {"table_id": table_id, "model": model, "options": options}
+        ``model`` and every option left out take the server's defaults, which are
+        the library's (the client declares none of its own). ``model="auto"``
+        chooses the model (``brdffit.selection``; options ``tolerance`` and
+        ``budget``); ``scene`` (a scene JSON object, see docs/selection.md)
+        restricts the directions that count, for any model."""
+        body = {"table_id": table_id, "options": options}
+        if model is not None:
+            body["model"] = model
         return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
 
     def job(self, job: JobRef) -> FitJob:

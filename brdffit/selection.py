@@ -9,7 +9,7 @@ evaluation cost per sample, a BIC, and whether its specular colour is grey.
 
 The choice (docs/selection.md):
 
-- **tolerance** (default ``DEFAULT_TOLERANCE`` = 0.005): the cheapest candidate
+- **tolerance** (default ``brdffit.options.DEFAULT_TOLERANCE``): the cheapest candidate
   whose error is within ``tolerance`` of the best candidate's, measured *in
   quadrature*: ``excess = sqrt(err^2 - best^2) <= tolerance``. Errors that no
   model can fit (measurement noise, binning) add in quadrature to each model's own
@@ -42,15 +42,13 @@ from .errors import FitInputError
 from .fitting import FitResult
 from .merl import MerlTable
 from .models.mono_ks import MonoKs, specular_colour_specs
+from .options import DEFAULT_TOLERANCE, FIT_KEYWORDS
 from .render import SphereReference
 from .scene import Scene, fit_in_scene
 
 DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
-DEFAULT_TOLERANCE = 0.005
 #: A specular colour is grey when (max - min) / max over R, G, B is at most this.
 DEFAULT_GREY_TOLERANCE = 0.05
-#: Options of ``fit`` that ``select`` passes on; the others it sets itself.
-FIT_OPTIONS = ("solver", "samples", "precision", "starts", "max_steps", "seed")
 
 
 @dataclass
@@ -200,10 +198,11 @@ def select(
             ``precision``, ``starts``, ``max_steps``, ``seed``).
     """
     t0 = time.perf_counter()
-    unknown = set(fit_options) - set(FIT_OPTIONS)
+    # the fit's own options only; select sets parent_fit, init and bin_weight itself
+    unknown = set(fit_options) - set(FIT_KEYWORDS)
     if unknown:
         raise FitInputError(
-            f"select passes only {', '.join(FIT_OPTIONS)} to fit, not {sorted(unknown)}"
+            f"select passes only {', '.join(FIT_KEYWORDS)} to fit, not {sorted(unknown)}"
         )
     for name, v in (("tolerance", tolerance), ("grey_tolerance", grey_tolerance)):
         if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):

@@ -71,21 +71,25 @@ def main(argv: list[str] | None = None) -> int:
         type=_parse_param,
         default=[],
         metavar="NAME=V[,V,V]",
-        help="model parameter (repeatable); others default",
+        help="model parameter (repeatable); others default (a preset's own, with --preset)",
     )
-    ap.add_argument("--noise", type=float, default=0.0, help="multiplicative noise std (e.g. 0.05)")
-    ap.add_argument("--missing", type=float, default=0.0, help="fraction of bins to drop")
+    # None, not 0: with --preset, an option not given keeps the preset's own value
+    ap.add_argument("--noise", type=float,
+                    help="multiplicative noise std (e.g. 0.05; default 0, or the preset's)")
+    ap.add_argument("--missing", type=float,
+                    help="fraction of bins to drop (default 0, or the preset's)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     try:
         if args.preset:
-            table, truth = make_preset(args.preset, seed=args.seed)
+            table, truth = make_preset(args.preset, seed=args.seed, noise=args.noise,
+                                       missing=args.missing, params=dict(args.param))
         else:
             table, truth = make_table(
                 args.model,
                 dict(args.param),
-                noise=args.noise,
-                missing=args.missing,
+                noise=args.noise or 0.0,
+                missing=args.missing or 0.0,
                 seed=args.seed,
                 source=args.out,
             )

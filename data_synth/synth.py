@@ -171,13 +171,33 @@ PRESETS: dict[str, tuple[list[Component], dict]] = {
 }
 
 
-def make_preset(name: str, seed: int = 0) -> tuple[merl.MerlTable, dict]:
+def make_preset(
+    name: str,
+    seed: int = 0,
+    *,
+    noise: float | None = None,
+    missing: float | None = None,
+    params: dict | None = None,
+) -> tuple[merl.MerlTable, dict]:
+    """The hard case ``name``; ``noise``, ``missing`` and ``params`` given here replace
+    the preset's own (``params`` only for a one-component preset: which lobe a
+    parameter of a two-lobe table belongs to would be a guess)."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     components, kw = PRESETS[name]
     kw = dict(kw)
     if kw.get("keep") == "grazing":
         kw["keep"] = _grazing_keep()
+    for key, value in (("noise", noise), ("missing", missing)):
+        if value is not None:
+            kw[key] = value
+    if params:
+        if len(components) != 1:
+            raise ValueError(
+                f"preset {name!r} has {len(components)} components: --param cannot say "
+                f"which one it sets; use --model {components[0].model} with --param instead")
+        c = components[0]
+        components = [Component(c.model, {**c.params, **params})]
     table, truth = make_table(components, seed=seed, source=f"<preset {name}>", **kw)
     truth["preset"] = name
     return table, truth

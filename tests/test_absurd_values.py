@@ -215,7 +215,7 @@ def _fit_record(path: str, error: dict) -> FitRecord:
                 "converged": False, "result": "nonfinite", "steps": 3, "time_s": 0.1,
                 "starts": 1, "samples": {"used": 1, "usable": 1, "measured": 1, "dropped": {
                     "unmeasured": 0, "nonfinite": 0, "below_horizon": 0}}}
-    return FitRecord(path=path, model="lambert", sha256="1", options=FitOptions().to_dict(),
+    return FitRecord(path=path, model="lambert", sha256="1", options=FitOptions().fit_keywords(),
                      status="ok", fit=fit_dict)
 
 
@@ -237,7 +237,7 @@ def test_batch_journal_is_strict_and_a_null_metric_is_nan_in_hdf5(tmp_path):
     assert got["rmse_cos"] == 0.25
     attrs = read_attrs(out)
     assert strict_loads(attrs["models"]) == ["lambert"]
-    assert strict_loads(attrs["options"]) == FitOptions().to_dict()
+    assert strict_loads(attrs["options"]) == FitOptions().fit_keywords()
 
 
 def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):

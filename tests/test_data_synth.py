@@ -79,3 +79,35 @@ def test_presets_make_valid_tables(name, tmp_path):
     table, truth = make_preset(name)
     assert truth["preset"] == name and table.n_measured > 1000
     assert np.all(np.isfinite(table.rgb))
+
+
+def test_cli_preset_applies_noise_missing_and_params(tmp_path):
+    out = tmp_path / "p.binary"
+    r = run("data_synth", str(out), "--preset", "near-mirror", "--noise", "0.1",
+            "--missing", "0.3", "--param", "alpha=0.05", "--seed", "2")
+    assert r.returncode == 0, r.stderr
+    truth = json.loads((tmp_path / "p.binary.json").read_text())
+    assert truth["preset"] == "near-mirror"
+    assert truth["noise"] == 0.1 and truth["missing"] == 0.3  # the sidecar tells the truth
+    assert truth["params"]["alpha"] == 0.05 and truth["params"]["f0"] == 0.9  # rest: preset's
+    t = merl.read(out)
+    above = bin_grid().above_horizon.reshape(t.mask.shape)
+    assert 0.28 < 1 - t.n_measured / above.sum() < 0.32  # --missing applied
+    clean, _ = make_preset("near-mirror", params={"alpha": 0.05})
+    keep = t.mask & (clean.rgb[0] > 1e-3)
+    ratio = t.rgb[:, keep] / clean.rgb[:, keep]
+    assert 0.08 < ratio.std() < 0.12  # --noise applied
+
+
+def test_preset_keeps_its_own_degradations_unless_told():
+    _, truth = make_preset("noisy-missing")
+    assert truth["noise"] == 0.2 and truth["missing"] == 0.5
+    _, truth = make_preset("noisy-missing", noise=0.0)
+    assert truth["noise"] == 0.0 and truth["missing"] == 0.5
+
+
+def test_cli_refuses_a_param_it_cannot_place_in_a_two_lobe_preset(tmp_path):
+    r = run("data_synth", str(tmp_path / "x.binary"), "--preset", "two-lobes",
+            "--param", "alpha=0.1")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "two-lobes" in r.stderr and "--param" in r.stderr

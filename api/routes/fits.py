@@ -15,15 +15,12 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 from fastapi.concurrency import run_in_threadpool
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
 
-from brdffit import models
-from brdffit.angles import N_PHI_D, N_THETA_D, N_THETA_H
-from brdffit.fitting import PRECISIONS, SOLVERS
+from brdffit import models, options
+from brdffit.errors import FitInputError
 from brdffit.plots import KINDS
-from brdffit.sampling import DEFAULT_SAMPLES
 from brdffit.scene import Scene, SceneError
-from brdffit.selection import DEFAULT_TOLERANCE
 
 from .. import tasks
 from ..deps import QueueDep, RunnerDep, StoreDep, require_token
@@ -37,33 +34,34 @@ router = APIRouter(prefix="/v1/fits", tags=["fits"], dependencies=[Depends(requi
                    responses=ERROR_RESPONSES)
 
 JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="the id POST /v1/fits gave")]
-N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
 PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[misc]
 
 
-class FitOptions(BaseModel):
-    """Keywords of ``brdffit.fit`` (same names, same defaults as ``brdffit fit``)."""
+def _contract_field(name: str):
+    """``(annotation, Field)`` of one ``brdffit.options.FitOptions`` field: the
+    request schema's type, default, bounds and description are the library's."""
+    default, opt = options.spec(name)
+    annotation = Literal[opt.choices] if opt.choices is not None else opt.kind
+    if opt.none is not None:
+        annotation = annotation | None
+    description = opt.doc + (f"; null for {opt.none}" if opt.none is not None else "")
+    return annotation, Field(default, ge=opt.least, gt=opt.above, le=opt.most,
+                             description=description)
 
-    model_config = ConfigDict(extra="forbid")
 
-    solver: Literal[SOLVERS] = "lm"  # type: ignore[valid-type]
-    samples: int | None = Field(
-        DEFAULT_SAMPLES, ge=64, le=N_BINS,
-        description="bins the solver sees; null for every bin (slow)",
-    )
-    precision: Literal[tuple(PRECISIONS)] = "float64"  # type: ignore[valid-type]
-    starts: int = Field(2, ge=1, le=32, description="solver starts, the best kept")
-    max_steps: int = Field(256, ge=1, le=10_000)
-    seed: int = Field(0, ge=0, le=2**32 - 1, description="subsample seed")
-    tolerance: float = Field(
-        DEFAULT_TOLERANCE, ge=0, le=10,
-        description="model 'auto': the cheapest model within this log_rmse of the best "
-        "(in quadrature) is chosen (docs/selection.md)",
-    )
-    budget: float | None = Field(
-        None, gt=0, le=10, description="model 'auto': the cheapest model under this log_rmse"
-    )
+# The model is the request's own field (one name, a list, or 'auto'); every
+# other option is FitOptions'.
+_ContractOptions = create_model(
+    "_ContractOptions", __config__=ConfigDict(extra="forbid"),
+    **{name: _contract_field(name) for name in options.names() if name != "model"},
+)
+
+
+class FitOptions(_ContractOptions):
+    """``brdffit.options.FitOptions`` but the model (same names, defaults and ranges
+    as ``brdffit fit``), and a scene."""
+
     scene: dict | None = Field(
         None, description="only the directions a scene uses count (docs/selection.md): "
         "preset, max_theta_i, max_theta_o, pairs, lights, views, spread, name",
@@ -81,13 +79,23 @@ class FitOptions(BaseModel):
                 raise ValueError(str(e)) from None
         return v
 
+    @model_validator(mode="after")
+    def _valid_for_the_library(self) -> FitOptions:
+        # Pydantic has checked the bounds it was given; the library has the last word.
+        try:
+            options.FitOptions(**self.model_dump(exclude={"scene"}))
+        except FitInputError as e:
+            raise ValueError(str(e)) from None
+        return self
+
 
 class FitRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     table_id: str = Field(pattern=r"^[0-9a-f]{64}$", description="from POST /v1/tables")
     model: str | list[str] = Field(
-        "ggx", description="a model name (GET /v1/models) or a list of them: each is fitted, "
+        options.spec("model")[0],
+        description="a model name (GET /v1/models) or a list of them: each is fitted, "
         "the best (lowest log_rmse) is the job's `result`; or 'auto': the candidates are "
         "fitted and the cheapest good enough is the `result`, its `extra.selection` says why",
     )
@@ -96,7 +104,7 @@ class FitRequest(BaseModel):
     @field_validator("model")
     @classmethod
     def _known_models(cls, v: str | list[str]) -> str | list[str]:
-        if v == "auto":
+        if v == options.AUTO:
             return v
         names = [v] if isinstance(v, str) else v
         if not names:

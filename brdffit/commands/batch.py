@@ -6,11 +6,11 @@ import os
 import sys
 
 from .. import jsonout
-from ..batch import FitOptions, run_batch
+from ..batch import run_batch
 from ..batch_progress import format_duration
 from ..batch_report import format_ranking, plot_summary, rank
-from ..selection import DEFAULT_TOLERANCE
-from .fit import add_fit_options
+from ..options import FitOptions
+from .fit import add_fit_options, add_option_arguments, options_from_args
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
 
@@ -34,7 +34,6 @@ def register(sub) -> None:
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of local workers")
     add_fit_options(p)
-    p.add_argument("--seed", type=int, default=0, help="subsample seed")
     p.add_argument("--refit", action="store_true",
                    help="fit again what the file already holds (e.g. after a model changed)")
     p.add_argument("--checkpoint", type=float, default=10.0, metavar="SECONDS",
@@ -48,9 +47,7 @@ def register(sub) -> None:
     r.add_argument("--png", help="summary figure (default: RESULTS without .h5 + .summary.png)")
     r.add_argument("--no-png", action="store_true", help="print only")
     r.add_argument("--json", action="store_true", help="print the ranking as JSON")
-    r.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE,
-                   help="the 'auto' column: cheapest model within this log_rmse of the best "
-                        f"(default {DEFAULT_TOLERANCE}, docs/selection.md)")
+    add_option_arguments(r, ["tolerance"])  # the 'auto' column, as `fit --model auto`
     r.set_defaults(run=run_report)
 
 
@@ -66,8 +63,7 @@ def _models(text: str) -> list[str]:
 
 
 def run(args) -> int:
-    options = FitOptions(solver=args.solver, samples=args.samples, precision=args.precision,
-                         starts=args.starts, max_steps=args.max_steps, seed=args.seed)
+    options = options_from_args(args)
     s = run_batch(args.inputs, args.models, args.out, options=options, workers=args.workers,
                   scheduler=args.scheduler, refit=args.refit, progress=not args.quiet,
                   checkpoint_s=args.checkpoint)
@@ -88,6 +84,7 @@ def run(args) -> int:
 
 
 def run_report(args) -> int:
+    FitOptions(tolerance=args.tolerance)  # the range every shell checks
     ranking = rank(args.results)
     if args.json:
         # A model with no successful fit has mean and median NaN: null in JSON.

@@ -2,42 +2,74 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
-from .. import jsonout, merl
-from ..fitting import DEFAULT_STARTS, PRECISIONS, SOLVERS, FitResult
-from ..sampling import DEFAULT_SAMPLES
+from .. import jsonout, merl, options
+from ..fitting import FitResult
+from ..options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
 from ..scene import PRESETS as SCENE_PRESETS
 from ..scene import Scene, fit_in_scene
-from ..selection import DEFAULT_CANDIDATES, DEFAULT_TOLERANCE, format_selection, select
+from ..selection import DEFAULT_CANDIDATES, format_selection, select
+
+
+def add_option_arguments(p, names) -> None:
+    """A ``--flag`` for each of ``brdffit.options.FitOptions``' fields ``names``.
+
+    Type, choices, default and help come from the field, so the command line
+    cannot drift from the library; ranges are checked where every shell checks
+    them, when the :class:`FitOptions` is built (:func:`options_from_args`).
+    """
+    for name in names:
+        default, opt = options.spec(name)
+        shown = opt.cli_none if default is None and opt.cli_none else default
+        valid = "" if opt.choices else opt.describe_range(opt.cli_none or "absent") + "; "
+        help_text = f"{opt.doc} ({valid}default {'none' if shown is None else shown})"
+        kw = {"default": default, "help": help_text.replace("%", "%%")}
+        if opt.choices is not None:
+            kw["choices"] = opt.choices
+        else:
+            kw["type"] = _value_parser(name, opt)
+        p.add_argument(f"--{name.replace('_', '-')}", **kw)
+
+
+def _value_parser(name: str, opt: options.Option):
+    def parse(text: str):
+        if opt.cli_none is not None and text == opt.cli_none:
+            return None
+        try:
+            return opt.kind(text)
+        except ValueError:
+            wanted = {int: "an integer", float: "a number", str: "a string"}[opt.kind]
+            alt = f" or {opt.cli_none!r}" if opt.cli_none else ""
+            raise argparse.ArgumentTypeError(
+                f"--{name.replace('_', '-')} wants {wanted}{alt}, got {text!r}") from None
+
+    parse.__name__ = name  # argparse names the option by it in its messages
+    return parse
 
 
 def add_fit_options(p) -> None:
     """The options of ``brdffit.fit`` (shared by ``fit`` and ``batch``)."""
-    p.add_argument("--solver", choices=SOLVERS, default="lm")
-    p.add_argument("--samples", type=_samples, default=DEFAULT_SAMPLES,
-                   help=f"bins the solver sees (default {DEFAULT_SAMPLES}; 'all' for every bin)")
-    p.add_argument("--precision", choices=list(PRECISIONS), default="float64")
-    p.add_argument("--starts", type=int, default=DEFAULT_STARTS,
-                   help="solver starts refined (best kept)")
-    p.add_argument("--max-steps", type=int, default=256)
+    add_option_arguments(p, FIT_KEYWORDS)
+
+
+def options_from_args(args) -> FitOptions:
+    """The :class:`FitOptions` of parsed arguments (the fields the parser has);
+    raises ``FitInputError`` for a value out of range."""
+    return FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)})
 
 
 def register(sub) -> None:
     p = sub.add_parser("fit", help="fit a model to a MERL .binary table")
     p.add_argument("table", help="path to a MERL .binary file")
-    p.add_argument("--model", default="ggx",
-                   help="model name (see `brdffit models`), or 'auto' to choose one")
+    add_option_arguments(p, ["model"])
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
     auto = p.add_argument_group("--model auto (docs/selection.md)")
-    auto.add_argument("--tolerance", type=float, default=DEFAULT_TOLERANCE,
-                      help="choose the cheapest model within this log_rmse of the best, in "
-                           f"quadrature (default {DEFAULT_TOLERANCE})")
-    auto.add_argument("--budget", type=float,
-                      help="choose the cheapest model with log_rmse under this budget")
+    add_option_arguments(auto, SELECTION_KEYWORDS)
     auto.add_argument("--candidates", type=lambda t: [c for c in t.split(",") if c],
                       default=list(DEFAULT_CANDIDATES),
                       help=f"comma-separated models (default {','.join(DEFAULT_CANDIDATES)})")
@@ -51,15 +83,6 @@ def register(sub) -> None:
     scene.add_argument("--max-theta-i", type=float, metavar="DEG", help="largest incidence angle")
     scene.add_argument("--max-theta-o", type=float, metavar="DEG", help="largest view angle")
     p.set_defaults(run=run)
-
-
-def _samples(text: str) -> int | None:
-    if text == "all":
-        return None
-    try:
-        return int(text)
-    except ValueError:
-        raise ValueError(f"--samples wants an integer or 'all', got {text!r}") from None
 
 
 def format_result(r: FitResult) -> str:
@@ -85,22 +108,17 @@ def format_result(r: FitResult) -> str:
 
 
 def run(args) -> int:
+    opts = options_from_args(args)  # refused before the table is read
     table = merl.read(args.table)
     scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
-    options = dict(solver=args.solver, samples=args.samples, precision=args.precision,
-                   starts=args.starts, max_steps=args.max_steps)
-    if args.model == "auto":
-        return _run_auto(args, table, scene, options)
-    result = fit_in_scene(table, args.model, scene, **options)
+    if opts.model == AUTO:
+        selection = select(table, args.candidates, scene=scene, mono_ks=args.mono_ks,
+                           **opts.selection_keywords(), **opts.fit_keywords())
+        return _report(args, table, selection.result, selection.to_dict(),
+                       format_selection(selection))
+    result = fit_in_scene(table, opts.model, scene, **opts.fit_keywords())
     return _report(args, table, result, result.to_dict(), format_result(result))
-
-
-def _run_auto(args, table, scene, options) -> int:
-    selection = select(table, args.candidates, tolerance=args.tolerance, budget=args.budget,
-                       scene=scene, mono_ks=args.mono_ks, **options)
-    return _report(args, table, selection.result, selection.to_dict(),
-                   format_selection(selection))
 
 
 def _report(args, table, result, as_dict: dict, as_text: str) -> int:

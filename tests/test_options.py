@@ -1,0 +1,241 @@
+"""One fit contract: the library's FitOptions, and every shell reading it.
+
+Each shell's defaults are read from the shell itself (the CLI's parsers, the
+service's request schema, the batch job's options), never from brdffit.options,
+so a shell that declares its own value fails here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import json
+import math
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from brdffit import FitInputError, FitResult, fit, merl, options
+from brdffit.cli import build_parser
+from brdffit.models import UnknownModelError
+from brdffit.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+
+from .cli_helpers import run
+
+
+def _library_defaults() -> dict:
+    return FitOptions().to_dict()
+
+
+# -- defaults: one declaration, every shell -------------------------------------------
+
+
+def test_fit_signature_and_select_take_the_contract_defaults():
+    from brdffit.selection import select
+
+    fit_sig = inspect.signature(fit).parameters
+    select_sig = inspect.signature(select).parameters
+    want = _library_defaults()
+    for name in (*FIT_KEYWORDS, "model"):
+        assert fit_sig[name].default == want[name], name
+    for name in SELECTION_KEYWORDS:
+        assert select_sig[name].default == want[name], name
+
+
+def test_defaults_are_the_library_constants():
+    # the named constants, not copies of their values: a retune moves every shell
+    from brdffit.fitting import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+    from brdffit.sampling import DEFAULT_SAMPLES
+
+    o = FitOptions()
+    assert (o.samples, o.starts, o.max_steps) == (DEFAULT_SAMPLES, DEFAULT_STARTS,
+                                                  DEFAULT_MAX_STEPS)
+
+
+def test_cli_fit_has_every_option_with_the_contract_default():
+    want = _library_defaults()
+    args = build_parser().parse_args(["fit", "t.binary"])
+    assert {n: getattr(args, n, "MISSING") for n in want} == want
+
+
+def test_cli_batch_has_every_fit_option_with_the_contract_default():
+    want = FitOptions().fit_keywords()
+    args = build_parser().parse_args(["batch", "d", "--models", "ggx", "--out", "o.h5"])
+    assert {n: getattr(args, n, "MISSING") for n in want} == want
+    report = build_parser().parse_args(["batch-report", "r.h5"])
+    assert report.tolerance == FitOptions().tolerance
+
+
+def test_api_request_schema_has_every_option_with_the_contract_default_and_range():
+    from api.routes.fits import FitOptions as RequestOptions
+    from api.routes.fits import FitRequest
+
+    want = _library_defaults()
+    got = RequestOptions().model_dump()
+    assert FitRequest.model_fields["model"].default == want.pop("model")
+    assert {n: got.get(n, "MISSING") for n in want} == want
+    schema = RequestOptions.model_json_schema()["properties"]
+    for name in want:
+        _, opt = options.spec(name)
+        prop = schema[name]
+        bounded = next(p for p in prop.get("anyOf", [prop]) if p.get("type") != "null")
+        assert bounded.get("minimum") == opt.least, name
+        assert bounded.get("exclusiveMinimum") == opt.above, name
+        assert bounded.get("maximum") == opt.most, name
+        assert set(bounded.get("enum", ())) == set(opt.choices or ()), name
+        assert ("anyOf" in prop) == (opt.none is not None), name
+
+
+def test_batch_options_are_the_library_options():
+    from brdffit import batch, batch_tasks
+
+    assert batch.FitOptions is FitOptions and batch_tasks.FitOptions is FitOptions
+    assert inspect.signature(batch.run_batch).parameters["options"].default is None
+
+
+def _edges(name: str):
+    """(valid, invalid) values at the ends of an option's range."""
+    _, opt = options.spec(name)
+    if opt.choices is not None:
+        return list(opt.choices), ["no-such-" + name]
+    step = 1 if opt.kind is int else 1e-9
+    valid, invalid = [], []
+    if opt.least is not None:
+        valid.append(opt.kind(opt.least))
+        invalid.append(opt.kind(opt.least - step))
+    if opt.above is not None:
+        valid.append(opt.above + step)
+        invalid.append(opt.kind(opt.above))
+    if opt.most is not None:
+        valid.append(opt.kind(opt.most))
+        invalid.append(opt.kind(opt.most + step))
+    return valid, invalid
+
+
+@pytest.mark.parametrize("name", [n for n in options.names() if n != "model"])
+def test_api_and_library_accept_and_refuse_the_same_values(name):
+    from api.routes.fits import FitOptions as RequestOptions
+
+    valid, invalid = _edges(name)
+    for v in valid:
+        FitOptions(**{name: v})
+        RequestOptions(**{name: v})
+    for v in invalid:
+        with pytest.raises(FitInputError):
+            FitOptions(**{name: v})
+        with pytest.raises(ValidationError):
+            RequestOptions(**{name: v})
+
+
+def test_options_refuse_bad_values_with_a_message():
+    for bad, words in [({"starts": 0}, "starts must be an integer in 1 .. 32"),
+                       ({"samples": 10}, "samples must be"), ({"seed": True}, "seed"),
+                       ({"tolerance": math.nan}, "tolerance"), ({"solver": "newton"}, "newton"),
+                       ({"budget": 0}, "budget")]:
+        with pytest.raises(FitInputError, match=words):
+            FitOptions(**bad)
+    with pytest.raises(UnknownModelError, match="unknown model 'nope'.*, or auto"):
+        FitOptions(model="nope")
+    with pytest.raises(FitInputError, match="unknown fit options"):
+        FitOptions.from_dict({"stars": 2})
+    assert FitOptions(model=AUTO, samples=None, budget=0.1).model == AUTO
+
+
+def test_cli_refuses_what_the_options_refuse(tmp_path):
+    r = run("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--starts", "0")
+    assert r.returncode == 2 and "starts must be an integer in 1 .. 32" in r.stderr
+    r = run("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--samples", "lots")
+    assert r.returncode == 2 and "--samples wants an integer or 'all'" in r.stderr
+
+
+# -- the batch's resume key ----------------------------------------------------------------
+
+
+def test_key_format_is_the_one_results_files_hold():
+    # The literal string earlier results files hold for these options: a change of
+    # format would make every finished fit look unfinished on resume.
+    o = FitOptions(solver="lm", samples=4096, precision="float32", starts=2, max_steps=100,
+                   seed=7, model="lambert", tolerance=0.01, budget=0.1)
+    assert o.key() == ('{"max_steps":100,"precision":"float32","samples":4096,"seed":7,'
+                       '"solver":"lm","starts":2}')
+    assert FitOptions(samples=None).key() == FitOptions.key_of(
+        {**FitOptions().fit_keywords(), "samples": None})
+    # a stored record from another range is still keyed, not refused
+    old = {"solver": "lm", "samples": 4096, "precision": "float64", "starts": 64,
+           "max_steps": 20_000, "seed": 0}
+    assert json.loads(FitOptions.key_of(old)) == old
+
+
+# -- one result: library, CLI, service, batch ---------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def noisy_table(tmp_path_factory):
+    from data_synth import make_table
+
+    # noise, so that the subsample (the seed) changes the fitted values
+    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]}, noise=0.05, seed=1)
+    path = tmp_path_factory.mktemp("contract") / "lambert.binary"
+    merl.write(path, table)
+    return path
+
+
+FAST = {"samples": 2048, "seed": 3}
+
+
+def test_library_cli_api_and_batch_results_carry_the_same_keys(noisy_table):
+    from api import tasks
+    from api.routes.fits import FitOptions as RequestOptions
+    from api.routes.fits import FitResultOut
+    from brdffit.batch_tasks import fit_table
+
+    path = str(noisy_table)
+    library = fit(merl.read(path), "lambert", **FAST)
+    keys = set(library.to_dict())
+    assert keys == {f.name for f in dataclasses.fields(FitResult)}
+
+    r = run("brdffit.cli", "fit", path, "--model", "lambert", "--json", "--samples", "2048",
+            "--seed", "3")
+    assert r.returncode == 0, r.stderr
+    cli = json.loads(r.stdout)
+
+    out = tasks.fit_models(path, "lambert.binary", ["lambert"],
+                           RequestOptions(**FAST).model_dump())
+    assert out["ok"], out
+    api = FitResultOut.model_validate(out["results"][0]).model_dump()
+
+    batch = fit_table(path, ["lambert"], FitOptions(**FAST).fit_keywords())["fits"][0]["fit"]
+
+    assert set(cli) == keys and set(api) == keys and set(batch) == keys
+    assert set(FitResultOut.model_fields) == keys  # the OpenAPI schema names them all
+    for other in (cli, api, batch):
+        np.testing.assert_allclose(other["params"]["kd"], library.params["kd"], rtol=1e-9)
+
+
+def test_fit_seed_reaches_the_fit(noisy_table):
+    path = str(noisy_table)
+    seed3 = fit(merl.read(path), "lambert", **FAST).params["kd"]
+    seed0 = fit(merl.read(path), "lambert", samples=2048, seed=0).params["kd"]
+    assert not np.allclose(seed3, seed0, rtol=1e-9), "the seed must change the subsample"
+    r = run("brdffit.cli", "fit", path, "--model", "lambert", "--json", "--samples", "2048",
+            "--seed", "0")
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_allclose(json.loads(r.stdout)["params"]["kd"], seed0, rtol=1e-9)
+
+
+# -- the docs state the defaults from the same source ---------------------------------------
+
+
+@pytest.mark.parametrize("doc", ["docs/fitting.md", "docs/service.md"])
+def test_docs_option_tables_are_generated_from_the_contract(doc):
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / doc).read_text()
+    blocks = re.findall(r"<!-- fit options: generated .*? style=(\w+) -->\n(.*?)\n<!-- end",
+                        text, re.S)
+    assert blocks, f"{doc} has no generated option table"
+    for style, table in blocks:
+        assert table == options.markdown_table(style), (
+            f"{doc} is out of date: run `python -m brdffit.options --docs {doc}`")
