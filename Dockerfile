@@ -21,7 +21,7 @@ COPY pyproject.toml README.md ./
 COPY brdffit ./brdffit
 COPY api ./api
 COPY data_synth ./data_synth
-RUN pip install . \
+RUN pip install '.[service]' \
     && useradd --system --uid 10001 --home-dir /nonexistent --shell /usr/sbin/nologin brdffit \
     && mkdir -p /data \
     && chown brdffit /data

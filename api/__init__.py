@@ -9,3 +9,7 @@
 - ``tasks``: the library calls that run inside a worker;
 - ``routes``: one module per resource, each with its schemas.
 """
+
+from brdffit import extras
+
+extras.require("service", "the brdffit service (the api package)")

@@ -84,7 +84,7 @@ def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:
 
 def warm_up() -> int:
     """Import the library (JAX, matplotlib) before the first job needs it."""
-    import brdffit  # noqa: F401
+    import brdffit.fitting  # noqa: F401  (import brdffit alone is lazy)
     import brdffit.plots  # noqa: F401
 
     return os.getpid()

@@ -29,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 
 from . import models
-from .batch_cluster import DaskRunner, connect
+from .batch_cluster import DaskRunner, connect, require_dask
 from .batch_progress import Progress
 from .batch_store import BatchStore
 from .batch_tasks import FitOptions, FitRecord, TableRecord, fit_table, now, worker_name
@@ -236,6 +236,8 @@ def run_batch(
     options = options or FitOptions()  # validated when it was built
     if not scheduler and (not isinstance(workers, int) or workers < 0):
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
+    if scheduler or workers:
+        require_dask()  # before the results file is created
     paths = find_tables(inputs)
     summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths))
     attrs = {

@@ -21,9 +21,9 @@ import logging
 import os
 from collections.abc import Iterator
 
-from . import models
+from . import extras, models
 from .batch_tasks import FitOptions, fit_one, raise_remote_error
-from .fitting import FitResult
+from .result import FitResult
 
 SCHEDULER_ENV = "BRDFFIT_DASK_SCHEDULER"
 #: XLA's CPU backend spreads one fit over every core it sees. Several worker
@@ -40,11 +40,18 @@ def local_worker_env(workers: int, environ=os.environ) -> dict[str, str]:
     return {}
 
 
+def require_dask() -> None:
+    """Raise :class:`brdffit.extras.MissingExtraError` unless Dask is installed."""
+    extras.require("batch", "a batch on Dask workers",
+                   hint="workers=0, or --workers 0, fits in this process without Dask")
+
+
 @contextlib.contextmanager
 def connect(workers: int = 1, scheduler: str | None = None,
             timeout_s: float = 30.0) -> Iterator:
     """A ``distributed.Client``: to ``scheduler`` if given, else to ``workers`` local
     worker processes, shut down on exit."""
+    require_dask()
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -89,6 +96,7 @@ class DaskRunner:
     """
 
     def __init__(self, address: str, *, timeout_s: float = 30.0):
+        extras.require("batch", f"a Dask runner ({SCHEDULER_ENV})")
         from distributed import Client
 
         self.address = address

@@ -15,7 +15,7 @@ import math
 import os
 from dataclasses import dataclass, field
 
-from . import models
+from . import extras, models
 from .batch_store import read_attrs, read_index
 from .selection import DEFAULT_TOLERANCE, choose
 
@@ -154,6 +154,7 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
 def plot_summary(r: Ranking, png: str | os.PathLike) -> str:
     """A two-panel PNG: the spread of each model's error over the tables, and how
     many tables each model fits best. Sized for ten tables or ten thousand."""
+    extras.require("plots", "the batch summary figure", hint="--no-png prints the ranking only")
     import matplotlib
 
     matplotlib.use("Agg")

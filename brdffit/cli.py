@@ -1,16 +1,17 @@
 """The ``brdffit`` command line: a thin shell over the library.
 
-Each subcommand lives in its own module under ``brdffit.commands`` with a
-``register(subparsers)`` function; this module finds them, parses, and turns
-brdffit's input errors into one-line messages and exit codes (never a traceback).
+Each subcommand lives in its own module under ``brdffit.commands`` with
+``add_arguments(parser)`` and ``run(args)``; this module builds the parser,
+parses, and turns brdffit's input errors into one-line messages and exit codes
+(never a traceback). Only the module of the command being run is imported, so
+``brdffit --help`` and ``brdffit models`` do not wait for what ``fit`` needs.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 import sys
+from collections.abc import Collection
 
 from . import commands
 from .errors import BrdffitError
@@ -19,7 +20,9 @@ EXIT_INPUT = 2  # bad input: malformed table, unknown model, bad option
 EXIT_INTERRUPTED = 130
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``brdffit`` parser with the arguments of the commands ``full`` (every
+    command when None); the others are listed with their summary only."""
     from . import __version__
 
     parser = argparse.ArgumentParser(
@@ -27,17 +30,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"brdffit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name):
-        importlib.import_module(f"{commands.__name__}.{info.name}").register(sub)
+    for name, summary in commands.COMMANDS.items():
+        p = sub.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
+        if full is None or name in full:
+            module = commands.load(name)
+            module.add_arguments(p)
+            p.set_defaults(run=module.run)
     return parser
 
 
+def _command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names: its first word that is not an option (the
+    top-level options take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:
+        parser = build_parser(full={_command(argv)})
+        args = parser.parse_args(argv)
         return int(args.run(args) or 0)
-    except BrdffitError as e:
+    except BrdffitError as e:  # includes a missing extra (brdffit.extras)
         print(f"brdffit: error: {e}", file=sys.stderr)
         return EXIT_INPUT
     except (ValueError, OSError) as e:  # bad option values, unreadable paths

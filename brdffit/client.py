@@ -20,9 +20,13 @@ import time
 from dataclasses import dataclass
 from datetime import datetime
 
-import httpx
+from . import extras
+from .result import FitResult  # plain data: a client process imports no JAX
 
-from .fitting import FitResult
+try:
+    import httpx
+except ModuleNotFoundError:
+    raise extras.MissingExtraError("brdffit.client", "client", ("httpx",)) from None
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 import functools
 import time
 import weakref
-from dataclasses import asdict, dataclass, field
 
 import equinox as eqx
 import jax
@@ -31,12 +30,13 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from . import initialisation, jsonout, merl, models, solvers
+from . import initialisation, merl, models, solvers
 from .errors import FitInputError
 from .grid import bin_grid
 from .loss import LossData, normal_equations, residuals, sum_squares
 from .merl import MerlTable
 from .models.frame import Frame, shading_frame
+from .result import FitResult
 from .sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from .solvers import NormalLevenbergMarquardt
 
@@ -281,51 +281,6 @@ def _every(data: LossData, k: int) -> LossData:
 
 
 # -- the result ----------------------------------------------------------------------
-
-
-@dataclass
-class FitResult:
-    """The outcome of one fit, failed or not, as plain Python values.
-
-    ``params`` uses the MODELS.md names: RGB parameters are lists of 3 floats,
-    shape parameters floats. ``error`` holds ``log_rmse`` (see ``brdffit.loss``)
-    and friends, on the full table. ``result`` is optimistix's result code name
-    (``"successful"``, ``"nonlinear_max_steps_reached"``, ...); ``converged`` is
-    True only for ``"successful"``.
-    """
-
-    model: str
-    params: dict[str, float | list[float]]
-    error: dict[str, float]
-    converged: bool
-    result: str
-    steps: int
-    time_s: float
-    samples: dict[str, int | dict[str, int]]
-    solver: str = "lm"
-    precision: str = "float64"
-    starts: int = 1
-    table: str | None = None
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def log_rmse(self) -> float:
-        return self.error["log_rmse"]
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    def to_json(self, **kw) -> str:
-        """Strict JSON (``brdffit.jsonout``): a metric that is NaN or inf here is null."""
-        return jsonout.dumps(self.to_dict(), **kw)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> FitResult:
-        return cls(**d)
-
-    def param_arrays(self) -> dict[str, np.ndarray]:
-        """Params as numpy arrays, ready for ``model(params, wi, wo)``."""
-        return {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
 
 
 def _plain(params: dict) -> dict:

@@ -27,17 +27,22 @@ from collections.abc import Callable
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from matplotlib.colors import to_rgb
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Circle
 
-from . import models
+from . import extras, models
+
+try:
+    from matplotlib.colors import to_rgb
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
+except ModuleNotFoundError:
+    raise extras.MissingExtraError("brdffit.plots", "plots", ("matplotlib",)) from None
+
 from .angles import N_PHI_D, N_THETA_D, N_THETA_H, bin_centres, half_diff_to_bins, half_diff_to_dirs
-from .fitting import FitResult
 from .grid import bin_grid
 from .merl import MerlTable
 from .render import LIGHTS, radiance, sphere_disc, tonemap
+from .result import FitResult
 
 KINDS = ("slices", "error_map", "spheres", "polar")
 

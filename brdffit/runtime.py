@@ -1,4 +1,9 @@
-"""Process-wide JAX settings, applied once when ``brdffit`` is imported.
+"""Process-wide JAX settings, applied once, before brdffit's first JAX code runs.
+
+:func:`configure` is called at the top of the modules that compute with JAX
+(``brdffit.models``, which ``fitting``, ``loss``, ``initialisation``, ``selection``,
+``render`` and ``plots`` import first), not by ``import brdffit``: a process that
+only reads tables or talks to the service (``brdffit.client``) never imports JAX.
 
 - float64 on: a MERL table spans ~6 decades and a near-mirror lobe's parameters
   are resolved only in double precision (float32 is opt-in per fit, where the
@@ -10,8 +15,6 @@
 from __future__ import annotations
 
 import os
-
-import jax
 
 _configured = False
 
@@ -29,6 +32,8 @@ def configure() -> None:
     if _configured:
         return
     _configured = True
+    import jax
+
     jax.config.update("jax_enable_x64", True)
     cache = cache_dir()
     if cache:

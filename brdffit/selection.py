@@ -39,11 +39,11 @@ import numpy as np
 
 from . import models
 from .errors import FitInputError
-from .fitting import FitResult
 from .merl import MerlTable
 from .models.mono_ks import MonoKs, specular_colour_specs
 from .options import DEFAULT_TOLERANCE, FIT_KEYWORDS
 from .render import SphereReference
+from .result import FitResult
 from .scene import Scene, fit_in_scene
 
 DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")

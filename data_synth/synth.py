@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-import brdffit  # noqa: F401  (JAX runtime settings: float64)
+# brdffit.models switches float64 on (brdffit.runtime) before any table is rendered
 from brdffit import jsonout, merl, models
 from brdffit.grid import bin_grid
 

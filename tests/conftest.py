@@ -1,4 +1,4 @@
-"""Shared fixtures. float64 is on for every test (brdffit's import switches it on)."""
+"""Shared fixtures. float64 is on for every test (brdffit's JAX modules switch it on)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,6 @@ os.environ.setdefault(
 
 import jax  # noqa: E402
 
-import brdffit  # noqa: E402,F401
+import brdffit.fitting  # noqa: E402,F401
 
-assert jax.config.jax_enable_x64, "brdffit must switch float64 on at import"
+assert jax.config.jax_enable_x64, "brdffit.fitting must switch float64 on at import"

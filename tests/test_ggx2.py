@@ -9,7 +9,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import brdffit  # noqa: F401  (x64)
 from brdffit import fit, initialisation, models
 from brdffit.models.base import KD, KS
 from brdffit.models.ggx import GGX

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .. import jsonout, merl, options
-from ..fitting import FitResult
+from .. import extras, jsonout, merl, options
 from ..options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from ..result import FitResult
 from ..scene import PRESETS as SCENE_PRESETS
 from ..scene import Scene, fit_in_scene
 from ..selection import DEFAULT_CANDIDATES, format_selection, select
@@ -60,8 +60,7 @@ def options_from_args(args) -> FitOptions:
     return FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)})
 
 
-def register(sub) -> None:
-    p = sub.add_parser("fit", help="fit a model to a MERL .binary table")
+def add_arguments(p) -> None:
     p.add_argument("table", help="path to a MERL .binary file")
     add_option_arguments(p, ["model"])
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -82,7 +81,6 @@ def register(sub) -> None:
                        help="largest incidence and view angle (degrees)")
     scene.add_argument("--max-theta-i", type=float, metavar="DEG", help="largest incidence angle")
     scene.add_argument("--max-theta-o", type=float, metavar="DEG", help="largest view angle")
-    p.set_defaults(run=run)
 
 
 def format_result(r: FitResult) -> str:
@@ -109,6 +107,8 @@ def format_result(r: FitResult) -> str:
 
 def run(args) -> int:
     opts = options_from_args(args)  # refused before the table is read
+    if args.plots:
+        extras.require("plots", "brdffit fit --plots")  # before the fit, not after
     table = merl.read(args.table)
     scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)

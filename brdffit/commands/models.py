@@ -7,10 +7,8 @@ import sys
 from .. import jsonout, models
 
 
-def register(sub) -> None:
-    p = sub.add_parser("models", help="list the models with their parameters and ranges")
+def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.set_defaults(run=run)
 
 
 def describe() -> list[dict]:

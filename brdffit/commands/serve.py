@@ -6,9 +6,10 @@ flags here override the ones a command line is expected to set.
 
 from __future__ import annotations
 
+from .. import extras
 
-def register(sub) -> None:
-    p = sub.add_parser("serve", help="run the REST API (fits in worker processes)")
+
+def add_arguments(p) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1; 0.0.0.0 in a container)")
     p.add_argument("--port", type=int, default=8000)
@@ -16,10 +17,10 @@ def register(sub) -> None:
     p.add_argument("--workers", type=int, help="fit worker processes (env BRDFFIT_WORKERS)")
     p.add_argument("--log-level", default="info",
                    choices=["critical", "error", "warning", "info", "debug"])
-    p.set_defaults(run=run)
 
 
 def run(args) -> int:
+    extras.require("service", "brdffit serve")
     import logging
 
     import uvicorn

@@ -5,17 +5,23 @@ A new model is one module plus one line in ``REGISTRY``.
 
 from __future__ import annotations
 
-from ..errors import BrdffitError
-from .base import AbstractBRDFModel, AbstractLobeModel, Params, ParamSpec
-from .beckmann import Beckmann
-from .blinn_phong import BlinnPhong
-from .ggx import GGX
-from .ggx2 import GGX2
-from .lambert import Lambert
-from .mono_ks import SUFFIX as _MONO
-from .mono_ks import MonoKs, specular_colour_specs
-from .oren_nayar import OrenNayar
-from .phong import Phong
+from .. import runtime
+
+# float64 and the compile cache before any model (or anything that imports one:
+# the fit, the loss, the renders) touches JAX
+runtime.configure()
+
+from ..errors import BrdffitError  # noqa: E402
+from .base import AbstractBRDFModel, AbstractLobeModel, Params, ParamSpec  # noqa: E402
+from .beckmann import Beckmann  # noqa: E402
+from .blinn_phong import BlinnPhong  # noqa: E402
+from .ggx import GGX  # noqa: E402
+from .ggx2 import GGX2  # noqa: E402
+from .lambert import Lambert  # noqa: E402
+from .mono_ks import SUFFIX as _MONO  # noqa: E402
+from .mono_ks import MonoKs, specular_colour_specs  # noqa: E402
+from .oren_nayar import OrenNayar  # noqa: E402
+from .phong import Phong  # noqa: E402
 
 #: Ordered cheapest to richest.
 REGISTRY: dict[str, AbstractBRDFModel] = {
