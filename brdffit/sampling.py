@@ -1,6 +1,6 @@
 """Which bins a fit looks at, and with what weight.
 
-A fit sees a fixed-size set of bins (``samples``, default 8192) drawn from the
+A fit sees a fixed-size set of bins (``samples``, default 16384) drawn from the
 measured bins above the horizon, stratified by theta_h row: every one of the 90
 rows gets an equal share, so the few rows that hold a near-mirror peak are as
 well represented as the broad diffuse rows. Each chosen bin carries its
@@ -21,10 +21,12 @@ from .angles import N_PHI_D, N_THETA_D, N_THETA_H
 from .grid import bin_grid
 from .merl import MerlTable
 
-#: bench/results/speed.md: 8k bins land within 0.1% of the full-table optimum's
-#: log_rmse on the noisy benchmark tables, and the near-mirror lobe is still
-#: resolved (90 rows, ~90 bins each); 65k buys nothing measurable at 2x the cost.
-DEFAULT_SAMPLES = 8192
+#: Chosen on the 100 real MERL materials (bench/results/real_materials_sweep.md):
+#: 16k bins put blinn_phong, beckmann and ggx within 1.01x of the best-effort
+#: full-table optimum on 100 of 100 and ggx2 on 99; 8k misses on 1-2 per model
+#: (the subsample's optimum, not the solver, is what is off), 32k buys nothing
+#: more, and more starts at 8k buy nothing at all.
+DEFAULT_SAMPLES = 16384
 
 
 @dataclass(frozen=True)
