@@ -17,9 +17,11 @@ class FitResult:
 
     ``params`` uses the MODELS.md names: RGB parameters are lists of 3 floats,
     shape parameters floats. ``error`` holds ``log_rmse`` (see ``brdffit.loss``)
-    and friends, on the full table. ``result`` is optimistix's result code name
-    (``"successful"``, ``"nonlinear_max_steps_reached"``, ...); ``converged`` is
-    True only for ``"successful"``.
+    and friends, on the full table. ``result`` says how the solve ended
+    (``brdffit.solvers.STATUS_NAMES``): ``"successful"`` only where the optimality
+    test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
+    ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
+    ``"successful"``.
     """
 
     model: str
