@@ -244,3 +244,24 @@ def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_pa
     assert "auto" in format_ranking(rank(out))
     assert cli.main(["batch-report", str(out), "--json", "--no-png"]) == 0
     assert json.loads(capsys.readouterr().out)["tables"][0]["auto"] == "ggx"
+
+
+def test_an_unconverged_candidate_is_refitted_and_the_reason_says_so(monkeypatch):
+    """gold-metallic-paint's GGX needs ~30 steps: with 2 (and 8 on the refit) it
+    cannot converge, and a choice resting on it must say so."""
+    import brdffit.selection as selection_module
+    from data_synth import nbrdf
+
+    calls = []
+    real_fit_in_scene = selection_module.fit_in_scene
+
+    def counting(table, m, scene, **kw):
+        calls.append((m.name, kw.get("max_steps"), kw.get("starts")))
+        return real_fit_in_scene(table, m, scene, **kw)
+
+    monkeypatch.setattr(selection_module, "fit_in_scene", counting)
+    sel = select(nbrdf.make_table("gold-metallic-paint"), ("lambert", "ggx"), max_steps=2)
+    ggx = next(r for r in sel.ranking if r["model"] == "ggx")
+    assert not ggx["converged"] and ggx["result"] == "nonlinear_max_steps_reached"
+    assert ("ggx", 8, 4) in calls  # refitted with 4x the steps and 4 starts
+    assert "ggx did not converge (nonlinear_max_steps_reached)" in sel.reason
