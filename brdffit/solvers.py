@@ -182,12 +182,17 @@ def decrement(jtj, jtr, bound_side) -> Float[Array, ""]:
     return free + gain
 
 
+def _verdict(loss, free_dec, pinned_gain, gtol, floor) -> Bool[Array, ""]:
+    dec = free_dec + pinned_gain
+    finite = jnp.isfinite(loss) & jnp.isfinite(dec)
+    return finite & ((dec <= gtol * loss) | (loss <= floor))
+
+
 def is_optimal(loss, jtj, jtr, bound_side, gtol, floor) -> Bool[Array, ""]:
     """The optimality test: a decrement below ``gtol`` of the loss, or a loss below
     ``floor`` (an exact fit, see :func:`exact_fit_floor`)."""
-    dec = decrement(jtj, jtr, bound_side)
-    finite = jnp.isfinite(loss) & jnp.isfinite(dec)
-    return finite & ((dec <= gtol * loss) | (loss <= floor))
+    _, free_dec, gain = split_decrement(jtj, jtr, bound_side)
+    return _verdict(loss, free_dec, gain, gtol, floor)
 
 
 class _LMState(eqx.Module):
@@ -198,6 +203,9 @@ class _LMState(eqx.Module):
     nu: Float[Array, ""]
     stall: Array  # consecutive accepted steps that changed the loss by < ftol
     stop: Array  # RUNNING, OPTIMAL, STALLED or STUCK
+    # split_decrement at the current point, kept for the next step's use
+    pinned: Bool[Array, " p"]
+    free_dec: Float[Array, ""]
     result: optx.RESULTS
 
 
@@ -229,14 +237,17 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     def _bound_side(self, y, args, options):
         return (options or {}).get("bound_side", _no_bounds)(y, args)
 
-    def _optimal(self, loss, jtj, jtr, y, args, options):
+    def _assess(self, loss, jtj, jtr, y, args, options):
+        """(pinned, free decrement, optimal) at a point: one split_decrement serves
+        the stop test here and the next step's pinning."""
         floor = (options or {}).get("loss_floor", self.atol)
-        return is_optimal(loss, jtj, jtr, self._bound_side(y, args, options), self.gtol, floor)
+        pinned, free_dec, gain = split_decrement(jtj, jtr, self._bound_side(y, args, options))
+        return pinned, free_dec, _verdict(loss, free_dec, gain, self.gtol, floor)
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         loss, jtj, jtr = _residual_and_normal(fn, y, args, options)
         finite = jnp.isfinite(loss) & jnp.all(jnp.isfinite(jtr))
-        optimal = self._optimal(loss, jtj, jtr, y, args, options)
+        pinned, free_dec, optimal = self._assess(loss, jtj, jtr, y, args, options)
         dtype = loss.dtype
         return _LMState(
             loss=loss,
@@ -246,6 +257,8 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             nu=jnp.asarray(2.0, dtype),
             stall=jnp.asarray(0),
             stop=jnp.where(finite & optimal, OPTIMAL, RUNNING),
+            pinned=pinned,
+            free_dec=free_dec,
             result=optx.RESULTS.where(finite, optx.RESULTS.successful, optx.RESULTS.nonfinite),
         )
 
@@ -257,10 +270,9 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # the start), and once those have converged they head for their bound by
         # one full step per iteration (geometrically closer in value). Either
         # way they never shrink the free coordinates' step.
-        pinned, free_dec, _ = split_decrement(state.jtj, state.jtr, side)
-        settled = free_dec <= self.gtol * state.loss
-        outward = jnp.where(pinned & settled, self.max_step * side, 0.0).astype(flat.dtype)
-        delta = _damped_step(state.jtj, state.jtr, state.lam, pinned, outward)
+        settled = state.free_dec <= self.gtol * state.loss
+        outward = jnp.where(state.pinned & settled, self.max_step * side, 0.0).astype(flat.dtype)
+        delta = _damped_step(state.jtj, state.jtr, state.lam, state.pinned, outward)
         # Cap the step in the unconstrained space: a parameter with a tiny Jacobian
         # column (kd of a dark channel) would otherwise jump deep into the flat tail
         # of its softplus/sigmoid, where its column vanishes and it stays stuck.
@@ -286,7 +298,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         loss, jtj, jtr = (keep(a, b) for a, b in ((loss_new, state.loss), (jtj_new, state.jtj),
                                                    (jtr_new, state.jtr)))
         y_out = keep(y_new_flat, flat)
-        optimal = self._optimal(loss, jtj, jtr, unravel(y_out), args, options)
+        pinned, free_dec, optimal = self._assess(loss, jtj, jtr, unravel(y_out), args, options)
         no_progress = jnp.abs(actual) < self.ftol * jnp.abs(state.loss)
         stall = jnp.where(accept, jnp.where(no_progress, state.stall + 1, 0), state.stall)
         stalled = jnp.where(stall >= self.patience, STALLED, RUNNING)
@@ -299,6 +311,8 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             nu=nu,
             stall=stall,
             stop=stop,
+            pinned=pinned,
+            free_dec=free_dec,
             result=optx.RESULTS.successful,
         )
         return unravel(y_out), state, None
