@@ -11,7 +11,7 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     # Tables, the job database and cached plots; JAX's compile cache beside them,
     # so a restarted container does not compile its fits again.
     BRDFFIT_DATA_DIR=/data \
-    BRDFFIT_JAX_CACHE=/data/jax-cache \
+    BRDFFIT_CACHE_DIR=/data/cache \
     # matplotlib wants a writable config dir; the image's home is not one.
     MPLCONFIGDIR=/tmp/matplotlib
 

@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
 
-.PHONY: demo test bench bench-real lint clean
+.PHONY: demo test test-quick bench bench-real lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -24,6 +24,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# unit and contract tests only (no subprocess, server or cluster): a few minutes
+test-quick: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not system"
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

@@ -8,10 +8,10 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from .jobs import JobQueue
-from .runner import AbstractRunner
-from .settings import Settings
-from .store import Store
+from api.jobs import JobQueue
+from api.runner import AbstractRunner
+from api.settings import Settings
+from api.store import Store
 
 
 def get_settings(request: Request) -> Settings:

@@ -16,9 +16,9 @@ import asyncio
 import contextlib
 import logging
 
-from . import tasks
-from .runner import AbstractRunner, WorkerLost
-from .store import JobRecord, Store
+from api import tasks
+from api.runner import AbstractRunner, WorkerLost
+from api.store import JobRecord, Store
 
 log = logging.getLogger("brdffit.api")
 

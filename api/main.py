@@ -15,13 +15,12 @@ from fastapi.openapi.utils import get_openapi
 from fastapi.routing import APIRoute
 
 import brdffit
-
-from . import errors
-from .jobs import JobQueue
-from .routes import docs, fits, health, models, tables
-from .runner import AbstractRunner, make_runner
-from .settings import Settings
-from .store import Store
+from api import errors
+from api.jobs import JobQueue
+from api.routes import docs, fits, health, models, tables
+from api.runner import AbstractRunner, make_runner
+from api.settings import Settings
+from api.store import Store
 
 log = logging.getLogger("brdffit.api")
 

@@ -20,8 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from . import tasks
-from .settings import Settings
+from api import tasks
+from api.settings import Settings
 
 log = logging.getLogger("brdffit.api")
 

@@ -17,7 +17,7 @@ import traceback
 
 
 def _read(table_path: str, source: str):
-    from brdffit import merl
+    from brdffit.io import merl
 
     table = merl.read(table_path)
     # Name it as the uploader did: the name shows in results and plot titles.
@@ -28,9 +28,9 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
     """Fit each model to the table: ``{"ok": True, "results": [FitResult dict, ...]}``
     or ``{"ok": False, "reason": "..."}``."""
     from brdffit import BrdffitError
+    from brdffit.fitting.scene import Scene, fit_in_scene
     from brdffit.jsonout import strict
     from brdffit.models import UnknownModelError
-    from brdffit.scene import Scene, fit_in_scene
 
     try:
         table = _read(table_path, source)
@@ -52,28 +52,20 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
 
 def _select(table, scene, rule: dict, options: dict) -> list[dict]:
     """``model="auto"``: every candidate's fit, the chosen one carrying the selection
-    (ranking, reason) in ``extra["selection"]``."""
+    (ranking, reason) in ``selection``."""
     from brdffit.jsonout import strict
     from brdffit.selection import DEFAULT_TOLERANCE, select
 
     tolerance = DEFAULT_TOLERANCE if rule["tolerance"] is None else rule["tolerance"]
     sel = select(table, tolerance=tolerance, budget=rule["budget"], scene=scene, **options)
-    results = []
-    for row in sel.ranking:
-        if row["model"] in sel.fits:
-            d = sel.fits[row["model"]].to_dict()
-            if row["model"] == sel.chosen:
-                summary = sel.to_dict()
-                summary.pop("fit")  # it is this very result
-                d["extra"]["selection"] = summary
-            results.append(strict(d))
-    return results
+    return [strict(sel.fits[row["model"]].to_dict())
+            for row in sel.ranking if row["model"] in sel.fits]
 
 
 def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:
-    """One plot of a finished fit: ``{"ok": True, "png": bytes}`` (``brdffit.plots``)
+    """One plot of a finished fit: ``{"ok": True, "png": bytes}`` (``brdffit.view.plots``)
     or ``{"ok": False, "reason": "..."}``."""
-    from brdffit import plots
+    from brdffit.view import plots
 
     try:
         return {"ok": True, "png": plots.render(kind, _read(table_path, source), result)}
@@ -84,8 +76,8 @@ def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:
 
 def warm_up() -> int:
     """Import the library (JAX, matplotlib) before the first job needs it."""
-    import brdffit.fitting  # noqa: F401  (import brdffit alone is lazy)
-    import brdffit.plots  # noqa: F401
+    import brdffit.fitting.pipeline  # noqa: F401  (import brdffit alone is lazy)
+    import brdffit.view.plots  # noqa: F401
 
     return os.getpid()
 

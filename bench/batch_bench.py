@@ -27,7 +27,7 @@ import time
 from datetime import UTC, datetime
 
 from brdffit import __version__, jsonout
-from brdffit.batch import FitOptions, run_batch
+from brdffit.batch.job import FitOptions, run_batch
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")

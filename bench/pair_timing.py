@@ -26,7 +26,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
     import brdffit
-    from brdffit import fit, merl
+    from brdffit import fit
+    from brdffit.io import merl
 
     cache = os.environ.get("BRDFFIT_BENCH_CACHE", ".bench-cache")
     directory = os.path.join(cache, "nbrdf")

@@ -20,7 +20,7 @@ disjoint materials can go side by side; ``--refresh-reference`` recomputes):
    JAX) on 32768 samples from that point;
 4. the reference is the lowest full-table ``log_rmse`` seen in 1-3.
 
-Every error is the full-table ``log_rmse`` (``brdffit.loss``). Reported per model:
+Every error is the full-table ``log_rmse`` (``brdffit.fitting.loss``). Reported per model:
 the share of materials within 1.01x of the reference, the worst ratio and its
 material, fits that say converged while above 1.05x, nested violations (ggx2 above
 1.001x ggx, oren_nayar above 1.001x lambert) and the median time per fit; and the
@@ -69,9 +69,10 @@ def _scipy_polish(table, model_name, params, samples=32768, seed=0):
     import jax
     from scipy.optimize import least_squares
 
-    from brdffit import fitting, models
-    from brdffit.loss import residuals
-    from brdffit.sampling import bin_weights, stratified_sample, usable_bins
+    from brdffit import models
+    from brdffit.fitting import pipeline as fitting
+    from brdffit.fitting.loss import residuals
+    from brdffit.fitting.sampling import bin_weights, stratified_sample, usable_bins
 
     m = models.get(model_name)
     weight = bin_weights(usable_bins(table).usable)
@@ -100,7 +101,7 @@ def _embed(child: str, parent_params: dict) -> dict:
 
 def reference_fit(table, model: str, default_params: dict, parent: dict | None) -> dict:
     from brdffit import fit
-    from brdffit.fitting import table_error
+    from brdffit.fitting.pipeline import table_error
 
     tried = {"default": (default_params, table_error(table, model, default_params)["log_rmse"])}
     multi = fit(table, model, starts=8, samples=32768, max_steps=500)
@@ -115,7 +116,7 @@ def reference_fit(table, model: str, default_params: dict, parent: dict | None) 
     polished = _scipy_polish(table, model, start)
     tried["scipy TRF polish"] = (polished, table_error(table, model, polished)["log_rmse"])
     how, (params, log_rmse) = min(tried.items(), key=lambda kv: kv[1][1])
-    from brdffit.fitting import _plain
+    from brdffit.fitting.pipeline import _plain
 
     return {"log_rmse": log_rmse, "params": _plain(params), "how": how,
             "tried": {k: v[1] for k, v in tried.items()}}
@@ -143,7 +144,8 @@ def save_json(path: str, obj) -> None:
 
 def run(materials, models, refresh: bool, log=print) -> dict:
     import brdffit
-    from brdffit import fit, merl
+    from brdffit import fit
+    from brdffit.io import merl
     from data_synth import nbrdf
 
     cache = cache_dir()
@@ -336,7 +338,8 @@ SWEEP_MODELS = ("blinn_phong", "beckmann", "ggx", "ggx2")
 def sweep(materials, log=print) -> list[dict]:
     """Share within 1.01x of the (cached) reference and time per fit for each of
     ``SWEEP``'s settings: the evidence behind the defaults."""
-    from brdffit import fit, merl
+    from brdffit import fit
+    from brdffit.io import merl
     from data_synth import nbrdf
 
     cache = cache_dir()

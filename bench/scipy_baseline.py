@@ -1,8 +1,8 @@
 """What a user would otherwise write: scipy.optimize.least_squares on the same loss.
 
-A numpy model (``tests/reference_merl.py``, written from MODELS.md), bounded
+A numpy model (``tests/reference_merl.py``, written from docs/models.md), bounded
 parameters in TRF, 2-point finite differences, over every usable bin of the table.
-The residual is brdffit's (``brdffit.loss``): sqrt(w) (log1p(f cos_i) - log1p(f_meas
+The residual is brdffit's (``brdffit.fitting.loss``): sqrt(w) (log1p(f cos_i) - log1p(f_meas
 cos_i)) with the same solid-angle weights, so both minimise the same function.
 """
 
@@ -14,10 +14,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from brdffit import models
-from brdffit.fitting import table_error
-from brdffit.grid import bin_grid
-from brdffit.merl import MerlTable
-from brdffit.sampling import bin_weights, usable_bins
+from brdffit.fitting.pipeline import table_error
+from brdffit.fitting.sampling import bin_weights, usable_bins
+from brdffit.io.grid import bin_grid
+from brdffit.io.merl import MerlTable
 from tests.reference_merl import evaluate
 
 

@@ -29,7 +29,7 @@ from datetime import UTC, datetime
 import jax
 
 from brdffit import __version__, fit, jsonout
-from brdffit.scene import Scene
+from brdffit.fitting.scene import Scene
 from brdffit.selection import DEFAULT_CANDIDATES, DEFAULT_TOLERANCE, choose, select
 from data_synth import Component, make_table
 from data_synth.synth import make_preset

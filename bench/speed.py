@@ -35,12 +35,13 @@ from datetime import UTC, datetime
 
 # Compile times are only measurable without the persistent cache; must precede
 # the first brdffit import.
-os.environ["BRDFFIT_JAX_CACHE"] = ""
+os.environ["BRDFFIT_CACHE_DIR"] = ""
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from brdffit import __version__, fit, jsonout, merl  # noqa: E402
+from brdffit import __version__, fit, jsonout
+from brdffit.io import merl  # noqa: E402
 from data_synth import Component, make_table  # noqa: E402
 from data_synth.synth import DEFAULT_PARAMS, write_table  # noqa: E402
 
@@ -48,7 +49,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")
 MODELS = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx")
 BUDGETS = (4096, 8192, 16384, 65536)
-DEFAULT_BUDGET = 8192  # brdffit.sampling.DEFAULT_SAMPLES
+DEFAULT_BUDGET = 8192  # brdffit.fitting.sampling.DEFAULT_SAMPLES
 
 HARD = {
     "near-mirror": [Component("ggx", {"kd": [0.02] * 3, "ks": [1.0] * 3, "alpha": 0.01,
@@ -193,7 +194,7 @@ def bench_second_process(path: str) -> dict:
     code = ("import time; t=time.perf_counter(); from brdffit import fit, merl; "
             f"r=fit(merl.read({path!r}), 'ggx'); print(time.perf_counter()-t, r.log_rmse)")
     cache = tempfile.mkdtemp(prefix="brdffit-jax-cache-")
-    env = dict(os.environ, BRDFFIT_JAX_CACHE=cache)
+    env = dict(os.environ, BRDFFIT_CACHE_DIR=cache)
     out = {}
     for label in ("cold_cache", "warm_cache", "warm_cache_again"):
         t0 = time.perf_counter()

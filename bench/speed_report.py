@@ -9,7 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from brdffit.sampling import DEFAULT_SAMPLES
+from brdffit.fitting.sampling import DEFAULT_SAMPLES
 
 TARGETS_MS = 150.0
 #: The full-table error is evaluated in float32: two fits whose log_rmse differ by

@@ -1,6 +1,8 @@
 """brdffit: fit analytic BRDF models to measured MERL tables.
 
-    from brdffit import fit, merl
+    from brdffit import fit
+
+    from brdffit.io import merl
     result = fit(merl.read("gold-metallic-paint.binary"), "ggx")
     print(result.params, result.log_rmse)
 
@@ -16,17 +18,17 @@ from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-# public name -> the module that defines it (a module's own name: the module itself)
+# public name -> the module that defines it
 _LAZY = {
     "BrdffitError": "errors",
     "FitInputError": "errors",
     "MerlFormatError": "errors",
-    "FitResult": "result",
-    "MerlTable": "merl",
-    "fit": "fitting",
-    "merl": "merl",
-    "models": "models",
+    "FitResult": "fitting.result",
+    "MerlTable": "io.merl",
+    "fit": "fitting.pipeline",
 }
+# public name -> the module it is
+_MODULES = {"merl": "io.merl", "models": "models"}
 
 __all__ = [
     "BrdffitError",
@@ -40,21 +42,24 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from . import merl, models
-    from .errors import BrdffitError, FitInputError, MerlFormatError
-    from .fitting import fit
-    from .merl import MerlTable
-    from .result import FitResult
+    from brdffit import models
+    from brdffit.errors import BrdffitError, FitInputError, MerlFormatError
+    from brdffit.fitting.pipeline import fit
+    from brdffit.fitting.result import FitResult
+    from brdffit.io import merl
+    from brdffit.io.merl import MerlTable
 
 
 def __getattr__(name: str):
-    if name not in _LAZY:
+    if name in _MODULES:
+        value = importlib.import_module(f"{__name__}.{_MODULES[name]}")
+    elif name in _LAZY:
+        value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    module = importlib.import_module(f"{__name__}.{_LAZY[name]}")
-    value = module if name == _LAZY[name] else getattr(module, name)
     globals()[name] = value  # the next access skips __getattr__
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | set(_MODULES))

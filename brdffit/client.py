@@ -20,8 +20,8 @@ import time
 from dataclasses import dataclass
 from datetime import datetime
 
-from . import extras
-from .result import FitResult  # plain data: a client process imports no JAX
+from brdffit import extras
+from brdffit.fitting.result import FitResult  # plain data: a client process imports no JAX
 
 try:
     import httpx
@@ -93,8 +93,8 @@ class FitJob:
     @property
     def selection(self) -> dict | None:
         """For a ``model="auto"`` job once done: the ranking, the choice and its reason
-        (``brdffit.selection.Selection.to_dict()``); else None."""
-        return self.result.extra.get("selection") if self.result else None
+        (``brdffit.selection.Selection.summary()``); else None."""
+        return self.result.selection if self.result else None
 
     @classmethod
     def from_json(cls, d: dict) -> FitJob:
@@ -173,7 +173,7 @@ class Client:
         return TableInfo.from_json(self._request("GET", f"/v1/tables/{table_id}").json())
 
     def fit(self, table_id: str, model: str | list[str] | None = None, **options) -> FitJob:
-        """Queue a fit; ``options`` are ``brdffit.options.FitOptions``' (solver,
+        """Queue a fit; ``options`` are ``brdffit.fitting.options.FitOptions``' (solver,
         samples, precision, starts, max_steps, seed). Returns at once: see :meth:`wait`.
 
         ``model`` and every option left out take the server's defaults, which are
@@ -228,7 +228,7 @@ class Client:
 
     def plot(self, job: JobRef, kind: str, model: str | None = None) -> bytes:
         """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,
-        ``spheres`` or ``polar`` (see ``brdffit.plots``)."""
+        ``spheres`` or ``polar`` (see ``brdffit.view.plots``)."""
         params = {"model": model} if model else None
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
                              params=params).content

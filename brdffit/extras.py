@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 
-from .errors import BrdffitError
+from brdffit.errors import BrdffitError
 
 #: extra -> the modules it provides (the import names of pyproject.toml's
 #: optional-dependencies; tests/test_light_imports.py checks the two agree)

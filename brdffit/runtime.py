@@ -1,46 +1,86 @@
-"""Process-wide JAX settings, applied once, before brdffit's first JAX code runs.
+"""How brdffit runs JAX, without changing the caller's JAX.
 
-:func:`configure` is called at the top of the modules that compute with JAX
-(``brdffit.models``, which ``fitting``, ``loss``, ``initialisation``, ``selection``,
-``render`` and ``plots`` import first), not by ``import brdffit``: a process that
-only reads tables or talks to the service (``brdffit.client``) never imports JAX.
-
-- float64 on: a MERL table spans ~6 decades and a near-mirror lobe's parameters
-  are resolved only in double precision (float32 is opt-in per fit, where the
-  stability suite shows it is safe).
-- a persistent compilation cache, so a second process reuses the compiled fits
-  of the first (``BRDFFIT_JAX_CACHE`` to move it, empty to switch it off).
+- **float64, scoped.** A MERL table spans ~6 decades and a near-mirror lobe's
+  parameters are resolved only in double precision, so brdffit's own entry
+  points (``fit``, ``select``, the renders, the plots, the synthetic tables) run
+  their JAX work inside :func:`float64`: ``jax.enable_x64`` for that call only.
+  Importing brdffit, or fitting with it, leaves ``jax_enable_x64`` as the caller
+  set it. Evaluating a model directly (``model(params, wi, wo)``) computes in the
+  caller's precision; wrap it in ``with brdffit.runtime.float64():`` for double.
+- **One cache directory**, created on first use, never on import:
+  ``$BRDFFIT_CACHE_DIR`` or ``$XDG_CACHE_HOME/brdffit`` (``~/.cache/brdffit``); an
+  empty ``BRDFFIT_CACHE_DIR`` switches caching off. It holds the MERL bin grid
+  (``merl-grid-v1.npz``, ~140 MB, ~20x faster than recomputing it in a new
+  process) and, under ``jax/``, JAX's persistent compilation cache, so a second
+  process reuses the compiled fits of the first. The compilation cache is only
+  switched on where the caller has not chosen one of their own. Both are logged
+  (logger ``brdffit``, level INFO) when first used.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import logging
 import os
+from collections.abc import Callable, Iterator
+from typing import TypeVar
 
-_configured = False
+log = logging.getLogger("brdffit")
+F = TypeVar("F", bound=Callable)
+
+_compilation_cache_checked = False
 
 
 def cache_dir() -> str | None:
-    """brdffit's on-disk cache (JAX's compiled code, the bin grid), or None if off."""
-    path = os.environ.get(
-        "BRDFFIT_JAX_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "brdffit", "jax")
-    )
+    """brdffit's cache directory (not created here), or None when switched off."""
+    path = os.environ.get("BRDFFIT_CACHE_DIR")
+    if path is None:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        path = os.path.join(base, "brdffit")
     return path or None
 
 
-def configure() -> None:
-    global _configured
-    if _configured:
+def use_compilation_cache() -> None:
+    """Point JAX's persistent compilation cache at ``cache_dir()/jax``, once per
+    process, unless caching is off or the caller already set a cache directory."""
+    global _compilation_cache_checked
+    if _compilation_cache_checked:
         return
-    _configured = True
+    _compilation_cache_checked = True
     import jax
 
-    jax.config.update("jax_enable_x64", True)
-    cache = cache_dir()
-    if cache:
-        try:
-            os.makedirs(cache, exist_ok=True)
-            jax.config.update("jax_compilation_cache_dir", cache)
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-            jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-        except OSError:
-            pass  # read-only home: run without the cache rather than fail
+    directory = cache_dir()
+    if directory is None or jax.config.jax_compilation_cache_dir:
+        return
+    path = os.path.join(directory, "jax")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as e:  # a read-only home costs compile time, not a failure
+        log.info("brdffit: no compilation cache (%s)", e)
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    log.info("brdffit: JAX compilation cache in %s", path)
+
+
+@contextlib.contextmanager
+def float64() -> Iterator[None]:
+    """JAX in double precision for the enclosed code (this thread only)."""
+    import jax
+
+    use_compilation_cache()
+    with jax.enable_x64(True):
+        yield
+
+
+def in_float64(fn: F) -> F:
+    """``fn`` run inside :func:`float64`: the decorator of brdffit's JAX entry points."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with float64():
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]

@@ -4,12 +4,12 @@ Every candidate is fitted once, cheapest first (the registry's order:
 lambert, oren_nayar, blinn_phong, phong, beckmann, ggx, ggx2 by default), and the
 ranking reports for each: the parameters, ``log_rmse`` (on the scene's bins when
 a scene is given, beside the full-table error), the PSNR of its sphere renders
-against the table's (``brdffit.render``), its parameter count, its measured
+against the table's (``brdffit.view.render``), its parameter count, its measured
 evaluation cost per sample, a BIC, and whether its specular colour is grey.
 
 The choice (docs/selection.md):
 
-- **tolerance** (default ``brdffit.options.DEFAULT_TOLERANCE``): the cheapest candidate
+- **tolerance** (default ``brdffit.fitting.options.DEFAULT_TOLERANCE``): the cheapest candidate
   whose error is within ``tolerance`` of the best candidate's, measured *in
   quadrature*: ``excess = sqrt(err^2 - best^2) <= tolerance``. Errors that no
   model can fit (measurement noise, binning) add in quadrature to each model's own
@@ -28,6 +28,7 @@ choice uses a tolerance a person can read.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -37,14 +38,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import models
-from .errors import FitInputError
-from .merl import MerlTable
-from .models.mono_ks import MonoKs, specular_colour_specs
-from .options import DEFAULT_TOLERANCE, FIT_KEYWORDS
-from .render import SphereReference
-from .result import FitResult
-from .scene import Scene, fit_in_scene
+from brdffit import models, runtime
+from brdffit.errors import FitInputError
+from brdffit.fitting.options import DEFAULT_TOLERANCE, FIT_KEYWORDS
+from brdffit.fitting.result import FitResult
+from brdffit.fitting.scene import Scene, fit_in_scene
+from brdffit.io.merl import MerlTable
+from brdffit.models.mono_ks import MonoKs, specular_colour_specs
+from brdffit.view.render import SphereReference
 
 DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
 #: A specular colour is grey when (max - min) / max over R, G, B is at most this.
@@ -79,17 +80,24 @@ class Selection:
     def row(self) -> dict:
         return next(r for r in self.ranking if r["model"] == self.chosen)
 
-    def to_dict(self) -> dict:
+    def summary(self) -> dict:
+        """Everything but the fits: what the chosen :class:`FitResult` carries as
+        its ``selection``."""
         d = asdict(self)
         d.pop("fits")
-        d["fit"] = self.result.to_dict()
         return d
+
+    def to_dict(self) -> dict:
+        """The chosen fit in the result schema, its ``selection`` set: the same JSON
+        shape as any fit's (``brdffit fit --json``, the service, the batch store)."""
+        return self.result.to_dict()
 
 
 # -- measured evaluation cost -------------------------------------------------------------
 
 
 @functools.cache
+@runtime.in_float64
 def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
     """Median wall time (ns) per direction pair of ``model(params, wi, wo)``.
 
@@ -166,6 +174,7 @@ def _fmt(x: float) -> str:
 # -- the front door ------------------------------------------------------------------------
 
 
+@runtime.in_float64
 def select(
     table: MerlTable,
     candidates=DEFAULT_CANDIDATES,
@@ -187,7 +196,7 @@ def select(
             candidate a cheaper one may be and still be chosen.
         budget: optional absolute ``log_rmse`` budget: the cheapest candidate
             under it wins (the tolerance rule decides when none is).
-        scene: optional :class:`brdffit.scene.Scene`: the loss, the errors the
+        scene: optional :class:`brdffit.fitting.scene.Scene`: the loss, the errors the
             choice uses, and the ranking are on its bins; the full-table error is
             reported beside.
         mono_ks: also fit the chosen model with a grey ``ks`` (``<model>_mono``)
@@ -222,7 +231,7 @@ def select(
             continue
         fits[m.name] = r
         err = r.error["log_rmse"]
-        full = r.extra["full_table_error"]["log_rmse"] if scene is not None else err
+        full = r.full_table_error["log_rmse"] if scene is not None else err
         row.update(
             params=r.params,
             log_rmse=err,
@@ -286,7 +295,7 @@ def select(
     if scene is not None:
         reason = (f"On scene {scene.describe()}: " + reason[0].lower() + reason[1:]
                   + f" Full-table log_rmse of {chosen['model']}: {_fmt(chosen['full_log_rmse'])}.")
-    return Selection(
+    selection = Selection(
         chosen=chosen["model"],
         reason=reason,
         ranking=rows,
@@ -298,13 +307,17 @@ def select(
         table=table.source,
         fits=fits,
     )
+    # the chosen fit carries how it was chosen (the one result schema)
+    fits[selection.chosen] = dataclasses.replace(fits[selection.chosen],
+                                                 selection=selection.summary())
+    return selection
 
 
 def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:
     """The candidate's fit, seeded from its parent's when it has one; refitted once
     with more starts and steps when it did not converge, so that the choice rests
     on optima (an unconverged error would make a model look worse than it is)."""
-    from .fitting import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+    from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS
 
     parent = {"parent_fit": fits[m.parent]} if m.parent in fits else {}
     r = fit_in_scene(table, m, scene, **parent, **fit_options)
@@ -373,7 +386,7 @@ def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):
         "n_params": mono_model.n_params,
         "params": r.params,
         "log_rmse": err,
-        "full_log_rmse": r.extra["full_table_error"]["log_rmse"] if scene is not None else err,
+        "full_log_rmse": r.full_table_error["log_rmse"] if scene is not None else err,
         "excess_over_rgb": excess,
         "accepted": bool(math.isfinite(err) and excess <= tolerance),
         "converged": r.converged,

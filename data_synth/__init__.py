@@ -6,6 +6,13 @@
 ``python -m data_synth --help`` writes them to disk with a JSON sidecar of the truth.
 """
 
-from .synth import DEFAULT_PARAMS, PRESETS, Component, make_table, render_values, write_table
+from data_synth.synth import (
+    DEFAULT_PARAMS,
+    PRESETS,
+    Component,
+    make_table,
+    render_values,
+    write_table,
+)
 
 __all__ = ["DEFAULT_PARAMS", "PRESETS", "Component", "make_table", "render_values", "write_table"]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from brdffit import merl, models
-
-from .synth import PRESETS, make_preset, make_table, write_table
+from brdffit import models
+from brdffit.io import merl
+from data_synth.synth import PRESETS, make_preset, make_table, write_table
 
 
 def _parse_param(text: str) -> tuple[str, object]:
@@ -25,7 +25,7 @@ def _parse_param(text: str) -> tuple[str, object]:
 
 def nbrdf_main(argv: list[str]) -> int:
     """``python -m data_synth nbrdf NAME -o OUT``: a real material's table."""
-    from . import nbrdf
+    from data_synth import nbrdf
 
     ap = argparse.ArgumentParser(
         prog="python -m data_synth nbrdf",
@@ -63,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("out", help="output .binary path")
     src = ap.add_mutually_exclusive_group()
-    src.add_argument("--model", choices=list(models.REGISTRY), default="ggx")
+    src.add_argument("--model", choices=models.names(), default="ggx")
     src.add_argument("--preset", choices=list(PRESETS), help="a named hard case")
     ap.add_argument(
         "--param",

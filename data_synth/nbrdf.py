@@ -16,8 +16,8 @@ import zipfile
 
 import numpy as np
 
-from brdffit import merl
-from brdffit.grid import bin_grid
+from brdffit.io import merl
+from brdffit.io.grid import bin_grid
 
 WEIGHTS_ZIP = os.path.join(os.path.dirname(__file__), "nbrdf", "merl_nbrdf.zip")
 _MEMBER = "merl_nbrdf/{name}.h5"

@@ -1,6 +1,6 @@
 """Write MERL tables from the analytic models of ``brdffit.models``.
 
-Each bin holds the model's value at the bin centre (MODELS.md's sample
+Each bin holds the model's value at the bin centre (docs/models.md's sample
 position); bins whose centre is below the horizon are written unmeasured
 (raw -1), as MERL does. Optional degradations, in this order:
 
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-# brdffit.models switches float64 on (brdffit.runtime) before any table is rendered
-from brdffit import jsonout, merl, models
-from brdffit.grid import bin_grid
+from brdffit import jsonout, models, runtime
+from brdffit.io import merl
+from brdffit.io.grid import bin_grid
 
 DEFAULT_PARAMS: dict[str, dict] = {
     "lambert": {"kd": [0.5, 0.35, 0.2]},
@@ -49,6 +49,7 @@ class Component:
     params: dict
 
 
+@runtime.in_float64
 def render_values(components: list[Component]) -> np.ndarray:
     """Model values at every bin centre, flat (3, 90*90*180); 0 below the horizon."""
     g = bin_grid()

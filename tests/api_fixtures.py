@@ -20,7 +20,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 
-from brdffit import merl
+from brdffit.io import merl
 from data_synth import make_table
 
 #: name -> (model, params) of the synthetic tables the service tests share.

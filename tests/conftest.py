@@ -1,16 +1,41 @@
-"""Shared fixtures. float64 is on for every test (brdffit's JAX modules switch it on)."""
+"""Shared fixtures.
+
+Every test runs inside ``brdffit.runtime.float64()``, as brdffit's own entry points
+do, so a test may evaluate a model directly in double precision. That brdffit
+needs no such help from its caller (and changes no JAX setting) is tested in a
+fresh process by tests/test_runtime.py.
+"""
 
 from __future__ import annotations
 
 import os
 
-# Tests keep JAX's persistent compile cache inside the checkout unless told otherwise.
+# Tests keep brdffit's cache (bin grid, compiled code) inside the checkout unless told
+# otherwise.
 os.environ.setdefault(
-    "BRDFFIT_JAX_CACHE", os.path.join(os.path.dirname(__file__), "..", ".venv", "jax-cache")
+    "BRDFFIT_CACHE_DIR", os.path.join(os.path.dirname(__file__), "..", ".venv", "brdffit-cache")
 )
 
-import jax  # noqa: E402
+import pytest  # noqa: E402
 
-import brdffit.fitting  # noqa: E402,F401
+from brdffit import runtime  # noqa: E402
 
-assert jax.config.jax_enable_x64, "brdffit.fitting must switch float64 on at import"
+#: Every test belongs to one layer (``pytestmark`` of its file, or its own mark):
+#: ``unit`` (one module, in process), ``contract`` (the shells agree with the
+#: library: options, result schema, imports, catalogue), ``system`` (real
+#: processes: the CLI, a uvicorn server, a Dask cluster, real materials).
+#: ``make test-quick`` runs all but ``system``.
+LAYERS = ("unit", "contract", "system")
+
+
+def pytest_collection_modifyitems(config, items):
+    unmarked = [i.nodeid for i in items
+                if next((m for m in i.iter_markers() if m.name in LAYERS), None) is None]
+    if unmarked:
+        raise pytest.UsageError(f"tests without a layer mark {LAYERS}: {unmarked[:5]}")
+
+
+@pytest.fixture(autouse=True)
+def _brdffit_precision():
+    with runtime.float64():
+        yield

@@ -1,7 +1,7 @@
-"""An independent MERL writer, in plain numpy, written from MODELS.md alone.
+"""An independent MERL writer, in plain numpy, written from docs/models.md alone.
 
 It shares no code with brdffit or data_synth: its own bin-centre geometry (explicit
-rotation matrices), its own model formulas (as MODELS.md writes them: tan, acos,
+rotation matrices), its own model formulas (as docs/models.md writes them: tan, acos,
 atan2, no rewrites), its own file writing (struct). A table it writes and brdffit
 fits is a check that a bug shared by brdffit's models and data_synth cannot hide.
 """
@@ -49,7 +49,7 @@ def _angles(wi, wo):
 
 
 def evaluate(model: str, p: dict, wi, wo) -> np.ndarray:
-    """f_r (N, 3) straight from MODELS.md's table."""
+    """f_r (N, 3) straight from docs/models.md's table."""
     kd = np.asarray(p["kd"], float) * np.ones(3)
     ci, co = wi[:, 2], wo[:, 2]
     h = _angles(wi, wo)

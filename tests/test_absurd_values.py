@@ -14,17 +14,19 @@ from decimal import Decimal
 import numpy as np
 import pytest
 
-from brdffit import FitResult, MerlFormatError, fit, jsonout, merl, models
-from brdffit.batch_store import BatchStore, read_attrs, read_results
-from brdffit.batch_tasks import FitOptions, FitRecord, TableRecord
+from brdffit import FitResult, MerlFormatError, fit, jsonout, models
+from brdffit.batch.store import BatchStore, read_attrs, read_results
+from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord
 from brdffit.cli import main as cli_main
-from brdffit.fitting import full_table_metrics
-from brdffit.merl import MAX_VALUE, MIN_PEAK, SCALE, MerlTable
-from brdffit.sampling import bin_weights, usable_bins
+from brdffit.fitting.pipeline import full_table_metrics
+from brdffit.fitting.sampling import bin_weights, usable_bins
+from brdffit.io import merl
+from brdffit.io.merl import MAX_VALUE, MIN_PEAK, SCALE, MerlTable
 from data_synth import make_table
 from data_synth.synth import write_table
+from tests.cli_helpers import run
 
-from .cli_helpers import run
+pytestmark = pytest.mark.unit
 
 GGX = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.2, "f0": 0.6}
 HOT = (10, 20, 30)  # a bin above the horizon (theta_h ~1 deg, theta_d ~20 deg)
@@ -240,6 +242,7 @@ def test_batch_journal_is_strict_and_a_null_metric_is_nan_in_hdf5(tmp_path):
     assert strict_loads(attrs["options"]) == FitOptions().fit_keywords()
 
 
+@pytest.mark.system  # a subprocess
 def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):
     hot, blank = tmp_path / "hot.binary", tmp_path / "blank.binary"
     hot.write_bytes(to_bytes(hot_bin(1000.0)))
@@ -273,6 +276,7 @@ def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("case", list(REFUSED))
+@pytest.mark.system  # a subprocess
 def test_cli_refuses_absurd_tables_in_one_line(tmp_path, case):
     make, words = REFUSED[case]
     path = tmp_path / "absurd.binary"
@@ -291,7 +295,7 @@ def test_cli_json_writes_a_missing_metric_as_null(capsys):
     NaN; no table makes one on demand)."""
     from argparse import Namespace
 
-    from brdffit.commands.fit import _report
+    from brdffit.cli.fit import _report
 
     r = FitResult(model="lambert", params={"kd": [0.1, 0.2, 0.3]},
                   error={"log_rmse": 0.5, "rmse_cos": 0.1, "rel_peak_error": 0.2,
@@ -304,14 +308,15 @@ def test_cli_json_writes_a_missing_metric_as_null(capsys):
 
 
 @pytest.mark.parametrize("model", ["lambert", "auto"])
+@pytest.mark.system  # a subprocess
 def test_cli_json_of_a_hot_bin_fit_is_strict_and_finite(tmp_path, model):
     path = tmp_path / "hot.binary"
     path.write_bytes(to_bytes(hot_bin(1000.0)))
     r = run("brdffit.cli", "fit", str(path), "--model", model, "--json", *FAST)
     assert r.returncode == 0, r.stderr
     d = strict_loads(r.stdout)
-    result = d if model != "auto" else d["fit"]
+    result = d  # fixed or auto: one result schema
     assert result["error"] and all(isinstance(v, float) and math.isfinite(v)
                                    for v in result["error"].values()), result["error"]
     if model == "auto":
-        assert d["chosen"] == result["model"]
+        assert d["selection"]["chosen"] == result["model"]

@@ -1,12 +1,14 @@
-"""Half/difference parameterisation and the reference bin lookup (MODELS.md)."""
+"""Half/difference parameterisation and the reference bin lookup (docs/models.md)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from brdffit import angles, merl
-from brdffit.grid import bin_grid
+from brdffit.io import angles, merl
+from brdffit.io.grid import bin_grid
+
+pytestmark = pytest.mark.unit
 
 
 def test_every_bin_centre_maps_back_to_its_own_bin():
@@ -88,9 +90,9 @@ def test_solid_angle_weights_are_positive_above_horizon(i_th):
 
 def test_grid_cache_round_trip(tmp_path, monkeypatch):
     """The on-disk grid equals the computed one; a damaged cache file is recomputed."""
-    from brdffit import grid
+    from brdffit.io import grid
 
-    monkeypatch.setenv("BRDFFIT_JAX_CACHE", str(tmp_path))
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path))
     grid.bin_grid.cache_clear()
     try:
         first = grid.bin_grid()  # computes and stores

@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from api.store import Store
-from brdffit import merl
+from brdffit.io import merl
+from tests.api_fixtures import FAST, Server, header, table, table_bytes, wait_status
 
-from .api_fixtures import FAST, Server, header, table, table_bytes, wait_status
+pytestmark = pytest.mark.system
 
 #: Small enough to test with a body a bit over it, big enough for one table.
 CAP = 40_000_000

@@ -20,13 +20,15 @@ import numpy as np
 import pytest
 
 from brdffit import MerlFormatError, models
-from brdffit.batch import BatchInputError, FitOptions, find_tables, run_batch
-from brdffit.batch_cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
-from brdffit.batch_report import format_ranking, plot_summary, rank
-from brdffit.batch_store import BatchFileError, BatchStore, read_results
-from brdffit.batch_tasks import TableRecord
+from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
+from brdffit.batch.job import BatchInputError, FitOptions, find_tables, run_batch
+from brdffit.batch.report import format_ranking, plot_summary, rank
+from brdffit.batch.store import BatchFileError, BatchStore, read_results
+from brdffit.batch.tasks import TableRecord
 from brdffit.cli import main as cli_main
 from brdffit.models import UnknownModelError
+
+pytestmark = pytest.mark.system
 
 MODELS = ["ggx", "beckmann", "lambert"]
 OPTIONS = FitOptions(samples=4096, starts=1)
@@ -215,7 +217,7 @@ def test_dask_runner_reports_a_dead_worker():
     import dask
     from distributed import LocalCluster
 
-    from brdffit.batch_cluster import WorkerLost
+    from brdffit.batch.cluster import WorkerLost
 
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
         with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -336,8 +338,8 @@ def _h5_fits(out) -> int:
 
 _STORE_WRITER = """
 import sys, time
-from brdffit.batch_store import BatchStore
-from brdffit.batch_tasks import FitOptions, FitRecord, TableRecord
+from brdffit.batch.store import BatchStore
+from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord
 out, n = sys.argv[1], int(sys.argv[2])
 fit = {"model": "lambert", "params": {"kd": [0.5, 0.4, 0.3]}, "error": {"log_rmse": 0.01},
        "converged": True, "result": "successful", "steps": 3, "time_s": 0.1, "starts": 1,
@@ -404,7 +406,7 @@ def test_a_second_writer_is_refused(tmp_path):
 
 
 def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
-    from brdffit import merl
+    from brdffit.io import merl
     from data_synth import make_table
 
     d = tmp_path / "t"

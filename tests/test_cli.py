@@ -7,8 +7,10 @@ import struct
 
 import pytest
 
-from .cli_helpers import run
-from .truths import FIT_JSON_KEYS, TRUTH, assert_params_close
+from tests.cli_helpers import run
+from tests.truths import FIT_JSON_KEYS, TRUTH, assert_params_close
+
+pytestmark = pytest.mark.system
 
 
 @pytest.fixture(scope="module")

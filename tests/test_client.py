@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from brdffit import FitResult, merl
+from brdffit import FitResult
 from brdffit.client import ApiError, Client, ClientError, FitFailed, FitJob
-from brdffit.grid import bin_grid
-from brdffit.plots import KINDS
+from brdffit.io import merl
+from brdffit.io.grid import bin_grid
+from brdffit.view.plots import KINDS
+from tests.api_fixtures import FAST, TABLES, Server, scaled_table_bytes, table, table_bytes, write
 
-from .api_fixtures import FAST, TABLES, Server, scaled_table_bytes, table, table_bytes, write
+pytestmark = pytest.mark.system
 
 
 @pytest.fixture(scope="module")

@@ -7,12 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from brdffit import merl
-from brdffit.grid import bin_grid
+from brdffit.io import merl
+from brdffit.io.grid import bin_grid
 from data_synth import PRESETS, make_table
 from data_synth.synth import make_preset
+from tests.cli_helpers import run
 
-from .cli_helpers import run
+pytestmark = pytest.mark.unit
 
 
 def test_cli_writes_table_and_truth_sidecar(tmp_path):
@@ -51,6 +52,7 @@ def test_cli_writes_table_and_truth_sidecar(tmp_path):
         (["--param", "beta=1"], "unknown parameter"),
     ],
 )
+@pytest.mark.system  # a subprocess
 def test_cli_rejects_bad_params(tmp_path, args, message):
     r = run("data_synth", str(tmp_path / "x.binary"), "--model", "ggx", *args)
     assert r.returncode == 2
@@ -81,6 +83,7 @@ def test_presets_make_valid_tables(name, tmp_path):
     assert np.all(np.isfinite(table.rgb))
 
 
+@pytest.mark.system  # a subprocess
 def test_cli_preset_applies_noise_missing_and_params(tmp_path):
     out = tmp_path / "p.binary"
     r = run("data_synth", str(out), "--preset", "near-mirror", "--noise", "0.1",
@@ -106,6 +109,7 @@ def test_preset_keeps_its_own_degradations_unless_told():
     assert truth["noise"] == 0.0 and truth["missing"] == 0.5
 
 
+@pytest.mark.system  # a subprocess
 def test_cli_refuses_a_param_it_cannot_place_in_a_two_lobe_preset(tmp_path):
     r = run("data_synth", str(tmp_path / "x.binary"), "--preset", "two-lobes",
             "--param", "alpha=0.1")

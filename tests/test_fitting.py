@@ -8,12 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from brdffit import FitInputError, fit, merl
-from brdffit.fitting import FitResult
+from brdffit import FitInputError, fit
+from brdffit.fitting.pipeline import FitResult
+from brdffit.io import merl
 from data_synth import make_table
+from tests import reference_merl
+from tests.truths import FIT_JSON_KEYS, TRUTH, assert_params_close
 
-from . import reference_merl
-from .truths import FIT_JSON_KEYS, TRUTH, assert_params_close
+pytestmark = pytest.mark.unit
 
 MODELS = list(TRUTH)
 
@@ -33,7 +35,7 @@ def test_recovers_params_from_data_synth_table(name, synth_tables):
 
 @pytest.mark.parametrize("name", MODELS)
 def test_recovers_params_from_independent_writer(name, tmp_path):
-    """The table comes from tests/reference_merl.py (plain numpy from MODELS.md)
+    """The table comes from tests/reference_merl.py (plain numpy from docs/models.md)
     and goes through the file reader: a bug shared by brdffit and data_synth
     cannot hide here."""
     path = tmp_path / f"{name}.binary"

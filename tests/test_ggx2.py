@@ -9,12 +9,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import fit, initialisation, models
+from brdffit import fit, models
+from brdffit.fitting import starts
+from brdffit.fitting.sampling import usable_bins
 from brdffit.models.base import KD, KS
 from brdffit.models.ggx import GGX
 from brdffit.models.microfacet import ALPHA, F0, dielectric_fresnel
-from brdffit.sampling import usable_bins
 from data_synth import DEFAULT_PARAMS, make_table
+
+pytestmark = pytest.mark.unit
 
 NEW_MODELS = ("ggx2", "ggx_dielectric", "beckmann_dielectric", "ggx_mono", "ggx2_mono")
 
@@ -34,7 +37,7 @@ def _random_pairs(n, seed=1):
 
 
 def _ggx_reference(kd, ks, alpha, f0, wi, wo):
-    """MODELS.md's GGX written out in numpy, independent of the JAX code."""
+    """docs/models.md's GGX written out in numpy, independent of the JAX code."""
     h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
     ci, co, ch = wi[..., 2], wo[..., 2], h[..., 2]
     cd = np.sum(wi * h, axis=-1)
@@ -161,7 +164,7 @@ def test_ggx2_start_candidates_follow_its_shape_grid():
     m = models.get("ggx2")
     assert all(s["alpha2"] >= 3 * s["alpha1"] for s in m.shape_grid)
     table, _ = make_table("ggx2")
-    u = initialisation.candidates(m, table, usable_bins(table).usable)
+    u = starts.candidates(m, table, usable_bins(table).usable)
     assert u.shape == (len(m.shape_grid), m.n_params) and np.all(np.isfinite(u))
     # The start on the true lobe pair has the true scales from the least squares alone.
     truth = DEFAULT_PARAMS["ggx2"]

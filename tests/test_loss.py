@@ -6,10 +6,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdffit import fitting, loss, models, sampling
+from brdffit import models
+from brdffit.fitting import loss, sampling
+from brdffit.fitting import pipeline as fitting
 from data_synth import make_table
+from tests.truths import TRUTH
 
-from .truths import TRUTH
+pytestmark = pytest.mark.unit
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,10 @@ import struct
 import numpy as np
 import pytest
 
-from brdffit import merl
 from brdffit.errors import MerlFormatError
+from brdffit.io import merl
+
+pytestmark = pytest.mark.unit
 
 N = merl.N_BINS
 

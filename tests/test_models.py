@@ -1,4 +1,4 @@
-"""The model zoo against MODELS.md: formulas, reciprocity, energy, NaN-free everywhere."""
+"""The model zoo against docs/models.md: formulas, reciprocity, energy, NaN-free everywhere."""
 
 from __future__ import annotations
 
@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.angles import half_diff_to_dirs
+from brdffit.io.angles import half_diff_to_dirs
+from tests.reference_merl import evaluate as reference_evaluate
+from tests.truths import TRUTH
 
-from .reference_merl import evaluate as reference_evaluate
-from .truths import TRUTH
+pytestmark = pytest.mark.unit
 
 MODELS = list(TRUTH)
 
@@ -90,7 +91,7 @@ ENERGY_CASES = [
     ("phong", {"kd": 0.0, "ks": 1.0, "n": 1.0}, 1.0),
     ("phong", {"kd": 0.0, "ks": 1.0, "n": 30.0}, 1.0),
     ("phong", {"kd": 0.5, "ks": 0.5, "n": 10.0}, 1.0),
-    # MODELS.md's Blinn-Phong normalisation: physical for kd + 4 ks <= 1 (see its module)
+    # docs/models.md's Blinn-Phong normalisation: physical for kd + 4 ks <= 1 (see its module)
     ("blinn_phong", {"kd": 0.0, "ks": 0.25, "n": 20.0}, 1.0),
     ("blinn_phong", {"kd": 0.0, "ks": 0.25, "n": 200.0}, 1.0),
     ("ggx", {"kd": 0.0, "ks": 1.0, "alpha": 0.1, "f0": 1.0}, 1.0),
@@ -195,9 +196,8 @@ def test_constrain_round_trip_and_finite_transform_gradients(name):
 
 def test_bin_centres_match_reference_geometry():
     """Our grid's bin-centre directions equal the independent reference's."""
-    from brdffit.grid import bin_grid
-
-    from .reference_merl import bin_centre_directions
+    from brdffit.io.grid import bin_grid
+    from tests.reference_merl import bin_centre_directions
 
     g = bin_grid()
     wi, wo = bin_centre_directions()

@@ -17,9 +17,11 @@ import h5py
 import numpy as np
 import pytest
 
-from brdffit import merl
+from brdffit.io import merl
 from data_synth import nbrdf
 from tests.reference_merl import SCALE, bin_centre_directions
+
+pytestmark = pytest.mark.system
 
 
 def _reference_network(name, tmp_path):

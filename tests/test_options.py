@@ -1,13 +1,12 @@
 """One fit contract: the library's FitOptions, and every shell reading it.
 
 Each shell's defaults are read from the shell itself (the CLI's parsers, the
-service's request schema, the batch job's options), never from brdffit.options,
+service's request schema, the batch job's options), never from brdffit.fitting.options,
 so a shell that declares its own value fails here.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 import json
 import math
@@ -16,12 +15,15 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from brdffit import FitInputError, FitResult, fit, merl, options
+from brdffit import FitInputError, FitResult, fit
 from brdffit.cli import build_parser
+from brdffit.fitting import options
+from brdffit.fitting.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.io import merl
 from brdffit.models import UnknownModelError
-from brdffit.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from tests.cli_helpers import run
 
-from .cli_helpers import run
+pytestmark = pytest.mark.contract
 
 
 def _library_defaults() -> dict:
@@ -45,8 +47,8 @@ def test_fit_signature_and_select_take_the_contract_defaults():
 
 def test_defaults_are_the_library_constants():
     # the named constants, not copies of their values: a retune moves every shell
-    from brdffit.fitting import DEFAULT_MAX_STEPS, DEFAULT_STARTS
-    from brdffit.sampling import DEFAULT_SAMPLES
+    from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+    from brdffit.fitting.sampling import DEFAULT_SAMPLES
 
     o = FitOptions()
     assert (o.samples, o.starts, o.max_steps) == (DEFAULT_SAMPLES, DEFAULT_STARTS,
@@ -88,7 +90,8 @@ def test_api_request_schema_has_every_option_with_the_contract_default_and_range
 
 
 def test_batch_options_are_the_library_options():
-    from brdffit import batch, batch_tasks
+    from brdffit.batch import job as batch
+    from brdffit.batch import tasks as batch_tasks
 
     assert batch.FitOptions is FitOptions and batch_tasks.FitOptions is FitOptions
     assert inspect.signature(batch.run_batch).parameters["options"].default is None
@@ -184,33 +187,61 @@ def noisy_table(tmp_path_factory):
 FAST = {"samples": 2048, "seed": 3}
 
 
-def test_library_cli_api_and_batch_results_carry_the_same_keys(noisy_table):
+def _same_fit(a: dict, b: dict) -> None:
+    """Two results of one deterministic fit: the same JSON but for the clocks (fit
+    times, and the measured evaluation cost that ranks auto's candidates)."""
+    clocks = {"time_s", "fit_time_s", "cost_ns"}
+    a, b = dict(a), dict(b)
+    for d in (a, b):
+        d.pop("time_s")
+        if d.get("selection"):
+            s = d["selection"] = {k: v for k, v in d["selection"].items() if k not in clocks}
+            s["ranking"] = [{k: v for k, v in row.items() if k not in clocks}
+                            for row in s["ranking"]]
+    assert json.loads(json.dumps(a)) == json.loads(json.dumps(b))
+
+
+@pytest.mark.parametrize("model", ["lambert", AUTO])
+def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, tmp_path, model):
+    """One fit, four ways: the library, ``brdffit fit --json``, the service's job and
+    the batch store all give the result schema with the same keys and values."""
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitResultOut
-    from brdffit.batch_tasks import fit_table
+    from api.routes.fits import FitResultOut, best_result
+    from brdffit.batch.job import run_batch
+    from brdffit.batch.store import read_results
+    from brdffit.selection import select
 
     path = str(noisy_table)
-    library = fit(merl.read(path), "lambert", **FAST)
-    keys = set(library.to_dict())
-    assert keys == {f.name for f in dataclasses.fields(FitResult)}
+    candidates = ["lambert", "oren_nayar"]
+    if model == AUTO:
+        library = select(merl.read(path), candidates, **FAST).to_dict()
+        assert library["selection"]["chosen"] == library["model"]
+    else:
+        library = fit(merl.read(path), model, **FAST).to_dict()
+    assert list(library) == FitResult.keys() and library["schema"] == "brdffit.fit/1"
+    FitResult.from_dict(library)  # reads back
 
-    r = run("brdffit.cli", "fit", path, "--model", "lambert", "--json", "--samples", "2048",
-            "--seed", "3")
+    cli_args = ["--candidates", ",".join(candidates)] if model == AUTO else []
+    r = run("brdffit.cli", "fit", path, "--model", model, "--json", "--samples", "2048",
+            "--seed", "3", *cli_args)
     assert r.returncode == 0, r.stderr
-    cli = json.loads(r.stdout)
+    _same_fit(json.loads(r.stdout), library)
 
-    out = tasks.fit_models(path, "lambert.binary", ["lambert"],
-                           RequestOptions(**FAST).model_dump())
-    assert out["ok"], out
-    api = FitResultOut.model_validate(out["results"][0]).model_dump()
+    if model != AUTO:  # the service's auto uses the default candidates
+        out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**FAST).model_dump())
+        assert out["ok"], out
+        served = FitResultOut.model_validate(best_result(out["results"])).model_dump(
+            by_alias=True)
+        _same_fit(served, {**library, "table": "noisy.binary"})
+        assert set(FitResultOut.model_fields) | {"schema"} - {"schema_"} >= set(library)
 
-    batch = fit_table(path, ["lambert"], FitOptions(**FAST).fit_keywords())["fits"][0]["fit"]
-
-    assert set(cli) == keys and set(api) == keys and set(batch) == keys
-    assert set(FitResultOut.model_fields) == keys  # the OpenAPI schema names them all
-    for other in (cli, api, batch):
-        np.testing.assert_allclose(other["params"]["kd"], library.params["kd"], rtol=1e-9)
+    names = candidates if model == AUTO else [model]
+    run_batch([path], names, tmp_path / "r.h5", options=FitOptions(**FAST), workers=0,
+              progress=False)
+    stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]
+    batch = stored[library["model"]]["fit"]
+    _same_fit(batch, {**library, "selection": None})  # a batch stores every candidate
 
 
 def test_fit_seed_reaches_the_fit(noisy_table):
@@ -238,4 +269,4 @@ def test_docs_option_tables_are_generated_from_the_contract(doc):
     assert blocks, f"{doc} has no generated option table"
     for style, table in blocks:
         assert table == options.markdown_table(style), (
-            f"{doc} is out of date: run `python -m brdffit.options --docs {doc}`")
+            f"{doc} is out of date: run `python -m brdffit.fitting.options --docs {doc}`")

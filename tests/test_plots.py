@@ -1,4 +1,4 @@
-"""brdffit.plots: every kind renders a readable PNG, from the library and the CLI."""
+"""brdffit.view.plots: every kind renders a readable PNG, from the library and the CLI."""
 
 from __future__ import annotations
 
@@ -9,11 +9,14 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from brdffit import fit, merl, plots
+from brdffit import fit
 from brdffit.cli import main as cli_main
-from brdffit.fitting import FitResult
+from brdffit.fitting.pipeline import FitResult
+from brdffit.io import merl
+from brdffit.view import plots
+from tests.api_fixtures import FAST, table
 
-from .api_fixtures import FAST, table
+pytestmark = pytest.mark.unit
 
 
 def decode_png(data: bytes) -> np.ndarray:
@@ -76,7 +79,7 @@ def test_evaluate_is_nan_below_the_horizon(ggx):
 
 def test_error_map_residual_matches_log_rmse(ggx):
     """The map shows the loss's own residual: its weighted RMS is log_rmse."""
-    from brdffit.grid import bin_grid
+    from brdffit.io.grid import bin_grid
 
     t = ggx[0]
     result = fit(t, "lambert", **FAST)  # a poor fit: an error well away from 0
@@ -88,6 +91,7 @@ def test_error_map_residual_matches_log_rmse(ggx):
     assert rmse == pytest.approx(result.log_rmse, rel=1e-6)
 
 
+@pytest.mark.system  # a subprocess
 def test_cli_fit_writes_plots(tmp_path, capsys):
     path = tmp_path / "lambert.binary"
     merl.write(path, table("lambert"))

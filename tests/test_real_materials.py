@@ -17,11 +17,14 @@ import jax
 import numpy as np
 import pytest
 
-from brdffit import fit, fitting, models
-from brdffit.loss import residuals
-from brdffit.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
-from brdffit.solvers import MAX_STEP
+from brdffit import fit, models
+from brdffit.fitting import pipeline as fitting
+from brdffit.fitting.loss import residuals
+from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
+from brdffit.fitting.solver import MAX_STEP
 from data_synth import nbrdf
+
+pytestmark = pytest.mark.system
 
 MATERIALS = ("gold-metallic-paint", "pink-felt", "red-plastic")
 MODELS = ("lambert", "oren_nayar", "blinn_phong", "beckmann", "ggx", "ggx2")

@@ -8,12 +8,15 @@ import math
 import numpy as np
 import pytest
 
-from brdffit import cli, merl
-from brdffit.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
-from brdffit.grid import bin_grid
-from brdffit.sampling import bin_weights
-from brdffit.scene import Scene, SceneError, fit_in_scene, full_table_error, read_pairs
+from brdffit import cli
+from brdffit.fitting.sampling import bin_weights
+from brdffit.fitting.scene import Scene, SceneError, fit_in_scene, full_table_error, read_pairs
+from brdffit.io import merl
+from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
+from brdffit.io.grid import bin_grid
 from data_synth.synth import make_preset
+
+pytestmark = pytest.mark.unit
 
 FAST = {"samples": 8192, "starts": 1}
 
@@ -158,8 +161,8 @@ def test_scene_fit_reports_scene_and_full_table_error(fresnel_table):
     scene = Scene.preset("camera-normal")
     on_scene = fit_in_scene(fresnel_table, "blinn_phong", scene, **FAST)
     everywhere = fit_in_scene(fresnel_table, "blinn_phong", None, **FAST)
-    full_of_scene_fit = on_scene.extra["full_table_error"]["log_rmse"]
-    assert on_scene.extra["scene"]["name"] == "camera-normal"
+    full_of_scene_fit = on_scene.full_table_error["log_rmse"]
+    assert on_scene.scene["name"] == "camera-normal"
     assert on_scene.samples["usable"] == scene.n_bins
     # The scene fit is better where the scene looks, worse elsewhere: the trade.
     assert on_scene.log_rmse < 0.3 * everywhere.log_rmse
@@ -179,8 +182,9 @@ def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):
     assert "blinn_phong" in out and "chosen" in out and "camera-normal" in out
     assert cli.main(args + ["--json", "--tolerance", "0.001"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["chosen"] == "ggx" and d["tolerance"] == 0.001 and d["scene"] is None
-    assert [r["model"] for r in d["ranking"]] == ["lambert", "blinn_phong", "ggx"]
+    s = d["selection"]  # the chosen fit, its selection beside it (docs/results.md)
+    assert s["chosen"] == d["model"] == "ggx" and s["tolerance"] == 0.001 and s["scene"] is None
+    assert [r["model"] for r in s["ranking"]] == ["lambert", "blinn_phong", "ggx"]
     assert cli.main(["fit", path, "--model", "ggx", "--max-theta", "30", "--samples", "8192"]) == 0
     out = capsys.readouterr().out
     assert "(scene)" in out and "(full table)" in out

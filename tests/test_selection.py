@@ -12,13 +12,15 @@ import json
 import numpy as np
 import pytest
 
-import brdffit.fitting
+import brdffit.fitting.pipeline
 from brdffit import models
 from brdffit.errors import FitInputError
-from brdffit.scene import Scene
+from brdffit.fitting.scene import Scene
 from brdffit.selection import DEFAULT_CANDIDATES, format_selection, select
 from data_synth import Component, make_table
 from data_synth.synth import make_preset
+
+pytestmark = pytest.mark.unit
 
 FAST = {"samples": 8192, "starts": 1}
 ROW_FIELDS = {"model", "n_params", "params", "log_rmse", "full_log_rmse", "psnr_db", "cost_ns",
@@ -119,20 +121,20 @@ def test_ranking_reports_every_candidate(ggx_selection):
     assert psnr["ggx"] > psnr["beckmann"] > psnr["lambert"]
     assert by_name["ggx"]["bic"] < by_name["beckmann"]["bic"]
     d = json.loads(json.dumps(sel.to_dict(), allow_nan=False))
-    assert d["chosen"] == "ggx" and d["fit"]["model"] == "ggx" and d["reason"]
+    assert d["model"] == "ggx" and d["selection"]["chosen"] == "ggx" and d["selection"]["reason"]
     text = format_selection(sel)
     assert "ggx2" in text and sel.reason in text
 
 
 def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
     calls = []
-    real_fit = brdffit.fitting.fit
+    real_fit = brdffit.fitting.pipeline.fit
 
     def counting_fit(table, model, **kw):
         calls.append(models.get(model).name)
         return real_fit(table, model, **kw)
 
-    monkeypatch.setattr(brdffit.fitting, "fit", counting_fit)
+    monkeypatch.setattr(brdffit.fitting.pipeline, "fit", counting_fit)
     sel = select(ggx_table, ("ggx", "lambert"), **FAST)
     assert calls == ["lambert", "ggx"]  # cheapest first, once each
     for row in sel.ranking:
@@ -191,8 +193,8 @@ def test_bad_options_are_input_errors(ggx_table):
 def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path):
     from api import tasks
     from api.routes.fits import FitOptions, FitRequest, best_result
-    from brdffit import merl
     from brdffit.client import FitJob
+    from brdffit.io import merl
 
     assert FitRequest(table_id="0" * 64, model="auto").model == "auto"
     for bad in (["auto"], ["ggx", "auto"]):
@@ -211,7 +213,7 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     assert [r["model"] for r in out["results"]] == list(DEFAULT_CANDIDATES)
     chosen = best_result(out["results"])  # what the job reports as its result
     assert chosen["model"] == "ggx"
-    selection = chosen["extra"]["selection"]
+    selection = chosen["selection"]
     assert selection["chosen"] == "ggx" and "tolerance" in selection["reason"]
     assert len(selection["ranking"]) == len(DEFAULT_CANDIDATES)
     json.dumps(out["results"], allow_nan=False)
@@ -222,13 +224,14 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     # A scene goes to single-model jobs too: the full-table error comes beside.
     options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
     out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
-    assert out["ok"] and "full_table_error" in out["results"][0]["extra"]
+    assert out["ok"] and out["results"][0]["full_table_error"] is not None
 
 
 def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_path, capsys):
-    from brdffit import cli, merl
-    from brdffit.batch import FitOptions, parse_models, run_batch
-    from brdffit.batch_report import format_ranking, rank
+    from brdffit import cli
+    from brdffit.batch.job import FitOptions, parse_models, run_batch
+    from brdffit.batch.report import format_ranking, rank
+    from brdffit.io import merl
 
     assert parse_models(["auto"]) == list(DEFAULT_CANDIDATES)
     assert parse_models(["ggx", "auto"])[0] == "ggx"  # no model twice

@@ -13,8 +13,9 @@ import pytest
 from brdffit import fit
 from data_synth import Component, make_table
 from data_synth.synth import _grazing_keep
+from tests.truths import assert_params_close
 
-from .truths import assert_params_close
+pytestmark = pytest.mark.unit
 
 GGX_BASE = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8], "alpha": 0.15, "f0": 0.6}
 
@@ -107,7 +108,7 @@ def test_nonfinite_and_negative_input_values_never_reach_the_loss():
     rgb[0, 10, 10, :50] = np.nan
     rgb[1, 20, 20, :50] = np.inf
     rgb[2, 30, 30, :50] = -5.0
-    from brdffit.merl import MerlTable
+    from brdffit.io.merl import MerlTable
 
     dirty = MerlTable.from_values(rgb, t.mask)
     r = fit(dirty, "ggx")

@@ -17,16 +17,17 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, st
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
 
-from brdffit import models, options
+from api import tasks
+from api.deps import QueueDep, RunnerDep, StoreDep, require_token
+from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.runner import WorkerLost
+from api.store import JobRecord, Store
+from brdffit import models
 from brdffit.errors import FitInputError
-from brdffit.plots import KINDS
-from brdffit.scene import Scene, SceneError
-
-from .. import tasks
-from ..deps import QueueDep, RunnerDep, StoreDep, require_token
-from ..errors import ERROR_RESPONSES, ErrorMessage
-from ..runner import WorkerLost
-from ..store import JobRecord, Store
+from brdffit.fitting import options
+from brdffit.fitting.result import SCHEMA
+from brdffit.fitting.scene import Scene, SceneError
+from brdffit.view.plots import KINDS
 
 log = logging.getLogger("brdffit.api")
 
@@ -39,7 +40,7 @@ PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[mis
 
 
 def _contract_field(name: str):
-    """``(annotation, Field)`` of one ``brdffit.options.FitOptions`` field: the
+    """``(annotation, Field)`` of one ``brdffit.fitting.options.FitOptions`` field: the
     request schema's type, default, bounds and description are the library's."""
     default, opt = options.spec(name)
     annotation = Literal[opt.choices] if opt.choices is not None else opt.kind
@@ -59,7 +60,7 @@ _ContractOptions = create_model(
 
 
 class FitOptions(_ContractOptions):
-    """``brdffit.options.FitOptions`` but the model (same names, defaults and ranges
+    """``brdffit.fitting.options.FitOptions`` but the model (same names, defaults and ranges
     as ``brdffit fit``), and a scene."""
 
     scene: dict | None = Field(
@@ -97,7 +98,7 @@ class FitRequest(BaseModel):
         options.spec("model")[0],
         description="a model name (GET /v1/models) or a list of them: each is fitted, "
         "the best (lowest log_rmse) is the job's `result`; or 'auto': the candidates are "
-        "fitted and the cheapest good enough is the `result`, its `extra.selection` says why",
+        "fitted and the cheapest good enough is the `result`, its `selection` says why",
     )
     options: FitOptions = FitOptions()
 
@@ -109,21 +110,24 @@ class FitRequest(BaseModel):
         names = [v] if isinstance(v, str) else v
         if not names:
             raise ValueError("give at least one model")
-        if len(names) > len(models.REGISTRY):
-            raise ValueError(f"at most {len(models.REGISTRY)} models per job")
+        if len(names) > len(models.names()):
+            raise ValueError(f"at most {len(models.names())} models per job")
         for name in names:
-            if name not in models.REGISTRY:
-                raise ValueError(
-                    f"unknown model {name!r}; choose from {', '.join(models.REGISTRY)}"
-                )
+            try:
+                models.check_name(name)
+            except models.UnknownModelError as e:  # pydantic reports ValueErrors as 422
+                raise ValueError(str(e)) from None
         return v
 
 
 class FitResultOut(BaseModel):
-    """``FitResult.to_dict()``: the JSON of ``brdffit fit --json`` (NaN as null)."""
+    """``FitResult.to_dict()``, the result schema (docs/results.md): the JSON of
+    ``brdffit fit --json`` (NaN as null). Extra keys are kept, not dropped: a job
+    stored by an older version is served as it was stored."""
 
-    model_config = ConfigDict(extra="allow")
+    model_config = ConfigDict(extra="allow", populate_by_name=True)
 
+    schema_: str = Field(SCHEMA, alias="schema", description="the result schema's version")
     model: str
     params: dict[str, float | list[float]]
     error: dict[str, float | None]
@@ -136,7 +140,9 @@ class FitResultOut(BaseModel):
     precision: str
     starts: int
     table: str | None = None
-    extra: dict = {}
+    scene: dict | None = None
+    full_table_error: dict[str, float | None] | None = None
+    selection: dict | None = None
 
 
 class JobOut(BaseModel):
@@ -163,7 +169,7 @@ def best_result(results: list[dict]) -> dict:
     """The fit with the lowest log_rmse (a null one counts as worst); for a
     ``model="auto"`` job, the chosen one."""
     for r in results:
-        if "selection" in (r.get("extra") or {}):
+        if r.get("selection"):
             return r
 
     def key(r):

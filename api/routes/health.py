@@ -6,9 +6,8 @@ from fastapi import APIRouter
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel
 
+from api.deps import StoreDep
 from brdffit import __version__
-
-from ..deps import StoreDep
 
 router = APIRouter(tags=["health"])
 

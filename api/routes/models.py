@@ -5,10 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter, Depends
 from pydantic import BaseModel
 
-from brdffit.commands.models import describe
-
-from ..deps import require_token
-from ..errors import ERROR_RESPONSES
+from api.deps import require_token
+from api.errors import ERROR_RESPONSES
+from brdffit.models import describe
 
 router = APIRouter(prefix="/v1/models", tags=["models"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -28,6 +27,8 @@ class ModelInfo(BaseModel):
     params: list[ParamInfo]
     n_params: int
     doc: str
+    parent: str | None
+    mono: bool
 
 
 @router.get("", summary="The registered models (as `brdffit models --json`)")

@@ -24,12 +24,11 @@ from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import ClientDisconnect
 
-from brdffit import merl
+from api.deps import SettingsDep, StoreDep, require_token
+from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.store import Store, TableRecord
 from brdffit.errors import MerlFormatError
-
-from ..deps import SettingsDep, StoreDep, require_token
-from ..errors import ERROR_RESPONSES, ErrorMessage
-from ..store import Store, TableRecord
+from brdffit.io import merl
 
 router = APIRouter(prefix="/v1/tables", tags=["tables"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)

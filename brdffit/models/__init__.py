@@ -1,61 +1,58 @@
-"""The analytic BRDF models of MODELS.md, by name.
+"""The analytic BRDF models of docs/models.md, by name.
 
-A new model is one module plus one line in ``REGISTRY``.
+Two layers, so that naming a model never waits for JAX:
+
+- :mod:`.catalogue` (no JAX): the names, ``auto``, the ``_mono`` variants, each
+  model's parameters, and the check every shell's model option goes through;
+- :mod:`.registry` (JAX): the model objects, ``get(name)``, ``register(model)``.
+
+``from brdffit.models import get`` (or ``REGISTRY``, or a model class) imports
+the registry, and JAX, on first use.
 """
 
 from __future__ import annotations
 
-from .. import runtime
+import importlib
+from typing import TYPE_CHECKING
 
-# float64 and the compile cache before any model (or anything that imports one:
-# the fit, the loss, the renders) touches JAX
-runtime.configure()
+from brdffit.models.catalogue import (
+    AUTO,
+    UnknownModelError,
+    check_name,
+    describe,
+    names,
+)
 
-from ..errors import BrdffitError  # noqa: E402
-from .base import AbstractBRDFModel, AbstractLobeModel, Params, ParamSpec  # noqa: E402
-from .beckmann import Beckmann  # noqa: E402
-from .blinn_phong import BlinnPhong  # noqa: E402
-from .ggx import GGX  # noqa: E402
-from .ggx2 import GGX2  # noqa: E402
-from .lambert import Lambert  # noqa: E402
-from .mono_ks import SUFFIX as _MONO  # noqa: E402
-from .mono_ks import MonoKs, specular_colour_specs  # noqa: E402
-from .oren_nayar import OrenNayar  # noqa: E402
-from .phong import Phong  # noqa: E402
-
-#: Ordered cheapest to richest.
-REGISTRY: dict[str, AbstractBRDFModel] = {
-    m.name: m
-    for m in (
-        Lambert(), OrenNayar(), BlinnPhong(), Phong(),
-        Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
-        GGX2(),
-    )
+# heavy name -> the module that defines it, imported on first access
+_LAZY = {
+    "REGISTRY": "registry",
+    "BUILTIN": "registry",
+    "get": "registry",
+    "register": "registry",
+    "AbstractBRDFModel": "base",
+    "AbstractLobeModel": "base",
+    "ParamSpec": "base",
+    "Params": "base",
+    "MonoKs": "mono_ks",
 }
 
-
-class UnknownModelError(BrdffitError, KeyError):
-    """A model name that is not in the registry (a KeyError for mapping-style callers)."""
-
-    def __str__(self) -> str:  # KeyError quotes its message otherwise
-        return self.args[0]
+if TYPE_CHECKING:
+    from brdffit.models.base import AbstractBRDFModel, AbstractLobeModel, Params, ParamSpec
+    from brdffit.models.mono_ks import MonoKs
+    from brdffit.models.registry import BUILTIN, REGISTRY, get, register
 
 
-def get(name: str | AbstractBRDFModel) -> AbstractBRDFModel:
-    """The model called ``name`` (a model instance is returned as is)."""
-    if isinstance(name, AbstractBRDFModel):
-        return name
-    if name in REGISTRY:
-        return REGISTRY[name]
-    # "ggx_mono": the registered model with a grey specular scale (models/mono_ks.py)
-    if isinstance(name, str) and name.endswith(_MONO):
-        base = REGISTRY.get(name.removesuffix(_MONO))
-        if base is not None and specular_colour_specs(base):
-            return MonoKs(base)
-    raise UnknownModelError(f"unknown model {name!r}; choose one of {', '.join(REGISTRY)}")
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    globals()[name] = value
+    return value
 
 
 __all__ = [
+    "AUTO",
+    "BUILTIN",
     "REGISTRY",
     "AbstractBRDFModel",
     "AbstractLobeModel",
@@ -63,5 +60,9 @@ __all__ = [
     "ParamSpec",
     "Params",
     "UnknownModelError",
+    "check_name",
+    "describe",
     "get",
+    "names",
+    "register",
 ]

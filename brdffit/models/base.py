@@ -4,7 +4,7 @@ A model is an immutable :class:`equinox.Module` (its configuration, if any, as
 static fields). ``model(params, wi, wo)`` evaluates one batch of direction pairs;
 batching over parameters or tables is the caller's ``jax.vmap``.
 
-Parameters are a ``dict`` keyed by the MODELS.md names; RGB parameters have shape
+Parameters are a ``dict`` keyed by the docs/models.md names; RGB parameters have shape
 ``(3,)``, shape parameters are scalars. Fitting works on an unconstrained vector
 ``u`` and maps it to the bounded parameters with :meth:`ParamSpec.constrain`.
 """
@@ -34,7 +34,7 @@ _TAIL_U = 11.5
 
 @dataclass(frozen=True)
 class ParamSpec:
-    """One parameter: its MODELS.md name, range, and how a fit keeps it in range.
+    """One parameter: its docs/models.md name, range, and how a fit keeps it in range.
 
     ``scale="log"`` spaces a bounded interval logarithmically (``alpha``, ``n``):
     a step of the optimiser then changes the parameter by a ratio, which is what
@@ -73,7 +73,7 @@ class ParamSpec:
 
         A fit cannot reach a bound, only approach it along a tail where the
         transform's slope vanishes; the solver treats such a coordinate as at the
-        bound (``brdffit.solvers``) instead of chasing it there step by step.
+        bound (``brdffit.fitting.solver``) instead of chasing it there step by step.
         """
         if self.upper is None:  # softplus: only u -> -inf is a bound
             return jnp.where(u < -_TAIL_U, -1, 0).astype(jnp.int32)
@@ -104,7 +104,7 @@ class AbstractBRDFModel(eqx.Module):
 
     name: ClassVar[str]
     param_specs: ClassVar[tuple[ParamSpec, ...]]
-    #: Shape-parameter values tried when seeding a fit (see brdffit.initialisation).
+    #: Shape-parameter values tried when seeding a fit (see brdffit.fitting.starts).
     shape_grid: ClassVar[tuple[dict[str, float], ...]] = ({},)
     #: The registry name of a model this one contains as a special case (ggx2
     #: contains ggx), or None. A fit seeds itself from the parent's optimum

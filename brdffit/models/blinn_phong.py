@@ -1,4 +1,4 @@
-"""Blinn-Phong: lobe = (n+2)/(2 pi) cos_h^n (MODELS.md normalisation).
+"""Blinn-Phong: lobe = (n+2)/(2 pi) cos_h^n (docs/models.md normalisation).
 
 | name | range        | meaning                 |
 |------|--------------|-------------------------|

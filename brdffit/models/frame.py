@@ -1,4 +1,4 @@
-"""Shading-frame quantities shared by every model (MODELS.md, "Directions").
+"""Shading-frame quantities shared by every model (docs/models.md, "Directions").
 
 Local frame with the normal on +z; ``wi`` and ``wo`` point away from the surface.
 Directions below the horizon are clamped to it: the models are defined for

@@ -34,7 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from ..grid import bin_grid
+from brdffit.io.grid import bin_grid
+
 from .base import KD, AbstractBRDFModel, ParamSpec
 from .frame import Frame, shading_frame
 from .ggx import GGX
@@ -87,7 +88,7 @@ class GGX2(AbstractBRDFModel):
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """Unconstrained start vectors (K, 12), one per ``shape_grid`` entry.
 
-        Called by ``brdffit.initialisation.candidates``. ``kd`` (the diffuse
+        Called by ``brdffit.fitting.starts.candidates``. ``kd`` (the diffuse
         estimate) is the fallback where the least squares leaves nothing.
         """
         g = bin_grid()

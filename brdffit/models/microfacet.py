@@ -3,7 +3,7 @@
 lobe = F * D * G / (4 cos_i cos_o), with height-correlated Smith
 G = 1 / (1 + Lambda(wi) + Lambda(wo)) and a Fresnel term F, one of:
 
-- ``"schlick"`` (default, MODELS.md): F = f0 + (1 - f0)(1 - cos_d)^5, parameter ``f0``;
+- ``"schlick"`` (default, docs/models.md): F = f0 + (1 - f0)(1 - cos_d)^5, parameter ``f0``;
 - ``"dielectric"``: the exact unpolarised Fresnel reflectance of a dielectric of
   relative index ``eta`` (Walter et al. 2007, eq. 22), parameter ``eta`` instead
   of ``f0``:
@@ -82,7 +82,7 @@ class AbstractMicrofacetModel(AbstractLobeModel):
     """A microfacet lobe; subclasses give the normal distribution and its Lambda.
 
     ``fresnel`` picks the Fresnel term (``"schlick"``: parameter ``f0``, the
-    MODELS.md model; ``"dielectric"``: parameter ``eta``). The model's name is the
+    docs/models.md model; ``"dielectric"``: parameter ``eta``). The model's name is the
     distribution's (``"ggx"``) or, for a non-default Fresnel, ``"ggx_dielectric"``.
     """
 

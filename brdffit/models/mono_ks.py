@@ -68,13 +68,12 @@ class MonoKs(AbstractBRDFModel):
     def eval_channels(self, params, frame):
         return self.base.eval_channels(self.expand(params), frame)
 
-    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """The base model's starts with each specular scale averaged over R, G, B."""
-        from ..initialisation import candidates  # imports brdffit.models: not at load time
-
+    def grey_starts(self, base_starts: np.ndarray) -> np.ndarray:
+        """The base model's starts (unconstrained, one per row) with each specular
+        scale averaged over R, G, B (``brdffit.fitting.starts`` makes the base's)."""
         grey = [s.name for s in specular_colour_specs(self.base)]
         starts = []
-        for u in candidates(self.base, table, usable):
+        for u in base_starts:
             p = {k: np.asarray(v) for k, v in self.base.constrain(jnp.asarray(u)).items()}
             starts.append(self.unconstrain({**p, **{k: p[k].mean() for k in grey}}))
         return np.stack(starts)

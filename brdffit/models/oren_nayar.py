@@ -1,4 +1,4 @@
-"""Oren-Nayar (qualitative model, Oren & Nayar 1994), as in MODELS.md.
+"""Oren-Nayar (qualitative model, Oren & Nayar 1994), as in docs/models.md.
 
 f = kd/pi * (A + B max(0, cos(phi_i - phi_o)) sin(a) tan(b)),
 A = 1 - s^2 / (2 (s^2 + 0.33)), B = 0.45 s^2 / (s^2 + 0.09),

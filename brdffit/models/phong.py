@@ -6,7 +6,7 @@
 | ks   | [0, inf)     | specular scale, RGB     |
 | n    | [0.1, 1e6]   | Phong exponent          |
 
-The fit keeps ``n`` in [0.1, 1e6] on a log scale; MODELS.md only asks n > 0.
+The fit keeps ``n`` in [0.1, 1e6] on a log scale; docs/models.md only asks n > 0.
 """
 
 from __future__ import annotations

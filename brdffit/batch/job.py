@@ -1,0 +1,295 @@
+"""Fit many tables x many models into one HDF5 file: ``run_batch(inputs, models, out)``.
+
+The shape of a batch:
+
+1. inputs (files, directories, glob patterns) become a sorted list of table
+   paths (:func:`find_tables`);
+2. tables already fitted with the same content (sha256), model and options are
+   skipped (resume: :class:`brdffit.batch.store.BatchStore`);
+3. one work item per table goes to Dask workers, local processes by default or
+   an existing cluster (``scheduler="tcp://HOST:PORT"``); a worker reads the
+   table from its path and fits every model that is left
+   (:func:`brdffit.batch.tasks.fit_table`);
+4. results return to this process, the only writer, which journals each table's
+   results and checkpoints the HDF5 file atomically.
+
+A bad table is a failed record, not an exception: the batch fits all the rest
+and :attr:`BatchSummary.ok` is False. ``workers=0`` runs everything in this
+process without Dask (debugging, or a machine where Dask cannot start workers).
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass, field
+
+from brdffit import models
+from brdffit.batch.cluster import DaskRunner, connect, require_dask
+from brdffit.batch.progress import Progress
+from brdffit.batch.store import BatchStore
+from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord, fit_table, now, worker_name
+from brdffit.errors import BrdffitError
+
+__all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "FitOptions", "find_tables",
+           "run_batch"]
+
+TABLE_SUFFIX = ".binary"
+
+
+class BatchInputError(BrdffitError, ValueError):
+    """Batch arguments that name nothing to fit (no such file, empty glob, no models)."""
+
+
+@dataclass
+class BatchSummary:
+    """What one ``run_batch`` call did. Failures are this run's (path, message)."""
+
+    out: str
+    tables: int = 0
+    skipped: int = 0  # tables whose every fit was already in the file
+    fits: int = 0  # fits made in this run, failed ones included
+    failed_tables: list[tuple[str, str]] = field(default_factory=list)
+    failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
+    recovered: int = 0  # journal records of an interrupted run folded into the file
+    elapsed_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed_tables and not self.failed_fits
+
+    @property
+    def n_failed_tables(self) -> int:
+        """Tables with a failure: unreadable, malformed, or any of their fits failed."""
+        return len({p for p, _ in self.failed_tables} | {p for p, _, _ in self.failed_fits})
+
+
+@dataclass(frozen=True)
+class _Task:
+    path: str
+    expected_sha256: str | None
+    done_models: tuple[str, ...]
+
+
+def find_tables(inputs: Iterable[str]) -> list[str]:
+    """Absolute paths of the tables that ``inputs`` name, in order, without repeats.
+
+    A file is taken whatever its name (a bad one fails as a table, later); a
+    directory gives every ``*.binary`` below it; a pattern (``*``, ``?``, ``[``)
+    is expanded like a shell glob, ``**`` included. An input that names nothing
+    is an error: it is far more often a typo than an intent.
+    """
+    found: dict[str, None] = {}
+
+    def add_dir(d: str) -> int:
+        files = sorted(glob.glob(os.path.join(glob.escape(d), "**", "*" + TABLE_SUFFIX),
+                                 recursive=True))
+        for f in files:
+            if os.path.isfile(f):
+                found.setdefault(os.path.abspath(f))
+        return len(files)
+
+    for text in inputs:
+        if os.path.isdir(text):
+            if not add_dir(text):
+                raise BatchInputError(f"{text}: directory holds no *{TABLE_SUFFIX} file")
+        elif os.path.lexists(text):
+            found.setdefault(os.path.abspath(text))
+        elif glob.has_magic(text):
+            matches = sorted(glob.glob(text, recursive=True))
+            if not matches:
+                raise BatchInputError(f"{text}: no file matches")
+            for m in matches:
+                if os.path.isdir(m):
+                    add_dir(m)
+                else:
+                    found.setdefault(os.path.abspath(m))
+        else:
+            raise BatchInputError(f"{text}: no such file or directory")
+    if not found:
+        raise BatchInputError("no tables to fit")
+    return list(found)
+
+
+def parse_models(names: Iterable[str]) -> list[str]:
+    """Registry names, deduplicated in order; an unknown name is an input error.
+    ``auto`` stands for the selection's candidates (``brdffit.selection``): each is
+    fitted and stored like any model, and ``batch-report`` shows the choice."""
+    from brdffit.selection import DEFAULT_CANDIDATES
+
+    out: dict[str, None] = {}
+    for name in names:
+        name = name.strip()
+        if not name:
+            continue
+        if name == "auto":
+            out.update(dict.fromkeys(DEFAULT_CANDIDATES))
+            continue
+        try:
+            out.setdefault(models.check_name(name))
+        except models.UnknownModelError as e:
+            raise BatchInputError(str(e)) from None
+    if not out:
+        raise BatchInputError("no models to fit")
+    return list(out)
+
+
+def file_sha256(path: str) -> str | None:
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while chunk := f.read(1 << 22):
+                h.update(chunk)
+    except OSError:
+        return None  # the worker will read it too, and record why it cannot
+    return h.hexdigest()
+
+
+def _plan(paths: list[str], model_names: list[str], options: FitOptions, store: BatchStore,
+          refit: bool) -> tuple[list[_Task], int]:
+    """Tasks for the tables with fits left to make, and how many tables are complete."""
+    # Only tables a previous run read need hashing here; new ones are hashed by
+    # their worker from the bytes it fits. hashlib releases the GIL: threads help.
+    known = [p for p in paths if not refit and store.known_sha256(p)]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        current = dict(zip(known, pool.map(file_sha256, known), strict=True))
+    tasks, skipped = [], 0
+    for p in paths:
+        sha = current.get(p)
+        done = store.done_models(p, sha, options) if sha else set()
+        if done >= set(model_names):
+            skipped += 1
+        else:
+            tasks.append(_Task(p, sha, tuple(sorted(done))))
+    return tasks, skipped
+
+
+def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict) -> Iterator[dict]:
+    for t in tasks:
+        yield fit_table(t.path, model_names, options, t.expected_sha256, t.done_models)
+
+
+def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: dict,
+                 timeout_s: float | None) -> Iterator[dict]:
+    from distributed import as_completed
+
+    futures = {
+        client.submit(fit_table, t.path, model_names, options, t.expected_sha256,
+                      t.done_models, pure=False): t
+        for t in tasks
+    }
+    try:
+        for fut in as_completed(futures, loop=client.loop, timeout=timeout_s):
+            t = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 - the task failed, not the batch
+                # fit_table returns failures as records, so this is a worker that
+                # died on the table (after Dask's retries) or a lost cluster.
+                result = {"table": asdict(TableRecord(
+                    path=t.path, status="failed", worker=worker_name(), finished_at=now(),
+                    message=f"worker failed on this table: {type(exc).__name__}: {exc}",
+                )), "fits": []}
+            fut.release()
+            yield result
+    finally:
+        client.cancel(list(futures))
+
+
+def run_batch(
+    inputs: Iterable[str],
+    model_names: Iterable[str],
+    out: str | os.PathLike,
+    *,
+    options: FitOptions | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    refit: bool = False,
+    progress: bool | Progress = True,
+    checkpoint_s: float = 10.0,
+    on_result: Callable[[TableRecord, list[FitRecord]], None] | None = None,
+    timeout_s: float | None = None,
+) -> BatchSummary:
+    """Fit every table of ``inputs`` with every model of ``model_names`` into ``out``.
+
+    Args:
+        inputs: table files, directories, glob patterns (:func:`find_tables`).
+        model_names: registry names.
+        out: the HDF5 results file; created, or resumed when it exists.
+        options: ``fit`` options for every fit (:class:`FitOptions`).
+        workers: local Dask worker processes; 0 fits in this process.
+        scheduler: ``tcp://HOST:PORT`` of an existing Dask cluster (``workers`` ignored).
+        refit: fit again even what the file already holds.
+        progress: draw a progress line on stderr (or pass a :class:`Progress`).
+        checkpoint_s: at most this long between rewrites of ``out``; every
+            result is journaled at once whatever this is.
+        on_result: called with each table's records as they are journaled.
+        timeout_s: give up (``TimeoutError``) when a Dask batch has not finished
+            after this long; what finished is kept. None waits for ever.
+    """
+    t0 = time.monotonic()
+    model_names = parse_models(model_names)
+    options = options or FitOptions()  # validated when it was built
+    if not scheduler and (not isinstance(workers, int) or workers < 0):
+        raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
+    if scheduler or workers:
+        require_dask()  # before the results file is created
+    paths = find_tables(inputs)
+    summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths))
+    attrs = {
+        "models": list(model_names),
+        "options": options.key(),
+        "engine": scheduler or ("in-process" if workers == 0 else f"local:{workers}"),
+    }
+
+    with BatchStore(out) as store:
+        summary.recovered = store.recovered
+        store.reserve_names(paths)  # group names follow the input order, not finish order
+        store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
+        tasks, summary.skipped = _plan(paths, model_names, options, store, refit)
+        bar = progress if isinstance(progress, Progress) else Progress(
+            len(tasks), skipped=summary.skipped, enabled=bool(progress))
+        bar.draw(force=True)
+        next_checkpoint = time.monotonic() + checkpoint_s
+
+        def take(results: Iterator[dict]) -> None:
+            nonlocal next_checkpoint
+            for r in results:
+                table = TableRecord(**r["table"])
+                fits = [FitRecord(**f) for f in r["fits"]]
+                store.add(table, fits)
+                summary.fits += len(fits)
+                if table.status != "ok":
+                    summary.failed_tables.append((table.path, table.message))
+                summary.failed_fits += [(f.path, f.model, f.message)
+                                        for f in fits if f.status != "ok"]
+                failed = table.status != "ok" or any(f.status != "ok" for f in fits)
+                bar.update(fits=len(fits), failed=failed)
+                if on_result is not None:
+                    on_result(table, fits)
+                if time.monotonic() >= next_checkpoint:
+                    started = time.monotonic()
+                    store.checkpoint(attrs)
+                    # A checkpoint copies the whole file: on a large one, space
+                    # them so that they take at most ~10 % of the batch.
+                    took = time.monotonic() - started
+                    next_checkpoint = time.monotonic() + max(checkpoint_s, 10 * took)
+
+        try:
+            if tasks and workers == 0 and not scheduler:
+                take(_run_in_process(tasks, model_names, options.fit_keywords()))
+            elif tasks:
+                with connect(workers, scheduler) as client:
+                    take(_run_on_dask(client, tasks, model_names, options.fit_keywords(),
+                                      timeout_s))
+        finally:
+            bar.finish()
+            # Interrupted or not, what was journaled goes into the file now; if
+            # this process is killed instead, the next run replays the journal.
+            store.checkpoint(attrs)
+    summary.elapsed_s = time.monotonic() - t0
+    return summary

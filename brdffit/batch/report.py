@@ -1,0 +1,212 @@
+"""Read a batch results file back: which model fits each table best, how each model does.
+
+The ranking metric is ``log_rmse`` on the full table (``brdffit.fitting.loss``): the
+error a fit is judged by everywhere in brdffit, comparable across models.
+Models within ``TIE`` of the lowest error are tied, and a tie goes to the model
+with fewer parameters: a Lambertian table is fitted exactly by GGX with ks = 0
+too, but it is Lambert's table. Fits that failed, and tables that could not be
+read, are counted, never ranked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+
+from brdffit import extras, models
+from brdffit.batch.store import read_attrs, read_index
+from brdffit.selection import DEFAULT_TOLERANCE, choose
+
+METRIC = "log_rmse"
+TIE = 1e-6  # in log_rmse: far below any difference a reader would act on
+
+
+@dataclass
+class TableRanking:
+    name: str
+    path: str
+    status: str
+    message: str
+    errors: dict[str, float]  # model -> log_rmse, successful fits only
+    failed_models: dict[str, str] = field(default_factory=dict)  # model -> message
+
+    @property
+    def best(self) -> str | None:
+        finite = {m: e for m, e in self.errors.items() if math.isfinite(e)}
+        if not finite:
+            return None
+        lowest = min(finite.values())
+        tied = [m for m, e in finite.items() if e <= lowest + TIE]
+        return min(tied, key=lambda m: (_n_params(m), finite[m]))
+
+    def chosen(self, tolerance: float = DEFAULT_TOLERANCE) -> tuple[str | None, str]:
+        """What ``model="auto"`` picks from these fits, and why: the cheapest model
+        within ``tolerance`` of the best, in quadrature (``brdffit.selection.choose``)."""
+        order = models.names()
+        rows = [{"model": m, "log_rmse": e} for m, e in self.errors.items() if math.isfinite(e)]
+        if not rows:
+            return None, "no successful fit"
+        rows.sort(key=lambda r: order.index(r["model"]) if r["model"] in order else len(order))
+        row, reason = choose(rows, tolerance)
+        return row["model"], reason
+
+
+@dataclass
+class ModelSummary:
+    model: str
+    fitted: int
+    failed: int
+    wins: int
+    mean: float  # of log_rmse over the tables it fitted
+    median: float
+    not_converged: int
+
+
+@dataclass
+class Ranking:
+    attrs: dict
+    models: list[str]
+    tables: list[TableRanking]
+    summary: list[ModelSummary]
+
+    @property
+    def failed_tables(self) -> list[TableRanking]:
+        return [t for t in self.tables if t.status != "ok" or t.failed_models]
+
+
+def rank(path: str | os.PathLike) -> Ranking:
+    """The ranking of the batch file at ``path``."""
+    attrs = read_attrs(path)
+    models: dict[str, None] = {}
+    for m in _list_attr(attrs.get("models")):
+        models.setdefault(m)
+    tables, not_converged = [], {}
+    for t in sorted(read_index(path).values(), key=lambda t: t.name):
+        row = TableRanking(t.name, t.path, t.status, t.message, {})
+        for model, f in t.fits.items():
+            models.setdefault(model)
+            if f.status == "ok":
+                row.errors[model] = f.log_rmse  # METRIC
+                not_converged[model] = not_converged.get(model, 0) + (not f.converged)
+            else:
+                row.failed_models[model] = f.message
+        tables.append(row)
+    summary = []
+    for m in models:
+        values = sorted(e for t in tables if math.isfinite(e := t.errors.get(m, math.nan)))
+        summary.append(ModelSummary(
+            model=m,
+            fitted=len(values),
+            failed=sum(m in t.failed_models for t in tables),
+            wins=sum(t.best == m for t in tables),
+            mean=sum(values) / len(values) if values else math.nan,
+            median=_median(values),
+            not_converged=not_converged.get(m, 0),
+        ))
+    return Ranking(attrs, list(models), tables, summary)
+
+
+def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLERANCE) -> str:
+    """The ranking as a plain-text report: one row per table, then one per model.
+    Column ``auto``: the model selection's choice at ``tolerance`` (docs/selection.md)."""
+    n_failed = len(r.failed_tables)
+    lines = [f"{source or 'batch'}: {len(r.tables)} tables ({n_failed} with failures), "
+             f"{len(r.models)} models, brdffit {r.attrs.get('brdffit_version', '?')}",
+             f"{METRIC} on the full table, lower is better; * marks each table's best; "
+             f"auto: the cheapest within {tolerance:g} of it (in quadrature)", ""]
+    width = max([len("table")] + [len(t.name) for t in r.tables])
+    cols = max([10] + [len(m) + 1 for m in r.models])
+    lines.append(f"{'table':<{width}}  {'best':<{cols}}{'auto':<{cols}}"
+                 + "".join(f"{m:>{cols + 1}}" for m in r.models))
+    for t in r.tables:
+        if t.status != "ok":
+            lines.append(f"{t.name:<{width}}  FAILED: {t.message.removeprefix(t.path + ': ')}")
+            continue
+        cells = []
+        for m in r.models:
+            if m in t.errors:
+                cells.append(f"{t.errors[m]:.4g}" + ("*" if m == t.best else " "))
+            elif m in t.failed_models:
+                cells.append("failed ")
+            else:
+                cells.append("- ")
+        auto = t.chosen(tolerance)[0]
+        lines.append(f"{t.name:<{width}}  {t.best or '-':<{cols}}{auto or '-':<{cols}}"
+                     + "".join(f"{c:>{cols + 1}}" for c in cells))
+    lines += ["", f"{'model':<{cols}} {'fitted':>7} {'failed':>7} {'wins':>6} "
+                  f"{'mean ' + METRIC:>14} {'median':>10} {'not conv.':>10}"]
+    for s in sorted(r.summary, key=lambda s: (math.isnan(s.mean), s.mean)):
+        lines.append(f"{s.model:<{cols}} {s.fitted:>7} {s.failed:>7} {s.wins:>6} "
+                     f"{s.mean:>14.4g} {s.median:>10.4g} {s.not_converged:>10}")
+    if n_failed:
+        lines += ["", "failures:"]
+        for t in r.failed_tables:
+            if t.status != "ok":  # read errors name their file already
+                lines.append(f"  {t.message}" if t.message.startswith(t.path)
+                             else f"  {t.path}: {t.message}")
+            for m, msg in t.failed_models.items():
+                lines.append(f"  {t.path} [{m}]: {msg}")
+    return "\n".join(lines)
+
+
+def plot_summary(r: Ranking, png: str | os.PathLike) -> str:
+    """A two-panel PNG: the spread of each model's error over the tables, and how
+    many tables each model fits best. Sized for ten tables or ten thousand."""
+    extras.require("plots", "the batch summary figure", hint="--no-png prints the ranking only")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_err, ax_win) = plt.subplots(1, 2, figsize=(11, 4.5),
+                                         gridspec_kw={"width_ratios": [3, 2]})
+    data = [[e for t in r.tables if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0]
+            for m in r.models]
+    positions = list(range(1, len(r.models) + 1))
+    shown = [(p, d) for p, d in zip(positions, data, strict=True) if d]
+    if shown:
+        ax_err.boxplot([d for _, d in shown], positions=[p for p, _ in shown], widths=0.5,
+                       showfliers=False)
+        for p, d in shown:  # every table as a dot: a box hides small batches
+            jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(d))]
+            ax_err.scatter(jitter, d, s=10, alpha=0.6, zorder=3)
+        ax_err.set_yscale("log")
+    ax_err.set_xticks(positions, r.models, rotation=30, ha="right")
+    ax_err.set_xlim(0.4, len(r.models) + 0.6)
+    ax_err.set_ylabel(f"{METRIC} (full table, lower is better)")
+    ax_err.set_title(f"error per model over {len(r.tables)} tables")
+    wins = [next((s.wins for s in r.summary if s.model == m), 0) for m in r.models]
+    ax_win.bar(positions, wins, color="tab:green")
+    ax_win.set_xticks(positions, r.models, rotation=30, ha="right")
+    ax_win.set_ylabel("tables where it is the best fit")
+    n_failed = len(r.failed_tables)
+    ax_win.set_title("best model per table" + (f" ({n_failed} tables with failures)"
+                                               if n_failed else ""))
+    fig.tight_layout()
+    png = os.fspath(png)
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+    return png
+
+
+def _n_params(model: str) -> float:
+    info = {m["name"]: m["n_params"] for m in models.describe()}
+    return info.get(model, math.inf)  # a model this version lacks
+
+
+def _median(values: list[float]) -> float:
+    if not values:
+        return math.nan
+    n = len(values)
+    return values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
+
+
+def _list_attr(v) -> list[str]:
+    if isinstance(v, str):
+        try:
+            v = json.loads(v)
+        except ValueError:
+            return []
+    return list(v) if isinstance(v, list) else []

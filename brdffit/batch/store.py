@@ -1,0 +1,516 @@
+"""Where a batch keeps its results: an HDF5 file, made crash-safe by a journal.
+
+Layout of ``results.h5`` (``format = "brdffit-batch"``, ``format_version = 1``;
+docs/batch.md describes every field)::
+
+    /                          attrs: format, format_version, brdffit_version, created,
+                                      updated, models, options, engine, n_tables,
+                                      n_tables_failed, n_fits, n_fits_failed
+    /inputs                    the table paths of the latest run, in order (strings)
+    /tables/<name>             one group per table file; attrs: path, sha256, size_bytes,
+                                      measured_bins, status, message, read_s, worker,
+                                      finished_at
+    /tables/<name>/<model>     one group per fitted model; attrs: status, message, sha256,
+                                      options, solver, samples, precision, starts,
+                                      max_steps, seed, result, converged, steps, time_s,
+                                      starts_used, samples_used, samples_usable,
+                                      samples_measured, dropped_unmeasured,
+                                      dropped_nonfinite, dropped_below_horizon, worker,
+                                      brdffit_version, finished_at, fit_json (the
+                                      whole result in the result schema, JSON)
+    /tables/<name>/<model>/params/<param>   float64, shape (3,) (RGB) or () (docs/models.md names)
+    /tables/<name>/<model>/error/<metric>   float64, shape (): FitResult.error
+    /index                     compound, one row per record written, in order (kind
+                               "table" or "fit"): kind, name, path, model, sha256, options,
+                               status, message, result, converged, steps, log_rmse,
+                               measured_bins; a later row supersedes an earlier one
+
+``/index`` repeats what resume and the ranking need, so that they read one
+dataset instead of walking every group (h5py spends milliseconds per group);
+the groups are the full record, and what a reader should use.
+
+Crash safety. One writer (the batch's client process) and two files:
+
+- ``results.h5.journal``: append-only JSON lines, one per finished table or
+  fit, written and fsynced as each table's results arrive. It is the
+  authoritative progress; a line torn by a kill is dropped on the next start.
+- ``results.h5``: updated by *checkpoints*: copy the current file, add the
+  records not yet in it, fsync, and rename over the old one. A rename is
+  atomic, so a reader or a SIGKILL at any moment finds the previous complete
+  file or the next one, never a half-written one. After a checkpoint the
+  journal is emptied; after a clean finish it is removed.
+
+The journal is also the lock: a second batch on the same file is refused.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import glob
+import json
+import os
+import shutil
+from dataclasses import asdict, dataclass, field
+
+import h5py
+import numpy as np
+
+from brdffit import __version__, jsonout
+from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord, now
+from brdffit.errors import BrdffitError
+
+FORMAT = "brdffit-batch"
+FORMAT_VERSION = 1
+
+
+class BatchFileError(BrdffitError, ValueError):
+    """A results file that is not a brdffit batch file, or is in use by another batch."""
+
+
+@dataclass
+class FitEntry:
+    """What the index holds of one fit: enough to resume and to rank."""
+
+    sha256: str
+    options: str  # FitOptions.key()
+    status: str
+    message: str = ""
+    result: str = ""
+    converged: bool = False
+    steps: int = -1
+    log_rmse: float = float("nan")
+
+
+@dataclass
+class TableEntry:
+    """What the index holds of one table, with its current fits by model."""
+
+    name: str  # its group under /tables
+    path: str
+    sha256: str | None
+    status: str
+    message: str = ""
+    measured_bins: int = -1
+    fits: dict[str, FitEntry] = field(default_factory=dict)
+
+
+#: Columns of ``/index``, one row per record a checkpoint wrote (kind "table" or
+#: "fit"), in order. Rows are only ever appended: a dataset rewritten at every
+#: checkpoint leaves its old space behind in HDF5, and the file grew
+#: quadratically when the index was a snapshot (54 MB after 300 checkpoints).
+_INDEX_COLUMNS = (("kind", str), ("name", str), ("path", str), ("model", str),
+                  ("sha256", str), ("options", str), ("status", str), ("message", str),
+                  ("result", str), ("converged", "?"), ("steps", "<i8"),
+                  ("log_rmse", "<f8"), ("measured_bins", "<i8"))
+_INDEX_DTYPE = np.dtype([(n, h5py.string_dtype() if k is str else k) for n, k in _INDEX_COLUMNS])
+
+
+def _index_row(r: dict, name: str) -> dict:
+    """The index row of a journal record (``TableRecord`` or ``FitRecord`` as a dict)."""
+    row = {"kind": r["kind"], "name": name, "path": r["path"], "model": r.get("model", ""),
+           "sha256": r["sha256"] or "", "options": "", "status": r["status"],
+           "message": r["message"], "result": "", "converged": False, "steps": -1,
+           "log_rmse": float("nan"), "measured_bins": _int(r.get("measured_bins"))}
+    if r["kind"] == "fit":
+        fit = r["fit"] or {}
+        row.update(options=FitOptions.key_of(r["options"]),
+                   result=fit.get("result", ""), converged=bool(fit.get("converged", False)),
+                   steps=int(fit.get("steps", -1)),
+                   log_rmse=_float(fit.get("error", {}).get("log_rmse")))
+    return row
+
+
+def _apply_row(tables: dict[str, TableEntry], row: dict) -> None:
+    """Fold one index row into the state: later rows supersede earlier ones."""
+    path = row["path"]
+    if row["kind"] == "table":
+        old = tables.get(path)
+        t = TableEntry(row["name"], path, row["sha256"] or None, row["status"], row["message"],
+                       row["measured_bins"])
+        if old is not None:
+            # Fits of other content describe a table that no longer exists.
+            keep_all = t.sha256 is None  # unreadable now: nothing to compare
+            t.fits = {m: f for m, f in old.fits.items() if keep_all or f.sha256 == t.sha256}
+        tables[path] = t
+    else:
+        t = tables.setdefault(path, TableEntry(row["name"], path, row["sha256"], "ok"))
+        t.fits[row["model"]] = FitEntry(
+            row["sha256"], row["options"], row["status"], row["message"], row["result"],
+            bool(row["converged"]), int(row["steps"]), float(row["log_rmse"]))
+
+
+class BatchStore:
+    """The single writer of a batch's results; use as a context manager.
+
+    ``add`` journals a table's records at once; ``checkpoint`` folds them into
+    the HDF5 file. Resume asks ``done_models``.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = os.path.abspath(os.fspath(path))
+        self.journal_path = self.path + ".journal"
+        self._tmp_prefix = os.path.join(os.path.dirname(self.path),
+                                        f".{os.path.basename(self.path)}.tmp-")
+        self._tables: dict[str, TableEntry] = {}
+        self._names: dict[str, str] = {}  # table path -> group name in the file
+        self._taken: set[str] = set()
+        self._pending: list[dict] = []  # journaled, not yet in the HDF5 file
+        self._journal_fd: int | None = None
+        self.recovered = 0  # records replayed from a previous run's journal
+
+    # -- opening, closing ------------------------------------------------------------
+
+    def __enter__(self) -> BatchStore:
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def open(self) -> None:
+        directory = os.path.dirname(self.path)
+        if not os.path.isdir(directory):
+            raise BatchFileError(f"{self.path}: directory {directory} does not exist")
+        self._journal_fd = _lock(self.journal_path, self.path)
+        try:
+            if os.path.exists(self.path):
+                self._tables = read_index(self.path)
+                for t in self._tables.values():
+                    self._names[t.path] = t.name
+                    self._taken.add(t.name)
+            for stale in glob.glob(glob.escape(self._tmp_prefix) + "*"):
+                os.unlink(stale)  # a checkpoint a kill interrupted; we hold the lock
+            self._replay_journal()
+        except BaseException:
+            os.close(self._journal_fd)
+            self._journal_fd = None
+            raise
+
+    def close(self) -> None:
+        if self._journal_fd is None:
+            return
+        if not self._pending:
+            # Everything is in the HDF5 file. Unlink while still locked: a batch
+            # waiting on the old journal sees it gone and takes a fresh one.
+            os.unlink(self.journal_path)
+        os.close(self._journal_fd)
+        self._journal_fd = None
+
+    # -- resume ----------------------------------------------------------------------
+
+    def known_sha256(self, path: str) -> str | None:
+        """The content hash a previous run read at ``path`` (None if never read)."""
+        t = self._tables.get(path)
+        return t.sha256 if t and t.status == "ok" else None
+
+    def done_models(self, path: str, sha256: str, options: FitOptions) -> set[str]:
+        """Models with a successful fit of this exact content under these options."""
+        t = self._tables.get(path)
+        if t is None or t.sha256 != sha256:
+            return set()
+        key = options.key()
+        return {m for m, f in t.fits.items()
+                if f.sha256 == sha256 and f.options == key and f.status == "ok"}
+
+    def counts(self) -> dict[str, int]:
+        tables = self._tables.values()
+        fits = [f for t in tables for f in t.fits.values()]
+        return {
+            "n_tables": len(self._tables),
+            "n_tables_failed": sum(t.status != "ok" for t in tables),
+            "n_fits": len(fits),
+            "n_fits_failed": sum(f.status != "ok" for f in fits),
+        }
+
+    def reserve_names(self, paths: list[str]) -> None:
+        """Fix the group names of new tables in this order (results arrive in any order)."""
+        for p in paths:
+            self._group_name(p)
+
+    # -- recording ---------------------------------------------------------------------
+
+    def add(self, table: TableRecord, fits: list[FitRecord]) -> None:
+        """Journal one table's results (fsynced before returning), then apply them."""
+        records = [{"kind": "table", **asdict(table)}]
+        records += [{"kind": "fit", **asdict(f)} for f in fits]
+        # Strict JSON: a metric a fit could not measure is null here, NaN again in HDF5.
+        data = "".join(jsonout.dumps(r, separators=(",", ":")) + "\n" for r in records).encode()
+        _write_all(self._journal_fd, data)
+        os.fsync(self._journal_fd)
+        for r in records:
+            self._apply(r)
+
+    def _apply(self, r: dict) -> None:
+        _apply_row(self._tables, _index_row(r, self._group_name(r["path"])))
+        self._pending.append(r)
+
+    # -- the HDF5 file -------------------------------------------------------------------
+
+    def checkpoint(self, attrs: dict | None = None, inputs: list[str] | None = None) -> None:
+        """Fold the journaled records into the HDF5 file, atomically (copy, add, rename).
+
+        ``attrs`` become file attributes (lists and dicts as JSON); ``inputs``
+        replaces the ``/inputs`` dataset (a dataset: attributes are limited to
+        64 KiB, and a batch may name thousands of tables).
+        """
+        tmp = f"{self._tmp_prefix}{os.getpid()}"
+        try:
+            if os.path.exists(self.path):
+                shutil.copyfile(self.path, tmp)
+                f = h5py.File(tmp, "r+")
+            else:
+                # Free-space tracking lets a refitted model's group reuse the
+                # space of the group it replaces.
+                f = h5py.File(tmp, "w", libver=("v110", "latest"), fs_strategy="fsm",
+                              fs_persist=True)
+                f.attrs["format"] = FORMAT
+                f.attrs["format_version"] = FORMAT_VERSION
+                f.attrs["created"] = now()
+                f.create_group("tables")
+                f.create_dataset("index", shape=(0,), maxshape=(None,), chunks=(256,),
+                                 dtype=_INDEX_DTYPE)
+            with f:
+                for r in self._pending:
+                    if r["kind"] == "table":
+                        self._write_table(f["tables"], r)
+                    else:
+                        self._write_fit(f["tables"], r)
+                self._append_index(f["index"])
+                if inputs is not None:
+                    if "inputs" in f:
+                        del f["inputs"]
+                    f.create_dataset("inputs", data=list(inputs), dtype=h5py.string_dtype())
+                for k, v in (attrs or {}).items():
+                    f.attrs[k] = v if isinstance(v, (str, int, float)) else jsonout.dumps(v)
+                f.attrs["brdffit_version"] = __version__
+                f.attrs["updated"] = now()
+                for k, v in self.counts().items():
+                    f.attrs[k] = v
+            _fsync_path(tmp)
+            os.replace(tmp, self.path)
+            _fsync_path(os.path.dirname(self.path))
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+        # Only now is the journal redundant; a kill before this line replays
+        # records that are already in the file, which rewrites them unchanged.
+        self._pending.clear()
+        os.ftruncate(self._journal_fd, 0)
+
+    def _group_name(self, path: str) -> str:
+        if path not in self._names:
+            stem = os.path.basename(path)
+            stem = stem[: -len(".binary")] if stem.endswith(".binary") and len(stem) > 7 else stem
+            name, i = stem, 1
+            while name in self._taken:
+                i += 1
+                name = f"{stem}~{i}"
+            self._names[path] = name
+            self._taken.add(name)
+        return self._names[path]
+
+    def _append_index(self, index: h5py.Dataset) -> None:
+        rows = [_index_row(r, self._group_name(r["path"])) for r in self._pending]
+        if not rows:
+            return
+        n = index.shape[0]
+        index.resize((n + len(rows),))
+        index[n:] = np.array([tuple(row[c] for c, _ in _INDEX_COLUMNS) for row in rows],
+                             dtype=_INDEX_DTYPE)
+
+    def _write_table(self, tables: h5py.Group, r: dict) -> None:
+        g = tables.require_group(self._group_name(r["path"]))
+        if r["sha256"] is not None:
+            for model in list(g):
+                if g[model].attrs.get("sha256") != r["sha256"]:
+                    del g[model]
+        g.attrs.update({
+            "path": r["path"],
+            "sha256": r["sha256"] or "",
+            "size_bytes": _int(r["size_bytes"]),
+            "measured_bins": _int(r["measured_bins"]),
+            "status": r["status"],
+            "message": r["message"],
+            "read_s": float(r["read_s"]),
+            "worker": r["worker"],
+            "finished_at": r["finished_at"],
+        })
+
+    def _write_fit(self, tables: h5py.Group, r: dict) -> None:
+        t = tables.require_group(self._group_name(r["path"]))
+        if r["model"] in t:
+            del t[r["model"]]
+        g = t.create_group(r["model"])
+        o = r["options"]
+        g.attrs.update({
+            "status": r["status"],
+            "message": r["message"],
+            "sha256": r["sha256"],
+            "options": FitOptions.key_of(o),
+            "solver": o["solver"],
+            "samples": _int(o["samples"], none=0),
+            "precision": o["precision"],
+            "starts": o["starts"],
+            "max_steps": o["max_steps"],
+            "seed": o["seed"],
+            "worker": r["worker"],
+            "brdffit_version": r["brdffit_version"],
+            "finished_at": r["finished_at"],
+        })
+        fit = r["fit"]
+        if fit is None:
+            g.attrs.update({"result": "", "converged": False, "steps": -1, "time_s": float("nan")})
+            return
+        s = fit["samples"]
+        g.attrs["fit_json"] = jsonout.dumps(fit)  # the whole result, in the result schema
+        g.attrs.update({
+            "result": fit["result"],
+            "converged": bool(fit["converged"]),
+            "steps": int(fit["steps"]),
+            "time_s": float(fit["time_s"]),
+            "starts_used": int(fit["starts"]),
+            "samples_used": int(s["used"]),
+            "samples_usable": int(s["usable"]),
+            "samples_measured": int(s["measured"]),
+            "dropped_unmeasured": int(s["dropped"]["unmeasured"]),
+            "dropped_nonfinite": int(s["dropped"]["nonfinite"]),
+            "dropped_below_horizon": int(s["dropped"]["below_horizon"]),
+        })
+        params = g.create_group("params")
+        for name, v in fit["params"].items():
+            params[name] = np.asarray(v, dtype=np.float64)
+        error = g.create_group("error")
+        for name, v in fit["error"].items():
+            error[name] = np.float64(_float(v))
+
+    def _replay_journal(self) -> None:
+        os.lseek(self._journal_fd, 0, os.SEEK_SET)
+        chunks = []
+        while chunk := os.read(self._journal_fd, 1 << 20):
+            chunks.append(chunk)
+        data = b"".join(chunks)
+        complete = data.rfind(b"\n") + 1
+        if complete < len(data):  # a line torn by a kill: the next append must not join it
+            os.ftruncate(self._journal_fd, complete)
+        for line in data[:complete].splitlines():
+            try:
+                r = json.loads(line)
+            except ValueError:
+                continue  # a torn line from an older kill that a crash left mid-file
+            self._apply(r)
+            self.recovered += 1
+
+
+def _open(path: str) -> h5py.File:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise BatchFileError(f"{path}: not a readable HDF5 file ({e})") from None
+    if f.attrs.get("format") != FORMAT:
+        f.close()
+        raise BatchFileError(f"{path}: an HDF5 file, but not a brdffit batch results file")
+    if int(f.attrs.get("format_version", 0)) > FORMAT_VERSION:
+        f.close()
+        raise BatchFileError(f"{path}: written by a newer brdffit (format version "
+                             f"{int(f.attrs['format_version'])})")
+    return f
+
+
+def read_attrs(path: str | os.PathLike) -> dict:
+    """The file-level attributes of a batch file, as plain Python values."""
+    with _open(os.fspath(path)) as f:
+        return {k: _plain(v) for k, v in f.attrs.items()}
+
+
+def read_index(path: str | os.PathLike) -> dict[str, TableEntry]:
+    """Every table of a batch file, by path, with its current fits: the ``/index``
+    replayed (two reads of one dataset, fast at any size)."""
+    with _open(os.fspath(path)) as f:
+        rows = f["index"][()]
+    tables: dict[str, TableEntry] = {}
+    names = rows.dtype.names
+    for values in rows.tolist():
+        _apply_row(tables, {k: _plain(v) for k, v in zip(names, values, strict=True)})
+    return tables
+
+
+def read_results(path: str | os.PathLike) -> dict:
+    """A batch file as plain data: ``{"attrs": {...}, "inputs": [...], "tables": [...]}``.
+
+    Each table is a dict of its attrs plus ``name`` and ``fits`` (model -> dict
+    of that group's attrs plus ``params`` and ``error`` dicts; RGB params as
+    lists of 3 floats, as in :class:`brdffit.FitResult`). A fit that ran also has
+    ``fit``: its whole result in the result schema (``FitResult.to_dict()``,
+    docs/results.md), the JSON ``brdffit fit --json`` prints.
+    """
+    with _open(os.fspath(path)) as f:
+        out = {"attrs": {k: _plain(v) for k, v in f.attrs.items()}, "tables": [],
+               "inputs": [_plain(s) for s in f["inputs"][()]] if "inputs" in f else []}
+        for name, g in f["tables"].items():
+            table = {"name": name, **{k: _plain(v) for k, v in g.attrs.items()}, "fits": {}}
+            for model, m in g.items():
+                fit = {k: _plain(v) for k, v in m.attrs.items()}
+                if "fit_json" in fit:  # FitResult.to_dict(), as the CLI and the API give it
+                    fit["fit"] = json.loads(fit.pop("fit_json"))
+                params, error = m.get("params", {}), m.get("error", {})
+                fit["params"] = {k: _plain(d[()]) for k, d in params.items()}
+                fit["error"] = {k: float(d[()]) for k, d in error.items()}
+                table["fits"][model] = fit
+            out["tables"].append(table)
+    return out
+
+
+def _plain(v):
+    """h5py values as plain Python (numpy scalars, arrays, bytes)."""
+    if isinstance(v, bytes):
+        return v.decode()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _int(v, none: int = -1) -> int:
+    return none if v is None else int(v)
+
+
+def _float(v) -> float:
+    """A metric from a journal record: null there (strict JSON) is NaN in HDF5."""
+    return float("nan") if v is None else float(v)
+
+
+def _lock(journal_path: str, results_path: str) -> int:
+    """Open and exclusively lock the journal; refuse when another batch holds it."""
+    for _ in range(10):
+        fd = os.open(journal_path, os.O_RDWR | os.O_CREAT | os.O_APPEND, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise BatchFileError(
+                f"{results_path}: another batch is writing it (it holds {journal_path})"
+            ) from None
+        try:
+            current = os.stat(journal_path).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            current = False
+        if current:
+            return fd
+        os.close(fd)  # the previous holder removed it as we opened it: take the new one
+    raise BatchFileError(f"{results_path}: could not lock {journal_path}")
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+def _fsync_path(path: str) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

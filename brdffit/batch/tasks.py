@@ -1,0 +1,204 @@
+"""What a batch worker runs: read one table by its path, fit it, return plain records.
+
+These functions run inside Dask worker processes (or in the caller's process for
+``workers=0``). They take a *path*, not a table: workers that share storage with
+the client read the 35 MB file themselves, and only a few hundred bytes of
+results travel back. Every failure becomes a record (a value), never an exception
+that would cross the wire: a bad table must not stop a batch, and brdffit's
+errors do not all survive pickling.
+
+Compiled fits are cached per worker process by ``brdffit.fitting.pipeline``, so a worker
+compiles each (model, options) once and reuses it for every later table.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import socket
+import time
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+
+from brdffit import __version__
+from brdffit.errors import BrdffitError, FitInputError, MerlFormatError
+from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
+from brdffit.fitting.pipeline import fit
+from brdffit.io import merl
+
+
+@dataclass
+class TableRecord:
+    """One table as a worker found it. ``sha256`` is None when it could not be read."""
+
+    path: str
+    status: str  # "ok" or "failed"
+    message: str = ""  # why it failed; empty when ok
+    sha256: str | None = None
+    size_bytes: int | None = None
+    measured_bins: int | None = None
+    read_s: float = 0.0
+    worker: str = ""
+    finished_at: str = ""
+
+
+@dataclass
+class FitRecord:
+    """One table x model fit. ``fit`` is ``FitResult.to_dict()`` when ``status == "ok"``."""
+
+    path: str
+    model: str
+    sha256: str
+    options: dict
+    status: str  # "ok" or "failed"
+    message: str = ""  # why it failed; empty when ok
+    fit: dict | None = None
+    worker: str = ""
+    brdffit_version: str = __version__
+    finished_at: str = ""
+
+    @property
+    def options_key(self) -> str:
+        return FitOptions.key_of(self.options)
+
+
+def worker_name() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _describe(e: BaseException) -> str:
+    """A one-line message; an unexpected exception keeps its type so a bug is visible."""
+    if isinstance(e, (BrdffitError, KeyError)) and str(e):
+        return str(e)
+    return f"{type(e).__name__}: {e}"
+
+
+def read_table(path: str) -> tuple[merl.MerlTable | None, TableRecord]:
+    """Read and hash ``path`` from one read of its bytes.
+
+    Hashing the very bytes that are parsed means the recorded sha256 is the
+    content that was fitted, even if the file changes during the batch. A
+    file of the wrong size is only streamed through the hash, never held in
+    memory (a batch may sweep up a 10 GB file by mistake), and ``merl.read``
+    says what is wrong with it.
+    """
+    t0 = time.perf_counter()
+    record = TableRecord(path=path, status="failed", worker=worker_name())
+    h = hashlib.sha256()
+    data = None
+    try:
+        with open(path, "rb") as f:
+            record.size_bytes = os.fstat(f.fileno()).st_size
+            if record.size_bytes == merl.FILE_BYTES:
+                data = f.read()
+                h.update(data)
+            else:
+                while chunk := f.read(1 << 22):
+                    h.update(chunk)
+    except OSError as e:
+        record.message = str(MerlFormatError(path, f"cannot read: {e.strerror or e}"))
+        record.finished_at = now()
+        return None, record
+    record.sha256 = h.hexdigest()
+    try:
+        if data is None:
+            merl.read(path)  # raises, naming the problem
+            raise MerlFormatError(path, "changed size while being read")
+        table = merl.from_bytes(data, source=path)
+    except Exception as e:  # noqa: BLE001 - any failure is this table's, recorded
+        record.message = _describe(e)
+        table = None
+    else:
+        record.status = "ok"
+        record.measured_bins = table.n_measured
+    record.read_s = time.perf_counter() - t0
+    record.finished_at = now()
+    return table, record
+
+
+def fit_record(table: merl.MerlTable, record: TableRecord, model: str,
+               options: FitOptions) -> FitRecord:
+    """Fit one model to a table that was read; a failure is recorded, not raised."""
+    out = FitRecord(path=record.path, model=model, sha256=record.sha256 or "",
+                    options=options.fit_keywords(), status="failed", worker=record.worker)
+    try:
+        result = fit(table, model, **options.fit_keywords())
+    except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
+        out.message = _describe(e)
+    else:
+        out.status = "ok"
+        out.fit = result.to_dict()
+    out.finished_at = now()
+    return out
+
+
+def fit_table(path: str, models: list[str], options: dict, expected_sha256: str | None = None,
+              done_models: tuple[str, ...] = ()) -> dict:
+    """Read ``path`` and fit every model of ``models`` not already done.
+
+    ``done_models`` are the models the client already holds finished fits for,
+    valid only for the content ``expected_sha256``: if the file changed since
+    the client hashed it, every model is fitted again.
+
+    Returns ``{"table": TableRecord dict, "fits": [FitRecord dict, ...]}``.
+    """
+    opts = FitOptions.from_dict(options)
+    table, record = read_table(path)
+    fits = []
+    if table is not None:
+        done = set(done_models) if record.sha256 == expected_sha256 else set()
+        fits = [asdict(fit_record(table, record, m, opts)) for m in models if m not in done]
+    return {"table": asdict(record), "fits": fits}
+
+
+def fit_one(source: str | bytes, model: str, options: dict) -> dict:
+    """One fit for a service job (``brdffit.batch.cluster.DaskRunner``).
+
+    ``source`` is a path the worker can read, or the table's bytes when it
+    cannot. Returns ``{"ok": True, "fit": FitResult dict, "sha256": ...}``, or
+    ``{"ok": False, "error": {...}}`` describing the exception so the caller can
+    raise it again (see ``raise_remote_error``).
+    """
+    try:
+        if isinstance(source, str):
+            with open(source, "rb") as f:
+                data = f.read()
+            table = merl.from_bytes(data, source=source)
+        else:
+            data = source
+            table = merl.from_bytes(data, source="<upload>")
+        result = fit(table, model, **FitOptions.from_dict(options).fit_keywords())
+    except Exception as e:  # noqa: BLE001 - crosses the wire as a value
+        return {"ok": False, "error": {
+            "type": type(e).__name__, "message": str(e),
+            "source": getattr(e, "source", None) or getattr(e, "filename", None),
+            "problem": getattr(e, "problem", None),
+            "strerror": getattr(e, "strerror", None),
+        }}
+    return {"ok": True, "fit": result.to_dict(), "sha256": hashlib.sha256(data).hexdigest(),
+            "worker": worker_name()}
+
+
+def raise_remote_error(error: dict) -> None:
+    """Raise the exception ``fit_one`` described, as the same brdffit type where it is one.
+
+    (``MerlFormatError`` cannot be pickled and rebuilt by its message alone, so
+    exceptions travel as these dicts.)
+    """
+    from brdffit.models import UnknownModelError
+
+    kind, message = error["type"], error["message"]
+    if kind == "MerlFormatError":
+        raise MerlFormatError(error["source"], error["problem"])
+    if kind == "FitInputError":
+        raise FitInputError(message)
+    if kind == "UnknownModelError":
+        raise UnknownModelError(message)
+    if kind in ("FileNotFoundError", "PermissionError", "IsADirectoryError"):
+        reason = error["strerror"] or message
+        raise MerlFormatError(error["source"] or "<table>", f"cannot read: {reason}")
+    raise RuntimeError(f"fit failed on the worker: {kind}: {message}")

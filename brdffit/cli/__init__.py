@@ -1,0 +1,82 @@
+"""The ``brdffit`` command line: a thin shell over the library.
+
+Each subcommand lives in its own module of this package with
+``add_arguments(parser)`` and ``run(args)`` (``batch-report`` in
+``batch_report.py``); this module builds the parser,
+parses, and turns brdffit's input errors into one-line messages and exit codes
+(never a traceback). Only the module of the command being run is imported, so
+``brdffit --help`` and ``brdffit models`` do not wait for what ``fit`` needs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Collection
+from types import ModuleType
+
+from brdffit.errors import BrdffitError
+
+#: command -> its one-line summary, in the order ``brdffit --help`` lists them; a
+#: command's module, and JAX, Dask or uvicorn behind it, is imported only when
+#: that command is asked for
+COMMANDS = {
+    "batch": "fit many tables x models into one HDF5 file (resumable, Dask)",
+    "batch-report": "rank the models of a batch results file",
+    "fit": "fit a model to a MERL .binary table",
+    "models": "list the models with their parameters and ranges",
+    "serve": "run the REST API (fits in worker processes)",
+}
+
+EXIT_INPUT = 2  # bad input: malformed table, unknown model, bad option
+EXIT_INTERRUPTED = 130
+
+
+def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The ``brdffit`` parser with the arguments of the commands ``full`` (every
+    command when None); the others are listed with their summary only."""
+    from brdffit import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="brdffit", description="Fit analytic BRDF models to measured MERL tables."
+    )
+    parser.add_argument("--version", action="version", version=f"brdffit {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, summary in COMMANDS.items():
+        p = sub.add_parser(name, help=summary, description=summary[0].upper() + summary[1:] + ".")
+        if full is None or name in full:
+            module = load(name)
+            module.add_arguments(p)
+            p.set_defaults(run=module.run)
+    return parser
+
+
+def load(command: str) -> ModuleType:
+    """The module of ``command`` (imported now, with whatever it needs)."""
+    return importlib.import_module(f"{__name__}.{command.replace('-', '_')}")
+
+
+def _command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names: its first word that is not an option (the
+    top-level options take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        parser = build_parser(full={_command(argv)})
+        args = parser.parse_args(argv)
+        return int(args.run(args) or 0)
+    except BrdffitError as e:  # includes a missing extra (brdffit.extras)
+        print(f"brdffit: error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except (ValueError, OSError) as e:  # bad option values, unreadable paths
+        print(f"brdffit: error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print("brdffit: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+

@@ -1,0 +1,68 @@
+"""``brdffit batch``: fit many tables x models into one HDF5 file (``brdffit.batch.job``)."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+from brdffit.batch.job import run_batch
+from brdffit.batch.progress import format_duration
+from brdffit.cli.fit import add_fit_options, options_from_args
+
+EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
+
+
+def add_arguments(p) -> None:
+    p.description = ("Fit every table of INPUTS with every model into an HDF5 file. Run it "
+                     "again with the same arguments to resume: finished fits are skipped.")
+    p.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="table files, directories (every *.binary below) or glob patterns")
+    p.add_argument("--models", required=True, type=_models,
+                   help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
+                        "for the selection's candidates (batch-report shows the choice)")
+    p.add_argument("--out", required=True, help="results file (.h5), created or resumed")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=_default_workers(),
+                       help="local worker processes (default: the CPU count, "
+                            f"{_default_workers()} here); 0 fits in this process")
+    where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                       help="run on this existing Dask cluster instead of local workers")
+    add_fit_options(p)
+    p.add_argument("--refit", action="store_true",
+                   help="fit again what the file already holds (e.g. after a model changed)")
+    p.add_argument("--checkpoint", type=float, default=10.0, metavar="SECONDS",
+                   help="longest time between rewrites of the .h5 (every result is "
+                        "journaled at once regardless; default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def _default_workers() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _models(text: str) -> list[str]:
+    return [m.strip() for m in text.split(",") if m.strip()]
+
+
+def run(args) -> int:
+    options = options_from_args(args)
+    s = run_batch(args.inputs, args.models, args.out, options=options, workers=args.workers,
+                  scheduler=args.scheduler, refit=args.refit, progress=not args.quiet,
+                  checkpoint_s=args.checkpoint)
+    if s.recovered:
+        print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
+    print(f"{s.out}: {s.fits} fits on {s.tables - s.skipped} tables in "
+          f"{format_duration(s.elapsed_s)}; {s.skipped} tables were already done")
+    if s.ok:
+        return 0
+    for path, message in s.failed_tables:
+        print(f"failed: {message}" if message.startswith(path) else f"failed: {path}: {message}",
+              file=sys.stderr)
+    for path, model, message in s.failed_fits:
+        print(f"failed: {path} [{model}]: {message}", file=sys.stderr)
+    print(f"brdffit: {s.n_failed_tables} of {s.tables} tables failed "
+          f"({len(s.failed_fits)} failed fits); the rest are in {s.out}", file=sys.stderr)
+    return EXIT_FAILED_TABLES

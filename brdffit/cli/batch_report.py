@@ -1,0 +1,44 @@
+"""``brdffit batch-report``: rank the models of a ``brdffit batch`` results file."""
+
+from __future__ import annotations
+
+import sys
+
+from brdffit import extras, jsonout
+from brdffit.batch.report import format_ranking, plot_summary, rank
+from brdffit.cli.fit import add_option_arguments
+from brdffit.fitting.options import FitOptions
+
+
+def add_arguments(p) -> None:
+    p.add_argument("results", help="an .h5 file written by `brdffit batch`")
+    p.add_argument("--png", help="summary figure (default: RESULTS without .h5 + .summary.png)")
+    p.add_argument("--no-png", action="store_true", help="print only")
+    p.add_argument("--json", action="store_true", help="print the ranking as JSON")
+    add_option_arguments(p, ["tolerance"])  # the 'auto' column, as `fit --model auto`
+
+
+def run(args) -> int:
+    FitOptions(tolerance=args.tolerance)  # the range every shell checks
+    if not args.no_png:
+        extras.require("plots", "brdffit batch-report's figure", hint="--no-png prints only")
+    ranking = rank(args.results)
+    if args.json:
+        # A model with no successful fit has mean and median NaN: null in JSON.
+        jsonout.dump({
+            "attrs": ranking.attrs,
+            "tables": [{"name": t.name, "path": t.path, "status": t.status, "best": t.best,
+                        "auto": t.chosen(args.tolerance)[0],
+                        "auto_reason": t.chosen(args.tolerance)[1],
+                        "log_rmse": t.errors, "message": t.message,
+                        "failed_models": t.failed_models} for t in ranking.tables],
+            "models": [vars(s) for s in ranking.summary],
+        }, sys.stdout, indent=2, default=str)
+        sys.stdout.write("\n")
+    else:
+        print(format_ranking(ranking, args.results, args.tolerance))
+    if not args.no_png:
+        png = args.png or (args.results.removesuffix(".h5") + ".summary.png")
+        plot_summary(ranking, png)
+        print(f"wrote {png}", file=sys.stderr)
+    return 0

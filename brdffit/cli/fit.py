@@ -1,0 +1,140 @@
+"""``brdffit fit TABLE``: fit one table and print the result (or JSON)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from brdffit import extras, jsonout
+from brdffit.fitting import options
+from brdffit.fitting.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.fitting.result import FitResult
+from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
+from brdffit.fitting.scene import Scene, fit_in_scene
+from brdffit.io import merl
+from brdffit.selection import DEFAULT_CANDIDATES, format_selection, select
+
+
+def add_option_arguments(p, names) -> None:
+    """A ``--flag`` for each of ``brdffit.fitting.options.FitOptions``' fields ``names``.
+
+    Type, choices, default and help come from the field, so the command line
+    cannot drift from the library; ranges are checked where every shell checks
+    them, when the :class:`FitOptions` is built (:func:`options_from_args`).
+    """
+    for name in names:
+        default, opt = options.spec(name)
+        shown = opt.cli_none if default is None and opt.cli_none else default
+        valid = "" if opt.choices else opt.describe_range(opt.cli_none or "absent") + "; "
+        help_text = f"{opt.doc} ({valid}default {'none' if shown is None else shown})"
+        kw = {"default": default, "help": help_text.replace("%", "%%")}
+        if opt.choices is not None:
+            kw["choices"] = opt.choices
+        else:
+            kw["type"] = _value_parser(name, opt)
+        p.add_argument(f"--{name.replace('_', '-')}", **kw)
+
+
+def _value_parser(name: str, opt: options.Option):
+    def parse(text: str):
+        if opt.cli_none is not None and text == opt.cli_none:
+            return None
+        try:
+            return opt.kind(text)
+        except ValueError:
+            wanted = {int: "an integer", float: "a number", str: "a string"}[opt.kind]
+            alt = f" or {opt.cli_none!r}" if opt.cli_none else ""
+            raise argparse.ArgumentTypeError(
+                f"--{name.replace('_', '-')} wants {wanted}{alt}, got {text!r}") from None
+
+    parse.__name__ = name  # argparse names the option by it in its messages
+    return parse
+
+
+def add_fit_options(p) -> None:
+    """The options of ``brdffit.fit`` (shared by ``fit`` and ``batch``)."""
+    add_option_arguments(p, FIT_KEYWORDS)
+
+
+def options_from_args(args) -> FitOptions:
+    """The :class:`FitOptions` of parsed arguments (the fields the parser has);
+    raises ``FitInputError`` for a value out of range."""
+    return FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)})
+
+
+def add_arguments(p) -> None:
+    p.add_argument("table", help="path to a MERL .binary file")
+    add_option_arguments(p, ["model"])
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_fit_options(p)
+    p.add_argument("--plots", metavar="DIR",
+                   help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
+    auto = p.add_argument_group("--model auto (docs/selection.md)")
+    add_option_arguments(auto, SELECTION_KEYWORDS)
+    auto.add_argument("--candidates", type=lambda t: [c for c in t.split(",") if c],
+                      default=list(DEFAULT_CANDIDATES),
+                      help=f"comma-separated models (default {','.join(DEFAULT_CANDIDATES)})")
+    auto.add_argument("--mono-ks", action="store_true",
+                      help="refit the chosen model with a grey ks when its ks is grey")
+    scene = p.add_argument_group("scene: only the directions a scene uses count")
+    scene.add_argument("--scene", metavar="FILE", help="scene description: .json, .npy, .csv")
+    scene.add_argument("--scene-preset", choices=list(SCENE_PRESETS))
+    scene.add_argument("--max-theta", type=float, metavar="DEG",
+                       help="largest incidence and view angle (degrees)")
+    scene.add_argument("--max-theta-i", type=float, metavar="DEG", help="largest incidence angle")
+    scene.add_argument("--max-theta-o", type=float, metavar="DEG", help="largest view angle")
+
+
+def format_result(r: FitResult) -> str:
+    """A human-readable summary of a fit."""
+    lines = [f"{r.table}: {r.model} fit, {r.result} after {r.steps} steps in {r.time_s:.2f} s"
+             + ("" if r.converged else "  (NOT converged)")]
+    for name, v in r.params.items():
+        val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
+        lines.append(f"  {name:<6} = {val}")
+    e = r.error
+    on = "scene" if r.scene is not None else "full table"
+    lines.append(f"  log_rmse = {e['log_rmse']:.4g} ({on})   rmse_cos = {e['rmse_cos']:.4g} 1/sr")
+    if r.full_table_error is not None:
+        lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} (full table)   "
+                     f"scene {r.scene['description']}")
+    s = r.samples
+    d = s["dropped"]
+    lines.append(
+        f"  bins: {s['used']:,} fitted of {s['usable']:,} usable; dropped {d['unmeasured']:,} "
+        f"unmeasured, {d['nonfinite']:,} non-finite, {d['below_horizon']:,} below the horizon"
+    )
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    opts = options_from_args(args)  # refused before the table is read
+    if args.plots:
+        extras.require("plots", "brdffit fit --plots")  # before the fit, not after
+    table = merl.read(args.table)
+    scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
+                               max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
+    if opts.model == AUTO:
+        selection = select(table, args.candidates, scene=scene, mono_ks=args.mono_ks,
+                           **opts.selection_keywords(), **opts.fit_keywords())
+        return _report(args, table, selection.result, selection.to_dict(),
+                       format_selection(selection))
+    result = fit_in_scene(table, opts.model, scene, **opts.fit_keywords())
+    return _report(args, table, result, result.to_dict(), format_result(result))
+
+
+def _report(args, table, result, as_dict: dict, as_text: str) -> int:
+    """Print JSON or text, write the plots of ``result`` if asked."""
+    if args.json:
+        jsonout.dump(as_dict, sys.stdout)  # a metric a fit could not measure is null
+        sys.stdout.write("\n")
+    else:
+        print(as_text)
+    if args.plots:
+        from brdffit.view import plots  # matplotlib only when asked for
+
+        for path in plots.save_all(table, result, args.plots):
+            # stderr: with --json, stdout stays one JSON object
+            print(f"wrote {path}", file=sys.stderr)
+    # A fit that ran is a result, converged or not: `converged` says which.
+    return 0

@@ -1,0 +1,21 @@
+"""``brdffit models``: list the models, their parameters and ranges."""
+
+from __future__ import annotations
+
+from brdffit import jsonout, models
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+
+
+def run(args) -> int:
+    info = models.describe()
+    if args.json:
+        print(jsonout.dumps(info, indent=2))
+        return 0
+    for m in info:
+        print(f"{m['name']}  ({m['n_params']} values)  {m['doc']}")
+        for p in m["params"]:
+            print(f"    {p['name']:<6} {p['range']:<22} {p['doc']}")
+    return 0

@@ -1,0 +1,278 @@
+"""The options of a fit, declared once: :class:`FitOptions`.
+
+Every shell takes its options from here rather than declaring its own: the CLI
+builds ``brdffit fit`` and ``brdffit batch`` arguments from the fields
+(``brdffit.cli.fit``), the service builds its request schema's defaults and
+bounds from them (``api/routes/fits.py``), and a batch identifies a finished fit
+by :meth:`FitOptions.key`. The defaults are the library's own constants
+(``DEFAULT_SAMPLES``, ``DEFAULT_STARTS``, ``DEFAULT_MAX_STEPS``, ...), so a default
+retuned there is retuned in every shell and in the docs (``python -m
+brdffit.fitting.options --docs`` rewrites their tables; a test checks them).
+
+Each field carries an :class:`Option` in its metadata: its one-line meaning and
+its valid range, which :class:`FitOptions` enforces on construction, so an
+options object that exists is one a fit accepts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import math
+from dataclasses import dataclass
+
+from brdffit import jsonout, models
+from brdffit.errors import FitInputError
+from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
+from brdffit.fitting.sampling import DEFAULT_SAMPLES
+from brdffit.io.angles import N_PHI_D, N_THETA_D, N_THETA_H
+from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name
+
+#: Selection tolerance in ``log_rmse``, in quadrature: 0.005 is ~0.5 % RMS at the
+#: highlight, below the repeatability of a MERL measurement (docs/selection.md).
+DEFAULT_TOLERANCE = 0.005
+#: The fields that are keywords of ``brdffit.fit``, in its order; the others
+#: (``model``, the selection rule) say what to fit and how to choose.
+FIT_KEYWORDS = ("solver", "samples", "precision", "starts", "max_steps", "seed")
+SELECTION_KEYWORDS = ("tolerance", "budget")
+N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
+
+# fit()'s signature is where the defaults without a named constant (model,
+# solver, precision, seed) are declared; reading them here keeps it so.
+_FIT_DEFAULTS = {n: p.default for n, p in inspect.signature(fit).parameters.items()}
+
+
+@dataclass(frozen=True)
+class Option:
+    """How one option is offered and checked: what every shell needs to know."""
+
+    doc: str  # one line, shown as CLI help and API description
+    kind: type  # int, float or str
+    choices: tuple[str, ...] | None = None
+    least: float | None = None  # smallest valid value, inclusive
+    above: float | None = None  # values must be strictly above this
+    most: float | None = None  # largest valid value, inclusive
+    none: str | None = None  # what None means, where None is allowed
+    cli_none: str | None = None  # the word a command line gives for None ("all")
+    words: str | None = None  # the valid values, where a range cannot say them
+
+    def check(self, name: str, value) -> None:
+        """Raise :class:`FitInputError` unless ``value`` is valid for this option."""
+        if value is None:
+            if self.none is None:
+                raise FitInputError(f"{name} must be given, got None")
+            return
+        if self.choices is not None:
+            if value not in self.choices:
+                raise FitInputError(
+                    f"unknown {name} {value!r}; choose one of {', '.join(self.choices)}")
+            return
+        ok_type = (int,) if self.kind is int else (int, float) if self.kind is float else (str,)
+        if not isinstance(value, ok_type) or isinstance(value, bool):
+            raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
+        if self.kind is float and not math.isfinite(value):
+            raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
+        if ((self.least is not None and value < self.least)
+                or (self.above is not None and value <= self.above)
+                or (self.most is not None and value > self.most)):
+            raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
+
+    def describe_range(self, none_word: str = "None") -> str:
+        """The valid values in words: ``"an integer in 1 .. 32"``; ``none_word`` is
+        how the reader spells None (``null`` in JSON, ``all`` on a command line)."""
+        if self.words is not None:
+            text = self.words
+        elif self.choices is not None:
+            text = "one of " + ", ".join(self.choices)
+        else:
+            text = {int: "an integer", float: "a number", str: "a string"}[self.kind]
+            if self.least is not None and self.most is not None:
+                text += f" in {_number(self.least)} .. {_number(self.most)}"
+            else:
+                bounds = [f"{op} {_number(x)}" for op, x in
+                          ((">=", self.least), (">", self.above), ("<=", self.most))
+                          if x is not None]
+                text += (" " + " and ".join(bounds)) if bounds else ""
+        if self.none is not None:
+            text += f", or {none_word} ({self.none})"
+        return text
+
+
+def _number(x: float) -> str:
+    if float(x).is_integer() and abs(x) >= 10_000:
+        return f"{int(x):,}"
+    return f"{x:g}"
+
+
+def _option(default, **spec):
+    return dataclasses.field(default=default, metadata={"option": Option(**spec)})
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Everything a caller chooses about a fit, with its default and valid range.
+
+    ``FitOptions()`` are the library's defaults; ``fit(table, o.model,
+    **o.fit_keywords())`` runs them (``select`` for ``model="auto"``, with
+    ``o.tolerance`` and ``o.budget``). Invalid values raise
+    :class:`~brdffit.errors.FitInputError` here, before any table is read.
+    """
+
+    model: str = _option(
+        _FIT_DEFAULTS["model"], kind=str, words="a model name, or auto",
+        doc="model name (see `brdffit models`), or 'auto' to choose one (docs/selection.md)")
+    solver: str = _option(
+        _FIT_DEFAULTS["solver"], kind=str, choices=SOLVERS,
+        doc="least-squares solver; lm is brdffit's Levenberg-Marquardt")
+    samples: int | None = _option(
+        DEFAULT_SAMPLES, kind=int, least=64, most=N_BINS, none="every bin; slow", cli_none="all",
+        doc="bins the solver sees (stratified subsample); the error is always on the full table")
+    precision: str = _option(
+        _FIT_DEFAULTS["precision"], kind=str, choices=tuple(PRECISIONS),
+        doc="floating point precision of the solve")
+    starts: int = _option(
+        DEFAULT_STARTS, kind=int, least=1, most=32,
+        doc="best-scoring start candidates refined side by side; the best result is kept")
+    max_steps: int = _option(
+        DEFAULT_MAX_STEPS, kind=int, least=1, most=10_000,
+        doc="solver step limit per start; running out is reported, not raised")
+    seed: int = _option(
+        _FIT_DEFAULTS["seed"], kind=int, least=0, most=2**32 - 1,
+        doc="subsample seed: a fit is deterministic for a given seed")
+    tolerance: float = _option(
+        DEFAULT_TOLERANCE, kind=float, least=0, most=10,
+        doc="model 'auto': the cheapest model within this log_rmse of the best (in "
+            "quadrature) is chosen")
+    budget: float | None = _option(
+        None, kind=float, above=0, most=10, none="no budget",
+        doc="model 'auto': the cheapest model with log_rmse under this budget is chosen")
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            f.metadata["option"].check(f.name, getattr(self, f.name))
+        models.check_name(self.model, allow_auto=True)
+
+    # -- what the shells and the library take -------------------------------------
+
+    def fit_keywords(self) -> dict:
+        """The keyword arguments of ``brdffit.fit`` (and ``select``'s ``**fit_options``)."""
+        return {name: getattr(self, name) for name in FIT_KEYWORDS}
+
+    def selection_keywords(self) -> dict:
+        """``tolerance`` and ``budget``, for ``brdffit.select``."""
+        return {name: getattr(self, name) for name in SELECTION_KEYWORDS}
+
+    def key(self) -> str:
+        """Canonical JSON of :meth:`fit_keywords`: equal fits, equal key.
+
+        A batch stores it beside each fit's table hash and model, and skips a fit
+        on resume when all three match; the model and the selection rule are
+        not part of it (a batch records the model separately, and the rule only
+        reads finished fits).
+        """
+        return self.key_of(self.fit_keywords())
+
+    @staticmethod
+    def key_of(fit_keywords: dict) -> str:
+        """:meth:`key` of fit keywords as a results file stored them, not checked
+        again: a file written under other ranges must still resume."""
+        d = {name: fit_keywords[name] for name in FIT_KEYWORDS}
+        return jsonout.dumps(d, sort_keys=True, separators=(",", ":"))
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FitOptions:
+        """Options from a dict of field names (a subset; the rest default)."""
+        unknown = sorted(set(d) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise FitInputError(f"unknown fit options {unknown}; known: {', '.join(names())}")
+        return cls(**d)
+
+    def replace(self, **changes) -> FitOptions:
+        return dataclasses.replace(self, **changes)
+
+
+def names() -> tuple[str, ...]:
+    """Every option, in declaration order."""
+    return tuple(f.name for f in dataclasses.fields(FitOptions))
+
+
+def spec(name: str) -> tuple[object, Option]:
+    """``(default, Option)`` of the option ``name``."""
+    f = next((f for f in dataclasses.fields(FitOptions) if f.name == name), None)
+    if f is None:
+        raise KeyError(name)
+    return f.default, f.metadata["option"]
+
+
+# -- the docs' option table --------------------------------------------------------------
+
+_DOC_BEGIN = "<!-- fit options: generated by `python -m brdffit.fitting.options --docs` -->"
+_DOC_END = "<!-- end of fit options -->"
+
+
+def markdown_table(style: str = "python") -> str:
+    """The options as a Markdown table; ``style`` ``"python"`` (keyword, ``None``),
+    ``"cli"`` (``--flag``) or ``"json"`` (key, ``null``) names them as each shell does;
+    the service's ``options`` object (``"json"``) holds all but the model, which is the
+    request's own field."""
+    rows = ["| option | default | valid values | meaning |", "|---|---|---|---|"]
+    for name in names():
+        if style == "json" and name == "model":
+            continue
+        default, opt = spec(name)
+        if style == "cli":
+            label = f"`--{name.replace('_', '-')}`"
+            none_word = f"`{opt.cli_none}`" if opt.cli_none else "absent"
+        else:
+            label, none_word = f"`{name}`", "`null`" if style == "json" else "`None`"
+        if default is None:
+            shown = none_word if style != "cli" or opt.cli_none else "absent"
+        else:
+            shown = f'`"{default}"`' if isinstance(default, str) else f"`{default}`"
+        rows.append(f"| {label} | {shown} | {opt.describe_range(none_word)} | {opt.doc} |")
+    return "\n".join(rows)
+
+
+def docs_block(style: str) -> str:
+    return f"{_DOC_BEGIN.replace('-->', f'style={style} -->')}\n{markdown_table(style)}\n{_DOC_END}"
+
+
+def rewrite_docs(path: str) -> bool:
+    """Replace every generated option table in the Markdown file ``path``; True if
+    it changed."""
+    import re
+
+    with open(path, encoding="utf-8") as f:
+        text = f.read()
+    begin = re.escape(_DOC_BEGIN.removesuffix(" -->")) + r" style=(\w+) -->"
+    pattern = re.compile(begin + r"\n(?:.*?\n)?" + re.escape(_DOC_END), re.S)
+    new = pattern.sub(lambda m: docs_block(m.group(1)), text)
+    if new != text:
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(new)
+    return new != text
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(
+        prog="python -m brdffit.fitting.options",
+        description="Print the fit options as a Markdown table, or rewrite the docs' tables.")
+    ap.add_argument("--style", choices=("python", "cli", "json"), default="python")
+    ap.add_argument("--docs", nargs="+", metavar="FILE.md",
+                    help="rewrite the generated tables in these files")
+    args = ap.parse_args(argv)
+    if args.docs:
+        for path in args.docs:
+            print(f"{path}: {'rewritten' if rewrite_docs(path) else 'up to date'}")
+    else:
+        print(markdown_table(args.style))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,436 @@
+"""Fit an analytic model to a MERL table: ``fit(table, "ggx") -> FitResult``.
+
+The pipeline, and where each decision is documented:
+
+1. usable bins and solid-angle weights (``brdffit.fitting.sampling``, ``brdffit.io.grid``);
+2. a fixed-size stratified subsample for the solver (``brdffit.fitting.sampling``);
+3. data-driven start candidates scored in one batched call
+   (``brdffit.fitting.starts``), the best ``starts`` kept;
+4. an optimistix least-squares solve from each start, batched with ``vmap``,
+   on the compressed loss of ``brdffit.fitting.loss``; failures stay values
+   (``throw=False``) and are reported, never raised;
+5. the error metrics of the best solution on **every** usable bin of the table.
+
+Compiled functions are keyed on (model, solver, sample count, precision) only:
+the data always travels through ``args``, so the second table with the same
+settings reuses the compiled fit, and the persistent cache (``brdffit.runtime``)
+carries it over to the next process.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+import weakref
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from brdffit import models, runtime
+from brdffit.errors import FitInputError
+from brdffit.fitting import solver as solvers
+from brdffit.fitting.loss import LossData, normal_equations, residuals, sum_squares
+from brdffit.fitting.result import FitResult
+from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
+from brdffit.fitting.solver import NormalLevenbergMarquardt
+from brdffit.fitting.starts import candidates as start_vectors
+from brdffit.io import merl
+from brdffit.io.grid import bin_grid
+from brdffit.io.merl import MerlTable
+from brdffit.models.frame import Frame, shading_frame
+
+PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
+#: One start suffices on every case of the stability suite: the starts are scored
+#: on a lobe-shape grid first, so the best one is already in the right basin.
+#: More starts (refined side by side with vmap) cost ~linearly more.
+DEFAULT_STARTS = 1
+#: Steps per start. A default fit of a real material converges in 3-80 steps
+#: (bench/results/real_materials.md); the limit only ends a fit that cannot.
+DEFAULT_MAX_STEPS = 256
+
+
+def _make_solver(name: str, precision: str):
+    # float32 cannot resolve relative changes much below 1e-6: looser tolerances
+    # there stop the solver at its attainable accuracy instead of at max_steps.
+    rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
+    gtol = solvers.gtol_for(PRECISIONS[precision])
+    return {
+        "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
+        "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
+        "dogleg": lambda: optx.Dogleg(rtol=rtol, atol=atol),
+        "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
+    }[name]()
+
+
+#: "lm" is brdffit's normal-equations Levenberg-Marquardt (``brdffit.fitting.solver``);
+#: "optx-lm" is optimistix's own, kept for comparison.
+SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
+#: Built once per (name, precision) and passed to the compiled solve as static.
+_SOLVER_CACHE = {(s, p): _make_solver(s, p) for s in SOLVERS for p in PRECISIONS}
+
+
+# -- compiled pieces -----------------------------------------------------------
+
+
+@eqx.filter_jit
+def _score(model, u_batch, data):
+    return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
+
+
+def _bound_side(u, args):
+    model, _ = args
+    return model.bound_side(u)
+
+
+@eqx.filter_jit
+def _solve_batch(model, solver, u_batch, data, max_steps):
+    # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
+    floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
+    options = {"normal_equations": normal_equations, "bound_side": _bound_side,
+               "loss_floor": floor}
+
+    def one(u0):
+        sol = optx.least_squares(
+            residuals,
+            solver,
+            u0,
+            args=(model, data),
+            options=options,
+            max_steps=max_steps,
+            throw=False,
+        )
+        # Whatever the solver and however it stopped, "successful" means the
+        # optimality test holds at the point it returns (brdffit.fitting.solver).
+        loss, jtj, jtr = normal_equations(sol.value, (model, data))
+        optimal = solvers.is_optimal(
+            loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
+        )
+        # Return values, not the Solution: its state holds a jaxpr.
+        return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
+
+    return jax.vmap(one)(u_batch)
+
+
+# -- data preparation --------------------------------------------------------------
+
+
+@functools.cache
+def _device_frames(dtype_name: str) -> Frame:
+    """The shading frame of every bin centre, on the device, computed once per
+    process: only targets and weights travel per table."""
+    g = bin_grid()
+    return jax.jit(shading_frame)(jnp.asarray(g.wi, dtype_name), jnp.asarray(g.wo, dtype_name))
+
+
+def _make_loss_data(table, index, weight, dtype, frame: Frame) -> LossData:
+    values = table.rgb.reshape(3, -1)[:, index]
+    target = np.log1p(values * bin_grid().cos_i[index])
+    return LossData(
+        frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype)
+    )
+
+
+def sample_data(
+    table: MerlTable, index: np.ndarray, weight: np.ndarray, dtype=jnp.float64
+) -> LossData:
+    """The bins ``index`` (flat) of ``table`` with their ``weight``s, ready for a loss."""
+    frame = _gather(_device_frames(jnp.dtype(dtype).name), jnp.asarray(index))
+    return _make_loss_data(table, index, weight, dtype, frame)
+
+
+@jax.jit
+def _gather(tree, index):
+    return jax.tree_util.tree_map(lambda a: a[..., index], tree)
+
+
+@jax.jit
+def _compress_all(rgb, cos_i):
+    return jnp.log1p(rgb * jnp.maximum(cos_i, 0.0))
+
+
+def full_table_data(table: MerlTable, weight: np.ndarray, dtype=jnp.float64) -> LossData:
+    """Every bin of the table (a fixed shape), weighted by ``weight`` (flat; 0 below
+    the horizon and on unmeasured bins), as a :class:`LossData`."""
+    frame = _device_frames(jnp.dtype(dtype).name)
+    rgb = jnp.asarray(table.rgb.reshape(3, -1), dtype)
+    return LossData(
+        frame=frame, target=_compress_all(rgb, frame.cos_i), weight=jnp.asarray(weight, dtype)
+    )
+
+
+#: The full-table error is a report, not an optimisation: float32 evaluates it
+#: ~2x faster over the 1.46M bins and agrees with float64 to ~1e-6 relative on
+#: log_rmse (tests/test_fitting.py::test_full_table_error_float32_matches_float64).
+FULL_TABLE_DTYPE = jnp.float32
+
+
+class _TableOnDevice(eqx.Module):
+    """What every full-table error of one table needs, whatever the model."""
+
+    meas_cos: Float[Array, "3 n"]  # f_meas cos_i
+    target: Float[Array, "3 n"]  # log1p(f_meas cos_i)
+
+
+@jax.jit
+def _table_on_device(rgb, cos_i) -> _TableOnDevice:
+    meas_cos = rgb * jnp.maximum(cos_i, 0.0)
+    return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos))
+
+
+#: Per-table arrays, reused by every model fitted to the same table object (a
+#: batch or `auto` fits several) and dropped with the table.
+_TABLE_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _cached(table: MerlTable, key: str, make):
+    per_table = _TABLE_CACHE.setdefault(table, {})
+    if key not in per_table:
+        per_table[key] = make()
+    return per_table[key]
+
+
+def _device_table(table: MerlTable, dtype) -> _TableOnDevice:
+    name = jnp.dtype(dtype).name
+    return _cached(table, f"device-{name}", lambda: _table_on_device(
+        jnp.asarray(table.rgb.reshape(3, -1).astype(name, copy=False)),
+        _device_frames(name).cos_i,
+    ))
+
+
+def _peak_bin(table: MerlTable, weight: np.ndarray) -> int:
+    """Bin with the largest measured sum_c f cos_i among those with weight > 0."""
+    brightness = _cached(table, "brightness", lambda: table.rgb.reshape(3, -1).sum(axis=0)
+                         * np.maximum(bin_grid().cos_i, 0.0))
+    return int(np.argmax(np.where(weight > 0, brightness, -np.inf)))
+
+
+# The full-table error is two jitted computations, not one: XLA's CPU backend
+# generates a multi-output reduction ~2x slower than two single ones, and async
+# dispatch runs the two side by side.
+
+
+def _fit_cos(model, u, frame):
+    f = jnp.maximum(model.eval_channels(model.constrain(u), frame), 0.0)
+    return f * jnp.maximum(frame.cos_i, 0.0)
+
+
+@eqx.filter_jit
+def _full_log_rmse(model, u, dev: _TableOnDevice, weight, frame):
+    d = jnp.log1p(_fit_cos(model, u, frame)) - dev.target
+    return jnp.sqrt(jnp.sum(weight * d * d) / 3.0)
+
+
+@eqx.filter_jit
+def _full_linear_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
+    lin = _fit_cos(model, u, frame) - dev.meas_cos
+    at_peak = _fit_cos(model, u, _gather(frame, peak[None]))[:, 0] - dev.meas_cos[:, peak]
+    return {
+        "rmse_cos": jnp.sqrt(jnp.sum(weight * lin * lin) / 3.0),
+        "rel_peak_error": jnp.max(jnp.abs(at_peak) / jnp.maximum(dev.meas_cos[:, peak], 1e-12)),
+    }
+
+
+@runtime.in_float64
+def full_table_metrics(
+    table: MerlTable,
+    model: models.AbstractBRDFModel,
+    u,
+    weight: np.ndarray,
+    dtype=FULL_TABLE_DTYPE,
+) -> dict[str, float]:
+    """``brdffit.fitting.loss.error_metrics`` of unconstrained params ``u`` over every bin of
+    ``table`` with weight > 0.
+
+    Evaluated in ``dtype`` (float32 by default, for speed). Table values are bounded
+    (``brdffit.io.merl.MAX_VALUE``, 1e12 1/sr), so float32 holds every measured term; a
+    model far off that scale (a diverged ``ks``) can still overflow it, and then the
+    metrics are evaluated again in float64 rather than reported as inf. A metric that
+    is not finite even in float64 is returned as it is (NaN or inf): the caller must
+    not report such a fit as a success.
+    """
+    peak = jnp.asarray(_peak_bin(table, weight))
+    for dt in (dtype, jnp.float64):
+        frame = _device_frames(jnp.dtype(dt).name)
+        dev = _device_table(table, dt)
+        ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
+        log_rmse = _full_log_rmse(model, ut, dev, w, frame)
+        linear = _full_linear_errors(model, ut, dev, w, frame, peak)
+        metrics = {"log_rmse": float(log_rmse), **{k: float(v) for k, v in linear.items()}}
+        if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
+            break
+    return metrics
+
+
+@runtime.in_float64
+def table_error(
+    table: MerlTable,
+    model: str | models.AbstractBRDFModel,
+    params: dict,
+    bin_weight: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Error metrics (``brdffit.fitting.loss.error_metrics``) of ``params`` on every usable
+    bin of ``table``, optionally under a scene's ``bin_weight``."""
+    m = models.get(model)
+    u = m.unconstrain(m.check_params(params))
+    weight = bin_weights(usable_bins(table, bin_weight).usable, bin_weight)
+    return full_table_metrics(table, m, u, weight)
+
+
+def _every(data: LossData, k: int) -> LossData:
+    """Every k-th bin (the bin axis is the last of every array)."""
+    return jax.tree_util.tree_map(lambda a: a[..., ::k], data)
+
+
+# -- the result ----------------------------------------------------------------------
+
+
+def _plain(params: dict) -> dict:
+    out = {}
+    for k, v in params.items():
+        a = np.asarray(v, dtype=np.float64)
+        out[k] = a.tolist() if a.ndim else float(a)
+    return out
+
+
+# -- the front door ------------------------------------------------------------------
+
+
+@runtime.in_float64
+def fit(
+    table: MerlTable,
+    model: str | models.AbstractBRDFModel = "ggx",
+    *,
+    solver: str = "lm",
+    samples: int | None = DEFAULT_SAMPLES,
+    precision: str = "float64",
+    starts: int = DEFAULT_STARTS,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    seed: int = 0,
+    init: dict | None = None,
+    bin_weight: np.ndarray | None = None,
+    parent_fit: FitResult | None = None,
+) -> FitResult:
+    """Fit ``model`` to ``table``; see the module docstring for the pipeline.
+
+    Args:
+        table: the measured table (``brdffit.io.merl.read``).
+        model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
+        solver: ``"lm"`` (Levenberg-Marquardt, default), ``"dogleg"`` or ``"bfgs"``.
+        samples: bins the solver sees (stratified subsample), ``None`` for all.
+            The reported error is always on the full table.
+        precision: ``"float64"`` (default) or ``"float32"`` for the solve.
+        starts: how many of the best-scoring start candidates to refine.
+        max_steps: solver step limit per start.
+        seed: subsample seed (fits are deterministic for a given seed).
+        init: optional starting params (docs/models.md names), used as the only start.
+        bin_weight: optional flat weight per bin (90*90*180, >= 0) multiplying the
+            solid-angle weight: a scene's use of directions. Bins with weight 0
+            are excluded from the loss and from the error.
+        parent_fit: for a model that contains another (``model.parent``: ggx2
+            contains ggx, oren_nayar contains lambert), that model's fit to the same
+            table with the same settings; fitted here when not given. Its optimum,
+            embedded, is always one of the starts, and the solver only accepts
+            steps that lower the loss: the richer model never ends worse on the
+            fit's samples than the one it contains.
+    """
+    t0 = time.perf_counter()
+    m = models.get(model)
+    if solver not in SOLVERS:
+        raise FitInputError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    if precision not in PRECISIONS:
+        raise FitInputError(f"unknown precision {precision!r}; choose float64 or float32")
+    if samples is not None and (not isinstance(samples, int) or samples < 64):
+        raise FitInputError(f"samples must be an integer >= 64 or None, got {samples!r}")
+    if not isinstance(starts, int) or starts < 1:
+        raise FitInputError(f"starts must be a positive integer, got {starts!r}")
+    if not isinstance(max_steps, int) or max_steps < 1:
+        raise FitInputError(f"max_steps must be a positive integer, got {max_steps!r}")
+    if bin_weight is not None:
+        bin_weight = np.asarray(bin_weight, dtype=np.float64).ravel()
+        if bin_weight.size != table.mask.size or not np.all(np.isfinite(bin_weight)):
+            raise FitInputError("bin_weight needs one finite value per MERL bin")
+        if np.any(bin_weight < 0):
+            raise FitInputError("bin_weight must be >= 0")
+
+    counts = usable_bins(table, bin_weight)
+    n_usable = int(np.count_nonzero(counts.usable))
+    if n_usable < m.n_params * 4:
+        raise FitInputError(
+            f"{table.source}: only {n_usable} usable bins (measured, finite, above the "
+            f"horizon{', weighted by the scene' if bin_weight is not None else ''}); "
+            f"{m.name} needs at least {m.n_params * 4}"
+        )
+    if table.rgb.reshape(3, -1)[:, counts.usable].max(initial=0.0) < merl.MIN_PEAK:
+        raise FitInputError(
+            f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
+            f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
+        )
+    weight = bin_weights(counts.usable, bin_weight)
+    sample_set = stratified_sample(weight, samples, seed)
+    dtype = PRECISIONS[precision]
+    data = sample_data(table, sample_set.index, sample_set.weight, dtype)
+
+    if init is not None:
+        u_candidates = m.unconstrain(m.check_params(init))[None]
+    else:
+        u_candidates = start_vectors(m, table, counts.usable)
+    # Score candidates on every 8th sample: ranking starts needs no more.
+    scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), _every(data, 8)))
+    scores = np.where(np.isfinite(scores), scores, np.inf)
+    k = min(starts, len(u_candidates))
+    best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+    if init is None and m.parent is not None:
+        if parent_fit is None or parent_fit.model != m.parent:
+            parent_fit = fit(table, m.parent, solver=solver, samples=samples,
+                             precision=precision, starts=starts, max_steps=max_steps,
+                             seed=seed, bin_weight=bin_weight)
+        embedded = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
+        best_starts = np.concatenate([embedded[None], best_starts])
+
+    values, codes, steps, losses = _solve_batch(
+        m, _SOLVER_CACHE[solver, precision], jnp.asarray(best_starts, dtype), data, max_steps
+    )
+    values = np.asarray(values, np.float64)
+    codes, steps, losses = np.asarray(codes), np.asarray(steps), np.asarray(losses, np.float64)
+    finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
+    if finite.any():
+        i = int(np.argmin(np.where(finite, losses, np.inf)))
+        u_best, result = values[i], solvers.STATUS_NAMES[int(codes[i])]
+    else:  # every start diverged: report the best start itself, flagged as such
+        i = 0
+        u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
+
+    metrics = full_table_metrics(table, m, u_best, weight)
+    metrics["sample_log_rmse"] = (
+        float(np.sqrt(max(losses[i], 0.0) / 3.0)) if finite.any() else float("nan")
+    )
+    if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
+        result = "nonfinite"  # an error that cannot be measured is no success
+    params = _plain(m.constrain(jnp.asarray(u_best)))
+    return FitResult(
+        model=m.name,
+        params=params,
+        error=metrics,
+        converged=result == "successful",
+        result=result,
+        steps=int(steps[i]),
+        time_s=time.perf_counter() - t0,
+        samples={
+            "used": sample_set.n_used,
+            "usable": n_usable,
+            "measured": counts.measured,
+            "dropped": {
+                "unmeasured": counts.unmeasured,
+                "nonfinite": counts.nonfinite,
+                "below_horizon": counts.below_horizon,
+            },
+        },
+        solver=solver,
+        precision=precision,
+        starts=len(best_starts),
+        table=table.source,
+    )

@@ -1,0 +1,94 @@
+"""What a fit returns: :class:`FitResult`, plain Python values and no JAX.
+
+Kept apart from ``brdffit.fitting.pipeline`` so that a process that only reads results
+(``brdffit.client``, a batch report) need not import JAX to hold one.
+
+``FitResult.to_dict()`` is *the* result schema (docs/results.md): ``brdffit fit
+--json`` prints it, for a fixed model and for ``auto`` alike, the service returns it
+for every fit of a job, and the batch store keeps it beside each fit. Its first
+key, ``schema``, names the version; a change of a key's meaning is a new version.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+from brdffit import jsonout
+
+#: The version of the result schema that :meth:`FitResult.to_dict` writes.
+SCHEMA = "brdffit.fit/1"
+
+
+@dataclass
+class FitResult:
+    """The outcome of one fit, failed or not, as plain Python values.
+
+    ``params`` uses the docs/models.md names: RGB parameters are lists of 3 floats,
+    shape parameters floats. ``error`` holds ``log_rmse`` (see ``brdffit.fitting.loss``)
+    and friends, on the bins the fit was judged on (the whole table, or the scene's
+    directions). ``result`` says how the solve ended
+    (``brdffit.fitting.solver.STATUS_NAMES``): ``"successful"`` only where the optimality
+    test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
+    ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
+    ``"successful"``.
+
+    Set only on some paths, None elsewhere:
+
+    - ``scene``: the scene the fit was weighted to (``brdffit.fitting.scene``), and
+      ``full_table_error``: the same metrics as ``error`` on the whole table;
+    - ``selection``: on the fit ``model="auto"`` chose, how and why it was chosen
+      (``brdffit.selection.Selection.summary``: ranking of every candidate, reason).
+    """
+
+    model: str
+    params: dict[str, float | list[float]]
+    error: dict[str, float]
+    converged: bool
+    result: str
+    steps: int
+    time_s: float
+    samples: dict[str, int | dict[str, int]]
+    solver: str = "lm"
+    precision: str = "float64"
+    starts: int = 1
+    table: str | None = None
+    scene: dict | None = None
+    full_table_error: dict[str, float] | None = None
+    selection: dict | None = None
+
+    @property
+    def log_rmse(self) -> float:
+        return self.error["log_rmse"]
+
+    def to_dict(self) -> dict:
+        """The result schema: ``{"schema": SCHEMA, ...every field}``."""
+        return {"schema": SCHEMA, **asdict(self)}
+
+    def to_json(self, **kw) -> str:
+        """Strict JSON (``brdffit.jsonout``): a metric that is NaN or inf here is null."""
+        return jsonout.dumps(self.to_dict(), **kw)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FitResult:
+        """A result from :meth:`to_dict`'s output; refuses another schema version."""
+        d = dict(d)
+        schema = d.pop("schema", SCHEMA)
+        if schema != SCHEMA:
+            raise ValueError(f"result schema {schema!r}; this brdffit reads {SCHEMA!r}")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown result keys {unknown} for schema {SCHEMA!r}")
+        return cls(**d)
+
+    @classmethod
+    def keys(cls) -> list[str]:
+        """The keys of :meth:`to_dict`, in order."""
+        return ["schema", *(f.name for f in fields(cls))]
+
+    def param_arrays(self) -> dict:
+        """Params as numpy arrays (``dict[str, np.ndarray]``), ready for
+        ``model(params, wi, wo)``."""
+        import numpy as np
+
+        return {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}

@@ -1,0 +1,392 @@
+"""Which direction pairs a scene uses, as a weight per MERL bin.
+
+A renderer only ever evaluates a material at the (light, view) pairs its scene
+produces. A :class:`Scene` says which, in the local shading frame (normal +z,
+directions pointing away from the surface), and :meth:`Scene.bin_weight` turns
+that into one weight per MERL bin for ``fit(..., bin_weight=...)``: the loss,
+the reported error and the model selection then count only those bins.
+
+Three ways to describe a scene, combinable (the weights multiply):
+
+- angle limits: ``max_theta_i`` / ``max_theta_o`` in **degrees** (a bin counts when
+  its centre is within both; by reciprocity a bin also stands for the swapped
+  pair, so either orientation qualifies);
+- direction pairs ``pairs`` (N, 2, 3): (wi, wo) the scene uses, each spread over a
+  cone of ``spread`` degrees (a few pairs would otherwise touch only a few bins);
+  a bin's weight is then its share of the pairs, per unit solid angle, so that the
+  fit's loss weights (solid angle x scene) are the pairs' own distribution;
+- a preset: ``camera-normal`` (a camera looking along the normal, within 10
+  degrees; lights anywhere), e.g. a flat material photographed head-on.
+
+Files (``Scene.from_file``), documented with examples in docs/selection.md:
+
+- ``.npy``: an array of pairs, shape (N, 6) or (N, 2, 3): wi_x, wi_y, wi_z, wo_x, wo_y, wo_z;
+- ``.csv``: the same six columns, one pair per line; a header line and ``#``
+  comments are skipped;
+- ``.json``: an object with any of ``preset``, ``max_theta_i``, ``max_theta_o``,
+  ``pairs`` ([[wi, wo], ...]), ``lights`` and ``views`` (every light with every
+  view), ``pairs_file`` (a .npy/.csv path, relative to the JSON file),
+  ``spread``, ``name``.
+
+Directions need not be unit length (they are normalised); pairs with a direction
+at or below the horizon are dropped and counted in :attr:`Scene.dropped_pairs`.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from brdffit import runtime
+from brdffit.errors import FitInputError
+from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
+from brdffit.io.grid import bin_grid
+
+#: Named scenes: keyword arguments of :class:`Scene`.
+PRESETS: dict[str, dict] = {
+    # A camera on the normal sees a flat sample within its half field of view
+    # (~10 deg for a normal lens); the light may come from anywhere.
+    "camera-normal": {"max_theta_o": 10.0},
+}
+
+#: Jittered copies per pair are capped so that a scene costs at most ~this many lookups.
+_MAX_LOOKUPS = 400_000
+
+
+class SceneError(FitInputError):
+    """A scene description that cannot be used (explained in the message)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """The directions a scene uses; see the module docstring."""
+
+    max_theta_i: float = 90.0
+    max_theta_o: float = 90.0
+    pairs: np.ndarray | None = None  # (N, 2, 3), unit, above the horizon
+    spread: float = 2.0
+    name: str = "custom"
+    dropped_pairs: int = 0
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for k in ("max_theta_i", "max_theta_o"):
+            v = getattr(self, k)
+            if not (isinstance(v, int | float) and 0.0 < v <= 90.0):
+                raise SceneError(f"scene {k} must be in (0, 90] degrees, got {v!r}")
+        if not (isinstance(self.spread, int | float) and 0.0 <= self.spread <= 45.0):
+            raise SceneError(f"scene spread must be in [0, 45] degrees, got {self.spread!r}")
+        if self.pairs is not None:
+            object.__setattr__(self, "pairs", _clean_pairs(self.pairs, self))
+
+    # -- construction ------------------------------------------------------------------
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> Scene:
+        if name not in PRESETS:
+            raise SceneError(f"unknown scene preset {name!r}; choose one of {', '.join(PRESETS)}")
+        return cls(**{**PRESETS[name], "name": name, **overrides})
+
+    @classmethod
+    def from_dict(cls, d: dict, base_dir: str = ".") -> Scene:
+        """A scene from its JSON form (see the module docstring for the keys)."""
+        if not isinstance(d, dict):
+            raise SceneError("a scene description must be a JSON object")
+        known = {"preset", "max_theta_i", "max_theta_o", "pairs", "lights", "views",
+                 "pairs_file", "spread", "name"}
+        unknown = set(d) - known
+        if unknown:
+            raise SceneError(f"unknown scene key(s) {sorted(unknown)}; expected {sorted(known)}")
+        kw: dict = {}
+        if "preset" in d:
+            if d["preset"] not in PRESETS:
+                raise SceneError(
+                    f"unknown scene preset {d['preset']!r}; choose one of {', '.join(PRESETS)}"
+                )
+            kw.update(PRESETS[d["preset"]], name=d["preset"])
+        for k in ("max_theta_i", "max_theta_o", "spread", "name"):
+            if k in d:
+                kw[k] = d[k]
+        parts = []
+        if "pairs" in d:
+            parts.append(_as_pairs(d["pairs"], "pairs"))
+        if "lights" in d or "views" in d:
+            if "lights" not in d or "views" not in d:
+                raise SceneError("a scene needs both 'lights' and 'views', or neither")
+            lights = _as_dirs(d["lights"], "lights")
+            views = _as_dirs(d["views"], "views")
+            parts.append(np.stack(np.broadcast_arrays(lights[:, None], views[None, :]),
+                                  axis=2).reshape(-1, 2, 3))
+        if "pairs_file" in d:
+            parts.append(read_pairs(os.path.join(base_dir, os.fspath(d["pairs_file"]))))
+        if parts:
+            kw["pairs"] = np.concatenate(parts)
+        return cls(**kw)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> Scene:
+        """A scene from a .json description or a .npy / .csv file of pairs."""
+        path = os.fspath(path)
+        if path.lower().endswith(".json"):
+            try:
+                with open(path) as f:
+                    d = json.load(f)
+            except json.JSONDecodeError as e:
+                raise SceneError(f"{path}: not valid JSON ({e})") from None
+            if isinstance(d, dict) and "name" not in d and "preset" not in d:
+                d["name"] = os.path.basename(path)
+            return cls.from_dict(d, base_dir=os.path.dirname(path))
+        return cls(pairs=read_pairs(path), name=os.path.basename(path))
+
+    @classmethod
+    def from_options(
+        cls,
+        scene: str | os.PathLike | dict | Scene | None = None,
+        *,
+        preset: str | None = None,
+        max_theta: float | None = None,
+        max_theta_i: float | None = None,
+        max_theta_o: float | None = None,
+    ) -> Scene | None:
+        """The scene of CLI/API options (a file, a dict, a preset, angle limits), or
+        ``None`` when none is given. Angle limits override those of the file/preset."""
+        if isinstance(scene, Scene):
+            base = scene
+        elif isinstance(scene, dict):
+            base = cls.from_dict(scene)
+        elif scene is not None:
+            base = cls.from_file(scene)
+        elif preset is not None:
+            base = cls.preset(preset)
+        else:
+            base = None
+        if scene is not None and preset is not None:
+            raise SceneError("give a scene file or a scene preset, not both")
+        limits = {}
+        if max_theta is not None:
+            limits = {"max_theta_i": max_theta, "max_theta_o": max_theta}
+        if max_theta_i is not None:
+            limits["max_theta_i"] = max_theta_i
+        if max_theta_o is not None:
+            limits["max_theta_o"] = max_theta_o
+        if not limits:
+            return base
+        if base is None:
+            return cls(**limits, name="angle limits")
+        return replace(base, **limits)
+
+    # -- what a fit needs --------------------------------------------------------------
+
+    def bin_weight(self) -> np.ndarray:
+        """Weight per flat MERL bin (>= 0, 0 = unused, mean 1 over the used bins)."""
+        return self._weight
+
+    @functools.cached_property
+    def _weight(self) -> np.ndarray:  # a scene is immutable: bin it once
+        w = _angle_mask(self.max_theta_i, self.max_theta_o).astype(np.float64)
+        if self.pairs is not None:
+            w = w * _pair_weight(self.pairs, self.spread)
+        used = w > 0
+        if not used.any():
+            raise SceneError(f"scene {self.name!r} uses no MERL bin above the horizon")
+        w /= w[used].mean()
+        w.setflags(write=False)
+        return w
+
+    @property
+    def n_bins(self) -> int:
+        return int(np.count_nonzero(self.bin_weight()))
+
+    @property
+    def solid_angle_fraction(self) -> float:
+        """Share of the hemisphere-pair measure that the scene's bins cover."""
+        return float(bin_grid().weight[self.bin_weight() > 0].sum())
+
+    def describe(self) -> str:
+        bits = []
+        if self.max_theta_i < 90:
+            bits.append(f"theta_i <= {self.max_theta_i:g} deg")
+        if self.max_theta_o < 90:
+            bits.append(f"theta_o <= {self.max_theta_o:g} deg")
+        if self.pairs is not None:
+            bits.append(f"{len(self.pairs):,} direction pairs (spread {self.spread:g} deg)")
+        what = ", ".join(bits) or "whole hemisphere"
+        return (f"{self.name}: {what}; {self.n_bins:,} bins, "
+                f"{100 * self.solid_angle_fraction:.2g}% of the solid angle")
+
+    def to_dict(self) -> dict:
+        """Plain JSON summary (the pairs themselves are counted, not listed)."""
+        return {
+            "name": self.name,
+            "max_theta_i": self.max_theta_i,
+            "max_theta_o": self.max_theta_o,
+            "pairs": None if self.pairs is None else len(self.pairs),
+            "dropped_pairs": self.dropped_pairs,
+            "spread": self.spread,
+            "bins": self.n_bins,
+            "solid_angle_fraction": self.solid_angle_fraction,
+            "description": self.describe(),
+        }
+
+
+# -- reading pairs -----------------------------------------------------------------------
+
+
+def read_pairs(path: str) -> np.ndarray:
+    """(N, 2, 3) direction pairs from a .npy or .csv file (see the module docstring)."""
+    ext = os.path.splitext(path)[1].lower()
+    if not os.path.exists(path):
+        raise SceneError(f"{path}: no such scene file")
+    if ext == ".npy":
+        try:
+            a = np.load(path, allow_pickle=False)
+        except ValueError as e:
+            raise SceneError(f"{path}: not a numeric .npy array ({e})") from None
+    elif ext == ".csv":
+        a = _read_csv(path)
+    else:
+        raise SceneError(f"{path}: a scene file is .json, .npy or .csv, not {ext or 'no suffix'}")
+    return _as_pairs(a, path)
+
+
+def _read_csv(path: str) -> np.ndarray:
+    rows, header_allowed = [], True
+    with open(path) as f:
+        for n, line in enumerate(f, 1):
+            line = line.split("#", 1)[0].strip()
+            if not line:
+                continue
+            cells = [c.strip() for c in line.replace(";", ",").split(",")]
+            try:
+                rows.append([float(c) for c in cells])
+            except ValueError:
+                if not header_allowed:
+                    raise SceneError(f"{path}:{n}: not six numbers: {line!r}") from None
+            header_allowed = False  # only the first content line may be a header
+    if not rows:
+        raise SceneError(f"{path}: no direction pairs")
+    if len({len(r) for r in rows}) != 1:
+        raise SceneError(f"{path}: every line needs the same six numbers")
+    return np.asarray(rows)
+
+
+def _as_dirs(a, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"scene {what}: not a list of 3-vectors") from None
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] == 0:
+        raise SceneError(f"scene {what}: need a non-empty list of 3-vectors, got shape {a.shape}")
+    return a
+
+
+def _as_pairs(a, what: str) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"scene {what}: not numeric direction pairs") from None
+    if a.ndim == 2 and a.shape[1] == 6:
+        a = a.reshape(-1, 2, 3)
+    if a.ndim != 3 or a.shape[1:] != (2, 3) or a.shape[0] == 0:
+        raise SceneError(
+            f"scene {what}: need N pairs as (N, 6) or (N, 2, 3) numbers, got shape {a.shape}"
+        )
+    return a
+
+
+def _clean_pairs(pairs, scene: Scene) -> np.ndarray:
+    """Unit pairs above the horizon; records how many were dropped."""
+    a = _as_pairs(pairs, "pairs")
+    norm = np.linalg.norm(a, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(a)):
+        raise SceneError("scene pairs contain non-finite numbers")
+    ok = np.all(norm[..., 0] > 0, axis=1)
+    a = a / np.where(norm > 0, norm, 1.0)
+    ok &= np.all(a[..., 2] > 0, axis=1)
+    object.__setattr__(scene, "dropped_pairs", scene.dropped_pairs + int(np.count_nonzero(~ok)))
+    if not ok.any():
+        raise SceneError(f"none of the {len(a)} scene pairs has both directions above the horizon")
+    return a[ok]
+
+
+# -- binning -----------------------------------------------------------------------------
+
+
+def _angle_mask(max_theta_i: float, max_theta_o: float) -> np.ndarray:
+    g = bin_grid()
+    ci, co = math.cos(math.radians(max_theta_i)), math.cos(math.radians(max_theta_o))
+    # >= with a hair of slack: a limit of 90 deg must keep bins with cos ~ 1e-4
+    direct = (g.cos_i >= ci - 1e-12) & (g.cos_o >= co - 1e-12)
+    swapped = (g.cos_o >= ci - 1e-12) & (g.cos_i >= co - 1e-12)
+    return g.above_horizon & (direct | swapped)
+
+
+def _cone_jitter(dirs: np.ndarray, k: int, spread_deg: float, rng) -> np.ndarray:
+    """``k`` directions uniform in a cone of half-angle ``spread_deg`` around each of
+    ``dirs`` (N, 3) -> (N, k, 3)."""
+    n = dirs.shape[0]
+    cos_max = math.cos(math.radians(spread_deg))
+    z = 1.0 - rng.random((n, k)) * (1.0 - cos_max)
+    phi = rng.random((n, k)) * 2 * math.pi
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+    # an orthonormal frame around each direction
+    helper = np.where(np.abs(dirs[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(helper, dirs)
+    t /= np.linalg.norm(t, axis=-1, keepdims=True)
+    b = np.cross(dirs, t)
+    return (local[..., 0:1] * t[:, None] + local[..., 1:2] * b[:, None]
+            + local[..., 2:3] * dirs[:, None])
+
+
+def _pair_weight(pairs: np.ndarray, spread: float) -> np.ndarray:
+    g = bin_grid()
+    n = len(pairs)
+    k = 1 if spread == 0 else int(np.clip(_MAX_LOOKUPS // n, 1, 256))
+    rng = np.random.default_rng(0)  # deterministic: the same scene, the same weights
+    wi, wo = pairs[:, 0], pairs[:, 1]
+    if k > 1:  # the pairs themselves, then their jittered copies: a pair's own bin counts
+        wi = np.concatenate([wi, _cone_jitter(wi, k, spread, rng).reshape(-1, 3)])
+        wo = np.concatenate([wo, _cone_jitter(wo, k, spread, rng).reshape(-1, 3)])
+    keep = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    idx = flat_index(*half_diff_to_bins(*dirs_to_half_diff(wi[keep], wo[keep])))
+    counts = np.bincount(idx, minlength=g.weight.size).astype(np.float64)
+    # counts are the scene's density times the bin's measure: divide the measure out,
+    # the fit multiplies it back in (loss weight = solid angle x scene = counts).
+    return np.where(g.weight > 0, counts / np.where(g.weight > 0, g.weight, 1.0), 0.0)
+
+
+# -- fitting in a scene --------------------------------------------------------------------
+
+
+@runtime.in_float64
+def full_table_error(table, model, params: dict) -> dict[str, float]:
+    """Error metrics (``brdffit.fitting.loss``) of ``params`` on every usable bin of ``table``,
+    solid-angle weighted, whatever scene the fit used."""
+    from brdffit.fitting.pipeline import table_error
+
+    return table_error(table, model, params)
+
+
+@runtime.in_float64
+def fit_in_scene(table, model, scene: Scene | None, **fit_options):
+    """``fit`` with the scene's bin weights; the full-table error goes beside the scene's.
+
+    The result's ``error`` is on the scene (the loss and the reported error use the
+    same weights); ``scene`` describes the scene and
+    ``full_table_error`` holds the same metrics on the whole table, so the
+    trade is visible. Without a scene this is plain ``fit``.
+    """
+    from brdffit.fitting.pipeline import fit
+
+    if scene is None:
+        return fit(table, model, **fit_options)
+    result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
+    result.scene = scene.to_dict()
+    result.full_table_error = full_table_error(table, model, result.params)
+    return result

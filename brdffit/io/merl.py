@@ -1,0 +1,253 @@
+"""MERL ``.binary`` BRDF tables (Matusik et al. 2003): read, write, look up.
+
+File layout (docs/models.md): three little-endian int32 dims (90, 90, 180), then
+3 * 90*90*180 little-endian float64, all R then all G then all B, phi_d fastest.
+Physical value = raw * scale with scale = (1/1500, 1.15/1500, 1.66/1500).
+A negative raw value marks an unmeasured bin.
+
+Bad input policy (every case raises :class:`MerlFormatError` naming the source):
+
+- empty, shorter than the header, text instead of binary, header dims that are
+  zero, negative, absurd or not (90, 90, 180), a body shorter (truncated) or
+  longer (trailing bytes) than the header promises: refused *before* the body
+  is allocated, from the file size alone;
+- a table with no measured bin: refused;
+- values outside the physical range (:data:`MAX_VALUE`, :data:`MIN_PEAK`): refused,
+  the message naming how many bins and the extreme value. A bin above 1e12 1/sr is
+  a corrupt value or another unit, not a reflectance, and one such bin would
+  dominate every error metric; a table whose brightest bin is below 1e-5 1/sr
+  (all zeros, all denormals) holds nothing a fit could recover.
+- NaN / Inf values: **masked, not refused**, and counted in
+  :attr:`MerlTable.n_nonfinite` (real captures do contain a few). A bin is
+  measured only when all three channels are finite and >= 0.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brdffit.errors import MerlFormatError
+from brdffit.io.angles import (
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+    SHAPE,
+    dirs_to_half_diff,
+    half_diff_to_bins,
+)
+
+SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
+HEADER_BYTES = 12
+N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
+FILE_BYTES = HEADER_BYTES + 3 * N_BINS * 8  # 34,992,012
+
+#: Largest physical value (1/sr) a table may hold. Measured MERL tables peak near
+#: 1e4 1/sr; the sharpest lobe the models allow (GGX or Beckmann, alpha 1e-3, ks 1)
+#: reaches 1e9 1/sr in the grazing bins of the mirror direction (its 1/(4 cos_i
+#: cos_o)). 1e12 leaves room above both and keeps the float32 full-table error
+#: (``brdffit.fitting.pipeline``) clear of overflow: (1e12)^2 = 1e24 < 3e38.
+MAX_VALUE = 1e12
+#: Smallest brightest-bin value (1/sr) of a table: the blackest coatings made
+#: (~0.04% reflectance) are near 1e-4 1/sr. Below this a table is blank (all
+#: zeros, all denormals) or in the wrong unit, and a fit of it is noise.
+MIN_PEAK = 1e-5
+
+
+@dataclass(frozen=True, eq=False)
+class MerlTable:
+    """A measured isotropic BRDF on the MERL grid.
+
+    ``rgb``: physical values (1/sr), shape (3, 90, 90, 180), 0 where unmeasured.
+    ``mask``: True where a bin is measured (all channels finite and >= 0).
+    """
+
+    rgb: np.ndarray
+    mask: np.ndarray
+    source: str = "<memory>"
+    n_nonfinite: int = 0
+    sha256: str | None = field(default=None)
+
+    def __post_init__(self):
+        if self.rgb.shape != (3, *SHAPE) or self.mask.shape != SHAPE:
+            raise ValueError(f"MerlTable needs rgb (3, {SHAPE}) and mask {SHAPE}")
+
+    @classmethod
+    def from_values(cls, rgb, mask=None, source: str = "<memory>") -> MerlTable:
+        """A table from physical values; bins that are negative or non-finite are masked."""
+        rgb = np.asarray(rgb, dtype=np.float64).reshape(3, *SHAPE)
+        ok = np.all(np.isfinite(rgb) & (rgb >= 0), axis=0)
+        n_nonfinite = int(np.count_nonzero(~np.all(np.isfinite(rgb), axis=0)))
+        if mask is not None:
+            ok &= np.asarray(mask, dtype=bool).reshape(SHAPE)
+        if not ok.any():
+            raise MerlFormatError(source, "no measured bin: every value is negative, "
+                                          "non-finite or masked")
+        rgb = np.where(ok, rgb, 0.0)
+        _check_range(rgb, source)
+        return cls(rgb, ok, source, n_nonfinite)
+
+    @property
+    def n_measured(self) -> int:
+        return int(np.count_nonzero(self.mask))
+
+    def lookup(self, wi, wo) -> np.ndarray:
+        """Nearest-bin values at direction pairs (..., 3) -> (..., 3); NaN where unmeasured."""
+        i_th, i_td, i_pd = half_diff_to_bins(*dirs_to_half_diff(np.asarray(wi), np.asarray(wo)))
+        vals = self.rgb[:, i_th, i_td, i_pd]
+        vals = np.where(self.mask[i_th, i_td, i_pd], vals, np.nan)
+        return np.moveaxis(vals, 0, -1)
+
+    def summary(self) -> dict:
+        """Plain-JSON description: bin counts and per-channel value ranges."""
+        measured = self.rgb[:, self.mask]
+        return {
+            "source": self.source,
+            "measured_bins": self.n_measured,
+            "unmeasured_bins": N_BINS - self.n_measured,
+            "nonfinite_bins": self.n_nonfinite,
+            "min": measured.min(axis=1).tolist(),
+            "median": np.median(measured, axis=1).tolist(),
+            "max": measured.max(axis=1).tolist(),
+        }
+
+
+def _looks_like_text(head: bytes) -> bool:
+    return len(head) > 0 and all(32 <= b < 127 or b in (9, 10, 13) for b in head)
+
+
+def _check_layout(header: bytes, size: int, source: str) -> None:
+    """Validate header and total size; raises before anything large is allocated."""
+    if size == 0:
+        raise MerlFormatError(source, "empty file; a MERL table is 34,992,012 bytes")
+    if size < HEADER_BYTES:
+        raise MerlFormatError(source, f"only {size} bytes, shorter than the 12-byte header")
+    if _looks_like_text(header):
+        raise MerlFormatError(source, "looks like a text file, not a binary MERL table")
+    dims = [int(d) for d in np.frombuffer(header, dtype="<i4", count=3)]
+    if any(d <= 0 for d in dims):
+        raise MerlFormatError(source, f"header dims {dims} are not positive")
+    body = size - HEADER_BYTES
+    expected = 3 * 8 * dims[0] * dims[1] * dims[2]  # Python ints: no overflow
+    if tuple(dims) != SHAPE:
+        raise MerlFormatError(
+            source,
+            f"header dims {dims} are not the MERL grid {list(SHAPE)}"
+            + (
+                f" (they would need {expected:,} bytes, the file has {body:,})"
+                if expected != body
+                else ""
+            ),
+        )
+    if body < expected:
+        raise MerlFormatError(
+            source, f"truncated: body has {body:,} bytes, the header promises {expected:,}"
+        )
+    if body > expected:
+        raise MerlFormatError(
+            source, f"{body - expected:,} trailing bytes after the {expected:,}-byte body"
+        )
+
+
+def _check_range(rgb: np.ndarray, source: str, raw: np.ndarray | None = None,
+                 measured: np.ndarray | None = None) -> None:
+    """Refuse physical values ``rgb`` (0 where unmeasured) outside MAX_VALUE / MIN_PEAK.
+
+    ``raw`` and ``measured``, the file's values and its measured bins, let the
+    message quote what the file holds: raw 5e-324 is 0 1/sr once scaled."""
+    peak = float(rgb.max())  # one pass; the details are worked out only to refuse
+    if peak > MAX_VALUE:
+        n = int(np.count_nonzero((rgb > MAX_VALUE).any(axis=0)))
+        c = np.unravel_index(int(np.argmax(rgb)), rgb.shape)[0]
+        raise MerlFormatError(
+            source,
+            f"{n:,} bin{'s' if n != 1 else ''} above {MAX_VALUE:g} 1/sr, the largest "
+            f"{peak:.3g} 1/sr (raw {peak / SCALE[c]:.3g}); measured BRDFs peak near 1e4 "
+            "1/sr: a corrupt file, or values in another unit",
+        )
+    if peak < MIN_PEAK:
+        raw_peak = ""
+        if raw is not None:
+            raw_peak = f" (largest raw value {float(raw[:, measured].max()):.3g})"
+        raise MerlFormatError(
+            source,
+            f"the brightest measured bin is {peak:.3g} 1/sr{raw_peak}, below {MIN_PEAK:g} 1/sr "
+            "and darker than any material: a blank table (zeros, denormals) or values in "
+            "another unit; there is no reflectance to fit",
+        )
+
+
+def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
+    """Raw file values -> physical values and mask, in few passes over 35 MB."""
+    raw = raw.reshape(3, *SHAPE)
+    # Per bin, the smallest and largest channel: min propagates NaN and is < 0 for
+    # any negative (unmeasured) or -inf channel; max catches +inf. Two reductions
+    # instead of elementwise masks over all 4.4M values.
+    lowest, highest = raw.min(axis=0), raw.max(axis=0)
+    unmeasured = ~(lowest >= 0) | (highest == np.inf)
+    if unmeasured.all():
+        raise MerlFormatError(source, "no measured bin: every value is negative or non-finite")
+    n_nonfinite = int(np.count_nonzero(~np.isfinite(raw[:, unmeasured]).all(axis=0)))
+    rgb = raw * SCALE[:, None, None, None]
+    np.copyto(rgb, 0.0, where=unmeasured[None])
+    _check_range(rgb, source, raw=raw, measured=~unmeasured)
+    return MerlTable(rgb, ~unmeasured, source, n_nonfinite)
+
+
+def read(path: str | os.PathLike) -> MerlTable:
+    """Read a MERL ``.binary`` file. Raises :class:`MerlFormatError` on any bad file."""
+    source = os.fspath(path)
+    try:
+        with open(source, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            header = f.read(HEADER_BYTES)
+            _check_layout(header, size, source)
+            raw = np.fromfile(f, dtype="<f8", count=3 * N_BINS)
+    except IsADirectoryError:
+        raise MerlFormatError(source, "is a directory, not a MERL table") from None
+    except OSError as e:
+        raise MerlFormatError(source, f"cannot read: {e.strerror or e}") from None
+    if raw.size != 3 * N_BINS:  # file shrank between stat and read
+        raise MerlFormatError(source, "truncated while reading")
+    return _from_raw(raw, source)
+
+
+def from_bytes(data: bytes, source: str = "<bytes>") -> MerlTable:
+    """Parse a MERL table held in memory (an upload); same checks as :func:`read`."""
+    _check_layout(bytes(data[:HEADER_BYTES]), len(data), source)
+    raw = np.frombuffer(data, dtype="<f8", count=3 * N_BINS, offset=HEADER_BYTES)
+    return _from_raw(raw, source)
+
+
+def to_bytes(table: MerlTable) -> bytes:
+    """The file image of ``table``; unmeasured bins are written as raw -1."""
+    raw = np.where(table.mask, table.rgb / SCALE[:, None, None, None], -1.0)
+    header = np.asarray(SHAPE, dtype="<i4").tobytes()
+    return header + np.ascontiguousarray(raw, dtype="<f8").tobytes()
+
+
+def write(path: str | os.PathLike, table: MerlTable) -> None:
+    """Write ``table`` as a MERL file, atomically (temp file + rename)."""
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".merl-", dir=directory)
+    try:
+        # mkstemp makes the file 0600; a table is data to share (cluster workers
+        # may run as another user), so give it the permissions open() would.
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as f:
+            f.write(to_bytes(table))
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

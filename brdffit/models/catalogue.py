@@ -1,0 +1,110 @@
+"""What models there are, without JAX: names, aliases, ``auto`` and parameters.
+
+Everything that only needs to *name* or *describe* a model reads this module:
+``brdffit models``, the service's ``/v1/models``, and the option checks of the
+CLI, the service and the batch job. It imports no JAX, so those answer in a
+fraction of a second; fitting goes through :mod:`brdffit.models.registry`.
+
+The built-in models' descriptions are a snapshot of the registry kept beside
+this file (``catalogue.json``, package data). A test compares it with the live
+registry; after changing a model run ``python -m brdffit.models --write-catalogue``.
+Models from other packages (the ``brdffit.models`` entry-point group, see
+docs/adding-a-model.md) are described by importing them.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from importlib.metadata import entry_points
+from pathlib import Path
+
+from brdffit.errors import BrdffitError
+
+SNAPSHOT = Path(__file__).with_name("catalogue.json")
+#: The entry-point group through which other packages add models.
+ENTRY_POINT_GROUP = "brdffit.models"
+#: Not a model: "fit the candidates and choose" (``brdffit.selection``).
+AUTO = "auto"
+#: ``"ggx_mono"``: a registered model with one grey specular scale (models/mono_ks.py).
+MONO_SUFFIX = "_mono"
+
+
+class UnknownModelError(BrdffitError, KeyError):
+    """A model name that is not in the registry (a KeyError for mapping-style callers)."""
+
+    def __str__(self) -> str:  # KeyError quotes its message otherwise
+        return self.args[0]
+
+
+@functools.cache
+def _builtin() -> tuple[dict, ...]:
+    return tuple(json.loads(SNAPSHOT.read_text()))
+
+
+@functools.cache
+def plugin_names() -> tuple[str, ...]:
+    """Names of the models other packages declare (not imported)."""
+    return tuple(ep.name for ep in entry_points(group=ENTRY_POINT_GROUP))
+
+
+def describe() -> list[dict]:
+    """Every registered model as plain data, cheapest first (``brdffit models --json``)."""
+    known = list(_builtin())
+    extra = [n for n in plugin_names() if n not in {m["name"] for m in known}]
+    registry = sys.modules.get("brdffit.models.registry")
+    if registry is not None:  # models registered in this process (registry.register)
+        extra += [n for n in registry.REGISTRY if n not in {m["name"] for m in known} | set(extra)]
+    if extra:
+        from brdffit.models import registry
+
+        known += [describe_model(registry.REGISTRY[n]) for n in extra if n in registry.REGISTRY]
+    return known
+
+
+def names() -> list[str]:
+    """The registered model names, cheapest first."""
+    return [m["name"] for m in describe()]
+
+
+def check_name(name: str, allow_auto: bool = False) -> str:
+    """``name`` if it names a model (or ``auto`` where allowed), else UnknownModelError
+    with the choices; the one check behind every shell's model option."""
+    if allow_auto and name == AUTO:
+        return name
+    info = {m["name"]: m for m in describe()}
+    if name in info:
+        return name
+    base = info.get(name.removesuffix(MONO_SUFFIX)) if name.endswith(MONO_SUFFIX) else None
+    if base is not None and base["mono"]:
+        return name
+    choices = ", ".join(info) + (f", or {AUTO}" if allow_auto else "")
+    raise UnknownModelError(f"unknown model {name!r}; choose one of {choices}")
+
+
+def describe_model(model) -> dict:
+    """One model instance as plain data (the snapshot's and the API's shape)."""
+    from brdffit.models.mono_ks import specular_colour_specs
+
+    doc = sys.modules[type(model).__module__].__doc__ or model.name
+    return {
+        "name": model.name,
+        "doc": doc.strip().splitlines()[0],  # the module docstring's first line: the formula
+        "params": [
+            {"name": s.name, "size": s.size, "range": s.describe_range(),
+             "lower": s.lower, "upper": s.upper, "doc": s.doc}
+            for s in model.param_specs
+        ],
+        "n_params": model.n_params,
+        "parent": model.parent,
+        "mono": bool(specular_colour_specs(model)),
+    }
+
+
+def snapshot() -> str:
+    """The built-in models' descriptions as the snapshot file holds them."""
+    from brdffit.models import registry
+
+    live = [describe_model(m) for m in registry.BUILTIN]
+    return json.dumps(live, indent=1) + "\n"

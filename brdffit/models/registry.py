@@ -1,0 +1,74 @@
+"""The model objects by name: the built-in models, then those other packages add.
+
+A new built-in model is one module plus one line in ``BUILTIN`` (and the
+catalogue snapshot rewritten, see :mod:`brdffit.models.catalogue`); a model
+from another package is declared under the ``brdffit.models`` entry-point group
+or passed to :func:`register` (docs/adding-a-model.md).
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import entry_points
+
+from brdffit.models.base import AbstractBRDFModel
+from brdffit.models.beckmann import Beckmann
+from brdffit.models.blinn_phong import BlinnPhong
+from brdffit.models.catalogue import (
+    ENTRY_POINT_GROUP,
+    MONO_SUFFIX,
+    UnknownModelError,
+    check_name,
+)
+from brdffit.models.ggx import GGX
+from brdffit.models.ggx2 import GGX2
+from brdffit.models.lambert import Lambert
+from brdffit.models.mono_ks import MonoKs, specular_colour_specs
+from brdffit.models.oren_nayar import OrenNayar
+from brdffit.models.phong import Phong
+
+#: The built-in models, cheapest to richest (``auto`` tries them in this order).
+BUILTIN: tuple[AbstractBRDFModel, ...] = (
+    Lambert(), OrenNayar(), BlinnPhong(), Phong(),
+    Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
+    GGX2(),
+)
+
+REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
+
+
+def register(model: AbstractBRDFModel) -> AbstractBRDFModel:
+    """Add ``model`` under ``model.name``, after the built-ins; the CLI, the service
+    and ``auto`` of this process then know it. A built-in name cannot be replaced."""
+    if not isinstance(model, AbstractBRDFModel):
+        raise TypeError(f"{model!r} is not an AbstractBRDFModel")
+    if model.name in {m.name for m in BUILTIN} and REGISTRY[model.name] is not model:
+        raise ValueError(f"{model.name!r} is a built-in model")
+    REGISTRY[model.name] = model
+    return model
+
+
+def _load_plugins() -> None:
+    """The models other packages declare: ``name = "package.module:ModelClass"``."""
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        obj = ep.load()
+        model = obj() if isinstance(obj, type) else obj
+        if model.name != ep.name:
+            raise ValueError(f"entry point {ep.name!r} names a model called {model.name!r}")
+        register(model)
+
+
+_load_plugins()
+
+
+def get(name: str | AbstractBRDFModel) -> AbstractBRDFModel:
+    """The model called ``name`` (a model instance is returned as is)."""
+    if isinstance(name, AbstractBRDFModel):
+        return name
+    if name in REGISTRY:
+        return REGISTRY[name]
+    if isinstance(name, str) and name.endswith(MONO_SUFFIX):
+        base = REGISTRY.get(name.removesuffix(MONO_SUFFIX))
+        if base is not None and specular_colour_specs(base):
+            return MonoKs(base)
+    check_name(str(name))  # raises with the choices
+    raise UnknownModelError(f"unknown model {name!r}")  # catalogue and registry disagree

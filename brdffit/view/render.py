@@ -1,0 +1,140 @@
+"""Sphere renders of a table and of a model, and the image error between them.
+
+A unit sphere seen orthographically along -z, lit by a directional light of
+irradiance pi (a white Lambertian surface facing the light has radiance 1): the
+picture a renderer would make of the material. Pixels read the table through its
+reference nearest-bin lookup (:meth:`MerlTable.lookup`; NaN where unmeasured) and
+the model through JAX. Two lights, as in ``brdffit.view.plots``: a key light 45 deg
+above-left and a grazing light from the right (80 deg), which shows the Fresnel
+rise.
+
+The image error is the PSNR of the tone-mapped renders (Reinhard, then the sRGB
+curve, one exposure per light taken from the table's own render, as the plots
+show them), over the lit, measured pixels of both lights:
+
+    PSNR = 10 log10(1 / MSE)  [dB],  capped at 100 dB (identical images).
+
+Tone mapping first: a difference the eye cannot see inside a blown-out highlight
+should not dominate the score, and a visible error in the dark diffuse part should
+count.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit import runtime
+from brdffit.io.merl import MerlTable
+from brdffit.models import AbstractBRDFModel
+
+#: (label, light direction in camera space: x right, y up, z towards the viewer)
+LIGHTS = (
+    ("key light 45° above-left", np.array([-0.5, 0.5, 0.7071])),
+    ("grazing light from the right (80°)", np.array([0.9848, 0.0, 0.1736])),
+)
+#: Rec. 709 luminance weights, for the exposure.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+PSNR_CAP_DB = 100.0
+
+
+def sphere_directions(size: int, light: np.ndarray):
+    """Per-pixel local (wi, wo) (size, size, 3) and the mask of lit, visible pixels."""
+    wi, wo, inside = sphere_disc(size, light)
+    lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    return wi, wo, lit
+
+
+def sphere_disc(size: int, light: np.ndarray):
+    """Per-pixel local (wi, wo) and the mask of pixels on the sphere's disc.
+
+    The tangent frame at each pixel is arbitrary about the normal: the tables are
+    isotropic, so only the angles between wi, wo and the normal matter.
+    """
+    s = (np.arange(size) + 0.5) / size * 2.0 - 1.0
+    x, y = np.meshgrid(s, -s)
+    inside = x * x + y * y < 1.0
+    n = np.stack([x, y, np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))], axis=-1)
+    up = np.where(np.abs(n[..., 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    t = np.cross(up, n)
+    t /= np.linalg.norm(t, axis=-1, keepdims=True)
+    b = np.cross(n, t)
+    frame = np.stack([t, b, n], axis=-2)  # rows: local x, y, z axes
+    wi = frame @ (light / np.linalg.norm(light))
+    wo = frame @ np.array([0.0, 0.0, 1.0])
+    return wi, wo, inside
+
+
+def radiance(f: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    """Outgoing radiance of BRDF values ``f`` under irradiance pi from ``wi``."""
+    return f * np.pi * np.clip(wi[..., 2:3], 0.0, None)
+
+
+def tonemap(rad: np.ndarray, exposure: float) -> np.ndarray:
+    """Reinhard, then the sRGB curve: highlights compress, nothing clips; in [0, 1)."""
+    x = np.maximum(rad * exposure, 0.0)
+    x = x / (1.0 + x)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
+    """Radiance image of the table (NaN where the bin is unmeasured) and its lit mask."""
+    wi, wo, lit = sphere_directions(size, light)
+    img = np.zeros((size, size, 3))
+    img[lit] = table.lookup(wi[lit], wo[lit])
+    return radiance(img, wi), lit
+
+
+@runtime.in_float64
+def render_model(model: AbstractBRDFModel, params: dict, light: np.ndarray, size: int = 128):
+    """Radiance image of a model with ``params`` (docs/models.md names) and its lit mask."""
+    wi, wo, lit = sphere_directions(size, light)
+    p = {k: jnp.asarray(np.asarray(v, dtype=np.float64)) for k, v in params.items()}
+    f = np.asarray(_evaluate(model, p, jnp.asarray(wi), jnp.asarray(wo)), dtype=np.float64)
+    return radiance(np.where(lit[..., None], f, 0.0), wi), lit
+
+
+@eqx.filter_jit
+def _evaluate(model, params, wi, wo):
+    return model(params, wi, wo)
+
+
+class SphereReference:
+    """A table's renders, made once, to score any number of models against.
+
+    ``psnr(model, params)`` is the image error of the module docstring.
+    """
+
+    def __init__(self, table: MerlTable, size: int = 128, lights=LIGHTS):
+        self.size = size
+        self.lights = [light for _, light in lights]
+        self.images, self.masks, self.exposures = [], [], []
+        for light in self.lights:
+            rad, lit = render_table(table, light, size)
+            ok = lit & np.all(np.isfinite(rad), axis=-1)
+            typical = float(np.median(rad[ok] @ LUMINANCE)) if ok.any() else 1.0
+            exposure = 0.35 / max(typical, 1e-6)
+            self.images.append(tonemap(np.nan_to_num(rad), exposure))
+            self.masks.append(ok)
+            self.exposures.append(exposure)
+
+    def psnr(self, model: AbstractBRDFModel, params: dict) -> float:
+        se, n = 0.0, 0
+        for light, ref, ok, exposure in zip(self.lights, self.images, self.masks,
+                                            self.exposures, strict=True):
+            rad, _ = render_model(model, params, light, self.size)
+            d = tonemap(rad, exposure)[ok] - ref[ok]
+            if not np.all(np.isfinite(d)):
+                return float("nan")
+            se += float(np.sum(d * d))
+            n += d.size
+        if n == 0:
+            return float("nan")
+        mse = se / n
+        return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+
+
+def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:
+    """PSNR (dB) of the model's sphere renders against the table's own."""
+    return SphereReference(table, size).psnr(model, params)
