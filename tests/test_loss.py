@@ -20,14 +20,23 @@ def noisy_ggx():
     return make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)[0]
 
 
-@pytest.mark.parametrize("name", list(TRUTH))
+MORE = {  # models with another parameter layout than TRUTH's
+    "ggx2": {"kd": [0.1, 0.1, 0.1], "ks1": [0.5, 0.4, 0.3], "alpha1": 0.05,
+             "ks2": [0.2, 0.25, 0.2], "alpha2": 0.3, "f0": 0.5},
+    "ggx_dielectric": {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "eta": 1.5},
+    "ggx_mono": {"kd": [0.2, 0.1, 0.05], "ks": 0.7, "alpha": 0.15, "f0": 0.6},
+}
+
+
+@pytest.mark.parametrize("name", [*TRUTH, *MORE])
 def test_structured_normal_equations_equal_plain_jacobian(name, noisy_ggx):
-    """The closed-form colour columns of loss.normal_equations match jacfwd."""
+    """The closed-form colour columns of loss.normal_equations (one lobe, two lobes
+    in any parameter order, or the generic path) match jacfwd."""
     c = sampling.usable_bins(noisy_ggx)
     s = sampling.stratified_sample(sampling.bin_weights(c.usable), 2048)
     data = fitting.sample_data(noisy_ggx, s.index, s.weight)
     m = models.get(name)
-    u = jnp.asarray(m.unconstrain(TRUTH[name])) + 0.3
+    u = jnp.asarray(m.unconstrain({**TRUTH, **MORE}[name])) + 0.3
     fast = loss.normal_equations(u, (m, data))
     plain = loss._generic_normal_equations(u, (m, data))
     for a, b in zip(fast, plain):
@@ -77,3 +86,18 @@ def test_stratified_sample_is_unbiased_and_fixed_size():
             assert (s.weight * f[s.index]).sum() == pytest.approx((w * f).sum(), rel=0.03)
     everything = sampling.stratified_sample(w, None)
     assert everything.n_used == np.count_nonzero(w)
+
+
+@pytest.mark.parametrize("name", ["ggx", "ggx2", "oren_nayar"])
+def test_blocked_normal_equations_equal_one_pass(name, noisy_ggx):
+    """Every bin (1.46M samples) is summed in blocks; the sums are the same."""
+    c = sampling.usable_bins(noisy_ggx)
+    s = sampling.stratified_sample(sampling.bin_weights(c.usable), None)
+    assert loss._block_size(s.index.size) is not None
+    data = fitting.sample_data(noisy_ggx, s.index, s.weight)
+    m = models.get(name)
+    u = jnp.asarray(m.unconstrain({**TRUTH, **MORE}[name])) + 0.2
+    blocked = loss.normal_equations(u, (m, data))
+    one_pass = loss._normal_equations(u, m, data)
+    for a, b in zip(blocked, one_pass):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-16)

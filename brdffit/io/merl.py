@@ -180,21 +180,44 @@ def _check_range(rgb: np.ndarray, source: str, raw: np.ndarray | None = None,
         )
 
 
+#: The bits of +inf: as unsigned integers, every IEEE double at or above this is
+#: NaN, infinite or negative (sign bit set), and every one below it is finite and >= 0.
+_INF_BITS = np.uint64(0x7FF0000000000000)
+_ABS_BITS = np.uint64(0x7FFFFFFFFFFFFFFF)
+
+
 def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
-    """Raw file values -> physical values and mask, in few passes over 35 MB."""
-    raw = raw.reshape(3, *SHAPE)
-    # Per bin, the smallest and largest channel: min propagates NaN and is < 0 for
-    # any negative (unmeasured) or -inf channel; max catches +inf. Two reductions
-    # instead of elementwise masks over all 4.4M values.
-    lowest, highest = raw.min(axis=0), raw.max(axis=0)
-    unmeasured = ~(lowest >= 0) | (highest == np.inf)
+    """Raw file values -> physical values and mask, converted in place in ``raw``
+    (which must be writable and not shared): a few passes over 35 MB and no
+    second 35 MB array, so that reading runs near the speed of the disk cache.
+
+    The tests work on the values' bits (see ``_INF_BITS``): a bin is measured when
+    the largest of its three channels' bit patterns, read as unsigned integers, is
+    below +inf's, one pass instead of a minimum, a maximum and their comparisons.
+    A negative zero counts as negative (unmeasured), as its sign bit says.
+    """
+    raw = raw.reshape(3, -1)
+    bits = raw.view(np.uint64)
+    top = np.maximum(bits[0], bits[1])
+    np.maximum(top, bits[2], out=top)
+    unmeasured = top >= _INF_BITS
     if unmeasured.all():
         raise MerlFormatError(source, "no measured bin: every value is negative or non-finite")
-    n_nonfinite = int(np.count_nonzero(~np.isfinite(raw[:, unmeasured]).all(axis=0)))
-    rgb = raw * SCALE[:, None, None, None]
-    np.copyto(rgb, 0.0, where=unmeasured[None])
-    _check_range(rgb, source, raw=raw, measured=~unmeasured)
-    return MerlTable(rgb, ~unmeasured, source, n_nonfinite)
+    # bins with a NaN or infinite channel: the largest magnitude's bits reach +inf's
+    magnitude = np.bitwise_and(bits[0], _ABS_BITS)
+    scratch = np.empty_like(magnitude)
+    for c in (1, 2):
+        np.maximum(magnitude, np.bitwise_and(bits[c], _ABS_BITS, out=scratch), out=magnitude)
+    n_nonfinite = int(np.count_nonzero(magnitude >= _INF_BITS))
+    np.copyto(raw, 0.0, where=unmeasured)
+    rgb, measured = raw.reshape(3, *SHAPE), ~unmeasured.reshape(SHAPE)
+    # scaling is monotonic: the physical peak is the largest raw channel peak scaled
+    peak = float((raw.max(axis=1) * SCALE).max())
+    if not MIN_PEAK <= peak <= MAX_VALUE:  # refused: the message quotes the file's values
+        _check_range(rgb * SCALE[:, None, None, None], source, raw=rgb, measured=measured)
+    for c in range(3):
+        raw[c] *= SCALE[c]
+    return MerlTable(rgb, measured, source, n_nonfinite)
 
 
 def read(path: str | os.PathLike) -> MerlTable:
@@ -219,7 +242,7 @@ def from_bytes(data: bytes, source: str = "<bytes>") -> MerlTable:
     """Parse a MERL table held in memory (an upload); same checks as :func:`read`."""
     _check_layout(bytes(data[:HEADER_BYTES]), len(data), source)
     raw = np.frombuffer(data, dtype="<f8", count=3 * N_BINS, offset=HEADER_BYTES)
-    return _from_raw(raw, source)
+    return _from_raw(raw.copy(), source)  # converted in place: not in the caller's buffer
 
 
 def to_bytes(table: MerlTable) -> bytes:

@@ -110,6 +110,17 @@ class AbstractBRDFModel(eqx.Module):
     #: contains ggx), or None. A fit seeds itself from the parent's optimum
     #: (:meth:`embed_parent`), so it can never end worse than its parent.
     parent: ClassVar[str | None] = None
+    #: For a model of the form ``f = kd/pi + sum_k scale_k * lobe_k`` (each scale an
+    #: RGB parameter, each lobe shared by R, G and B): the scales' names, in the order
+    #: of :meth:`unit_lobes`. The fit then forms its normal equations in closed form
+    #: in the colour parameters and differentiates only the lobes' few shape
+    #: parameters (``brdffit.fitting.loss.normal_equations``). Empty: any other model.
+    lobe_scales: ClassVar[tuple[str, ...]] = ()
+
+    def unit_lobes(self, shape: Params, frame: Frame) -> Float[Array, "k ..."]:
+        """The lobes for unit scales, stacked (k, ...); ``shape`` holds the non-RGB
+        parameters only. Needed where :attr:`lobe_scales` is not empty."""
+        raise NotImplementedError(f"{self.name} declares no lobes")
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The parent's parameters as a point of this model with the same values."""
@@ -201,6 +212,11 @@ class AbstractLobeModel(AbstractBRDFModel):
     Subclasses define :meth:`lobe` (a scalar field over the batch) and the
     lobe's shape parameters after ``kd`` and ``ks``.
     """
+
+    lobe_scales = ("ks",)
+
+    def unit_lobes(self, shape: Params, frame: Frame) -> Float[Array, "1 ..."]:
+        return self.lobe(shape, frame)[None]
 
     @abc.abstractmethod
     def lobe(self, params: Params, frame: Frame) -> Float[Array, ...]:

@@ -65,6 +65,11 @@ class GGX2(AbstractBRDFModel):
     )
 
     parent = "ggx"
+    lobe_scales = ("ks1", "ks2")
+
+    def unit_lobes(self, shape, frame: Frame):
+        stacked = jnp.stack([shape["alpha1"], shape["alpha2"], shape["f0"]])
+        return _lobes(stacked.astype(frame.cos_d.dtype), frame)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """GGX as lobe 1, lobe 2 off (ks2 = 0) and three times broader, ready to grow."""
