@@ -112,7 +112,7 @@ def _solve_batch(model, solver, u_batch, data, max_steps):
         # Return values, not the Solution: its state holds a jaxpr.
         return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
 
-    return jax.vmap(one)(u_batch)
+    return jax.lax.map(one, u_batch)
 
 
 # -- data preparation --------------------------------------------------------------
