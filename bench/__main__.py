@@ -1,4 +1,4 @@
-"""`make bench`: the speed-vs-error report, then the batch and selection benchmarks.
+"""`make bench`: the speed-vs-error report, then startup, batch and selection benchmarks.
 
     python -m bench [--quick]
 
@@ -17,7 +17,7 @@ def main(argv=None) -> int:
     from bench import speed
 
     rc = speed.main(["--quick"] if quick else [])
-    for name in ("bench.batch_bench", "bench.selection_bench"):
+    for name in ("bench.startup", "bench.batch_bench", "bench.selection_bench"):
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError:

@@ -484,3 +484,56 @@ def _sha256(path: str) -> str:
     import hashlib
 
     return hashlib.sha256(open(path, "rb").read()).hexdigest()
+
+
+# -- an existing cluster: scheduler and worker started by hand, as on several machines ----
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path):
+    """docs/batch.md, "On a real cluster": `dask scheduler` and `dask worker` run as
+    their own processes (as they would on other machines), and `brdffit batch
+    --scheduler` submits to them."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, **local_worker_env(1), "PYTHONPATH": REPO}
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
+                               "--host", "127.0.0.1", "--port", str(port),
+                               "--dashboard-address", "127.0.0.1:0"],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              start_new_session=True)]
+    try:
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
+                                       address, "--nworkers", "1", "--nthreads", "1",
+                                       "--host", "127.0.0.1", "--dashboard-address",
+                                       "127.0.0.1:0"],
+                                      env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, start_new_session=True))
+        out = tmp_path / "results.h5"
+        r = subprocess.run(
+            [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models",
+             "lambert", "--out", str(out), *CLI_OPTIONS, "--scheduler", address],
+            cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 1, r.stderr  # the bad tables are recorded: exit 1
+        tables = _tables(out)
+        for name in TRUTHS:
+            fit = tables[name]["fits"]["lambert"]
+            assert fit["status"] == "ok" and fit["fit"]["model"] == "lambert"
+            assert fit["worker"].split(":")[0], fit  # the worker process that ran it
+        for name in BAD:
+            assert tables[name]["status"] == "failed"
+    finally:
+        for p in reversed(procs):
+            os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)

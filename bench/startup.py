@@ -1,0 +1,171 @@
+"""Everything around a fit, on real materials: reading, a new process, auto, every bin.
+
+    python -m bench.startup [--materials red-plastic,gold-metallic-paint]
+    # writes bench/results/startup.{json,md}
+
+Rows, each a median measured side by side in this one run, each with the error it
+buys (log_rmse on the full table):
+
+- read: ``brdffit.merl.read`` against a plain ``np.fromfile`` of the same file;
+- a new process: ``brdffit fit TABLE --model ggx --json`` end to end, with the
+  persistent compilation cache empty, then warm;
+- auto: its first call in a new process (compilation cache warm) and warm, as a
+  multiple of one warm ggx fit of the same table in the same process;
+- every bin (``samples=None``): ggx and ggx2, first call and warm.
+
+Real materials come from ``data_synth.nbrdf`` (cached in ``.bench-cache/nbrdf``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from bench.real_materials import cache_dir
+from bench.speed import machine
+from brdffit import fit, jsonout
+from brdffit.io import merl
+from brdffit.selection import select
+from data_synth import nbrdf
+
+RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+
+
+def _median_s(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def bench_read(path: str) -> dict:
+    plain = _median_s(lambda: np.fromfile(path, dtype="<f8", offset=merl.HEADER_BYTES), 21)
+    ours = _median_s(lambda: merl.read(path), 21)
+    return {"fromfile_ms": plain * 1e3, "read_ms": ours * 1e3, "ratio": ours / plain}
+
+
+def _process(argv: list[str], cache: str) -> tuple[float, str]:
+    env = dict(os.environ, BRDFFIT_CACHE_DIR=cache)
+    t0 = time.perf_counter()
+    p = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=900)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError(f"{argv} failed: {p.stderr[-2000:]}")
+    return wall, p.stdout
+
+
+def bench_new_process(path: str) -> dict:
+    """``brdffit fit`` in a fresh process: empty cache, then warm (twice)."""
+    cache = tempfile.mkdtemp(prefix="brdffit-startup-")
+    argv = [sys.executable, "-m", "brdffit.cli", "fit", path, "--model", "ggx", "--json"]
+    out = {}
+    for label in ("cold_cache", "warm_cache", "warm_cache_again"):
+        out[label + "_s"], stdout = _process(argv, cache)
+        out["log_rmse"] = json.loads(stdout)["error"]["log_rmse"]
+    code = ("import time; t0 = time.perf_counter()\n"
+            "from brdffit.io import merl\nfrom brdffit.selection import select\n"
+            f"s = select(merl.read({path!r}))\n"
+            "print(time.perf_counter() - t0, s.chosen, s.result.log_rmse)")
+    _process([sys.executable, "-c", code], cache)  # fills the cache with auto's fits
+    wall, stdout = _process([sys.executable, "-c", code], cache)
+    inner, chosen, err = stdout.split()
+    out.update(auto_first_call_process_s=wall, auto_first_call_s=float(inner),
+               auto_chosen=chosen, auto_log_rmse=float(err))
+    return out
+
+
+def bench_in_process(path: str) -> dict:
+    """Warm ggx, auto and every-bin fits of one table, in this process."""
+    table = merl.read(path)
+    out = {}
+    fit(table, "ggx")
+    out["ggx_warm_ms"] = 1e3 * _median_s(lambda: fit(merl.read(path), "ggx"), 7)
+    out["ggx_log_rmse"] = fit(table, "ggx").log_rmse
+    t0 = time.perf_counter()
+    select(table)
+    out["auto_first_in_process_s"] = time.perf_counter() - t0
+    out["auto_warm_s"] = _median_s(lambda: select(merl.read(path)), 3)
+    out["auto_over_ggx"] = out["auto_warm_s"] / (out["ggx_warm_ms"] / 1e3)
+    for model in ("ggx", "ggx2"):
+        t0 = time.perf_counter()
+        r = fit(table, model, samples=None)
+        out[f"{model}_all_first_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        r = fit(merl.read(path), model, samples=None)
+        out[f"{model}_all_warm_s"] = time.perf_counter() - t0
+        out[f"{model}_all_log_rmse"] = r.log_rmse
+        out[f"{model}_all_steps"] = r.steps
+        out[f"{model}_all_result"] = r.result
+        out[f"{model}_default_log_rmse"] = fit(table, model).log_rmse
+    return out
+
+
+def write_markdown(report: dict, path: str) -> None:
+    m = report["machine"]
+    lines = ["# Around the fit: reading, a new process, auto, every bin", "",
+             f"{m['cpu']}, {m['cores']} cores, JAX {m['jax']} on {m['backend']}, "
+             f"{m['date']}, load average {m['loadavg']} at the start. "
+             "`python -m bench.startup`; medians, side by side in one run.", ""]
+    for name, r in report["materials"].items():
+        rd, npr, ip = r["read"], r["new_process"], r["in_process"]
+        lines += [f"## {name}", "",
+                  "| what | time | error (log_rmse, full table) |", "|---|---|---|",
+                  f"| read one table (`np.fromfile` alone: {rd['fromfile_ms']:.1f} ms) | "
+                  f"{rd['read_ms']:.1f} ms ({rd['ratio']:.1f}x fromfile) | |",
+                  f"| `brdffit fit --model ggx --json`, new process, empty compile cache | "
+                  f"{npr['cold_cache_s']:.2f} s | {npr['log_rmse']:.5f} |",
+                  f"| the same, compile cache warm | {npr['warm_cache_s']:.2f} s, "
+                  f"{npr['warm_cache_again_s']:.2f} s | {npr['log_rmse']:.5f} |",
+                  f"| warm default ggx fit (read included) | {ip['ggx_warm_ms']:.0f} ms | "
+                  f"{ip['ggx_log_rmse']:.5f} |",
+                  f"| auto, first call in a new process (cache warm; whole process) | "
+                  f"{npr['auto_first_call_s']:.2f} s ({npr['auto_first_call_process_s']:.2f} s) "
+                  f"| {npr['auto_log_rmse']:.5f} ({npr['auto_chosen']}) |",
+                  f"| auto, warm | {ip['auto_warm_s']:.2f} s = {ip['auto_over_ggx']:.1f} "
+                  "warm ggx fits | |"]
+        for model in ("ggx", "ggx2"):
+            lines.append(
+                f"| {model}, every bin (`--samples all`): first call, warm | "
+                f"{ip[model + '_all_first_s']:.1f} s, {ip[model + '_all_warm_s']:.1f} s "
+                f"({ip[model + '_all_steps']} steps, {ip[model + '_all_result']}) | "
+                f"{ip[model + '_all_log_rmse']:.5f} (default samples: "
+                f"{ip[model + '_default_log_rmse']:.5f}) |")
+        lines.append("")
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench.startup")
+    ap.add_argument("--materials", default="red-plastic,gold-metallic-paint")
+    ap.add_argument("--out", default=RESULTS)
+    args = ap.parse_args(argv)
+    directory = os.path.join(cache_dir(), "nbrdf")
+    report = {"machine": machine(), "materials": {}}
+    for name in args.materials.split(","):
+        path = nbrdf.cached_table(name, directory)
+        print(f"{name} ...", file=sys.stderr)
+        report["materials"][name] = {"read": bench_read(path),
+                                     "new_process": bench_new_process(path),
+                                     "in_process": bench_in_process(path)}
+    report["machine"]["loadavg_end"] = os.getloadavg()
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "startup.json"), "w") as f:
+        jsonout.dump(report, f, indent=1)
+    write_markdown(report, os.path.join(args.out, "startup.md"))
+    print(f"wrote {args.out}/startup.json, startup.md", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
