@@ -20,6 +20,7 @@ process without Dask (debugging, or a machine where Dask cannot start workers).
 
 from __future__ import annotations
 
+import concurrent.futures
 import glob
 import hashlib
 import os
@@ -32,7 +33,16 @@ from brdffit import models
 from brdffit.batch.cluster import DaskRunner, connect, require_dask
 from brdffit.batch.progress import Progress
 from brdffit.batch.store import BatchStore
-from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord, fit_table, now, worker_name
+from brdffit.batch.tasks import (
+    FitOptions,
+    FitRecord,
+    TableRecord,
+    fit_read_table,
+    fit_table,
+    now,
+    read_table,
+    worker_name,
+)
 from brdffit.errors import BrdffitError
 
 __all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "FitOptions", "find_tables",
@@ -169,8 +179,15 @@ def _plan(paths: list[str], model_names: list[str], options: FitOptions, store: 
 
 
 def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict) -> Iterator[dict]:
-    for t in tasks:
-        yield fit_table(t.path, model_names, options, t.expected_sha256, t.done_models)
+    """One table after another in this process, the next one read (and hashed: ~60
+    ms for 35 MB) in a thread while this one is fitted: file reading and hashing
+    release the GIL."""
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="brdffit-read") as pool:
+        ahead = pool.submit(read_table, tasks[0].path) if tasks else None
+        for i, t in enumerate(tasks):
+            read = ahead.result()
+            ahead = pool.submit(read_table, tasks[i + 1].path) if i + 1 < len(tasks) else None
+            yield fit_read_table(read, model_names, options, t.expected_sha256, t.done_models)
 
 
 def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: dict,

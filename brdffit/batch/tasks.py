@@ -146,8 +146,15 @@ def fit_table(path: str, models: list[str], options: dict, expected_sha256: str 
 
     Returns ``{"table": TableRecord dict, "fits": [FitRecord dict, ...]}``.
     """
+    return fit_read_table(read_table(path), models, options, expected_sha256, done_models)
+
+
+def fit_read_table(read: tuple[merl.MerlTable | None, TableRecord], models: list[str],
+                   options: dict, expected_sha256: str | None = None,
+                   done_models: tuple[str, ...] = ()) -> dict:
+    """:func:`fit_table` for a table :func:`read_table` already read."""
     opts = FitOptions.from_dict(options)
-    table, record = read_table(path)
+    table, record = read
     fits = []
     if table is not None:
         done = set(done_models) if record.sha256 == expected_sha256 else set()
