@@ -18,7 +18,9 @@ renderer's material, not an approximation of it.
 
       t1 = eta^2 - k^2 - s2,   a2b2 = sqrt(t1^2 + 4 eta^2 k^2),   a = sqrt((a2b2 + t1) / 2)
       Rs = (a2b2 + c^2 - 2 c a) / (a2b2 + c^2 + 2 c a)
+         = ((c - a)^2 + e) / ((c + a)^2 + e),                 e = (a2b2 - t1) / 2 >= 0
       Rp = Rs (a2b2 c^2 + s2^2 - 2 c a s2) / (a2b2 c^2 + s2^2 + 2 c a s2)
+         = Rs ((s2 - c a)^2 + c^2 e) / ((s2 + c a)^2 + c^2 e)
       F  = (Rs + Rp) / 2
 """
 
@@ -47,15 +49,16 @@ def conductor_fresnel(eta, k, cos_d) -> Float[Array, ...]:
     floor returns the limit 0 (no reflection from a medium matched to the outside).
     """
     c = cos_d
-    c2 = c * c
-    s2 = 1.0 - c2
+    s2 = 1.0 - c * c
     t1 = eta * eta - k * k - s2
     a2b2 = safe_sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
     a = safe_sqrt(0.5 * (a2b2 + t1))
-    term1 = a2b2 + c2
-    term2 = 2.0 * c * a
-    rs = safe_div(term1 - term2, term1 + term2, 1e-30)
-    term3 = a2b2 * c2 + s2 * s2
-    term4 = term2 * s2
-    rp = rs * safe_div(term3 - term4, term3 + term4, 1e-30)
+    # Mitsuba's a2b2 + c^2 -+ 2 c a and a2b2 c^2 + s2^2 -+ 2 c a s2, regrouped as sums of
+    # non-negative terms (a2b2 - a^2 = (a2b2 - t1) / 2 >= 0 in floating point too), so
+    # that F >= 0 exactly where rounding made the difference form slightly negative
+    # (eta = 1, k = 0, near grazing, times a sharp D).
+    excess = 0.5 * (a2b2 - t1)
+    rs = safe_div((c - a) ** 2 + excess, (c + a) ** 2 + excess, 1e-30)
+    rp = rs * safe_div((s2 - c * a) ** 2 + c * c * excess,
+                       (s2 + c * a) ** 2 + c * c * excess, 1e-30)
     return 0.5 * (rs + rp)
