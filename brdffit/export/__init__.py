@@ -56,6 +56,15 @@ class Export:
     def to_json(self, **kw) -> str:
         return jsonout.dumps(self.to_dict(), **kw)
 
+    @classmethod
+    def from_dict(cls, d: dict) -> Export:
+        """An export from :meth:`to_dict`'s output; refuses another schema version."""
+        d = dict(d)
+        schema = d.pop("schema", SCHEMA)
+        if schema != SCHEMA:
+            raise ValueError(f"export schema {schema!r}; this brdffit reads {SCHEMA!r}")
+        return cls(**d)
+
 
 def _material_name(result: FitResult) -> str:
     stem = (result.table or "material").replace("\\", "/").rsplit("/", 1)[-1]

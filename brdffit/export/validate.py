@@ -15,21 +15,32 @@ exporting never do.
 
 from __future__ import annotations
 
+import importlib
 import json
+import shutil
 import subprocess
 
 import numpy as np
 
+from brdffit.errors import BrdffitError
+from brdffit.extras import MissingExtraError
 from brdffit.io.grid import bin_grid
 
 #: Vectorised (needs the LLVM library at run time) first; scalar_rgb needs nothing.
 MITSUBA_VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 
 
+def _import(module: str, who: str):
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError:
+        raise MissingExtraError(who, "export-check", (module,)) from None
+
+
 def mitsuba():
     """The ``mitsuba`` module with an RGB variant set (the first of MITSUBA_VARIANTS
     that runs here)."""
-    import mitsuba as mi
+    mi = _import("mitsuba", "brdffit.export.validate.mitsuba")
 
     if mi.variant() in MITSUBA_VARIANTS:
         return mi
@@ -116,8 +127,7 @@ def mitsuba_sphere(material: dict, light: np.ndarray, size: int = 128, spp: int 
 def materialx_validate(text: str) -> tuple[bool, str]:
     """MaterialX's own validation of a document, its standard libraries imported
     (every node must resolve to a node definition)."""
-    import MaterialX as mx
-
+    mx = _import("MaterialX", "brdffit.export.validate.materialx_validate")
     doc = mx.createDocument()
     mx.readFromXmlString(doc, text)
     lib = mx.createDocument()
@@ -147,6 +157,9 @@ def gltf_validate(document: dict, validator: str) -> dict:
     document; ``validator``: the installed ``gltf-validator`` npm package's folder."""
     from brdffit import jsonout
 
+    if shutil.which("node") is None:
+        raise BrdffitError("the glTF check needs Node.js (node) and the npm package "
+                           "gltf-validator")
     out = subprocess.run(["node", "-e", _GLTF_SCRIPT, validator],
                          input=jsonout.dumps(document).encode(), capture_output=True,
                          timeout=120, check=False)
