@@ -49,6 +49,19 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     assert x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
 
 
+def test_an_ior_fit_writes_khr_materials_ior():
+    r = result("gltf_pbr_ior", {**GLTF, "ior": 1.9})
+    g = export(r, "gltf")
+    assert g.fidelity["exact"] and g.fidelity["target_model"] == "gltf_pbr_ior"
+    assert g.material["extensionsUsed"] == ["KHR_materials_ior"]
+    assert g.material["materials"][0]["extensions"] == {"KHR_materials_ior": {"ior": 1.9}}
+    assert any("KHR_materials_ior" in w for w in g.warnings)  # viewers without it: 0.04
+    x = ET.fromstring(export(r, "materialx").material)
+    assert x.find("gltf_pbr/input[@name='ior']").get("value") == "1.9"
+    # a core fit writes no extension at all
+    assert "extensionsUsed" not in export(result("gltf_pbr", GLTF), "gltf").material
+
+
 def test_conductor_fit_exports_exactly_to_mitsuba():
     e = export(result("rough_conductor", CONDUCTOR), "mitsuba")
     assert e.fidelity["exact"] and e.warnings == []

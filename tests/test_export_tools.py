@@ -94,7 +94,8 @@ def test_mitsuba_sphere_render_matches_brdffits_render():
 
 
 def test_materialx_validates_the_exports():
-    for source in (("pink-felt", "gltf_pbr"), ("red-plastic", "ggx")):
+    for source in (("pink-felt", "gltf_pbr"), ("red-plastic", "ggx"),
+                   ("red-plastic", "gltf_pbr_ior")):
         ok, message = check.materialx_validate(export(real_fit(*source), "materialx").material)
         assert ok, message
     ok, message = check.materialx_validate(
@@ -117,7 +118,8 @@ def gltf_validator() -> str:
 
 
 def test_gltf_validator_passes_the_exports(gltf_validator):
-    for source in (("pink-felt", "gltf_pbr"), ("red-plastic", "ggx"), ("chrome", "ggx")):
+    for source in (("pink-felt", "gltf_pbr"), ("red-plastic", "ggx"), ("chrome", "ggx"),
+                   ("red-plastic", "gltf_pbr_ior")):
         report = check.gltf_validate(export(real_fit(*source), "gltf").material, gltf_validator)
         issues = report["issues"]
         assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.unit
 GLTF = {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}
 CONDUCTOR = {"eta": [0.2, 0.9, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.15,
              "kd": [0.3, 0.2, 0.1], "weight": 0.2}
-CASES = {"gltf_pbr": GLTF, "rough_conductor": CONDUCTOR}
+CASES = {"gltf_pbr": GLTF, "gltf_pbr_ior": {**GLTF, "ior": 1.9}, "rough_conductor": CONDUCTOR}
 
 
 def _jnp(params):
@@ -41,10 +41,12 @@ def _gltf_appendix_b(p, wi, wo):
     """glTF 2.0 Appendix B, term by term as the spec writes it (its V = G / (4 N.L N.V)
     with G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2)))."""
     base, m, a = np.asarray(p["base_color"]), p["metallic"], p["roughness"] ** 2
+    # KHR_materials_ior: the dielectric's f0 from its ior; the core spec's is 0.04
+    dielectric_f0 = ((p["ior"] - 1) / (p["ior"] + 1)) ** 2 if "ior" in p else 0.04
     h = wi + wo
     h /= np.linalg.norm(h, axis=-1, keepdims=True)
     nl, nv, nh, vh = wi[:, 2:3], wo[:, 2:3], h[:, 2:3], np.sum(wo * h, -1, keepdims=True)
-    f0 = 0.04 * (1 - m) + base * m
+    f0 = dielectric_f0 * (1 - m) + base * m
     fresnel = f0 + (1 - f0) * (1 - np.abs(vh)) ** 5
     d = a**2 / (np.pi * (nh**2 * (a**2 - 1) + 1) ** 2)
 
@@ -61,8 +63,11 @@ def test_gltf_pbr_is_the_spec_brdf():
     wi, wo = wi[keep], wo[keep]
     for p in (GLTF, {"base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.04},
               {"base_color": [0.1, 0.5, 0.9], "metallic": 0.0, "roughness": 1.0}):
-        ours = np.asarray(models.get("gltf_pbr")(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
-        np.testing.assert_allclose(ours, _gltf_appendix_b(p, wi, wo), rtol=1e-9, atol=1e-12)
+        for name, extra in (("gltf_pbr", {}), ("gltf_pbr_ior", {"ior": 1.5}),
+                            ("gltf_pbr_ior", {"ior": 2.2})):
+            q = {**p, **extra}
+            ours = np.asarray(models.get(name)(_jnp(q), jnp.asarray(wi), jnp.asarray(wo)))
+            np.testing.assert_allclose(ours, _gltf_appendix_b(q, wi, wo), rtol=1e-9, atol=1e-12)
 
 
 def test_conductor_fresnel_limits():
@@ -127,6 +132,8 @@ def _edge_directions():
 EDGES = {
     "gltf_pbr": [{"base_color": b, "metallic": m, "roughness": r}
                  for b in (0.0, 1.0) for m in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0)],
+    "gltf_pbr_ior": [{"base_color": 0.5, "metallic": m, "roughness": r, "ior": i}
+                     for m in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 3.0)],
     "rough_conductor": [{"eta": e, "k": k, "alpha": a, "kd": 0.5, "weight": w}
                         for e in (0.02, 1.0, 10.0) for k in (0.0, 15.0)
                         for a in (1e-3, 2.0) for w in (0.0, 1.0)],
@@ -177,5 +184,6 @@ def test_rough_conductor_fit_reproduces_its_table():
 def test_auto_candidates_leave_the_target_models_out():
     from brdffit.selection import DEFAULT_CANDIDATES
 
-    assert "gltf_pbr" not in DEFAULT_CANDIDATES and "rough_conductor" not in DEFAULT_CANDIDATES
-    assert {"gltf_pbr", "rough_conductor"} <= set(models.names())
+    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor"}
+    assert not targets & set(DEFAULT_CANDIDATES)
+    assert targets <= set(models.names())

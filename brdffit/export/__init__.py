@@ -20,7 +20,7 @@ from brdffit.fitting.result import FitResult
 #: The version of the export schema that :meth:`Export.to_dict` writes.
 SCHEMA = "brdffit.export/1"
 
-#: target -> its module (TARGET_MODEL, MEDIA_TYPE and the writer).
+#: target -> its module (TARGET_MODELS, MEDIA_TYPE and the writer).
 TARGETS = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
 
 
@@ -80,7 +80,7 @@ def export(result: FitResult, target: str) -> Export:
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = TARGETS[target]
-    conv = convert(result, module.TARGET_MODEL)
+    conv = convert(result, module.TARGET_MODELS)
     warnings = list(conv.warnings)
     name = _material_name(result)
     if target == "mitsuba":
@@ -89,6 +89,8 @@ def export(result: FitResult, target: str) -> Export:
     elif target == "gltf":
         material = gltf.document(conv.params, name)
         files = {f"{name}.gltf": jsonout.dumps(material, indent=1)}
+        if "ior" in conv.params:
+            warnings.append(gltf.IOR_NOTE)
     else:
         material = materialx.document(conv.params, name)
         files = {f"{name}.mtlx": material}

@@ -86,20 +86,23 @@ def bound_warnings(target_model: str, params: dict) -> list[str]:
 _CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha"}
 
 
-def convert(result: FitResult, target_model: str, *, samples: int = CONVERSION_SAMPLES,
-            seed: int = 0) -> Conversion:
-    """``result`` as parameters of ``target_model`` (see the module docstring)."""
+def convert(result: FitResult, target_models: tuple[str, ...], *,
+            samples: int = CONVERSION_SAMPLES, seed: int = 0) -> Conversion:
+    """``result`` as parameters of one of ``target_models``, the models the renderer
+    shades exactly: a copy when the fit is one of them, else a refit of the first
+    (see the module docstring)."""
     from brdffit.fitting.pipeline import fit
 
     warnings = []
     if not result.converged:
         warnings.append(f"the {result.model} fit did not converge ({result.result}): the "
                         "export carries its last point")
-    if result.model == target_model:
-        params = models.get(target_model).check_params(result.params)
+    if result.model in target_models:
+        params = models.get(result.model).check_params(result.params)
         plain = {k: np.asarray(v).tolist() for k, v in params.items()}
-        return Conversion(target_model, plain, True, 0.0,
-                          warnings + bound_warnings(target_model, plain))
+        return Conversion(result.model, plain, True, 0.0,
+                          warnings + bound_warnings(result.model, plain))
+    target_model = target_models[0]
     refit = fit(fit_as_table(result), target_model, samples=samples, seed=seed)
     warnings.append(
         f"approximated: {target_model} (the renderer's model) fitted to the {result.model} "

@@ -6,8 +6,9 @@ parameters under the same names, so the mapping is a copy:
 
     base_color = base_color,  metallic = metallic,  roughness = roughness
 
-with the node's other inputs at their defaults (ior 1.5, specular 1, no clearcoat,
-transmission, sheen or emission): the gltf_pbr model's own assumptions.
+and ``ior = ior`` for a ``gltf_pbr_ior`` fit; the node's other inputs at their
+defaults (ior 1.5, specular 1, no clearcoat, transmission, sheen or emission): the
+gltf_pbr model's own assumptions.
 
 What is not exact: MaterialX implements the node as a graph of its BSDF nodes, which
 layers the dielectric lobe over the diffuse one by the lobe's directional albedo
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-TARGET_MODEL = "gltf_pbr"
+TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior")
 MEDIA_TYPE = "application/mtlx+xml"
 SHADING_NOTE = ("MaterialX's gltf_pbr node layers its specular lobe over the diffuse by "
                 "directional albedo, not glTF Appendix B's (1 - F): the parameters are exact, "
@@ -45,6 +46,8 @@ def document(params: dict, name: str) -> str:
         f'    <input name="base_color" type="color3" value="{colour}"/>',
         f'    <input name="metallic" type="float" value="{float(params["metallic"])!r}"/>',
         f'    <input name="roughness" type="float" value="{float(params["roughness"])!r}"/>',
+        *([f'    <input name="ior" type="float" value="{float(params["ior"])!r}"/>']
+          if "ior" in params else []),
         "  </gltf_pbr>",
         f'  <surfacematerial name={quoteattr("M_" + ident)} type="material">',
         f'    <input name="surfaceshader" type="surfaceshader" nodename={shader}/>',

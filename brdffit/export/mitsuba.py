@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-TARGET_MODEL = "rough_conductor"
+TARGET_MODELS = ("rough_conductor",)
 MEDIA_TYPE = "application/json"
 
 

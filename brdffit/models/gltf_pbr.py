@@ -1,5 +1,9 @@
 """glTF 2.0 metallic-roughness BRDF (glTF 2.0 spec, Appendix B), separable Smith GGX.
 
+``gltf_pbr``: the core material. ``gltf_pbr_ior`` (``GltfPBR(ior=True)``): the same with
+the extension ``KHR_materials_ior``, whose ``ior`` sets the dielectric reflectance
+``((ior - 1)/(ior + 1))^2`` in place of 0.04 (the metal part is unchanged).
+
     c_diff = base_color (1 - metallic),   f0 = 0.04 (1 - metallic) + base_color metallic
     alpha  = roughness^2
     F      = f0 + (1 - f0) (1 - cos_d)^5                       (RGB)
@@ -15,12 +19,14 @@ the three parameters and loses nothing.
 | base_color | [0, 1], RGB        | ``baseColorFactor`` (linear RGB)               |
 | metallic   | [0, 1]             | ``metallicFactor``                             |
 | roughness  | [0.0316, 1] (log)  | ``roughnessFactor``; lower bound: alpha = 1e-3 |
+| ior        | [1, 3]             | ``KHR_materials_ior.ior`` (``gltf_pbr_ior`` only) |
 """
 
 from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -38,15 +44,37 @@ ROUGHNESS = ParamSpec(
     "roughness", "roughnessFactor (alpha = roughness^2)", math.sqrt(1e-3), 1.0, scale="log"
 )
 
+IOR = ParamSpec("ior", "KHR_materials_ior: index of refraction of the dielectric", 1.0, 3.0)
+#: glTF's default index of refraction (its f0 is DIELECTRIC_F0).
+DEFAULT_IOR = 1.5
+
 
 class GltfPBR(AbstractBRDFModel):
-    name = "gltf_pbr"
-    param_specs = (BASE_COLOR, METALLIC, ROUGHNESS)
-    shape_grid = tuple(
-        {"roughness": min(math.sqrt(a), 1.0), "metallic": m}
-        for a in ALPHA_GRID
-        for m in (0.0, 0.5, 1.0)
-    )
+    #: True: ``gltf_pbr_ior``, the dielectric's index a parameter (KHR_materials_ior).
+    ior: bool = eqx.field(static=True, default=False)
+
+    @property
+    def name(self) -> str:
+        return "gltf_pbr_ior" if self.ior else "gltf_pbr"
+
+    @property
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        return (BASE_COLOR, METALLIC, ROUGHNESS) + ((IOR,) if self.ior else ())
+
+    @property
+    def shape_grid(self) -> tuple[dict[str, float], ...]:
+        extra = {"ior": DEFAULT_IOR} if self.ior else {}
+        return tuple(
+            {"roughness": min(math.sqrt(a), 1.0), "metallic": m, **extra}
+            for a in ALPHA_GRID
+            for m in (0.0, 0.5, 1.0)
+        )
+
+    def dielectric_f0(self, params: Params):
+        if not self.ior:
+            return DIELECTRIC_F0
+        r = (params["ior"] - 1.0) / (params["ior"] + 1.0)
+        return r * r
 
     def eval_channels(self, params: Params, frame: Frame):
         base = params["base_color"]
@@ -54,7 +82,7 @@ class GltfPBR(AbstractBRDFModel):
         rough = params["roughness"]
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         base = base[expand]
-        f0 = DIELECTRIC_F0 * (1.0 - m) + base * m
+        f0 = self.dielectric_f0(params) * (1.0 - m) + base * m
         c_diff = base * (1.0 - m)
         fresnel = f0 + (1.0 - f0) * (1.0 - frame.cos_d)[None] ** 5
         dg = separable_ggx_dg(

@@ -34,7 +34,7 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     GGX2(),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
-    GltfPBR(), RoughConductor(),
+    GltfPBR(), GltfPBR(ior=True), RoughConductor(),
 )
 
 REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
