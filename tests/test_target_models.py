@@ -187,3 +187,13 @@ def test_auto_candidates_leave_the_target_models_out():
     targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor"}
     assert not targets & set(DEFAULT_CANDIDATES)
     assert targets <= set(models.names())
+
+
+def test_gltf_pbr_ior_contains_gltf_pbr():
+    # seeded from a gltf_pbr fit (models.parent), the larger model never ends worse
+    m = models.get("gltf_pbr_ior")
+    assert m.parent == "gltf_pbr" and models.get("gltf_pbr").parent is None
+    wi, wo = _pairs(500)
+    ours = m(_jnp(m.embed_parent(GLTF)), jnp.asarray(wi), jnp.asarray(wo))
+    core = models.get("gltf_pbr")(_jnp(GLTF), jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_allclose(np.asarray(ours), np.asarray(core), rtol=1e-12)
