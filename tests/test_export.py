@@ -30,9 +30,10 @@ def result(model, params, **kw) -> FitResult:
 def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     r = result("gltf_pbr", GLTF)
     g = export(r, "gltf")
+    energy = {k: g.fidelity.pop(k) for k in ("albedo_max", "albedo_max_theta_deg")}
     assert g.fidelity == {"exact": True, "target_model": "gltf_pbr", "log_rmse_to_fit": 0.0,
                           "fit_log_rmse": 0.02}
-    assert g.warnings == []
+    assert 0 < max(energy["albedo_max"]) < 1 and g.warnings == []
     (mat,) = g.material["materials"]
     assert g.material["asset"]["version"] == "2.0"
     assert mat["pbrMetallicRoughness"] == {"baseColorFactor": [0.8, 0.35, 0.1, 1.0],
@@ -106,6 +107,21 @@ def test_every_clamp_is_a_warning():
     # at the lower roughness bound
     sharp = export(result("gltf_pbr", {**GLTF, "roughness": float(np.sqrt(1e-3))}), "gltf")
     assert any("roughness" in w and "lower bound" in w for w in sharp.warnings)
+
+
+def test_a_material_that_reflects_more_than_it_receives_is_a_warning():
+    # glTF's own formula: a white dielectric's albedo passes 1 towards grazing
+    white = export(result("gltf_pbr", {"base_color": [1.0, 1.0, 1.0], "metallic": 0.0,
+                                       "roughness": 0.5}), "gltf")
+    assert max(white.fidelity["albedo_max"]) > 1.05
+    assert white.fidelity["albedo_max_theta_deg"] >= 80
+    assert any(w.startswith("energy: the gltf_pbr material reflects up to 1.1") for w in
+               white.warnings)
+    # the conductor conserves energy by construction, even at its brightest
+    bright = {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3, "weight": 0.5}
+    e = export(result("rough_conductor", bright), "mitsuba")
+    assert max(e.fidelity["albedo_max"]) <= 1.0
+    assert not any(w.startswith("energy") for w in e.warnings)
 
 
 def test_an_unconverged_fit_says_so():

@@ -36,8 +36,9 @@ class Export:
     dictionary, for ``gltf`` the glTF JSON document, for ``materialx`` the XML text;
     ``files``: the same material as the files a user saves (name -> text), e.g. the
     Mitsuba scene XML. ``fidelity``: ``exact``, the ``target_model`` the renderer
-    shades with, ``log_rmse_to_fit`` (what the conversion lost; 0 when exact) and the
-    fit's own ``fit_log_rmse`` to its table.
+    shades with, ``log_rmse_to_fit`` (what the conversion lost; 0 when exact), the
+    fit's own ``fit_log_rmse`` to its table, and the material's largest directional
+    albedo ``albedo_max`` (RGB) at ``albedo_max_theta_deg`` (``brdffit.export.energy``).
     """
 
     target: str
@@ -74,6 +75,7 @@ def _material_name(result: FitResult) -> str:
 def export(result: FitResult, target: str) -> Export:
     """``result`` as a material of ``target`` (one of ``TARGETS``)."""
     from brdffit.export.conversion import convert
+    from brdffit.export.energy import energy_report
 
     if target not in TARGETS:
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
@@ -81,7 +83,8 @@ def export(result: FitResult, target: str) -> Export:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = TARGETS[target]
     conv = convert(result, module.TARGET_MODELS)
-    warnings = list(conv.warnings)
+    energy, energy_warnings = energy_report(conv.target_model, conv.params)
+    warnings = conv.warnings + energy_warnings
     name = _material_name(result)
     if target == "mitsuba":
         material = mitsuba.load_dict(conv.params)
@@ -96,4 +99,4 @@ def export(result: FitResult, target: str) -> Export:
         files = {f"{name}.mtlx": material}
         warnings.append(materialx.SHADING_NOTE)
     return Export(target, result.model, module.MEDIA_TYPE, material, files,
-                  conv.fidelity(result), conv.params, warnings, result.table)
+                  {**conv.fidelity(result), **energy}, conv.params, warnings, result.table)
