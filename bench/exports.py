@@ -122,8 +122,9 @@ def _markdown(rows: list[dict], meta: dict) -> str:
         "## Fidelity of the exports",
         "",
         "| material | fit | target | exact | reported log_rmse to the fit | measured in "
-        "Mitsuba | exported material vs table | Mitsuba sphere vs brdffit | warnings |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "Mitsuba | exported material vs table | Mitsuba sphere vs brdffit | largest albedo "
+        "| warnings |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for e in r["exports"]:
@@ -133,7 +134,8 @@ def _markdown(rows: list[dict], meta: dict) -> str:
                 f"| {r['material']} | {e['source']} | {e['target']} | "
                 f"{'yes' if e['exact'] else 'no'} | {e['log_rmse_to_fit']:.5f} | "
                 f"{'' if mi is None else f'{mi:.5f}'} | {e['exported_log_rmse_to_table']:.4f} | "
-                f"{'' if psnr is None else f'{psnr:.1f} dB'} | {len(e['warnings'])} |")
+                f"{'' if psnr is None else f'{psnr:.1f} dB'} | {max(e['albedo_max']):.3f} at "
+                f"{e['albedo_max_theta_deg']:g} deg | {len(e['warnings'])} |")
     lines += ["", "Warnings, per export:", ""]
     for r in rows:
         for e in r["exports"]:

@@ -32,9 +32,9 @@ from brdffit.models.rough_conductor import RoughConductor
 BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
-    GGX2(),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), RoughConductor(),
+    GGX2(),
 )
 
 REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
