@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import httpx
 import pytest
 
 from brdffit.client import ApiError, Client
@@ -91,3 +92,8 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
         with pytest.raises(ApiError) as e:
             c.export("0" * 32, "gltf")
         assert e.value.status_code == 404 and "no fit job" in e.value.detail
+    # the OpenAPI document (the client's contract) names the route and its schema
+    doc = httpx.get(f"{server.url}/openapi.json", timeout=30).json()
+    route = doc["paths"]["/v1/fits/{job_id}/exports/{target}"]["get"]
+    assert route["operationId"] == "get_export"
+    assert "ExportOut" in doc["components"]["schemas"]

@@ -15,12 +15,13 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Query, status
 from fastapi.concurrency import run_in_threadpool
+from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
 from api.routes.fits import JobId, _job_or_404, best_result
 from api.runner import WorkerLost
-from brdffit.export import TARGETS
+from brdffit.export import SCHEMA, TARGETS
 
 log = logging.getLogger("brdffit.api")
 
@@ -28,6 +29,25 @@ router = APIRouter(prefix="/v1/fits", tags=["exports"], dependencies=[Depends(re
                    responses=ERROR_RESPONSES)
 
 ExportTarget = Enum("ExportTarget", {t: t for t in TARGETS}, type=str)  # type: ignore[misc]
+
+
+class ExportOut(BaseModel):
+    """``brdffit.export.Export.to_dict()`` (docs/exports.md, schema ``brdffit.export/1``)."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    schema_: str = Field(SCHEMA, alias="schema", description="the export schema's version")
+    target: str = Field(description="mitsuba, gltf or materialx")
+    source_model: str = Field(description="the fitted model")
+    media_type: str = Field(description="of the material document")
+    material: dict | str = Field(description="Mitsuba load_dict dictionary, glTF JSON "
+                                             "document, or MaterialX XML text")
+    files: dict[str, str] = Field(description="file name -> text, ready to save")
+    fidelity: dict = Field(description="exact, target_model, log_rmse_to_fit, fit_log_rmse, "
+                                       "albedo_max, albedo_max_theta_deg")
+    target_params: dict = Field(description="the target model's parameters")
+    warnings: list[str] = Field(description="every clamp and approximation")
+    table: str | None = None
 
 
 def export_task(result: dict, target: str) -> dict:
@@ -65,7 +85,7 @@ async def get_export(
     runner: RunnerDep,
     model: Annotated[str | None, Query(max_length=64,
                                        description="which model's fit (default: the best)")] = None,
-) -> dict:
+) -> ExportOut:
     job = await run_in_threadpool(_job_or_404, store, job_id)
     if job.status != "done":
         why = f": {job.reason}" if job.reason else ""
@@ -90,4 +110,4 @@ async def get_export(
         log.error("export %s of job %s failed:\n%s", target.value, job_id, outcome["traceback"])
         raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                             f"the {target.value} export failed: {outcome['reason']}")
-    return outcome["export"]
+    return ExportOut.model_validate(outcome["export"])
