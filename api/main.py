@@ -17,7 +17,7 @@ from fastapi.routing import APIRoute
 import brdffit
 from api import errors
 from api.jobs import JobQueue
-from api.routes import docs, fits, health, models, tables
+from api.routes import docs, exports, fits, health, models, tables
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
 from api.store import Store
@@ -71,7 +71,7 @@ def create_app(settings: Settings | None = None, *,
         generate_unique_id_function=_operation_id,
     )
     errors.install(app)
-    for module in (health, tables, fits, models, docs):
+    for module in (health, tables, fits, exports, models, docs):
         app.include_router(module.router)
     app.openapi = lambda: _openapi(app, settings)
     return app

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from brdffit import extras
+from brdffit.export import Export  # plain data, as FitResult
 from brdffit.fitting.result import FitResult  # plain data: a client process imports no JAX
 
 try:
@@ -232,6 +233,13 @@ class Client:
         params = {"model": model} if model else None
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
                              params=params).content
+
+    def export(self, job: JobRef, target: str, model: str | None = None) -> Export:
+        """A finished fit as a renderer's material: ``mitsuba``, ``gltf`` or
+        ``materialx`` (``brdffit.export``; its files in ``Export.files``)."""
+        params = {"model": model} if model else None
+        return Export.from_dict(self._request(
+            "GET", f"/v1/fits/{_job_id(job)}/exports/{target}", params=params).json())
 
 
 def _detail(response: httpx.Response) -> str:

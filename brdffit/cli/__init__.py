@@ -24,6 +24,7 @@ from brdffit.errors import BrdffitError
 COMMANDS = {
     "batch": "fit many tables x models into one HDF5 file (resumable, Dask)",
     "batch-report": "rank the models of a batch results file",
+    "export": "write a fit as a Mitsuba 3, glTF 2.0 or MaterialX material",
     "fit": "fit a model to a MERL .binary table",
     "models": "list the models with their parameters and ranges",
     "serve": "run the REST API (fits in worker processes)",

@@ -21,15 +21,19 @@ from brdffit.models.catalogue import (
 )
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
+from brdffit.models.gltf_pbr import GltfPBR
 from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 from brdffit.models.oren_nayar import OrenNayar
 from brdffit.models.phong import Phong
+from brdffit.models.rough_conductor import RoughConductor
 
 #: The built-in models, cheapest to richest (``auto`` tries them in this order).
 BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
+    # renderer targets: a fit of these is the renderer's material (brdffit.export)
+    GltfPBR(), GltfPBR(ior=True), RoughConductor(),
     GGX2(),
 )
 

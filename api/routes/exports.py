@@ -1,0 +1,113 @@
+"""``GET /v1/fits/{job_id}/exports/{target}``: a finished fit as a renderer's material.
+
+The response is ``brdffit.export.Export.to_dict()`` (schema ``brdffit.export/1``,
+docs/exports.md): the material, its files, the warnings of every clamp and
+approximation, and the fidelity. A conversion that is not exact refits the target's
+model to the fit (seconds of JAX), so it runs in a worker process like a fit.
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from enum import Enum
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException, Query, status
+from fastapi.concurrency import run_in_threadpool
+from pydantic import BaseModel, ConfigDict, Field
+
+from api.deps import RunnerDep, StoreDep, require_token
+from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.routes.fits import JobId, _job_or_404, best_result
+from api.runner import WorkerLost
+from brdffit.export import SCHEMA, TARGETS
+
+log = logging.getLogger("brdffit.api")
+
+router = APIRouter(prefix="/v1/fits", tags=["exports"], dependencies=[Depends(require_token)],
+                   responses=ERROR_RESPONSES)
+
+ExportTarget = Enum("ExportTarget", {t: t for t in TARGETS}, type=str)  # type: ignore[misc]
+
+
+class ExportOut(BaseModel):
+    """``brdffit.export.Export.to_dict()`` (docs/exports.md, schema ``brdffit.export/1``)."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    schema_: str = Field(SCHEMA, alias="schema", description="the export schema's version")
+    target: str = Field(description="mitsuba, gltf or materialx")
+    source_model: str = Field(description="the fitted model")
+    media_type: str = Field(description="of the material document")
+    material: dict | str = Field(description="Mitsuba load_dict dictionary, glTF JSON "
+                                             "document, or MaterialX XML text")
+    files: dict[str, str] = Field(description="file name -> text, ready to save")
+    fidelity: dict = Field(description="exact, target_model, log_rmse_to_fit, fit_log_rmse, "
+                                       "albedo_max, albedo_max_theta_deg")
+    target_params: dict = Field(description="the target model's parameters")
+    warnings: list[str] = Field(description="every clamp and approximation")
+    table: str | None = None
+
+
+def export_task(result: dict, target: str) -> dict:
+    """Worker side: ``{"ok": True, "export": {...}}``, ``{"ok": False, "input": True,
+    "reason": ...}`` for a fit that cannot be exported, or ``{"ok": False, ...}`` with a
+    traceback for a bug."""
+    from brdffit import jsonout
+    from brdffit.export import ExportError, export
+    from brdffit.fitting.result import FitResult
+
+    try:
+        out = export(FitResult.from_dict(result), target)
+        return {"ok": True, "export": jsonout.strict(out.to_dict())}
+    except (ExportError, ValueError) as e:
+        return {"ok": False, "input": True, "reason": str(e)}
+    except Exception as e:  # a bug: the server's fault
+        return {"ok": False, "input": False, "reason": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc()}
+
+
+@router.get(
+    "/{job_id}/exports/{target}",
+    summary="A finished fit as a Mitsuba 3, glTF 2.0 or MaterialX material",
+    responses={
+        404: {"model": ErrorMessage, "description": "no such job, or no such model in it"},
+        409: {"model": ErrorMessage, "description": "the job is not done"},
+        422: {"model": ErrorMessage, "description": "this fit cannot be exported"},
+        503: {"model": ErrorMessage, "description": "the worker died; try again"},
+    },
+)
+async def get_export(
+    job_id: JobId,
+    target: ExportTarget,
+    store: StoreDep,
+    runner: RunnerDep,
+    model: Annotated[str | None, Query(max_length=64,
+                                       description="which model's fit (default: the best)")] = None,
+) -> ExportOut:
+    job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status != "done":
+        why = f": {job.reason}" if job.reason else ""
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} is {job.status}{why}; exports exist once it is done")
+    if model is None:
+        result = best_result(job.results)
+    else:
+        result = next((r for r in job.results if r["model"] == model), None)
+        if result is None:
+            raise HTTPException(status.HTTP_404_NOT_FOUND,
+                                f"fit job {job_id} has no {model!r} fit; "
+                                f"it has {', '.join(job.models)}")
+    try:
+        outcome = await runner.run(export_task, result, target.value)
+    except WorkerLost as e:
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
+                            headers={"Retry-After": "5"}) from None
+    if not outcome["ok"]:
+        if outcome["input"]:
+            raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, outcome["reason"])
+        log.error("export %s of job %s failed:\n%s", target.value, job_id, outcome["traceback"])
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
+                            f"the {target.value} export failed: {outcome['reason']}")
+    return ExportOut.model_validate(outcome["export"])

@@ -1,0 +1,115 @@
+"""A fit as a renderer's own model: copied where it is one, refitted where it is not.
+
+Each export target shades with one formula that brdffit also implements as a model
+(``gltf_pbr`` for glTF and MaterialX, ``rough_conductor`` for Mitsuba 3; see
+docs/models.md). A fit of that model converts exactly: its parameters are the
+material's. Any other fit is converted by fitting the target model to the fitted
+BRDF itself, evaluated at every bin centre above the horizon (a noiseless table of
+the fit): the least-squares optimum of the same loss a fit minimises, so the
+conversion loses as little as that model allows, and its ``log_rmse`` against the
+fit *is* the fidelity lost. That number is reported with every approximate export.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brdffit import models, runtime
+from brdffit.fitting.result import FitResult
+from brdffit.io.grid import bin_grid
+from brdffit.io.merl import MerlTable
+
+#: Bins the conversion's refit samples (the reported loss is on every bin).
+CONVERSION_SAMPLES = 16384
+#: A parameter this close (relative to its range) to a bound is reported as at it.
+_AT_BOUND = 1e-4
+
+
+@dataclass
+class Conversion:
+    """The target model's parameters for a fit, and what the conversion cost."""
+
+    target_model: str
+    params: dict
+    exact: bool
+    #: log_rmse (brdffit.fitting.loss) of the target's parameters against the fitted
+    #: BRDF, on every bin above the horizon; 0 for an exact conversion.
+    log_rmse_to_fit: float
+    warnings: list[str] = field(default_factory=list)
+
+    def fidelity(self, result: FitResult) -> dict:
+        return {
+            "exact": self.exact,
+            "target_model": self.target_model,
+            "log_rmse_to_fit": self.log_rmse_to_fit,
+            "fit_log_rmse": result.error.get("log_rmse"),
+        }
+
+
+@runtime.in_float64
+def fit_as_table(result: FitResult) -> MerlTable:
+    """The fitted BRDF at every bin centre above the horizon, as a table."""
+    import jax.numpy as jnp
+
+    model = models.get(result.model)
+    params = {k: jnp.asarray(v) for k, v in model.check_params(result.params).items()}
+    g = bin_grid()
+    idx = np.flatnonzero(g.above_horizon)
+    values = np.zeros((3, g.weight.size))
+    values[:, idx] = np.asarray(model(params, jnp.asarray(g.wi[idx]), jnp.asarray(g.wo[idx]))).T
+    return MerlTable.from_values(values, g.above_horizon, source=f"<{result.model} fit>")
+
+
+def bound_warnings(target_model: str, params: dict) -> list[str]:
+    """One line per parameter value at the bound of the target's range: there the
+    renderer's range (not the data) decided the value."""
+    out = []
+    for spec in models.get(target_model).param_specs:
+        v = np.atleast_1d(np.asarray(params[spec.name], float))
+        hi = spec.upper if spec.upper is not None else np.inf
+        span = (hi - spec.lower) if np.isfinite(hi) else max(1.0, abs(spec.lower))
+        for c, x in zip("RGB" if spec.rgb else " ", v, strict=True):
+            name = spec.name + (f"[{c}]" if spec.rgb else "")
+            if x <= spec.lower + _AT_BOUND * span and spec.lower > 0:
+                out.append(f"clamp: {name} = {x:.6g} is at the lower bound {spec.lower:g} "
+                           f"of {target_model}")
+            elif np.isfinite(hi) and x >= hi - _AT_BOUND * span and spec.name in _CLAMP_UPPER:
+                out.append(f"clamp: {name} = {x:.6g} is at the upper bound {hi:g} of "
+                           f"{target_model}: the fit would want more")
+    return out
+
+
+#: Parameters whose upper bound is a physical limit the data can push against (a
+#: metallic of 1 or a weight of 1 is a legitimate material, not a clamp).
+_CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha"}
+
+
+def convert(result: FitResult, target_models: tuple[str, ...], *,
+            samples: int = CONVERSION_SAMPLES, seed: int = 0) -> Conversion:
+    """``result`` as parameters of one of ``target_models``, the models the renderer
+    shades exactly: a copy when the fit is one of them, else a refit of the first
+    (see the module docstring)."""
+    from brdffit.fitting.pipeline import fit
+
+    warnings = []
+    if not result.converged:
+        warnings.append(f"the {result.model} fit did not converge ({result.result}): the "
+                        "export carries its last point")
+    if result.model in target_models:
+        params = models.get(result.model).check_params(result.params)
+        plain = {k: np.asarray(v).tolist() for k, v in params.items()}
+        return Conversion(result.model, plain, True, 0.0,
+                          warnings + bound_warnings(result.model, plain))
+    target_model = target_models[0]
+    refit = fit(fit_as_table(result), target_model, samples=samples, seed=seed)
+    warnings.append(
+        f"approximated: {target_model} (the renderer's model) fitted to the {result.model} "
+        f"fit at every bin above the horizon; log_rmse to the fit "
+        f"{refit.error['log_rmse']:.4g} (the fit's own log_rmse to its table: "
+        f"{result.error.get('log_rmse', float('nan')):.4g})")
+    if not refit.converged:
+        warnings.append(f"the conversion's {target_model} fit ended {refit.result}")
+    return Conversion(target_model, refit.params, False, float(refit.error["log_rmse"]),
+                      warnings + bound_warnings(target_model, refit.params))

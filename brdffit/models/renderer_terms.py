@@ -1,0 +1,64 @@
+"""The renderers' own microfacet terms: separable Smith GGX and the conductor Fresnel.
+
+The base models use the height-correlated Smith G (docs/models.md). Renderers do not:
+the glTF 2.0 spec (Appendix B) and Mitsuba 3 (``microfacet.h``) both shade with the
+separable product ``G = G1(wi) G1(wo)``, and Mitsuba's ``roughconductor`` with the
+exact Fresnel of a conductor of complex index ``eta + i k``. The target models
+(``gltf_pbr``, ``rough_conductor``) are built from these so that a fit of them is the
+renderer's material, not an approximation of it.
+
+- Separable Smith GGX: ``G1(w) = 2 cos_w / (cos_w + sqrt(cos_w^2 + alpha^2 sin_w^2))``
+  (glTF's form; Mitsuba's ``2 / (1 + sqrt(1 + alpha^2 tan^2))`` is the same). With it
+
+      D G / (4 cos_i cos_o) = D / ((cos_i + r_i) (cos_o + r_o)),  r = sqrt(cos^2 + alpha^2 sin^2)
+
+  which has no cosine in a denominator: finite to grazing (r >= alpha sin > 0).
+- Conductor Fresnel (Mitsuba 3 ``fresnel_conductor``, after Moeller, *Optics*, 1988),
+  unpolarised, per channel, ``c = cos_d``, ``s2 = 1 - c^2``:
+
+      t1 = eta^2 - k^2 - s2,   a2b2 = sqrt(t1^2 + 4 eta^2 k^2),   a = sqrt((a2b2 + t1) / 2)
+      Rs = (a2b2 + c^2 - 2 c a) / (a2b2 + c^2 + 2 c a)
+         = ((c - a)^2 + e) / ((c + a)^2 + e),                 e = (a2b2 - t1) / 2 >= 0
+      Rp = Rs (a2b2 c^2 + s2^2 - 2 c a s2) / (a2b2 c^2 + s2^2 + 2 c a s2)
+         = Rs ((s2 - c a)^2 + c^2 e) / ((s2 + c a)^2 + c^2 e)
+      F  = (Rs + Rp) / 2
+"""
+
+from __future__ import annotations
+
+from jaxtyping import Array, Float
+
+from .guarded import safe_div, safe_sqrt
+
+
+def separable_ggx_dg(alpha, cos_h, sin2_h, cos_i, sin2_i, cos_o, sin2_o) -> Float[Array, ...]:
+    """GGX ``D G1(wi) G1(wo) / (4 cos_i cos_o)`` (1/sr), the glTF / Mitsuba lobe without F."""
+    a2 = alpha * alpha
+    t = cos_h * cos_h * a2 + sin2_h  # cos^2 (a^2 - 1) + 1, without the cancellation
+    d = a2 / (3.141592653589793 * t * t)
+    ri = safe_sqrt(cos_i * cos_i + a2 * sin2_i)
+    ro = safe_sqrt(cos_o * cos_o + a2 * sin2_o)
+    return safe_div(d, (cos_i + ri) * (cos_o + ro), 1e-30)
+
+
+def conductor_fresnel(eta, k, cos_d) -> Float[Array, ...]:
+    """Unpolarised Fresnel reflectance of a conductor ``eta + i k`` (Mitsuba 3's formula).
+
+    ``eta``, ``k`` broadcast against ``cos_d``. Both ratios have a denominator
+    >= their numerator >= 0; it is 0 only for ``eta = 1, k = 0`` at grazing, where the
+    floor returns the limit 0 (no reflection from a medium matched to the outside).
+    """
+    c = cos_d
+    s2 = 1.0 - c * c
+    t1 = eta * eta - k * k - s2
+    a2b2 = safe_sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
+    a = safe_sqrt(0.5 * (a2b2 + t1))
+    # Mitsuba's a2b2 + c^2 -+ 2 c a and a2b2 c^2 + s2^2 -+ 2 c a s2, regrouped as sums of
+    # non-negative terms (a2b2 - a^2 = (a2b2 - t1) / 2 >= 0 in floating point too), so
+    # that F >= 0 exactly where rounding made the difference form slightly negative
+    # (eta = 1, k = 0, near grazing, times a sharp D).
+    excess = 0.5 * (a2b2 - t1)
+    rs = safe_div((c - a) ** 2 + excess, (c + a) ** 2 + excess, 1e-30)
+    rp = rs * safe_div((s2 - c * a) ** 2 + c * c * excess,
+                       (s2 + c * a) ** 2 + c * c * excess, 1e-30)
+    return 0.5 * (rs + rp)

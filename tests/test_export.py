@@ -1,0 +1,150 @@
+"""brdffit.export in process: exact copies of target-model fits, refits with their loss
+reported for every other fit, a warning for every clamp, strict JSON, clear errors."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export
+from brdffit.export.conversion import fit_as_table
+from brdffit.fitting.pipeline import table_error
+from brdffit.fitting.result import FitResult
+
+pytestmark = pytest.mark.unit
+
+GLTF = {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}
+CONDUCTOR = {"eta": [0.2, 0.9, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.15,
+             "kd": [0.3, 0.2, 0.1], "weight": 0.2}
+GGX = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "f0": 0.6}
+
+
+def result(model, params, **kw) -> FitResult:
+    return FitResult(model, params, {"log_rmse": 0.02}, kw.pop("converged", True),
+                     kw.pop("status", "successful"), 10, 0.1, {}, table="mats/gold.binary", **kw)
+
+
+def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
+    r = result("gltf_pbr", GLTF)
+    g = export(r, "gltf")
+    energy = {k: g.fidelity.pop(k) for k in ("albedo_max", "albedo_max_theta_deg")}
+    assert g.fidelity == {"exact": True, "target_model": "gltf_pbr", "log_rmse_to_fit": 0.0,
+                          "fit_log_rmse": 0.02}
+    assert 0 < max(energy["albedo_max"]) < 1 and g.warnings == []
+    (mat,) = g.material["materials"]
+    assert g.material["asset"]["version"] == "2.0"
+    assert mat["pbrMetallicRoughness"] == {"baseColorFactor": [0.8, 0.35, 0.1, 1.0],
+                                           "metallicFactor": 0.4, "roughnessFactor": 0.45}
+    assert json.loads(g.files["gold_gltf_pbr.gltf"]) == g.material
+
+    x = export(r, "materialx")
+    root = ET.fromstring(x.material)
+    node = root.find("gltf_pbr")
+    inputs = {i.get("name"): i.get("value") for i in node.findall("input")}
+    assert inputs == {"base_color": "0.8, 0.35, 0.1", "metallic": "0.4", "roughness": "0.45"}
+    assert root.find("surfacematerial/input").get("nodename") == node.get("name")
+    # exact parameters, but MaterialX's own shading graph: said, not hidden
+    assert x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
+
+
+def test_an_ior_fit_writes_khr_materials_ior():
+    r = result("gltf_pbr_ior", {**GLTF, "ior": 1.9})
+    g = export(r, "gltf")
+    assert g.fidelity["exact"] and g.fidelity["target_model"] == "gltf_pbr_ior"
+    assert g.material["extensionsUsed"] == ["KHR_materials_ior"]
+    assert g.material["materials"][0]["extensions"] == {"KHR_materials_ior": {"ior": 1.9}}
+    assert any("KHR_materials_ior" in w for w in g.warnings)  # viewers without it: 0.04
+    x = ET.fromstring(export(r, "materialx").material)
+    assert x.find("gltf_pbr/input[@name='ior']").get("value") == "1.9"
+    # a core fit writes no extension at all
+    assert "extensionsUsed" not in export(result("gltf_pbr", GLTF), "gltf").material
+
+
+def test_conductor_fit_exports_exactly_to_mitsuba():
+    e = export(result("rough_conductor", CONDUCTOR), "mitsuba")
+    assert e.fidelity["exact"] and e.warnings == []
+    m = e.material
+    assert m["type"] == "blendbsdf" and m["weight"] == 0.2
+    assert m["bsdf_0"] == {"type": "roughconductor", "distribution": "ggx", "alpha": 0.15,
+                           "eta": {"type": "srgb", "color": [0.2, 0.9, 1.4], "unbounded": True},
+                           "k": {"type": "srgb", "color": [3.9, 2.4, 1.6], "unbounded": True}}
+    assert m["bsdf_1"] == {"type": "diffuse", "reflectance": {"type": "rgb",
+                                                              "value": [0.3, 0.2, 0.1]}}
+    scene = ET.fromstring(e.files["gold_rough_conductor.xml"])
+    bsdf = scene.find("bsdf")
+    assert bsdf.get("id") == "gold_rough_conductor" and bsdf.get("type") == "blendbsdf"
+    assert [b.get("type") for b in bsdf.findall("bsdf")] == ["roughconductor", "diffuse"]
+    # a pure metal is the roughconductor alone
+    pure = export(result("rough_conductor", {**CONDUCTOR, "weight": 0.0}), "mitsuba")
+    assert pure.material["type"] == "roughconductor"
+
+
+def test_other_fits_are_refitted_and_their_loss_is_the_measured_one():
+    r = result("ggx", GGX)
+    e = export(r, "gltf")
+    assert not e.fidelity["exact"] and e.fidelity["target_model"] == "gltf_pbr"
+    loss = e.fidelity["log_rmse_to_fit"]
+    assert 0 < loss < 0.05
+    assert any(w.startswith("approximated: gltf_pbr") and f"{loss:.4g}" in w for w in e.warnings)
+    # the reported loss is the target's parameters against the fitted BRDF, every bin
+    measured = table_error(fit_as_table(r), "gltf_pbr", e.target_params)["log_rmse"]
+    assert measured == pytest.approx(loss, rel=1e-9)
+    # the same refit behind both glTF-model targets
+    assert export(r, "materialx").target_params == e.target_params  # deterministic
+
+
+def test_every_clamp_is_a_warning():
+    # a highlight brighter than any glTF base colour: base_color pinned at 1
+    bright = result("ggx", {"kd": [0.9, 0.9, 0.9], "ks": [3.0, 3.0, 3.0], "alpha": 0.3,
+                            "f0": 1.0})
+    e = export(bright, "gltf")
+    clamps = [w for w in e.warnings if w.startswith("clamp:")]
+    pinned = [c for c, v in zip("RGB", e.target_params["base_color"], strict=True) if v >= 0.9999]
+    assert pinned and all(any(f"base_color[{c}]" in w for w in clamps) for c in pinned)
+    # at the lower roughness bound
+    sharp = export(result("gltf_pbr", {**GLTF, "roughness": float(np.sqrt(1e-3))}), "gltf")
+    assert any("roughness" in w and "lower bound" in w for w in sharp.warnings)
+
+
+def test_a_material_that_reflects_more_than_it_receives_is_a_warning():
+    # glTF's own formula: a white dielectric's albedo passes 1 towards grazing
+    white = export(result("gltf_pbr", {"base_color": [1.0, 1.0, 1.0], "metallic": 0.0,
+                                       "roughness": 0.5}), "gltf")
+    assert max(white.fidelity["albedo_max"]) > 1.05
+    assert white.fidelity["albedo_max_theta_deg"] >= 80
+    assert any(w.startswith("energy: the gltf_pbr material reflects up to 1.1") for w in
+               white.warnings)
+    # the conductor conserves energy by construction, even at its brightest
+    bright = {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3, "weight": 0.5}
+    e = export(result("rough_conductor", bright), "mitsuba")
+    assert max(e.fidelity["albedo_max"]) <= 1.0
+    assert not any(w.startswith("energy") for w in e.warnings)
+
+
+def test_an_unconverged_fit_says_so():
+    e = export(result("gltf_pbr", GLTF, converged=False, status="nonlinear_max_steps_reached"),
+               "gltf")
+    assert any("did not converge" in w for w in e.warnings)
+
+
+def test_export_json_is_strict_and_round_trips():
+    e = export(result("rough_conductor", CONDUCTOR), "mitsuba")
+    text = e.to_json()
+    d = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-strict JSON {c}"))
+    assert d["schema"] == SCHEMA and Export.from_dict(d) == e
+    with pytest.raises(ValueError, match="export schema"):
+        Export.from_dict({**d, "schema": "brdffit.export/0"})
+
+
+def test_bad_requests_are_clear_errors():
+    with pytest.raises(ExportError, match="unknown export target 'blender'; choose one of "
+                                          + ", ".join(TARGETS)):
+        export(result("ggx", GGX), "blender")
+    failed = FitResult("ggx", {}, {"log_rmse": float("nan")}, False, "nonfinite", 0, 0.0, {})
+    with pytest.raises(ExportError, match="no parameters"):
+        export(failed, "gltf")
+    with pytest.raises(ValueError, match="roughness"):
+        export(result("gltf_pbr", {**GLTF, "roughness": 3.0}), "gltf")

@@ -1,0 +1,99 @@
+"""The export's shells: ``brdffit export`` as a subprocess, and
+``GET /v1/fits/{id}/exports/{target}`` on a real server through ``Client.export``;
+both give what ``brdffit.export.export`` gives."""
+
+from __future__ import annotations
+
+import json
+
+import httpx
+import pytest
+
+from brdffit.client import ApiError, Client
+from brdffit.export import Export, export
+from brdffit.fitting.result import FitResult
+from tests.api_fixtures import FAST, Server, table_bytes, write
+from tests.cli_helpers import run
+
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def ggx_file(tmp_path_factory):
+    return write(tmp_path_factory.mktemp("tables") / "ggx.binary", table_bytes("ggx"))
+
+
+@pytest.fixture(scope="module")
+def fit_json(ggx_file, tmp_path_factory):
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "gltf_pbr", "--samples", "2048",
+            "--json")
+    assert r.returncode == 0, r.stderr
+    path = tmp_path_factory.mktemp("fit") / "fit.json"
+    path.write_text(r.stdout)
+    return path
+
+
+def test_cli_writes_the_files_and_reports_fidelity(fit_json, tmp_path):
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    (written,) = tmp_path.iterdir()
+    assert written.name == "ggx_gltf_pbr.gltf" and str(written) in r.stdout
+    want = export(FitResult.from_dict(json.loads(fit_json.read_text())), "gltf")
+    assert json.loads(written.read_text()) == want.material
+    assert "gltf_pbr fit as gltf_pbr (exact)" in r.stderr
+
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "mitsuba", "--json")
+    assert r.returncode == 0, r.stderr
+    out = Export.from_dict(json.loads(r.stdout))
+    assert not out.fidelity["exact"] and out.material["type"] in ("blendbsdf", "roughconductor")
+    assert out.fidelity["log_rmse_to_fit"] > 0
+
+
+def test_cli_errors_are_one_line(fit_json, tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    for args, message in (
+        ([str(bad), "--to", "gltf"], "not JSON"),
+        ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
+        ([str(tmp_path / "missing.json"), "--to", "gltf"], "No such file"),
+    ):
+        r = run("brdffit.cli", "export", *args)
+        assert r.returncode == 2 and message in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"schema": "brdffit.fit/0", "model": "ggx"}))
+    r = run("brdffit.cli", "export", str(other), "--to", "gltf")
+    assert r.returncode == 2 and "not a fit result" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    with Server(tmp_path_factory.mktemp("exports"), workers=1) as s:
+        yield s
+        assert '" 500 ' not in s.log() and "Traceback" not in s.log(), s.log()[-5000:]
+
+
+def test_api_and_client_export_a_finished_fit(server, ggx_file):
+    with Client(server.url, timeout=120) as c:
+        job = c.fit(c.upload(ggx_file), ["rough_conductor", "ggx"], **FAST)
+        c.wait(job, timeout=300)
+        conductor = c.result(job, model="rough_conductor")
+        got = c.export(job, "mitsuba", model="rough_conductor")
+        assert got == export(conductor, "mitsuba")
+        assert got.fidelity["exact"]
+        best = c.export(job, "gltf")  # default: the best fit of the job
+        assert best.source_model == c.result(job).model
+        with pytest.raises(ApiError) as e:
+            c.export(job, "gltf", model="lambert")
+        assert e.value.status_code == 404 and "has no 'lambert' fit" in e.value.detail
+        with pytest.raises(ApiError) as e:
+            c.export(job, "blender")
+        assert e.value.status_code == 422
+        with pytest.raises(ApiError) as e:
+            c.export("0" * 32, "gltf")
+        assert e.value.status_code == 404 and "no fit job" in e.value.detail
+    # the OpenAPI document (the client's contract) names the route and its schema
+    doc = httpx.get(f"{server.url}/openapi.json", timeout=30).json()
+    route = doc["paths"]["/v1/fits/{job_id}/exports/{target}"]["get"]
+    assert route["operationId"] == "get_export"
+    assert "ExportOut" in doc["components"]["schemas"]

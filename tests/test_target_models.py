@@ -1,0 +1,199 @@
+"""The renderer target models gltf_pbr and rough_conductor: each against its
+renderer's formula written independently, reciprocity, energy, NaN-free everywhere,
+and recovery of their parameters from a table they made."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdffit import models
+from brdffit.fitting.pipeline import fit
+from brdffit.io.merl import MerlTable
+from brdffit.models.microfacet import dielectric_fresnel
+from brdffit.models.renderer_terms import conductor_fresnel
+
+pytestmark = pytest.mark.unit
+
+GLTF = {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}
+CONDUCTOR = {"eta": [0.2, 0.9, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.15,
+             "kd": [0.3, 0.2, 0.1], "weight": 0.2}
+CASES = {"gltf_pbr": GLTF, "gltf_pbr_ior": {**GLTF, "ior": 1.9}, "rough_conductor": CONDUCTOR}
+
+
+def _jnp(params):
+    return {k: jnp.asarray(v, jnp.float64) for k, v in params.items()}
+
+
+def _pairs(n, seed=0):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(2, n, 3))
+    v[..., 2] = np.abs(v[..., 2])
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    return v[0], v[1]
+
+
+def _gltf_appendix_b(p, wi, wo):
+    """glTF 2.0 Appendix B, term by term as the spec writes it (its V = G / (4 N.L N.V)
+    with G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2)))."""
+    base, m, a = np.asarray(p["base_color"]), p["metallic"], p["roughness"] ** 2
+    # KHR_materials_ior: the dielectric's f0 from its ior; the core spec's is 0.04
+    dielectric_f0 = ((p["ior"] - 1) / (p["ior"] + 1)) ** 2 if "ior" in p else 0.04
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    nl, nv, nh, vh = wi[:, 2:3], wo[:, 2:3], h[:, 2:3], np.sum(wo * h, -1, keepdims=True)
+    f0 = dielectric_f0 * (1 - m) + base * m
+    fresnel = f0 + (1 - f0) * (1 - np.abs(vh)) ** 5
+    d = a**2 / (np.pi * (nh**2 * (a**2 - 1) + 1) ** 2)
+
+    def g1(x):
+        return 2 * x / (x + np.sqrt(a**2 + (1 - a**2) * x**2))
+
+    vis = g1(nl) * g1(nv) / (4 * nl * nv)
+    return (1 - fresnel) * base * (1 - m) / np.pi + fresnel * d * vis
+
+
+def test_gltf_pbr_is_the_spec_brdf():
+    wi, wo = _pairs(5000)
+    keep = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3)
+    wi, wo = wi[keep], wo[keep]
+    for p in (GLTF, {"base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.04},
+              {"base_color": [0.1, 0.5, 0.9], "metallic": 0.0, "roughness": 1.0}):
+        for name, extra in (("gltf_pbr", {}), ("gltf_pbr_ior", {"ior": 1.5}),
+                            ("gltf_pbr_ior", {"ior": 2.2})):
+            q = {**p, **extra}
+            ours = np.asarray(models.get(name)(_jnp(q), jnp.asarray(wi), jnp.asarray(wo)))
+            np.testing.assert_allclose(ours, _gltf_appendix_b(q, wi, wo), rtol=1e-9, atol=1e-12)
+
+
+def test_conductor_fresnel_limits():
+    c = jnp.linspace(0.0, 1.0, 101)
+    # k = 0 is a dielectric: the exact dielectric Fresnel of microfacet.py
+    for eta in (1.2, 1.5, 2.4):
+        np.testing.assert_allclose(np.asarray(conductor_fresnel(eta, 0.0, c)),
+                                   np.asarray(dielectric_fresnel(eta, c)), rtol=1e-9, atol=1e-12)
+    # normal incidence: ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2); grazing: 1
+    for eta, k in ((0.2, 3.9), (1.66, 9.2), (3.1, 3.3)):
+        f = np.asarray(conductor_fresnel(eta, k, jnp.array([1.0, 0.0])))
+        assert f[0] == pytest.approx(((eta - 1) ** 2 + k**2) / ((eta + 1) ** 2 + k**2), rel=1e-12)
+        assert f[1] == pytest.approx(1.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_reciprocity(name):
+    wi, wo = _pairs(4000, seed=1)
+    m, p = models.get(name), _jnp(CASES[name])
+    a = np.asarray(m(p, jnp.asarray(wi), jnp.asarray(wo)))
+    b = np.asarray(m(p, jnp.asarray(wo), jnp.asarray(wi)))
+    np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-14)
+
+
+def _albedo(model, params, theta_i, n=500):
+    mu = (np.arange(n) + 0.5) / n
+    phi = (np.arange(n) + 0.5) / n * 2 * np.pi
+    mm, pp = np.meshgrid(mu, phi, indexing="ij")
+    s = np.sqrt(1 - mm**2)
+    wo = np.stack([s * np.cos(pp), s * np.sin(pp), mm], -1).reshape(-1, 3)
+    wi = np.broadcast_to([math.sin(theta_i), 0.0, math.cos(theta_i)], wo.shape)
+    f = np.asarray(model(_jnp(params), jnp.asarray(wi), jnp.asarray(wo)))
+    return (f * wo[:, 2:3]).sum(0) / n * (2 * np.pi / n)
+
+
+@pytest.mark.parametrize("name, params, bound", [
+    # glTF's (1 - F(v.h)) weighting of the diffuse is not exact energy conservation: a
+    # white dielectric reflects up to ~10% more than it receives at 86 deg incidence (the
+    # spec's own formula, which the model keeps; docs/models.md says so)
+    ("gltf_pbr", {"base_color": [1.0, 1.0, 1.0], "metallic": 0.0, "roughness": 0.5}, 1.11),
+    ("gltf_pbr", {"base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.3}, 1.0),
+    ("rough_conductor", {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3,
+                         "weight": 0.0}, 1.0),
+    ("rough_conductor", {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3,
+                         "weight": 0.5}, 1.0),
+])
+def test_energy_conservation_at_the_bounds(name, params, bound):
+    for theta_i in (0.0, 0.6, 1.2, 1.5):
+        a = _albedo(models.get(name), params, theta_i)
+        assert np.all(a <= bound * 1.005) and np.all(a >= 0), (theta_i, a)
+
+
+def _edge_directions():
+    dirs = []
+    for c in (0.0, 1e-6, 1e-3, 0.5, 1.0 - 1e-9, 1.0):
+        s = math.sqrt(max(0.0, 1 - c * c))
+        dirs += [[s * math.cos(p), s * math.sin(p), c] for p in (0.0, math.pi / 2, math.pi)]
+    dirs = np.array(dirs)
+    return jnp.asarray(np.repeat(dirs, len(dirs), 0)), jnp.asarray(np.tile(dirs, (len(dirs), 1)))
+
+
+EDGES = {
+    "gltf_pbr": [{"base_color": b, "metallic": m, "roughness": r}
+                 for b in (0.0, 1.0) for m in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0)],
+    "gltf_pbr_ior": [{"base_color": 0.5, "metallic": m, "roughness": r, "ior": i}
+                     for m in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 3.0)],
+    "rough_conductor": [{"eta": e, "k": k, "alpha": a, "kd": 0.5, "weight": w}
+                        for e in (0.02, 1.0, 10.0) for k in (0.0, 15.0)
+                        for a in (1e-3, 2.0) for w in (0.0, 1.0)],
+}
+
+
+@pytest.mark.parametrize("name", list(EDGES))
+def test_finite_values_and_gradients_on_the_closed_hemisphere(name):
+    m = models.get(name)
+    wi, wo = _edge_directions()
+    for params in EDGES[name]:
+        p = {s.name: jnp.asarray(params[s.name], jnp.float64) * (jnp.ones(3) if s.rgb else 1.0)
+             for s in m.param_specs}
+        f = m(p, wi, wo)
+        assert bool(jnp.all(jnp.isfinite(f))) and bool(jnp.all(f >= 0)), params
+        for k, g in jax.grad(lambda q: jnp.sum(m(q, wi, wo)))(p).items():
+            assert bool(jnp.all(jnp.isfinite(g))), (params, k)
+        g_dirs = jax.grad(lambda a, b: jnp.sum(m(p, a, b)), argnums=(0, 1))(wi, wo)
+        assert all(bool(jnp.all(jnp.isfinite(g))) for g in g_dirs), params
+    u = jnp.asarray(m.unconstrain(m.check_params(EDGES[name][0])))
+    for scale in (-50.0, 0.0, 50.0):  # beyond both ends of every transform
+        g = jax.grad(lambda v: jnp.sum(m(m.constrain(v), wi, wo)))(jnp.full_like(u, scale))
+        assert bool(jnp.all(jnp.isfinite(g))), scale
+
+
+def _table_of(name, params) -> MerlTable:
+    from brdffit.export.conversion import fit_as_table
+    from brdffit.fitting.result import FitResult
+
+    return fit_as_table(FitResult(name, params, {}, True, "successful", 0, 0.0, {}))
+
+
+def test_gltf_pbr_fit_recovers_its_parameters():
+    r = fit(_table_of("gltf_pbr", GLTF), "gltf_pbr", samples=4096)
+    assert r.converged and r.log_rmse < 1e-5
+    for k, v in GLTF.items():
+        np.testing.assert_allclose(r.params[k], v, rtol=1e-3, atol=1e-4)
+
+
+def test_rough_conductor_fit_reproduces_its_table():
+    # eta and k trade off against each other along the Fresnel curve, so the test is
+    # on the BRDF (the error), and on alpha, the one parameter the data pins alone.
+    r = fit(_table_of("rough_conductor", CONDUCTOR), "rough_conductor", samples=4096)
+    assert r.log_rmse < 1e-4, r
+    assert r.params["alpha"] == pytest.approx(CONDUCTOR["alpha"], rel=1e-2)
+
+
+def test_auto_candidates_leave_the_target_models_out():
+    from brdffit.selection import DEFAULT_CANDIDATES
+
+    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor"}
+    assert not targets & set(DEFAULT_CANDIDATES)
+    assert targets <= set(models.names())
+
+
+def test_gltf_pbr_ior_contains_gltf_pbr():
+    # seeded from a gltf_pbr fit (models.parent), the larger model never ends worse
+    m = models.get("gltf_pbr_ior")
+    assert m.parent == "gltf_pbr" and models.get("gltf_pbr").parent is None
+    wi, wo = _pairs(500)
+    ours = m(_jnp(m.embed_parent(GLTF)), jnp.asarray(wi), jnp.asarray(wo))
+    core = models.get("gltf_pbr")(_jnp(GLTF), jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_allclose(np.asarray(ours), np.asarray(core), rtol=1e-12)
