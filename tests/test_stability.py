@@ -86,7 +86,9 @@ def test_hard_case(case, tables):
     assert _finite(r32), r32
     # float32 agrees with float64 on everything that is identifiable
     assert_params_close(r32.params, {k: r64.params[k] for k in recover}, rel=0.01, abs_small=0.002)
-    assert r32.log_rmse == pytest.approx(r64.log_rmse, rel=0.05, abs=1e-6)
+    # abs: a parameter at its bound stops at its transform's tail edge (1e-5 of its
+    # range, brdffit.models.base._TAIL_U); f0 = 1 - 8e-6 leaves ~1e-6 log_rmse
+    assert r32.log_rmse == pytest.approx(r64.log_rmse, rel=0.05, abs=2e-6)
 
 
 @pytest.mark.parametrize("other", ["lambert", "oren_nayar", "phong", "blinn_phong", "beckmann"])
