@@ -79,8 +79,15 @@ _SOLVER_CACHE = {(s, p): _make_solver(s, p) for s in SOLVERS for p in PRECISIONS
 
 
 @eqx.filter_jit
-def _score(model, u_batch, data):
+def _score(model, u_batch, data, every: int = 1):
+    """Loss of each start, on every ``every``-th sample (``every`` is static)."""
+    data = jax.tree_util.tree_map(lambda a: a[..., ::every], data)
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
+
+
+# One compiled call, not one per eager operation: a new process pays each eager
+# jnp operation a compilation of its own.
+_constrain = eqx.filter_jit(lambda model, u: model.constrain(u))
 
 
 def _bound_side(u, args):
@@ -283,11 +290,6 @@ def table_error(
     return full_table_metrics(table, m, u, weight)
 
 
-def _every(data: LossData, k: int) -> LossData:
-    """Every k-th bin (the bin axis is the last of every array)."""
-    return jax.tree_util.tree_map(lambda a: a[..., ::k], data)
-
-
 # -- the result ----------------------------------------------------------------------
 
 
@@ -420,7 +422,7 @@ def fit(
     else:
         u_candidates = start_vectors(m, table, counts.usable)
     # Score candidates on every 8th sample: ranking starts needs no more.
-    scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), _every(data, 8)))
+    scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))
     scores = np.where(np.isfinite(scores), scores, np.inf)
     k = min(starts, len(u_candidates))
     best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
@@ -464,7 +466,7 @@ def fit(
     )
     if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
         result = "nonfinite"  # an error that cannot be measured is no success
-    params = _plain(m.constrain(jnp.asarray(u_best)))
+    params = _plain(_constrain(m, jnp.asarray(u_best)))
     return FitResult(
         model=m.name,
         params=params,
