@@ -155,7 +155,8 @@ def _create(con: sqlite3.Connection) -> None:
 class Store:
     """Tables and jobs under one data dir (see the module docstring)."""
 
-    def __init__(self, data_dir: str | os.PathLike, database: str | os.PathLike | None = None):
+    def __init__(self, data_dir: str | os.PathLike, database: str | os.PathLike | None = None,
+                 *, check: bool = True):
         self.data_dir = Path(data_dir)
         self.tables_dir = self.data_dir / "tables"
         self.plots_dir = self.data_dir / "plots"
@@ -163,7 +164,8 @@ class Store:
         for d in (self.tables_dir, self.plots_dir, self.tmp_dir):
             d.mkdir(parents=True, exist_ok=True)
         self.database = Path(database) if database else self.data_dir / "brdffit.sqlite3"
-        self.check()
+        if check:
+            self.check()
         with self._connect() as con:
             con.execute("PRAGMA journal_mode=WAL")
             self._migrate(con)
@@ -261,6 +263,11 @@ class Store:
             tmp_file.unlink(missing_ok=True)
         else:
             os.replace(tmp_file, final)
+        return self.register_table(table_id, size, name, summary)
+
+    def register_table(self, table_id: str, size: int, name: str,
+                       summary: dict) -> tuple[TableRecord, bool]:
+        """The row of a table file already in place (``add_table``, ``api.repair``)."""
         with self._connect() as con:
             cur = con.execute(
                 "INSERT OR IGNORE INTO tables (id, size, name, summary, created_at) "
