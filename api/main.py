@@ -75,6 +75,7 @@ def create_app(settings: Settings | None = None, *,
     errors.install(app)
     for module in (health, tables, fits, models, docs):
         app.include_router(module.router)
+    app.include_router(docs.assets)
     app.add_middleware(RequestLimits, settings=settings)
     app.openapi = lambda: _openapi(app, settings)
     return app

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -69,7 +70,17 @@ def test_health_models_and_openapi(http):
     for path in ("/v1/tables", "/v1/tables/{table_id}", "/v1/fits", "/v1/fits/{job_id}",
                  "/v1/fits/{job_id}/plots/{kind}.png", "/v1/models", "/healthz"):
         assert path in doc["paths"], path
-    assert "swagger" in http.get("/docs").text.lower()
+    page = http.get("/docs").text
+    assert "swagger" in page.lower()
+    # Offline: every script, stylesheet and icon the page loads is served here.
+    urls = re.findall(r'(?:src|href)="([^"]+)"', page)
+    assert urls and all(u.startswith("/docs/assets/") for u in urls), urls
+    assert "http://" not in page and "https://" not in page
+    for url in urls:
+        r = http.get(url)
+        assert r.status_code == 200 and len(r.content) > 500, url
+    assert "SwaggerUIBundle" in http.get("/docs/assets/swagger-ui-bundle.js").text
+    assert http.get("/docs/assets/..%2Fmain.py").status_code == 404
 
 
 def test_upload_is_content_addressed_and_idempotent(http, table_id):
