@@ -8,7 +8,8 @@ holds a fixed amount: the process (JAX, the table) and the full-table error pass
 The constants were measured on a 2-core x86 machine with
 ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` around ``brdffit.fit`` on a real
 MERL table (gold-metallic-paint), for ggx and ggx2 at 16,384 and 131,072 samples
-and 1 to 8 starts, and rounded up: the estimate is meant to be above what a fit
+and 1 to 8 starts (ggx2 at 131,072 x 8: 2.2 GB peak, 259 s for 109 steps; this
+estimate: 3.9 GB, 808 s at 256 steps), and rounded up: the estimate is meant to be above what a fit
 takes, so that a refusal is never wrong by much and an acceptance is safe. The
 time is an upper bound: every start running all ``max_steps`` steps (a fit
 usually stops well before); refits that ``model="auto"`` may add for an
@@ -27,8 +28,9 @@ MiB = 1024 * 1024
 FIXED_BYTES = 600 * MiB
 #: Peak memory per sample x start x (parameter + 1).
 BYTES_PER_UNIT = 256
-#: Seconds per sample x start x parameter x solver step.
-SECONDS_PER_UNIT_STEP = 1.5e-7
+#: Seconds per sample x start x parameter x solver step (measured: 1.4e-7 to 1.9e-7
+#: for ggx2, 3e-8 for ggx; the larger, rounded up).
+SECONDS_PER_UNIT_STEP = 2.5e-7
 #: Seconds of compilation and table reading per model fitted.
 SECONDS_PER_MODEL = 3.0
 
