@@ -24,6 +24,7 @@ import logging
 import multiprocessing
 import os
 from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from api import tasks
@@ -110,6 +111,11 @@ class ProcessRunner(AbstractRunner):
         self._idle: asyncio.Queue[_Worker] | None = None
         self._all: set[_Worker] = set()
         self._closed = False
+        # Threads that wait on the workers' pipes, one per busy worker: their own
+        # pool, since a fit holds one for minutes, and asyncio's default pool (a few
+        # threads on a small machine) also runs the job queue's database calls.
+        self._readers = ThreadPoolExecutor(max_workers=workers + 2,
+                                           thread_name_prefix="worker-pipe")
 
     def start(self) -> None:
         # Spawn now (each imports JAX and matplotlib before its first task), not when
@@ -143,7 +149,7 @@ class ProcessRunner(AbstractRunner):
         waiter = asyncio.ensure_future(cancel.wait()) if cancel is not None else None
         try:
             while True:
-                message = asyncio.ensure_future(asyncio.to_thread(worker.receive))
+                message = loop.run_in_executor(self._readers, worker.receive)
                 left = None if deadline is None else max(deadline - loop.time(), 0.0)
                 await asyncio.wait([message] + ([waiter] if waiter else []), timeout=left,
                                    return_when=asyncio.FIRST_COMPLETED)
@@ -196,6 +202,7 @@ class ProcessRunner(AbstractRunner):
             else:
                 worker.kill()
         self._all.clear()
+        self._readers.shutdown(wait=False)
 
 
 def make_runner(settings: Settings) -> AbstractRunner:

@@ -198,7 +198,7 @@ class Store:
         except sqlite3.DatabaseError as e:
             raise self._refuse(f"unreadable ({e})") from None
         if found != ["ok"]:
-            raise self._refuse("damaged: " + "; ".join(found[:5]))
+            raise self._refuse("damaged: " + "; ".join(" ".join(f.split()) for f in found[:5]))
         if version > SCHEMA_VERSION:
             raise self._refuse(f"written by a newer brdffit (layout {version}, this one "
                                f"knows up to {SCHEMA_VERSION})")
