@@ -413,7 +413,10 @@ def test_schemathesis_finds_no_server_error(server, tmp_path):
         pytest.skip("schemathesis is not installed (pip install -e '.[test]')")
     proc = subprocess.run(
         [str(exe), "run", f"{server.url}/openapi.json", "--checks", "not_a_server_error",
-         "--max-examples", "25", "--phases", "examples,coverage,fuzzing", "--workers", "2",
+         # One worker thread: with two, schemathesis's coverage phase calls compile()
+         # from both and CPython 3.11 < 3.11.8 may raise "AST constructor recursion
+         # depth mismatch" (python/cpython#106905), a crash of the tool, not a finding.
+         "--max-examples", "25", "--phases", "examples,coverage,fuzzing", "--workers", "1",
          "--request-timeout", "30", "--seed", "1", "--generation-database", "none",
          "--no-color", "--suppress-health-check", "all"],
         capture_output=True, text=True, timeout=240, cwd=tmp_path,
