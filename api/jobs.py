@@ -146,6 +146,10 @@ class JobQueue:
         retry_s = self.settings.storage_retry_s
         table = await self._store(name, f"read the table of job {job.id}", self.store.get_table,
                                   job.table_id)
+        if table is None:  # cannot happen through the API (a table in use is not deleted)
+            await self._store(name, f"fail job {job.id}", self.store.fail, job.id,
+                              f"its table {job.table_id} is gone", give_up_after=retry_s)
+            return
         path = str(self.store.table_path(job.table_id))
 
         async def progress(stage: str, fraction: float) -> None:
