@@ -16,15 +16,19 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     MPLCONFIGDIR=/tmp/matplotlib
 
 WORKDIR /src
-# Only what the package needs (see .dockerignore): the metadata first, then code.
-COPY pyproject.toml README.md ./
-COPY brdffit ./brdffit
-COPY api ./api
-COPY data_synth ./data_synth
-RUN pip install '.[service]' \
+# 1. The dependencies, pinned with hashes (requirements/service.lock): this layer
+#    depends on the lock alone, so an edit of the source reuses it.
+COPY requirements/service.lock ./requirements/
+RUN pip install --no-deps --require-hashes -r requirements/service.lock \
     && useradd --system --uid 10001 --home-dir /nonexistent --shell /usr/sbin/nologin brdffit \
     && mkdir -p /data \
     && chown brdffit /data
+# 2. The package itself, without dependencies (they are all in): only what the service
+#    runs, brdffit/ and api/ (not data_synth, tests, docs, bench; see .dockerignore).
+COPY pyproject.toml README.md ./
+COPY brdffit ./brdffit
+COPY api ./api
+RUN pip install --no-deps . && rm -rf /src
 WORKDIR /
 USER brdffit
 

@@ -10,6 +10,7 @@ logged with its traceback, and the server carries on.
 from __future__ import annotations
 
 import logging
+import sqlite3
 
 from fastapi import FastAPI, Request, status
 from fastapi.exceptions import RequestValidationError
@@ -22,6 +23,10 @@ from brdffit.models import UnknownModelError
 log = logging.getLogger("brdffit.api")
 
 
+class BodyTimeout(Exception):
+    """The client sent no part of its body for ``BRDFFIT_BODY_READ_TIMEOUT_S``."""
+
+
 class ErrorMessage(BaseModel):
     """The body of every error response."""
 
@@ -32,7 +37,10 @@ class ErrorMessage(BaseModel):
 ERROR_RESPONSES = {
     400: {"model": ErrorMessage, "description": "a body that cannot be parsed"},
     401: {"model": ErrorMessage, "description": "missing or wrong bearer token"},
+    408: {"model": ErrorMessage, "description": "the body stalled (BRDFFIT_BODY_READ_TIMEOUT_S)"},
+    413: {"model": ErrorMessage, "description": "body over the server's cap"},
     422: {"model": ErrorMessage, "description": "invalid request (the detail says what)"},
+    503: {"model": ErrorMessage, "description": "the service's storage failed; try later"},
 }
 
 
@@ -53,14 +61,32 @@ async def _input_error(request: Request, exc: Exception) -> JSONResponse:
     return JSONResponse({"detail": str(exc)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
-async def _internal_error(request: Request, exc: Exception) -> JSONResponse:
-    log.error("%s %s failed", request.method, request.url.path, exc_info=exc)
-    return JSONResponse({"detail": f"internal server error ({type(exc).__name__})"},
-                        status_code=status.HTTP_500_INTERNAL_SERVER_ERROR)
+def internal_error_body(scope, exc: Exception) -> dict:
+    """Log a bug with its traceback; the body of its 500 (``api.limits`` sends it)."""
+    log.error("%s %s failed", scope.get("method"), scope.get("path"), exc_info=exc)
+    return {"detail": f"internal server error ({type(exc).__name__})"}
+
+
+async def _storage_error(request: Request, exc: Exception) -> JSONResponse:
+    # Not the request's fault, and not a bug: the disk or the database under the
+    # service failed (read-only, full, gone). Nothing was accepted; try later.
+    log.error("%s %s: storage error: %s", request.method, request.url.path, exc)
+    return JSONResponse({"detail": f"the service's storage failed ({type(exc).__name__}: "
+                                   f"{exc}); nothing was stored, try again later"},
+                        status_code=status.HTTP_503_SERVICE_UNAVAILABLE,
+                        headers={"Retry-After": "10"})
+
+
+async def _body_timeout(request: Request, exc: Exception) -> JSONResponse:
+    return JSONResponse({"detail": str(exc)}, status_code=status.HTTP_408_REQUEST_TIMEOUT,
+                        headers={"Connection": "close"})
 
 
 def install(app: FastAPI) -> None:
+
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(BrdffitError, _input_error)
     app.add_exception_handler(UnknownModelError, _input_error)
-    app.add_exception_handler(Exception, _internal_error)
+    app.add_exception_handler(sqlite3.Error, _storage_error)
+    app.add_exception_handler(BodyTimeout, _body_timeout)
+    # Anything else is answered by api.limits.RequestLimits (internal_error_body).

@@ -1,8 +1,10 @@
 """Build the service: ``create_app(settings)`` -> a FastAPI app.
 
-The app's life (FastAPI lifespan): open the store, start the runner's workers,
-settle the jobs a previous server left behind and start dispatching; on a clean
-stop, put running jobs back in the queue and stop the workers.
+``create_app`` opens the store first, so a damaged database is refused
+(``store.DatabaseRefused``: what is wrong and what to do) before the server
+listens. The app's life (FastAPI lifespan): start the runner's workers, settle the
+jobs a previous server left behind and start dispatching; on a clean stop, put
+running jobs back in the queue and stop the workers.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from fastapi.routing import APIRoute
 import brdffit
 from api import errors
 from api.jobs import JobQueue
+from api.limits import RequestLimits
 from api.routes import docs, exports, fits, health, models, tables
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
@@ -41,15 +44,14 @@ def create_app(settings: Settings | None = None, *,
                runner: AbstractRunner | None = None) -> FastAPI:
     """The service's app; ``runner`` replaces the one the settings would make."""
     settings = settings or Settings()
+    store = Store(settings.data_dir, settings.database)  # raises DatabaseRefused
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        store = Store(settings.data_dir, settings.database)
         store.clear_tmp()
         work = runner or make_runner(settings)
         work.start()
-        queue = JobQueue(store, work, workers=settings.workers,
-                         max_attempts=settings.max_attempts)
+        queue = JobQueue(store, work, settings)
         app.state.settings, app.state.store = settings, store
         app.state.runner, app.state.queue = work, queue
         await queue.start()
@@ -73,6 +75,8 @@ def create_app(settings: Settings | None = None, *,
     errors.install(app)
     for module in (health, tables, fits, exports, models, docs):
         app.include_router(module.router)
+    app.include_router(docs.assets)
+    app.add_middleware(RequestLimits, settings=settings)
     app.openapi = lambda: _openapi(app, settings)
     return app
 

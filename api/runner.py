@@ -2,22 +2,29 @@
 
 :class:`AbstractRunner` is the whole contract the job queue and the plot route
 rely on: ``await runner.run(fn, *args)`` runs a top-level function of
-``api.tasks`` somewhere else and returns its value. :class:`ProcessRunner` uses a
-local pool of worker processes. A Dask runner (``BRDFFIT_DASK_SCHEDULER``,
-issue 5) is one more subclass whose ``run`` submits to a
-``distributed.Client``, plus one branch in :func:`make_runner`.
+``api.tasks`` somewhere else and returns its value, and stops it when asked
+(``cancel``) or when it runs too long (``limit_s``). :class:`ProcessRunner` keeps
+``workers`` local processes. A Dask runner (``BRDFFIT_DASK_SCHEDULER``, issue 5)
+is one more subclass whose ``run`` submits to a ``distributed.Client``, plus one
+branch in :func:`make_runner`.
+
+Each worker process has its own pipe and runs one task at a time, so the runner
+knows which task each process holds: a process that dies fails only its own task
+(:class:`WorkerLost`), and stopping one task kills only its process. (A
+``ProcessPoolExecutor`` cannot do either: one dead process breaks the pool and
+every task in it, and it cannot stop a running task.)
 """
 
 from __future__ import annotations
 
 import abc
 import asyncio
+import contextlib
 import logging
 import multiprocessing
 import os
-from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
+from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from api import tasks
@@ -25,16 +32,34 @@ from api.settings import Settings
 
 log = logging.getLogger("brdffit.api")
 
+#: ``progress(stage, fraction)``, awaited for each report a task makes.
+Progress = Callable[[str, float], Awaitable[None]]
 
-class WorkerLost(RuntimeError):
+
+class Stopped(RuntimeError):
+    """A task did not complete: its process died, or was stopped on purpose."""
+
+
+class WorkerLost(Stopped):
     """The process running a task died (killed, out of memory, crashed)."""
+
+
+class TimeLimitExceeded(Stopped):
+    """The task ran past its time limit and its process was stopped."""
+
+
+class Cancelled(Stopped):
+    """The task was cancelled on request and its process was stopped."""
 
 
 class AbstractRunner(abc.ABC):
     @abc.abstractmethod
-    async def run(self, fn: Callable[..., Any], /, *args: Any) -> Any:
-        """``fn(*args)`` away from the event loop; raises :class:`WorkerLost` if
-        the worker dies under it."""
+    async def run(self, fn: Callable[..., Any], /, *args: Any, progress: Progress | None = None,
+                  limit_s: float | None = None, cancel: asyncio.Event | None = None) -> Any:
+        """``fn(*args)`` away from the event loop. Raises :class:`WorkerLost` if the
+        worker dies under it, :class:`TimeLimitExceeded` after ``limit_s`` seconds,
+        :class:`Cancelled` once ``cancel`` is set; ``progress`` gets the task's
+        reports (``api.tasks.report``)."""
 
     def start(self) -> None:
         """Optional: get ready before the first task (e.g. start workers)."""
@@ -44,50 +69,140 @@ class AbstractRunner(abc.ABC):
         """Stop now; tasks still running are abandoned."""
 
 
-class ProcessRunner(AbstractRunner):
-    """A pool of ``workers`` processes, started with 'spawn': JAX is not fork-safe
+class _Worker:
+    """One 'spawn' process and the parent's end of its pipe. JAX is not fork-safe
     once initialised, and the server process has imported it."""
+
+    def __init__(self, ctx) -> None:
+        self.conn, child = ctx.Pipe(duplex=True)
+        self.process = ctx.Process(target=tasks.serve, args=(child, os.getpid()),
+                                   name="brdffit-worker", daemon=True)
+        self.process.start()
+        child.close()  # else the parent holds the child's end and never sees EOF
+
+    @property
+    def pid(self) -> int | None:
+        return self.process.pid
+
+    def receive(self) -> tuple:
+        """The next message, blocking (run in a thread); EOFError once the process is gone."""
+        return self.conn.recv()
+
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(timeout=5.0)
+        self.conn.close()
+
+    def stop(self, timeout: float) -> None:
+        """Ask an idle worker to exit; kill it if it does not within ``timeout``."""
+        with contextlib.suppress(OSError, ValueError):
+            self.conn.send(None)
+        self.process.join(timeout=timeout)
+        self.kill()
+
+
+class ProcessRunner(AbstractRunner):
+    """``workers`` processes, each running one task at a time."""
 
     def __init__(self, workers: int):
         self.workers = workers
-        self._pool = self._new_pool()
-
-    def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(
-            max_workers=self.workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=tasks.start_worker,
-            initargs=(os.getpid(),),
-        )
+        self._ctx = multiprocessing.get_context("spawn")
+        self._idle: asyncio.Queue[_Worker] | None = None
+        self._all: set[_Worker] = set()
+        self._closed = False
+        # Threads that wait on the workers' pipes, one per busy worker: their own
+        # pool, since a fit holds one for minutes, and asyncio's default pool (a few
+        # threads on a small machine) also runs the job queue's database calls.
+        self._readers = ThreadPoolExecutor(max_workers=workers + 2,
+                                           thread_name_prefix="worker-pipe")
 
     def start(self) -> None:
-        # Spawn and import in every worker now, not when the first fit arrives.
+        # Spawn now (each imports JAX and matplotlib before its first task), not when
+        # the first fit arrives.
+        self._idle = asyncio.Queue()
         for _ in range(self.workers):
-            self._pool.submit(tasks.warm_up)
+            self._idle.put_nowait(self._spawn())
 
-    async def run(self, fn, /, *args):
-        pool = self._pool
+    def _spawn(self) -> _Worker:
+        worker = _Worker(self._ctx)
+        self._all.add(worker)
+        return worker
+
+    def _replace(self, worker: _Worker) -> None:
+        worker.kill()
+        self._all.discard(worker)
+        if not self._closed:
+            self._idle.put_nowait(self._spawn())
+
+    async def run(self, fn, /, *args, progress=None, limit_s=None, cancel=None):
+        if self._idle is None:
+            self.start()
+        worker = await self._idle.get()
         try:
-            return await asyncio.wrap_future(pool.submit(fn, *args))
-        except BrokenProcessPool as e:
-            # A dead worker breaks the whole pool: replace it (once, whoever sees it
-            # first) so that the next task runs.
-            if pool is self._pool:
-                log.warning("a worker process died; starting a new pool")
-                self._pool = self._new_pool()
-                pool.shutdown(wait=False, cancel_futures=True)
-            raise WorkerLost("the worker process died (killed, out of memory or crashed)") from e
+            worker.conn.send((fn, args))
+        except (OSError, ValueError):  # died while idle
+            self._replace(worker)
+            raise WorkerLost("the worker process died before it could start the task") from None
+        loop = asyncio.get_running_loop()
+        deadline = None if limit_s is None else loop.time() + limit_s
+        waiter = asyncio.ensure_future(cancel.wait()) if cancel is not None else None
+        try:
+            while True:
+                message = loop.run_in_executor(self._readers, worker.receive)
+                left = None if deadline is None else max(deadline - loop.time(), 0.0)
+                await asyncio.wait([message] + ([waiter] if waiter else []), timeout=left,
+                                   return_when=asyncio.FIRST_COMPLETED)
+                if not message.done():
+                    # Cancelled or out of time: stop the process, and with it the
+                    # thread blocked on its pipe.
+                    why = (Cancelled("cancelled on request") if waiter and waiter.done()
+                           else TimeLimitExceeded(f"ran past its time limit of {limit_s:g} s"))
+                    self._replace(worker)
+                    with contextlib.suppress(EOFError, OSError):
+                        await message
+                    raise why
+                try:
+                    kind, *body = message.result()
+                except (EOFError, OSError):
+                    self._replace(worker)
+                    code = worker.process.exitcode
+                    raise WorkerLost("the worker process died (killed, out of memory or "
+                                     f"crashed; exit code {code})") from None
+                if kind == "progress":
+                    if progress is not None:
+                        await progress(*body)
+                    continue
+                self._idle.put_nowait(worker)
+                if kind == "value":
+                    return body[0]
+                raise RuntimeError(f"task {fn.__name__} raised {body[0]}")  # kind == "error"
+        except asyncio.CancelledError:
+            # The caller went away (server stopping): the task's process is of no use.
+            self._replace(worker)
+            raise
+        finally:
+            if waiter is not None:
+                waiter.cancel()
+
+    def pids(self) -> list[int]:
+        """The worker processes' ids (for the tests that kill one)."""
+        return [w.pid for w in self._all if w.pid is not None]
 
     def close(self) -> None:
-        pool = self._pool
-        processes = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)  # idle workers exit at once
-        # A clean stop should not wait out a long fit: its job is back in the queue
-        # (Store.release_running). Python 3.11 has no terminate_workers().
-        for process in processes:
-            process.join(timeout=2.0)
-            if process.is_alive():
-                process.terminate()
+        # A clean stop does not wait out a long fit: its job is back in the queue
+        # (Store.release_running). Idle workers exit when told; busy ones are killed.
+        self._closed = True
+        idle = set()
+        while self._idle is not None and not self._idle.empty():
+            idle.add(self._idle.get_nowait())
+        for worker in self._all:
+            if worker in idle:
+                worker.stop(timeout=2.0)
+            else:
+                worker.kill()
+        self._all.clear()
+        self._readers.shutdown(wait=False)
 
 
 def make_runner(settings: Settings) -> AbstractRunner:

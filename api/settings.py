@@ -11,8 +11,8 @@ MiB = 1024 * 1024
 
 
 class Settings(BaseSettings):
-    """``BRDFFIT_DATA_DIR``, ``BRDFFIT_MAX_UPLOAD_BYTES``, ``BRDFFIT_WORKERS``,
-    ``BRDFFIT_API_TOKEN``, ``BRDFFIT_MAX_ATTEMPTS``."""
+    """Each field is the ``BRDFFIT_<NAME>`` environment variable (docs/service.md,
+    "Settings", lists them all)."""
 
     model_config = SettingsConfigDict(env_prefix="BRDFFIT_", extra="ignore")
 
@@ -28,6 +28,25 @@ class Settings(BaseSettings):
     #: Runs of a job that a server stop or a worker crash may interrupt before the
     #: job is marked failed (a job that kills its worker must not loop forever).
     max_attempts: int = Field(2, ge=1, le=10)
+
+    # -- bounds: what one request or one job may take --------------------------------
+    #: A fit whose estimated peak memory (api.estimate) is over this is refused (422).
+    max_job_memory_mib: int = Field(8192, ge=64)
+    #: A fit whose estimated run time is over this is refused (422).
+    max_job_estimate_s: float = Field(1800.0, gt=0)
+    #: A running job is stopped, and failed, after this long.
+    job_time_limit_s: float = Field(3600.0, gt=0)
+    #: Largest request body on every route but the upload (JSON fit requests).
+    max_json_bytes: int = Field(1 * MiB, ge=1024)
+    #: A request body that sends nothing for this long is answered 408 and dropped.
+    body_read_timeout_s: float = Field(30.0, gt=0)
+
+    # -- supervision -------------------------------------------------------------------
+    #: How long the dispatcher retries storing a job's outcome while the storage
+    #: fails before it gives up on the job (failed with the reason, if it can write).
+    storage_retry_s: float = Field(300.0, ge=0)
+    #: /healthz reports not ready when the data dir has less free space than this.
+    min_free_mib: int = Field(256, ge=0)
 
     @field_validator("api_token")
     @classmethod

@@ -26,13 +26,20 @@ import sqlite3
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 from brdffit import jsonout
+from brdffit.errors import BrdffitError
 
-STATUSES = ("queued", "running", "done", "failed")
+STATUSES = ("queued", "running", "done", "failed", "cancelled")
+#: Statuses a job leaves no more.
+FINISHED = ("done", "failed", "cancelled")
+
+#: ``PRAGMA user_version`` of the layout below. 0: the first layout (no
+#: ``cancelled``, no progress); :meth:`Store._migrate` brings it up to date.
+SCHEMA_VERSION = 1
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS tables (
@@ -48,17 +55,39 @@ CREATE TABLE IF NOT EXISTS jobs (
     table_id    TEXT NOT NULL REFERENCES tables(id),
     models      TEXT NOT NULL,             -- JSON list of model names
     options     TEXT NOT NULL,             -- JSON object, fit() keywords
-    status      TEXT NOT NULL CHECK (status IN ('queued', 'running', 'done', 'failed')),
+    status      TEXT NOT NULL
+                CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled')),
     reason      TEXT,                      -- why it failed
     note        TEXT,                      -- what happened on the way (re-runs)
     results     TEXT,                      -- JSON list of FitResult dicts, one per model
     attempts    INTEGER NOT NULL DEFAULT 0,
     created_at  REAL NOT NULL,
     started_at  REAL,
-    finished_at REAL
+    finished_at REAL,
+    stage       TEXT,                      -- what a running job is doing
+    fraction    REAL                       -- how much of it is done, 0 .. 1
 );
 CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
+CREATE INDEX IF NOT EXISTS jobs_by_table ON jobs (table_id, seq);
+CREATE TABLE IF NOT EXISTS probe (
+    id          INTEGER PRIMARY KEY CHECK (id = 1),
+    at          REAL NOT NULL              -- the last write /healthz made to see it can
+);
 """
+
+#: The columns version 0 had, in order (the jobs table is rebuilt to widen its CHECK).
+_V0_JOB_COLUMNS = ("seq, id, table_id, models, options, status, reason, note, results, "
+                   "attempts, created_at, started_at, finished_at")
+
+#: What to do about a database the service refuses to open (docs/service.md).
+REPAIR = ("stop the service, then restore a backup of {path} (docs/service.md, "
+          "'Backup and repair') or rebuild it from the table files with "
+          "`python -m api.repair rebuild --data-dir {data_dir}`")
+
+
+class DatabaseRefused(BrdffitError):
+    """The job database is damaged, emptied or missing beside existing tables: the
+    service does not start on it (starting empty would silently drop every job)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +113,17 @@ class JobRecord:
     created_at: float
     started_at: float | None
     finished_at: float | None
+    stage: str | None = None
+    fraction: float | None = None
+
+
+@dataclass(frozen=True)
+class Page:
+    """One page of a listing, newest first; ``next_cursor`` continues it (None: the end)."""
+
+    items: list
+    total: int
+    next_cursor: str | None
 
 
 def _table(row: sqlite3.Row) -> TableRecord:
@@ -97,7 +137,7 @@ def _job(row: sqlite3.Row) -> JobRecord:
         options=json.loads(row["options"]), status=row["status"], reason=row["reason"],
         note=row["note"], results=json.loads(row["results"]) if row["results"] else None,
         attempts=row["attempts"], created_at=row["created_at"], started_at=row["started_at"],
-        finished_at=row["finished_at"],
+        finished_at=row["finished_at"], stage=row["stage"], fraction=row["fraction"],
     )
 
 
@@ -105,10 +145,18 @@ def _add_note(old: str | None, new: str) -> str:
     return new if not old else f"{old}; {new}"
 
 
+def _create(con: sqlite3.Connection) -> None:
+    # One statement at a time: executescript() would commit the open transaction.
+    for statement in _SCHEMA.split(";"):
+        if statement.strip():
+            con.execute(statement)
+
+
 class Store:
     """Tables and jobs under one data dir (see the module docstring)."""
 
-    def __init__(self, data_dir: str | os.PathLike, database: str | os.PathLike | None = None):
+    def __init__(self, data_dir: str | os.PathLike, database: str | os.PathLike | None = None,
+                 *, check: bool = True):
         self.data_dir = Path(data_dir)
         self.tables_dir = self.data_dir / "tables"
         self.plots_dir = self.data_dir / "plots"
@@ -116,9 +164,70 @@ class Store:
         for d in (self.tables_dir, self.plots_dir, self.tmp_dir):
             d.mkdir(parents=True, exist_ok=True)
         self.database = Path(database) if database else self.data_dir / "brdffit.sqlite3"
+        if check:
+            self.check()
         with self._connect() as con:
             con.execute("PRAGMA journal_mode=WAL")
-            con.executescript(_SCHEMA)
+            self._migrate(con)
+
+    def _refuse(self, problem: str) -> DatabaseRefused:
+        what = REPAIR.format(path=self.database, data_dir=self.data_dir)
+        return DatabaseRefused(f"job database {self.database}: {problem}; not starting on it "
+                               f"(that would drop every job). To go on: {what}")
+
+    def check(self) -> None:
+        """Refuse a database that is not one this service can trust (raises
+        :class:`DatabaseRefused` saying what is wrong and what to do).
+
+        SQLite opens an empty file, or no file, as a fresh database: a truncated
+        file, or one deleted beside the uploaded tables, would start an empty
+        service and every job would be gone without a word.
+        """
+        tables_on_disk = any(self.tables_dir.glob("*.binary"))
+        if not self.database.exists():
+            if tables_on_disk:
+                raise self._refuse(f"missing, but {self.tables_dir} holds uploaded tables")
+            return
+        if self.database.stat().st_size == 0:
+            raise self._refuse("the file is empty (0 bytes): truncated")
+        try:
+            with self._connect() as con:
+                found = [r[0] for r in con.execute("PRAGMA quick_check")]
+                version = con.execute("PRAGMA user_version").fetchone()[0]
+                names = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
+        except sqlite3.DatabaseError as e:
+            raise self._refuse(f"unreadable ({e})") from None
+        if found != ["ok"]:
+            raise self._refuse("damaged: " + "; ".join(" ".join(f.split()) for f in found[:5]))
+        if version > SCHEMA_VERSION:
+            raise self._refuse(f"written by a newer brdffit (layout {version}, this one "
+                               f"knows up to {SCHEMA_VERSION})")
+        if not {"tables", "jobs"} <= names and (names or tables_on_disk):
+            raise self._refuse("not a brdffit job database (no tables and jobs)")
+
+    def _migrate(self, con: sqlite3.Connection) -> None:
+        """Bring the layout to :data:`SCHEMA_VERSION`, in one transaction."""
+        version = con.execute("PRAGMA user_version").fetchone()[0]
+        has_jobs = con.execute(
+            "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'jobs'").fetchone()
+        con.execute("BEGIN IMMEDIATE")
+        try:
+            if has_jobs and version == 0:
+                # Version 0's CHECK has no 'cancelled': SQLite changes a CHECK only by
+                # copying the table (https://sqlite.org/lang_altertable.html#otheralter).
+                con.execute("ALTER TABLE jobs RENAME TO jobs_v0")
+                con.execute("DROP INDEX IF EXISTS jobs_by_status")
+                _create(con)
+                con.execute(f"INSERT INTO jobs ({_V0_JOB_COLUMNS}) "
+                            f"SELECT {_V0_JOB_COLUMNS} FROM jobs_v0")
+                con.execute("DROP TABLE jobs_v0")
+            else:
+                _create(con)
+            con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            con.execute("COMMIT")
+        except BaseException:
+            con.execute("ROLLBACK")
+            raise
 
     @contextmanager
     def _connect(self) -> Iterator[sqlite3.Connection]:
@@ -154,6 +263,11 @@ class Store:
             tmp_file.unlink(missing_ok=True)
         else:
             os.replace(tmp_file, final)
+        return self.register_table(table_id, size, name, summary)
+
+    def register_table(self, table_id: str, size: int, name: str,
+                       summary: dict) -> tuple[TableRecord, bool]:
+        """The row of a table file already in place (``add_table``, ``api.repair``)."""
         with self._connect() as con:
             cur = con.execute(
                 "INSERT OR IGNORE INTO tables (id, size, name, summary, created_at) "
@@ -191,7 +305,8 @@ class Store:
         """The oldest queued job, now marked running (one atomic statement)."""
         with self._connect() as con:
             rows = con.execute(
-                "UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ? "
+                "UPDATE jobs SET status = 'running', attempts = attempts + 1, started_at = ?, "
+                "stage = 'starting', fraction = 0 "
                 "WHERE seq = (SELECT seq FROM jobs WHERE status = 'queued' ORDER BY seq LIMIT 1) "
                 "RETURNING *",
                 (time.time(),),
@@ -259,6 +374,122 @@ class Store:
                 "WHERE status = 'running'"
             )
             return cur.rowcount
+
+    def set_progress(self, job_id: str, stage: str, fraction: float) -> None:
+        with self._connect() as con:
+            con.execute("UPDATE jobs SET stage = ?, fraction = ? "
+                        "WHERE id = ? AND status = 'running'", (stage, fraction, job_id))
+
+    def cancel_queued(self, job_id: str) -> bool:
+        """Cancel a job that has not started; False if it is not queued (any more)."""
+        with self._connect() as con:
+            cur = con.execute(
+                "UPDATE jobs SET status = 'cancelled', reason = 'cancelled before it started', "
+                "finished_at = ?, stage = NULL WHERE id = ? AND status = 'queued'",
+                (time.time(), job_id))
+            return cur.rowcount == 1
+
+    def cancelled(self, job_id: str, reason: str) -> None:
+        """A running job was stopped on request."""
+        with self._connect() as con:
+            con.execute("UPDATE jobs SET status = 'cancelled', reason = ?, finished_at = ? "
+                        "WHERE id = ? AND status = 'running'", (reason, time.time(), job_id))
+
+    def list_jobs(self, *, limit: int, cursor: int | None = None, status: str | None = None,
+                  table_id: str | None = None, model: str | None = None) -> Page:
+        """Jobs, newest first, ``limit`` at a time; ``cursor``: the last page's
+        ``next_cursor``. Keyset paging: a page stays right while jobs are added."""
+        where, args = [], []
+        if status is not None:
+            where.append("status = ?")
+            args.append(status)
+        if table_id is not None:
+            where.append("table_id = ?")
+            args.append(table_id)
+        if model is not None:
+            where.append("EXISTS (SELECT 1 FROM json_each(jobs.models) WHERE value = ?)")
+            args.append(model)
+        return self._page("jobs", "seq", where, args, limit, cursor, _job)
+
+    def list_tables(self, *, limit: int, cursor: int | None = None,
+                    name: str | None = None) -> Page:
+        """Tables, newest first; ``name``: the ones whose name contains it."""
+        where, args = [], []
+        if name is not None:
+            where.append("instr(lower(name), lower(?)) > 0")
+            args.append(name)
+        return self._page("tables", "rowid", where, args, limit, cursor, _table)
+
+    def _page(self, table: str, key: str, where: list[str], args: list, limit: int,
+              cursor: int | None, make) -> Page:
+        clause = " AND ".join(where) or "1"
+        with self._connect() as con:
+            total = con.execute(f"SELECT COUNT(*) FROM {table} WHERE {clause}", args).fetchone()[0]
+            if cursor is not None:
+                clause += f" AND {key} < ?"
+                args = [*args, cursor]
+            rows = con.execute(f"SELECT {key} AS page_key, * FROM {table} WHERE {clause} "
+                               f"ORDER BY {key} DESC LIMIT ?", [*args, limit + 1]).fetchall()
+        more = len(rows) > limit
+        rows = rows[:limit]
+        return Page([make(r) for r in rows], total,
+                    str(rows[-1]["page_key"]) if more else None)
+
+    def delete_job(self, job_id: str) -> str | None:
+        """Delete a finished job and its plots. Returns None when deleted, else the
+        status that stops it (``queued``/``running``: cancel it first; ``gone``)."""
+        with self._connect() as con:
+            row = con.execute("SELECT status FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                return "gone"
+            cur = con.execute("DELETE FROM jobs WHERE id = ? AND status IN "
+                              "('done', 'failed', 'cancelled')", (job_id,))
+            if cur.rowcount != 1:
+                return row["status"]
+        shutil.rmtree(self.plots_dir / job_id, ignore_errors=True)
+        return None
+
+    def delete_table(self, table_id: str, *, with_fits: bool) -> tuple[str | None, int]:
+        """Delete a table (row, then file). Returns (None, fits deleted) or (why not, count):
+        ``gone``; ``fits`` (jobs use it and ``with_fits`` is False); ``active``
+        (queued or running jobs use it)."""
+        with self._connect() as con:
+            con.execute("BEGIN IMMEDIATE")
+            try:
+                if con.execute("SELECT 1 FROM tables WHERE id = ?", (table_id,)).fetchone() is None:
+                    con.execute("ROLLBACK")
+                    return "gone", 0
+                jobs = con.execute("SELECT id, status FROM jobs WHERE table_id = ?",
+                                   (table_id,)).fetchall()
+                active = [j for j in jobs if j["status"] not in FINISHED]
+                if active or (jobs and not with_fits):
+                    con.execute("ROLLBACK")
+                    return ("active" if active else "fits"), len(active or jobs)
+                con.execute("DELETE FROM jobs WHERE table_id = ?", (table_id,))
+                con.execute("DELETE FROM tables WHERE id = ?", (table_id,))
+                con.execute("COMMIT")
+            except BaseException:
+                if con.in_transaction:
+                    con.execute("ROLLBACK")
+                raise
+        # The row first: a row never points at a missing file (a file without a row
+        # is only disk space, and the next upload of the same bytes reuses it).
+        self.table_path(table_id).unlink(missing_ok=True)
+        for job in jobs:
+            shutil.rmtree(self.plots_dir / job["id"], ignore_errors=True)
+        return None, len(jobs)
+
+    def probe(self) -> None:
+        """One real write (raises if the database cannot take one): what /healthz
+        and a dispatcher waiting out a storage failure ask."""
+        with self._connect() as con:
+            con.execute("INSERT OR REPLACE INTO probe (id, at) VALUES (1, ?)", (time.time(),))
+
+    def backup(self, destination: str | os.PathLike) -> None:
+        """A consistent copy of the database while the service runs (SQLite's
+        online backup); the table files are plain files beside it."""
+        with self._connect() as con, closing(sqlite3.connect(destination)) as out:
+            con.backup(out)
 
     def counts(self) -> dict[str, int]:
         with self._connect() as con:

@@ -15,6 +15,16 @@ import threading
 import time
 import traceback
 
+#: Where :func:`report` sends a running task's progress (set by :func:`serve`).
+_reporter = None
+
+
+def report(stage: str, fraction: float) -> None:
+    """Tell the server what the task is doing (``stage``) and how far it is
+    (``fraction`` of the job, 0 .. 1); a no-op outside a worker."""
+    if _reporter is not None:
+        _reporter(stage, fraction)
+
 
 def _read(table_path: str, source: str):
     from brdffit.io import merl
@@ -33,15 +43,22 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
     from brdffit.models import UnknownModelError
 
     try:
+        report("reading the table", 0.0)
         table = _read(table_path, source)
         options = dict(options)
         rule = {"tolerance": options.pop("tolerance", None), "budget": options.pop("budget", None)}
         scene = options.pop("scene", None)
         scene = None if scene is None else Scene.from_dict(scene)
         if models == ["auto"]:
+            report("fitting the candidates and choosing (model auto)", 0.0)
             return {"ok": True, "results": _select(table, scene, rule, options)}
         # Strict before it is stored and served: a metric a fit could not measure is null.
-        results = [strict(fit_in_scene(table, m, scene, **options).to_dict()) for m in models]
+        # The fraction counts finished models: a fit does not report its own steps.
+        results = []
+        for i, m in enumerate(models):
+            report(f"fitting {m} ({i + 1} of {len(models)})", i / len(models))
+            results.append(strict(fit_in_scene(table, m, scene, **options).to_dict()))
+        report("storing the results", 1.0)
         return {"ok": True, "results": results}
     except (BrdffitError, UnknownModelError, ValueError) as e:
         return {"ok": False, "reason": str(e)}
@@ -82,10 +99,36 @@ def warm_up() -> int:
     return os.getpid()
 
 
-def start_worker(parent_pid: int) -> None:
-    """Worker initialiser: exit when the server is gone.
+def serve(conn, parent_pid: int) -> None:
+    """A worker process's life (``api.runner.ProcessRunner``): take ``(fn, args)``
+    from the pipe, answer ``("value", v)`` or ``("error", text)``, with
+    ``("progress", stage, fraction)`` messages on the way; ``None`` ends it."""
+    global _reporter
+    watch_parent(parent_pid)
+    warm_up()
+    _reporter = lambda stage, fraction: conn.send(("progress", stage, float(fraction)))  # noqa: E731
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):  # the server is gone
+            return
+        if task is None:
+            return
+        fn, args = task
+        try:
+            answer = ("value", fn(*args))
+        except Exception as e:  # tasks return failures as values; this is a bug
+            answer = ("error", f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
+        try:
+            conn.send(answer)
+        except (EOFError, OSError):
+            return
 
-    A server killed with SIGKILL cannot stop its pool; without this its workers
+
+def watch_parent(parent_pid: int) -> None:
+    """Exit when the server is gone.
+
+    A server killed with SIGKILL cannot stop its workers; without this they
     would finish (and compete with) fits nobody will collect.
     """
 

@@ -10,13 +10,19 @@
 
 Every error the server reports arrives as :class:`ApiError` with the server's
 message (``.detail``) and status; a fit that failed raises :class:`FitFailed`
-with its reason; a wait that runs out raises ``TimeoutError``.
+with its reason (:class:`FitCancelled` if it was cancelled); a wait that runs out
+raises ``TimeoutError``.
+
+Job control: :meth:`Client.fits` and :meth:`Client.tables` walk the server's
+paged listings (filtered), :meth:`Client.cancel` stops a queued or running job,
+:meth:`Client.delete_fit` and :meth:`Client.delete_table` remove finished ones.
 """
 
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
 
@@ -53,7 +59,11 @@ class FitFailed(ClientError):
     def __init__(self, job: FitJob):
         self.job = job
         self.reason = job.reason or "no reason given"
-        super().__init__(f"fit job {job.id} failed: {self.reason}")
+        super().__init__(f"fit job {job.id} {job.status}: {self.reason}")
+
+
+class FitCancelled(FitFailed):
+    """The fit job was cancelled (``Client.cancel``) before it finished."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +87,7 @@ class FitJob:
     """A fit job as the server last described it (``GET /v1/fits/{id}``)."""
 
     id: str
-    status: str  # queued, running, done, failed
+    status: str  # queued, running, done, failed, cancelled
     table_id: str
     models: list[str]
     options: dict
@@ -86,10 +96,13 @@ class FitJob:
     note: str | None
     result: FitResult | None  # the best fit, once done
     results: list[FitResult]  # every model's fit, once done
+    #: While running: ``{"stage": "fitting ggx (2 of 3)", "fraction": 0.33}``
+    #: (the fraction counts finished models); else None.
+    progress: dict | None = None
 
     @property
     def finished(self) -> bool:
-        return self.status in ("done", "failed")
+        return self.status in ("done", "failed", "cancelled")
 
     @property
     def selection(self) -> dict | None:
@@ -105,6 +118,7 @@ class FitJob:
             note=d.get("note"),
             result=FitResult.from_dict(d["result"]) if d.get("result") else None,
             results=[FitResult.from_dict(r) for r in d.get("results") or []],
+            progress=d.get("progress"),
         )
 
 
@@ -212,10 +226,12 @@ class Client:
     def result(self, job: JobRef, model: str | None = None) -> FitResult:
         """The fit of a finished job: the best one, or ``model``'s.
 
-        Raises :class:`FitFailed` if the job failed, :class:`ClientError` if it is
-        not finished yet (call :meth:`wait` first).
+        Raises :class:`FitFailed` if the job failed (:class:`FitCancelled` if it was
+        cancelled), :class:`ClientError` if it is not finished yet (call :meth:`wait`).
         """
         current = job if isinstance(job, FitJob) and job.finished else self.job(job)
+        if current.status == "cancelled":
+            raise FitCancelled(current)
         if current.status == "failed":
             raise FitFailed(current)
         if current.status != "done":
@@ -226,6 +242,46 @@ class Client:
             if r.model == model:
                 return r
         raise ClientError(f"fit job {current.id} has no {model!r} fit; it has {current.models}")
+
+    # -- job control --------------------------------------------------------------------
+
+    def _pages(self, url: str, params: dict, page_size: int) -> Iterator[dict]:
+        params = {k: v for k, v in params.items() if v is not None} | {"limit": page_size}
+        while True:
+            page = self._request("GET", url, params=params).json()
+            yield from page["items"]
+            if page["next_cursor"] is None:
+                return
+            params["cursor"] = page["next_cursor"]
+
+    def fits(self, *, status: str | None = None, table_id: str | None = None,
+             model: str | None = None, page_size: int = 200) -> Iterator[FitJob]:
+        """Every fit job the server has, newest first (``GET /v1/fits``, fetched
+        ``page_size`` at a time as the iteration goes), filtered by ``status``
+        (queued, running, done, failed, cancelled), ``table_id`` and ``model``."""
+        params = {"status": status, "table_id": table_id, "model": model}
+        return (FitJob.from_json(d) for d in self._pages("/v1/fits", params, page_size))
+
+    def tables(self, *, name: str | None = None, page_size: int = 200) -> Iterator[TableInfo]:
+        """Every uploaded table, newest first; ``name``: those whose name contains it."""
+        return (TableInfo.from_json(d)
+                for d in self._pages("/v1/tables", {"name": name}, page_size))
+
+    def cancel(self, job: JobRef) -> FitJob:
+        """Cancel a queued or running job; returns it (``cancelled`` once its worker
+        is stopped, within a second or two). An already finished job: ApiError 409."""
+        return FitJob.from_json(self._request("POST", f"/v1/fits/{_job_id(job)}/cancel").json())
+
+    def delete_fit(self, job: JobRef) -> None:
+        """Delete a finished job with its results and plots (a queued or running one:
+        ApiError 409, cancel it first)."""
+        self._request("DELETE", f"/v1/fits/{_job_id(job)}")
+
+    def delete_table(self, table_id: str, *, with_fits: bool = False) -> None:
+        """Delete a table; ``with_fits``: its finished fit jobs too (without it, a
+        table that has fit jobs is an ApiError 409)."""
+        self._request("DELETE", f"/v1/tables/{table_id}",
+                      params={"with_fits": "true"} if with_fits else None)
 
     def plot(self, job: JobRef, kind: str, model: str | None = None) -> bytes:
         """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,

@@ -78,7 +78,8 @@ class Server:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self, timeout: float = 120.0) -> Server:
+    def start(self, timeout: float = 120.0, *, ready: bool = True) -> Server:
+        """Start, and wait until ``/healthz`` answers 200 (``ready=False``: answers at all)."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
         env = {k: v for k, v in os.environ.items() if k != "BRDFFIT_API_TOKEN"}
         env.update({"BRDFFIT_DATA_DIR": str(self.data_dir), "BRDFFIT_WORKERS": str(self.workers),
@@ -97,13 +98,25 @@ class Server:
             if self.proc.poll() is not None:
                 raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log()}")
             try:
-                if httpx.get(f"{self.url}/healthz", timeout=2.0).status_code == 200:
+                code = httpx.get(f"{self.url}/healthz", timeout=2.0).status_code
+                if code == 200 or not ready:
                     return self
             except httpx.TransportError:
                 pass
             time.sleep(0.2)
         self.stop()
         raise RuntimeError(f"server not up after {timeout} s:\n{self.log()}")
+
+    def run_to_exit(self, timeout: float = 120.0) -> subprocess.CompletedProcess:
+        """Run ``brdffit serve`` expecting it to refuse to start: its exit code and output."""
+        env = {k: v for k, v in os.environ.items() if k != "BRDFFIT_API_TOKEN"}
+        env.update({"BRDFFIT_DATA_DIR": str(self.data_dir), "PYTHONUNBUFFERED": "1"})
+        env.update(self.extra_env)
+        return subprocess.run(
+            [sys.executable, "-m", "brdffit.cli", "serve", "--host", "127.0.0.1",
+             "--port", str(free_port())],
+            env=env, capture_output=True, text=True, timeout=timeout,
+        )
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -69,7 +70,17 @@ def test_health_models_and_openapi(http):
     for path in ("/v1/tables", "/v1/tables/{table_id}", "/v1/fits", "/v1/fits/{job_id}",
                  "/v1/fits/{job_id}/plots/{kind}.png", "/v1/models", "/healthz"):
         assert path in doc["paths"], path
-    assert "swagger" in http.get("/docs").text.lower()
+    page = http.get("/docs").text
+    assert "swagger" in page.lower()
+    # Offline: every script, stylesheet and icon the page loads is served here.
+    urls = re.findall(r'(?:src|href)="([^"]+)"', page)
+    assert urls and all(u.startswith("/docs/assets/") for u in urls), urls
+    assert "http://" not in page and "https://" not in page
+    for url in urls:
+        r = http.get(url)
+        assert r.status_code == 200 and len(r.content) > 500, url
+    assert "SwaggerUIBundle" in http.get("/docs/assets/swagger-ui-bundle.js").text
+    assert http.get("/docs/assets/..%2Fmain.py").status_code == 404
 
 
 def test_upload_is_content_addressed_and_idempotent(http, table_id):
@@ -285,8 +296,8 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
 
 
 def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, table_id):
-    """A worker that dies (OOM killer, say) breaks the pool: the pool is replaced
-    and the job runs again, saying why."""
+    """A worker that dies (OOM killer, say) is replaced and its job runs again,
+    saying why."""
     r = http.post("/v1/fits", json={"table_id": table_id, "model": "ggx",
                                     "options": {"samples": 8192, "starts": 2, "seed": 3}})
     job = wait_status(http, r.json()["id"], ("running", "done", "failed"), poll=0.02)
@@ -298,7 +309,7 @@ def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, tabl
     done = wait_status(http, job["id"], ("done", "failed"))
     assert done["status"] == "done", done
     assert done["attempts"] == 2 and "worker process died" in done["note"], done
-    assert "a worker process died" in server.log()
+    assert "worker process died" in server.log()
 
 
 # -- bearer token ------------------------------------------------------------------------
@@ -402,7 +413,10 @@ def test_schemathesis_finds_no_server_error(server, tmp_path):
         pytest.skip("schemathesis is not installed (pip install -e '.[test]')")
     proc = subprocess.run(
         [str(exe), "run", f"{server.url}/openapi.json", "--checks", "not_a_server_error",
-         "--max-examples", "25", "--phases", "examples,coverage,fuzzing", "--workers", "2",
+         # One worker thread: with two, schemathesis's coverage phase calls compile()
+         # from both and CPython 3.11 < 3.11.8 may raise "AST constructor recursion
+         # depth mismatch" (python/cpython#106905), a crash of the tool, not a finding.
+         "--max-examples", "25", "--phases", "examples,coverage,fuzzing", "--workers", "1",
          "--request-timeout", "30", "--seed", "1", "--generation-database", "none",
          "--no-color", "--suppress-health-check", "all"],
         capture_output=True, text=True, timeout=240, cwd=tmp_path,

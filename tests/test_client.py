@@ -12,7 +12,7 @@ import pytest
 from matplotlib.image import imread
 
 from brdffit import FitResult
-from brdffit.client import ApiError, Client, ClientError, FitFailed, FitJob
+from brdffit.client import ApiError, Client, ClientError, FitCancelled, FitFailed, FitJob
 from brdffit.io import merl
 from brdffit.io.grid import bin_grid
 from brdffit.view.plots import KINDS
@@ -121,6 +121,34 @@ def test_wait_times_out_and_result_wants_a_finished_job(client, files):
     with pytest.raises(TimeoutError, match=job.id):
         client.wait(job, timeout=0.001)
     assert client.wait(job, timeout=240).status == "done"
+
+
+def test_list_cancel_and_delete(client, files):
+    table_id = client.upload(files["lambert"])
+    # Queued behind nothing but cancelled at once, or running and stopped: either
+    # way it ends cancelled, and result() says so.
+    job = client.fit(table_id, "ggx2", samples=65536, starts=8)
+    cancelled = client.cancel(job)
+    assert cancelled.status == "cancelled" and cancelled.reason, cancelled
+    with pytest.raises(FitCancelled):
+        client.result(cancelled)
+    with pytest.raises(ApiError) as e:
+        client.cancel(job)
+    assert e.value.status_code == 409
+    done = client.wait(client.fit(table_id, "lambert", seed=11, **FAST), timeout=240)
+    listed = list(client.fits(table_id=table_id, page_size=1))  # one request per job
+    assert [j.id for j in listed][:2] == [done.id, job.id]
+    assert [j.id for j in client.fits(status="cancelled", table_id=table_id)] == [job.id]
+    assert table_id in [t.id for t in client.tables(name="lambert")]
+    with pytest.raises(ApiError) as e:
+        client.delete_table(table_id)
+    assert e.value.status_code == 409 and "with_fits" in e.value.detail
+    client.delete_fit(job)
+    with pytest.raises(ApiError) as e:
+        client.job(job)
+    assert e.value.status_code == 404
+    client.delete_table(table_id, with_fits=True)
+    assert table_id not in [t.id for t in client.tables()]
 
 
 def test_token_is_sent_and_a_401_explained():

@@ -7,6 +7,7 @@ find out (say, too few usable bins), and says so in ``reason``.
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import os
 from datetime import UTC, datetime
@@ -18,10 +19,11 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
 
 from api import tasks
-from api.deps import QueueDep, RunnerDep, StoreDep, require_token
+from api.deps import QueueDep, RunnerDep, SettingsDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.estimate import estimate
 from api.runner import WorkerLost
-from api.store import JobRecord, Store
+from api.store import STATUSES, JobRecord, Store
 from brdffit import models
 from brdffit.errors import FitInputError
 from brdffit.fitting import options
@@ -145,14 +147,20 @@ class FitResultOut(BaseModel):
     selection: dict | None = None
 
 
+class Progress(BaseModel):
+    stage: str = Field(description="what the job is doing, e.g. 'fitting ggx (2 of 3)'")
+    fraction: float = Field(ge=0, le=1, description="share of the job's models finished")
+
+
 class JobOut(BaseModel):
     id: str
-    status: Literal["queued", "running", "done", "failed"]
+    status: Literal["queued", "running", "done", "failed", "cancelled"]
     table_id: str
     models: list[str]
     options: FitOptions
     attempts: int = Field(description="runs started so far (a server restart may re-run a job)")
-    reason: str | None = Field(None, description="why the job failed")
+    reason: str | None = Field(None, description="why the job failed or was cancelled")
+    progress: Progress | None = Field(None, description="while running: stage and fraction")
     note: str | None = Field(None, description="what happened on the way, e.g. a re-run")
     created_at: datetime
     started_at: datetime | None = None
@@ -185,6 +193,8 @@ def _out(job: JobRecord) -> JobOut:
         options=FitOptions(**job.options), attempts=job.attempts, reason=job.reason,
         note=job.note, created_at=_time(job.created_at), started_at=_time(job.started_at),
         finished_at=_time(job.finished_at),
+        progress=(Progress(stage=job.stage, fraction=job.fraction or 0.0)
+                  if job.status == "running" and job.stage else None),
         result=best_result(job.results) if job.results else None, results=job.results,
     )
 
@@ -208,23 +218,114 @@ def _job_or_404(store: Store, job_id: str) -> JobRecord:
         404: {"model": ErrorMessage, "description": "no such table"},
     },
 )
-def create_fit(body: FitRequest, response: Response, store: StoreDep,
-               queue: QueueDep) -> JobOut:
-    if store.get_table(body.table_id) is None:
+def create_fit(body: FitRequest, response: Response, store: StoreDep, queue: QueueDep,
+               settings: SettingsDep) -> JobOut:
+    table = store.get_table(body.table_id)
+    if table is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             f"no table {body.table_id}; upload it with POST /v1/tables")
     names = [body.model] if isinstance(body.model, str) else body.model
     names = list(dict.fromkeys(names))  # a model twice is fitted once
-    job = store.create_job(body.table_id, names, body.options.model_dump())
+    fit_options = body.options.model_dump()
+    cost = estimate(names, fit_options, table.summary["measured_bins"])
+    over = []
+    if cost.memory_mib > settings.max_job_memory_mib:
+        over.append(f"memory {cost.memory_mib:,.0f} MiB > {settings.max_job_memory_mib:,} MiB "
+                    "(BRDFFIT_MAX_JOB_MEMORY_MIB)")
+    if cost.seconds > settings.max_job_estimate_s:
+        over.append(f"time {cost.seconds:,.0f} s > {settings.max_job_estimate_s:,.0f} s "
+                    "(BRDFFIT_MAX_JOB_ESTIMATE_S)")
+    if over:
+        # Refused before anything is queued or allocated: say by how much, and why.
+        raise HTTPException(
+            status.HTTP_422_UNPROCESSABLE_CONTENT,
+            f"this fit is estimated over the server's limits: {'; '.join(over)}; estimate "
+            f"for {cost.detail}. Ask for fewer samples or starts (or max_steps).",
+        )
+    job = store.create_job(body.table_id, names, fit_options)
     queue.notify()
     response.headers["Location"] = f"/v1/fits/{job.id}"
     return _out(job)
+
+
+class FitPage(BaseModel):
+    items: list[JobOut] = Field(description="newest first")
+    total: int = Field(description="jobs matching the filters, over all pages")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null: "
+                                                "this was the last")
+
+
+Cursor = Annotated[str | None, Query(pattern=r"^[0-9]{1,19}$",
+                                     description="next_cursor of the previous page")]
+
+
+@router.get("", summary="List fit jobs, newest first (paged, filtered)")
+def list_fits(
+    store: StoreDep,
+    limit: Annotated[int, Query(ge=1, le=500, description="jobs per page")] = 50,
+    cursor: Cursor = None,
+    status_: Annotated[Literal[STATUSES] | None,  # type: ignore[valid-type]
+                       Query(alias="status", description="only jobs in this status")] = None,
+    table_id: Annotated[str | None, Query(pattern=r"^[0-9a-f]{64}$",
+                                          description="only fits of this table")] = None,
+    model: Annotated[str | None, Query(max_length=64,
+                                       description="only jobs that fit this model")] = None,
+) -> FitPage:
+    page = store.list_jobs(limit=limit, cursor=None if cursor is None else int(cursor),
+                           status=status_, table_id=table_id, model=model)
+    return FitPage(items=[_out(j) for j in page.items], total=page.total,
+                   next_cursor=page.next_cursor)
 
 
 @router.get("/{job_id}", summary="A fit job: status, and the result once done",
             responses={404: {"model": ErrorMessage, "description": "no such job"}})
 def get_fit(job_id: JobId, store: StoreDep) -> JobOut:
     return _out(_job_or_404(store, job_id))
+
+
+#: How long a cancel waits for a running job's worker to be stopped before answering.
+CANCEL_WAIT_S = 2.0
+
+
+@router.post(
+    "/{job_id}/cancel",
+    summary="Cancel a queued or running fit",
+    responses={404: {"model": ErrorMessage, "description": "no such job"},
+               409: {"model": ErrorMessage, "description": "the job has already ended"}},
+)
+async def cancel_fit(job_id: JobId, store: StoreDep, queue: QueueDep) -> JobOut:
+    """A queued job is cancelled at once; a running one has its worker process
+    stopped (its partial work is dropped) and is ``cancelled`` within a second or so."""
+    if await run_in_threadpool(store.cancel_queued, job_id):
+        return _out(await run_in_threadpool(_job_or_404, store, job_id))
+    job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status == "running":
+        queue.cancel_running(job_id)
+        deadline = asyncio.get_running_loop().time() + CANCEL_WAIT_S
+        while job.status == "running" and asyncio.get_running_loop().time() < deadline:
+            await asyncio.sleep(0.05)
+            job = await run_in_threadpool(_job_or_404, store, job_id)
+        return _out(job)
+    raise HTTPException(status.HTTP_409_CONFLICT,
+                        f"fit job {job_id} is {job.status}: there is nothing to cancel")
+
+
+@router.delete(
+    "/{job_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a finished fit job, its results and plots",
+    responses={404: {"model": ErrorMessage, "description": "no such job"},
+               409: {"model": ErrorMessage, "description": "queued or running: cancel it first"}},
+)
+def delete_fit(job_id: JobId, store: StoreDep) -> Response:
+    why = store.delete_job(job_id)
+    if why == "gone":
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no fit job {job_id}")
+    if why is not None:
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} is {why}; cancel it first "
+                            f"(POST /v1/fits/{job_id}/cancel)")
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.get(

@@ -41,6 +41,8 @@ RAW_TYPES = ("application/octet-stream", "application/x-merl-binary")
 CHUNK = 1 << 20
 #: How far past the cap a body is still read (and dropped) to answer it cleanly.
 DRAIN = 16 << 20
+#: Longest table name kept (a file name's usual limit).
+MAX_NAME = 255
 
 
 class TableSummary(BaseModel):
@@ -171,7 +173,8 @@ async def upload_table(
     response: Response,
     store: StoreDep,
     settings: SettingsDep,
-    name: Annotated[str | None, Query(max_length=255, description="file name to record")] = None,
+    name: Annotated[str | None, Query(max_length=MAX_NAME,
+                                      description="file name to record")] = None,
 ) -> TableOut:
     cap = settings.max_upload_bytes
     length = request.headers.get("content-length", "")
@@ -190,7 +193,12 @@ async def upload_table(
             if not isinstance(upload, UploadFile):
                 raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                                     "the multipart body needs the table in a 'file' field")
-            name = name or os.path.basename(upload.filename or "")
+            sent = os.path.basename(upload.filename or "")
+            if len(sent) > MAX_NAME:  # the same cap as ?name=
+                raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                                    f"the file name is {len(sent):,} characters; at most "
+                                    f"{MAX_NAME} are kept (send a shorter one, or ?name=)")
+            name = name or sent
             chunks = _file_chunks(upload)
         else:
             raise HTTPException(
@@ -227,3 +235,53 @@ def get_table(table_id: TableId, store: StoreDep) -> TableOut:
     if record is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no table {table_id}")
     return _out(record)
+
+
+class TablePage(BaseModel):
+    items: list[TableOut] = Field(description="newest first")
+    total: int = Field(description="tables matching the filter, over all pages")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null: "
+                                                "this was the last")
+
+
+@router.get("", summary="List tables, newest first (paged, filtered)")
+def list_tables(
+    store: StoreDep,
+    limit: Annotated[int, Query(ge=1, le=500, description="tables per page")] = 50,
+    cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,19}$",
+                                        description="next_cursor of the previous page")] = None,
+    name: Annotated[str | None, Query(max_length=MAX_NAME,
+                                      description="only tables whose name contains this "
+                                                  "(case-insensitive)")] = None,
+) -> TablePage:
+    page = store.list_tables(limit=limit, cursor=None if cursor is None else int(cursor),
+                             name=name)
+    return TablePage(items=[_out(t) for t in page.items], total=page.total,
+                     next_cursor=page.next_cursor)
+
+
+@router.delete(
+    "/{table_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a table (and, with ?with_fits=true, its finished fit jobs)",
+    responses={404: {"model": ErrorMessage, "description": "no such table"},
+               409: {"model": ErrorMessage, "description": "fit jobs use it (the detail "
+                                                           "says which kind)"}},
+)
+def delete_table(
+    table_id: TableId,
+    store: StoreDep,
+    with_fits: Annotated[bool, Query(description="delete its finished fit jobs too")] = False,
+) -> Response:
+    why, count = store.delete_table(table_id, with_fits=with_fits)
+    if why == "gone":
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no table {table_id}")
+    if why == "active":
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"{count} queued or running fit job(s) use table {table_id}; "
+                            "cancel them first (POST /v1/fits/{id}/cancel)")
+    if why == "fits":
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"{count} fit job(s) use table {table_id}; delete them, or pass "
+                            "?with_fits=true to delete them with the table")
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

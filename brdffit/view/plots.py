@@ -20,8 +20,10 @@ the few degrees around the specular peak get as much room as the rest.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
+import tempfile
 from collections.abc import Callable
 
 import equinox as eqx
@@ -90,6 +92,9 @@ def evaluate(result: FitResult | dict, wi: np.ndarray, wo: np.ndarray) -> np.nda
 
 def _title(table: MerlTable, result: FitResult) -> str:
     name = os.path.basename(table.source) or table.source
+    # A table's name is the uploader's text: matplotlib would parse "$...$" in it as
+    # math, and fail on an unbalanced one. An escaped dollar is a literal dollar.
+    name = name.replace("$", r"\$")
     e = result.error.get("log_rmse")
     return f"{name}: {result.model} fit, log_rmse " + ("n/a" if e is None else f"{e:.3g}")
 
@@ -378,12 +383,25 @@ def render(kind: str, table: MerlTable, result: FitResult | dict) -> bytes:
 
 def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.PathLike,
              kinds=KINDS) -> list[str]:
-    """Write ``<directory>/<kind>.png`` for each kind; returns the paths."""
+    """Write ``<directory>/<kind>.png`` for each kind; returns the paths.
+
+    Each file is rendered first, then written beside its place and renamed over
+    it: a plot that fails to render leaves no file (not a 0-byte one), and a
+    reader never sees half a PNG.
+    """
     os.makedirs(directory, exist_ok=True)
     paths = []
     for kind in kinds:
         path = os.path.join(directory, f"{kind}.png")
-        with open(path, "wb") as f:
-            f.write(render(kind, table, result))
+        png = render(kind, table, result)
+        fd, tmp = tempfile.mkstemp(prefix=f".{kind}.", suffix=".png.part", dir=directory)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(png)
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
         paths.append(path)
     return paths
