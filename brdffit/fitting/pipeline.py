@@ -310,6 +310,7 @@ class _Prepared(NamedTuple):
     sample_set: object  # sampling.SampleSet
     data: LossData
     peak: int
+    brightest: float  # the largest usable value (1/sr)
 
 
 def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str) -> _Prepared:
@@ -320,16 +321,15 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str) -
 
     def make() -> _Prepared:
         counts = usable_bins(table, bin_weight)
-        if table.rgb.reshape(3, -1)[:, counts.usable].max(initial=0.0) < merl.MIN_PEAK:
-            raise FitInputError(
-                f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
-                f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
-            )
+        n_usable = int(np.count_nonzero(counts.usable))
+        brightest = float(table.rgb.reshape(3, -1)[:, counts.usable].max(initial=0.0))
+        if n_usable == 0 or brightest < merl.MIN_PEAK:  # fit() says why
+            return _Prepared(counts, n_usable, None, None, None, -1, brightest)
         weight = bin_weights(counts.usable, bin_weight)
         sample_set = stratified_sample(weight, samples, seed)
         data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision])
-        return _Prepared(counts, int(np.count_nonzero(counts.usable)), weight, sample_set,
-                         data, _peak_bin(table, weight))
+        return _Prepared(counts, n_usable, weight, sample_set, data, _peak_bin(table, weight),
+                         brightest)
 
     return _cached(table, ("prepared", samples, seed, precision, weight_key), make)
 
@@ -402,6 +402,11 @@ def fit(
             f"{table.source}: only {n_usable} usable bins (measured, finite, above the "
             f"horizon{', weighted by the scene' if bin_weight is not None else ''}); "
             f"{m.name} needs at least {m.n_params * 4}"
+        )
+    if prep.brightest < merl.MIN_PEAK:
+        raise FitInputError(
+            f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
+            f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
         )
     dtype = PRECISIONS[precision]
 
