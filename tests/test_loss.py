@@ -77,3 +77,67 @@ def test_stratified_sample_is_unbiased_and_fixed_size():
             assert (s.weight * f[s.index]).sum() == pytest.approx((w * f).sum(), rel=0.03)
     everything = sampling.stratified_sample(w, None)
     assert everything.n_used == np.count_nonzero(w)
+
+
+# -- the loss as a choice ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("choice", loss.LOSSES)
+def test_structured_normal_equations_equal_plain_jacobian_for_every_loss(choice, noisy_ggx):
+    c = sampling.usable_bins(noisy_ggx)
+    s = sampling.stratified_sample(sampling.bin_weights(c.usable), 2048)
+    data = fitting.sample_data(noisy_ggx, s.index, s.weight, loss=choice)
+    assert data.loss == choice
+    m = models.get("ggx")
+    u = jnp.asarray(m.unconstrain(TRUTH["ggx"])) + 0.3
+    fast = loss.normal_equations(u, (m, data))
+    plain = loss._generic_normal_equations(u, (m, data))
+    for a, b in zip(fast, plain, strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-14)
+
+
+@pytest.mark.parametrize("choice", loss.LOSSES)
+def test_every_loss_recovers_the_truth_and_reports_every_metric(choice):
+    table, _ = make_table("ggx", TRUTH["ggx"])
+    r = fitting.fit(table, "ggx", loss=choice, samples=2048)
+    assert r.converged and r.loss == choice
+    for name in ("kd", "ks"):
+        np.testing.assert_allclose(r.params[name], TRUTH["ggx"][name], rtol=1e-3, atol=1e-5)
+    np.testing.assert_allclose(r.params["alpha"], TRUTH["ggx"]["alpha"], rtol=1e-3)
+    metric = loss.LOSS_METRIC[choice]
+    assert set(r.error) == {"log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error",
+                            "psnr_db", f"sample_{metric}"}
+    assert r.error[metric] < 1e-4 and r.error["psnr_db"] > 40
+
+
+def test_each_loss_minimises_its_own_metric():
+    """A model that cannot fit the table exactly (Blinn-Phong on GGX): each loss
+    ends lowest on the metric it optimised, so the choice matters and is reported."""
+    table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35, "f0": 0.1})
+    fits = {c: fitting.fit(table, "blinn_phong", loss=c, samples=4096) for c in loss.LOSSES}
+    for c, r in fits.items():
+        metric = loss.LOSS_METRIC[c]
+        for other in fits.values():
+            assert r.error[metric] <= other.error[metric] * 1.01, (c, metric)
+    exponents = sorted(r.params["n"] for r in fits.values())
+    assert exponents[-1] > 1.02 * exponents[0], exponents  # the choice changes the fit
+
+
+def test_an_unknown_loss_is_refused_everywhere():
+    from brdffit.errors import FitInputError
+    from brdffit.fitting.options import FitOptions
+
+    table, _ = make_table("lambert", TRUTH["lambert"])
+    with pytest.raises(FitInputError, match="unknown loss 'l1'; choose one of log, cube_root"):
+        fitting.fit(table, "lambert", loss="l1")
+    with pytest.raises(FitInputError, match="unknown loss 'l1'"):
+        FitOptions(loss="l1")
+
+
+def test_the_resume_key_names_the_loss_only_when_it_is_not_the_default():
+    from brdffit.fitting.options import FitOptions
+
+    assert '"loss"' not in FitOptions().key()  # keys of earlier results files still match
+    assert FitOptions(loss="cube_root").key() != FitOptions().key()
+    assert FitOptions.key_of(FitOptions(loss="linear_cos").fit_keywords()) == \
+        FitOptions(loss="linear_cos").key()
