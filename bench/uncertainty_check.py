@@ -14,7 +14,6 @@ bench/results/uncertainty.{json,md}.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
