@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
 from collections.abc import Callable
 
 import equinox as eqx
@@ -120,52 +121,69 @@ def _theta_h_edges_deg() -> np.ndarray:
 # -- slices -------------------------------------------------------------------------
 
 
+#: phi_d of the slice rows. Isotropy and reciprocity make phi_d and 180 - phi_d the
+#: same bin, so 0 .. 90 covers the table: 90 is the view of Ngan et al. 2005, 0 the
+#: plane that holds both directions (retro- and forward scattering).
+SLICE_PHI_D = (90.0, 45.0, 0.0)
+
+
 def slices(
     table: MerlTable, result: FitResult | dict, *, theta_d_deg=(1.0, 30.0, 60.0, 80.0),
-    phi_d_deg: float = 90.0,
+    phi_d_deg=SLICE_PHI_D,
 ) -> bytes:
-    """Measured (dots) and fitted (lines) f_r against theta_h, one panel per theta_d."""
+    """Measured (dots) and fitted (lines) f_r against theta_h, one panel per theta_d,
+    one row per phi_d."""
     result = _as_result(result)
+    phi_d_deg = tuple(np.atleast_1d(phi_d_deg).tolist())
+    fig = Figure(figsize=(13.0, 2.0 + 2.9 * len(phi_d_deg)), layout="constrained")
+    _draw_slices(fig, table, result, theta_d_deg, phi_d_deg)
+    shown = ", ".join(f"{p:g}°" for p in phi_d_deg)
+    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}", fontsize=12)
+    return _png(fig)
+
+
+def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
+    axes = np.atleast_2d(fig.subplots(len(phi_d_deg), len(theta_d_deg), sharey=True,
+                                      sharex=True, squeeze=False))
     i_th = np.arange(N_THETA_H)
-    _, i_tds, i_pd = half_diff_to_bins(
-        np.zeros(len(theta_d_deg)), np.radians(theta_d_deg), np.radians(phi_d_deg)
-    )
-    i_pd = int(np.ravel(i_pd)[0])
-    i_tds = np.atleast_1d(i_tds)
-    theta_h, theta_d, phi_d = bin_centres(i_th[None, :], i_tds[:, None], i_pd)
-    theta_h, theta_d, phi_d = np.broadcast_arrays(theta_h, theta_d, phi_d)
-    fitted_all = evaluate(result, *half_diff_to_dirs(theta_h, theta_d, phi_d))
-    fig = Figure(figsize=(12.5, 4.0), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, len(theta_d_deg), sharey=True))
     lo, hi = np.inf, 0.0
-    for p, (ax, i_td) in enumerate(zip(axes, i_tds, strict=True)):
-        fitted = fitted_all[p]
-        measured = np.where(table.mask[i_th, i_td, i_pd], table.rgb[:, i_th, i_td, i_pd], np.nan).T
-        x = np.degrees(theta_h[p])
-        for c, (_, colour) in enumerate(CHANNELS):
-            ax.plot(x, measured[:, c], "o", ms=3.2, color=colour, alpha=0.55, mec="none")
-            ax.plot(x, fitted[:, c], "-", lw=1.5, color=colour)
-        for v in (measured, fitted):
-            v = v[np.isfinite(v) & (v > 0)]
-            if v.size:
-                lo, hi = min(lo, v.min()), max(hi, v.max())
-        ax.set_yscale("log")
-        _sqrt_axis(ax)
-        ax.grid(True, which="major", alpha=0.3)
-        ax.set_title(f"θd = {np.degrees(theta_d[p, 0]):.1f}°", fontsize=11)
-        ax.set_xlabel("θh (degrees, √ scale)")
-    first = axes[0]
+    for row, phi in enumerate(phi_d_deg):
+        _, i_tds, i_pd = half_diff_to_bins(
+            np.zeros(len(theta_d_deg)), np.radians(theta_d_deg), np.radians(phi))
+        i_pd = int(np.ravel(i_pd)[0])
+        i_tds = np.atleast_1d(i_tds)
+        theta_h, theta_d, phi_d = bin_centres(i_th[None, :], i_tds[:, None], i_pd)
+        theta_h, theta_d, phi_d = np.broadcast_arrays(theta_h, theta_d, phi_d)
+        fitted_all = evaluate(result, *half_diff_to_dirs(theta_h, theta_d, phi_d))
+        for p, (ax, i_td) in enumerate(zip(axes[row], i_tds, strict=True)):
+            fitted = fitted_all[p]
+            measured = np.where(table.mask[i_th, i_td, i_pd], table.rgb[:, i_th, i_td, i_pd],
+                                np.nan).T
+            x = np.degrees(theta_h[p])
+            for c, (_, colour) in enumerate(CHANNELS):
+                ax.plot(x, measured[:, c], "o", ms=3.0, color=colour, alpha=0.55, mec="none")
+                ax.plot(x, fitted[:, c], "-", lw=1.5, color=colour)
+            for v in (measured, fitted):
+                v = v[np.isfinite(v) & (v > 0)]
+                if v.size:
+                    lo, hi = min(lo, v.min()), max(hi, v.max())
+            ax.set_yscale("log")
+            _sqrt_axis(ax)
+            ax.grid(True, which="major", alpha=0.3)
+            ax.set_title(f"θd = {np.degrees(theta_d[p, 0]):.1f}°", fontsize=10)
+            if row == len(phi_d_deg) - 1:
+                ax.set_xlabel("θh (degrees, √ scale)")
+        # the bin centre actually shown, as the panel titles give theta_d's
+        axes[row, 0].set_ylabel(f"φd = {np.degrees(phi_d[0, 0]):.1f}°\nf_r (1/sr, log)")
     if hi > 0:
-        first.set_ylim(lo / 2, hi * 2)
-    first.set_ylabel("BRDF f_r (1/sr, log scale)")
+        axes[0, 0].set_ylim(lo / 2, hi * 2)
     fig.legend(
         handles=[Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
                  Line2D([], [], color="0.3", label="fit")]
         + [Line2D([], [], color=col, lw=4, label=name) for name, col in CHANNELS],
         loc="outside right upper", fontsize=9,
     )
-    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {phi_d_deg:g}°", fontsize=12)
-    return _png(fig)
+    return axes
 
 
 # -- error map ----------------------------------------------------------------------
@@ -234,67 +252,128 @@ def _with_bad(name: str):
 # -- spheres ------------------------------------------------------------------------
 
 SPHERE_BACKGROUND = "#33404f"
-# The lights and the sphere geometry are brdffit.view.render's: the plots show what the
-# selection's PSNR measures.
+#: The plots' lights: brdffit.view.render's two (what the PSNR measures), and a back
+#: light 135 deg from the camera. Its lit crescent has light and camera at opposite
+#: grazing angles (theta_d ~ 68 deg), where the Fresnel rise shows.
+SPHERE_LIGHTS = (
+    ("key light\n45° above-left", LIGHTS[0][1]),
+    ("grazing light\n80° from the right", LIGHTS[1][1]),
+    ("back light 135° from\nthe camera: Fresnel rim", np.array([0.7071, 0.0, -0.7071])),
+)
+#: The colour panel: 0.5 + COLOUR_GAIN * log2(channel share, fit / measured), so
+#: one stop of a channel's share saturates that channel.
+COLOUR_GAIN = 0.5
+#: One exposure for every table, fit and light: a white Lambertian surface facing the
+#: light has radiance 1 and shows at Reinhard 0.5 (sRGB 0.74). A dark material looks
+#: dark and a bright one bright, as a renderer would show them under the same light.
+EXPOSURE = 1.0
+#: Samples per pixel side: a smooth silhouette and terminator.
+SUPERSAMPLE = 3
+
+
+def _block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """Mean over k x k pixel blocks of an (n k, n k, ...) image, NaN-aware."""
+    n = a.shape[0] // k
+    b = a.reshape(n, k, n, k, *a.shape[2:])
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN block is NaN: off the disc
+        return np.nanmean(b, axis=(1, 3))
+
+
+def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
+                  size: int = 200, supersample: int = SUPERSAMPLE):
+    """Anti-aliased radiance images of the table and the fit under ``light``.
+
+    Returns ``(measured, fitted, coverage, unmeasured)``: (size, size, 3) radiance
+    (black where unlit; the measured image NaN where the table has no bin), the
+    fraction of each pixel on the sphere's disc, and the pixels whose samples are
+    mostly unmeasured.
+    """
+    result = _as_result(result)
+    n = size * supersample
+    wi, wo, inside = sphere_disc(n, light)
+    lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    measured = np.zeros((n, n, 3))
+    fitted = np.zeros((n, n, 3))
+    measured[lit] = table.lookup(wi[lit], wo[lit])
+    fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
+    measured, fitted = radiance(measured, wi), radiance(fitted, wi)
+    missing = inside & ~np.all(np.isfinite(measured), axis=-1)
+    outside = ~inside
+    measured[outside] = np.nan  # off the disc: not part of the pixel's average
+    fitted[outside] = np.nan
+    coverage = _block_mean(inside.astype(float), supersample)
+    unmeasured = _block_mean(missing.astype(float), supersample) > 0.5 * np.maximum(coverage, 1e-9)
+    return (_block_mean(measured, supersample), _block_mean(fitted, supersample), coverage,
+            unmeasured)
+
+
+def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray) -> np.ndarray:
+    img = tonemap(np.nan_to_num(rad), EXPOSURE)
+    return coverage[..., None] * img + (1.0 - coverage[..., None]) * background
 
 
 def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> bytes:
-    """Table and fit on a sphere under two lights, and log2(fit / measured)."""
+    """Table and fit on a sphere under three lights, their brightness ratio and their
+    colour ratio."""
     result = _as_result(result)
-    fig = Figure(figsize=(10.5, 7.0), layout="constrained")
-    axes = fig.subplots(len(LIGHTS), 3)
+    fig = Figure(figsize=(13.5, 10.0), layout="constrained")
+    _draw_spheres(fig, table, result, size)
+    fig.suptitle(f"{_title(table, result)}\nsphere renders at one exposure for table and fit "
+                 f"(white diffuse facing the light = mid-grey); camera along the normal at "
+                 "the centre; grey: unmeasured bin", fontsize=12)
+    return _png(fig)
+
+
+def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS):
+    axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = np.array(to_rgb(NO_DATA))
-    ratio_img = None
-    for row, (label, light) in enumerate(LIGHTS):
-        wi, wo, inside = sphere_disc(size, light)
-        lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        measured = np.zeros((size, size, 3))
-        fitted = np.zeros((size, size, 3))
-        measured[lit] = table.lookup(wi[lit], wo[lit])
-        fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
-        measured, fitted = radiance(measured, wi), radiance(fitted, wi)
-        unmeasured = lit & ~np.all(np.isfinite(measured), axis=-1)
-        lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
-        ok = lit & ~unmeasured
-        # One exposure per row, from the measured image, for both: the pictures
-        # compare brightness honestly.
-        typical = float(np.median(lum_m[ok])) if ok.any() else 1.0
-        exposure = 0.35 / max(typical, 1e-6)
-        images = []
-        for rad in (measured, fitted):
-            img = tonemap(np.nan_to_num(rad), exposure)
-            img[~inside] = background
-            images.append(img)
+    ratio_img = colour_img = None
+    for row, (label, light) in enumerate(lights):
+        measured, fitted, coverage, unmeasured = sphere_images(table, result, light, size)
+        images = [_composite(measured, coverage, background),
+                  _composite(fitted, coverage, background)]
         images[0][unmeasured] = no_data
-        eps = 1e-3 * max(typical, 1e-9)
+        lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
+        on = (coverage > 0.5) & ~unmeasured
+        lit = on & (lum_m > 0)
+        eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
         with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.log2((lum_f + eps) / (lum_m + eps))
-        ratio = np.where(ok, ratio, np.nan)
+            ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
+            # chromaticity ratio: each channel's share of the luminance, fit over
+            # measured, in stops; grey where the hue is right
+            share = ((fitted + eps) / (lum_f[..., None] + eps)) / (
+                (measured + eps) / (lum_m[..., None] + eps))
+            colour = np.clip(0.5 + COLOUR_GAIN * np.log2(share), 0.0, 1.0)
+        bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
+        colour[~bright] = np.nan
         for col, img in enumerate(images):
-            axes[row, col].imshow(img, interpolation="nearest")
-        # Under the ratio: background outside the sphere, black where unlit, grey
-        # where the table has no bin; the ratio's masked pixels are transparent.
-        base = np.where(inside[..., None], 0.0, background)
+            axes[row, col].imshow(img, interpolation="bilinear")
+        base = np.where(on[..., None], 0.0, background)
         base[unmeasured] = no_data
         axes[row, 2].imshow(base, interpolation="nearest")
         ratio_img = axes[row, 2].imshow(np.ma.masked_invalid(ratio), cmap="RdBu_r",
                                         vmin=-2, vmax=2, interpolation="nearest")
+        axes[row, 3].imshow(base, interpolation="nearest")
+        colour_img = np.where(np.isnan(colour), base, colour)
+        axes[row, 3].imshow(colour_img, interpolation="nearest")
         axes[row, 0].set_ylabel(label, fontsize=10)
-        for ax in axes[row]:  # the unlit half is black: outline the sphere
+        for ax in axes[row]:  # the unlit part is black: outline the sphere
             ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False,
                                 lw=0.8, ec="0.65"))
     for col, name in enumerate(("measured (nearest bin)", f"fit ({result.model})",
-                                "log₂(fit / measured)")):
+                                "brightness: log₂(fit / measured)",
+                                "colour: fit's hue over measured")):
         axes[0, col].set_title(name, fontsize=11)
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.8, extend="both",
-                 label="brightness ratio, stops (+1: fit 2× brighter)")
-    fig.suptitle(f"{_title(table, result)}\nsphere renders, directional light, "
-                 "camera along the normal at the centre; grey: unmeasured bin", fontsize=12)
-    return _png(fig)
+    fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
+                 label="stops (+1: fit 2× brighter)")
+    axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
+                           "(a stop saturates)", fontsize=9)
+    return axes
 
 
 # -- polar --------------------------------------------------------------------------
