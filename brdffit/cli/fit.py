@@ -144,11 +144,25 @@ def run(args) -> int:
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
     if opts.model == AUTO:
         selection = select(table, args.candidates, scene=scene, mono_ks=args.mono_ks,
-                           **opts.selection_keywords(), **opts.fit_keywords())
+                           progress=print_progress, **opts.selection_keywords(),
+                           **opts.fit_keywords())
         return _report(args, table, selection.result, selection.to_dict(),
                        format_selection(selection))
     result = fit_in_scene(table, opts.model, scene, **opts.fit_keywords())
     return _report(args, table, result, result.to_dict(), format_result(result))
+
+
+def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
+    """``--model auto``'s progress, one line per candidate on stderr (stdout stays the
+    result, one JSON object with --json)."""
+    if row is None:
+        print(f"auto: [{i + 1}/{n}] fitting {model} ...", end="", file=sys.stderr, flush=True)
+    elif row["status"] == "failed":
+        print(f" failed: {row.get('message', row.get('result'))}", file=sys.stderr, flush=True)
+    else:
+        note = "" if row["converged"] else f", {row['result']}"
+        print(f" log_rmse {row['log_rmse']:.4g} in {row['fit_time_s']:.1f} s{note}",
+              file=sys.stderr, flush=True)
 
 
 def _report(args, table, result, as_dict: dict, as_text: str) -> int:

@@ -52,7 +52,7 @@ from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.view.render import LIGHTS, radiance, sphere_disc, tonemap
 
-KINDS = ("slices", "error_map", "spheres", "polar")
+KINDS = ("slices", "error_map", "spheres", "polar", "report")
 
 CHANNELS = (("R", "#d62728"), ("G", "#2ca02c"), ("B", "#1f77b4"))
 #: Rec. 709 luminance weights, for the one-curve-per-angle plots.
@@ -207,6 +207,14 @@ def bin_residuals(table: MerlTable, result: FitResult | dict) -> np.ndarray:
 def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
     """RMS and mean of the per-bin residual over phi_d and RGB, on (theta_h, theta_d)."""
     result = _as_result(result)
+    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
+    _draw_error_map(fig, table, result)
+    fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
+                 fontsize=12)
+    return _png(fig)
+
+
+def _draw_error_map(fig, table: MerlTable, result: FitResult):
     r = bin_residuals(table, result)
     n = np.count_nonzero(np.isfinite(r), axis=(0, 3))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -214,8 +222,6 @@ def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
         bias = np.nansum(r, axis=(0, 3)) / n
     x = _theta_h_edges_deg()
     y = np.linspace(0.0, 90.0, N_THETA_D + 1)
-
-    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
     ax_rms, ax_bias = fig.subplots(1, 2, sharey=True)
     finite_rms = rms[np.isfinite(rms)]
     vmax = float(np.percentile(finite_rms, 99.5)) if finite_rms.size else 1.0
@@ -238,9 +244,6 @@ def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
         ax.set_xlabel("θh (degrees, √ scale)")
     ax_rms.set_ylabel("θd (degrees)")
     ax_rms.set_yticks([0, 15, 30, 45, 60, 75, 90])
-    fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
-                 fontsize=12)
-    return _png(fig)
 
 
 def _with_bad(name: str):
@@ -308,6 +311,25 @@ def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
             unmeasured)
 
 
+def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
+    """The brightness ratio, log2(fit / measured) of the luminance, and the colour
+    ratio image of two radiance images: per channel ``0.5 + COLOUR_GAIN *
+    log2(share_fit / share_measured)`` with ``share`` a channel's part of the
+    luminance, so grey where the hue is right and tinted towards the colour the fit
+    has too much of. NaN off ``on``, where unlit, and (colour) in the darkest 0.5 %."""
+    lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
+    lit = on & (lum_m > 0)
+    eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
+        share = ((fitted + eps) / (lum_f[..., None] + eps)) / (
+            (measured + eps) / (lum_m[..., None] + eps))
+        colour = np.clip(0.5 + COLOUR_GAIN * np.log2(share), 0.0, 1.0)
+    bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
+    colour[~bright] = np.nan
+    return ratio, colour
+
+
 def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray) -> np.ndarray:
     img = tonemap(np.nan_to_num(rad), EXPOSURE)
     return coverage[..., None] * img + (1.0 - coverage[..., None]) * background
@@ -335,19 +357,8 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         images = [_composite(measured, coverage, background),
                   _composite(fitted, coverage, background)]
         images[0][unmeasured] = no_data
-        lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
         on = (coverage > 0.5) & ~unmeasured
-        lit = on & (lum_m > 0)
-        eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
-            # chromaticity ratio: each channel's share of the luminance, fit over
-            # measured, in stops; grey where the hue is right
-            share = ((fitted + eps) / (lum_f[..., None] + eps)) / (
-                (measured + eps) / (lum_m[..., None] + eps))
-            colour = np.clip(0.5 + COLOUR_GAIN * np.log2(share), 0.0, 1.0)
-        bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
-        colour[~bright] = np.nan
+        ratio, colour = ratio_images(measured, fitted, on)
         for col, img in enumerate(images):
             axes[row, col].imshow(img, interpolation="bilinear")
         base = np.where(on[..., None], 0.0, background)
@@ -441,10 +452,80 @@ def _discrete_colours(name: str, n: int):
     return [colormaps[name](x) for x in np.linspace(0.05, 0.85, n)]
 
 
+# -- one page per fit -----------------------------------------------------------------
+
+
+def report(table: MerlTable, result: FitResult | dict) -> bytes:
+    """One page: the parameters with their standard errors and undetermined flags,
+    every error metric, the spheres, the phi_d = 90 deg slices and the error map."""
+    result = _as_result(result)
+    fig = Figure(figsize=(14.0, 19.5), layout="constrained")
+    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[1.9, 9.0, 3.6, 4.2])
+    _draw_summary(head, result)
+    _draw_spheres(sph, table, result, size=160)
+    sph.suptitle("sphere renders, one exposure for table and fit", fontsize=11)
+    _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
+    sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
+    _draw_error_map(err, table, result)
+    err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
+    fig.suptitle(_title(table, result), fontsize=14, fontweight="bold")
+    return _png(fig)
+
+
+def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
+    """The parameter lines (``value ± error``, flags) and the metric lines of a fit."""
+    u = result.uncertainty or {}
+    se, flags = u.get("std_error", {}), u.get("undetermined", {})
+    at_bound = u.get("at_bound", {})
+    params = []
+    for name, v in result.params.items():
+        vals = v if isinstance(v, list) else [v]
+
+        def listed(d, default, name=name, n=len(vals)):
+            x = d.get(name, [default] * n)
+            return x if isinstance(x, list) else [x]
+
+        parts = []
+        for x, e, b, f in zip(vals, listed(se, None), listed(at_bound, False),
+                              listed(flags, False), strict=True):
+            text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
+            parts.append(text + (" ?" if f else ""))
+        params.append(f"{name:<7}" + ",  ".join(parts))
+    params += [f"  ? {k}: {why}" for k, why in u.get("why", {}).items()]
+    params += [f"  {k} ~ {', '.join(v)} (|corr| > 0.95)"
+               for k, v in u.get("strongly_correlated", {}).items()]
+    e = result.error
+
+    def g(key, fmt=".4g"):
+        x = e.get(key)
+        return "n/a" if x is None or not np.isfinite(x) else format(x, fmt)
+
+    metrics = [f"log_rmse        {g('log_rmse')}",
+               f"cube_root_rmse  {g('cube_root_rmse')}",
+               f"rmse_cos        {g('rmse_cos')} 1/sr",
+               f"rel_peak_error  {g('rel_peak_error')}",
+               f"sphere PSNR     {g('psnr_db', '.1f')} dB",
+               f"loss {result.loss}, {result.result}, {result.steps} steps, "
+               f"{result.samples['used']:,} of {result.samples['usable']:,} bins"]
+    return params, metrics
+
+
+def _draw_summary(fig, result: FitResult) -> None:
+    params, metrics = summary_lines(result)
+    ax_p, ax_m = fig.subplots(1, 2, width_ratios=[1.6, 1.0])
+    for ax, title, lines in ((ax_p, "parameters ± standard error   (? = undetermined)", params),
+                             (ax_m, "errors (full table)", metrics)):
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=11, loc="left")
+        ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace",
+                fontsize=10.5, transform=ax.transAxes)
+
+
 # -- all of them --------------------------------------------------------------------
 
 RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
     "slices": slices, "error_map": error_map, "spheres": spheres, "polar": polar,
+    "report": report,
 }
 
 
