@@ -238,7 +238,7 @@ def select(
         except FitInputError as e:  # e.g. a scene with too few bins for this model
             rows.append({**row, "status": "failed", "message": str(e)})
             if progress is not None:
-                progress(i, len(ordered), m.name, rows[-1])
+                progress(i, len(ordered), m.name, dict(rows[-1]))
             continue
         fits[m.name] = r
         err = r.error["log_rmse"]
@@ -259,7 +259,7 @@ def select(
         )
         rows.append(row)
         if progress is not None:
-            progress(i, len(ordered), m.name, row)
+            progress(i, len(ordered), m.name, dict(row))  # the choice edits row later
 
     ok = [row for row in rows if row["status"] == "fitted"]
     if not ok:
