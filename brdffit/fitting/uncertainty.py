@@ -150,6 +150,10 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
 
     at_bound = np.asarray(model.bound_side(jnp.asarray(u, jnp.float64))) != 0
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        # a fit that ran off the table's scale: no linearisation to report, and no
+        # number pretends otherwise (every entry undetermined, no errors)
+        a, b = np.zeros_like(a), np.zeros_like(b)
     d = np.sqrt(np.maximum(np.diag(a), 0.0))
     no_effect = ~at_bound & (d <= 1e-12 * max(float(d.max()), 1e-300))
     free = ~at_bound & ~no_effect

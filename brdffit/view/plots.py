@@ -459,8 +459,8 @@ def report(table: MerlTable, result: FitResult | dict) -> bytes:
     """One page: the parameters with their standard errors and undetermined flags,
     every error metric, the spheres, the phi_d = 90 deg slices and the error map."""
     result = _as_result(result)
-    fig = Figure(figsize=(14.0, 19.5), layout="constrained")
-    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[1.9, 9.0, 3.6, 4.2])
+    fig = Figure(figsize=(14.0, 19.0), layout="constrained")
+    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[1.5, 9.0, 3.6, 4.2])
     _draw_summary(head, result)
     _draw_spheres(sph, table, result, size=160)
     sph.suptitle("sphere renders, one exposure for table and fit", fontsize=11)
