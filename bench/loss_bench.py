@@ -3,9 +3,10 @@
     python -m bench.loss_bench [--materials N] [--samples 16384]
 
 Fits each model under each loss (``brdffit.fitting.loss.LOSSES``) to N real MERL
-materials (gold-metallic-paint, red-plastic, pink-felt, then an even spread) (rebuilt offline by ``data_synth.nbrdf``; the cache directory is
-``$BRDFFIT_NBRDF_CACHE`` or ``.bench-cache/nbrdf``) and reports, per model and loss,
-the median over materials of every metric a result carries. No timings. Writes
+materials (gold-metallic-paint, red-plastic, pink-felt, then an even spread; rebuilt
+offline by ``data_synth.nbrdf``, cached in ``$BRDFFIT_NBRDF_CACHE`` or
+``.bench-cache/nbrdf``) and reports, per model and loss, the median over materials
+of every metric a result carries. No timings. Writes
 bench/results/losses.{json,md}.
 """
 
