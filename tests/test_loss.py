@@ -141,3 +141,40 @@ def test_the_resume_key_names_the_loss_only_when_it_is_not_the_default():
     assert FitOptions(loss="cube_root").key() != FitOptions().key()
     assert FitOptions.key_of(FitOptions(loss="linear_cos").fit_keywords()) == \
         FitOptions(loss="linear_cos").key()
+
+
+def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
+    """``loss`` is a FitOptions field, so every shell takes it without its own code."""
+    import json
+    import subprocess
+    import sys
+
+    from api import tasks
+    from api.routes.fits import FitOptions as RequestOptions
+    from api.routes.fits import FitResultOut, best_result
+    from brdffit.batch.job import run_batch
+    from brdffit.batch.store import read_results
+    from brdffit.fitting.options import FitOptions
+    from brdffit.io import merl
+
+    table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35}, noise=0.02, seed=2)
+    path = tmp_path / "t.binary"
+    merl.write(path, table)
+    r = subprocess.run([sys.executable, "-m", "brdffit.cli", "fit", str(path), "--model", "ggx",
+                        "--loss", "cube_root", "--samples", "2048", "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    cli = json.loads(r.stdout)
+    assert cli["loss"] == "cube_root" and "sample_cube_root_rmse" in cli["error"]
+
+    out = tasks.fit_models(str(path), "t.binary", ["ggx"],
+                           RequestOptions(loss="linear_cos", samples=2048).model_dump())
+    served = FitResultOut.model_validate(best_result(out["results"]))
+    assert served.loss == "linear_cos" and "sample_rmse_cos" in served.error
+
+    run_batch([str(path)], ["ggx"], tmp_path / "r.h5",
+              options=FitOptions(loss="cube_root", samples=2048), workers=0, progress=False)
+    stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]["ggx"]["fit"]
+    assert stored["loss"] == "cube_root" and stored["uncertainty"]["std_error"]["alpha"] > 0
+    for name, v in cli["params"].items():  # the same fit from the CLI and the batch
+        np.testing.assert_allclose(stored["params"][name], v, rtol=1e-9)
