@@ -31,6 +31,10 @@ class FitResult:
     test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
     ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
     ``"successful"``.
+    ``loss`` names what the solver minimised (``brdffit.fitting.loss.LOSSES``);
+    ``error`` holds every metric (``log_rmse``, ``cube_root_rmse``, ``rmse_cos``,
+    ``rel_peak_error``, ``psnr_db``) whatever it was, and ``sample_<metric>`` of the
+    loss on the solver's subsample.
 
     Set only on some paths, None elsewhere:
 
