@@ -61,8 +61,8 @@ def _cbrt(x):
 
 
 def compress_values(x, loss: str):
-    """``g(x)`` of the module docstring, for ``x = f cos_i >= 0``; JAX or numpy."""
-    x = jnp.maximum(x, 0.0)
+    """``g(x)`` of the module docstring, for ``x = f cos_i >= 0``: the caller clamps
+    (``compress`` does), so that the hot path holds no second clamp."""
     if loss == "log":
         return jnp.log1p(x)
     if loss == "cube_root":
@@ -73,8 +73,7 @@ def compress_values(x, loss: str):
 
 
 def compress_slope(x, loss: str):
-    """``g'(x)``, for the closed-form Jacobian of :func:`normal_equations`."""
-    x = jnp.maximum(x, 0.0)
+    """``g'(x)``, for the closed-form Jacobian of :func:`normal_equations` (``x >= 0``)."""
     if loss == "log":
         return 1.0 / (1.0 + x)
     if loss == "cube_root":

@@ -139,7 +139,10 @@ def _device_frames(dtype_name: str) -> Frame:
 
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
     values = table.rgb.reshape(3, -1)[:, index]
-    target = compress_values(values * np.maximum(bin_grid().cos_i[index], 0.0), loss)
+    x = values * np.maximum(bin_grid().cos_i[index], 0.0)
+    # numpy's log1p for the default: the same targets, to the last bit, as before the
+    # loss was a choice (JAX's log1p differs in the last place on some values)
+    target = np.log1p(x) if loss == "log" else compress_values(x, loss)
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
         loss=loss,
@@ -162,7 +165,9 @@ def _gather(tree, index):
 
 @functools.partial(jax.jit, static_argnames="loss")
 def _compress_all(rgb, cos_i, loss):
-    return compress_values(rgb * jnp.maximum(cos_i, 0.0), loss)
+    # unmeasured bins hold negative values: clamped so that every loss's target is
+    # finite there (their weight is 0)
+    return compress_values(jnp.maximum(rgb, 0.0) * jnp.maximum(cos_i, 0.0), loss)
 
 
 def full_table_data(
@@ -196,7 +201,7 @@ class _TableOnDevice(eqx.Module):
 def _table_on_device(rgb, cos_i) -> _TableOnDevice:
     meas_cos = rgb * jnp.maximum(cos_i, 0.0)
     return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos),
-                          cube=compress_values(meas_cos, "cube_root"))
+                          cube=compress_values(jnp.maximum(meas_cos, 0.0), "cube_root"))
 
 
 #: Per-table arrays, reused by every model fitted to the same table object (a
