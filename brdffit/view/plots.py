@@ -459,8 +459,8 @@ def report(table: MerlTable, result: FitResult | dict) -> bytes:
     """One page: the parameters with their standard errors and undetermined flags,
     every error metric, the spheres, the phi_d = 90 deg slices and the error map."""
     result = _as_result(result)
-    fig = Figure(figsize=(14.0, 19.0), layout="constrained")
-    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[1.5, 9.0, 3.6, 4.2])
+    fig = Figure(figsize=(14.0, 19.5), layout="constrained")
+    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[2.6, 9.0, 3.6, 4.2])
     _draw_summary(head, result)
     _draw_spheres(sph, table, result, size=160)
     sph.suptitle("sphere renders, one exposure for table and fit", fontsize=11)
@@ -512,13 +512,34 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
 
 def _draw_summary(fig, result: FitResult) -> None:
     params, metrics = summary_lines(result)
-    ax_p, ax_m = fig.subplots(1, 2, width_ratios=[1.6, 1.0])
+    ax_p, ax_m, ax_c = fig.subplots(1, 3, width_ratios=[1.7, 1.0, 0.9])
     for ax, title, lines in ((ax_p, "parameters ± standard error   (? = undetermined)", params),
                              (ax_m, "errors (full table)", metrics)):
         ax.set_axis_off()
         ax.set_title(title, fontsize=11, loc="left")
         ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace",
                 fontsize=10.5, transform=ax.transAxes)
+    _draw_correlation(fig, ax_c, result)
+
+
+def _draw_correlation(fig, ax, result: FitResult) -> None:
+    """The parameters' correlation matrix (``FitResult.uncertainty``): a pair near ±1
+    trades off; grey where a parameter has no error (at a bound, undetermined)."""
+    u = result.uncertainty or {}
+    names = u.get("entries")
+    if not names:
+        ax.set_axis_off()
+        ax.set_title("no uncertainty for this fit", fontsize=10)
+        return
+    c = np.array([[np.nan if x is None else x for x in row] for row in u["correlation"]],
+                 dtype=float)
+    m = ax.imshow(np.ma.masked_invalid(c), cmap=_with_bad("RdBu_r"), vmin=-1, vmax=1,
+                  interpolation="nearest")
+    ticks = range(len(names))
+    ax.set_xticks(ticks, names, rotation=90, fontsize=7)
+    ax.set_yticks(ticks, names, fontsize=7)
+    ax.set_title("parameter correlation", fontsize=10)
+    fig.colorbar(m, ax=ax, shrink=0.8, ticks=[-1, 0, 1])
 
 
 # -- all of them --------------------------------------------------------------------
