@@ -6,7 +6,8 @@
   residual that ``log_rmse`` aggregates (``brdffit.fitting.loss``), and its sign;
 - :func:`spheres`: table and fit rendered on a sphere under two lights, with the
   ratio of the two images;
-- :func:`polar`: f_r in the plane of incidence for a few incident angles.
+- :func:`polar`: f_r in the plane of incidence for a few incident angles, per channel;
+- :func:`report`: one page per fit: parameters with errors, metrics, the above.
 
 The measured table is read by its reference nearest-bin lookup
 (:meth:`MerlTable.lookup`), the fit is evaluated by its model in JAX; unmeasured
@@ -393,7 +394,9 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
 def polar(
     table: MerlTable, result: FitResult | dict, *, theta_i_deg=(10.0, 30.0, 50.0, 70.0)
 ) -> bytes:
-    """f_r (luminance) in the plane of incidence, log radius, per incident angle."""
+    """f_r in the plane of incidence, log radius, per incident angle: one half disc
+    per channel (R, G, B) on one radial scale, so a colour misfit shows as curves
+    that fit in one channel and miss in another."""
     result = _as_result(result)
     theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
     theta_i = np.radians(np.asarray(theta_i_deg, dtype=float))[:, None]
@@ -401,10 +404,9 @@ def polar(
     wo = np.broadcast_to(
         np.stack([np.sin(theta_o), np.zeros_like(theta_o), np.cos(theta_o)], axis=-1), wi.shape
     )
-    measured = table.lookup(wi, wo) @ LUMINANCE
-    fitted = evaluate(result, wi, wo) @ LUMINANCE
-    curves = list(zip(measured, fitted, strict=True))
-    values = np.concatenate([np.ravel(c) for c in curves])
+    measured = table.lookup(wi, wo)  # (n_theta_i, n_theta_o, 3)
+    fitted = evaluate(result, wi, wo)
+    values = np.concatenate([measured.ravel(), fitted.ravel()])
     values = values[np.isfinite(values) & (values > 0)]
     top = np.ceil(np.log10(values.max())) if values.size else 1.0
     bottom = max(np.floor(np.log10(values.min())) if values.size else -3.0, top - 5)
@@ -412,37 +414,47 @@ def polar(
     def radius(v):
         return np.clip(np.log10(np.where(v > 0, v, np.nan)) - bottom, 0.0, None)
 
-    fig = Figure(figsize=(11.0, 5.6))
-    # A half disc placed by hand: matplotlib centres the wedge (height r) in a square
-    # box of side 2r, so the box hangs below the figure to put the disc's centre
-    # near the bottom edge. Here r = 3.6 in, centre 0.7 in above the bottom.
-    ax = fig.add_axes((0.04, (0.7 - 1.8) / 5.6, 7.2 / 11.0, 7.2 / 5.6), projection="polar")
-    ax.set_theta_zero_location("N")
-    ax.set_theta_direction(-1)
-    ax.set_thetamin(-90)
-    ax.set_thetamax(90)
+    fig = Figure(figsize=(16.0, 4.0))
+    # Half discs placed by hand: matplotlib centres the wedge (height r) in a square
+    # box of side 2r, so the disc's centre is r/2 above the box's bottom, which
+    # hangs below the figure. Here r = 1.9 in, centres 0.45 in above the bottom.
     colours = _discrete_colours("viridis", len(theta_i_deg))
-    for ti, (meas, fit), colour in zip(theta_i_deg, curves, colours, strict=True):
-        ax.plot(theta_o, radius(meas), "o", ms=2.6, color=colour, alpha=0.5, mec="none")
-        ax.plot(theta_o, radius(fit), "-", lw=1.6, color=colour, label=f"θi = {ti:g}°")
-        ax.plot([-np.radians(ti)] * 2, [0, top - bottom], ls=":", lw=1, color=colour)
     ticks = np.arange(0, top - bottom + 1)
-    ax.set_rticks(ticks)
-    ax.set_yticklabels([f"$10^{{{int(bottom + t)}}}$" for t in ticks], fontsize=9)
-    ax.set_rlim(0, top - bottom)
-    ax.set_rlabel_position(-90)
-    ax.set_thetagrids(range(-90, 91, 30), [f"{d}°" for d in range(-90, 91, 30)])
+    for c, (name, _) in enumerate(CHANNELS):
+        ax = fig.add_axes((0.02 + c * 0.28, (0.45 - 0.95) / 4.0, 3.8 / 16.0, 3.8 / 4.0),
+                          projection="polar")
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(-1)
+        ax.set_thetamin(-90)
+        ax.set_thetamax(90)
+        for k, (ti, colour) in enumerate(zip(theta_i_deg, colours, strict=True)):
+            ax.plot(theta_o, radius(measured[k, :, c]), "o", ms=2.2, color=colour, alpha=0.5,
+                    mec="none")
+            ax.plot(theta_o, radius(fitted[k, :, c]), "-", lw=1.4, color=colour,
+                    label=f"θi = {ti:g}°")
+            ax.plot([-np.radians(ti)] * 2, [0, top - bottom], ls=":", lw=1, color=colour)
+        ax.set_rticks(ticks)
+        # the one radial scale, labelled once: the neighbours' labels would collide
+        ax.set_yticklabels([f"$10^{{{int(bottom + t)}}}$" for t in ticks] if c == 0
+                           else [], fontsize=8)
+        ax.set_rlim(0, top - bottom)
+        ax.set_rlabel_position(-90)
+        ax.set_thetagrids(range(-90, 91, 30), [f"{d}°" for d in range(-90, 91, 30)],
+                          fontsize=8)
+        ax.text(0.0, 0.74, f"{name} channel", transform=ax.transAxes, ha="left",
+                fontsize=12, color=CHANNELS[c][1], fontweight="bold")
     fig.legend(
         handles=ax.get_legend_handles_labels()[0]
         + [Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
            Line2D([], [], color="0.3", label="fit"),
            Line2D([], [], color="0.3", ls=":", label="incident direction")],
-        loc="upper left", bbox_to_anchor=(0.73, 0.86), fontsize=9,
+        loc="upper left", bbox_to_anchor=(0.85, 0.9), fontsize=9,
         title="incident angle", title_fontsize=9,
     )
-    fig.text(0.73, 0.2, "radius: f_r luminance\n(1/sr, log scale)\n\nθo < 0: back towards\n"
-            "the light; > 0: forward", fontsize=9, va="bottom")
-    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence", fontsize=12)
+    fig.text(0.85, 0.06, "radius: f_r (1/sr, log),\none scale for R, G, B\nθo < 0: back "
+             "towards\nthe light; > 0: forward", fontsize=9, va="bottom")
+    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel",
+                 fontsize=12)
     return _png(fig)
 
 
