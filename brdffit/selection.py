@@ -32,6 +32,7 @@ import dataclasses
 import functools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import jax
@@ -185,6 +186,7 @@ def select(
     mono_ks: bool = False,
     grey_tolerance: float = DEFAULT_GREY_TOLERANCE,
     image_size: int = 96,
+    progress: Callable[[int, int, str, dict | None], None] | None = None,
     **fit_options,
 ) -> Selection:
     """Fit every candidate and choose the cheapest that is good enough.
@@ -203,6 +205,11 @@ def select(
             when its fitted specular colour is grey within ``grey_tolerance``.
         grey_tolerance: ``(max - min) / max`` of ks over R, G, B that counts as grey.
         image_size: pixels per side of the sphere renders behind ``psnr_db``.
+        progress: called as ``progress(i, n, model, None)`` before candidate ``i``
+            of ``n`` (0-based) is fitted and ``progress(i, n, model, row)`` after,
+            with its ranking row (``status`` ``"fitted"`` or ``"failed"``): a shell
+            shows it (``brdffit fit --model auto`` on stderr); the library prints
+            nothing.
         **fit_options: passed to :func:`brdffit.fit` (``solver``, ``samples``,
             ``precision``, ``starts``, ``max_steps``, ``seed``).
     """
@@ -222,12 +229,16 @@ def select(
     reference = SphereReference(table, image_size)
 
     rows, fits = [], {}
-    for m in ordered:
+    for i, m in enumerate(ordered):
+        if progress is not None:
+            progress(i, len(ordered), m.name, None)
         row = {"model": m.name, "n_params": m.n_params}
         try:
             r = _fit_converged(table, m, scene, fits, fit_options)
         except FitInputError as e:  # e.g. a scene with too few bins for this model
             rows.append({**row, "status": "failed", "message": str(e)})
+            if progress is not None:
+                progress(i, len(ordered), m.name, dict(rows[-1]))
             continue
         fits[m.name] = r
         err = r.error["log_rmse"]
@@ -247,6 +258,8 @@ def select(
             status="fitted" if math.isfinite(err) else "failed",
         )
         rows.append(row)
+        if progress is not None:
+            progress(i, len(ordered), m.name, dict(row))  # the choice edits row later
 
     ok = [row for row in rows if row["status"] == "fitted"]
     if not ok:

@@ -28,7 +28,7 @@ def assert_sane_png(data: bytes) -> None:
     """A real picture: decodes, a few hundred pixels a side, not blank, not huge."""
     image = decode_png(data)
     h, w = image.shape[:2]
-    assert 300 <= h <= 1600 and 500 <= w <= 2000, (h, w)
+    assert 300 <= h <= 2200 and 500 <= w <= 2000, (h, w)  # the report page is the tallest
     assert 10_000 < len(data) < 2_000_000
     assert image[..., :3].std() > 0.05  # something is drawn
 
@@ -104,3 +104,60 @@ def test_cli_fit_writes_plots(tmp_path, capsys):
     for kind in plots.KINDS:
         assert f"{kind}.png" in captured.err
         assert_sane_png((out / f"{kind}.png").read_bytes())
+
+
+# -- what the pictures must show (issue 13) ---------------------------------------------
+
+
+def test_spheres_share_one_exposure_so_dark_and_bright_tables_look_different():
+    from data_synth import make_table
+
+    images = []
+    for kd in (0.04, 0.8):
+        t, _ = make_table("lambert", {"kd": [kd] * 3})
+        r = fit(t, "lambert", **FAST)
+        m, f, coverage, _ = plots.sphere_images(t, r, plots.SPHERE_LIGHTS[0][1], size=48)
+        images.append(plots._composite(m, coverage, np.zeros(3)))
+        # the measurement and its fit are shown at the same exposure: equal images
+        np.testing.assert_allclose(plots._composite(f, coverage, np.zeros(3)), images[-1],
+                                   atol=0.02)
+    dark, bright = (img.mean() for img in images)
+    assert bright > 2.5 * dark, (dark, bright)
+
+
+def test_spheres_are_antialiased():
+    """Supersampled: the silhouette has pixels between background and sphere."""
+    t = table("lambert")
+    r = fit(t, "lambert", **FAST)
+    _, _, coverage, _ = plots.sphere_images(t, r, plots.SPHERE_LIGHTS[0][1], size=64)
+    partial = (coverage > 0.05) & (coverage < 0.95)
+    assert partial.sum() > 64  # a ring of edge pixels
+    _, _, hard, _ = plots.sphere_images(t, r, plots.SPHERE_LIGHTS[0][1], size=64, supersample=1)
+    assert set(np.unique(hard)) <= {0.0, 1.0}
+
+
+def test_a_colour_misfit_shows_in_the_colour_ratio():
+    """A fit with too much blue tints the colour panel blue; the right fit is grey."""
+    t = table("lambert")
+    r = fit(t, "lambert", **FAST)
+    bluer = FitResult.from_dict({**r.to_dict(),
+                                 "params": {"kd": [r.params["kd"][0], r.params["kd"][1],
+                                                   r.params["kd"][2] * 1.5]}})
+    light = plots.SPHERE_LIGHTS[0][1]
+    for result, blue in ((r, False), (bluer, True)):
+        m, f, coverage, unmeasured = plots.sphere_images(t, result, light, size=48)
+        _, colour = plots.ratio_images(m, f, (coverage > 0.5) & ~unmeasured)
+        mean = np.nanmean(colour.reshape(-1, 3), axis=0)
+        if blue:
+            assert mean[2] > 0.7 and mean[0] < 0.5 and mean[1] < 0.5, mean
+        else:
+            np.testing.assert_allclose(mean, 0.5, atol=0.02)
+
+
+def test_report_page_lists_parameters_with_errors_and_every_metric(ggx):
+    _, result = ggx
+    params, metrics = plots.summary_lines(result)
+    assert any("±" in line for line in params)
+    assert [m.split()[0] for m in metrics[:5]] == ["log_rmse", "cube_root_rmse", "rmse_cos",
+                                                  "rel_peak_error", "sphere"]
+    assert "(bound)" in "".join(plots.summary_lines(fit(table("lambert"), "ggx", **FAST))[0])

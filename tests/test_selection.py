@@ -268,3 +268,32 @@ def test_an_unconverged_candidate_is_refitted_and_the_reason_says_so(monkeypatch
     assert not ggx["converged"] and ggx["result"] == "nonlinear_max_steps_reached"
     assert ("ggx", 8, 4) in calls  # refitted with 4x the steps and 4 starts
     assert "ggx did not converge (nonlinear_max_steps_reached)" in sel.reason
+
+
+# -- progress (issue 13) ----------------------------------------------------------------
+
+
+def test_progress_is_called_before_and_after_each_candidate():
+    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]})
+    calls = []
+    select(table, ["lambert", "oren_nayar"], samples=2048,
+           progress=lambda i, n, model, row: calls.append((i, n, model, row)))
+    assert [(i, n, m, row is None) for i, n, m, row in calls] == [
+        (0, 2, "lambert", True), (0, 2, "lambert", False),
+        (1, 2, "oren_nayar", True), (1, 2, "oren_nayar", False)]
+    assert calls[1][3]["status"] == "fitted" and calls[1][3]["log_rmse"] < 1e-4
+
+
+def test_cli_auto_prints_progress_on_stderr_and_json_on_stdout(tmp_path, capsys):
+    from brdffit.cli import main as cli_main
+    from brdffit.io import merl
+
+    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]})
+    path = tmp_path / "lambert.binary"
+    merl.write(path, table)
+    assert cli_main(["fit", str(path), "--model", "auto", "--candidates", "lambert,oren_nayar",
+                     "--samples", "2048", "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["selection"]["chosen"] == "lambert"  # stdout: one JSON object
+    assert "auto: [1/2] fitting lambert ... log_rmse" in out.err
+    assert "auto: [2/2] fitting oren_nayar ... log_rmse" in out.err

@@ -140,11 +140,15 @@ class FitResultOut(BaseModel):
     samples: dict
     solver: str
     precision: str
+    loss: str = Field("log", description="the loss the solver minimised (docs/fitting.md)")
     starts: int
     table: str | None = None
     scene: dict | None = None
     full_table_error: dict[str, float | None] | None = None
     selection: dict | None = None
+    uncertainty: dict | None = Field(
+        None, description="standard errors, correlations and undetermined parameters "
+                          "(docs/results.md)")
 
 
 class Progress(BaseModel):

@@ -151,43 +151,50 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
     return "\n".join(lines)
 
 
-def plot_summary(r: Ranking, png: str | os.PathLike) -> str:
-    """A two-panel PNG: the spread of each model's error over the tables, and how
-    many tables each model fits best. Sized for ten tables or ten thousand."""
+def plot_summary(r: Ranking, png: str | os.PathLike, source: str = "") -> str:
+    """A titled two-panel PNG: the spread of each model's error over the tables, and
+    how many tables each model fits best; models ordered by median error, best
+    first. Sized for ten tables or ten thousand. ``source`` (the results file)
+    goes in the title."""
     extras.require("plots", "the batch summary figure", hint="--no-png prints the ranking only")
-    import matplotlib
+    from matplotlib.figure import Figure  # no pyplot: no global state, safe in workers
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax_err, ax_win) = plt.subplots(1, 2, figsize=(11, 4.5),
-                                         gridspec_kw={"width_ratios": [3, 2]})
+    medians = {s.model: s.median for s in r.summary}
+    order = sorted(r.models, key=lambda m: (not math.isfinite(medians.get(m, math.nan)),
+                                            medians.get(m, math.inf)))
+    width = max(11.0, 4.0 + 0.9 * len(order))
+    fig = Figure(figsize=(width, 5.2), layout="constrained")
+    ax_err, ax_win = fig.subplots(1, 2, width_ratios=[3, 2])
     data = [[e for t in r.tables if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0]
-            for m in r.models]
-    positions = list(range(1, len(r.models) + 1))
+            for m in order]
+    positions = list(range(1, len(order) + 1))
     shown = [(p, d) for p, d in zip(positions, data, strict=True) if d]
     if shown:
         ax_err.boxplot([d for _, d in shown], positions=[p for p, _ in shown], widths=0.5,
                        showfliers=False)
         for p, d in shown:  # every table as a dot: a box hides small batches
             jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(d))]
-            ax_err.scatter(jitter, d, s=10, alpha=0.6, zorder=3)
+            ax_err.scatter(jitter, d, s=10, alpha=0.6, zorder=3, color="tab:blue")
         ax_err.set_yscale("log")
-    ax_err.set_xticks(positions, r.models, rotation=30, ha="right")
-    ax_err.set_xlim(0.4, len(r.models) + 0.6)
-    ax_err.set_ylabel(f"{METRIC} (full table, lower is better)")
-    ax_err.set_title(f"error per model over {len(r.tables)} tables")
-    wins = [next((s.wins for s in r.summary if s.model == m), 0) for m in r.models]
-    ax_win.bar(positions, wins, color="tab:green")
-    ax_win.set_xticks(positions, r.models, rotation=30, ha="right")
+    ax_err.set_xticks(positions, order, rotation=30, ha="right")
+    ax_err.set_xlim(0.4, len(order) + 0.6)
+    ax_err.set_ylabel(f"{METRIC} (full table, log scale; lower is better)")
+    ax_err.set_title(f"error per model over {len(r.tables)} tables (best median first)",
+                     fontsize=11)
+    ax_err.grid(True, axis="y", which="major", alpha=0.3)
+    wins = [next((s.wins for s in r.summary if s.model == m), 0) for m in order]
+    bars = ax_win.bar(positions, wins, color="tab:green")
+    ax_win.bar_label(bars, fontsize=9)
+    ax_win.set_xticks(positions, order, rotation=30, ha="right")
     ax_win.set_ylabel("tables where it is the best fit")
+    ax_win.set_ylim(0, max(wins + [1]) * 1.15)
     n_failed = len(r.failed_tables)
-    ax_win.set_title("best model per table" + (f" ({n_failed} tables with failures)"
-                                               if n_failed else ""))
-    fig.tight_layout()
+    ax_win.set_title("best model per table (ties go to fewer parameters)"
+                     + (f"; {n_failed} tables with failures" if n_failed else ""), fontsize=11)
+    name = os.path.basename(os.fspath(source)) if source else "batch"
+    fig.suptitle(f"{name}: {len(r.tables)} tables x {len(order)} models", fontsize=13)
     png = os.fspath(png)
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    fig.savefig(png, dpi=110, facecolor="white")
     return png
 
 

@@ -39,6 +39,6 @@ def run(args) -> int:
         print(format_ranking(ranking, args.results, args.tolerance))
     if not args.no_png:
         png = args.png or (args.results.removesuffix(".h5") + ".summary.png")
-        plot_summary(ranking, png)
+        plot_summary(ranking, png, source=args.results)
         print(f"wrote {png}", file=sys.stderr)
     return 0

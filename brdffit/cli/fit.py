@@ -86,15 +86,33 @@ def add_arguments(p) -> None:
 
 
 def format_result(r: FitResult) -> str:
-    """A human-readable summary of a fit."""
-    lines = [f"{r.table}: {r.model} fit, {r.result} after {r.steps} steps in {r.time_s:.2f} s"
-             + ("" if r.converged else "  (NOT converged)")]
+    """A human-readable summary of a fit: parameters with their standard errors and
+    undetermined flags (docs/results.md), every metric, the bins used."""
+    lines = [f"{r.table}: {r.model} fit ({r.loss} loss), {r.result} after {r.steps} steps "
+             f"in {r.time_s:.2f} s" + ("" if r.converged else "  (NOT converged)")]
+    u = r.uncertainty or {}
+    se, flag = u.get("std_error", {}), u.get("undetermined", {})
+    at_bound = u.get("at_bound", {})
     for name, v in r.params.items():
-        val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
-        lines.append(f"  {name:<6} = {val}")
+        vals = v if isinstance(v, list) else [v]
+        errs = se.get(name, [None] * len(vals))
+        errs = errs if isinstance(errs, list) else [errs]
+        bounds = at_bound.get(name, [False] * len(vals))
+        bounds = bounds if isinstance(bounds, list) else [bounds]
+        shown = ", ".join(_with_error(x, e, b) for x, e, b in zip(vals, errs, bounds, strict=True))
+        flags = flag.get(name, False)
+        mark = "  UNDETERMINED" if any(flags if isinstance(flags, list) else [flags]) else ""
+        lines.append(f"  {name:<6} = {shown}{mark}")
+    for entry, why in u.get("why", {}).items():
+        lines.append(f"    {entry}: {why}")
+    for entry, others in u.get("strongly_correlated", {}).items():
+        lines.append(f"    {entry} correlates (|r| > 0.95) with {', '.join(others)}")
     e = r.error
     on = "scene" if r.scene is not None else "full table"
-    lines.append(f"  log_rmse = {e['log_rmse']:.4g} ({on})   rmse_cos = {e['rmse_cos']:.4g} 1/sr")
+    lines.append(f"  error ({on}): log_rmse {e['log_rmse']:.4g}   cube_root_rmse "
+                 f"{_g(e.get('cube_root_rmse'))}   rmse_cos {e['rmse_cos']:.4g} 1/sr   "
+                 f"rel_peak_error {_g(e.get('rel_peak_error'))}   sphere PSNR "
+                 f"{_g(e.get('psnr_db'), '.1f')} dB")
     if r.full_table_error is not None:
         lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} (full table)   "
                      f"scene {r.scene['description']}")
@@ -107,6 +125,16 @@ def format_result(r: FitResult) -> str:
     return "\n".join(lines)
 
 
+def _g(x, fmt: str = ".4g") -> str:
+    return "n/a" if x is None else format(x, fmt)
+
+
+def _with_error(x: float, se: float | None, at_bound: bool) -> str:
+    if at_bound:
+        return f"{x:.5g} (at bound)"
+    return f"{x:.5g}" if se is None else f"{x:.5g} ± {se:.2g}"
+
+
 def run(args) -> int:
     opts = options_from_args(args)  # refused before the table is read
     if args.plots:
@@ -116,11 +144,25 @@ def run(args) -> int:
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
     if opts.model == AUTO:
         selection = select(table, args.candidates, scene=scene, mono_ks=args.mono_ks,
-                           **opts.selection_keywords(), **opts.fit_keywords())
+                           progress=print_progress, **opts.selection_keywords(),
+                           **opts.fit_keywords())
         return _report(args, table, selection.result, selection.to_dict(),
                        format_selection(selection))
     result = fit_in_scene(table, opts.model, scene, **opts.fit_keywords())
     return _report(args, table, result, result.to_dict(), format_result(result))
+
+
+def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
+    """``--model auto``'s progress, one line per candidate on stderr (stdout stays the
+    result, one JSON object with --json)."""
+    if row is None:
+        print(f"auto: [{i + 1}/{n}] fitting {model} ...", end="", file=sys.stderr, flush=True)
+    elif row["status"] == "failed":
+        print(f" failed: {row.get('message', row.get('result'))}", file=sys.stderr, flush=True)
+    else:
+        note = "" if row["converged"] else f", {row['result']}"
+        print(f" log_rmse {row['log_rmse']:.4g} in {row['fit_time_s']:.1f} s{note}",
+              file=sys.stderr, flush=True)
 
 
 def _report(args, table, result, as_dict: dict, as_text: str) -> int:

@@ -1,16 +1,28 @@
-"""The fitting loss and the error metrics, one definition for both.
+"""The fitting losses and the error metrics, one definition for both.
 
-Residual of bin b, channel c (``compressed`` space, after Löw et al. 2012 and
-Ngan et al. 2005, who fit in a log space so that the peak does not swamp the
-rest):
+Residual of bin b, channel c, for a loss with compression ``g``:
 
-    r_cb = sqrt(w_b) * ( log(1 + f_model_c(b) cos_i(b)) - log(1 + f_meas_c(b) cos_i(b)) )
+    r_cb = sqrt(w_b) * ( g(f_model_c(b) cos_i(b)) - g(f_meas_c(b) cos_i(b)) )
+
+The loss is a choice (:data:`LOSSES`, docs/fitting.md says when to use which):
+
+- ``"log"`` (default): ``g(x) = log(1 + x)``, after Löw et al. 2012 and Ngan et
+  al. 2005, who fit in a log space so that the peak does not swamp the rest;
+- ``"cube_root"``: ``g(x) = cbrt(x + 1e-6)``, the perceptual compression of
+  Löw et al. 2012 and Sun et al. 2018 (closer to lightness than the log; the
+  highlight counts more than under the log, less than in linear space). The
+  offset keeps the slope finite at ``x = 0`` (``cbrt`` has an infinite one there);
+  it cancels in every difference of values well above 1e-6 1/sr;
+- ``"linear_cos"``: ``g(x) = x``, the linear radiance-like error under uniform
+  lighting: the energy of the highlight decides, as in a rendered image without
+  tone mapping.
 
 with w_b the bin's solid-angle weight (see ``brdffit.io.grid``; times the scene
 weight for scene-aware fits), normalised to sum 1 over the bins used. Only
 measured, finite bins above the horizon have w_b > 0.
 
-``log_rmse`` is the root of the weighted mean square of the bracket:
+``log_rmse`` is the root of the weighted mean square of the bracket under the log
+loss (``cube_root_rmse`` and ``rmse_cos`` the same under the other two):
 
     log_rmse = sqrt( sum_b w_b sum_c (...)^2 / (3 sum_b w_b) )
 
@@ -34,24 +46,68 @@ from brdffit.models import AbstractBRDFModel
 from brdffit.models.base import KD, ParamSpec
 from brdffit.models.frame import Frame
 
+#: The losses a fit can minimise; the first is the default.
+LOSSES = ("log", "cube_root", "linear_cos")
+DEFAULT_LOSS = "log"
+#: The full-table metric that each loss is the (weighted) mean square of: every
+#: result reports all three, whatever was optimised.
+LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos"}
+#: Offset inside the cube root (1/sr, times cos_i): finite slope at 0, far below
+#: any measured value (``merl.MIN_PEAK`` is 1e-5 for the brightest bin).
+CUBE_ROOT_OFFSET = 1e-6
+
+
+def _cbrt(x):
+    # exp(log(x)/3) for x > 0: XLA's CPU cbrt is ~20x slower over a full table, and
+    # this agrees with it to 1e-6 relative in float32
+    return jnp.exp(jnp.log(x) * (1.0 / 3.0))
+
+
+def compress_values(x, loss: str):
+    """``g(x)`` of the module docstring, for ``x = f cos_i >= 0``: the caller clamps
+    (``compress`` does), so that the hot path holds no second clamp."""
+    if loss == "log":
+        return jnp.log1p(x)
+    if loss == "cube_root":
+        return _cbrt(x + CUBE_ROOT_OFFSET)
+    if loss == "linear_cos":
+        return x
+    raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
+
+
+def compress_slope(x, loss: str):
+    """``g'(x)``, for the closed-form Jacobian of :func:`normal_equations` (``x >= 0``)."""
+    if loss == "log":
+        return 1.0 / (1.0 + x)
+    if loss == "cube_root":
+        c = _cbrt(x + CUBE_ROOT_OFFSET)
+        return 1.0 / (3.0 * c * c)
+    if loss == "linear_cos":
+        return jnp.ones_like(x)
+    raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
+
 
 class LossData(eqx.Module):
-    """One fixed-size batch of bins: geometry, compressed targets, weights."""
+    """One fixed-size batch of bins: geometry, compressed targets, weights, and the
+    loss they are compressed for (static: each loss compiles its own fit)."""
 
     frame: Frame  # per-bin geometry, precomputed (see brdffit.models.frame), (S,)
-    target: Float[Array, "3 s"]  # log1p(f_meas * cos_i)
+    target: Float[Array, "3 s"]  # g(f_meas * cos_i) of the loss
     weight: Float[Array, " s"]  # sums to 1; 0 on padding and unusable bins
+    loss: str = eqx.field(static=True, default=DEFAULT_LOSS)
 
 
-def compress(f: Float[Array, "3 s"], cos_i: Float[Array, " s"]) -> Float[Array, "3 s"]:
-    """The compressed value log(1 + f cos_i) that the loss compares."""
-    return jnp.log1p(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0))
+def compress(
+    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS
+) -> Float[Array, "3 s"]:
+    """The compressed value g(f cos_i) that the loss compares."""
+    return compress_values(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), loss)
 
 
 def residuals(u: Float[Array, " p"], args) -> Float[Array, "3 s"]:
     model, data = args
     f = model.eval_channels(model.constrain(u), data.frame)
-    return jnp.sqrt(data.weight) * (compress(f, data.frame.cos_i) - data.target)
+    return jnp.sqrt(data.weight) * (compress(f, data.frame.cos_i, data.loss) - data.target)
 
 
 def sum_squares(u, model: AbstractBRDFModel, data: LossData):
@@ -60,23 +116,39 @@ def sum_squares(u, model: AbstractBRDFModel, data: LossData):
 
 
 def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Array]:
-    """log_rmse and friends of parameters ``u`` on ``data`` (usually the full table).
+    """Every metric of parameters ``u`` on ``data`` (usually the full table), whatever
+    loss ``data`` was made for.
 
-    - ``log_rmse``: see the module docstring.
+    - ``log_rmse``, ``cube_root_rmse``: see the module docstring (``g`` of each loss).
     - ``rmse_cos``: the same weighting on (f_model - f_meas) cos_i, linear space (1/sr).
     - ``rel_peak_error``: relative error of the fitted value at the bin with the
       largest measured compressed value (how well the highlight is matched).
     """
     f = model.eval_channels(model.constrain(u), data.frame)
-    pred = compress(f, data.frame.cos_i)
-    d = pred - data.target
-    log_rmse = jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
-    meas_cos = jnp.expm1(data.target)
-    lin = jnp.maximum(f, 0.0) * data.frame.cos_i - meas_cos
-    rmse_cos = jnp.sqrt(jnp.sum(data.weight * lin * lin) / 3.0)
+    fit_cos = jnp.maximum(f, 0.0) * jnp.maximum(data.frame.cos_i, 0.0)
+    meas_cos = _uncompress(data.target, data.loss)
+
+    def rmse(d):
+        return jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
+
+    lin = fit_cos - meas_cos
     peak = jnp.argmax(jnp.where(data.weight > 0, jnp.sum(data.target, axis=0), -jnp.inf))
     rel_peak = jnp.max(jnp.abs(lin[:, peak]) / jnp.maximum(meas_cos[:, peak], 1e-12))
-    return {"log_rmse": log_rmse, "rmse_cos": rmse_cos, "rel_peak_error": rel_peak}
+    return {
+        "log_rmse": rmse(compress_values(fit_cos, "log") - compress_values(meas_cos, "log")),
+        "cube_root_rmse": rmse(compress_values(fit_cos, "cube_root")
+                               - compress_values(meas_cos, "cube_root")),
+        "rmse_cos": rmse(lin),
+        "rel_peak_error": rel_peak,
+    }
+
+
+def _uncompress(target, loss: str):
+    if loss == "log":
+        return jnp.expm1(target)
+    if loss == "cube_root":
+        return jnp.maximum(target**3 - CUBE_ROOT_OFFSET, 0.0)
+    return target
 
 
 #: Samples per block of the normal equations (see :func:`normal_equations`).
@@ -94,18 +166,25 @@ def normal_equations(u: Float[Array, " p"], args):
     count with no such divisor is summed in one pass.
     """
     model, data = args
+    return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
+
+
+def sum_over_blocks(terms, data: LossData):
+    """``terms(data)`` for a function that returns sums over the samples (any pytree
+    of arrays), evaluated block by block when there are many samples: the sum of
+    ``terms`` over consecutive blocks of :data:`BLOCK` samples or so."""
     n = data.weight.shape[-1]
     block = _block_size(n)
     if block is None:
-        return _normal_equations(u, model, data)
+        return terms(data)
 
     def add_block(i, total):
         part = jax.tree_util.tree_map(
             lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1), data)
-        return jax.tree_util.tree_map(jnp.add, total, _normal_equations(u, model, part))
+        return jax.tree_util.tree_map(jnp.add, total, terms(part))
 
     first = jax.tree_util.tree_map(lambda a: a[..., :block], data)
-    return jax.lax.fori_loop(1, n // block, add_block, _normal_equations(u, model, first))
+    return jax.lax.fori_loop(1, n // block, add_block, terms(first))
 
 
 def _block_size(n: int) -> int | None:
@@ -163,8 +242,8 @@ def _normal_equations(u: Float[Array, " p"], model, data):
     cos_i = jnp.maximum(frame.cos_i, 0.0)
     f = jnp.maximum(kd[:, None] / jnp.pi + jnp.einsum("kc,ks->cs", scales, lobes), 0.0)
     sqrt_w = jnp.sqrt(data.weight)
-    r = sqrt_w * (jnp.log1p(f * cos_i) - data.target)  # (3, S)
-    a = sqrt_w * cos_i / (1.0 + f * cos_i)  # dr/df, (3, S)
+    r = sqrt_w * (compress_values(f * cos_i, data.loss) - data.target)  # (3, S)
+    a = sqrt_w * cos_i * compress_slope(f * cos_i, data.loss)  # dr/df, (3, S)
     a2, ar = a * a, a * r
     shape_cols = jnp.einsum("kc,jks->jcs", scales, d_lobes)  # d f_c / d shape_j, (J, 3, S)
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from brdffit import jsonout, models
 from brdffit.errors import FitInputError
+from brdffit.fitting.loss import LOSSES
 from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.io.angles import N_PHI_D, N_THETA_D, N_THETA_H
@@ -33,7 +34,7 @@ from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name
 DEFAULT_TOLERANCE = 0.005
 #: The fields that are keywords of ``brdffit.fit``, in its order; the others
 #: (``model``, the selection rule) say what to fit and how to choose.
-FIT_KEYWORDS = ("solver", "samples", "precision", "starts", "max_steps", "seed")
+FIT_KEYWORDS = ("loss", "solver", "samples", "precision", "starts", "max_steps", "seed")
 SELECTION_KEYWORDS = ("tolerance", "budget")
 N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
@@ -121,6 +122,10 @@ class FitOptions:
     model: str = _option(
         _FIT_DEFAULTS["model"], kind=str, words="a model name, or auto",
         doc="model name (see `brdffit models`), or 'auto' to choose one (docs/selection.md)")
+    loss: str = _option(
+        _FIT_DEFAULTS["loss"], kind=str, choices=LOSSES,
+        doc="what the solver minimises: log (log1p(f cos), default), cube_root, or linear_cos "
+            "(f cos); every metric is reported whatever the choice (docs/fitting.md)")
     solver: str = _option(
         _FIT_DEFAULTS["solver"], kind=str, choices=SOLVERS,
         doc="least-squares solver; lm is brdffit's Levenberg-Marquardt")
@@ -175,8 +180,12 @@ class FitOptions:
     @staticmethod
     def key_of(fit_keywords: dict) -> str:
         """:meth:`key` of fit keywords as a results file stored them, not checked
-        again: a file written under other ranges must still resume."""
-        d = {name: fit_keywords[name] for name in FIT_KEYWORDS}
+        again: a file written under other ranges must still resume. A keyword the
+        file lacks (written before the option existed) takes today's default."""
+        d = {name: fit_keywords.get(name, _FIT_DEFAULTS.get(name)) for name in FIT_KEYWORDS}
+        if d["loss"] == _FIT_DEFAULTS["loss"]:
+            # keys written before the loss was an option stay the same: resume skips them
+            del d["loss"]
         return jsonout.dumps(d, sort_keys=True, separators=(",", ":"))
 
     def to_dict(self) -> dict:

@@ -11,7 +11,7 @@ The pipeline, and where each decision is documented:
    (``throw=False``) and are reported, never raised;
 5. the error metrics of the best solution on **every** usable bin of the table.
 
-Compiled functions are keyed on (model, solver, sample count, precision) only:
+Compiled functions are keyed on (model, solver, sample count, precision, loss) only:
 the data always travels through ``args``, so the second table with the same
 settings reuses the compiled fit, and the persistent cache (``brdffit.runtime``)
 carries it over to the next process.
@@ -35,15 +35,26 @@ from jaxtyping import Array, Float
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
 from brdffit.fitting import solver as solvers
-from brdffit.fitting.loss import LossData, normal_equations, residuals, sum_squares
+from brdffit.fitting.loss import (
+    DEFAULT_LOSS,
+    LOSS_METRIC,
+    LOSSES,
+    LossData,
+    compress_values,
+    normal_equations,
+    residuals,
+    sum_squares,
+)
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.solver import NormalLevenbergMarquardt
 from brdffit.fitting.starts import candidates as start_vectors
+from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io import merl
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.models.frame import Frame, shading_frame
+from brdffit.view.render import SphereReference
 
 PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
 #: One start suffices on every case of the stability suite: the starts are scored
@@ -135,20 +146,25 @@ def _device_frames(dtype_name: str) -> Frame:
     return jax.jit(shading_frame)(jnp.asarray(g.wi, dtype_name), jnp.asarray(g.wo, dtype_name))
 
 
-def _make_loss_data(table, index, weight, dtype, frame: Frame) -> LossData:
+def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
     values = table.rgb.reshape(3, -1)[:, index]
-    target = np.log1p(values * bin_grid().cos_i[index])
+    x = values * np.maximum(bin_grid().cos_i[index], 0.0)
+    # numpy's log1p for the default: the same targets, to the last bit, as before the
+    # loss was a choice (JAX's log1p differs in the last place on some values)
+    target = np.log1p(x) if loss == "log" else compress_values(x, loss)
     return LossData(
-        frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype)
+        frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
+        loss=loss,
     )
 
 
 def sample_data(
-    table: MerlTable, index: np.ndarray, weight: np.ndarray, dtype=jnp.float64
+    table: MerlTable, index: np.ndarray, weight: np.ndarray, dtype=jnp.float64,
+    loss: str = DEFAULT_LOSS,
 ) -> LossData:
-    """The bins ``index`` (flat) of ``table`` with their ``weight``s, ready for a loss."""
+    """The bins ``index`` (flat) of ``table`` with their ``weight``s, ready for ``loss``."""
     frame = _gather(_device_frames(jnp.dtype(dtype).name), jnp.asarray(index))
-    return _make_loss_data(table, index, weight, dtype, frame)
+    return _make_loss_data(table, index, weight, dtype, frame, loss)
 
 
 @jax.jit
@@ -156,18 +172,23 @@ def _gather(tree, index):
     return jax.tree_util.tree_map(lambda a: a[..., index], tree)
 
 
-@jax.jit
-def _compress_all(rgb, cos_i):
-    return jnp.log1p(rgb * jnp.maximum(cos_i, 0.0))
+@functools.partial(jax.jit, static_argnames="loss")
+def _compress_all(rgb, cos_i, loss):
+    # unmeasured bins hold negative values: clamped so that every loss's target is
+    # finite there (their weight is 0)
+    return compress_values(jnp.maximum(rgb, 0.0) * jnp.maximum(cos_i, 0.0), loss)
 
 
-def full_table_data(table: MerlTable, weight: np.ndarray, dtype=jnp.float64) -> LossData:
+def full_table_data(
+    table: MerlTable, weight: np.ndarray, dtype=jnp.float64, loss: str = DEFAULT_LOSS
+) -> LossData:
     """Every bin of the table (a fixed shape), weighted by ``weight`` (flat; 0 below
-    the horizon and on unmeasured bins), as a :class:`LossData`."""
+    the horizon and on unmeasured bins), as a :class:`LossData` for ``loss``."""
     frame = _device_frames(jnp.dtype(dtype).name)
     rgb = jnp.asarray(table.rgb.reshape(3, -1), dtype)
     return LossData(
-        frame=frame, target=_compress_all(rgb, frame.cos_i), weight=jnp.asarray(weight, dtype)
+        frame=frame, target=_compress_all(rgb, frame.cos_i, loss),
+        weight=jnp.asarray(weight, dtype), loss=loss,
     )
 
 
@@ -182,12 +203,14 @@ class _TableOnDevice(eqx.Module):
 
     meas_cos: Float[Array, "3 n"]  # f_meas cos_i
     target: Float[Array, "3 n"]  # log1p(f_meas cos_i)
+    cube: Float[Array, "3 n"]  # cbrt(f_meas cos_i + offset), the cube-root loss's target
 
 
 @jax.jit
 def _table_on_device(rgb, cos_i) -> _TableOnDevice:
     meas_cos = rgb * jnp.maximum(cos_i, 0.0)
-    return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos))
+    return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos),
+                          cube=compress_values(jnp.maximum(meas_cos, 0.0), "cube_root"))
 
 
 #: Per-table arrays, reused by every model fitted to the same table object (a
@@ -234,6 +257,12 @@ def _full_log_rmse(model, u, dev: _TableOnDevice, weight, frame):
 
 
 @eqx.filter_jit
+def _full_cube_root_rmse(model, u, dev: _TableOnDevice, weight, frame):
+    d = compress_values(_fit_cos(model, u, frame), "cube_root") - dev.cube
+    return jnp.sqrt(jnp.sum(weight * d * d) / 3.0)
+
+
+@eqx.filter_jit
 def _full_linear_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
     lin = _fit_cos(model, u, frame) - dev.meas_cos
     at_peak = _fit_cos(model, u, _gather(frame, peak[None]))[:, 0] - dev.meas_cos[:, peak]
@@ -268,8 +297,10 @@ def full_table_metrics(
         dev = _device_table(table, dt)
         ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
         log_rmse = _full_log_rmse(model, ut, dev, w, frame)
+        cube_root_rmse = _full_cube_root_rmse(model, ut, dev, w, frame)
         linear = _full_linear_errors(model, ut, dev, w, frame, peak)
-        metrics = {"log_rmse": float(log_rmse), **{k: float(v) for k, v in linear.items()}}
+        metrics = {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
+                   **{k: float(v) for k, v in linear.items()}}
         if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
             break
     return metrics
@@ -313,7 +344,8 @@ class _Prepared(NamedTuple):
     brightest: float  # the largest usable value (1/sr)
 
 
-def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str) -> _Prepared:
+def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
+             loss: str) -> _Prepared:
     """The usable bins, their weights, the subsample and its device data: computed
     once per table and options and reused by every model fitted to the same table
     object (``auto``, a batch's models, a nested model's parent), ~15 ms a fit."""
@@ -327,11 +359,12 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str) -
             return _Prepared(counts, n_usable, None, None, None, -1, brightest)
         weight = bin_weights(counts.usable, bin_weight)
         sample_set = stratified_sample(weight, samples, seed)
-        data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision])
+        data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision],
+                           loss)
         return _Prepared(counts, n_usable, weight, sample_set, data, _peak_bin(table, weight),
                          brightest)
 
-    return _cached(table, ("prepared", samples, seed, precision, weight_key), make)
+    return _cached(table, ("prepared", samples, seed, precision, loss, weight_key), make)
 
 
 # -- the front door ------------------------------------------------------------------
@@ -342,6 +375,7 @@ def fit(
     table: MerlTable,
     model: str | models.AbstractBRDFModel = "ggx",
     *,
+    loss: str = DEFAULT_LOSS,
     solver: str = "lm",
     samples: int | None = DEFAULT_SAMPLES,
     precision: str = "float64",
@@ -357,6 +391,9 @@ def fit(
     Args:
         table: the measured table (``brdffit.io.merl.read``).
         model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
+        loss: what the solver minimises (``brdffit.fitting.loss.LOSSES``): ``"log"``
+            (default), ``"cube_root"`` or ``"linear_cos"``. Every metric is reported
+            whatever the loss.
         solver: ``"lm"`` (Levenberg-Marquardt, default), ``"dogleg"`` or ``"bfgs"``.
         samples: bins the solver sees (stratified subsample), ``None`` for all.
             The reported error is always on the full table.
@@ -377,6 +414,8 @@ def fit(
     """
     t0 = time.perf_counter()
     m = models.get(model)
+    if loss not in LOSSES:
+        raise FitInputError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
     if solver not in SOLVERS:
         raise FitInputError(f"unknown solver {solver!r}; choose one of {', '.join(SOLVERS)}")
     if precision not in PRECISIONS:
@@ -394,7 +433,7 @@ def fit(
         if np.any(bin_weight < 0):
             raise FitInputError("bin_weight must be >= 0")
 
-    prep = _prepare(table, bin_weight, samples, seed, precision)
+    prep = _prepare(table, bin_weight, samples, seed, precision, loss)
     counts, n_usable, weight, sample_set, data = (
         prep.counts, prep.n_usable, prep.weight, prep.sample_set, prep.data)
     if n_usable < m.n_params * 4:
@@ -410,8 +449,8 @@ def fit(
         )
     dtype = PRECISIONS[precision]
 
-    again = dict(solver=solver, precision=precision, starts=starts, max_steps=max_steps,
-                 seed=seed, bin_weight=bin_weight)
+    again = dict(loss=loss, solver=solver, precision=precision, starts=starts,
+                 max_steps=max_steps, seed=seed, bin_weight=bin_weight)
     # Every bin (samples=None): the fit on the default subsample, with its starts and
     # its nested parent, lands next to the optimum at ~1/70 of the cost per step;
     # every bin then only polishes it (a few steps instead of dozens, per start).
@@ -434,7 +473,8 @@ def fit(
     parent_start = None
     if init is None and m.parent is not None:
         on_every_bin = parent_fit is not None and parent_fit.samples["used"] == n_usable
-        if parent_fit is None or parent_fit.model != m.parent or (polish and not on_every_bin):
+        if (parent_fit is None or parent_fit.model != m.parent or parent_fit.loss != loss
+                or (polish and not on_every_bin)):
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
         if not polish:
@@ -466,12 +506,17 @@ def fit(
         u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
 
     metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
-    metrics["sample_log_rmse"] = (
+    # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
+    metrics[f"sample_{LOSS_METRIC[loss]}"] = (
         float(np.sqrt(max(losses[i], 0.0) / 3.0)) if finite.any() else float("nan")
     )
     if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
         result = "nonfinite"  # an error that cannot be measured is no success
     params = _plain(_constrain(m, jnp.asarray(u_best)))
+    # The image error of the whole sphere (no scene weighting): one figure that
+    # compares fits made under different losses.
+    metrics["psnr_db"] = _cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
+    uncertainty = parameter_uncertainty(m, u_best, data) if result != "nonfinite" else None
     return FitResult(
         model=m.name,
         params=params,
@@ -492,6 +537,8 @@ def fit(
         },
         solver=solver,
         precision=precision,
+        loss=loss,
         starts=len(best_starts),
+        uncertainty=uncertainty,
         table=table.source,
     )

@@ -31,11 +31,17 @@ class FitResult:
     test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
     ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
     ``"successful"``.
+    ``loss`` names what the solver minimised (``brdffit.fitting.loss.LOSSES``);
+    ``error`` holds every metric (``log_rmse``, ``cube_root_rmse``, ``rmse_cos``,
+    ``rel_peak_error``, ``psnr_db``) whatever it was, and ``sample_<metric>`` of the
+    loss on the solver's subsample.
 
     Set only on some paths, None elsewhere:
 
     - ``scene``: the scene the fit was weighted to (``brdffit.fitting.scene``), and
       ``full_table_error``: the same metrics as ``error`` on the whole table;
+    - ``uncertainty``: standard errors, correlations and undetermined parameters
+      (``brdffit.fitting.uncertainty``); None for a fit whose every start diverged;
     - ``selection``: on the fit ``model="auto"`` chose, how and why it was chosen
       (``brdffit.selection.Selection.summary``: ranking of every candidate, reason).
     """
@@ -50,11 +56,13 @@ class FitResult:
     samples: dict[str, int | dict[str, int]]
     solver: str = "lm"
     precision: str = "float64"
+    loss: str = "log"
     starts: int = 1
     table: str | None = None
     scene: dict | None = None
     full_table_error: dict[str, float] | None = None
     selection: dict | None = None
+    uncertainty: dict | None = None
 
     @property
     def log_rmse(self) -> float:

@@ -6,7 +6,8 @@
   residual that ``log_rmse`` aggregates (``brdffit.fitting.loss``), and its sign;
 - :func:`spheres`: table and fit rendered on a sphere under two lights, with the
   ratio of the two images;
-- :func:`polar`: f_r in the plane of incidence for a few incident angles.
+- :func:`polar`: f_r in the plane of incidence for a few incident angles, per channel;
+- :func:`report`: one page per fit: parameters with errors, metrics, the above.
 
 The measured table is read by its reference nearest-bin lookup
 (:meth:`MerlTable.lookup`), the fit is evaluated by its model in JAX; unmeasured
@@ -24,6 +25,7 @@ import contextlib
 import io
 import os
 import tempfile
+import warnings
 from collections.abc import Callable
 
 import equinox as eqx
@@ -53,7 +55,7 @@ from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.view.render import LIGHTS, radiance, sphere_disc, tonemap
 
-KINDS = ("slices", "error_map", "spheres", "polar")
+KINDS = ("slices", "error_map", "spheres", "polar", "report")
 
 CHANNELS = (("R", "#d62728"), ("G", "#2ca02c"), ("B", "#1f77b4"))
 #: Rec. 709 luminance weights, for the one-curve-per-angle plots.
@@ -125,52 +127,69 @@ def _theta_h_edges_deg() -> np.ndarray:
 # -- slices -------------------------------------------------------------------------
 
 
+#: phi_d of the slice rows. Isotropy and reciprocity make phi_d and 180 - phi_d the
+#: same bin, so 0 .. 90 covers the table: 90 is the view of Ngan et al. 2005, 0 the
+#: plane that holds both directions (retro- and forward scattering).
+SLICE_PHI_D = (90.0, 45.0, 0.0)
+
+
 def slices(
     table: MerlTable, result: FitResult | dict, *, theta_d_deg=(1.0, 30.0, 60.0, 80.0),
-    phi_d_deg: float = 90.0,
+    phi_d_deg=SLICE_PHI_D,
 ) -> bytes:
-    """Measured (dots) and fitted (lines) f_r against theta_h, one panel per theta_d."""
+    """Measured (dots) and fitted (lines) f_r against theta_h, one panel per theta_d,
+    one row per phi_d."""
     result = _as_result(result)
+    phi_d_deg = tuple(np.atleast_1d(phi_d_deg).tolist())
+    fig = Figure(figsize=(13.0, 2.0 + 2.9 * len(phi_d_deg)), layout="constrained")
+    _draw_slices(fig, table, result, theta_d_deg, phi_d_deg)
+    shown = ", ".join(f"{p:g}°" for p in phi_d_deg)
+    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}", fontsize=12)
+    return _png(fig)
+
+
+def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
+    axes = np.atleast_2d(fig.subplots(len(phi_d_deg), len(theta_d_deg), sharey=True,
+                                      sharex=True, squeeze=False))
     i_th = np.arange(N_THETA_H)
-    _, i_tds, i_pd = half_diff_to_bins(
-        np.zeros(len(theta_d_deg)), np.radians(theta_d_deg), np.radians(phi_d_deg)
-    )
-    i_pd = int(np.ravel(i_pd)[0])
-    i_tds = np.atleast_1d(i_tds)
-    theta_h, theta_d, phi_d = bin_centres(i_th[None, :], i_tds[:, None], i_pd)
-    theta_h, theta_d, phi_d = np.broadcast_arrays(theta_h, theta_d, phi_d)
-    fitted_all = evaluate(result, *half_diff_to_dirs(theta_h, theta_d, phi_d))
-    fig = Figure(figsize=(12.5, 4.0), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, len(theta_d_deg), sharey=True))
     lo, hi = np.inf, 0.0
-    for p, (ax, i_td) in enumerate(zip(axes, i_tds, strict=True)):
-        fitted = fitted_all[p]
-        measured = np.where(table.mask[i_th, i_td, i_pd], table.rgb[:, i_th, i_td, i_pd], np.nan).T
-        x = np.degrees(theta_h[p])
-        for c, (_, colour) in enumerate(CHANNELS):
-            ax.plot(x, measured[:, c], "o", ms=3.2, color=colour, alpha=0.55, mec="none")
-            ax.plot(x, fitted[:, c], "-", lw=1.5, color=colour)
-        for v in (measured, fitted):
-            v = v[np.isfinite(v) & (v > 0)]
-            if v.size:
-                lo, hi = min(lo, v.min()), max(hi, v.max())
-        ax.set_yscale("log")
-        _sqrt_axis(ax)
-        ax.grid(True, which="major", alpha=0.3)
-        ax.set_title(f"θd = {np.degrees(theta_d[p, 0]):.1f}°", fontsize=11)
-        ax.set_xlabel("θh (degrees, √ scale)")
-    first = axes[0]
+    for row, phi in enumerate(phi_d_deg):
+        _, i_tds, i_pd = half_diff_to_bins(
+            np.zeros(len(theta_d_deg)), np.radians(theta_d_deg), np.radians(phi))
+        i_pd = int(np.ravel(i_pd)[0])
+        i_tds = np.atleast_1d(i_tds)
+        theta_h, theta_d, phi_d = bin_centres(i_th[None, :], i_tds[:, None], i_pd)
+        theta_h, theta_d, phi_d = np.broadcast_arrays(theta_h, theta_d, phi_d)
+        fitted_all = evaluate(result, *half_diff_to_dirs(theta_h, theta_d, phi_d))
+        for p, (ax, i_td) in enumerate(zip(axes[row], i_tds, strict=True)):
+            fitted = fitted_all[p]
+            measured = np.where(table.mask[i_th, i_td, i_pd], table.rgb[:, i_th, i_td, i_pd],
+                                np.nan).T
+            x = np.degrees(theta_h[p])
+            for c, (_, colour) in enumerate(CHANNELS):
+                ax.plot(x, measured[:, c], "o", ms=3.0, color=colour, alpha=0.55, mec="none")
+                ax.plot(x, fitted[:, c], "-", lw=1.5, color=colour)
+            for v in (measured, fitted):
+                v = v[np.isfinite(v) & (v > 0)]
+                if v.size:
+                    lo, hi = min(lo, v.min()), max(hi, v.max())
+            ax.set_yscale("log")
+            _sqrt_axis(ax)
+            ax.grid(True, which="major", alpha=0.3)
+            ax.set_title(f"θd = {np.degrees(theta_d[p, 0]):.1f}°", fontsize=10)
+            if row == len(phi_d_deg) - 1:
+                ax.set_xlabel("θh (degrees, √ scale)")
+        # the bin centre actually shown, as the panel titles give theta_d's
+        axes[row, 0].set_ylabel(f"φd = {np.degrees(phi_d[0, 0]):.1f}°\nf_r (1/sr, log)")
     if hi > 0:
-        first.set_ylim(lo / 2, hi * 2)
-    first.set_ylabel("BRDF f_r (1/sr, log scale)")
+        axes[0, 0].set_ylim(lo / 2, hi * 2)
     fig.legend(
         handles=[Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
                  Line2D([], [], color="0.3", label="fit")]
         + [Line2D([], [], color=col, lw=4, label=name) for name, col in CHANNELS],
         loc="outside right upper", fontsize=9,
     )
-    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {phi_d_deg:g}°", fontsize=12)
-    return _png(fig)
+    return axes
 
 
 # -- error map ----------------------------------------------------------------------
@@ -194,6 +213,14 @@ def bin_residuals(table: MerlTable, result: FitResult | dict) -> np.ndarray:
 def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
     """RMS and mean of the per-bin residual over phi_d and RGB, on (theta_h, theta_d)."""
     result = _as_result(result)
+    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
+    _draw_error_map(fig, table, result)
+    fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
+                 fontsize=12)
+    return _png(fig)
+
+
+def _draw_error_map(fig, table: MerlTable, result: FitResult):
     r = bin_residuals(table, result)
     n = np.count_nonzero(np.isfinite(r), axis=(0, 3))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -201,8 +228,6 @@ def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
         bias = np.nansum(r, axis=(0, 3)) / n
     x = _theta_h_edges_deg()
     y = np.linspace(0.0, 90.0, N_THETA_D + 1)
-
-    fig = Figure(figsize=(12.0, 4.8), layout="constrained")
     ax_rms, ax_bias = fig.subplots(1, 2, sharey=True)
     finite_rms = rms[np.isfinite(rms)]
     vmax = float(np.percentile(finite_rms, 99.5)) if finite_rms.size else 1.0
@@ -225,9 +250,6 @@ def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
         ax.set_xlabel("θh (degrees, √ scale)")
     ax_rms.set_ylabel("θd (degrees)")
     ax_rms.set_yticks([0, 15, 30, 45, 60, 75, 90])
-    fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
-                 fontsize=12)
-    return _png(fig)
 
 
 def _with_bad(name: str):
@@ -239,67 +261,136 @@ def _with_bad(name: str):
 # -- spheres ------------------------------------------------------------------------
 
 SPHERE_BACKGROUND = "#33404f"
-# The lights and the sphere geometry are brdffit.view.render's: the plots show what the
-# selection's PSNR measures.
+#: The plots' lights: brdffit.view.render's two (what the PSNR measures), and a back
+#: light 135 deg from the camera. Its lit crescent has light and camera at opposite
+#: grazing angles (theta_d ~ 68 deg), where the Fresnel rise shows.
+SPHERE_LIGHTS = (
+    ("key light\n45° above-left", LIGHTS[0][1]),
+    ("grazing light\n80° from the right", LIGHTS[1][1]),
+    ("back light 135° from\nthe camera: Fresnel rim", np.array([0.7071, 0.0, -0.7071])),
+)
+#: The colour panel: 0.5 + COLOUR_GAIN * log2(channel share, fit / measured), so
+#: one stop of a channel's share saturates that channel.
+COLOUR_GAIN = 0.5
+#: One exposure for every table, fit and light: a white Lambertian surface facing the
+#: light has radiance 1 and shows at Reinhard 0.5 (sRGB 0.74). A dark material looks
+#: dark and a bright one bright, as a renderer would show them under the same light.
+EXPOSURE = 1.0
+#: Samples per pixel side: a smooth silhouette and terminator.
+SUPERSAMPLE = 3
+
+
+def _block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """Mean over k x k pixel blocks of an (n k, n k, ...) image, NaN-aware."""
+    n = a.shape[0] // k
+    b = a.reshape(n, k, n, k, *a.shape[2:])
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN block is NaN: off the disc
+        return np.nanmean(b, axis=(1, 3))
+
+
+def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
+                  size: int = 200, supersample: int = SUPERSAMPLE):
+    """Anti-aliased radiance images of the table and the fit under ``light``.
+
+    Returns ``(measured, fitted, coverage, unmeasured)``: (size, size, 3) radiance
+    (black where unlit; the measured image NaN where the table has no bin), the
+    fraction of each pixel on the sphere's disc, and the pixels whose samples are
+    mostly unmeasured.
+    """
+    result = _as_result(result)
+    n = size * supersample
+    wi, wo, inside = sphere_disc(n, light)
+    lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    measured = np.zeros((n, n, 3))
+    fitted = np.zeros((n, n, 3))
+    measured[lit] = table.lookup(wi[lit], wo[lit])
+    fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
+    measured, fitted = radiance(measured, wi), radiance(fitted, wi)
+    missing = inside & ~np.all(np.isfinite(measured), axis=-1)
+    outside = ~inside
+    measured[outside] = np.nan  # off the disc: not part of the pixel's average
+    fitted[outside] = np.nan
+    coverage = _block_mean(inside.astype(float), supersample)
+    unmeasured = _block_mean(missing.astype(float), supersample) > 0.5 * np.maximum(coverage, 1e-9)
+    return (_block_mean(measured, supersample), _block_mean(fitted, supersample), coverage,
+            unmeasured)
+
+
+def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
+    """The brightness ratio, log2(fit / measured) of the luminance, and the colour
+    ratio image of two radiance images: per channel ``0.5 + COLOUR_GAIN *
+    log2(share_fit / share_measured)`` with ``share`` a channel's part of the
+    luminance, so grey where the hue is right and tinted towards the colour the fit
+    has too much of. NaN off ``on``, where unlit, and (colour) in the darkest 0.5 %."""
+    lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
+    lit = on & (lum_m > 0)
+    eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
+        share = ((fitted + eps) / (lum_f[..., None] + eps)) / (
+            (measured + eps) / (lum_m[..., None] + eps))
+        colour = np.clip(0.5 + COLOUR_GAIN * np.log2(share), 0.0, 1.0)
+    bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
+    colour[~bright] = np.nan
+    return ratio, colour
+
+
+def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray) -> np.ndarray:
+    img = tonemap(np.nan_to_num(rad), EXPOSURE)
+    return coverage[..., None] * img + (1.0 - coverage[..., None]) * background
 
 
 def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> bytes:
-    """Table and fit on a sphere under two lights, and log2(fit / measured)."""
+    """Table and fit on a sphere under three lights, their brightness ratio and their
+    colour ratio."""
     result = _as_result(result)
-    fig = Figure(figsize=(10.5, 7.0), layout="constrained")
-    axes = fig.subplots(len(LIGHTS), 3)
+    fig = Figure(figsize=(13.5, 10.0), layout="constrained")
+    _draw_spheres(fig, table, result, size)
+    fig.suptitle(f"{_title(table, result)}\nsphere renders at one exposure for table and fit "
+                 f"(white diffuse facing the light = mid-grey); camera along the normal at "
+                 "the centre; grey: unmeasured bin", fontsize=12)
+    return _png(fig)
+
+
+def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS):
+    axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = np.array(to_rgb(NO_DATA))
-    ratio_img = None
-    for row, (label, light) in enumerate(LIGHTS):
-        wi, wo, inside = sphere_disc(size, light)
-        lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        measured = np.zeros((size, size, 3))
-        fitted = np.zeros((size, size, 3))
-        measured[lit] = table.lookup(wi[lit], wo[lit])
-        fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
-        measured, fitted = radiance(measured, wi), radiance(fitted, wi)
-        unmeasured = lit & ~np.all(np.isfinite(measured), axis=-1)
-        lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
-        ok = lit & ~unmeasured
-        # One exposure per row, from the measured image, for both: the pictures
-        # compare brightness honestly.
-        typical = float(np.median(lum_m[ok])) if ok.any() else 1.0
-        exposure = 0.35 / max(typical, 1e-6)
-        images = []
-        for rad in (measured, fitted):
-            img = tonemap(np.nan_to_num(rad), exposure)
-            img[~inside] = background
-            images.append(img)
+    ratio_img = colour_img = None
+    for row, (label, light) in enumerate(lights):
+        measured, fitted, coverage, unmeasured = sphere_images(table, result, light, size)
+        images = [_composite(measured, coverage, background),
+                  _composite(fitted, coverage, background)]
         images[0][unmeasured] = no_data
-        eps = 1e-3 * max(typical, 1e-9)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = np.log2((lum_f + eps) / (lum_m + eps))
-        ratio = np.where(ok, ratio, np.nan)
+        on = (coverage > 0.5) & ~unmeasured
+        ratio, colour = ratio_images(measured, fitted, on)
         for col, img in enumerate(images):
-            axes[row, col].imshow(img, interpolation="nearest")
-        # Under the ratio: background outside the sphere, black where unlit, grey
-        # where the table has no bin; the ratio's masked pixels are transparent.
-        base = np.where(inside[..., None], 0.0, background)
+            axes[row, col].imshow(img, interpolation="bilinear")
+        base = np.where(on[..., None], 0.0, background)
         base[unmeasured] = no_data
         axes[row, 2].imshow(base, interpolation="nearest")
         ratio_img = axes[row, 2].imshow(np.ma.masked_invalid(ratio), cmap="RdBu_r",
                                         vmin=-2, vmax=2, interpolation="nearest")
+        axes[row, 3].imshow(base, interpolation="nearest")
+        colour_img = np.where(np.isnan(colour), base, colour)
+        axes[row, 3].imshow(colour_img, interpolation="nearest")
         axes[row, 0].set_ylabel(label, fontsize=10)
-        for ax in axes[row]:  # the unlit half is black: outline the sphere
+        for ax in axes[row]:  # the unlit part is black: outline the sphere
             ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False,
                                 lw=0.8, ec="0.65"))
     for col, name in enumerate(("measured (nearest bin)", f"fit ({result.model})",
-                                "log₂(fit / measured)")):
+                                "brightness: log₂(fit / measured)",
+                                "colour: fit's hue over measured")):
         axes[0, col].set_title(name, fontsize=11)
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.8, extend="both",
-                 label="brightness ratio, stops (+1: fit 2× brighter)")
-    fig.suptitle(f"{_title(table, result)}\nsphere renders, directional light, "
-                 "camera along the normal at the centre; grey: unmeasured bin", fontsize=12)
-    return _png(fig)
+    fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
+                 label="stops (+1: fit 2× brighter)")
+    axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
+                           "(a stop saturates)", fontsize=9)
+    return axes
 
 
 # -- polar --------------------------------------------------------------------------
@@ -308,7 +399,9 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> b
 def polar(
     table: MerlTable, result: FitResult | dict, *, theta_i_deg=(10.0, 30.0, 50.0, 70.0)
 ) -> bytes:
-    """f_r (luminance) in the plane of incidence, log radius, per incident angle."""
+    """f_r in the plane of incidence, log radius, per incident angle: one half disc
+    per channel (R, G, B) on one radial scale, so a colour misfit shows as curves
+    that fit in one channel and miss in another."""
     result = _as_result(result)
     theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
     theta_i = np.radians(np.asarray(theta_i_deg, dtype=float))[:, None]
@@ -316,10 +409,9 @@ def polar(
     wo = np.broadcast_to(
         np.stack([np.sin(theta_o), np.zeros_like(theta_o), np.cos(theta_o)], axis=-1), wi.shape
     )
-    measured = table.lookup(wi, wo) @ LUMINANCE
-    fitted = evaluate(result, wi, wo) @ LUMINANCE
-    curves = list(zip(measured, fitted, strict=True))
-    values = np.concatenate([np.ravel(c) for c in curves])
+    measured = table.lookup(wi, wo)  # (n_theta_i, n_theta_o, 3)
+    fitted = evaluate(result, wi, wo)
+    values = np.concatenate([measured.ravel(), fitted.ravel()])
     values = values[np.isfinite(values) & (values > 0)]
     top = np.ceil(np.log10(values.max())) if values.size else 1.0
     bottom = max(np.floor(np.log10(values.min())) if values.size else -3.0, top - 5)
@@ -327,37 +419,47 @@ def polar(
     def radius(v):
         return np.clip(np.log10(np.where(v > 0, v, np.nan)) - bottom, 0.0, None)
 
-    fig = Figure(figsize=(11.0, 5.6))
-    # A half disc placed by hand: matplotlib centres the wedge (height r) in a square
-    # box of side 2r, so the box hangs below the figure to put the disc's centre
-    # near the bottom edge. Here r = 3.6 in, centre 0.7 in above the bottom.
-    ax = fig.add_axes((0.04, (0.7 - 1.8) / 5.6, 7.2 / 11.0, 7.2 / 5.6), projection="polar")
-    ax.set_theta_zero_location("N")
-    ax.set_theta_direction(-1)
-    ax.set_thetamin(-90)
-    ax.set_thetamax(90)
+    fig = Figure(figsize=(16.0, 4.0))
+    # Half discs placed by hand: matplotlib centres the wedge (height r) in a square
+    # box of side 2r, so the disc's centre is r/2 above the box's bottom, which
+    # hangs below the figure. Here r = 1.9 in, centres 0.45 in above the bottom.
     colours = _discrete_colours("viridis", len(theta_i_deg))
-    for ti, (meas, fit), colour in zip(theta_i_deg, curves, colours, strict=True):
-        ax.plot(theta_o, radius(meas), "o", ms=2.6, color=colour, alpha=0.5, mec="none")
-        ax.plot(theta_o, radius(fit), "-", lw=1.6, color=colour, label=f"θi = {ti:g}°")
-        ax.plot([-np.radians(ti)] * 2, [0, top - bottom], ls=":", lw=1, color=colour)
     ticks = np.arange(0, top - bottom + 1)
-    ax.set_rticks(ticks)
-    ax.set_yticklabels([f"$10^{{{int(bottom + t)}}}$" for t in ticks], fontsize=9)
-    ax.set_rlim(0, top - bottom)
-    ax.set_rlabel_position(-90)
-    ax.set_thetagrids(range(-90, 91, 30), [f"{d}°" for d in range(-90, 91, 30)])
+    for c, (name, _) in enumerate(CHANNELS):
+        ax = fig.add_axes((0.02 + c * 0.28, (0.45 - 0.95) / 4.0, 3.8 / 16.0, 3.8 / 4.0),
+                          projection="polar")
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(-1)
+        ax.set_thetamin(-90)
+        ax.set_thetamax(90)
+        for k, (ti, colour) in enumerate(zip(theta_i_deg, colours, strict=True)):
+            ax.plot(theta_o, radius(measured[k, :, c]), "o", ms=2.2, color=colour, alpha=0.5,
+                    mec="none")
+            ax.plot(theta_o, radius(fitted[k, :, c]), "-", lw=1.4, color=colour,
+                    label=f"θi = {ti:g}°")
+            ax.plot([-np.radians(ti)] * 2, [0, top - bottom], ls=":", lw=1, color=colour)
+        ax.set_rticks(ticks)
+        # the one radial scale, labelled once: the neighbours' labels would collide
+        ax.set_yticklabels([f"$10^{{{int(bottom + t)}}}$" for t in ticks] if c == 0
+                           else [], fontsize=8)
+        ax.set_rlim(0, top - bottom)
+        ax.set_rlabel_position(-90)
+        ax.set_thetagrids(range(-90, 91, 30), [f"{d}°" for d in range(-90, 91, 30)],
+                          fontsize=8)
+        ax.text(0.0, 0.74, f"{name} channel", transform=ax.transAxes, ha="left",
+                fontsize=12, color=CHANNELS[c][1], fontweight="bold")
     fig.legend(
         handles=ax.get_legend_handles_labels()[0]
         + [Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
            Line2D([], [], color="0.3", label="fit"),
            Line2D([], [], color="0.3", ls=":", label="incident direction")],
-        loc="upper left", bbox_to_anchor=(0.73, 0.86), fontsize=9,
+        loc="upper left", bbox_to_anchor=(0.85, 0.9), fontsize=9,
         title="incident angle", title_fontsize=9,
     )
-    fig.text(0.73, 0.2, "radius: f_r luminance\n(1/sr, log scale)\n\nθo < 0: back towards\n"
-            "the light; > 0: forward", fontsize=9, va="bottom")
-    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence", fontsize=12)
+    fig.text(0.85, 0.06, "radius: f_r (1/sr, log),\none scale for R, G, B\nθo < 0: back "
+             "towards\nthe light; > 0: forward", fontsize=9, va="bottom")
+    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel",
+                 fontsize=12)
     return _png(fig)
 
 
@@ -367,10 +469,101 @@ def _discrete_colours(name: str, n: int):
     return [colormaps[name](x) for x in np.linspace(0.05, 0.85, n)]
 
 
+# -- one page per fit -----------------------------------------------------------------
+
+
+def report(table: MerlTable, result: FitResult | dict) -> bytes:
+    """One page: the parameters with their standard errors and undetermined flags,
+    every error metric, the spheres, the phi_d = 90 deg slices and the error map."""
+    result = _as_result(result)
+    fig = Figure(figsize=(14.0, 19.5), layout="constrained")
+    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[2.6, 9.0, 3.6, 4.2])
+    _draw_summary(head, result)
+    _draw_spheres(sph, table, result, size=160)
+    sph.suptitle("sphere renders, one exposure for table and fit", fontsize=11)
+    _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
+    sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
+    _draw_error_map(err, table, result)
+    err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
+    fig.suptitle(_title(table, result), fontsize=14, fontweight="bold")
+    return _png(fig)
+
+
+def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
+    """The parameter lines (``value ± error``, flags) and the metric lines of a fit."""
+    u = result.uncertainty or {}
+    se, flags = u.get("std_error", {}), u.get("undetermined", {})
+    at_bound = u.get("at_bound", {})
+    params = []
+    for name, v in result.params.items():
+        vals = v if isinstance(v, list) else [v]
+
+        def listed(d, default, name=name, n=len(vals)):
+            x = d.get(name, [default] * n)
+            return x if isinstance(x, list) else [x]
+
+        parts = []
+        for x, e, b, f in zip(vals, listed(se, None), listed(at_bound, False),
+                              listed(flags, False), strict=True):
+            text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
+            parts.append(text + (" ?" if f else ""))
+        params.append(f"{name:<7}" + ",  ".join(parts))
+    params += [f"  ? {k}: {why}" for k, why in u.get("why", {}).items()]
+    params += [f"  {k} ~ {', '.join(v)} (|corr| > 0.95)"
+               for k, v in u.get("strongly_correlated", {}).items()]
+    e = result.error
+
+    def g(key, fmt=".4g"):
+        x = e.get(key)
+        return "n/a" if x is None or not np.isfinite(x) else format(x, fmt)
+
+    metrics = [f"log_rmse        {g('log_rmse')}",
+               f"cube_root_rmse  {g('cube_root_rmse')}",
+               f"rmse_cos        {g('rmse_cos')} 1/sr",
+               f"rel_peak_error  {g('rel_peak_error')}",
+               f"sphere PSNR     {g('psnr_db', '.1f')} dB",
+               f"loss {result.loss}, {result.result}, {result.steps} steps, "
+               f"{result.samples['used']:,} of {result.samples['usable']:,} bins"]
+    return params, metrics
+
+
+def _draw_summary(fig, result: FitResult) -> None:
+    params, metrics = summary_lines(result)
+    ax_p, ax_m, ax_c = fig.subplots(1, 3, width_ratios=[1.7, 1.0, 0.9])
+    for ax, title, lines in ((ax_p, "parameters ± standard error   (? = undetermined)", params),
+                             (ax_m, "errors (full table)", metrics)):
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=11, loc="left")
+        ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace",
+                fontsize=10.5, transform=ax.transAxes)
+    _draw_correlation(fig, ax_c, result)
+
+
+def _draw_correlation(fig, ax, result: FitResult) -> None:
+    """The parameters' correlation matrix (``FitResult.uncertainty``): a pair near ±1
+    trades off; grey where a parameter has no error (at a bound, undetermined)."""
+    u = result.uncertainty or {}
+    names = u.get("entries")
+    if not names:
+        ax.set_axis_off()
+        ax.set_title("no uncertainty for this fit", fontsize=10)
+        return
+    c = np.array([[np.nan if x is None else x for x in row] for row in u["correlation"]],
+                 dtype=float)
+    m = ax.imshow(np.ma.masked_invalid(c), cmap=_with_bad("RdBu_r"), vmin=-1, vmax=1,
+                  interpolation="nearest")
+    ticks = range(len(names))
+    ax.set_xticks(ticks, names, rotation=90, fontsize=7)
+    ax.set_yticks(ticks, names, fontsize=7)
+    ax.set_title("parameter correlation", fontsize=10)
+    fig.colorbar(m, ax=ax, shrink=0.8, ticks=[-1, 0, 1])
+
+
 # -- all of them --------------------------------------------------------------------
 
 RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
     "slices": slices, "error_map": error_map, "spheres": spheres, "polar": polar,
+    "report": report,
 }
 
 

@@ -1,0 +1,236 @@
+"""How well the data determine each fitted parameter: standard errors, correlations
+and a flag for what the table does not pin down.
+
+At the optimum ``theta`` of the weighted least-squares loss (``brdffit.fitting.loss``,
+residuals ``r_i = sqrt(w_i) (g(f_model) - g(f_meas))``), with ``J`` the Jacobian of
+the residuals with respect to the parameters on the user's scale (kd, ks, alpha,
+f0 as docs/models.md has them), the covariance is the sandwich (Huber 1967, White
+1980; the HC1 form of MacKinnon & White 1985):
+
+    A = J^T J,   B = sum_i r_i^2 J_i^T J_i,   cov = n / (n - p) A^+ B A^+
+
+``B`` holds the residual variance bin by bin. The plain ``s^2 A^-1`` assumes every
+residual has the variance its weight implies; measured noise is multiplicative
+(larger on the highlight, in every compressed space), and the sandwich stays right
+when that assumption is wrong (``tests/test_uncertainty.py`` checks it against the
+spread of fits to 50 noisy copies of a table). The residuals are those of the
+solver's own subsample, so the errors are those of the fit that was made.
+
+What the numbers mean: the spread of the fitted values over repeated measurements
+with independent noise per bin. On a real table the residual is mostly the model's
+misfit, correlated between neighbouring bins; the errors then say how firmly the
+data pin each parameter, not a calibrated error bar on the material.
+
+A parameter is **undetermined** when the data do not fix it:
+
+- ``no effect``: the residuals do not change with it (``alpha`` of a table without a
+  highlight, where ``ks`` is ~0);
+- ``trades off``: it lies along a direction that leaves the loss flat, with the
+  parameters named (``ks`` and ``f0`` can do this: the lobe scales with their product);
+- ``no lobe``: it shapes a lobe whose scale (``ks``) is within 2 standard errors
+  of 0 in every channel (``alpha`` of a diffuse table, where the fit lets a lobe of
+  ``ks`` ~0.004 chase the noise);
+- ``loose``: its standard error is more than half its scale (its value, or the
+  width of its range for ``f0`` and ``sigma``).
+
+A parameter held at a bound by the solver (``f0 = 1``, a dark channel's ``ks = 0``;
+``brdffit.fitting.solver``) is reported ``at_bound``; it is left out of the
+covariance (held fixed, as the solver holds it) and has no standard error.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit.fitting.loss import LossData, compress, sum_over_blocks
+from brdffit.models import AbstractBRDFModel
+
+#: Bins beyond which the Jacobian is taken on every k-th one (its memory is
+#: 3 x bins x parameters); the covariance is then scaled by 1/k.
+MAX_JACOBIAN_BINS = 65_536
+#: An eigenvalue of the scaled A below this fraction of the largest is a flat
+#: direction: the loss does not change along it, to float64's resolution.
+FLAT = 1e-10
+#: Correlation beyond which two parameters are named as trading off.
+STRONG_CORRELATION = 0.95
+#: A standard error above this fraction of the parameter's scale is "loose".
+LOOSE = 0.5
+#: The scale parameter(s) of the lobe that each shape parameter shapes: a shape
+#: means nothing once its lobe is indistinguishable from zero.
+LOBE_SCALE = {"alpha": ("ks",), "n": ("ks",), "f0": ("ks", "ks1", "ks2"), "eta": ("ks",),
+              "alpha1": ("ks1",), "alpha2": ("ks2",)}
+#: A lobe is significant when some channel of its scale is this many standard
+#: errors above 0.
+SIGNIFICANT = 2.0
+
+
+def entry_names(model: AbstractBRDFModel) -> list[str]:
+    """One name per scalar parameter: ``kd[0]``, ``kd[1]``, ``kd[2]``, ``alpha``, ..."""
+    out = []
+    for s in model.param_specs:
+        out += [f"{s.name}[{c}]" for c in range(3)] if s.rgb else [s.name]
+    return out
+
+
+def names_of(model: AbstractBRDFModel) -> set[str]:
+    return {s.name for s in model.param_specs}
+
+
+def _unflatten(model: AbstractBRDFModel, theta):
+    params, i = {}, 0
+    for s in model.param_specs:
+        params[s.name] = theta[i:i + 3] if s.rgb else theta[i]
+        i += s.size
+    return params
+
+
+@eqx.filter_jit
+def _jacobian_terms(model, theta, data: LossData):
+    """(A, B, n) of the module docstring, on the parameters' own scale.
+
+    Both are sums over the samples: an every-bin fit (1.46M samples) sums them
+    block by block, as its normal equations do (``brdffit.fitting.loss``), instead
+    of holding a (3 S, p) Jacobian of ~0.5 GB."""
+
+    def terms(part: LossData):
+        def r_of(t):
+            f = model.eval_channels(_unflatten(model, t), part.frame)
+            r = jnp.sqrt(part.weight) * (compress(f, part.frame.cos_i, part.loss) - part.target)
+            return r.reshape(-1)
+
+        jac = jax.jacfwd(r_of)(theta)  # (3 S, p)
+        jr = jac * r_of(theta)[:, None]
+        return jac.T @ jac, jr.T @ jr
+
+    return (*sum_over_blocks(terms, data), 3 * jnp.sum(data.weight > 0))
+
+
+@eqx.filter_jit
+def _slopes(model: AbstractBRDFModel, u):
+    """d theta / d u of every scalar entry (the transforms are elementwise)."""
+    def flat(v):
+        return jnp.concatenate([jnp.ravel(x) for x in model.constrain(v).values()])
+
+    return jnp.diag(jax.jacfwd(flat)(u))
+
+
+def _scale(model: AbstractBRDFModel, theta: np.ndarray) -> np.ndarray:
+    """What "half its scale" is measured against, per entry."""
+    out, i = [], 0
+    for s in model.param_specs:
+        v = theta[i:i + s.size]
+        if s.upper is not None and s.scale != "log":
+            scale = np.full(s.size, s.upper - s.lower)  # f0, sigma: the range
+        else:  # a colour is judged against its brightest channel
+            scale = np.full(s.size, max(float(np.max(np.abs(v))), 1e-6))
+        out.append(scale)
+        i += s.size
+    return np.concatenate(out)
+
+
+def _grouped(model: AbstractBRDFModel, flat) -> dict:
+    d, i = {}, 0
+    for s in model.param_specs:
+        v = [None if x is None else x for x in flat[i:i + s.size]]
+        d[s.name] = v if s.rgb else v[0]
+        i += s.size
+    return d
+
+
+def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossData) -> dict:
+    """The ``uncertainty`` of a :class:`~brdffit.fitting.result.FitResult` (schema in
+    docs/results.md) of unconstrained parameters ``u`` on the solver's ``data``."""
+    names = entry_names(model)
+    p = len(names)
+    n_bins = int(data.weight.shape[-1])
+    k = max(1, -(-n_bins // MAX_JACOBIAN_BINS))
+    if k > 1:
+        data = jax.tree_util.tree_map(lambda a: a[..., ::k], data)
+    theta = np.concatenate([np.ravel(np.asarray(v, np.float64)) for v in
+                            model.constrain(jnp.asarray(u, jnp.float64)).values()])
+    a, b, n = _jacobian_terms(model, jnp.asarray(theta), data)
+    a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
+
+    at_bound = np.asarray(model.bound_side(jnp.asarray(u, jnp.float64))) != 0
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        # a fit that ran off the table's scale: no linearisation to report, and no
+        # number pretends otherwise (every entry undetermined, no errors)
+        a, b = np.zeros_like(a), np.zeros_like(b)
+    d = np.sqrt(np.maximum(np.diag(a), 0.0))
+    no_effect = ~at_bound & (d <= 1e-12 * max(float(d.max()), 1e-300))
+    free = ~at_bound & ~no_effect
+    idx = np.flatnonzero(free)
+    cov = np.full((p, p), np.nan)
+    flat_partners: dict[int, set[int]] = {i: set() for i in range(p)}
+    if idx.size:
+        ds = d[idx]
+        an = a[np.ix_(idx, idx)] / np.outer(ds, ds)
+        bn = b[np.ix_(idx, idx)] / np.outer(ds, ds)
+        lam, vec = np.linalg.eigh(an)
+        keep = lam > FLAT * lam.max()
+        inv = (vec[:, keep] / lam[keep]) @ vec[:, keep].T
+        dof = max(n - idx.size, 1)
+        c = (n / dof) * inv @ bn @ inv / np.outer(ds, ds) * k  # every k-th bin: 1/k the data
+        cov[np.ix_(idx, idx)] = c
+        for j in np.flatnonzero(~keep):  # the flat directions and who lies along them
+            members = idx[np.abs(vec[:, j]) > 0.1]
+            for m in members:
+                flat_partners[int(m)] |= {int(x) for x in members if x != m}
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(se, se)
+    slopes = np.asarray(_slopes(model, jnp.asarray(u, jnp.float64)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        se_u = se / np.abs(slopes)
+    scale = _scale(model, theta)
+
+    def significant(scale_names) -> bool:
+        for j, name in enumerate(names):
+            if (name.split("[")[0] in scale_names and not at_bound[j]
+                    and np.isfinite(se[j]) and theta[j] > SIGNIFICANT * se[j]):
+                return True
+        return False
+
+    reasons: list[str | None] = []
+    for i in range(p):
+        lobe = [x for x in LOBE_SCALE.get(names[i], ()) if x in names_of(model)]
+        if at_bound[i]:
+            reasons.append(None)
+        elif lobe and not significant(lobe):
+            reasons.append(f"no lobe: {' and '.join(lobe)} within {SIGNIFICANT:g} standard "
+                           "errors of 0 in every channel")
+        elif no_effect[i]:
+            reasons.append("no effect: the residuals do not depend on it")
+        elif flat_partners[i]:
+            reasons.append("trades off with " + ", ".join(names[j] for j in
+                                                          sorted(flat_partners[i])))
+        elif not np.isfinite(se[i]) or se[i] > LOOSE * scale[i]:
+            reasons.append(f"loose: standard error {se[i]:.3g} against a scale of "
+                           f"{scale[i]:.3g}")
+        else:
+            reasons.append(None)
+    undetermined = [r is not None for r in reasons]
+    # A flat direction has no finite error along it; say so rather than print a number.
+    se_out = [None if (at_bound[i] or no_effect[i] or flat_partners[i]) else float(se[i])
+              for i in range(p)]
+    se_u_out = [None if x is None else float(se_u[i]) for i, x in enumerate(se_out)]
+    corr_out = [[None if not np.isfinite(corr[i, j]) else float(np.clip(corr[i, j], -1, 1))
+                 for j in range(p)] for i in range(p)]
+    strong = [[names[j] for j in range(p) if j != i and corr_out[i][j] is not None
+               and abs(corr_out[i][j]) > STRONG_CORRELATION] for i in range(p)]
+    return {
+        "method": "sandwich",
+        "entries": names,
+        "std_error": _grouped(model, se_out),
+        "std_error_transformed": _grouped(model, se_u_out),
+        "correlation": corr_out,
+        "undetermined": _grouped(model, undetermined),
+        "at_bound": _grouped(model, [bool(x) for x in at_bound]),
+        "why": {names[i]: reasons[i] for i in range(p) if reasons[i] is not None},
+        "strongly_correlated": {names[i]: strong[i] for i in range(p) if strong[i]},
+        "residuals": n,
+        "jacobian_every": k,
+    }
