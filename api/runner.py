@@ -4,9 +4,8 @@
 rely on: ``await runner.run(fn, *args)`` runs a top-level function of
 ``api.tasks`` somewhere else and returns its value, and stops it when asked
 (``cancel``) or when it runs too long (``limit_s``). :class:`ProcessRunner` keeps
-``workers`` local processes. A Dask runner (``BRDFFIT_DASK_SCHEDULER``, issue 5)
-is one more subclass whose ``run`` submits to a ``distributed.Client``, plus one
-branch in :func:`make_runner`.
+``workers`` local processes; :class:`DaskClusterRunner` runs them on an existing
+Dask cluster (``BRDFFIT_DASK_SCHEDULER``) through the batch job's runner.
 
 Each worker process has its own pipe and runs one task at a time, so the runner
 knows which task each process holds: a process that dies fails only its own task
@@ -205,6 +204,56 @@ class ProcessRunner(AbstractRunner):
         self._readers.shutdown(wait=False)
 
 
+class DaskClusterRunner(AbstractRunner):
+    """The service's tasks on an existing Dask cluster, through the batch job's own
+    runner (:class:`brdffit.batch.cluster.DaskRunner`): one way to reach a cluster
+    for both. The workers must read the service's data directory at the same path.
+
+    What Dask cannot do, and what happens instead: a running Dask task cannot be
+    interrupted, so ``cancel`` and ``limit_s`` end the job at once (the
+    :class:`Cancelled` / :class:`TimeLimitExceeded` it raises) while the worker
+    finishes the call and its result is dropped; a worker process reports no
+    progress to the server, so a running job's progress stays at its start.
+    """
+
+    def __init__(self, address: str):
+        from brdffit.batch.cluster import DaskRunner
+
+        self._dask = DaskRunner(address)
+
+    async def run(self, fn, /, *args, progress=None, limit_s=None, cancel=None):
+        from brdffit.batch.cluster import WorkerLost as DaskWorkerLost
+
+        if progress is not None:
+            await progress("running on the Dask cluster", 0.0)
+        done = asyncio.ensure_future(asyncio.wrap_future(self._dask.submit_call(fn, *args)))
+        waiters = {done}
+        stop = asyncio.ensure_future(cancel.wait()) if cancel is not None else None
+        if stop is not None:
+            waiters.add(stop)
+        try:
+            finished, _ = await asyncio.wait(waiters, timeout=limit_s,
+                                             return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            if stop is not None:
+                stop.cancel()
+        if done in finished:
+            try:
+                return done.result()
+            except DaskWorkerLost as e:
+                raise WorkerLost(str(e)) from e
+        done.cancel()
+        if stop is not None and stop in finished:
+            raise Cancelled("cancelled on request (the Dask worker finishes the call)")
+        raise TimeLimitExceeded(f"ran past {limit_s:g} s (the Dask worker finishes the call)")
+
+    def close(self) -> None:
+        self._dask.close()
+
+
 def make_runner(settings: Settings) -> AbstractRunner:
-    """The runner the settings ask for (only local processes for now)."""
+    """The runner the settings ask for: an existing Dask cluster when
+    ``dask_scheduler`` is set, else ``workers`` local processes."""
+    if settings.dask_scheduler:
+        return DaskClusterRunner(settings.dask_scheduler)
     return ProcessRunner(settings.workers)

@@ -23,6 +23,10 @@ class Settings(BaseSettings):
     #: Fit worker processes. Each fit already uses several cores through XLA, so
     #: more workers than cores / 2 rarely helps.
     workers: int = Field(1, ge=1, le=64)
+    #: ``tcp://HOST:PORT`` of an existing Dask cluster: jobs run there, on the batch
+    #: job's runner (``brdffit.batch.cluster.DaskRunner``), instead of in ``workers``
+    #: local processes. Its workers must read the data directory at the same path.
+    dask_scheduler: str | None = None
     #: When set, every route but /healthz needs ``Authorization: Bearer <token>``.
     api_token: SecretStr | None = None
     #: Runs of a job that a server stop or a worker crash may interrupt before the
