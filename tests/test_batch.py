@@ -104,7 +104,7 @@ def test_cluster_batch_records_every_table_and_model(cluster_batch, table_dir):
     attrs = results["attrs"]
     assert attrs["format"] == "brdffit-batch" and attrs["format_version"] == 1
     assert json.loads(attrs["models"]) == MODELS
-    assert json.loads(attrs["options"]) == OPTIONS.fit_keywords()
+    assert json.loads(attrs["options"]) == json.loads(OPTIONS.key())  # the resume key
     assert attrs["n_tables"] == 6 and attrs["n_tables_failed"] == 3
     assert attrs["n_fits"] == 9 and attrs["n_fits_failed"] == 0
     assert not os.path.exists(str(out) + ".journal"), "a clean finish removes the journal"

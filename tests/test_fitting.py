@@ -140,3 +140,12 @@ def test_table_with_too_few_bins_is_refused():
     tiny = merl.MerlTable.from_values(table.rgb, mask)
     with pytest.raises(FitInputError, match="usable bins"):
         fit(tiny, "ggx")
+
+
+def test_params_come_in_the_model_order():
+    """The result lists parameters as docs/models.md does (kd, ks, alpha, f0), not in
+    a pytree's sorted order."""
+    table, _ = make_table("ggx", TRUTH["ggx"])
+    r = fit(table, "ggx", samples=2048)
+    assert list(r.params) == ["kd", "ks", "alpha", "f0"]
+    assert list(r.uncertainty["std_error"]) == list(r.params)

@@ -96,9 +96,17 @@ def _score(model, u_batch, data, every: int = 1):
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
-# One compiled call, not one per eager operation: a new process pays each eager
-# jnp operation a compilation of its own.
-_constrain = eqx.filter_jit(lambda model, u: model.constrain(u))
+@eqx.filter_jit
+def _constrain_jit(model, u):
+    return model.constrain(u)
+
+
+def _constrain(model, u) -> dict:
+    """``model.constrain(u)`` in one compiled call, not one per eager operation (a
+    new process compiles each of those); in the model's parameter order, which a
+    pytree (sorted keys) does not keep."""
+    values = _constrain_jit(model, u)
+    return {s.name: values[s.name] for s in model.param_specs}
 
 
 def _bound_side(u, args):
