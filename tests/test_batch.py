@@ -126,7 +126,7 @@ def test_cluster_batch_records_every_table_and_model(cluster_batch, table_dir):
         for model, f in t["fits"].items():
             assert f["status"] == "ok" and f["message"] == ""
             assert f["sha256"] == t["sha256"]
-            assert json.loads(f["options"]) == OPTIONS.fit_keywords()
+            assert json.loads(f["options"]) == json.loads(OPTIONS.key())
             assert f["samples"] == 4096 and f["starts"] == 1 and f["solver"] == "lm"
             assert f["result"] and f["steps"] >= 0 and f["time_s"] > 0
             assert isinstance(f["converged"], bool)
