@@ -169,11 +169,13 @@ def normal_equations(u: Float[Array, " p"], args):
     return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
 
 
-def sum_over_blocks(terms, data: LossData):
+def sum_over_blocks(terms, data, n: int | None = None):
     """``terms(data)`` for a function that returns sums over the samples (any pytree
     of arrays), evaluated block by block when there are many samples: the sum of
-    ``terms`` over consecutive blocks of :data:`BLOCK` samples or so."""
-    n = data.weight.shape[-1]
+    ``terms`` over consecutive blocks of :data:`BLOCK` samples or so. ``data`` is
+    a pytree whose arrays all have the samples on their last axis (``n`` of them;
+    a :class:`LossData`'s own count by default)."""
+    n = data.weight.shape[-1] if n is None else n
     block = _block_size(n)
     if block is None:
         return terms(data)

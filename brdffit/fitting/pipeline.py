@@ -43,6 +43,7 @@ from brdffit.fitting.loss import (
     compress_values,
     normal_equations,
     residuals,
+    sum_over_blocks,
     sum_squares,
 )
 from brdffit.fitting.result import FitResult
@@ -248,34 +249,34 @@ def _peak_bin(table: MerlTable, weight: np.ndarray) -> int:
     return int(np.argmax(np.where(weight > 0, brightness, -np.inf)))
 
 
-# The full-table error is two jitted computations, not one: XLA's CPU backend
-# generates a multi-output reduction ~2x slower than two single ones, and async
-# dispatch runs the two side by side.
-
-
 def _fit_cos(model, u, frame):
     f = jnp.maximum(model.eval_channels(model.constrain(u), frame), 0.0)
     return f * jnp.maximum(frame.cos_i, 0.0)
 
 
 @eqx.filter_jit
-def _full_log_rmse(model, u, dev: _TableOnDevice, weight, frame):
-    d = jnp.log1p(_fit_cos(model, u, frame)) - dev.target
-    return jnp.sqrt(jnp.sum(weight * d * d) / 3.0)
+def _full_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
+    """log_rmse, cube_root_rmse and rmse_cos of the whole table in one pass, block by
+    block (``brdffit.fitting.loss.sum_over_blocks``): the model is evaluated once per
+    bin and each block's temporaries stay in cache (~2x faster than one pass per
+    metric), and the relative error at the peak bin."""
 
+    def sums(part):
+        fit_cos = _fit_cos(model, u, part["frame"])
+        w = part["weight"]
+        d_log = jnp.log1p(fit_cos) - part["target"]
+        d_cube = compress_values(fit_cos, "cube_root") - part["cube"]
+        lin = fit_cos - part["meas_cos"]
+        return jnp.stack([jnp.sum(w * d_log * d_log), jnp.sum(w * d_cube * d_cube),
+                          jnp.sum(w * lin * lin)])
 
-@eqx.filter_jit
-def _full_cube_root_rmse(model, u, dev: _TableOnDevice, weight, frame):
-    d = compress_values(_fit_cos(model, u, frame), "cube_root") - dev.cube
-    return jnp.sqrt(jnp.sum(weight * d * d) / 3.0)
-
-
-@eqx.filter_jit
-def _full_linear_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
-    lin = _fit_cos(model, u, frame) - dev.meas_cos
+    arrays = {"frame": frame, "weight": weight, "target": dev.target, "cube": dev.cube,
+              "meas_cos": dev.meas_cos}
+    log_rmse, cube_root_rmse, rmse_cos = jnp.sqrt(
+        sum_over_blocks(sums, arrays, weight.shape[-1]) / 3.0)
     at_peak = _fit_cos(model, u, _gather(frame, peak[None]))[:, 0] - dev.meas_cos[:, peak]
     return {
-        "rmse_cos": jnp.sqrt(jnp.sum(weight * lin * lin) / 3.0),
+        "log_rmse": log_rmse, "cube_root_rmse": cube_root_rmse, "rmse_cos": rmse_cos,
         "rel_peak_error": jnp.max(jnp.abs(at_peak) / jnp.maximum(dev.meas_cos[:, peak], 1e-12)),
     }
 
@@ -304,11 +305,9 @@ def full_table_metrics(
         frame = _device_frames(jnp.dtype(dt).name)
         dev = _device_table(table, dt)
         ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
-        log_rmse = _full_log_rmse(model, ut, dev, w, frame)
-        cube_root_rmse = _full_cube_root_rmse(model, ut, dev, w, frame)
-        linear = _full_linear_errors(model, ut, dev, w, frame, peak)
-        metrics = {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
-                   **{k: float(v) for k, v in linear.items()}}
+        errors = _full_errors(model, ut, dev, w, frame, peak)
+        metrics = {k: float(errors[k])  # in this order (a pytree's keys come sorted)
+                   for k in ("log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error")}
         if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
             break
     return metrics
@@ -362,7 +361,8 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
     def make() -> _Prepared:
         counts = usable_bins(table, bin_weight)
         n_usable = int(np.count_nonzero(counts.usable))
-        brightest = float(table.rgb.reshape(3, -1)[:, counts.usable].max(initial=0.0))
+        # the channels' maximum first: one boolean selection of 1.46M, not of 4.4M
+        brightest = float(table.rgb.reshape(3, -1).max(axis=0)[counts.usable].max(initial=0.0))
         if n_usable == 0 or brightest < merl.MIN_PEAK:  # fit() says why
             return _Prepared(counts, n_usable, None, None, None, -1, brightest)
         weight = bin_weights(counts.usable, bin_weight)
