@@ -432,7 +432,7 @@ async function refreshLists() {
   const tbody = $("tables-table").querySelector("tbody");
   tbody.textContent = "";
   for (const t of tables.items) {
-    const row = el("tr");
+    const row = el("tr", null, { "data-table": t.id });
     row.append(el("td", t.name), el("td", t.id.slice(0, 12), { class: "ids", title: t.id }),
       el("td", fmt(t.summary.measured_bins, 7), { class: "num" }), el("td", when(t.created_at)));
     const actions = el("td", null, { class: "actions" });
@@ -448,7 +448,7 @@ async function refreshLists() {
   const jbody = $("jobs-table").querySelector("tbody");
   jbody.textContent = "";
   for (const j of jobs.items) {
-    const row = el("tr", null, { class: `status-${j.status}` });
+    const row = el("tr", null, { class: `status-${j.status}`, "data-job": j.id });
     let outcome = j.reason || "";
     if (j.result) outcome = `${j.result.model}, log_rmse ${fmt(j.result.error.log_rmse)}`;
     if (j.progress) outcome = `${j.progress.stage}`;
