@@ -300,7 +300,9 @@ async function deleteJob(job) {
 
 async function openJob(job) {
   clearMessage();
-  showJob(await api("GET", `/v1/fits/${job.id}`));
+  const fresh = await api("GET", `/v1/fits/${job.id}`);
+  state.job = null; // shown anew, even when it is the job already on screen
+  showJob(fresh);
 }
 
 // -- results -----------------------------------------------------------------------
@@ -402,7 +404,7 @@ async function exportTo(event) {
     + (f.exact ? " (exact)" : `, log_rmse to the fit ${fmt(f.log_rmse_to_fit)}`
       + ` (the fit's own: ${fmt(f.fit_log_rmse)})`) + ". Files: ");
   for (const [name, text] of Object.entries(out.files)) {
-    const blob = new Blob([text], { type: out.media_type });
+    const blob = new Blob([text], { type: "application/octet-stream" });
     const link = el("a", name, { href: "#", class: "file" });
     link.addEventListener("click", (e) => { e.preventDefault(); download(name, blob); });
     head.append(link, " ");
@@ -443,7 +445,9 @@ async function refreshLists() {
     tbody.append(row);
   }
   if (tables.total > tables.items.length) {
-    tbody.append(el("tr")).append(el("td", `… and ${tables.total - tables.items.length} older`));
+    const more = el("tr");
+    more.append(el("td", `… and ${tables.total - tables.items.length} older (not shown)`));
+    tbody.append(more);
   }
   const jbody = $("jobs-table").querySelector("tbody");
   jbody.textContent = "";
@@ -463,7 +467,9 @@ async function refreshLists() {
     jbody.append(row);
   }
   if (jobs.total > jobs.items.length) {
-    jbody.append(el("tr")).append(el("td", `… and ${jobs.total - jobs.items.length} older`));
+    const more = el("tr");
+    more.append(el("td", `… and ${jobs.total - jobs.items.length} older (not shown)`));
+    jbody.append(more);
   }
 }
 
