@@ -238,6 +238,8 @@ async function poll(jobId) {
     job = await api("GET", `/v1/fits/${jobId}`);
   } catch (e) {
     say(`Error ${e.message} (while following job ${jobId.slice(0, 8)})`);
+    // The server gone for a moment, or its storage failing: keep following, slower.
+    if (e.status === 0 || e.status === 503) state.polling = setTimeout(() => poll(jobId), 5000);
     return;
   }
   if (!state.job || state.job.id !== jobId) return; // another job was opened meanwhile
