@@ -100,7 +100,7 @@ class Visit:
 
 def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_validator):  # noqa: F811
     table_file = fx.write(tmp_path / "ggx.binary", fx.table_bytes("ggx"))
-    bad_file = fx.write(tmp_path / "broken.binary", fx.header([180, 90, 360]) + b"\0" * 1000)
+    bad_file = fx.write(tmp_path / "broken.binary", fx.header([90, 90, 180]) + b"\0" * 1000)
     with fx.Server(tmp_path / "data") as server, httpx.Client(base_url=server.url) as http:
         visit = Visit(browser, server, tmp_path / "screens")
         page = visit.page
