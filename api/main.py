@@ -20,7 +20,7 @@ import brdffit
 from api import errors
 from api.jobs import JobQueue
 from api.limits import RequestLimits
-from api.routes import docs, exports, fits, health, models, tables
+from api.routes import docs, exports, fits, health, materials, models, page, tables
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
 from api.store import Store
@@ -34,6 +34,8 @@ Fit analytic BRDF models to measured MERL tables.
 2. `POST /v1/fits` with `{"table_id": ..., "model": "ggx"}`: a job id (202).
 3. `GET /v1/fits/{id}` until `status` is `done` (or `failed`, with a `reason`).
 4. `GET /v1/fits/{id}/plots/{kind}.png`: slices, error_map, spheres, polar.
+
+The same steps without a line of code: the web page at `/`.
 
 Every error is JSON `{"detail": "..."}`. When the server sets `BRDFFIT_API_TOKEN`,
 every route but `/healthz` needs `Authorization: Bearer <token>`.
@@ -73,9 +75,12 @@ def create_app(settings: Settings | None = None, *,
         generate_unique_id_function=_operation_id,
     )
     errors.install(app)
-    for module in (health, tables, fits, exports, models, docs):
+    for module in (health, tables, materials, fits, exports, models, docs):
         app.include_router(module.router)
     app.include_router(docs.assets)
+    # The page's choices before its files: /page/{name} would take the path otherwise.
+    app.include_router(page.choices_router)
+    app.include_router(page.router)
     app.add_middleware(RequestLimits, settings=settings)
     app.openapi = lambda: _openapi(app, settings)
     return app

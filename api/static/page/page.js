@@ -1,0 +1,548 @@
+// The brdffit service's page: every number and image comes from the /v1 routes
+// (docs/service.md). No framework and no network beyond this server. Text from
+// the server (table names, error details) is always set as textContent, never
+// parsed as HTML.
+"use strict";
+
+const TOKEN_KEY = "brdffit-token";
+const POLL_MS = 500;
+const METRICS = ["log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error", "psnr_db"];
+const ACTIVE = new Set(["queued", "running"]);
+
+const state = {
+  table: null,   // {id, name, summary}
+  job: null,     // the job shown in Results
+  model: null,   // the model whose plots and exports are shown
+  polling: null, // timer id
+  blobs: [],     // object URLs of the images shown (revoked when replaced)
+};
+
+const $ = (id) => document.getElementById(id);
+
+// -- talking to the API ------------------------------------------------------------
+
+class ApiError extends Error {
+  constructor(status, detail) {
+    super(status ? `${status}: ${detail}` : detail);
+    this.status = status;
+    this.detail = detail;
+  }
+}
+
+function token() {
+  return sessionStorage.getItem(TOKEN_KEY);
+}
+
+// One request; its error becomes an ApiError carrying the API's `detail`.
+async function api(method, path, { json, body, contentType, as = "json" } = {}) {
+  const headers = {};
+  if (token()) headers.Authorization = `Bearer ${token()}`;
+  if (json !== undefined) {
+    headers["Content-Type"] = "application/json";
+    body = JSON.stringify(json);
+  } else if (contentType) {
+    headers["Content-Type"] = contentType;
+  }
+  let response;
+  try {
+    response = await fetch(path, { method, headers, body });
+  } catch (e) {
+    throw new ApiError(0, `the server did not answer (${e.message}); is it running?`);
+  }
+  if (!response.ok) {
+    let detail = `${response.statusText || "error"} (no detail in the answer)`;
+    try {
+      const data = await response.json();
+      if (data && typeof data.detail === "string") detail = data.detail;
+    } catch (e) { /* not JSON: a proxy's page; keep the status text */ }
+    if (response.status === 401) askForToken(detail);
+    throw new ApiError(response.status, detail);
+  }
+  if (response.status === 204) return null;
+  if (as === "blob") return response.blob();
+  return response.json();
+}
+
+function say(text, kind = "error") {
+  const box = $("message");
+  box.textContent = text;
+  box.className = kind;
+  box.hidden = false;
+}
+
+function clearMessage() {
+  $("message").hidden = true;
+}
+
+// Run an action from a button: its error is shown, never thrown into the void.
+function guarded(action) {
+  return async (event) => {
+    const button = event && event.currentTarget;
+    if (button) button.disabled = true;
+    try {
+      await action(event);
+    } catch (e) {
+      say(e instanceof ApiError ? `Error ${e.message}` : `Error: ${e.message}`);
+    } finally {
+      if (button) button.disabled = false;
+    }
+  };
+}
+
+function askForToken(detail) {
+  $("token-why").textContent = `The server answered 401: ${detail}`;
+  $("token-form").hidden = false;
+  $("token-input").focus();
+}
+
+// -- small formatting helpers ------------------------------------------------------
+
+function fmt(x, digits = 4) {
+  if (x === null || x === undefined) return "–";
+  if (typeof x !== "number") return String(x);
+  if (x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5)) return x.toExponential(digits - 1);
+  return Number(x.toPrecision(digits)).toString();
+}
+
+function when(iso) {
+  return iso ? new Date(iso).toLocaleString() : "";
+}
+
+function el(tag, text, attrs = {}) {
+  const node = document.createElement(tag);
+  if (text !== undefined && text !== null) node.textContent = text;
+  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, v);
+  return node;
+}
+
+function button(text, action, attrs = {}) {
+  const b = el("button", text, { type: "button", ...attrs });
+  b.addEventListener("click", guarded(action));
+  return b;
+}
+
+function asList(v) {
+  return Array.isArray(v) ? v : [v];
+}
+
+// "value ± error" for each parameter, flags as the CLI's report shows them.
+function paramsCell(result) {
+  const cell = el("td", null, { class: "params" });
+  const u = result.uncertainty || {};
+  const se = u.std_error || {}, flags = u.undetermined || {}, bounds = u.at_bound || {};
+  const why = u.why || {};
+  for (const [name, value] of Object.entries(result.params)) {
+    const values = asList(value);
+    const errors = se[name] === undefined ? values.map(() => null) : asList(se[name]);
+    const undetermined = flags[name] === undefined ? values.map(() => false) : asList(flags[name]);
+    const atBound = bounds[name] === undefined ? values.map(() => false) : asList(bounds[name]);
+    const line = el("div", null, { class: "param" });
+    line.append(el("span", name, { class: "pname" }), " = ");
+    values.forEach((v, i) => {
+      if (i) line.append(", ");
+      const entry = values.length > 1 ? `${name}[${i}]` : name;
+      const part = el("span", fmt(v));
+      if (atBound[i]) {
+        part.append(el("em", " at bound"));
+      } else if (errors[i] !== null && errors[i] !== undefined) {
+        part.append(` ± ${fmt(errors[i], 2)}`);
+      }
+      if (undetermined[i]) {
+        part.append(el("span", "?", { class: "flag", title: why[entry] || "undetermined" }));
+      }
+      line.append(part);
+    });
+    cell.append(line);
+  }
+  return cell;
+}
+
+// -- tables ------------------------------------------------------------------------
+
+function chooseTable(table) {
+  state.table = table;
+  const s = table.summary || {};
+  const p = $("table-current");
+  p.textContent = "";
+  p.append("Table: ", el("strong", table.name), ` (${fmt(s.measured_bins, 7)} measured bins, `
+    + `${fmt(s.unmeasured_bins, 7)} unmeasured, ${fmt(s.nonfinite_bins, 7)} non-finite) `,
+  el("span", table.id.slice(0, 12), { class: "ids", title: table.id }));
+}
+
+async function uploadTable() {
+  const file = $("upload-file").files[0];
+  if (!file) throw new Error("choose a .binary file first");
+  clearMessage();
+  say(`Uploading ${file.name} (${fmt(file.size / 1e6, 3)} MB)…`, "info");
+  const table = await api("POST", `/v1/tables?name=${encodeURIComponent(file.name)}`,
+    { body: file, contentType: "application/octet-stream" });
+  chooseTable(table);
+  say(`Uploaded ${table.name}.`, "info");
+  await refreshLists();
+}
+
+async function useMaterial() {
+  const name = $("material-select").value;
+  if (!name) throw new Error("pick a material first");
+  say(`Building the ${name} table (a second or two)…`, "info");
+  const table = await api("POST", `/v1/materials/${encodeURIComponent(name)}`);
+  chooseTable(table);
+  say(`Using ${table.name}.`, "info");
+  await refreshLists();
+}
+
+async function deleteTable(table, withFits) {
+  await api("DELETE", `/v1/tables/${table.id}${withFits ? "?with_fits=true" : ""}`);
+  if (state.table && state.table.id === table.id) {
+    state.table = null;
+    $("table-current").textContent = "No table chosen.";
+  }
+  say(`Deleted table ${table.name}.`, "info");
+  await refreshLists();
+}
+
+// -- fitting -----------------------------------------------------------------------
+
+function fitRequest() {
+  if (!state.table) throw new Error("choose a table first (upload, material, or Use in the list)");
+  let model = "auto";
+  if ($("mode-list").checked) {
+    model = [...document.querySelectorAll("#model-boxes input:checked")].map((b) => b.value);
+    if (!model.length) throw new Error("tick at least one model, or choose auto");
+  }
+  const options = { loss: $("loss-select").value };
+  const scene = $("scene-select").value;
+  if (scene) options.scene = { preset: scene };
+  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")]]) {
+    if (input.value !== "") options[key] = Number(input.value);
+  }
+  return { table_id: state.table.id, model, options };
+}
+
+async function startFit() {
+  clearMessage();
+  const job = await api("POST", "/v1/fits", { json: fitRequest() });
+  showJob(job);
+  await refreshLists();
+}
+
+function stopPolling() {
+  if (state.polling !== null) clearTimeout(state.polling);
+  state.polling = null;
+}
+
+async function poll(jobId) {
+  state.polling = null;
+  let job;
+  try {
+    job = await api("GET", `/v1/fits/${jobId}`);
+  } catch (e) {
+    say(`Error ${e.message} (while following job ${jobId.slice(0, 8)})`);
+    // The server gone for a moment, or its storage failing: keep following, slower.
+    if (e.status === 0 || e.status === 503) state.polling = setTimeout(() => poll(jobId), 5000);
+    return;
+  }
+  if (!state.job || state.job.id !== jobId) return; // another job was opened meanwhile
+  showJob(job);
+}
+
+// Show a job: its progress while active, its results once done.
+function showJob(job) {
+  stopPolling();
+  const changed = !state.job || state.job.id !== job.id || state.job.status !== job.status;
+  state.job = job;
+  const box = $("job-state");
+  box.hidden = false;
+  const progress = $("job-progress");
+  $("job-cancel").hidden = !ACTIVE.has(job.status);
+  if (job.status === "running") {
+    progress.value = job.progress ? job.progress.fraction : 0;
+    $("job-stage").textContent = `running: ${job.progress ? job.progress.stage : "starting"}`
+      + ` (job ${job.id.slice(0, 8)}, ${job.models.join(", ")})`;
+  } else if (job.status === "queued") {
+    progress.removeAttribute("value");
+    $("job-stage").textContent = `queued (job ${job.id.slice(0, 8)})`
+      + (job.note ? `: ${job.note}` : "");
+  } else {
+    progress.value = job.status === "done" ? 1 : 0;
+    $("job-stage").textContent = `${job.status} (job ${job.id.slice(0, 8)})`
+      + (job.reason ? `: ${job.reason}` : "") + (job.note ? ` (${job.note})` : "");
+  }
+  if (ACTIVE.has(job.status)) {
+    state.polling = setTimeout(() => poll(job.id), POLL_MS);
+    $("results-panel").hidden = true;
+  } else {
+    if (changed) refreshLists().catch((e) => say(`Error ${e.message}`));
+    if (job.status === "done") {
+      if (changed) showResults(job);
+    } else {
+      $("results-panel").hidden = true;
+      if (job.status === "failed") say(`The fit failed: ${job.reason || "no reason given"}`);
+    }
+  }
+}
+
+async function cancelJob(job) {
+  const after = await api("POST", `/v1/fits/${job.id}/cancel`);
+  say(`Job ${job.id.slice(0, 8)} is ${after.status}.`, "info");
+  if (state.job && state.job.id === job.id) showJob(after);
+  await refreshLists();
+}
+
+async function deleteJob(job) {
+  await api("DELETE", `/v1/fits/${job.id}`);
+  if (state.job && state.job.id === job.id) {
+    state.job = null;
+    $("results-panel").hidden = true;
+    $("job-state").hidden = true;
+  }
+  say(`Deleted job ${job.id.slice(0, 8)}.`, "info");
+  await refreshLists();
+}
+
+async function openJob(job) {
+  clearMessage();
+  const fresh = await api("GET", `/v1/fits/${job.id}`);
+  state.job = null; // shown anew, even when it is the job already on screen
+  showJob(fresh);
+}
+
+// -- results -----------------------------------------------------------------------
+
+function showResults(job) {
+  $("results-panel").hidden = false;
+  $("results-job").textContent = `job ${job.id.slice(0, 8)}`;
+  const best = job.result;
+  const selection = best && best.selection;
+  $("selection-reason").textContent = selection
+    ? `auto chose ${selection.chosen}: ${selection.reason}`
+    : `best log_rmse: ${best ? best.model : "none"}`;
+  const body = $("results-table").querySelector("tbody");
+  body.textContent = "";
+  for (const r of job.results || []) {
+    const row = el("tr", null, { "data-model": r.model });
+    if (best && r.model === best.model) row.classList.add("best");
+    row.append(el("td", r.model + (best && r.model === best.model ? " ★" : "")));
+    for (const m of METRICS) row.append(el("td", fmt(r.error[m]), { class: "num" }));
+    row.append(paramsCell(r));
+    row.append(el("td", r.converged ? `${r.result}, ${r.steps} steps`
+      : `NOT converged: ${r.result}, ${r.steps} steps`, { class: r.converged ? "" : "warn" }));
+    row.append(el("td", fmt(r.time_s, 3), { class: "num" }));
+    row.addEventListener("click", () => showModel(r.model));
+    body.append(row);
+  }
+  $("export-report").textContent = "";
+  $("extra-figure").hidden = true;
+  showModel(best ? best.model : null);
+}
+
+function showModel(model) {
+  state.model = model;
+  for (const row of $("results-table").querySelectorAll("tbody tr")) {
+    row.classList.toggle("shown", row.dataset.model === model);
+  }
+  $("plots-model").textContent = model ? `(${model})` : "";
+  for (const url of state.blobs) URL.revokeObjectURL(url);
+  state.blobs = [];
+  loadPlot("spheres", $("plot-spheres"));
+  loadPlot("slices", $("plot-slices"));
+  $("extra-figure").hidden = true;
+}
+
+function plotPath(kind) {
+  return `/v1/fits/${state.job.id}/plots/${kind}.png?model=${encodeURIComponent(state.model)}`;
+}
+
+// Images are fetched (not <img src>): a browser sends no token for an image.
+async function loadPlot(kind, img) {
+  img.removeAttribute("src");
+  img.alt = `${kind}: rendering…`;
+  img.classList.add("loading");
+  try {
+    const url = URL.createObjectURL(await api("GET", plotPath(kind), { as: "blob" }));
+    state.blobs.push(url);
+    img.src = url;
+    img.alt = `${kind} plot of ${state.model}`;
+  } catch (e) {
+    img.alt = `${kind}: ${e.message}`;
+    say(`Error ${e.message} (the ${kind} plot)`);
+  } finally {
+    img.classList.remove("loading");
+  }
+}
+
+async function showExtraPlot(event) {
+  const kind = event.currentTarget.dataset.plot;
+  $("extra-figure").hidden = false;
+  $("extra-caption").textContent = `${kind} of ${state.model}`;
+  await loadPlot(kind, $("plot-extra"));
+}
+
+function download(name, blob) {
+  const url = URL.createObjectURL(blob);
+  const a = el("a", null, { href: url, download: name });
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
+async function exportTo(event) {
+  const target = event.currentTarget.dataset.export;
+  const report = $("export-report");
+  report.textContent = `Exporting ${state.model} to ${target}…`;
+  let out;
+  try {
+    out = await api("GET", `/v1/fits/${state.job.id}/exports/${target}`
+      + `?model=${encodeURIComponent(state.model)}`);
+  } catch (e) {
+    report.textContent = "";
+    throw e;
+  }
+  report.textContent = "";
+  const f = out.fidelity || {};
+  const head = el("p");
+  head.append(el("strong", `${target}`), `: ${out.source_model} as ${f.target_model || "?"}`
+    + (f.exact ? " (exact)" : `, log_rmse to the fit ${fmt(f.log_rmse_to_fit)}`
+      + ` (the fit's own: ${fmt(f.fit_log_rmse)})`) + ". Files: ");
+  for (const [name, text] of Object.entries(out.files)) {
+    const blob = new Blob([text], { type: "application/octet-stream" });
+    const link = el("a", name, { href: "#", class: "file" });
+    link.addEventListener("click", (e) => { e.preventDefault(); download(name, blob); });
+    head.append(link, " ");
+    download(name, blob);
+  }
+  report.append(head);
+  if (out.warnings.length) {
+    const list = el("ul", null, { class: "warnings" });
+    for (const w of out.warnings) list.append(el("li", w));
+    report.append(el("p", "Warnings (every clamp and approximation):"), list);
+  }
+}
+
+function downloadJson() {
+  const job = state.job;
+  download(`brdffit-fit-${job.id.slice(0, 8)}.json`,
+    new Blob([JSON.stringify(job, null, 1)], { type: "application/json" }));
+}
+
+// -- the lists ---------------------------------------------------------------------
+
+async function refreshLists() {
+  const [tables, jobs] = await Promise.all([
+    api("GET", "/v1/tables?limit=100"), api("GET", "/v1/fits?limit=100"),
+  ]);
+  const names = new Map(tables.items.map((t) => [t.id, t.name]));
+  const tbody = $("tables-table").querySelector("tbody");
+  tbody.textContent = "";
+  for (const t of tables.items) {
+    const row = el("tr", null, { "data-table": t.id });
+    row.append(el("td", t.name), el("td", t.id.slice(0, 12), { class: "ids", title: t.id }),
+      el("td", fmt(t.summary.measured_bins, 7), { class: "num" }), el("td", when(t.created_at)));
+    const actions = el("td", null, { class: "actions" });
+    actions.append(button("Use", async () => { chooseTable(t); clearMessage(); }),
+      button("Delete", () => deleteTable(t, false)),
+      button("Delete with its fits", () => deleteTable(t, true)));
+    row.append(actions);
+    tbody.append(row);
+  }
+  if (tables.total > tables.items.length) {
+    const more = el("tr");
+    more.append(el("td", `… and ${tables.total - tables.items.length} older (not shown)`));
+    tbody.append(more);
+  }
+  const jbody = $("jobs-table").querySelector("tbody");
+  jbody.textContent = "";
+  for (const j of jobs.items) {
+    const row = el("tr", null, { class: `status-${j.status}`, "data-job": j.id });
+    let outcome = j.reason || "";
+    if (j.result) outcome = `${j.result.model}, log_rmse ${fmt(j.result.error.log_rmse)}`;
+    if (j.progress) outcome = `${j.progress.stage}`;
+    row.append(el("td", when(j.created_at)), el("td", j.status),
+      el("td", j.models.join(", ")), el("td", names.get(j.table_id) || j.table_id.slice(0, 12)),
+      el("td", outcome));
+    const actions = el("td", null, { class: "actions" });
+    actions.append(button("Open", () => openJob(j)));
+    if (ACTIVE.has(j.status)) actions.append(button("Cancel", () => cancelJob(j)));
+    else actions.append(button("Delete", () => deleteJob(j)));
+    row.append(actions);
+    jbody.append(row);
+  }
+  if (jobs.total > jobs.items.length) {
+    const more = el("tr");
+    more.append(el("td", `… and ${jobs.total - jobs.items.length} older (not shown)`));
+    jbody.append(more);
+  }
+}
+
+// -- start -------------------------------------------------------------------------
+
+async function loadChoices() {
+  const [choices, models, materials] = await Promise.all([
+    api("GET", "/page/choices.json"), api("GET", "/v1/models"), api("GET", "/v1/materials"),
+  ]);
+  const loss = $("loss-select");
+  loss.textContent = "";
+  for (const name of choices.losses) loss.append(el("option", name, { value: name }));
+  loss.value = choices.default_loss;
+  const scene = $("scene-select");
+  scene.querySelectorAll("option:not([value=''])").forEach((o) => o.remove());
+  for (const name of choices.scene_presets) scene.append(el("option", name, { value: name }));
+  $("samples-input").placeholder = String(choices.defaults.samples);
+  $("starts-input").placeholder = String(choices.defaults.starts);
+  const boxes = $("model-boxes");
+  boxes.textContent = "";
+  for (const m of models) {
+    const label = el("label", null, { class: "choice", title: m.doc });
+    const box = el("input", null, { type: "checkbox", value: m.name });
+    box.addEventListener("change", () => { $("mode-list").checked = true; });
+    label.append(box, ` ${m.name} (${m.n_params})`);
+    boxes.append(label);
+  }
+  const select = $("material-select");
+  select.textContent = "";
+  select.append(el("option", materials.names.length ? "(choose)" : materials.note, { value: "" }));
+  for (const name of materials.names) select.append(el("option", name, { value: name }));
+}
+
+async function start() {
+  clearMessage();
+  await loadChoices();
+  await refreshLists();
+}
+
+function setExposure() {
+  const ev = Number($("exposure").value);
+  $("exposure-value").textContent = `${ev >= 0 ? "+" : ""}${ev} EV`;
+  // One factor on the one image that holds both sides: measurement and fit stay comparable.
+  $("plot-spheres").style.filter = ev ? `brightness(${2 ** ev})` : "";
+}
+
+document.addEventListener("DOMContentLoaded", () => {
+  $("upload-button").addEventListener("click", guarded(uploadTable));
+  $("material-button").addEventListener("click", guarded(useMaterial));
+  $("fit-button").addEventListener("click", guarded(startFit));
+  $("job-cancel").addEventListener("click", guarded(() => cancelJob(state.job)));
+  $("refresh-button").addEventListener("click", guarded(refreshLists));
+  $("json-button").addEventListener("click", guarded(downloadJson));
+  for (const b of document.querySelectorAll("[data-export]")) {
+    b.addEventListener("click", guarded(exportTo));
+  }
+  for (const b of document.querySelectorAll("[data-plot]")) {
+    b.addEventListener("click", guarded(showExtraPlot));
+  }
+  $("exposure").addEventListener("input", setExposure);
+  $("token-open").addEventListener("click", () => askForToken("enter or change the token"));
+  $("token-form").addEventListener("submit", guarded(async (event) => {
+    event.preventDefault();
+    sessionStorage.setItem(TOKEN_KEY, $("token-input").value.trim());
+    $("token-input").value = "";
+    $("token-form").hidden = true;
+    await start();
+  }));
+  $("token-clear").addEventListener("click", () => {
+    sessionStorage.removeItem(TOKEN_KEY);
+    $("token-form").hidden = true;
+  });
+  start().catch((e) => say(`Error ${e.message}`));
+});

@@ -1,0 +1,257 @@
+"""The web page at ``/`` in a real headless Chromium against a real server.
+
+Debian's ``chromium`` (``apt-get install chromium``; ``.ci/run`` installs it) driven
+by Playwright's Python package, pointed at that binary: Playwright's own browser
+download is never used. The page is driven as a person would: upload a synthetic
+table, fit with ``auto``, see the plots, download a glTF export (checked by the
+Khronos validator, as in test_export_tools) and the JSON, upload a bad file and read
+the API's error on the page, delete and cancel from the lists; then once more with a
+token, on a shipped real material. Every request the browser makes is recorded: none
+may leave the server (the page works with the network unplugged). Screenshots of each
+step are written to the test's tmp dir (``screens/``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import httpx
+import pytest
+
+from brdffit.export import validate as check
+from tests import api_fixtures as fx
+from tests.test_export_tools import gltf_validator  # noqa: F401 (a fixture, used by name)
+
+pytestmark = pytest.mark.system
+
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+#: A fit with auto of seven candidates on a 2-core machine, compilation included.
+FIT_TIMEOUT_MS = 600_000
+STEP_MS = 60_000
+
+
+def chromium_path() -> str:
+    path = shutil.which("chromium") or "/usr/bin/chromium"
+    if not os.path.exists(path):
+        pytest.fail("Debian's chromium is not installed, and this test needs it: "
+                    "apt-get install -y chromium chromium-driver (.ci/run does this)")
+    return path
+
+
+@pytest.fixture(scope="module")
+def browser():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.fail("the playwright package is missing: pip install -e '.[test]'")
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+class Visit:
+    """A browser tab on the server's page; records every URL it asks for and
+    writes numbered screenshots."""
+
+    def __init__(self, browser, server: fx.Server, shots: Path):
+        self.server, self.shots, self.n = server, shots, 0
+        self.context = browser.new_context(viewport={"width": 1280, "height": 900},
+                                           accept_downloads=True)
+        self.outside: list[str] = []
+        self.context.route("**/*", self._route)
+        self.page = self.context.new_page()
+        self.console_errors: list[str] = []
+        self.page.on("pageerror", lambda e: self.console_errors.append(str(e)))
+        shots.mkdir(parents=True, exist_ok=True)
+
+    def _route(self, route):
+        if route.request.url.startswith(self.server.url + "/"):
+            route.continue_()
+        else:  # the network is unplugged for the page: nothing may need it
+            self.outside.append(route.request.url)
+            route.abort()
+
+    def shot(self, name: str, *, full: bool = True) -> None:
+        self.n += 1
+        self.page.screenshot(path=str(self.shots / f"{self.n:02d}-{name}.png"), full_page=full)
+
+    def message(self) -> str:
+        box = self.page.locator("#message")
+        box.wait_for(state="visible", timeout=STEP_MS)
+        return box.inner_text()
+
+    def wait_image(self, selector: str, timeout: int = STEP_MS) -> None:
+        """Until the image shows a decoded PNG."""
+        self.page.wait_for_function(
+            "s => { const i = document.querySelector(s); "
+            "return i && i.src.startsWith('blob:') && i.complete && i.naturalWidth > 0; }",
+            arg=selector, timeout=timeout)
+
+    def close(self) -> None:
+        self.context.close()
+
+
+def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_validator):  # noqa: F811
+    table_file = fx.write(tmp_path / "ggx.binary", fx.table_bytes("ggx"))
+    bad_file = fx.write(tmp_path / "broken.binary", fx.header([90, 90, 180]) + b"\0" * 1000)
+    with fx.Server(tmp_path / "data") as server, httpx.Client(base_url=server.url) as http:
+        visit = Visit(browser, server, tmp_path / "screens")
+        page = visit.page
+        page.goto(server.url + "/")
+        page.locator("#model-boxes input[value=ggx]").wait_for(timeout=STEP_MS)
+        assert page.locator("#loss-select option").count() == 3
+        visit.shot("start")
+
+        page.set_input_files("#upload-file", str(table_file))
+        page.click("#upload-button")
+        page.wait_for_function("document.querySelector('#table-current').innerText"
+                               ".includes('ggx.binary')", timeout=STEP_MS)
+        page.locator("#tables-table tbody tr", has_text="ggx.binary").wait_for(timeout=STEP_MS)
+        visit.shot("uploaded")
+
+        page.fill("#samples-input", "2048")
+        assert page.is_checked("#mode-auto")
+        page.click("#fit-button")
+        page.wait_for_function("document.querySelector('#job-stage').innerText"
+                               ".match(/queued|running/)", timeout=STEP_MS)
+        visit.shot("fitting")
+        page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
+        job_id = http.get("/v1/fits").json()["items"][0]["id"]
+        job = http.get(f"/v1/fits/{job_id}").json()
+        assert job["status"] == "done"
+        chosen = job["result"]["model"]
+
+        # The results table: one row per candidate, the chosen one marked, its
+        # parameters with standard errors, the selection's reason.
+        rows = page.locator("#results-table tbody tr")
+        assert rows.count() == len(job["results"])
+        best = page.locator("#results-table tbody tr.best")
+        assert best.get_attribute("data-model") == chosen
+        assert "★" in best.inner_text()
+        assert "±" in best.locator("td.params").inner_text()
+        assert page.locator("#selection-reason").inner_text().startswith(f"auto chose {chosen}")
+        shown_rmse = float(best.locator("td.num").first.inner_text())
+        assert shown_rmse == pytest.approx(job["result"]["error"]["log_rmse"], rel=1e-3)
+
+        visit.wait_image("#plot-spheres")
+        visit.wait_image("#plot-slices")
+        visit.shot("results")
+        page.click("[data-plot=report]")
+        visit.wait_image("#plot-extra")
+        page.locator("#extra-figure").scroll_into_view_if_needed()
+        visit.shot("report")
+        page.eval_on_selector("#exposure", "e => { e.value = '1'; "  # the shared exposure
+                              "e.dispatchEvent(new Event('input')); }")
+        assert "brightness(2)" in page.get_attribute("#plot-spheres", "style")
+
+        # Downloads: the glTF material validates; the JSON is the job.
+        with page.expect_download(timeout=STEP_MS) as d:
+            page.click("[data-export=gltf]")
+        gltf_path = tmp_path / d.value.suggested_filename
+        d.value.save_as(gltf_path)
+        assert gltf_path.suffix == ".gltf"
+        report = check.gltf_validate(json.loads(gltf_path.read_text()), gltf_validator)
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+        page.locator("#export-report", has_text="Files:").wait_for(timeout=STEP_MS)
+        page.locator("#export-report").scroll_into_view_if_needed()
+        visit.shot("exported", full=False)
+        with page.expect_download(timeout=STEP_MS) as d:
+            page.click("#json-button")
+        saved = json.loads(Path(d.value.path()).read_text())
+        assert saved["id"] == job_id and saved["result"]["model"] == chosen
+
+        # A bad file: the page shows the API's own detail.
+        detail = http.post("/v1/tables?name=broken.binary", content=bad_file.read_bytes(),
+                           headers={"Content-Type": "application/octet-stream"}).json()["detail"]
+        page.set_input_files("#upload-file", str(bad_file))
+        page.click("#upload-button")
+        page.wait_for_function("document.querySelector('#message').className === 'error'",
+                               timeout=STEP_MS)
+        assert "422" in visit.message() and detail in visit.message()
+        page.evaluate("window.scrollTo(0, 0)")
+        visit.shot("bad-file", full=False)
+
+        # A table with fits cannot be deleted alone: the 409's detail is shown.
+        table_row = page.locator("#tables-table tbody tr", has_text="ggx.binary")
+        table_row.get_by_role("button", name="Delete", exact=True).click()
+        page.wait_for_function("document.querySelector('#message').innerText.includes('409')",
+                               timeout=STEP_MS)
+        assert "with_fits=true" in visit.message()
+
+        # Cancel a fit from the page, then delete the finished jobs from the list.
+        page.locator("#tables-table tbody tr", has_text="ggx.binary").get_by_role(
+            "button", name="Use").click()
+        page.click("#fit-button")
+        page.locator("#job-cancel").wait_for(state="visible", timeout=STEP_MS)
+        page.click("#job-cancel")
+        page.wait_for_function("document.querySelector('#job-stage').innerText"
+                               ".startsWith('cancelled')", timeout=STEP_MS)
+        visit.shot("cancelled")
+        jobs = http.get("/v1/fits").json()["items"]
+        assert [j["status"] for j in jobs] == ["cancelled", "done"]
+        for j in jobs:
+            row = page.locator(f"#jobs-table tr[data-job='{j['id']}']")
+            row.get_by_role("button", name="Delete").click()
+            page.wait_for_function("document.querySelector('#message').innerText"
+                                   f".includes('Deleted job {j['id'][:8]}')", timeout=STEP_MS)
+        assert http.get("/v1/fits").json()["total"] == 0
+        page.wait_for_function("document.querySelectorAll('#jobs-table tbody tr').length === 0",
+                               timeout=STEP_MS)
+        visit.shot("lists")
+
+        assert visit.outside == []
+        assert visit.console_errors == []
+        visit.close()
+        assert http.get("/healthz").status_code == 200
+        assert not re.search(r'HTTP/1.1" 5\d\d |Traceback', server.log()), server.log()[-3000:]
+
+
+def test_with_a_token_on_a_real_material(browser, tmp_path):
+    with fx.Server(tmp_path / "data", env={"BRDFFIT_API_TOKEN": "s3cret-token"}) as server:
+        visit = Visit(browser, server, tmp_path / "screens")
+        page = visit.page
+        page.goto(server.url + "/")
+        page.locator("#token-form").wait_for(state="visible", timeout=STEP_MS)
+        assert "401" in page.locator("#token-why").inner_text()
+        visit.shot("token-asked", full=False)
+
+        page.fill("#token-input", "wrong")
+        page.click("#token-save")
+        page.wait_for_function("document.querySelector('#token-why').innerText"
+                               ".includes('wrong bearer token')", timeout=STEP_MS)
+        page.fill("#token-input", "s3cret-token")
+        page.click("#token-save")
+        page.locator("#token-form").wait_for(state="hidden", timeout=STEP_MS)
+        page.locator("#material-select option[value=red-plastic]").wait_for(
+            state="attached", timeout=STEP_MS)
+
+        page.select_option("#material-select", "red-plastic")
+        page.click("#material-button")
+        page.wait_for_function("document.querySelector('#table-current').innerText"
+                               ".includes('red-plastic.binary')", timeout=STEP_MS)
+        page.click("#model-boxes input[value=ggx]")
+        assert page.is_checked("#mode-list")
+        page.fill("#samples-input", "2048")
+        page.select_option("#loss-select", "cube_root")
+        page.click("#fit-button")
+        page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
+        visit.wait_image("#plot-spheres")
+        visit.wait_image("#plot-slices")
+        visit.shot("token-results")
+
+        headers = {"Authorization": "Bearer s3cret-token"}
+        job = httpx.get(server.url + "/v1/fits", headers=headers).json()["items"][0]
+        missing = httpx.post(server.url + "/v1/materials/no-such-paint", headers=headers)
+        assert missing.status_code == 404 and "GET /v1/materials" in missing.json()["detail"]
+        assert job["status"] == "done" and job["models"] == ["ggx"]
+        assert job["options"]["loss"] == "cube_root"
+        assert visit.outside == []
+        assert visit.console_errors == []
+        visit.close()
