@@ -14,12 +14,11 @@ from enum import Enum
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Query, status
-from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.routes.fits import JobId, _job_or_404, best_result
+from api.routes.fits import JobId, finished_fit
 from api.runner import WorkerLost
 from brdffit.export import SCHEMA, TARGETS
 
@@ -86,19 +85,7 @@ async def get_export(
     model: Annotated[str | None, Query(max_length=64,
                                        description="which model's fit (default: the best)")] = None,
 ) -> ExportOut:
-    job = await run_in_threadpool(_job_or_404, store, job_id)
-    if job.status != "done":
-        why = f": {job.reason}" if job.reason else ""
-        raise HTTPException(status.HTTP_409_CONFLICT,
-                            f"fit job {job_id} is {job.status}{why}; exports exist once it is done")
-    if model is None:
-        result = best_result(job.results)
-    else:
-        result = next((r for r in job.results if r["model"] == model), None)
-        if result is None:
-            raise HTTPException(status.HTTP_404_NOT_FOUND,
-                                f"fit job {job_id} has no {model!r} fit; "
-                                f"it has {', '.join(job.models)}")
+    _, result = await finished_fit(store, job_id, model, "exports")
     try:
         outcome = await runner.run(export_task, result, target.value)
     except WorkerLost as e:

@@ -210,6 +210,24 @@ def _job_or_404(store: Store, job_id: str) -> JobRecord:
     return job
 
 
+async def finished_fit(store: Store, job_id: str, model: str | None,
+                       what: str) -> tuple[JobRecord, dict]:
+    """A done job and one of its fits (``model``'s, or the best): 404 for no such job
+    or model, 409 while the job is not done (``what`` names what waits on it)."""
+    job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status != "done":
+        why = f": {job.reason}" if job.reason else ""
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} is {job.status}{why}; {what} exist once it is done")
+    if model is None:
+        return job, best_result(job.results)
+    result = next((r for r in job.results if r["model"] == model), None)
+    if result is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"fit job {job_id} has no {model!r} fit; "
+                                                       f"it has {', '.join(job.models)}")
+    return job, result
+
+
 @router.post(
     "",
     status_code=status.HTTP_202_ACCEPTED,
@@ -352,20 +370,7 @@ async def get_plot(
     model: Annotated[str | None, Query(max_length=64,
                                        description="which model's fit (default: the best)")] = None,
 ) -> Response:
-    job = await run_in_threadpool(_job_or_404, store, job_id)
-    if job.status != "done":
-        why = f": {job.reason}" if job.reason else ""
-        raise HTTPException(status.HTTP_409_CONFLICT,
-                            f"fit job {job_id} is {job.status}{why}; plots exist once it is done")
-    if model is None:
-        result = best_result(job.results)
-    else:
-        result = next((r for r in job.results if r["model"] == model), None)
-        if result is None:
-            raise HTTPException(
-                status.HTTP_404_NOT_FOUND,
-                f"fit job {job_id} has no {model!r} fit; it has {', '.join(job.models)}",
-            )
+    job, result = await finished_fit(store, job_id, model, "plots")
     path = store.plot_path(job_id, result["model"], kind.value)
     if not path.exists():
         # Rendered on first request, in a worker (a second or two of matplotlib

@@ -21,7 +21,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from brdffit.io.grid import bin_grid
+from brdffit.io.grid import bin_grid, peak_bin
 from brdffit.io.merl import MerlTable
 from brdffit.models import AbstractBRDFModel, AbstractLobeModel, MonoKs
 from brdffit.models.frame import shading_frame
@@ -42,15 +42,6 @@ def _diffuse_region() -> np.ndarray:
     return np.flatnonzero(sel)[::3]
 
 
-@functools.cache
-def _peak_region() -> np.ndarray:
-    """Flat bins near the mirror direction (theta_h < ~6 deg), both directions well
-    above grazing, small theta_d: where any lobe peaks, and only ~5% of the table."""
-    g = bin_grid()
-    near = (g.theta_h < 0.1) & (g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6)
-    return np.flatnonzero(near)
-
-
 def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
     """kd estimate (3,) from bins far from the highlight."""
     idx = _diffuse_region()
@@ -59,16 +50,6 @@ def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
         idx = np.flatnonzero(usable)
     values = table.rgb.reshape(3, -1)[:, idx]
     return np.pi * np.percentile(values, 20, axis=1)
-
-
-def peak_bin(table: MerlTable, usable: np.ndarray) -> int:
-    """Flat index of the brightest usable bin with both directions well above grazing."""
-    idx = _peak_region()
-    idx = idx[usable[idx]]
-    if idx.size == 0:
-        idx = np.flatnonzero(usable)
-    lum = table.rgb.reshape(3, -1)[:, idx].sum(axis=0)
-    return int(idx[np.argmax(lum)])
 
 
 def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray) -> np.ndarray:

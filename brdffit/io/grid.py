@@ -17,11 +17,15 @@ from __future__ import annotations
 import functools
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from brdffit import runtime
 from brdffit.io import angles
+
+if TYPE_CHECKING:
+    from brdffit.io.merl import MerlTable
 
 
 @dataclass(frozen=True)
@@ -92,3 +96,23 @@ def _compute_grid() -> BinGrid:
     weight = np.where(above, weight, 0.0)
     weight /= weight.sum()
     return _freeze(BinGrid(theta_h, theta_d, phi_d, wi, wo, cos_i, cos_o, weight, above))
+
+
+@functools.cache
+def _peak_region() -> np.ndarray:
+    """Flat bins near the mirror direction (theta_h < ~6 deg), both directions well
+    above grazing, small theta_d: where any lobe peaks, and only ~5% of the table."""
+    g = bin_grid()
+    near = (g.theta_h < 0.1) & (g.cos_i > 0.3) & (g.cos_o > 0.3) & (g.theta_d < 0.6)
+    return np.flatnonzero(near)
+
+
+def peak_bin(table: MerlTable, usable: np.ndarray) -> int:
+    """Flat index of the brightest usable bin with both directions well above grazing
+    (where a fit's starts and a model's seeding read the highlight's height)."""
+    idx = _peak_region()
+    idx = idx[usable[idx]]
+    if idx.size == 0:
+        idx = np.flatnonzero(usable)
+    lum = table.rgb.reshape(3, -1)[:, idx].sum(axis=0)
+    return int(idx[np.argmax(lum)])

@@ -111,7 +111,7 @@ class GltfPBR(AbstractBRDFModel):
         A dielectric start takes the diffuse estimate as its base colour; a metal's
         base colour is its highlight colour, the peak bin's, normalised to 0.9.
         """
-        from brdffit.fitting.starts import peak_bin
+        from brdffit.io.grid import peak_bin
 
         peak = table.rgb.reshape(3, -1)[:, peak_bin(table, usable)]
         metal = 0.9 * peak / max(float(np.max(peak)), 1e-12)
