@@ -49,17 +49,37 @@ def plugin_names() -> tuple[str, ...]:
     return tuple(ep.name for ep in entry_points(group=ENTRY_POINT_GROUP))
 
 
+def load_plugins() -> list:
+    """The model objects other packages declare (``name = "package.module:Model"``,
+    a class or an instance), imported now."""
+    out = []
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        obj = ep.load()
+        model = obj() if isinstance(obj, type) else obj
+        if model.name != ep.name:
+            raise ValueError(f"entry point {ep.name!r} names a model called {model.name!r}")
+        out.append(model)
+    return out
+
+
+#: Descriptions of models registered in this process (``registry.register``
+#: adds them), beyond the built-ins and the plugins.
+_REGISTERED: dict[str, dict] = {}
+
+
+def add(model) -> None:
+    """Describe ``model`` from now on (called by ``brdffit.models.registry.register``)."""
+    _REGISTERED[model.name] = describe_model(model)
+
+
 def describe() -> list[dict]:
     """Every registered model as plain data, cheapest first (``brdffit models --json``)."""
     known = list(_builtin())
-    extra = [n for n in plugin_names() if n not in {m["name"] for m in known}]
-    registry = sys.modules.get("brdffit.models.registry")
-    if registry is not None:  # models registered in this process (registry.register)
-        extra += [n for n in registry.REGISTRY if n not in {m["name"] for m in known} | set(extra)]
-    if extra:
-        from brdffit.models import registry
-
-        known += [describe_model(registry.REGISTRY[n]) for n in extra if n in registry.REGISTRY]
+    seen = {m["name"] for m in known}
+    if set(plugin_names()) - seen - set(_REGISTERED):  # described by importing them
+        for model in load_plugins():
+            _REGISTERED.setdefault(model.name, describe_model(model))
+    known += [d for name, d in _REGISTERED.items() if name not in seen]
     return known
 
 
@@ -102,9 +122,7 @@ def describe_model(model) -> dict:
     }
 
 
-def snapshot() -> str:
-    """The built-in models' descriptions as the snapshot file holds them."""
-    from brdffit.models import registry
-
-    live = [describe_model(m) for m in registry.BUILTIN]
-    return json.dumps(live, indent=1) + "\n"
+def snapshot(builtin) -> str:
+    """The descriptions of ``builtin`` (the registry's built-in models) as the
+    snapshot file holds them."""
+    return json.dumps([describe_model(m) for m in builtin], indent=1) + "\n"

@@ -8,17 +8,11 @@ or passed to :func:`register` (docs/adding-a-model.md).
 
 from __future__ import annotations
 
-from importlib.metadata import entry_points
-
+from brdffit.models import catalogue
 from brdffit.models.base import AbstractBRDFModel
 from brdffit.models.beckmann import Beckmann
 from brdffit.models.blinn_phong import BlinnPhong
-from brdffit.models.catalogue import (
-    ENTRY_POINT_GROUP,
-    MONO_SUFFIX,
-    UnknownModelError,
-    check_name,
-)
+from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_pbr import GltfPBR
@@ -48,20 +42,13 @@ def register(model: AbstractBRDFModel) -> AbstractBRDFModel:
     if model.name in {m.name for m in BUILTIN} and REGISTRY[model.name] is not model:
         raise ValueError(f"{model.name!r} is a built-in model")
     REGISTRY[model.name] = model
+    if model.name not in {m.name for m in BUILTIN}:
+        catalogue.add(model)  # brdffit models, the service's model list, the checks
     return model
 
 
-def _load_plugins() -> None:
-    """The models other packages declare: ``name = "package.module:ModelClass"``."""
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        obj = ep.load()
-        model = obj() if isinstance(obj, type) else obj
-        if model.name != ep.name:
-            raise ValueError(f"entry point {ep.name!r} names a model called {model.name!r}")
-        register(model)
-
-
-_load_plugins()
+for _plugin in catalogue.load_plugins():  # other packages' models (entry points)
+    register(_plugin)
 
 
 def get(name: str | AbstractBRDFModel) -> AbstractBRDFModel:
