@@ -100,6 +100,7 @@ function askForToken(detail) {
 function fmt(x, digits = 4) {
   if (x === null || x === undefined) return "–";
   if (typeof x !== "number") return String(x);
+  if (Number.isInteger(x) && digits > 4) return x.toLocaleString("en-US"); // counts
   if (x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5)) return x.toExponential(digits - 1);
   return Number(x.toPrecision(digits)).toString();
 }
@@ -221,7 +222,16 @@ function fitRequest() {
 
 async function startFit() {
   clearMessage();
-  const job = await api("POST", "/v1/fits", { json: fitRequest() });
+  const request = fitRequest();
+  // The previous job's results go away at once: nothing on screen may pass for the new fit's.
+  $("results-panel").hidden = true;
+  let job;
+  try {
+    job = await api("POST", "/v1/fits", { json: request });
+  } catch (e) {
+    if (state.job && state.job.status === "done") $("results-panel").hidden = false;
+    throw e;
+  }
   showJob(job);
   await refreshLists();
 }
@@ -315,7 +325,7 @@ function showResults(job) {
   const best = job.result;
   const selection = best && best.selection;
   $("selection-reason").textContent = selection
-    ? `auto chose ${selection.chosen}: ${selection.reason}`
+    ? `auto: ${selection.reason}`
     : `best log_rmse: ${best ? best.model : "none"}`;
   const body = $("results-table").querySelector("tbody");
   body.textContent = "";
