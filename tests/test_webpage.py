@@ -207,8 +207,9 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
             page.wait_for_function("document.querySelector('#message').innerText"
                                    f".includes('Deleted job {j['id'][:8]}')", timeout=STEP_MS)
         assert http.get("/v1/fits").json()["total"] == 0
-        page.wait_for_function("document.querySelectorAll('#jobs-table tbody tr').length === 0",
-                               timeout=STEP_MS)
+        page.locator("#jobs-table tbody tr.empty", has_text="no fit jobs yet").wait_for(
+            timeout=STEP_MS)
+        assert page.locator("#jobs-table tbody tr").count() == 1
         visit.shot("lists")
 
         assert visit.outside == []

@@ -438,6 +438,12 @@ function downloadJson() {
 
 // -- the lists ---------------------------------------------------------------------
 
+function emptyRow(columns, text) {
+  const row = el("tr", null, { class: "empty" });
+  row.append(el("td", text, { colspan: String(columns), class: "hint" }));
+  return row;
+}
+
 async function refreshLists() {
   const [tables, jobs] = await Promise.all([
     api("GET", "/v1/tables?limit=100"), api("GET", "/v1/fits?limit=100"),
@@ -456,6 +462,7 @@ async function refreshLists() {
     row.append(actions);
     tbody.append(row);
   }
+  if (!tables.items.length) tbody.append(emptyRow(5, "no tables yet"));
   if (tables.total > tables.items.length) {
     const more = el("tr");
     more.append(el("td", `… and ${tables.total - tables.items.length} older (not shown)`));
@@ -478,6 +485,7 @@ async function refreshLists() {
     row.append(actions);
     jbody.append(row);
   }
+  if (!jobs.items.length) jbody.append(emptyRow(6, "no fit jobs yet"));
   if (jobs.total > jobs.items.length) {
     const more = el("tr");
     more.append(el("td", `… and ${jobs.total - jobs.items.length} older (not shown)`));
