@@ -97,10 +97,13 @@ function askForToken(detail) {
 
 // -- small formatting helpers ------------------------------------------------------
 
+function count(n) {  // a count of bins: 1,096,216, not 1.096216e+6
+  return typeof n === "number" ? n.toLocaleString("en-US") : fmt(n);
+}
+
 function fmt(x, digits = 4) {
   if (x === null || x === undefined) return "–";
   if (typeof x !== "number") return String(x);
-  if (Number.isInteger(x) && digits > 4) return x.toLocaleString("en-US"); // counts
   if (x !== 0 && (Math.abs(x) < 1e-3 || Math.abs(x) >= 1e5)) return x.toExponential(digits - 1);
   return Number(x.toPrecision(digits)).toString();
 }
@@ -165,8 +168,8 @@ function chooseTable(table) {
   const s = table.summary || {};
   const p = $("table-current");
   p.textContent = "";
-  p.append("Table: ", el("strong", table.name), ` (${fmt(s.measured_bins, 7)} measured bins, `
-    + `${fmt(s.unmeasured_bins, 7)} unmeasured, ${fmt(s.nonfinite_bins, 7)} non-finite) `,
+  p.append("Table: ", el("strong", table.name), ` (${count(s.measured_bins)} measured bins, `
+    + `${count(s.unmeasured_bins)} unmeasured, ${count(s.nonfinite_bins)} non-finite) `,
   el("span", table.id.slice(0, 12), { class: "ids", title: table.id }));
 }
 
@@ -454,7 +457,7 @@ async function refreshLists() {
   for (const t of tables.items) {
     const row = el("tr", null, { "data-table": t.id });
     row.append(el("td", t.name), el("td", t.id.slice(0, 12), { class: "ids", title: t.id }),
-      el("td", fmt(t.summary.measured_bins, 7), { class: "num" }), el("td", when(t.created_at)));
+      el("td", count(t.summary.measured_bins), { class: "num" }), el("td", when(t.created_at)));
     const actions = el("td", null, { class: "actions" });
     actions.append(button("Use", async () => { chooseTable(t); clearMessage(); }),
       button("Delete", () => deleteTable(t, false)),
