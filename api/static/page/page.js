@@ -225,7 +225,16 @@ function fitRequest() {
 
 async function startFit() {
   clearMessage();
-  const job = await api("POST", "/v1/fits", { json: fitRequest() });
+  const request = fitRequest();
+  // The previous job's results go away at once: nothing on screen may pass for the new fit's.
+  $("results-panel").hidden = true;
+  let job;
+  try {
+    job = await api("POST", "/v1/fits", { json: request });
+  } catch (e) {
+    if (state.job && state.job.status === "done") $("results-panel").hidden = false;
+    throw e;
+  }
   showJob(job);
   await refreshLists();
 }
@@ -319,7 +328,7 @@ function showResults(job) {
   const best = job.result;
   const selection = best && best.selection;
   $("selection-reason").textContent = selection
-    ? `auto chose ${selection.chosen}: ${selection.reason}`
+    ? `auto: ${selection.reason}`
     : `best log_rmse: ${best ? best.model : "none"}`;
   const body = $("results-table").querySelector("tbody");
   body.textContent = "";
@@ -432,6 +441,12 @@ function downloadJson() {
 
 // -- the lists ---------------------------------------------------------------------
 
+function emptyRow(columns, text) {
+  const row = el("tr", null, { class: "empty" });
+  row.append(el("td", text, { colspan: String(columns), class: "hint" }));
+  return row;
+}
+
 async function refreshLists() {
   const [tables, jobs] = await Promise.all([
     api("GET", "/v1/tables?limit=100"), api("GET", "/v1/fits?limit=100"),
@@ -450,6 +465,7 @@ async function refreshLists() {
     row.append(actions);
     tbody.append(row);
   }
+  if (!tables.items.length) tbody.append(emptyRow(5, "no tables yet"));
   if (tables.total > tables.items.length) {
     const more = el("tr");
     more.append(el("td", `… and ${tables.total - tables.items.length} older (not shown)`));
@@ -472,6 +488,7 @@ async function refreshLists() {
     row.append(actions);
     jbody.append(row);
   }
+  if (!jobs.items.length) jbody.append(emptyRow(6, "no fit jobs yet"));
   if (jobs.total > jobs.items.length) {
     const more = el("tr");
     more.append(el("td", `… and ${jobs.total - jobs.items.length} older (not shown)`));
