@@ -11,14 +11,13 @@ from __future__ import annotations
 import logging
 import traceback
 from enum import Enum
-from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Query, status
+from fastapi import APIRouter, Depends, HTTPException, status
 from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.routes.fits import JobId, finished_fit
+from api.routes.fits import FitModel, JobId, finished_fit
 from api.runner import WorkerLost
 from brdffit.export import SCHEMA, TARGETS
 
@@ -82,8 +81,7 @@ async def get_export(
     target: ExportTarget,
     store: StoreDep,
     runner: RunnerDep,
-    model: Annotated[str | None, Query(max_length=64,
-                                       description="which model's fit (default: the best)")] = None,
+    model: FitModel = None,
 ) -> ExportOut:
     _, result = await finished_fit(store, job_id, model, "exports")
     try:

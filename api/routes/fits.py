@@ -37,6 +37,9 @@ router = APIRouter(prefix="/v1/fits", tags=["fits"], dependencies=[Depends(requi
                    responses=ERROR_RESPONSES)
 
 JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="the id POST /v1/fits gave")]
+#: ``?model=``: which model's fit of a job a plot or an export is of.
+FitModel = Annotated[str | None, Query(max_length=64,
+                                       description="which model's fit (default: the best)")]
 
 PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[misc]
 
@@ -367,8 +370,7 @@ async def get_plot(
     kind: PlotKind,
     store: StoreDep,
     runner: RunnerDep,
-    model: Annotated[str | None, Query(max_length=64,
-                                       description="which model's fit (default: the best)")] = None,
+    model: FitModel = None,
 ) -> Response:
     job, result = await finished_fit(store, job_id, model, "plots")
     path = store.plot_path(job_id, result["model"], kind.value)
