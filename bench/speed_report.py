@@ -149,7 +149,7 @@ def write_plots(report: dict, out_dir: str) -> None:
     full-table optimum. Colour: samples; marker: solver; hollow: float32. No text
     beside the points (they crowd at the default budgets): the legend says all."""
     from matplotlib.lines import Line2D
-    from matplotlib.ticker import FuncFormatter, NullFormatter
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     fits = report["fits"]
     models = list(dict.fromkeys(r["model"] for r in fits))
@@ -186,6 +186,8 @@ def write_plots(report: dict, out_dir: str) -> None:
                            s=200, color="tab:red", zorder=4)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # 1-2-5 ticks: an axis that spans less than a decade still gets labels
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
