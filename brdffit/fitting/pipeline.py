@@ -473,11 +473,14 @@ def fit(
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
         u_candidates = start_vectors(m, table, counts.usable)
-    # Score candidates on every 8th sample: ranking starts needs no more.
-    scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))
-    scores = np.where(np.isfinite(scores), scores, np.inf)
-    k = min(starts, len(u_candidates))
-    best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+    if len(u_candidates) > 1:  # one candidate (init, a polish) has nothing to rank
+        # Score candidates on every 8th sample: ranking starts needs no more.
+        scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))
+        scores = np.where(np.isfinite(scores), scores, np.inf)
+        k = min(starts, len(u_candidates))
+        best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+    else:
+        best_starts = u_candidates
     parent_start = None
     if init is None and m.parent is not None:
         on_every_bin = parent_fit is not None and parent_fit.samples["used"] == n_usable
