@@ -11,8 +11,9 @@
   ``$BRDFFIT_CACHE_DIR`` or ``$XDG_CACHE_HOME/brdffit`` (``~/.cache/brdffit``); an
   empty ``BRDFFIT_CACHE_DIR`` switches caching off. It holds the MERL bin grid
   (``merl-grid-v1.npz``, ~140 MB, ~20x faster than recomputing it in a new
-  process) and, under ``jax/``, JAX's persistent compilation cache, so a second
-  process reuses the compiled fits of the first. The compilation cache is only
+  process), under ``executables/`` the compiled fits themselves
+  (``brdffit.executables``: a second process runs them without tracing), and under
+  ``jax/`` JAX's persistent compilation cache, for everything else. The compilation cache is only
   switched on where the caller has not chosen one of their own. Both are logged
   (logger ``brdffit``, level INFO) when first used.
 """

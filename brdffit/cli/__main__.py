@@ -1,7 +1,5 @@
 """``python -m brdffit.cli``: the same as the ``brdffit`` command."""
 
-import sys
+from brdffit.cli import console
 
-from brdffit.cli import main
-
-sys.exit(main())
+console()

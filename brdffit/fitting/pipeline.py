@@ -29,12 +29,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float
 
-from brdffit import models, runtime
+from brdffit import executables, models, runtime
 from brdffit.errors import FitInputError
-from brdffit.fitting import solver as solvers
 from brdffit.fitting.loss import (
     DEFAULT_LOSS,
     LOSS_METRIC,
@@ -46,9 +44,8 @@ from brdffit.fitting.loss import (
     sum_over_blocks,
     sum_squares,
 )
-from brdffit.fitting.result import FitResult
+from brdffit.fitting.result import STATUS_NAMES, FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
-from brdffit.fitting.solver import NormalLevenbergMarquardt
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io import merl
@@ -67,13 +64,21 @@ DEFAULT_STARTS = 1
 DEFAULT_MAX_STEPS = 256
 
 
-def _make_solver(name: str, precision: str):
+@functools.cache
+def _solver(name: str, precision: str):
+    """The solver ``name`` for ``precision``, built once. optimistix is imported
+    here, when a fit is first traced, not with brdffit: a process that runs its
+    fits from compiled executables (``brdffit.executables``) never needs it."""
+    import optimistix as optx
+
+    from brdffit.fitting import solver as solvers
+
     # float32 cannot resolve relative changes much below 1e-6: looser tolerances
     # there stop the solver at its attainable accuracy instead of at max_steps.
     rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
     gtol = solvers.gtol_for(PRECISIONS[precision])
     return {
-        "lm": lambda: NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
+        "lm": lambda: solvers.NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
         "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
         "dogleg": lambda: optx.Dogleg(rtol=rtol, atol=atol),
         "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
@@ -83,21 +88,19 @@ def _make_solver(name: str, precision: str):
 #: "lm" is brdffit's normal-equations Levenberg-Marquardt (``brdffit.fitting.solver``);
 #: "optx-lm" is optimistix's own, kept for comparison.
 SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
-#: Built once per (name, precision) and passed to the compiled solve as static.
-_SOLVER_CACHE = {(s, p): _make_solver(s, p) for s in SOLVERS for p in PRECISIONS}
 
 
 # -- compiled pieces -----------------------------------------------------------
 
 
-@eqx.filter_jit
+@executables.jit
 def _score(model, u_batch, data, every: int = 1):
     """Loss of each start, on every ``every``-th sample (``every`` is static)."""
     data = jax.tree_util.tree_map(lambda a: a[..., ::every], data)
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
-@eqx.filter_jit
+@executables.jit
 def _constrain_jit(model, u):
     return model.constrain(u)
 
@@ -115,8 +118,13 @@ def _bound_side(u, args):
     return model.bound_side(u)
 
 
-@eqx.filter_jit
-def _solve_batch(model, solver, u_batch, data, max_steps):
+@executables.jit
+def _solve_batch(model, solver_name: str, u_batch, data, max_steps):
+    import optimistix as optx
+
+    from brdffit.fitting import solver as solvers
+
+    solver = _solver(solver_name, jnp.dtype(data.target.dtype).name)
     # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
     floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
     options = {"normal_equations": normal_equations, "bound_side": _bound_side,
@@ -152,7 +160,10 @@ def _device_frames(dtype_name: str) -> Frame:
     """The shading frame of every bin centre, on the device, computed once per
     process: only targets and weights travel per table."""
     g = bin_grid()
-    return jax.jit(shading_frame)(jnp.asarray(g.wi, dtype_name), jnp.asarray(g.wo, dtype_name))
+    return _shading_frame(np.asarray(g.wi, dtype_name), np.asarray(g.wo, dtype_name))
+
+
+_shading_frame = executables.jit(shading_frame)
 
 
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
@@ -176,12 +187,12 @@ def sample_data(
     return _make_loss_data(table, index, weight, dtype, frame, loss)
 
 
-@jax.jit
+@executables.jit
 def _gather(tree, index):
     return jax.tree_util.tree_map(lambda a: a[..., index], tree)
 
 
-@functools.partial(jax.jit, static_argnames="loss")
+@executables.jit
 def _compress_all(rgb, cos_i, loss):
     # unmeasured bins hold negative values: clamped so that every loss's target is
     # finite there (their weight is 0)
@@ -215,7 +226,7 @@ class _TableOnDevice(eqx.Module):
     cube: Float[Array, "3 n"]  # cbrt(f_meas cos_i + offset), the cube-root loss's target
 
 
-@jax.jit
+@executables.jit
 def _table_on_device(rgb, cos_i) -> _TableOnDevice:
     meas_cos = rgb * jnp.maximum(cos_i, 0.0)
     return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos),
@@ -254,7 +265,7 @@ def _fit_cos(model, u, frame):
     return f * jnp.maximum(frame.cos_i, 0.0)
 
 
-@eqx.filter_jit
+@executables.jit
 def _full_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
     """log_rmse, cube_root_rmse and rmse_cos of the whole table in one pass, block by
     block (``brdffit.fitting.loss.sum_over_blocks``): the model is evaluated once per
@@ -492,7 +503,7 @@ def fit(
             best_starts = np.concatenate([parent_start[None], best_starts])
             parent_start = None
 
-    solve = functools.partial(_solve_batch, m, _SOLVER_CACHE[solver, precision],
+    solve = functools.partial(_solve_batch, m, solver,
                               data=data, max_steps=max_steps)
     values, codes, steps, losses = (np.asarray(a) for a in solve(
         u_batch=jnp.asarray(best_starts, dtype)))
@@ -511,7 +522,7 @@ def fit(
     finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
     if finite.any():
         i = int(np.argmin(np.where(finite, losses, np.inf)))
-        u_best, result = values[i], solvers.STATUS_NAMES[int(codes[i])]
+        u_best, result = values[i], STATUS_NAMES[int(codes[i])]
     else:  # every start diverged: report the best start itself, flagged as such
         i = 0
         u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"

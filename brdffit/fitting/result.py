@@ -15,6 +15,10 @@ from dataclasses import asdict, dataclass, fields
 
 from brdffit import jsonout
 
+#: The status of a finished fit, as ``FitResult.result`` names it. Only the first
+#: means the optimality test holds (``brdffit.fitting.solver``).
+STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfinite")
+
 #: The version of the result schema that :meth:`FitResult.to_dict` writes.
 SCHEMA = "brdffit.fit/1"
 
@@ -27,7 +31,7 @@ class FitResult:
     shape parameters floats. ``error`` holds ``log_rmse`` (see ``brdffit.fitting.loss``)
     and friends, on the bins the fit was judged on (the whole table, or the scene's
     directions). ``result`` says how the solve ended
-    (``brdffit.fitting.solver.STATUS_NAMES``): ``"successful"`` only where the optimality
+    (:data:`STATUS_NAMES`): ``"successful"`` only where the optimality
     test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
     ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
     ``"successful"``.

@@ -55,6 +55,8 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Bool, Float, Int
 
+from brdffit.fitting.result import STATUS_NAMES  # noqa: F401 - re-exported
+
 #: Damping beyond which no step can change the parameters at float precision.
 _LAMBDA_MAX = 1e14
 #: Longest step, in the unconstrained parameters (max norm), that a solve takes.
@@ -66,9 +68,7 @@ _RANK_FLOOR = 1e-20
 #: Why a solve stopped (``_LMState.stop``).
 RUNNING, OPTIMAL, STALLED, STUCK = 0, 1, 2, 3
 
-#: The status of a finished fit, as ``FitResult.result`` names it. Only the first
-#: means the optimality test holds.
-STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfinite")
+#: Indices into ``STATUS_NAMES`` (the result schema's names).
 SUCCESSFUL, MAX_STEPS, STATUS_STALLED, NONFINITE = range(4)
 
 

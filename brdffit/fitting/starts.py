@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import functools
 
-import equinox as eqx
 import jax
 import numpy as np
 
+from brdffit import executables
 from brdffit.io.grid import bin_grid, peak_bin
 from brdffit.io.merl import MerlTable
 from brdffit.models import AbstractBRDFModel, AbstractLobeModel, MonoKs
@@ -80,7 +80,7 @@ def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray) -
     return np.stack(starts)
 
 
-@eqx.filter_jit
+@executables.jit
 def _lobe_at(model, shapes, wi, wo):
     """The model's lobe at one direction pair for a batch of shape parameters."""
     frame = shading_frame(wi, wo)

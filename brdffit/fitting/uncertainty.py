@@ -40,11 +40,11 @@ covariance (held fixed, as the solver holds it) and has no standard error.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdffit import executables
 from brdffit.fitting.loss import LossData, compress, sum_over_blocks
 from brdffit.models import AbstractBRDFModel
 
@@ -87,7 +87,7 @@ def _unflatten(model: AbstractBRDFModel, theta):
     return params
 
 
-@eqx.filter_jit
+@executables.jit
 def _jacobian_terms(model, theta, data: LossData):
     """(A, B, n) of the module docstring, on the parameters' own scale.
 
@@ -108,13 +108,16 @@ def _jacobian_terms(model, theta, data: LossData):
     return (*sum_over_blocks(terms, data), 3 * jnp.sum(data.weight > 0))
 
 
-@eqx.filter_jit
-def _slopes(model: AbstractBRDFModel, u):
-    """d theta / d u of every scalar entry (the transforms are elementwise)."""
+@executables.jit
+def _linearisation(model: AbstractBRDFModel, u):
+    """The parameters ``theta`` (flat, in the model's order), which of them sit on a
+    bound, and d theta / d u of every entry (the transforms are elementwise): one
+    compiled call, not one per eager operation."""
     def flat(v):
-        return jnp.concatenate([jnp.ravel(x) for x in model.constrain(v).values()])
+        params = model.constrain(v)
+        return jnp.concatenate([jnp.ravel(params[s.name]) for s in model.param_specs])
 
-    return jnp.diag(jax.jacfwd(flat)(u))
+    return flat(u), model.bound_side(u), jnp.diag(jax.jacfwd(flat)(u))
 
 
 def _scale(model: AbstractBRDFModel, theta: np.ndarray) -> np.ndarray:
@@ -149,12 +152,12 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     k = max(1, -(-n_bins // MAX_JACOBIAN_BINS))
     if k > 1:
         data = jax.tree_util.tree_map(lambda a: a[..., ::k], data)
-    theta = np.concatenate([np.ravel(np.asarray(v, np.float64)) for v in
-                            model.constrain(jnp.asarray(u, jnp.float64)).values()])
-    a, b, n = _jacobian_terms(model, jnp.asarray(theta), data)
+    theta, bound_side, slopes = (np.asarray(x, np.float64) for x in _linearisation(
+        model, np.asarray(u, np.float64)))
+    a, b, n = _jacobian_terms(model, theta, data)
     a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
 
-    at_bound = np.asarray(model.bound_side(jnp.asarray(u, jnp.float64))) != 0
+    at_bound = bound_side != 0
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         # a fit that ran off the table's scale: no linearisation to report, and no
         # number pretends otherwise (every entry undetermined, no errors)
@@ -182,7 +185,6 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se, se)
-    slopes = np.asarray(_slopes(model, jnp.asarray(u, jnp.float64)))
     with np.errstate(invalid="ignore", divide="ignore"):
         se_u = se / np.abs(slopes)
     scale = _scale(model, theta)

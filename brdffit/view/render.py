@@ -21,11 +21,11 @@ count.
 
 from __future__ import annotations
 
-import equinox as eqx
-import jax.numpy as jnp
+import functools
+
 import numpy as np
 
-from brdffit import runtime
+from brdffit import executables, runtime
 from brdffit.io.merl import MerlTable
 from brdffit.models import AbstractBRDFModel
 
@@ -40,9 +40,17 @@ PSNR_CAP_DB = 100.0
 
 
 def sphere_directions(size: int, light: np.ndarray):
-    """Per-pixel local (wi, wo) (size, size, 3) and the mask of lit, visible pixels."""
-    wi, wo, inside = sphere_disc(size, light)
+    """Per-pixel local (wi, wo) (size, size, 3) and the mask of lit, visible pixels
+    (read-only arrays, shared: every fit's PSNR renders the same two spheres)."""
+    return _sphere_directions(size, tuple(float(c) for c in np.ravel(light)))
+
+
+@functools.lru_cache(maxsize=16)
+def _sphere_directions(size: int, light: tuple[float, ...]):
+    wi, wo, inside = sphere_disc(size, np.array(light))
     lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    for a in (wi, wo, lit):
+        a.setflags(write=False)
     return wi, wo, lit
 
 
@@ -90,12 +98,12 @@ def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
 def render_model(model: AbstractBRDFModel, params: dict, light: np.ndarray, size: int = 128):
     """Radiance image of a model with ``params`` (docs/models.md names) and its lit mask."""
     wi, wo, lit = sphere_directions(size, light)
-    p = {k: jnp.asarray(np.asarray(v, dtype=np.float64)) for k, v in params.items()}
-    f = np.asarray(_evaluate(model, p, jnp.asarray(wi), jnp.asarray(wo)), dtype=np.float64)
+    p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
+    f = np.asarray(_evaluate(model, p, wi, wo), dtype=np.float64)
     return radiance(np.where(lit[..., None], f, 0.0), wi), lit
 
 
-@eqx.filter_jit
+@executables.jit
 def _evaluate(model, params, wi, wo):
     return model(params, wi, wo)
 

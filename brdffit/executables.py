@@ -1,0 +1,286 @@
+"""Compiled fits kept on disk, so that a new process runs them without tracing.
+
+JAX's persistent compilation cache (``brdffit.runtime``) saves the *compilation* of a
+function, but a new process still traces it and lowers it to find the cache entry:
+for a default fit that is ~1 s of a 2 s command. :func:`jit` keeps the compiled
+executable itself (``jax.experimental.serialize_executable``) under
+``cache_dir()/executables/<fingerprint>/``, found again from the arguments' shapes
+alone; loading one takes milliseconds to ~0.1 s.
+
+:func:`jit` is a drop-in ``equinox.filter_jit``: arrays are traced, every other
+argument is static. The key of an executable on disk is everything its code depends
+on:
+
+- the **fingerprint**: the bytes of every brdffit source file, the versions of jax,
+  jaxlib, equinox, lineax and optimistix, the backend and device kind, the CPU's
+  feature flags and ``XLA_FLAGS``; a new brdffit or jax gets a new directory, and
+  directories unused for :data:`KEEP_DAYS` are removed;
+- the function's name, the structure and static values of its arguments (a model's
+  static fields, a solver's tolerances) and the shape and dtype of every array.
+
+Only brdffit's own functions, with arguments built from brdffit's own classes,
+optimistix/lineax/equinox and Python's plain values, are kept on disk: a plugin
+model's code is not in the fingerprint, so its fits are compiled as usual
+(``equinox.filter_jit``), in memory.
+A file that cannot be read or loaded is compiled again and replaced; a cache that
+cannot be written costs speed only. ``BRDFFIT_CACHE_DIR=`` (empty) switches it off.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.metadata
+import os
+import pickle
+import re
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from brdffit import runtime
+
+#: Fingerprint directories not used for this long are removed (old brdffit or jax).
+KEEP_DAYS = 7
+#: Modules whose classes may appear in a key on disk: their code is fixed by the
+#: fingerprint (brdffit) or by the recorded package versions.
+_KEYED_MODULES = ("brdffit.", "optimistix.", "lineax.", "equinox.", "jax.", "builtins",
+                  "collections", "numpy")
+_FORMAT = 1  # of the files written here
+_lock = threading.Lock()
+
+
+@functools.cache
+def _fingerprint() -> str:
+    import jax
+
+    h = hashlib.sha256(f"format {_FORMAT}\n".encode())
+    package = Path(__file__).resolve().parent
+    for path in sorted(package.rglob("*.py")) + sorted(package.rglob("*.json")):
+        h.update(str(path.relative_to(package)).encode())
+        h.update(path.read_bytes())
+    for dist in ("jax", "jaxlib", "equinox", "lineax", "optimistix"):
+        try:
+            h.update(f"{dist} {importlib.metadata.version(dist)}\n".encode())
+        except importlib.metadata.PackageNotFoundError:
+            h.update(f"{dist} -\n".encode())
+    device = jax.devices()[0]
+    h.update(f"{device.platform} {device.device_kind} {device.client.platform_version}\n".encode())
+    h.update(os.environ.get("XLA_FLAGS", "").encode())
+    h.update(_cpu_flags().encode())
+    return h.hexdigest()[:24]
+
+
+def _cpu_flags() -> str:
+    # XLA compiles for the host's instruction set: an executable from another CPU
+    # (a shared home directory) could use instructions this one lacks.
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith(("flags", "Features")):
+                    return line
+    except OSError:
+        pass
+    import platform
+
+    return platform.processor() or platform.machine()
+
+
+def _directory() -> Path | None:
+    base = runtime.cache_dir()
+    return None if base is None else _directory_in(base)
+
+
+@functools.cache
+def _directory_in(base: str) -> Path | None:
+    root = Path(base) / "executables"
+    path = root / _fingerprint()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        os.utime(path)
+    except OSError as e:
+        runtime.log.info("brdffit: compiled fits not kept on disk (%s)", e)
+        return None
+    _remove_stale(root, path)
+    return path
+
+
+def _remove_stale(root: Path, current: Path) -> None:
+    cutoff = time.time() - KEEP_DAYS * 86400
+    for d in root.iterdir():
+        try:
+            if d != current and d.is_dir() and d.stat().st_mtime < cutoff:
+                for f in d.iterdir():
+                    f.unlink()
+                d.rmdir()
+        except OSError:
+            pass  # another process's, or in use: left for next time
+
+
+def _type_is_keyed(cls) -> bool:
+    module = getattr(cls, "__module__", "") or ""
+    return module == "builtins" or module.startswith(_KEYED_MODULES)
+
+
+def _treedef_is_keyed(treedef) -> bool:
+    node = treedef.node_data()
+    if node is not None and not _type_is_keyed(node[0]):
+        return False
+    return all(_treedef_is_keyed(c) for c in treedef.children())
+
+
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def _static_text(value) -> str | None:
+    """A process-independent text of a static leaf, or None when it has none."""
+    if callable(value) and hasattr(value, "__qualname__"):
+        if not _type_is_keyed(value) and not getattr(value, "__module__", "").startswith(
+                _KEYED_MODULES):
+            return None
+        return f"{value.__module__}.{value.__qualname__}"
+    if not _type_is_keyed(type(value)):
+        return None
+    return _ADDRESS.sub("", repr(value))
+
+
+class _Entry:
+    """One compiled program and the structure of what it returns."""
+
+    __slots__ = ("call", "out_def")
+
+    def __init__(self, call, out_def):
+        self.call, self.out_def = call, out_def
+
+
+def jit(fn: Callable) -> Callable:
+    """``fn`` compiled like ``equinox.filter_jit``, its executables kept on disk."""
+    import equinox as eqx
+    import jax
+
+    plain = eqx.filter_jit(fn)
+    entries: dict = {}
+    name = f"{fn.__module__}.{fn.__qualname__}"
+    own_code = fn.__module__.startswith("brdffit.")  # the fingerprint covers its code
+
+    def split(args, kwargs):
+        leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
+        dynamic = [i for i, x in enumerate(leaves) if eqx.is_array(x)]
+        key = (treedef, tuple(
+            (x.shape, x.dtype, getattr(x, "weak_type", False)) if i in dynamic else x
+            for i, x in enumerate(leaves)), jax.config.jax_enable_x64)
+        return leaves, treedef, dynamic, key
+
+    def compile_entry(leaves, treedef, dynamic, to_store: bool):
+        from jax._src import config as jax_config
+
+        out_defs = []
+
+        def flat(*arrays):
+            full = list(leaves)
+            for i, a in zip(dynamic, arrays):
+                full[i] = a
+            args, kwargs = jax.tree_util.tree_unflatten(treedef, full)
+            out_leaves, out_def = jax.tree_util.tree_flatten(fn(*args, **kwargs))
+            out_defs.append(out_def)
+            return out_leaves
+
+        lowered = jax.jit(flat).lower(*(leaves[i] for i in dynamic))
+        if to_store:
+            # An executable that JAX's own cache loaded serialises without its
+            # machine code (its fused kernels are then "not found" when run): the
+            # one kept here is compiled afresh, once per fingerprint.
+            with jax_config.enable_compilation_cache(False):
+                compiled = lowered.compile()
+        else:
+            compiled = lowered.compile()
+        return _Entry(compiled, out_defs[0]), compiled
+
+    def disk_path(leaves, treedef, dynamic) -> Path | None:
+        directory = _directory()
+        if directory is None or not own_code or not _treedef_is_keyed(treedef):
+            return None
+        parts = [name, _ADDRESS.sub("", str(treedef)), str(jax.config.jax_enable_x64)]
+        for i, x in enumerate(leaves):
+            if i in dynamic:
+                parts.append(f"{x.dtype}{list(x.shape)}{'w' if getattr(x, 'weak_type', 0) else ''}")
+            else:
+                text = _static_text(x)
+                if text is None:
+                    return None
+                parts.append(text)
+        digest = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+        return directory / f"{fn.__name__}-{digest}.xla"
+
+    def load(path: Path) -> _Entry | None:
+        from jax.experimental import serialize_executable
+
+        t0 = time.perf_counter()
+        try:
+            with open(path, "rb") as f:
+                payload, in_tree, out_tree, out_example = pickle.load(f)
+            call = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+            runtime.log.debug("brdffit: loaded compiled %s in %.3f s", name,
+                              time.perf_counter() - t0)
+            return _Entry(call, jax.tree_util.tree_structure(out_example))
+        except Exception as e:  # noqa: BLE001 - damaged, truncated or from an older jax
+            runtime.log.info("brdffit: compiled %s not loaded from %s (%s)", name, path, e)
+            return None
+
+    def store(path: Path, entry: _Entry, compiled) -> None:
+        from jax.experimental import serialize_executable
+
+        try:
+            payload, in_tree, out_tree = serialize_executable.serialize(compiled)
+            example = jax.tree_util.tree_unflatten(entry.out_def, [0] * entry.out_def.num_leaves)
+            tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
+            with open(tmp, "wb") as f:
+                pickle.dump((payload, in_tree, out_tree, example), f,
+                            protocol=pickle.HIGHEST_PROTOCOL)
+            os.replace(tmp, path)
+        except Exception as e:  # noqa: BLE001 - not serialisable, or no space: speed only
+            runtime.log.info("brdffit: compiled %s not kept (%s)", name, e)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        leaves, treedef, dynamic, key = split(args, kwargs)
+        if any(isinstance(leaves[i], jax.core.Tracer) for i in dynamic):
+            return plain(*args, **kwargs)  # called inside another traced function
+        try:
+            entry = entries.get(key)
+        except TypeError:  # an unhashable static argument: no caching of ours
+            return plain(*args, **kwargs)
+        if entry is None:
+            with _lock:
+                entry = entries.get(key)
+                if entry is None:
+                    path = disk_path(leaves, treedef, dynamic)
+                    entry = load(path) if path is not None and path.exists() else None
+                    if entry is not None:
+                        entry, out = checked(entry, path, leaves, treedef, dynamic)
+                        if entry is not None:
+                            entries[key] = entry
+                            return jax.tree_util.tree_unflatten(entry.out_def, out)
+                    if entry is None:
+                        entry, compiled = compile_entry(leaves, treedef, dynamic,
+                                                        path is not None)
+                        if path is not None:
+                            store(path, entry, compiled)
+                    entries[key] = entry
+        out = entry.call(*(leaves[i] for i in dynamic))
+        return jax.tree_util.tree_unflatten(entry.out_def, out)
+
+    def checked(entry: _Entry, path: Path, leaves, treedef, dynamic):
+        """``(entry, its outputs)`` if it runs on these arguments; else its file is
+        removed and ``(None, None)`` returned."""
+        try:
+            return entry, jax.block_until_ready(entry.call(*(leaves[i] for i in dynamic)))
+        except Exception as e:  # noqa: BLE001 - a file that loads but cannot run
+            runtime.log.info("brdffit: compiled %s in %s does not run (%s); compiling again",
+                             name, path, e)
+            path.unlink(missing_ok=True)
+            return None, None
+
+    call.plain = plain  # the same function without the cache, e.g. to nest in a jit
+    return call

@@ -1,0 +1,127 @@
+"""Compiled fits kept on disk (brdffit.executables): a second process runs them
+without tracing and gets the very same fit; a damaged file is compiled again; a
+plugin's code, whose changes the fingerprint cannot see, is never kept."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdffit import executables, models
+from brdffit.view import render
+
+ROOT = Path(__file__).resolve().parents[1]
+
+pytestmark = pytest.mark.contract
+
+PROBE = r"""
+import json, logging, sys
+logging.basicConfig(level=logging.DEBUG, stream=sys.stderr, format="%(message)s")
+for name in ("jax", "absl"):
+    logging.getLogger(name).setLevel(logging.WARNING)
+from brdffit import fit
+from data_synth.synth import Component, make_table
+
+table, _ = make_table([Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.5, 0.5, 0.5],
+                                       "alpha": 0.08, "f0": 0.04})])
+r = fit(table, "ggx", samples=2048, seed=0)
+print(json.dumps({"params": r.params, "error": r.error, "result": r.result,
+                  "uncertainty": r.uncertainty}))
+"""
+
+
+def _run(cache: Path) -> tuple[dict, str]:
+    env = {k: v for k, v in os.environ.items() if k != "XDG_CACHE_HOME"}
+    env["BRDFFIT_CACHE_DIR"] = str(cache)
+    r = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
+                       timeout=600, cwd=ROOT, env=env)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1]), r.stderr
+
+
+def _stored(cache: Path) -> list[Path]:
+    return sorted((cache / "executables").glob("*/*.xla"))
+
+
+def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path):
+    cache = tmp_path / "cache"
+    first, log1 = _run(cache)
+    files = _stored(cache)
+    assert any(f.name.startswith("_solve_batch-") for f in files), files
+    assert "loaded compiled" not in log1
+
+    second, log2 = _run(cache)
+    assert "loaded compiled brdffit.fitting.pipeline._solve_batch" in log2
+    assert second == first  # to the last bit: the same executable, the same data
+
+    # damaged files (a disk error, a killed writer) are compiled again and replaced
+    for f in files:
+        f.write_bytes(b"not an executable")
+    third, log3 = _run(cache)
+    assert third == first
+    assert "not loaded" in log3
+    assert all(f.stat().st_size > 100 for f in _stored(cache))
+
+
+def _fresh(fn):
+    """The decorated function as a new process sees it: nothing in memory."""
+    return executables.jit(fn.__wrapped__)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch) -> Path:
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path))
+    return tmp_path
+
+
+def _directions(n=64):
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(2, n, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 0.1
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def test_arguments_key_the_stored_executables(cache, caplog):
+    wi, wo = _directions()
+    ggx = models.get("ggx")
+    params = {"kd": np.array([0.2, 0.1, 0.05]), "ks": np.array([0.5, 0.5, 0.5]),
+              "alpha": np.array(0.1), "f0": np.array(0.04)}
+    evaluate = _fresh(render._evaluate)
+    expected = np.asarray(evaluate(ggx, params, wi, wo))
+    evaluate(ggx, params, wi[:32], wo[:32])  # another shape: another executable
+    evaluate(models.get("beckmann"), params, wi, wo)  # another model: another one
+    assert len(_stored(cache)) == 3
+
+    with caplog.at_level(logging.DEBUG, logger="brdffit"):
+        again = np.asarray(_fresh(render._evaluate)(ggx, params, wi, wo))
+    assert "loaded compiled brdffit.view.render._evaluate" in caplog.text
+    np.testing.assert_array_equal(again, expected)
+    assert len(_stored(cache)) == 3
+
+
+def test_plugin_code_is_compiled_in_memory_only(cache):
+    evaluate = _fresh(render._evaluate)
+    wi, wo = _directions()
+
+    class Plugin(models.get("lambert").__class__):  # a class from outside brdffit
+        pass
+
+    out = np.asarray(evaluate(Plugin(), {"kd": np.array([0.5, 0.5, 0.5])}, wi, wo))
+    np.testing.assert_allclose(out, 0.5 / np.pi)
+    assert _stored(cache) == []
+
+
+def test_no_cache_directory_keeps_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
+    wi, wo = _directions()
+    out = np.asarray(_fresh(render._evaluate)(models.get("lambert"),
+                                              {"kd": np.array([0.5, 0.5, 0.5])}, wi, wo))
+    np.testing.assert_allclose(out, 0.5 / np.pi)
+    assert not any(tmp_path.iterdir())
