@@ -73,8 +73,13 @@ def _select(table, scene, rule: dict, options: dict) -> list[dict]:
     from brdffit.jsonout import strict
     from brdffit.selection import DEFAULT_TOLERANCE, select
 
+    def progress(i: int, n: int, model: str, row: dict | None) -> None:
+        if row is None:  # before candidate i; after it, the fraction counts it done
+            report(f"fitting {model} ({i + 1} of {n} candidates, model auto)", i / n)
+
     tolerance = DEFAULT_TOLERANCE if rule["tolerance"] is None else rule["tolerance"]
-    sel = select(table, tolerance=tolerance, budget=rule["budget"], scene=scene, **options)
+    sel = select(table, tolerance=tolerance, budget=rule["budget"], scene=scene,
+                 progress=progress, **options)
     return [strict(sel.fits[row["model"]].to_dict())
             for row in sel.ranking if row["model"] in sel.fits]
 

@@ -9,7 +9,7 @@ cached in ``$BRDFFIT_BENCH_CACHE``, default ``.bench-cache/``), default fits of
 - ``ggx`` (grey Schlick f0, the base model), ``ggx2``, and the two target models
   ``rough_conductor`` (Mitsuba's conductor, coloured complex IOR) and ``gltf_pbr``;
   each fit's full-table ``log_rmse`` and its sphere-render PSNR against the table
-  (``brdffit.view.render``), so the conductor's gain on metals over grey f0 is read
+  (``brdffit.fitting.sphere``), so the conductor's gain on metals over grey f0 is read
   off one row;
 - every export of the ``ggx`` fit and of the matching target fit: ``exact`` or not,
   the reported ``log_rmse_to_fit``, the exported material's own ``log_rmse`` to the
@@ -44,7 +44,7 @@ def _table(name: str):
 def _mitsuba_sphere_psnr(export, model, params) -> float:
     from brdffit import models
     from brdffit.export import validate
-    from brdffit.view import render
+    from brdffit.fitting import sphere as render
 
     se, n = 0.0, 0
     for _, light in render.LIGHTS:
@@ -62,7 +62,7 @@ def material_row(name: str) -> dict:
     from brdffit.export import export, validate
     from brdffit.export.conversion import fit_as_table
     from brdffit.fitting.pipeline import table_error
-    from brdffit.view.render import SphereReference
+    from brdffit.fitting.sphere import SphereReference
 
     table = _table(name)
     reference = SphereReference(table)
@@ -102,7 +102,7 @@ def _markdown(rows: list[dict], meta: dict) -> str:
         f"Mitsuba {meta['mitsuba']} `{meta['mitsuba_variant']}`, MaterialX {meta['materialx']}). "
         "Default fits (16384 samples, 1 start); log_rmse on every bin of the table; sphere "
         "PSNR of brdffit's render of the fit against the table's (two lights, "
-        "`brdffit.view.render`).",
+        "`brdffit.fitting.sphere`).",
         "",
         "## The target models against grey-f0 GGX",
         "",

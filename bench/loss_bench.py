@@ -55,7 +55,7 @@ def main(argv=None) -> int:
              f"{args.samples}`: {len(names)} MERL materials ({', '.join(names)}), each model "
              "fitted under each loss; every result reports every metric. Medians over the "
              "materials; **bold**: the best loss for that column's metric. Each loss should "
-             "win its own metric; PSNR is the sphere render (`brdffit.view.render`).", "",
+             "win its own metric; PSNR is the sphere render (`brdffit.fitting.sphere`).", "",
              "| model | loss | log_rmse | cube_root_rmse | rmse_cos (1/sr) | PSNR (dB) | "
              "not converged |", "|---|---|---|---|---|---|---|"]
     for model in MODELS:

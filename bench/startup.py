@@ -7,8 +7,10 @@ Rows, each a median measured side by side in this one run, each with the error i
 buys (log_rmse on the full table):
 
 - read: ``brdffit.merl.read`` against a plain ``np.fromfile`` of the same file;
-- a new process: ``brdffit fit TABLE --model ggx --json`` end to end, with the
-  persistent compilation cache empty, then warm;
+- a new process: ``brdffit fit TABLE --model ggx --json`` end to end, with
+  brdffit's cache (compiled fits, ``brdffit.executables``) empty, then warm;
+- a warm fit: of a table read afresh (read included, and excluded), and again of the
+  same table object (its per-table preparation reused, as ``auto`` and a batch do);
 - auto: its first call in a new process (compilation cache warm) and warm, as a
   multiple of one warm ggx fit of the same table in the same process;
 - every bin (``samples=None``): ggx and ggx2, first call and warm.
@@ -90,6 +92,9 @@ def bench_in_process(path: str) -> dict:
     out = {}
     fit(table, "ggx")
     out["ggx_warm_ms"] = 1e3 * _median_s(lambda: fit(merl.read(path), "ggx"), 7)
+    tables = [merl.read(path) for _ in range(7)]  # read beforehand: the fit alone
+    out["ggx_warm_fresh_table_ms"] = 1e3 * _median_s(lambda: fit(tables.pop(), "ggx"), 7)
+    out["ggx_warm_same_table_ms"] = 1e3 * _median_s(lambda: fit(table, "ggx"), 7)
     out["ggx_log_rmse"] = fit(table, "ggx").log_rmse
     t0 = time.perf_counter()
     select(table)
@@ -122,12 +127,16 @@ def write_markdown(report: dict, path: str) -> None:
                   "| what | time | error (log_rmse, full table) |", "|---|---|---|",
                   f"| read one table (`np.fromfile` alone: {rd['fromfile_ms']:.1f} ms) | "
                   f"{rd['read_ms']:.1f} ms ({rd['ratio']:.1f}x fromfile) | |",
-                  f"| `brdffit fit --model ggx --json`, new process, empty compile cache | "
+                  f"| `brdffit fit --model ggx --json`, new process, empty brdffit cache | "
                   f"{npr['cold_cache_s']:.2f} s | {npr['log_rmse']:.5f} |",
-                  f"| the same, compile cache warm | {npr['warm_cache_s']:.2f} s, "
+                  f"| the same, cache warm (compiled fits loaded) | {npr['warm_cache_s']:.2f} s, "
                   f"{npr['warm_cache_again_s']:.2f} s | {npr['log_rmse']:.5f} |",
-                  f"| warm default ggx fit (read included) | {ip['ggx_warm_ms']:.0f} ms | "
-                  f"{ip['ggx_log_rmse']:.5f} |",
+                  f"| warm default ggx fit, table read afresh (read included) | "
+                  f"{ip['ggx_warm_ms']:.0f} ms | {ip['ggx_log_rmse']:.5f} |",
+                  f"| the same fit of a table read beforehand (read excluded) | "
+                  f"{ip['ggx_warm_fresh_table_ms']:.0f} ms | {ip['ggx_log_rmse']:.5f} |",
+                  f"| the same fit again, same table object (its preparation reused) | "
+                  f"{ip['ggx_warm_same_table_ms']:.0f} ms | {ip['ggx_log_rmse']:.5f} |",
                   f"| auto, first call in a new process (cache warm; whole process) | "
                   f"{npr['auto_first_call_s']:.2f} s ({npr['auto_first_call_process_s']:.2f} s) "
                   f"| {npr['auto_log_rmse']:.5f} ({npr['auto_chosen']}) |",

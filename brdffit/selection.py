@@ -4,7 +4,7 @@ Every candidate is fitted once, cheapest first (the registry's order:
 lambert, oren_nayar, blinn_phong, phong, beckmann, ggx, ggx2 by default), and the
 ranking reports for each: the parameters, ``log_rmse`` (on the scene's bins when
 a scene is given, beside the full-table error), the PSNR of its sphere renders
-against the table's (``brdffit.view.render``), its parameter count, its measured
+against the table's (``brdffit.fitting.sphere``), its parameter count, its measured
 evaluation cost per sample, a BIC, and whether its specular colour is grey.
 
 The choice (docs/selection.md):
@@ -35,18 +35,18 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
 from brdffit.fitting.options import DEFAULT_TOLERANCE, FIT_KEYWORDS
+from brdffit.fitting.pipeline import constrained
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
+from brdffit.fitting.sphere import SphereReference, evaluate
 from brdffit.io.merl import MerlTable
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
-from brdffit.view.render import SphereReference
 
 DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
 #: A specular colour is grey when (max - min) / max over R, G, B is at most this.
@@ -113,15 +113,15 @@ def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
     v[..., 2] = np.abs(v[..., 2])
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     wi, wo = (jnp.asarray(a, jnp.float32) for a in v)
-    params = jax.tree_util.tree_map(
-        lambda a: a.astype(jnp.float32), m.constrain(jnp.zeros(m.n_params))
-    )
-    run = jax.jit(lambda p, a, b: m(p, a, b))
-    run(params, wi, wo).block_until_ready()
+    params = {k: np.asarray(x, np.float32) for k, x in
+              constrained(m, np.zeros(m.n_params)).items()}
+    # the renders' compiled evaluation: kept on disk, so a new process's first
+    # `auto` loads it instead of compiling one per candidate
+    evaluate(m, params, wi, wo).block_until_ready()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        run(params, wi, wo).block_until_ready()
+        evaluate(m, params, wi, wo).block_until_ready()
         times.append(time.perf_counter() - t0)
     return float(np.median(times) / n * 1e9)
 

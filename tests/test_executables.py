@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from brdffit import executables, models
-from brdffit.view import render
+from brdffit.fitting import sphere
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -93,21 +93,21 @@ def test_arguments_key_the_stored_executables(cache, caplog):
     ggx = models.get("ggx")
     params = {"kd": np.array([0.2, 0.1, 0.05]), "ks": np.array([0.5, 0.5, 0.5]),
               "alpha": np.array(0.1), "f0": np.array(0.04)}
-    evaluate = _fresh(render._evaluate)
+    evaluate = _fresh(sphere.evaluate)
     expected = np.asarray(evaluate(ggx, params, wi, wo))
     evaluate(ggx, params, wi[:32], wo[:32])  # another shape: another executable
     evaluate(models.get("beckmann"), params, wi, wo)  # another model: another one
     assert len(_stored(cache)) == 3
 
     with caplog.at_level(logging.DEBUG, logger="brdffit"):
-        again = np.asarray(_fresh(render._evaluate)(ggx, params, wi, wo))
-    assert "loaded compiled brdffit.view.render._evaluate" in caplog.text
+        again = np.asarray(_fresh(sphere.evaluate)(ggx, params, wi, wo))
+    assert "loaded compiled brdffit.fitting.sphere.evaluate" in caplog.text
     np.testing.assert_array_equal(again, expected)
     assert len(_stored(cache)) == 3
 
 
 def test_plugin_code_is_compiled_in_memory_only(cache):
-    evaluate = _fresh(render._evaluate)
+    evaluate = _fresh(sphere.evaluate)
     wi, wo = _directions()
 
     class Plugin(models.get("lambert").__class__):  # a class from outside brdffit
@@ -121,7 +121,7 @@ def test_plugin_code_is_compiled_in_memory_only(cache):
 def test_no_cache_directory_keeps_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
     wi, wo = _directions()
-    out = np.asarray(_fresh(render._evaluate)(models.get("lambert"),
+    out = np.asarray(_fresh(sphere.evaluate)(models.get("lambert"),
                                               {"kd": np.array([0.5, 0.5, 0.5])}, wi, wo))
     np.testing.assert_allclose(out, 0.5 / np.pi)
     assert not any(tmp_path.iterdir())

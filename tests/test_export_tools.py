@@ -22,8 +22,8 @@ from brdffit import models
 from brdffit.export import export
 from brdffit.export import validate as check
 from brdffit.export.conversion import fit_as_table
+from brdffit.fitting import sphere as render
 from brdffit.fitting.pipeline import fit
-from brdffit.view import render
 from data_synth import nbrdf
 
 pytestmark = pytest.mark.system

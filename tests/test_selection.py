@@ -190,7 +190,8 @@ def test_bad_options_are_input_errors(ggx_table):
 # -- the service and the client -------------------------------------------------------------
 
 
-def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path):
+def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path,
+                                                                 monkeypatch):
     from api import tasks
     from api.routes.fits import FitOptions, FitRequest, best_result
     from brdffit.client import FitJob
@@ -208,8 +209,14 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     path = tmp_path / "ggx.binary"
     merl.write(path, ggx_table)
     options = FitOptions(samples=8192, starts=1, tolerance=0.005).model_dump()
+    reports = []
+    monkeypatch.setattr(tasks, "_reporter", lambda stage, f: reports.append((stage, f)))
     out = tasks.fit_models(str(path), "ggx.binary", ["auto"], options)
     assert out["ok"], out
+    # the job's progress moves candidate by candidate, not from 0 straight to done
+    fractions = [f for stage, f in reports if " candidates, model auto" in stage]
+    assert len(fractions) == len(DEFAULT_CANDIDATES) and fractions == sorted(fractions)
+    assert fractions[-1] == pytest.approx((len(DEFAULT_CANDIDATES) - 1) / len(DEFAULT_CANDIDATES))
     assert [r["model"] for r in out["results"]] == list(DEFAULT_CANDIDATES)
     chosen = best_result(out["results"])  # what the job reports as its result
     assert chosen["model"] == "ggx"

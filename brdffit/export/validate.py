@@ -8,7 +8,7 @@ exporting never do.
   ``brdffit.fitting.loss`` between Mitsuba's values of the export and the fitted
   BRDF, on every bin above the horizon (the bins the export's reported
   ``log_rmse_to_fit`` is computed on);
-- :func:`mitsuba_sphere` renders the unit sphere of ``brdffit.view.render`` (orthographic
+- :func:`mitsuba_sphere` renders the unit sphere of ``brdffit.fitting.sphere`` (orthographic
   camera along -z, a directional light of irradiance pi) with Mitsuba's path tracer;
 - :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks.
 """
@@ -100,7 +100,7 @@ def mitsuba_log_rmse(material: dict, reference: np.ndarray) -> float:
 
 def mitsuba_sphere(material: dict, light: np.ndarray, size: int = 128, spp: int = 64):
     """Radiance image (size, size, 3) of the unit sphere with ``material``, rendered by
-    Mitsuba's ``direct`` integrator: the camera and light of ``brdffit.view.render``."""
+    Mitsuba's ``direct`` integrator: the camera and light of ``brdffit.fitting.sphere``."""
     mi = mitsuba()
     light = np.asarray(light, float) / np.linalg.norm(light)
     scene = mi.load_dict({

@@ -43,6 +43,7 @@ except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
 from brdffit.fitting.result import FitResult
+from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
 from brdffit.io.angles import (
     N_PHI_D,
     N_THETA_D,
@@ -53,7 +54,6 @@ from brdffit.io.angles import (
 )
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
-from brdffit.view.render import LIGHTS, radiance, sphere_disc, tonemap
 
 KINDS = ("slices", "error_map", "spheres", "polar", "report")
 
@@ -261,7 +261,7 @@ def _with_bad(name: str):
 # -- spheres ------------------------------------------------------------------------
 
 SPHERE_BACKGROUND = "#33404f"
-#: The plots' lights: brdffit.view.render's two (what the PSNR measures), and a back
+#: The plots' lights: brdffit.fitting.sphere's two (what the PSNR measures), and a back
 #: light 135 deg from the camera. Its lit crescent has light and camera at opposite
 #: grazing angles (theta_d ~ 68 deg), where the Fresnel rise shows.
 SPHERE_LIGHTS = (

@@ -99,12 +99,14 @@ def render_model(model: AbstractBRDFModel, params: dict, light: np.ndarray, size
     """Radiance image of a model with ``params`` (docs/models.md names) and its lit mask."""
     wi, wo, lit = sphere_directions(size, light)
     p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-    f = np.asarray(_evaluate(model, p, wi, wo), dtype=np.float64)
+    f = np.asarray(evaluate(model, p, wi, wo), dtype=np.float64)
     return radiance(np.where(lit[..., None], f, 0.0), wi), lit
 
 
 @executables.jit
-def _evaluate(model, params, wi, wo):
+def evaluate(model, params, wi, wo):
+    """``model(params, wi, wo)``, compiled once per model and shape and kept on disk
+    (``brdffit.executables``)."""
     return model(params, wi, wo)
 
 
