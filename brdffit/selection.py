@@ -185,7 +185,7 @@ def select(
     scene: Scene | None = None,
     mono_ks: bool = False,
     grey_tolerance: float = DEFAULT_GREY_TOLERANCE,
-    image_size: int = 96,
+    image_size: int | None = None,
     progress: Callable[[int, int, str, dict | None], None] | None = None,
     **fit_options,
 ) -> Selection:
@@ -204,7 +204,8 @@ def select(
         mono_ks: also fit the chosen model with a grey ``ks`` (``<model>_mono``)
             when its fitted specular colour is grey within ``grey_tolerance``.
         grey_tolerance: ``(max - min) / max`` of ks over R, G, B that counts as grey.
-        image_size: pixels per side of the sphere renders behind ``psnr_db``.
+        image_size: pixels per side of the sphere renders behind ``psnr_db``; None
+            (default) takes each fit's own ``psnr_db`` (128 px), rendered once.
         progress: called as ``progress(i, n, model, None)`` before candidate ``i``
             of ``n`` (0-based) is fitted and ``progress(i, n, model, row)`` after,
             with its ranking row (``status`` ``"fitted"`` or ``"failed"``): a shell
@@ -226,7 +227,7 @@ def select(
     if budget is not None and not (isinstance(budget, int | float) and budget > 0):
         raise FitInputError(f"budget must be a number > 0, got {budget!r}")
     ordered = _order(candidates)
-    reference = SphereReference(table, image_size)
+    reference = None if image_size is None else SphereReference(table, image_size)
 
     rows, fits = [], {}
     for i, m in enumerate(ordered):
@@ -247,7 +248,8 @@ def select(
             params=r.params,
             log_rmse=err,
             full_log_rmse=full,
-            psnr_db=reference.psnr(m, r.params),
+            psnr_db=(r.error["psnr_db"] if reference is None
+                     else reference.psnr(m, r.params)),
             cost_ns=eval_cost_ns(m.name),
             bic=bic(err, r.samples["usable"], m.n_params),
             ks_grey_spread=grey_spread(m, r.params),

@@ -119,6 +119,8 @@ def test_ranking_reports_every_candidate(ggx_selection):
     # The rendered error agrees with the table error: the truth model renders best.
     psnr = {name: row["psnr_db"] for name, row in by_name.items()}
     assert psnr["ggx"] > psnr["beckmann"] > psnr["lambert"]
+    # the ranking's PSNR is each fit's own (rendered once), unless another size is asked
+    assert all(row["psnr_db"] == sel.fits[row["model"]].error["psnr_db"] for row in sel.ranking)
     assert by_name["ggx"]["bic"] < by_name["beckmann"]["bic"]
     d = json.loads(json.dumps(sel.to_dict(), allow_nan=False))
     assert d["model"] == "ggx" and d["selection"]["chosen"] == "ggx" and d["selection"]["reason"]
@@ -139,6 +141,11 @@ def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
     assert calls == ["lambert", "ggx"]  # cheapest first, once each
     for row in sel.ranking:
         assert sel.fits[row["model"]].params == row["params"]
+    # renders at another size when asked: a PSNR of its own, as good a ranking
+    small = select(ggx_table, ("ggx", "lambert"), image_size=48, **FAST)
+    rows = {r["model"]: r for r in small.ranking}
+    assert rows["ggx"]["psnr_db"] != sel.fits["ggx"].error["psnr_db"]
+    assert rows["ggx"]["psnr_db"] > rows["lambert"]["psnr_db"]
 
 
 def test_budget_picks_the_cheapest_under_it(ggx_table, ggx_selection):
