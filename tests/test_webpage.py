@@ -263,6 +263,40 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         visit.close()
 
 
+def test_lists_page_through_everything_the_server_holds(browser, tmp_path):
+    """More tables than a page: the list says how many are not shown and shows them
+    on request, page after page, until none is left out."""
+    with fx.Server(tmp_path / "data") as server, httpx.Client(base_url=server.url) as http:
+        names = [f"scaled-{i}.binary" for i in range(5)]
+        for i, name in enumerate(names):  # distinct tables (the store keys on content)
+            r = http.post("/v1/tables", content=fx.scaled_table_bytes("ggx", 1 + i / 10),
+                          params={"name": name},
+                          headers={"Content-Type": "application/octet-stream"})
+            assert r.status_code in (200, 201), r.text
+        visit = Visit(browser, server, tmp_path / "screens")
+        page = visit.page
+        page.goto(server.url + "/?page_size=2")
+        rows = page.locator("#tables-table tbody tr[data-table]")
+        more = page.locator("#tables-table tbody tr.more button")
+        more.wait_for(state="visible", timeout=STEP_MS)
+        assert rows.count() == 2
+        assert more.inner_text() == "Show 2 older tables (3 not shown)"
+        more.click()
+        page.wait_for_function("document.querySelectorAll('#tables-table tr[data-table]')"
+                               ".length === 4", timeout=STEP_MS)
+        assert more.inner_text() == "Show 1 older table (1 not shown)"
+        visit.shot("lists-paged")
+        more.click()
+        page.wait_for_function("document.querySelectorAll('#tables-table tr[data-table]')"
+                               ".length === 5", timeout=STEP_MS)
+        assert page.locator("#tables-table tbody tr.more").count() == 0
+        shown = page.locator("#tables-table tbody tr[data-table] td:first-child").all_inner_texts()
+        assert sorted(shown) == sorted(names)  # each once, none left out
+        assert "no fit jobs yet" in page.locator("#jobs-table").inner_text()
+        assert visit.outside == [] and visit.console_errors == []
+        visit.close()
+
+
 def test_materials_where_data_synth_is_not_installed(monkeypatch):
     """The service image ships without data_synth: an empty list that says why, and
     a 404 (not a 500) for a material."""

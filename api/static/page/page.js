@@ -15,6 +15,7 @@ const state = {
   model: null,   // the model whose plots and exports are shown
   polling: null, // timer id
   blobs: [],     // object URLs of the images shown (revoked when replaced)
+  tableNames: new Map(),  // table id -> name, for the jobs list
 };
 
 const $ = (id) => document.getElementById(id);
@@ -447,53 +448,71 @@ function emptyRow(columns, text) {
   return row;
 }
 
+//: Rows per page of each list (?page_size=N in the address changes it).
+const PAGE = Math.max(1, Number(new URLSearchParams(location.search).get("page_size")) || 100);
+
+function tableRow(t) {
+  const row = el("tr", null, { "data-table": t.id });
+  row.append(el("td", t.name), el("td", t.id.slice(0, 12), { class: "ids", title: t.id }),
+    el("td", count(t.summary.measured_bins), { class: "num" }), el("td", when(t.created_at)));
+  const actions = el("td", null, { class: "actions" });
+  actions.append(button("Use", async () => { chooseTable(t); clearMessage(); }),
+    button("Delete", () => deleteTable(t, false)),
+    button("Delete with its fits", () => deleteTable(t, true)));
+  row.append(actions);
+  return row;
+}
+
+function jobRow(j) {
+  const row = el("tr", null, { class: `status-${j.status}`, "data-job": j.id });
+  let outcome = j.reason || "";
+  if (j.result) outcome = `${j.result.model}, log_rmse ${fmt(j.result.error.log_rmse)}`;
+  if (j.progress) outcome = `${j.progress.stage}`;
+  row.append(el("td", when(j.created_at)), el("td", j.status),
+    el("td", j.models.join(", ")),
+    el("td", state.tableNames.get(j.table_id) || j.table_id.slice(0, 12)),
+    el("td", outcome));
+  const actions = el("td", null, { class: "actions" });
+  actions.append(button("Open", () => openJob(j)));
+  if (ACTIVE.has(j.status)) actions.append(button("Cancel", () => cancelJob(j)));
+  else actions.append(button("Delete", () => deleteJob(j)));
+  row.append(actions);
+  return row;
+}
+
+// One page of a list appended to its table, and a "Show older" row when the
+// server has more (its next_cursor): nothing is silently left out.
+function appendPage(tbody, page, { columns, rowOf, path, noun }) {
+  const old = tbody.querySelector("tr.more");
+  if (old) old.remove();
+  for (const item of page.items) tbody.append(rowOf(item));
+  if (!page.next_cursor) return;
+  const shown = tbody.querySelectorAll("tr:not(.more):not(.empty)").length;
+  const left = Math.max(page.total - shown, 0);
+  const row = el("tr", null, { class: "more" });
+  const cell = el("td", null, { colspan: String(columns) });
+  const n = Math.min(PAGE, left);
+  cell.append(button(`Show ${n} older ${n === 1 ? noun[0] : noun[1]} (${left} not shown)`, async () => {
+    const next = await api("GET", `${path}?limit=${PAGE}&cursor=${page.next_cursor}`);
+    appendPage(tbody, next, { columns, rowOf, path, noun });
+  }));
+  row.append(cell);
+  tbody.append(row);
+}
+
 async function refreshLists() {
   const [tables, jobs] = await Promise.all([
-    api("GET", "/v1/tables?limit=100"), api("GET", "/v1/fits?limit=100"),
+    api("GET", `/v1/tables?limit=${PAGE}`), api("GET", `/v1/fits?limit=${PAGE}`),
   ]);
-  const names = new Map(tables.items.map((t) => [t.id, t.name]));
+  state.tableNames = new Map(tables.items.map((t) => [t.id, t.name]));
   const tbody = $("tables-table").querySelector("tbody");
   tbody.textContent = "";
-  for (const t of tables.items) {
-    const row = el("tr", null, { "data-table": t.id });
-    row.append(el("td", t.name), el("td", t.id.slice(0, 12), { class: "ids", title: t.id }),
-      el("td", count(t.summary.measured_bins), { class: "num" }), el("td", when(t.created_at)));
-    const actions = el("td", null, { class: "actions" });
-    actions.append(button("Use", async () => { chooseTable(t); clearMessage(); }),
-      button("Delete", () => deleteTable(t, false)),
-      button("Delete with its fits", () => deleteTable(t, true)));
-    row.append(actions);
-    tbody.append(row);
-  }
   if (!tables.items.length) tbody.append(emptyRow(5, "no tables yet"));
-  if (tables.total > tables.items.length) {
-    const more = el("tr");
-    more.append(el("td", `… and ${tables.total - tables.items.length} older (not shown)`));
-    tbody.append(more);
-  }
+  appendPage(tbody, tables, { columns: 5, rowOf: tableRow, path: "/v1/tables", noun: ["table", "tables"] });
   const jbody = $("jobs-table").querySelector("tbody");
   jbody.textContent = "";
-  for (const j of jobs.items) {
-    const row = el("tr", null, { class: `status-${j.status}`, "data-job": j.id });
-    let outcome = j.reason || "";
-    if (j.result) outcome = `${j.result.model}, log_rmse ${fmt(j.result.error.log_rmse)}`;
-    if (j.progress) outcome = `${j.progress.stage}`;
-    row.append(el("td", when(j.created_at)), el("td", j.status),
-      el("td", j.models.join(", ")), el("td", names.get(j.table_id) || j.table_id.slice(0, 12)),
-      el("td", outcome));
-    const actions = el("td", null, { class: "actions" });
-    actions.append(button("Open", () => openJob(j)));
-    if (ACTIVE.has(j.status)) actions.append(button("Cancel", () => cancelJob(j)));
-    else actions.append(button("Delete", () => deleteJob(j)));
-    row.append(actions);
-    jbody.append(row);
-  }
   if (!jobs.items.length) jbody.append(emptyRow(6, "no fit jobs yet"));
-  if (jobs.total > jobs.items.length) {
-    const more = el("tr");
-    more.append(el("td", `… and ${jobs.total - jobs.items.length} older (not shown)`));
-    jbody.append(more);
-  }
+  appendPage(jbody, jobs, { columns: 6, rowOf: jobRow, path: "/v1/fits", noun: ["fit job", "fit jobs"] });
 }
 
 // -- start -------------------------------------------------------------------------
