@@ -498,5 +498,7 @@ class Store:
 
     # -- plots ----------------------------------------------------------------------
 
-    def plot_path(self, job_id: str, model: str, kind: str) -> Path:
-        return self.plots_dir / job_id / model / f"{kind}.png"
+    def plot_path(self, job_id: str, model: str, kind: str, exposure_ev: float = 0.0) -> Path:
+        """Where a rendered plot is kept; one file per exposure asked for."""
+        name = kind if exposure_ev == 0 else f"{kind}@{exposure_ev:+g}EV"
+        return self.plots_dir / job_id / model / f"{name}.png"

@@ -84,13 +84,15 @@ def _select(table, scene, rule: dict, options: dict) -> list[dict]:
             for row in sel.ranking if row["model"] in sel.fits]
 
 
-def render_plot(table_path: str, source: str, result: dict, kind: str) -> dict:
+def render_plot(table_path: str, source: str, result: dict, kind: str,
+                exposure_ev: float = 0.0) -> dict:
     """One plot of a finished fit: ``{"ok": True, "png": bytes}`` (``brdffit.view.plots``)
     or ``{"ok": False, "reason": "..."}``."""
     from brdffit.view import plots
 
     try:
-        return {"ok": True, "png": plots.render(kind, _read(table_path, source), result)}
+        return {"ok": True, "png": plots.render(kind, _read(table_path, source), result,
+                                                exposure_ev)}
     except Exception as e:  # a stored table gone bad, or a plotting bug
         return {"ok": False, "reason": f"{type(e).__name__}: {e}",
                 "traceback": traceback.format_exc()}

@@ -283,10 +283,15 @@ class Client:
         self._request("DELETE", f"/v1/tables/{table_id}",
                       params={"with_fits": "true"} if with_fits else None)
 
-    def plot(self, job: JobRef, kind: str, model: str | None = None) -> bytes:
+    def plot(self, job: JobRef, kind: str, model: str | None = None,
+             exposure_ev: float = 0.0) -> bytes:
         """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,
-        ``spheres`` or ``polar`` (see ``brdffit.view.plots``)."""
-        params = {"model": model} if model else None
+        ``spheres``, ``polar`` or ``report`` (see ``brdffit.view.plots``);
+        ``exposure_ev`` (stops, multiples of 0.25) brightens the sphere renders of
+        ``spheres`` and ``report``."""
+        params = {"model": model} if model else {}
+        if exposure_ev:
+            params["exposure_ev"] = exposure_ev
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
                              params=params).content
 

@@ -293,6 +293,17 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
     assert_error(http.get(f"/v1/fits/{job['id']}/plots/spheres.png", params={"model": "ggx"}),
                  404, "no 'ggx' fit")
     assert_error(http.get(f"/v1/fits/{job['id']}/plots/histogram.png"), 422, "kind")
+    # an exposure re-renders the sphere plots (a file of its own); the others have none
+    plain = http.get(f"/v1/fits/{job['id']}/plots/spheres.png")
+    brighter = http.get(f"/v1/fits/{job['id']}/plots/spheres.png", params={"exposure_ev": 1.5})
+    assert plain.status_code == brighter.status_code == 200
+    assert brighter.content != plain.content
+    assert http.get(f"/v1/fits/{job['id']}/plots/spheres.png").content == plain.content
+    assert_error(http.get(f"/v1/fits/{job['id']}/plots/slices.png",
+                          params={"exposure_ev": 1}), 422, "no sphere renders")
+    for bad in (0.3, 7, "nan"):
+        assert http.get(f"/v1/fits/{job['id']}/plots/spheres.png",
+                        params={"exposure_ev": bad}).status_code == 422
 
 
 def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, table_id):

@@ -125,6 +125,27 @@ def test_spheres_share_one_exposure_so_dark_and_bright_tables_look_different():
     assert bright > 2.5 * dark, (dark, bright)
 
 
+def test_exposure_brightens_table_and_fit_alike_before_the_tone_curve():
+    t = table("lambert")
+    r = fit(t, "lambert", **FAST)
+    m, f, coverage, _ = plots.sphere_images(t, r, plots.SPHERE_LIGHTS[0][1], size=48)
+    base, up = (plots._composite(m, coverage, np.zeros(3), ev) for ev in (0.0, 2.0))
+    lit = base.sum(axis=-1) > 0.05
+    assert np.all(up[lit] > base[lit])  # brighter everywhere lit ...
+    assert up.max() < 1.0  # ... and compressed by the tone curve, not clipped
+    measured = np.all(np.isfinite(m), axis=-1)  # the fit matches where there is a bin
+    np.testing.assert_allclose(plots._composite(f, coverage, np.zeros(3), 2.0)[measured],
+                               up[measured], atol=0.03)  # a few silhouette pixels
+    png = plots.render("spheres", t, r, exposure_ev=1.5)
+    assert_sane_png(png)
+    assert png != plots.render("spheres", t, r)
+    for bad in (7, float("nan"), "bright"):
+        with pytest.raises(ValueError, match="exposure_ev"):
+            plots.render("spheres", t, r, exposure_ev=bad)
+    with pytest.raises(ValueError, match="no sphere renders"):
+        plots.render("slices", t, r, exposure_ev=1.0)
+
+
 def test_spheres_are_antialiased():
     """Supersampled: the silhouette has pixels between background and sphere."""
     t = table("lambert")

@@ -152,9 +152,16 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         visit.wait_image("#plot-extra")
         page.locator("#extra-figure").scroll_into_view_if_needed()
         visit.shot("report")
-        page.eval_on_selector("#exposure", "e => { e.value = '1'; "  # the shared exposure
+        # the exposure re-renders the sphere renders on the server (before tone mapping),
+        # the spheres and the report alike; the slices have none
+        page.eval_on_selector("#exposure", "e => { e.value = '1.5'; "
                               "e.dispatchEvent(new Event('input')); }")
-        assert "brightness(2)" in page.get_attribute("#plot-spheres", "style")
+        for img in ("#plot-spheres", "#plot-extra"):
+            page.wait_for_function(
+                "s => (document.querySelector(s).dataset.shown || '')"
+                ".endsWith('exposure_ev=1.5')", arg=img, timeout=FIT_TIMEOUT_MS)
+        assert "exposure_ev" not in page.get_attribute("#plot-slices", "data-shown")
+        visit.shot("exposed")
 
         # Downloads: the glTF material validates; the JSON is the job.
         with page.expect_download(timeout=STEP_MS) as d:

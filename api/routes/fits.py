@@ -29,7 +29,7 @@ from brdffit.errors import FitInputError
 from brdffit.fitting import options
 from brdffit.fitting.result import SCHEMA
 from brdffit.fitting.scene import Scene, SceneError
-from brdffit.view.plots import KINDS
+from brdffit.view.plots import EXPOSED_KINDS, EXPOSURE_EV_RANGE, KINDS
 
 log = logging.getLogger("brdffit.api")
 
@@ -371,16 +371,25 @@ async def get_plot(
     store: StoreDep,
     runner: RunnerDep,
     model: FitModel = None,
+    exposure_ev: Annotated[float, Query(
+        ge=EXPOSURE_EV_RANGE[0], le=EXPOSURE_EV_RANGE[1], multiple_of=0.25,
+        description="stops brighter (+) or darker (-) than the one exposure the sphere "
+                    "renders share, applied before tone mapping; for spheres and report "
+                    "only")] = 0.0,
 ) -> Response:
+    if exposure_ev and kind.value not in EXPOSED_KINDS:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
+                            f"the {kind.value} plot has no sphere renders to expose; "
+                            f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
     job, result = await finished_fit(store, job_id, model, "plots")
-    path = store.plot_path(job_id, result["model"], kind.value)
+    path = store.plot_path(job_id, result["model"], kind.value, exposure_ev)
     if not path.exists():
         # Rendered on first request, in a worker (a second or two of matplotlib
         # and JAX), then served from the data dir.
         table = await run_in_threadpool(store.get_table, job.table_id)
         try:
             outcome = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
-                                       table.name, result, kind.value)
+                                       table.name, result, kind.value, exposure_ev)
         except WorkerLost as e:
             raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                                 headers={"Retry-After": "5"}) from None

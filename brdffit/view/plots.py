@@ -336,32 +336,61 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
     return ratio, colour
 
 
-def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray) -> np.ndarray:
-    img = tonemap(np.nan_to_num(rad), EXPOSURE)
+#: Exposure changes (stops, EV) a sphere plot accepts: +-6 stops span a 4096x range,
+#: from a black coating's diffuse to a mirror's highlight.
+EXPOSURE_EV_RANGE = (-6.0, 6.0)
+
+
+def check_exposure_ev(exposure_ev: float) -> float:
+    """``exposure_ev`` as a float, or ValueError naming the accepted range."""
+    lo, hi = EXPOSURE_EV_RANGE
+    try:
+        ev = float(exposure_ev)
+    except (TypeError, ValueError):
+        raise ValueError(f"exposure_ev must be a number of stops, got {exposure_ev!r}") from None
+    if not lo <= ev <= hi:  # NaN fails this too
+        raise ValueError(f"exposure_ev must be within {lo:g}..{hi:+g} stops, got {exposure_ev!r}")
+    return ev
+
+
+def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray,
+               exposure_ev: float = 0.0) -> np.ndarray:
+    # before the tone curve, as a camera's exposure: the highlight compresses, the
+    # diffuse brightens, table and fit by the same factor
+    img = tonemap(np.nan_to_num(rad), EXPOSURE * 2.0**exposure_ev)
     return coverage[..., None] * img + (1.0 - coverage[..., None]) * background
 
 
-def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200) -> bytes:
+def _exposure_words(exposure_ev: float) -> str:
+    return "" if exposure_ev == 0 else f", exposure {exposure_ev:+g} EV"
+
+
+def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
+            exposure_ev: float = 0.0) -> bytes:
     """Table and fit on a sphere under three lights, their brightness ratio and their
-    colour ratio."""
+    colour ratio; ``exposure_ev`` brightens (or darkens) both renders by that many
+    stops before tone mapping (the ratio panels do not change)."""
     result = _as_result(result)
+    exposure_ev = check_exposure_ev(exposure_ev)
     fig = Figure(figsize=(13.5, 10.0), layout="constrained")
-    _draw_spheres(fig, table, result, size)
-    fig.suptitle(f"{_title(table, result)}\nsphere renders at one exposure for table and fit "
-                 f"(white diffuse facing the light = mid-grey); camera along the normal at "
-                 "the centre; grey: unmeasured bin", fontsize=12)
+    _draw_spheres(fig, table, result, size, exposure_ev=exposure_ev)
+    fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\nsphere renders at "
+                 "one exposure for table and fit (white diffuse facing the light = mid-grey"
+                 f"{' at 0 EV' if exposure_ev else ''}); camera along the normal at the "
+                 "centre; grey: unmeasured bin", fontsize=12)
     return _png(fig)
 
 
-def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS):
+def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS,
+                  exposure_ev: float = 0.0):
     axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = np.array(to_rgb(NO_DATA))
     ratio_img = colour_img = None
     for row, (label, light) in enumerate(lights):
         measured, fitted, coverage, unmeasured = sphere_images(table, result, light, size)
-        images = [_composite(measured, coverage, background),
-                  _composite(fitted, coverage, background)]
+        images = [_composite(measured, coverage, background, exposure_ev),
+                  _composite(fitted, coverage, background, exposure_ev)]
         images[0][unmeasured] = no_data
         on = (coverage > 0.5) & ~unmeasured
         ratio, colour = ratio_images(measured, fitted, on)
@@ -472,15 +501,18 @@ def _discrete_colours(name: str, n: int):
 # -- one page per fit -----------------------------------------------------------------
 
 
-def report(table: MerlTable, result: FitResult | dict) -> bytes:
+def report(table: MerlTable, result: FitResult | dict, *, exposure_ev: float = 0.0) -> bytes:
     """One page: the parameters with their standard errors and undetermined flags,
-    every error metric, the spheres, the phi_d = 90 deg slices and the error map."""
+    every error metric, the spheres (at ``exposure_ev``), the phi_d = 90 deg slices
+    and the error map."""
     result = _as_result(result)
+    exposure_ev = check_exposure_ev(exposure_ev)
     fig = Figure(figsize=(14.0, 19.5), layout="constrained")
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[2.6, 9.0, 3.6, 4.2])
     _draw_summary(head, result)
-    _draw_spheres(sph, table, result, size=160)
-    sph.suptitle("sphere renders, one exposure for table and fit", fontsize=11)
+    _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev)
+    sph.suptitle(f"sphere renders, one exposure for table and fit"
+                 f"{_exposure_words(exposure_ev)}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
     sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
@@ -567,10 +599,22 @@ RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
 }
 
 
-def render(kind: str, table: MerlTable, result: FitResult | dict) -> bytes:
-    """The plot called ``kind`` (one of :data:`KINDS`) as PNG bytes."""
+#: The plots that show sphere renders, so take an ``exposure_ev``.
+EXPOSED_KINDS = ("spheres", "report")
+
+
+def render(kind: str, table: MerlTable, result: FitResult | dict,
+           exposure_ev: float = 0.0) -> bytes:
+    """The plot called ``kind`` (one of :data:`KINDS`) as PNG bytes; ``exposure_ev``
+    (stops) for the kinds with sphere renders (:data:`EXPOSED_KINDS`), refused for
+    the others rather than ignored."""
     if kind not in RENDERERS:
         raise ValueError(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    if exposure_ev:
+        if kind not in EXPOSED_KINDS:
+            raise ValueError(f"the {kind} plot has no sphere renders to expose; "
+                             f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
+        return RENDERERS[kind](table, _as_result(result), exposure_ev=exposure_ev)
     return RENDERERS[kind](table, _as_result(result))
 
 

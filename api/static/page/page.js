@@ -363,20 +363,32 @@ function showModel(model) {
   $("extra-figure").hidden = true;
 }
 
+//: The plots with sphere renders: the exposure control re-renders them on the server
+//: (before the tone curve, as a camera would), not brightens their pixels.
+const EXPOSED = new Set(["spheres", "report"]);
+
 function plotPath(kind) {
-  return `/v1/fits/${state.job.id}/plots/${kind}.png?model=${encodeURIComponent(state.model)}`;
+  const ev = Number($("exposure").value);
+  const exposure = EXPOSED.has(kind) && ev ? `&exposure_ev=${ev}` : "";
+  return `/v1/fits/${state.job.id}/plots/${kind}.png?model=${encodeURIComponent(state.model)}`
+    + exposure;
 }
 
 // Images are fetched (not <img src>): a browser sends no token for an image.
 async function loadPlot(kind, img) {
+  const path = plotPath(kind);
+  img.dataset.want = path;  // a slower, older request must not overwrite a newer one
   img.removeAttribute("src");
   img.alt = `${kind}: rendering…`;
   img.classList.add("loading");
   try {
-    const url = URL.createObjectURL(await api("GET", plotPath(kind), { as: "blob" }));
+    const blob = await api("GET", path, { as: "blob" });
+    if (img.dataset.want !== path) return;
+    const url = URL.createObjectURL(blob);
     state.blobs.push(url);
     img.src = url;
     img.alt = `${kind} plot of ${state.model}`;
+    img.dataset.shown = path;
   } catch (e) {
     img.alt = `${kind}: ${e.message}`;
     say(`Error ${e.message} (the ${kind} plot)`);
@@ -551,11 +563,19 @@ async function start() {
   await refreshLists();
 }
 
+let exposureTimer = null;
+
 function setExposure() {
   const ev = Number($("exposure").value);
   $("exposure-value").textContent = `${ev >= 0 ? "+" : ""}${ev} EV`;
-  // One factor on the one image that holds both sides: measurement and fit stay comparable.
-  $("plot-spheres").style.filter = ev ? `brightness(${2 ** ev})` : "";
+  // Re-rendered once the slider rests: one exposure for measurement and fit alike.
+  clearTimeout(exposureTimer);
+  exposureTimer = setTimeout(() => {
+    if (!state.job || !state.model) return;
+    loadPlot("spheres", $("plot-spheres"));
+    const extra = $("extra-caption").textContent.split(" ")[0];
+    if (!$("extra-figure").hidden && EXPOSED.has(extra)) loadPlot(extra, $("plot-extra"));
+  }, 300);
 }
 
 document.addEventListener("DOMContentLoaded", () => {
