@@ -140,6 +140,14 @@ def test_the_barrier_is_finite_with_finite_slopes_down_to_a_black_channel():
     assert np.all(np.isinf(physical._barrier(out, m, grid, 1e-6)))
 
 
+def test_bound_of_a_given_fit_is_the_physical_fit():
+    table, _ = make_table("lambert", {"kd": [1.3, 0.4, 0.2]})
+    free = fit(table, "lambert", **FAST)
+    a = physical.bound(table, free, **FAST)
+    b = fit(table, "lambert", physical=True, **FAST)
+    assert a.params == b.params and a.physical == b.physical and a.error == b.error
+
+
 def test_physical_fits_are_strict_json_and_read_back():
     table, _ = make_table("lambert", {"kd": [1.3, 0.4, 0.2]})
     r = fit(table, "lambert", physical=True, **FAST)
