@@ -279,14 +279,14 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
         "The bounded fit of each default fit (`brdffit.fitting.physical`): reflectances "
         "<= 1 and directional albedo <= 1 at every incidence and channel.",
         "",
-        "| model | log_rmse | converged | bounded log_rmse | materials with an active bound "
-        "| relative cost where bounded | largest albedo before | after | bounded fits "
-        "converged | final clamp | extra time where bounded (s) |",
+        "| model | log_rmse | converged | bounded log_rmse | materials the bounds cost "
+        "anything (bounds at their limit) | relative cost there | largest albedo before | "
+        "after | bounded fits converged | final clamp | extra time there (s) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for m in MODELS:
         s = summary["fits"][m]
-        act = ", ".join(f"{k} {v}" for k, v in s["active"].items() if v) or "none"
+        act = ", ".join(f"{k}: {v}" for k, v in s["active"].items() if v) or "none"
         lines.append(
             f"| {m} | {_range(s['log_rmse'])} | {s['converged']}/{s['log_rmse']['n']} | "
             f"{_range(s['bounded_log_rmse'])} | "
