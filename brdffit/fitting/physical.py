@@ -27,8 +27,8 @@ How it is solved:
   each of BARRIERS in turn times the data loss at the start, so the pull is the same
   on a dim table and a bright one. ``a_c`` is a coarse quadrature
   (:func:`coarse_albedo`: the incidences of ``brdffit.export.energy`` and 1,792 half
-  vectors, within ~0.15% of the exact albedo for lobes from alpha = 1e-3 to 2),
-  cheap enough for every step;
+  vectors; for lobes from alpha = 1e-3 to 2 within 0.2% of the exact albedo where it
+  is largest, 1% at any incidence), cheap enough for every step;
 - a final exact check with ``brdffit.export.energy`` (512 x 256 half vectors per
   incidence): where the albedo still passes 1, the linear reflectance parameters
   (``kd``, the lobe scales, ``base_color``) are scaled by one factor below 1 until it
@@ -74,8 +74,9 @@ from brdffit.models.frame import Frame, shading_frame
 #: last holds a binding albedo ~1e-4 below its limit and moves a free one by
 #: nothing measurable.
 BARRIERS = (1e-2, 1e-4)
-#: The coarse albedo is held below 1 - MARGIN: the coarse quadrature's error
-#: (~0.15%, tests/test_physical.py), so that the exact check rarely needs the scale.
+#: The coarse albedo is held below 1 - MARGIN: the coarse quadrature's error where
+#: the albedo is largest (tests/test_physical.py), so that the exact check rarely
+#: needs the scale.
 MARGIN = 0.002
 #: The starts are scaled to a coarse albedo at most this fraction of the limit:
 #: strictly inside, where the barrier is finite.
@@ -399,6 +400,7 @@ def physical_fit(table, model: AbstractBRDFModel, *, loss: str, solver: str, sam
                  precision=precision, max_steps=max_steps, seed=seed, bin_weight=bin_weight)
 
 
+@runtime.in_float64
 def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
           loss: str = DEFAULT_LOSS, solver: str = "lm", samples: int | None = DEFAULT_SAMPLES,
           precision: str = "float64", max_steps: int = DEFAULT_MAX_STEPS, seed: int = 0,
