@@ -33,6 +33,9 @@ BYTES_PER_UNIT = 256
 SECONDS_PER_UNIT_STEP = 2.5e-7
 #: Seconds of compilation and table reading per model fitted.
 SECONDS_PER_MODEL = 3.0
+#: A physically bounded fit (``physical``) adds this many one-start solves to the
+#: unconstrained fit (``len(brdffit.fitting.physical.BARRIERS)``; a test checks it).
+PHYSICAL_SOLVES = 2
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,10 @@ def estimate(models: list[str], options: dict, usable_bins: int) -> Estimate:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
         memory = max(memory, FIXED_BYTES + BYTES_PER_UNIT * samples * starts * (k + 1))
         seconds += SECONDS_PER_MODEL + SECONDS_PER_UNIT_STEP * samples * starts * k * steps
+        if options.get("physical"):
+            seconds += PHYSICAL_SOLVES * SECONDS_PER_UNIT_STEP * samples * k * steps
     what = "the auto candidates " + ", ".join(fitted) if auto else ", ".join(fitted)
     detail = (f"{what} on {samples:,} samples x {starts} start(s), at most {steps} steps "
-              "each (an upper bound: fits usually stop sooner)")
+              f"each{', and the physically bounded solves' if options.get('physical') else ''} "
+              "(an upper bound: fits usually stop sooner)")
     return Estimate(int(memory), seconds, detail)

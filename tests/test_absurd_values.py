@@ -239,9 +239,9 @@ def test_batch_journal_is_strict_and_a_null_metric_is_nan_in_hdf5(tmp_path):
     assert got["rmse_cos"] == 0.25
     attrs = read_attrs(out)
     assert strict_loads(attrs["models"]) == ["lambert"]
-    # the resume key: the fit keywords, but the loss only when it is not the default
+    # the resume key: the fit keywords, but the loss and physical only when not the default
     assert strict_loads(attrs["options"]) == {k: v for k, v in FitOptions().fit_keywords().items()
-                                              if k != "loss"}
+                                              if k not in ("loss", "physical")}
 
 
 @pytest.mark.system  # a subprocess

@@ -67,6 +67,58 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
 
 
 @pytest.fixture(scope="module")
+def batch_store(tmp_path_factory):
+    """A real batch run (``brdffit batch`` in its own process) on two real materials."""
+    from data_synth import nbrdf
+
+    root = tmp_path_factory.mktemp("batch")
+    paths = [nbrdf.cached_table(name, str(root)) for name in ("gold-metallic-paint", "pink-felt")]
+    out = root / "results.h5"
+    r = run("brdffit.cli", "batch", *paths, "--models", "ggx,rough_conductor", "--out", str(out),
+            "--workers", "0", "--samples", "4096", "--quiet", timeout=600)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def test_cli_exports_a_fit_of_a_batch_results_file(batch_store, tmp_path):
+    from brdffit.batch.store import read_results
+
+    stored = {t["name"]: t["fits"] for t in read_results(batch_store)["tables"]}
+    gold = FitResult.from_dict(stored["gold-metallic-paint"]["rough_conductor"]["fit"])
+    r = run("brdffit.cli", "export", str(batch_store), "--table", "gold-metallic-paint",
+            "--model", "rough_conductor", "--to", "mitsuba", "--json")
+    assert r.returncode == 0, r.stderr
+    got = Export.from_dict(json.loads(r.stdout))
+    assert got.to_dict() == json.loads(export(gold, "mitsuba").to_json())
+    assert got.fidelity["exact"] and got.source_model == "rough_conductor"
+
+    # by file name, the best fit by default, into files
+    r = run("brdffit.cli", "export", str(batch_store), "--table", "pink-felt.binary", "--to",
+            "gltf", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    best = min(stored["pink-felt"].values(), key=lambda f: f["fit"]["error"]["log_rmse"])
+    (written,) = tmp_path.iterdir()
+    assert written.name == f"pink-felt_{best['fit']['model']}.gltf"
+
+
+def test_cli_store_errors_say_what_the_file_holds(batch_store, fit_json):
+    for args, message in (
+        ([str(batch_store), "--to", "gltf"],
+         "a batch results file; choose a table with --table (it holds gold-metallic-paint, "
+         "pink-felt)"),
+        ([str(batch_store), "--table", "gold", "--to", "gltf"],
+         "no table 'gold'; the file holds gold-metallic-paint, pink-felt"),
+        ([str(batch_store), "--table", "pink-felt", "--model", "ggx2", "--to", "gltf"],
+         "table 'pink-felt' has no ggx2 fit; it has ggx, rough_conductor"),
+        ([str(fit_json), "--table", "pink-felt", "--to", "gltf"],
+         "a fit result holds one fit; --table and --model choose a fit of a batch results"),
+    ):
+        r = run("brdffit.cli", "export", *args)
+        assert r.returncode == 2 and message in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
 def server(tmp_path_factory):
     with Server(tmp_path_factory.mktemp("exports"), workers=1) as s:
         yield s

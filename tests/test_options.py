@@ -102,6 +102,8 @@ def _edges(name: str):
     _, opt = options.spec(name)
     if opt.choices is not None:
         return list(opt.choices), ["no-such-" + name]
+    if opt.kind is bool:
+        return [True, False], ["yes", 1, None]
     step = 1 if opt.kind is int else 1e-9
     valid, invalid = [], []
     if opt.least is not None:
@@ -164,6 +166,9 @@ def test_key_format_is_the_one_results_files_hold():
                        '"solver":"lm","starts":2}')
     assert FitOptions(samples=None).key() == FitOptions.key_of(
         {**FitOptions().fit_keywords(), "samples": None})
+    # an option added later is left out of the key at its default: old keys still match
+    assert "physical" not in FitOptions().key()
+    assert json.loads(FitOptions(physical=True).key())["physical"] is True
     # a stored record from another range is still keyed, not refused
     old = {"solver": "lm", "samples": 4096, "precision": "float64", "starts": 64,
            "max_steps": 20_000, "seed": 0}
@@ -180,6 +185,17 @@ def noisy_table(tmp_path_factory):
     # noise, so that the subsample (the seed) changes the fitted values
     table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]}, noise=0.05, seed=1)
     path = tmp_path_factory.mktemp("contract") / "lambert.binary"
+    merl.write(path, table)
+    return path
+
+
+@pytest.fixture(scope="module")
+def bright_table(tmp_path_factory):
+    from data_synth import make_table
+
+    # kd above 1: the physically bounded fit has a bound to hold
+    table, _ = make_table("lambert", {"kd": [1.2, 0.8, 0.4]}, noise=0.05, seed=1)
+    path = tmp_path_factory.mktemp("contract") / "bright.binary"
     merl.write(path, table)
     return path
 
@@ -201,10 +217,13 @@ def _same_fit(a: dict, b: dict) -> None:
     assert json.loads(json.dumps(a)) == json.loads(json.dumps(b))
 
 
-@pytest.mark.parametrize("model", ["lambert", AUTO])
-def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, tmp_path, model):
+@pytest.mark.parametrize("model, physical", [("lambert", False), (AUTO, False),
+                                             ("lambert", True)])
+def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright_table,
+                                                              tmp_path, model, physical):
     """One fit, four ways: the library, ``brdffit fit --json``, the service's job and
-    the batch store all give the result schema with the same keys and values."""
+    the batch store all give the result schema with the same keys and values; a
+    physically bounded fit (``--physical``) too."""
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut, best_result
@@ -212,24 +231,29 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, tmp_pa
     from brdffit.batch.store import read_results
     from brdffit.selection import select
 
-    path = str(noisy_table)
+    path = str(bright_table if physical else noisy_table)
+    fast = {**FAST, "physical": physical}
     candidates = ["lambert", "oren_nayar"]
     if model == AUTO:
-        library = select(merl.read(path), candidates, **FAST).to_dict()
+        library = select(merl.read(path), candidates, **fast).to_dict()
         assert library["selection"]["chosen"] == library["model"]
     else:
-        library = fit(merl.read(path), model, **FAST).to_dict()
+        library = fit(merl.read(path), model, **fast).to_dict()
     assert list(library) == FitResult.keys() and library["schema"] == "brdffit.fit/1"
+    assert (library["physical"] is not None) == physical
+    if physical:
+        assert library["physical"]["active"][0] == "range: kd[R] <= 1"
     FitResult.from_dict(library)  # reads back
 
     cli_args = ["--candidates", ",".join(candidates)] if model == AUTO else []
+    cli_args += ["--physical"] if physical else []
     r = run("brdffit.cli", "fit", path, "--model", model, "--json", "--samples", "2048",
             "--seed", "3", *cli_args)
     assert r.returncode == 0, r.stderr
     _same_fit(json.loads(r.stdout), library)
 
     if model != AUTO:  # the service's auto uses the default candidates
-        out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**FAST).model_dump())
+        out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**fast).model_dump())
         assert out["ok"], out
         served = FitResultOut.model_validate(best_result(out["results"])).model_dump(
             by_alias=True)
@@ -237,7 +261,7 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, tmp_pa
         assert set(FitResultOut.model_fields) | {"schema"} - {"schema_"} >= set(library)
 
     names = candidates if model == AUTO else [model]
-    run_batch([path], names, tmp_path / "r.h5", options=FitOptions(**FAST), workers=0,
+    run_batch([path], names, tmp_path / "r.h5", options=FitOptions(**fast), workers=0,
               progress=False)
     stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]
     batch = stored[library["model"]]["fit"]

@@ -253,18 +253,22 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         assert page.is_checked("#mode-list")
         page.fill("#samples-input", "2048")
         page.select_option("#loss-select", "cube_root")
+        page.check("#physical-input")
         page.click("#fit-button")
         page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
         visit.wait_image("#plot-spheres")
         visit.wait_image("#plot-slices")
         visit.shot("token-results")
+        row = page.locator("#results-table tbody tr[data-model=ggx]").inner_text()
+        assert "physically bounded: log_rmse" in row and "against the unconstrained" in row
 
         headers = {"Authorization": "Bearer s3cret-token"}
         job = httpx.get(server.url + "/v1/fits", headers=headers).json()["items"][0]
         missing = httpx.post(server.url + "/v1/materials/no-such-paint", headers=headers)
         assert missing.status_code == 404 and "GET /v1/materials" in missing.json()["detail"]
         assert job["status"] == "done" and job["models"] == ["ggx"]
-        assert job["options"]["loss"] == "cube_root"
+        assert job["options"]["loss"] == "cube_root" and job["options"]["physical"] is True
+        assert job["result"]["physical"]["unconstrained_log_rmse"] > 0
         assert visit.outside == []
         assert visit.console_errors == []
         visit.close()

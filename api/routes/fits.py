@@ -16,7 +16,15 @@ from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
 from fastapi.concurrency import run_in_threadpool
-from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from api import tasks
 from api.deps import QueueDep, RunnerDep, SettingsDep, StoreDep, require_token
@@ -48,7 +56,8 @@ def _contract_field(name: str):
     """``(annotation, Field)`` of one ``brdffit.fitting.options.FitOptions`` field: the
     request schema's type, default, bounds and description are the library's."""
     default, opt = options.spec(name)
-    annotation = Literal[opt.choices] if opt.choices is not None else opt.kind
+    annotation = (Literal[opt.choices] if opt.choices is not None
+                  else StrictBool if opt.kind is bool else opt.kind)  # "yes" is no bool
     if opt.none is not None:
         annotation = annotation | None
     description = opt.doc + (f"; null for {opt.none}" if opt.none is not None else "")
@@ -152,6 +161,10 @@ class FitResultOut(BaseModel):
     uncertainty: dict | None = Field(
         None, description="standard errors, correlations and undetermined parameters "
                           "(docs/results.md)")
+    physical: dict | None = Field(
+        None, description="on a physically bounded fit (options.physical): the unconstrained "
+                          "and bounded log_rmse, the relative cost, the largest albedo before "
+                          "and after, the active constraints (docs/results.md)")
 
 
 class Progress(BaseModel):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from fastapi import APIRouter, Depends
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 from api.deps import require_token
 from api.errors import ERROR_RESPONSES
@@ -20,6 +20,8 @@ class ParamInfo(BaseModel):
     lower: float
     upper: float | None
     doc: str
+    physical_upper: float | None = Field(
+        None, description="the upper bound in a physically bounded fit (options.physical)")
 
 
 class ModelInfo(BaseModel):

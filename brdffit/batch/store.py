@@ -461,6 +461,71 @@ def read_results(path: str | os.PathLike) -> dict:
     return out
 
 
+def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> dict:
+    """One fit of a batch file, in the result schema (``FitResult.to_dict()``).
+
+    ``table``: its group name (``brdffit batch-report`` shows it), the path it was
+    read from, or that path's file name (with or without ``.binary``); ``model``: the
+    fitted model, or None for the table's best fit (lowest ``log_rmse``). Raises
+    :class:`BatchFileError` naming what the file holds when there is no such table,
+    no such model, or the fit failed.
+    """
+    path = os.fspath(path)
+    with _open(path) as f:
+        groups = f["tables"]
+        name = _find_table(path, groups, table)
+        g = groups[name]
+        fits = {m: {k: _plain(v) for k, v in g[m].attrs.items()} for m in g}
+        if model is None:
+            ok = {m: a for m, a in fits.items() if a.get("status") == "ok" and "fit_json" in a}
+            if not ok:
+                raise BatchFileError(f"{path}: table {name!r} has no successful fit"
+                                     f"{_failed(fits)}")
+            model = min(ok, key=lambda m: _rank(json.loads(ok[m]["fit_json"])))
+        if model not in fits:
+            raise BatchFileError(
+                f"{path}: table {name!r} has no {model} fit; it has "
+                f"{', '.join(sorted(fits)) or 'none'}")
+        a = fits[model]
+        if a.get("status") != "ok" or "fit_json" not in a:
+            raise BatchFileError(f"{path}: the {model} fit of table {name!r} failed: "
+                                 f"{a.get('message') or 'no result stored'}")
+        return json.loads(a["fit_json"])
+
+
+def _find_table(path: str, groups: h5py.Group, table: str) -> str:
+    """The group name of ``table`` (see :func:`read_fit`)."""
+    if table in groups:
+        return table
+    stem = table.removesuffix(".binary")
+    found = []
+    for name, g in groups.items():
+        source = _plain(g.attrs.get("path", ""))
+        base = os.path.basename(source)
+        if table == source or table == base or stem == base.removesuffix(".binary"):
+            found.append(name)
+    if len(found) == 1:
+        return found[0]
+    if found:
+        raise BatchFileError(f"{path}: {table!r} names several tables: {', '.join(found)}; "
+                             "give one of these names")
+    names = sorted(groups)
+    shown = ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
+    raise BatchFileError(f"{path}: no table {table!r}; the file holds "
+                         f"{shown or 'no tables'}")
+
+
+def _rank(fit: dict) -> float:
+    """A fit's log_rmse for choosing the best; one that could not be measured is last."""
+    e = _float(fit["error"].get("log_rmse"))
+    return e if np.isfinite(e) else float("inf")
+
+
+def _failed(fits: dict) -> str:
+    failed = [f"{m} ({a.get('message') or a.get('status')})" for m, a in fits.items()]
+    return f"; its fits: {', '.join(failed)}" if failed else ""
+
+
 def _plain(v):
     """h5py values as plain Python (numpy scalars, arrays, bytes)."""
     if isinstance(v, bytes):

@@ -1,7 +1,9 @@
-"""``brdffit export RESULT.json --to TARGET``: a fit as a renderer's material.
+"""``brdffit export RESULT --to TARGET``: a fit as a renderer's material.
 
-RESULT.json is the output of ``brdffit fit --json`` (the result schema,
-docs/results.md; ``-`` reads standard input). The material goes to ``--out DIR``
+RESULT is the output of ``brdffit fit --json`` (the result schema, docs/results.md;
+``-`` reads standard input), or a batch results file (``brdffit batch``, HDF5) with
+``--table NAME`` and optionally ``--model MODEL`` (default: the table's best fit).
+The material goes to ``--out DIR``
 as the files a renderer loads, or to standard output; the warnings (every clamp and
 approximation) and the fidelity go to standard error, or all of it as one JSON
 document with ``--json``. See docs/exports.md.
@@ -14,12 +16,16 @@ import sys
 from pathlib import Path
 
 from brdffit.errors import BrdffitError
-from brdffit.export import TARGETS, export
+from brdffit.export import TARGETS, export, export_from_store
 from brdffit.fitting.result import FitResult
+
+#: The first bytes of every HDF5 file (a batch results file is one).
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
 def add_arguments(p) -> None:
-    p.add_argument("result", help="a fit result JSON file (brdffit fit --json), or - for stdin")
+    p.add_argument("result", help="a fit result JSON file (brdffit fit --json), - for stdin, "
+                                  "or a batch results file (brdffit batch --out)")
     p.add_argument("--to", required=True, choices=list(TARGETS), dest="target",
                    help="the renderer: mitsuba (load_dict + scene XML), gltf (glTF 2.0 "
                         "material), materialx (gltf_pbr node)")
@@ -27,6 +33,10 @@ def add_arguments(p) -> None:
                    help="write the material's files into DIR (created if missing)")
     p.add_argument("--json", action="store_true",
                    help="print the whole export (material, warnings, fidelity) as JSON")
+    store = p.add_argument_group("a batch results file (docs/batch.md)")
+    store.add_argument("--table", help="the table: its name in the file (brdffit batch-report "
+                                       "shows it), its path, or its file name")
+    store.add_argument("--model", help="the fitted model (default: the table's best fit)")
 
 
 def _read_result(source: str) -> FitResult:
@@ -46,9 +56,33 @@ def _read_result(source: str) -> FitResult:
         raise BrdffitError(f"{source}: not a fit result: {e}") from None
 
 
+def _is_store(source: str) -> bool:
+    if source == "-":
+        return False
+    with open(source, "rb") as f:  # a missing file: OSError, a one-line message
+        return f.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE
+
+
+def _export(args):
+    if not _is_store(args.result):
+        if args.table is not None or args.model is not None:
+            raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
+                               "--model choose a fit of a batch results file (brdffit batch)")
+        return export(_read_result(args.result), args.target)
+    if args.table is None:
+        from brdffit.batch.store import read_attrs, read_index
+
+        read_attrs(args.result)  # refuses an HDF5 file that is not a batch file
+        names = sorted(t.name for t in read_index(args.result).values())
+        shown = ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20
+                                         else "")
+        raise BrdffitError(f"{args.result}: a batch results file; choose a table with "
+                           f"--table (it holds {shown or 'no tables'})")
+    return export_from_store(args.result, args.table, args.target, args.model)
+
+
 def run(args) -> int:
-    result = _read_result(args.result)
-    out = export(result, args.target)
+    out = _export(args)
     if args.json:
         print(out.to_json(indent=2))
         return 0

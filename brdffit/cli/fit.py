@@ -24,6 +24,10 @@ def add_option_arguments(p, names) -> None:
     """
     for name in names:
         default, opt = options.spec(name)
+        if opt.kind is bool:  # a flag: --physical turns it on
+            p.add_argument(f"--{name.replace('_', '-')}", action="store_true", default=default,
+                           help=f"{opt.doc} (default off)".replace("%", "%%"))
+            continue
         shown = opt.cli_none if default is None and opt.cli_none else default
         valid = "" if opt.choices else opt.describe_range(opt.cli_none or "absent") + "; "
         help_text = f"{opt.doc} ({valid}default {'none' if shown is None else shown})"

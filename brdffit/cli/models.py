@@ -17,5 +17,8 @@ def run(args) -> int:
     for m in info:
         print(f"{m['name']}  ({m['n_params']} values)  {m['doc']}")
         for p in m["params"]:
-            print(f"    {p['name']:<6} {p['range']:<22} {p['doc']}")
+            bounded = p.get("physical_upper")
+            note = ("" if bounded is None or bounded == p["upper"]
+                    else f"  (<= {bounded:g} in a --physical fit)")
+            print(f"    {p['name']:<6} {p['range']:<22} {p['doc']}{note}")
     return 0

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import functools
 
+import equinox as eqx
+import jax
 import numpy as np
 
 from brdffit import models, runtime
@@ -29,14 +31,33 @@ N_U, N_PHI = 512, 256
 
 
 @functools.cache
-def _half_vector_grid():
+def _directions():
+    """wi, wo (n_incidences, N_U * N_PHI, 3) and the weights cos_o 4 (wi.h) dw_h
+    (0 where wo is below the horizon) of every incidence."""
     u = (np.arange(N_U) + 0.5) / N_U
     phi = (np.arange(N_PHI) + 0.5) / N_PHI * 2 * np.pi
     uu, pp = np.meshgrid(u, phi, indexing="ij")
     th = uu * uu * np.pi / 2
     h = np.stack([np.sin(th) * np.cos(pp), np.sin(th) * np.sin(pp), np.cos(th)], -1).reshape(-1, 3)
     dw_h = (np.sin(th) * np.pi * uu).reshape(-1) / N_U * (2 * np.pi / N_PHI)
-    return h, dw_h
+    wis, wos, weights = [], [], []
+    for deg in THETA_I_DEG:
+        t = np.radians(deg)
+        wi = np.array([np.sin(t), 0.0, np.cos(t)])
+        c = h @ wi
+        wo = 2 * c[:, None] * h - wi
+        ok = (c > 0) & (wo[:, 2] > 0)
+        wis.append(np.broadcast_to(wi, wo.shape))
+        wos.append(np.where(ok[:, None], wo, [0.0, 0.0, 1.0]))
+        weights.append(np.where(ok, wo[:, 2] * 4 * c * dw_h, 0.0))
+    return np.stack(wis), np.stack(wos), np.stack(weights)
+
+
+@eqx.filter_jit
+def _albedo(model, params, wi, wo, weight):
+    # one incidence at a time: the 131,072 direction pairs of all eight at once
+    # would hold ~100 MB of temporaries
+    return jax.lax.map(lambda a: a[2] @ model(params, a[0], a[1]), (wi, wo, weight))
 
 
 @runtime.in_float64
@@ -46,19 +67,8 @@ def directional_albedo(model: str, params: dict) -> np.ndarray:
 
     m = models.get(model)
     p = {k: jnp.asarray(v) for k, v in m.check_params(params).items()}
-    h, dw_h = _half_vector_grid()
-    out = []
-    for deg in THETA_I_DEG:
-        t = np.radians(deg)
-        wi = np.array([np.sin(t), 0.0, np.cos(t)])
-        c = h @ wi
-        wo = 2 * c[:, None] * h - wi
-        ok = (c > 0) & (wo[:, 2] > 0)
-        wo = np.where(ok[:, None], wo, [0.0, 0.0, 1.0])
-        f = np.asarray(m(p, jnp.asarray(np.broadcast_to(wi, wo.shape)), jnp.asarray(wo)))
-        weight = np.where(ok, wo[:, 2] * 4 * c * dw_h, 0.0)
-        out.append(weight @ f)
-    return np.array(out)
+    wi, wo, weight = (jnp.asarray(a) for a in _directions())
+    return np.asarray(_albedo(m, p, wi, wo, weight))
 
 
 def energy_report(model: str, params: dict) -> tuple[dict, list[str]]:

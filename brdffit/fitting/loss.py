@@ -43,7 +43,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from brdffit.models import AbstractBRDFModel
-from brdffit.models.base import KD, ParamSpec
+from brdffit.models.base import ParamSpec
 from brdffit.models.frame import Frame
 
 #: The losses a fit can minimise; the first is the default.
@@ -233,7 +233,7 @@ def _normal_equations(u: Float[Array, " p"], model, data):
     def value_and_slope(spec, x):  # a colour parameter and d(value)/du, elementwise
         return jax.jvp(spec.constrain, (x,), (jnp.ones_like(x),))
 
-    kd, dkd = value_and_slope(KD, u[layout.kd_at])
+    kd, dkd = value_and_slope(layout.kd_spec, u[layout.kd_at])
     scales, dscales = zip(*(value_and_slope(s, u[at])
                             for s, at in zip(layout.scale_specs, layout.scale_at)))
     scales = jnp.stack(scales)  # (K, 3)
@@ -274,6 +274,7 @@ class _ColourLayout(NamedTuple):
     """Where a colour-linear model's parameters sit in its unconstrained vector."""
 
     kd_at: np.ndarray  # (3,)
+    kd_spec: ParamSpec  # KD, or its physical range (brdffit.fitting.physical)
     scale_specs: tuple[ParamSpec, ...]
     scale_at: tuple[np.ndarray, ...]  # (3,) each
     shape_specs: tuple[ParamSpec, ...]
@@ -299,7 +300,7 @@ def _colour_layout(model) -> _ColourLayout | None:
         return None
     colour = [at["kd"], *(at[k] for k in model.lobe_scales)]
     return _ColourLayout(
-        kd_at=at["kd"], scale_specs=tuple(specs[k] for k in model.lobe_scales),
+        kd_at=at["kd"], kd_spec=specs["kd"], scale_specs=tuple(specs[k] for k in model.lobe_scales),
         scale_at=tuple(at[k] for k in model.lobe_scales), shape_specs=shape_specs,
         shape_at=np.concatenate([at[s.name] for s in shape_specs]),
         colour_at=np.stack(colour, axis=1),

@@ -34,7 +34,8 @@ from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name
 DEFAULT_TOLERANCE = 0.005
 #: The fields that are keywords of ``brdffit.fit``, in its order; the others
 #: (``model``, the selection rule) say what to fit and how to choose.
-FIT_KEYWORDS = ("loss", "solver", "samples", "precision", "starts", "max_steps", "seed")
+FIT_KEYWORDS = ("loss", "solver", "samples", "precision", "starts", "max_steps", "seed",
+                "physical")
 SELECTION_KEYWORDS = ("tolerance", "budget")
 N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
@@ -48,7 +49,7 @@ class Option:
     """How one option is offered and checked: what every shell needs to know."""
 
     doc: str  # one line, shown as CLI help and API description
-    kind: type  # int, float or str
+    kind: type  # int, float, str or bool (a flag: --name on a command line)
     choices: tuple[str, ...] | None = None
     least: float | None = None  # smallest valid value, inclusive
     above: float | None = None  # values must be strictly above this
@@ -68,6 +69,10 @@ class Option:
                 raise FitInputError(
                     f"unknown {name} {value!r}; choose one of {', '.join(self.choices)}")
             return
+        if self.kind is bool:
+            if not isinstance(value, bool):
+                raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
+            return
         ok_type = (int,) if self.kind is int else (int, float) if self.kind is float else (str,)
         if not isinstance(value, ok_type) or isinstance(value, bool):
             raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
@@ -83,6 +88,8 @@ class Option:
         how the reader spells None (``null`` in JSON, ``all`` on a command line)."""
         if self.words is not None:
             text = self.words
+        elif self.kind is bool:
+            text = "true or false"
         elif self.choices is not None:
             text = "one of " + ", ".join(self.choices)
         else:
@@ -144,6 +151,10 @@ class FitOptions:
     seed: int = _option(
         _FIT_DEFAULTS["seed"], kind=int, least=0, most=2**32 - 1,
         doc="subsample seed: a fit is deterministic for a given seed")
+    physical: bool = _option(
+        _FIT_DEFAULTS["physical"], kind=bool,
+        doc="physically bounded fit: directional albedo <= 1 at every incidence and "
+            "reflectances <= 1; the result's `physical` reports the cost (docs/fitting.md)")
     tolerance: float = _option(
         DEFAULT_TOLERANCE, kind=float, least=0, most=10,
         doc="model 'auto': the cheapest model within this log_rmse of the best (in "
@@ -183,9 +194,10 @@ class FitOptions:
         again: a file written under other ranges must still resume. A keyword the
         file lacks (written before the option existed) takes today's default."""
         d = {name: fit_keywords.get(name, _FIT_DEFAULTS.get(name)) for name in FIT_KEYWORDS}
-        if d["loss"] == _FIT_DEFAULTS["loss"]:
-            # keys written before the loss was an option stay the same: resume skips them
-            del d["loss"]
+        for name in ("loss", "physical"):
+            if d[name] == _FIT_DEFAULTS[name]:
+                # keys written before the option existed stay the same: resume skips them
+                del d[name]
         return jsonout.dumps(d, sort_keys=True, separators=(",", ":"))
 
     def to_dict(self) -> dict:
@@ -239,9 +251,15 @@ def markdown_table(style: str = "python") -> str:
             label, none_word = f"`{name}`", "`null`" if style == "json" else "`None`"
         if default is None:
             shown = none_word if style != "cli" or opt.cli_none else "absent"
+        elif opt.kind is bool:
+            shown = {"cli": "off", "json": f"`{str(default).lower()}`"}.get(style, f"`{default}`")
         else:
             shown = f'`"{default}"`' if isinstance(default, str) else f"`{default}`"
-        rows.append(f"| {label} | {shown} | {opt.describe_range(none_word)} | {opt.doc} |")
+        valid = opt.describe_range(none_word)
+        if opt.kind is bool:
+            valid = {"cli": "a flag: present is on", "json": "`true` or `false`"}.get(
+                style, "`True` or `False`")
+        rows.append(f"| {label} | {shown} | {valid} | {opt.doc} |")
     return "\n".join(rows)
 
 

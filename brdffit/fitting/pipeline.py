@@ -432,6 +432,7 @@ def fit(
     init: dict | None = None,
     bin_weight: np.ndarray | None = None,
     parent_fit: FitResult | None = None,
+    physical: bool = False,
 ) -> FitResult:
     """Fit ``model`` to ``table``; see the module docstring for the pipeline.
 
@@ -458,6 +459,9 @@ def fit(
             embedded, is always one of the starts, and the solver only accepts
             steps that lower the loss: the richer model never ends worse on the
             fit's samples than the one it contains.
+        physical: constrain the fit to conserve energy (directional albedo <= 1)
+            and to reflectances <= 1; ``FitResult.physical`` reports what that cost
+            (``brdffit.fitting.physical``).
     """
     t0 = time.perf_counter()
     m = models.get(model)
@@ -479,6 +483,14 @@ def fit(
             raise FitInputError("bin_weight needs one finite value per MERL bin")
         if np.any(bin_weight < 0):
             raise FitInputError("bin_weight must be >= 0")
+    if physical is not False:
+        if physical is not True:
+            raise FitInputError(f"physical must be true or false, got {physical!r}")
+        from brdffit.fitting.physical import physical_fit
+
+        return physical_fit(table, m, loss=loss, solver=solver, samples=samples,
+                            precision=precision, starts=starts, max_steps=max_steps, seed=seed,
+                            init=init, bin_weight=bin_weight, parent_fit=parent_fit)
 
     prep = _prepare(table, bin_weight, samples, seed, precision, loss)
     counts, n_usable, weight, sample_set, data = (

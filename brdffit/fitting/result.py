@@ -47,7 +47,10 @@ class FitResult:
     - ``uncertainty``: standard errors, correlations and undetermined parameters
       (``brdffit.fitting.uncertainty``); None for a fit whose every start diverged;
     - ``selection``: on the fit ``model="auto"`` chose, how and why it was chosen
-      (``brdffit.selection.Selection.summary``: ranking of every candidate, reason).
+      (``brdffit.selection.Selection.summary``: ranking of every candidate, reason);
+    - ``physical``: on a physically bounded fit (``physical=True``), what the bounds
+      cost against the unconstrained fit and which were active
+      (``brdffit.fitting.physical``, docs/results.md).
     """
 
     model: str
@@ -67,6 +70,7 @@ class FitResult:
     full_table_error: dict[str, float] | None = None
     selection: dict | None = None
     uncertainty: dict | None = None
+    physical: dict | None = None
 
     @property
     def log_rmse(self) -> float:

@@ -12,6 +12,7 @@ Parameters are a ``dict`` keyed by the docs/models.md names; RGB parameters have
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import ClassVar
@@ -95,6 +96,13 @@ class ParamSpec:
         return np.log(s) - np.log1p(-s)
 
 
+def _at_most_one(spec: ParamSpec) -> ParamSpec:
+    """``spec`` with its upper bound lowered to 1 (a reflectance's physical range)."""
+    if spec.upper is not None and spec.upper <= 1.0:
+        return spec
+    return dataclasses.replace(spec, upper=1.0)
+
+
 KD = ParamSpec("kd", "diffuse albedo (RGB)", 0.0, None, rgb=True)
 KS = ParamSpec("ks", "specular scale (RGB)", 0.0, None, rgb=True)
 
@@ -116,6 +124,19 @@ class AbstractBRDFModel(eqx.Module):
     #: in the colour parameters and differentiates only the lobes' few shape
     #: parameters (``brdffit.fitting.loss.normal_equations``). Empty: any other model.
     lobe_scales: ClassVar[tuple[str, ...]] = ()
+
+    @property
+    def physical_specs(self) -> tuple[ParamSpec, ...]:
+        """:attr:`param_specs` with each reflectance at most 1: the ranges of a
+        physically bounded fit (``fit(..., physical=True)``, brdffit.fitting.physical).
+
+        The reflectances are ``kd`` (a diffuse albedo) and the lobe scales
+        (:attr:`lobe_scales`; ``ks`` of every one-lobe model): ``ks F(cos_d)`` is the
+        facets' reflectance and F reaches 1 at grazing, so ``ks <= 1``. A range that
+        is already within [0, 1] (``f0``, glTF's factors) is kept.
+        """
+        return tuple(_at_most_one(s) if s.name in ("kd", *self.lobe_scales) else s
+                     for s in self.param_specs)
 
     def unit_lobes(self, shape: Params, frame: Frame) -> Float[Array, "k ..."]:
         """The lobes for unit scales, stacked (k, ...); ``shape`` holds the non-RGB

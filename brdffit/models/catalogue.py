@@ -113,8 +113,10 @@ def describe_model(model) -> dict:
         "doc": doc.strip().splitlines()[0],  # the module docstring's first line: the formula
         "params": [
             {"name": s.name, "size": s.size, "range": s.describe_range(),
-             "lower": s.lower, "upper": s.upper, "doc": s.doc}
-            for s in model.param_specs
+             "lower": s.lower, "upper": s.upper, "doc": s.doc,
+             # the range of a physically bounded fit (brdffit.fitting.physical)
+             "physical_upper": phys.upper}
+            for s, phys in zip(model.param_specs, model.physical_specs, strict=True)
         ],
         "n_params": model.n_params,
         "parent": model.parent,

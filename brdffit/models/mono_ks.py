@@ -52,6 +52,12 @@ class MonoKs(AbstractBRDFModel):
         )
 
     @property
+    def physical_specs(self) -> tuple[ParamSpec, ...]:
+        grey = {s.name for s in specular_colour_specs(self.base)}
+        return tuple(dataclasses.replace(s, rgb=False, doc=s.doc.replace("(RGB)", "(grey)"))
+                     if s.name in grey else s for s in self.base.physical_specs)
+
+    @property
     def shape_grid(self):
         return self.base.shape_grid
 

@@ -216,6 +216,7 @@ function fitRequest() {
     if (!model.length) throw new Error("tick at least one model, or choose auto");
   }
   const options = { loss: $("loss-select").value };
+  if ($("physical-input").checked) options.physical = true;
   const scene = $("scene-select").value;
   if (scene) options.scene = { preset: scene };
   for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")]]) {
@@ -339,8 +340,9 @@ function showResults(job) {
     row.append(el("td", r.model + (best && r.model === best.model ? " ★" : "")));
     for (const m of METRICS) row.append(el("td", fmt(r.error[m]), { class: "num" }));
     row.append(paramsCell(r));
-    row.append(el("td", r.converged ? `${r.result}, ${r.steps} steps`
-      : `NOT converged: ${r.result}, ${r.steps} steps`, { class: r.converged ? "" : "warn" }));
+    row.append(el("td", (r.converged ? `${r.result}, ${r.steps} steps`
+      : `NOT converged: ${r.result}, ${r.steps} steps`) + physicalNote(r.physical),
+      { class: r.converged ? "" : "warn" }));
     row.append(el("td", fmt(r.time_s, 3), { class: "num" }));
     row.addEventListener("click", () => showModel(r.model));
     body.append(row);
@@ -348,6 +350,16 @@ function showResults(job) {
   $("export-report").textContent = "";
   $("extra-figure").hidden = true;
   showModel(best ? best.model : null);
+}
+
+// A physically bounded fit: what the bounds cost against the unconstrained fit.
+function physicalNote(p) {
+  if (!p) return "";
+  const c = p.relative_cost;
+  const cost = c === null ? "n/a" : `${c < 0 ? "" : "+"}${(100 * c).toFixed(1)}%`;
+  const active = p.active.length ? p.active.join("; ") : "no bound active";
+  return `; physically bounded: log_rmse ${cost} against the unconstrained `
+    + `${fmt(p.unconstrained_log_rmse)} (${active})`;
 }
 
 function showModel(model) {

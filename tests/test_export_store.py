@@ -1,0 +1,96 @@
+"""Exports from a batch results file (brdffit.export.export_from_store and
+brdffit.batch.store.read_fit): a fit found by the table's name, path or file name, the
+best fit by default, and errors that say what the file holds."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from brdffit import merl
+from brdffit.batch.job import run_batch
+from brdffit.batch.store import BatchFileError, read_fit, read_results
+from brdffit.export import ExportError, export, export_from_store
+from brdffit.fitting.options import FitOptions
+from brdffit.fitting.result import FitResult
+from brdffit.io.grid import bin_grid
+from data_synth import make_table
+
+pytestmark = pytest.mark.unit
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """Two tables both called gold.binary (in a/ and b/), and one of 8 measured bins,
+    too few for any fit."""
+    root = tmp_path_factory.mktemp("store")
+    keep = np.zeros(bin_grid().above_horizon.size, bool)
+    keep[np.flatnonzero(bin_grid().above_horizon)[::100_000][:8]] = True
+    tables = {
+        "a/gold.binary": make_table("ggx", {"kd": [0.05, 0.04, 0.02], "ks": [0.6, 0.4, 0.2],
+                                            "alpha": 0.2, "f0": 1.0})[0],
+        "b/gold.binary": make_table("lambert", {"kd": [0.5, 0.4, 0.3]})[0],
+        "sparse.binary": make_table("lambert", {"kd": [0.5, 0.4, 0.3]}, keep=keep)[0],
+    }
+    for rel, table in tables.items():
+        (root / rel).parent.mkdir(exist_ok=True)
+        merl.write(root / rel, table)
+    out = root / "results.h5"
+    run_batch([str(root / rel) for rel in tables], ["ggx", "lambert"], out,
+              options=FitOptions(samples=1024), workers=0, progress=False)
+    return root, out
+
+
+def _stored(out, name: str, model: str) -> FitResult:
+    table = next(t for t in read_results(out)["tables"] if t["name"] == name)
+    return FitResult.from_dict(table["fits"][model]["fit"])
+
+
+def test_a_stored_fit_exports_as_the_fit_itself(store):
+    root, out = store
+    want = export(_stored(out, "gold", "ggx"), "gltf")
+    for table in ("gold", str(root / "a" / "gold.binary")):
+        got = export_from_store(out, table, "gltf", model="ggx")
+        assert got.to_dict() == want.to_dict()
+    assert read_fit(out, "gold~2", "lambert") == _stored(out, "gold~2", "lambert").to_dict()
+
+
+def test_the_default_is_the_best_fit(store):
+    _, out = store
+    fits = {m: _stored(out, "gold~2", m) for m in ("ggx", "lambert")}
+    best = min(fits.values(), key=lambda r: r.log_rmse)
+    assert read_fit(out, "gold~2")["model"] == best.model
+
+
+def test_unknown_table_or_model_lists_what_the_file_holds(store):
+    root, out = store
+    with pytest.raises(BatchFileError, match=r"no table 'silver'; the file holds gold, gold~2, "
+                                             r"sparse"):
+        read_fit(out, "silver", "ggx")
+    with pytest.raises(BatchFileError, match=r"'gold.binary' names several tables: gold, gold~2"):
+        read_fit(out, "gold.binary", "ggx")
+    with pytest.raises(BatchFileError, match="table 'gold' has no beckmann fit; it has ggx, "
+                                             "lambert"):
+        export_from_store(out, "gold", "mitsuba", model="beckmann")
+
+
+def test_a_failed_fit_says_why(store):
+    _, out = store
+    with pytest.raises(BatchFileError, match="the ggx fit of table 'sparse' failed: .*only 8 "
+                                             "usable bins"):
+        read_fit(out, "sparse", "ggx")
+    with pytest.raises(BatchFileError, match="table 'sparse' has no successful fit; its fits: "
+                                             "ggx .*, lambert "):
+        read_fit(out, "sparse")
+
+
+def test_not_a_batch_file_and_a_bad_target_are_clear_errors(store, tmp_path):
+    _, out = store
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f["x"] = 1
+    with pytest.raises(BatchFileError, match="not a brdffit batch results file"):
+        export_from_store(other, "gold", "gltf")
+    with pytest.raises(ExportError, match="unknown export target 'blender'"):
+        export_from_store(out, "gold", "blender")
