@@ -162,7 +162,9 @@ def markdown(res: dict) -> str:
         "",
         f"**Picks the truth on {res['hits']} of {len(res['cases'])} tables**; `auto` costs a "
         f"median **{res['median_ratio']:.1f}x** one fit of the true model (warm). The first "
-        f"selection in a process, compiling every candidate, took {res['cold_auto_s']:.0f} s.",
+        f"selection in this process took {res['cold_auto_s']:.2f} s (its fits traced, or "
+        "loaded from brdffit's cache of compiled fits; under `make bench` the benchmarks "
+        "before it have compiled them already).",
         "",
         "| table | truth | auto chose | auto (s) | of which fits (s) | one fit (s) | ratio "
         "| log_rmse chosen | log_rmse truth fit |",
