@@ -28,6 +28,7 @@ cannot be written costs speed only. ``BRDFFIT_CACHE_DIR=`` (empty) switches it o
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import importlib.metadata
@@ -119,8 +120,8 @@ def _remove_stale(root: Path, current: Path) -> None:
 
 
 def _type_is_keyed(cls) -> bool:
-    module = getattr(cls, "__module__", "") or ""
-    return module == "builtins" or module.startswith(_KEYED_MODULES)
+    """Whether a class (or function) is code the key can vouch for."""
+    return (getattr(cls, "__module__", "") or "").startswith(_KEYED_MODULES)
 
 
 def _treedef_is_keyed(treedef) -> bool:
@@ -136,10 +137,7 @@ _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 def _static_text(value) -> str | None:
     """A process-independent text of a static leaf, or None when it has none."""
     if callable(value) and hasattr(value, "__qualname__"):
-        if not _type_is_keyed(value) and not getattr(value, "__module__", "").startswith(
-                _KEYED_MODULES):
-            return None
-        return f"{value.__module__}.{value.__qualname__}"
+        return f"{value.__module__}.{value.__qualname__}" if _type_is_keyed(value) else None
     if not _type_is_keyed(type(value)):
         return None
     return _ADDRESS.sub("", repr(value))
@@ -168,11 +166,11 @@ def jit(fn: Callable) -> Callable:
         leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
         dynamic = [i for i, x in enumerate(leaves) if eqx.is_array(x)]
         key = (treedef, tuple(
-            (x.shape, x.dtype, getattr(x, "weak_type", False)) if i in dynamic else x
-            for i, x in enumerate(leaves)), jax.config.jax_enable_x64)
+            (x.shape, x.dtype, getattr(x, "weak_type", False)) if eqx.is_array(x) else x
+            for x in leaves), jax.config.jax_enable_x64)
         return leaves, treedef, dynamic, key
 
-    def compile_entry(leaves, treedef, dynamic, to_store: bool):
+    def compile_entry(leaves, treedef, dynamic, to_store: bool) -> _Entry:
         from jax._src import config as jax_config
 
         out_defs = []
@@ -187,23 +185,21 @@ def jit(fn: Callable) -> Callable:
             return out_leaves
 
         lowered = jax.jit(flat).lower(*(leaves[i] for i in dynamic))
-        if to_store:
-            # An executable that JAX's own cache loaded serialises without its
-            # machine code (its fused kernels are then "not found" when run): the
-            # one kept here is compiled afresh, once per fingerprint.
-            with jax_config.enable_compilation_cache(False):
-                compiled = lowered.compile()
-        else:
+        # An executable that JAX's own cache loaded serialises without its machine
+        # code (its fused kernels are then "not found" when run): the one kept on
+        # disk is compiled afresh, once per fingerprint.
+        with (jax_config.enable_compilation_cache(False) if to_store
+              else contextlib.nullcontext()):
             compiled = lowered.compile()
-        return _Entry(compiled, out_defs[0]), compiled
+        return _Entry(compiled, out_defs[0])
 
-    def disk_path(leaves, treedef, dynamic) -> Path | None:
+    def disk_path(leaves, treedef) -> Path | None:
         directory = _directory()
         if directory is None or not own_code or not _treedef_is_keyed(treedef):
             return None
         parts = [name, _ADDRESS.sub("", str(treedef)), str(jax.config.jax_enable_x64)]
-        for i, x in enumerate(leaves):
-            if i in dynamic:
+        for x in leaves:
+            if eqx.is_array(x):
                 parts.append(f"{x.dtype}{list(x.shape)}{'w' if getattr(x, 'weak_type', 0) else ''}")
             else:
                 text = _static_text(x)
@@ -228,11 +224,11 @@ def jit(fn: Callable) -> Callable:
             runtime.log.info("brdffit: compiled %s not loaded from %s (%s)", name, path, e)
             return None
 
-    def store(path: Path, entry: _Entry, compiled) -> None:
+    def store(path: Path, entry: _Entry) -> None:
         from jax.experimental import serialize_executable
 
         try:
-            payload, in_tree, out_tree = serialize_executable.serialize(compiled)
+            payload, in_tree, out_tree = serialize_executable.serialize(entry.call)
             example = jax.tree_util.tree_unflatten(entry.out_def, [0] * entry.out_def.num_leaves)
             tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
             with open(tmp, "wb") as f:
@@ -242,10 +238,25 @@ def jit(fn: Callable) -> Callable:
         except Exception as e:  # noqa: BLE001 - not serialisable, or no space: speed only
             runtime.log.info("brdffit: compiled %s not kept (%s)", name, e)
 
+    def loaded_and_run(path: Path, arrays):
+        """The executable kept at ``path`` and its outputs on ``arrays``, or None when
+        it is missing, does not load or does not run (its file is then removed)."""
+        entry = load(path) if path.exists() else None
+        if entry is None:
+            return None
+        try:
+            return entry, jax.block_until_ready(entry.call(*arrays))
+        except Exception as e:  # noqa: BLE001 - a file that loads but cannot run
+            runtime.log.info("brdffit: compiled %s in %s does not run (%s); compiling again",
+                             name, path, e)
+            path.unlink(missing_ok=True)
+            return None
+
     @functools.wraps(fn)
     def call(*args, **kwargs):
         leaves, treedef, dynamic, key = split(args, kwargs)
-        if any(isinstance(leaves[i], jax.core.Tracer) for i in dynamic):
+        arrays = [leaves[i] for i in dynamic]
+        if any(isinstance(a, jax.core.Tracer) for a in arrays):
             return plain(*args, **kwargs)  # called inside another traced function
         try:
             entry = entries.get(key)
@@ -255,32 +266,15 @@ def jit(fn: Callable) -> Callable:
             with _lock:
                 entry = entries.get(key)
                 if entry is None:
-                    path = disk_path(leaves, treedef, dynamic)
-                    entry = load(path) if path is not None and path.exists() else None
-                    if entry is not None:
-                        entry, out = checked(entry, path, leaves, treedef, dynamic)
-                        if entry is not None:
-                            entries[key] = entry
-                            return jax.tree_util.tree_unflatten(entry.out_def, out)
-                    if entry is None:
-                        entry, compiled = compile_entry(leaves, treedef, dynamic,
-                                                        path is not None)
-                        if path is not None:
-                            store(path, entry, compiled)
-                    entries[key] = entry
-        out = entry.call(*(leaves[i] for i in dynamic))
-        return jax.tree_util.tree_unflatten(entry.out_def, out)
+                    path = disk_path(leaves, treedef)
+                    found = loaded_and_run(path, arrays) if path is not None else None
+                    if found is not None:  # already run once, to check it
+                        entries[key], out = found
+                        return jax.tree_util.tree_unflatten(found[0].out_def, out)
+                    entry = entries[key] = compile_entry(leaves, treedef, dynamic,
+                                                         path is not None)
+                    if path is not None:
+                        store(path, entry)
+        return jax.tree_util.tree_unflatten(entry.out_def, entry.call(*arrays))
 
-    def checked(entry: _Entry, path: Path, leaves, treedef, dynamic):
-        """``(entry, its outputs)`` if it runs on these arguments; else its file is
-        removed and ``(None, None)`` returned."""
-        try:
-            return entry, jax.block_until_ready(entry.call(*(leaves[i] for i in dynamic)))
-        except Exception as e:  # noqa: BLE001 - a file that loads but cannot run
-            runtime.log.info("brdffit: compiled %s in %s does not run (%s); compiling again",
-                             name, path, e)
-            path.unlink(missing_ok=True)
-            return None, None
-
-    call.plain = plain  # the same function without the cache, e.g. to nest in a jit
     return call
