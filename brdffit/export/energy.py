@@ -40,6 +40,15 @@ def _directions():
     th = uu * uu * np.pi / 2
     h = np.stack([np.sin(th) * np.cos(pp), np.sin(th) * np.sin(pp), np.cos(th)], -1).reshape(-1, 3)
     dw_h = (np.sin(th) * np.pi * uu).reshape(-1) / N_U * (2 * np.pi / N_PHI)
+    return mirrored_directions(h, dw_h)
+
+
+def mirrored_directions(h: np.ndarray, dw_h: np.ndarray):
+    """For each incidence of :data:`THETA_I_DEG`, the directions an albedo integral
+    over half vectors ``h`` (n, 3) with solid angles ``dw_h`` visits: wi, wo = the
+    mirror of wi about each h (+z where it falls below the horizon), and the weight
+    cos_o 4 (wi.h) dw_h (0 there), stacked as (n_incidences, n, ...). Shared with the
+    coarser grid of ``brdffit.fitting.physical``."""
     wis, wos, weights = [], [], []
     for deg in THETA_I_DEG:
         t = np.radians(deg)

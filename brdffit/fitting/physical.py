@@ -156,27 +156,17 @@ def theta_h_nodes() -> tuple[np.ndarray, np.ndarray]:
 @functools.cache
 @runtime.in_float64
 def albedo_grid(dtype_name: str = "float64") -> AlbedoGrid:
-    from brdffit.export.energy import THETA_I_DEG
+    from brdffit.export.energy import mirrored_directions
 
     theta, band = theta_h_nodes()
     phi = (np.arange(N_PHI_H) + 0.5) / N_PHI_H * np.pi
     tt, pp = np.meshgrid(theta, phi, indexing="ij")
     h = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
     dw_h = np.repeat(band, N_PHI_H) * (2 * np.pi / N_PHI_H)  # both halves of phi_h
-    wi_all, wo_all, weights = [], [], []
-    for deg in THETA_I_DEG:
-        t = math.radians(deg)
-        wi = np.array([math.sin(t), 0.0, math.cos(t)])
-        c = h @ wi
-        wo = 2 * c[:, None] * h - wi
-        ok = (c > 0) & (wo[:, 2] > 0)
-        wo = np.where(ok[:, None], wo, [0.0, 0.0, 1.0])
-        wi_all.append(np.broadcast_to(wi, wo.shape))
-        wo_all.append(wo)
-        weights.append(np.where(ok, wo[:, 2] * 4 * c * dw_h, 0.0))
-    frame = shading_frame(jnp.asarray(np.concatenate(wi_all), dtype_name),
-                          jnp.asarray(np.concatenate(wo_all), dtype_name))
-    return AlbedoGrid(frame=frame, weight=jnp.asarray(np.stack(weights), dtype_name))
+    wi, wo, weight = mirrored_directions(h, dw_h)
+    frame = shading_frame(jnp.asarray(wi.reshape(-1, 3), dtype_name),
+                          jnp.asarray(wo.reshape(-1, 3), dtype_name))
+    return AlbedoGrid(frame=frame, weight=jnp.asarray(weight, dtype_name))
 
 
 def coarse_albedo(model: AbstractBRDFModel, params: Params, grid: AlbedoGrid):
