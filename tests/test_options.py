@@ -178,26 +178,25 @@ def test_key_format_is_the_one_results_files_hold():
 # -- one result: library, CLI, service, batch ---------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def noisy_table(tmp_path_factory):
+def _noisy_lambert_file(tmp_path_factory, name: str, kd: list[float]):
     from data_synth import make_table
 
     # noise, so that the subsample (the seed) changes the fitted values
-    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]}, noise=0.05, seed=1)
-    path = tmp_path_factory.mktemp("contract") / "lambert.binary"
+    table, _ = make_table("lambert", {"kd": kd}, noise=0.05, seed=1)
+    path = tmp_path_factory.mktemp("contract") / name
     merl.write(path, table)
     return path
+
+
+@pytest.fixture(scope="module")
+def noisy_table(tmp_path_factory):
+    return _noisy_lambert_file(tmp_path_factory, "lambert.binary", [0.5, 0.35, 0.2])
 
 
 @pytest.fixture(scope="module")
 def bright_table(tmp_path_factory):
-    from data_synth import make_table
-
     # kd above 1: the physically bounded fit has a bound to hold
-    table, _ = make_table("lambert", {"kd": [1.2, 0.8, 0.4]}, noise=0.05, seed=1)
-    path = tmp_path_factory.mktemp("contract") / "bright.binary"
-    merl.write(path, table)
-    return path
+    return _noisy_lambert_file(tmp_path_factory, "bright.binary", [1.2, 0.8, 0.4])
 
 
 FAST = {"samples": 2048, "seed": 3}
