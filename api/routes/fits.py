@@ -37,7 +37,7 @@ from brdffit.errors import FitInputError
 from brdffit.fitting import options
 from brdffit.fitting.result import SCHEMA
 from brdffit.fitting.scene import Scene, SceneError
-from brdffit.view.plots import EXPOSED_KINDS, EXPOSURE_EV_RANGE, KINDS
+from brdffit.view.plots import EXPOSURE_EV_RANGE, KINDS, exposure_refused
 
 log = logging.getLogger("brdffit.api")
 
@@ -390,10 +390,8 @@ async def get_plot(
                     "renders share, applied before tone mapping; for spheres and report "
                     "only")] = 0.0,
 ) -> Response:
-    if exposure_ev and kind.value not in EXPOSED_KINDS:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
-                            f"the {kind.value} plot has no sphere renders to expose; "
-                            f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
+    if (why := exposure_refused(kind.value, exposure_ev)) is not None:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, why)
     job, result = await finished_fit(store, job_id, model, "plots")
     path = store.plot_path(job_id, result["model"], kind.value, exposure_ev)
     if not path.exists():

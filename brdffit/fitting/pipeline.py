@@ -13,8 +13,8 @@ The pipeline, and where each decision is documented:
 
 Compiled functions are keyed on (model, solver, sample count, precision, loss) only:
 the data always travels through ``args``, so the second table with the same
-settings reuses the compiled fit, and the persistent cache (``brdffit.runtime``)
-carries it over to the next process.
+settings reuses the compiled fit, and ``brdffit.executables`` keeps the compiled
+executables on disk for the next process.
 """
 
 from __future__ import annotations

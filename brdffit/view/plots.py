@@ -603,6 +603,15 @@ RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
 EXPOSED_KINDS = ("spheres", "report")
 
 
+def exposure_refused(kind: str, exposure_ev: float) -> str | None:
+    """Why plot ``kind`` cannot take ``exposure_ev`` (a plot without sphere renders
+    and a non-zero exposure), or None: the service refuses the request with it."""
+    if exposure_ev and kind not in EXPOSED_KINDS:
+        return (f"the {kind} plot has no sphere renders to expose; "
+                f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
+    return None
+
+
 def render(kind: str, table: MerlTable, result: FitResult | dict,
            exposure_ev: float = 0.0) -> bytes:
     """The plot called ``kind`` (one of :data:`KINDS`) as PNG bytes; ``exposure_ev``
@@ -611,9 +620,8 @@ def render(kind: str, table: MerlTable, result: FitResult | dict,
     if kind not in RENDERERS:
         raise ValueError(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")
     if exposure_ev:
-        if kind not in EXPOSED_KINDS:
-            raise ValueError(f"the {kind} plot has no sphere renders to expose; "
-                             f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
+        if (why := exposure_refused(kind, exposure_ev)) is not None:
+            raise ValueError(why)
         return RENDERERS[kind](table, _as_result(result), exposure_ev=exposure_ev)
     return RENDERERS[kind](table, _as_result(result))
 
