@@ -64,6 +64,9 @@ DEFAULT_STARTS = 1
 #: Steps per start. A default fit of a real material converges in 3-80 steps
 #: (bench/results/real_materials.md); the limit only ends a fit that cannot.
 DEFAULT_MAX_STEPS = 256
+#: |u| within which every parameter transform has a useful slope (softplus(-8) =
+#: 3e-4 with slope 3e-4): a nested model's start from its parent is pulled back here.
+LIVE_U = 8.0
 
 
 @functools.cache
@@ -540,17 +543,23 @@ def fit(
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
         if not polish:
-            best_starts = np.concatenate([parent_start[None], best_starts])
-            parent_start = None
+            # The embedding puts what the parent lacks at its bound (ggx2's ks2 = 0,
+            # deep in the softplus tail): a saddle, from which LM crawled for 30-100
+            # steps before the second lobe came alive (issue 15). The start is that
+            # point pulled back to where every coordinate moves; the exact embedding
+            # stays the fallback below, which keeps the guarantee.
+            best_starts = np.concatenate(
+                [np.clip(parent_start, -LIVE_U, LIVE_U)[None], best_starts])
 
     solve = functools.partial(_solve_batch, m, solver,
                               data=data, max_steps=max_steps)
     values, codes, steps, losses = (np.asarray(a) for a in solve(
         u_batch=jnp.asarray(best_starts, dtype)))
     if parent_start is not None:
-        # The polished fit is never worse than the parent's optimum on every bin: a
-        # parent that does better (rare: the subsample ranked them otherwise) is
-        # polished too, and the better of the two kept.
+        # The fit is never worse than the parent's optimum on its samples: a parent
+        # that does better (rare: the starts ended in a poorer basin, or a polish's
+        # subsample ranked them otherwise) is refined from its exact embedding too,
+        # and the better of the two kept.
         parent_loss = float(_score(m, jnp.asarray(parent_start[None], dtype), data)[0])
         if parent_loss < np.min(np.where(np.isfinite(losses), losses, np.inf)):
             extra = [np.asarray(a) for a in solve(u_batch=jnp.asarray(parent_start[None], dtype))]

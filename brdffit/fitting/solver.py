@@ -133,9 +133,16 @@ def pinned_coordinates(jtj, jtr, bound_side: Int[Array, " p"]) -> Bool[Array, " 
 
     The step-length condition is what makes this scale-free: a dim table's kd of
     1e-7 sits in the softplus tail too, but its optimum is a step or two away, so
-    it stays free."""
+    it stays free.
+
+    A tail coordinate whose column is numerically unidentified (``_RANK_FLOOR``)
+    and whose descent points outward is pinned too, whatever its step: its damped
+    step is then ~1e10 and meaningless, yet its share of the decrement kept a fit
+    from ever passing the optimality test (a lobe's colour channel at ks ~ 1e-15)."""
     full = _damped_step(jtj, jtr, jnp.finfo(jtj.dtype).eps ** 0.5, jnp.zeros_like(bound_side, bool))
-    outward = (-jtr * bound_side >= 0) & (full * bound_side >= MAX_STEP)
+    d = jnp.diag(jtj)
+    unidentified = d <= _RANK_FLOOR * jnp.max(d)
+    outward = (-jtr * bound_side >= 0) & ((full * bound_side >= MAX_STEP) | unidentified)
     return (bound_side != 0) & outward
 
 
@@ -276,8 +283,11 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # Cap the step in the unconstrained space: a parameter with a tiny Jacobian
         # column (kd of a dark channel) would otherwise jump deep into the flat tail
         # of its softplus/sigmoid, where its column vanishes and it stays stuck.
-        longest = jnp.max(jnp.abs(delta))
-        delta = delta * jnp.minimum(1.0, self.max_step / jnp.maximum(longest, 1e-300))
+        # Each coordinate is capped on its own: scaling the whole step by its
+        # longest component let one coordinate sliding down a tail shrink every
+        # other one's step to nothing (ggx2 on gold-metallic-paint crawled for 40
+        # steps at a constant loss; issue 15).
+        delta = jnp.clip(delta, -self.max_step, self.max_step)
         y_new_flat = flat + delta
         y_new = unravel(y_new_flat)
         loss_new, jtj_new, jtr_new = _residual_and_normal(fn, y_new, args, options)
