@@ -27,11 +27,9 @@ import time
 import weakref
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from brdffit import executables, models, runtime
 from brdffit.errors import FitInputError
@@ -49,6 +47,7 @@ from brdffit.fitting.loss import (
 from brdffit.fitting.result import STATUS_NAMES, FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.sphere import SphereReference
+from brdffit.fitting.starts import TableHints, table_hints
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io import merl
@@ -223,21 +222,6 @@ def full_table_data(
 FULL_TABLE_DTYPE = jnp.float32
 
 
-class _TableOnDevice(eqx.Module):
-    """What every full-table error of one table needs, whatever the model."""
-
-    meas_cos: Float[Array, "3 n"]  # f_meas cos_i
-    target: Float[Array, "3 n"]  # log1p(f_meas cos_i)
-    cube: Float[Array, "3 n"]  # cbrt(f_meas cos_i + offset), the cube-root loss's target
-
-
-@executables.jit
-def _table_on_device(rgb, cos_i) -> _TableOnDevice:
-    meas_cos = rgb * jnp.maximum(cos_i, 0.0)
-    return _TableOnDevice(meas_cos=meas_cos, target=jnp.log1p(meas_cos),
-                          cube=compress_values(jnp.maximum(meas_cos, 0.0), "cube_root"))
-
-
 #: Per-table arrays, reused by every model fitted to the same table object (a
 #: batch or `auto` fits several) and dropped with the table.
 _TABLE_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -250,19 +234,30 @@ def _cached(table: MerlTable, key, make):
     return per_table[key]
 
 
-def _device_table(table: MerlTable, dtype) -> _TableOnDevice:
-    name = jnp.dtype(dtype).name
-    return _cached(table, f"device-{name}", lambda: _table_on_device(
-        jnp.asarray(table.rgb.reshape(3, -1).astype(name, copy=False)),
-        _device_frames(name).cos_i,
-    ))
+def _device_rgb(table: MerlTable):
+    """The table's values on the device, as they are (float64, channel-major): no
+    copy at all on the CPU, where a 64-byte-aligned array (``merl.read`` allocates
+    one) is used in place; each error pass converts them block by block."""
+    return _cached(table, "device-rgb", lambda: jax.device_put(table.rgb.reshape(3, -1)))
 
 
 def _peak_bin(table: MerlTable, weight: np.ndarray) -> int:
-    """Bin with the largest measured sum_c f cos_i among those with weight > 0."""
-    brightness = _cached(table, "brightness", lambda: table.rgb.reshape(3, -1).sum(axis=0)
-                         * np.maximum(bin_grid().cos_i, 0.0))
+    """Bin with the largest measured sum_c f cos_i among those with weight > 0.
+
+    In numpy: XLA's CPU argmax over 1.46M values takes ~30 ms, numpy's ~1 ms. The
+    brightest bin of the whole table almost always has weight (unmeasured bins hold
+    0); only where it has none (a scene that leaves it out) is the mask applied."""
+    brightness = table.rgb.reshape(3, -1).sum(axis=0)
+    brightness *= _cos_i_above()
+    b = int(np.argmax(brightness))
+    if weight[b] > 0:
+        return b
     return int(np.argmax(np.where(weight > 0, brightness, -np.inf)))
+
+
+@functools.cache
+def _cos_i_above() -> np.ndarray:
+    return np.maximum(bin_grid().cos_i, 0.0)
 
 
 def _fit_cos(model, u, frame):
@@ -271,29 +266,36 @@ def _fit_cos(model, u, frame):
 
 
 @executables.jit
-def _full_errors(model, u, dev: _TableOnDevice, weight, frame, peak):
+def _full_errors(model, u, rgb, weight, frame, peak):
     """log_rmse, cube_root_rmse and rmse_cos of the whole table in one pass, block by
-    block (``brdffit.fitting.loss.sum_over_blocks``): the model is evaluated once per
-    bin and each block's temporaries stay in cache (~2x faster than one pass per
-    metric), and the relative error at the peak bin."""
+    block (``brdffit.fitting.loss.sum_over_blocks``), and the relative error at the
+    peak bin.
+
+    The measured side of every metric is made here, per block, from the table's own
+    values: the model is evaluated once per bin, each block's temporaries stay in
+    cache, and no per-table array of targets is built first. Building the three
+    targets of 4.4M values beforehand cost 15-25 ms per table; here they cost ~1 ms
+    per pass, which is bound by memory traffic, not by the logs (issue 15)."""
 
     def sums(part):
         fit_cos = _fit_cos(model, u, part["frame"])
+        meas_cos = part["rgb"].astype(u.dtype) * jnp.maximum(part["frame"].cos_i, 0.0)
         w = part["weight"]
-        d_log = jnp.log1p(fit_cos) - part["target"]
-        d_cube = compress_values(fit_cos, "cube_root") - part["cube"]
-        lin = fit_cos - part["meas_cos"]
+        d_log = jnp.log1p(fit_cos) - jnp.log1p(meas_cos)
+        d_cube = compress_values(fit_cos, "cube_root") - compress_values(meas_cos, "cube_root")
+        lin = fit_cos - meas_cos
         return jnp.stack([jnp.sum(w * d_log * d_log), jnp.sum(w * d_cube * d_cube),
                           jnp.sum(w * lin * lin)])
 
-    arrays = {"frame": frame, "weight": weight, "target": dev.target, "cube": dev.cube,
-              "meas_cos": dev.meas_cos}
+    arrays = {"frame": frame, "weight": weight, "rgb": rgb}
     log_rmse, cube_root_rmse, rmse_cos = jnp.sqrt(
         sum_over_blocks(sums, arrays, weight.shape[-1]) / 3.0)
-    at_peak = _fit_cos(model, u, _gather(frame, peak[None]))[:, 0] - dev.meas_cos[:, peak]
+    at = _gather(frame, peak[None])
+    meas_peak = rgb[:, peak].astype(u.dtype) * jnp.maximum(at.cos_i[0], 0.0)
+    at_peak = _fit_cos(model, u, at)[:, 0] - meas_peak
     return {
         "log_rmse": log_rmse, "cube_root_rmse": cube_root_rmse, "rmse_cos": rmse_cos,
-        "rel_peak_error": jnp.max(jnp.abs(at_peak) / jnp.maximum(dev.meas_cos[:, peak], 1e-12)),
+        "rel_peak_error": jnp.max(jnp.abs(at_peak) / jnp.maximum(meas_peak, 1e-12)),
     }
 
 
@@ -317,11 +319,11 @@ def full_table_metrics(
     not report such a fit as a success.
     """
     peak = jnp.asarray(_peak_bin(table, weight) if peak is None else peak)
+    rgb = _device_rgb(table)
     for dt in (dtype, jnp.float64):
         frame = _device_frames(jnp.dtype(dt).name)
-        dev = _device_table(table, dt)
         ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
-        errors = _full_errors(model, ut, dev, w, frame, peak)
+        errors = _full_errors(model, ut, rgb, w, frame, peak)
         metrics = {k: float(errors[k])  # in this order (a pytree's keys come sorted)
                    for k in ("log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error")}
         if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
@@ -365,6 +367,7 @@ class _Prepared(NamedTuple):
     data: LossData
     peak: int
     brightest: float  # the largest usable value (1/sr)
+    hints: TableHints | None  # what the starts read from the table
 
 
 #: Solid-angle weights and subsamples by usable-bin mask: tables measured on the same
@@ -397,22 +400,23 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
              loss: str) -> _Prepared:
     """The usable bins, their weights, the subsample and its device data: computed
     once per table and options and reused by every model fitted to the same table
-    object (``auto``, a batch's models, a nested model's parent), ~15 ms a fit."""
+    object (``auto``, a batch's models, a nested model's parent), ~10 ms a table."""
     weight_key = None if bin_weight is None else hashlib.sha1(bin_weight.tobytes()).hexdigest()
 
     def make() -> _Prepared:
         counts = usable_bins(table, bin_weight)
         n_usable = int(np.count_nonzero(counts.usable))
-        # the channels' maximum first: one boolean selection of 1.46M, not of 4.4M
-        brightest = float(table.rgb.reshape(3, -1).max(axis=0)[counts.usable].max(initial=0.0))
+        # the channels' maximum first, then the usable bins' (no boolean selection copy)
+        brightest = float(np.max(table.rgb.reshape(3, -1).max(axis=0), where=counts.usable,
+                                 initial=0.0))
         if n_usable == 0 or brightest < merl.MIN_PEAK:  # fit() says why
-            return _Prepared(counts, n_usable, None, None, None, -1, brightest)
+            return _Prepared(counts, n_usable, None, None, None, -1, brightest, None)
         weight, sample_set = _weights_and_samples(counts.usable, bin_weight, weight_key,
                                                   samples, seed)
         data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision],
                            loss)
         return _Prepared(counts, n_usable, weight, sample_set, data, _peak_bin(table, weight),
-                         brightest)
+                         brightest, table_hints(table, counts.usable))
 
     return _cached(table, ("prepared", samples, seed, precision, loss, weight_key), make)
 
@@ -526,7 +530,7 @@ def fit(
         # want it back, and from deep in the tail capped steps would only crawl.
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
-        u_candidates = start_vectors(m, table, counts.usable)
+        u_candidates = start_vectors(m, table, counts.usable, prep.hints)
     if len(u_candidates) > 1:  # one candidate (init, a polish) has nothing to rank
         # Score candidates on every 8th sample: ranking starts needs no more.
         scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))

@@ -26,6 +26,7 @@ import functools
 import numpy as np
 
 from brdffit import executables, runtime
+from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins
 from brdffit.io.merl import MerlTable
 from brdffit.models import AbstractBRDFModel
 
@@ -87,11 +88,24 @@ def tonemap(rad: np.ndarray, exposure: float) -> np.ndarray:
 
 
 def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
-    """Radiance image of the table (NaN where the bin is unmeasured) and its lit mask."""
+    """Radiance image of the table (NaN where the bin is unmeasured) and its lit mask:
+    :meth:`MerlTable.lookup` at every lit pixel, through the pixels' bins, which are
+    the same for every table."""
     wi, wo, lit = sphere_directions(size, light)
+    bins = _sphere_bins(size, tuple(float(c) for c in np.ravel(light)))
+    values = table.rgb.reshape(3, -1)[:, bins]
     img = np.zeros((size, size, 3))
-    img[lit] = table.lookup(wi[lit], wo[lit])
+    img[lit] = np.where(table.mask.reshape(-1)[bins], values, np.nan).T
     return radiance(img, wi), lit
+
+
+@functools.lru_cache(maxsize=16)
+def _sphere_bins(size: int, light: tuple[float, ...]) -> np.ndarray:
+    """Flat MERL bin of each lit pixel (in ``lit``'s order), as ``lookup`` finds it."""
+    wi, wo, lit = _sphere_directions(size, light)
+    bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi[lit], wo[lit])), SHAPE)
+    bins.setflags(write=False)
+    return bins
 
 
 @runtime.in_float64
