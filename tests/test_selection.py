@@ -138,7 +138,10 @@ def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
 
     monkeypatch.setattr(brdffit.fitting.pipeline, "fit", counting_fit)
     sel = select(ggx_table, ("ggx", "lambert"), **FAST)
-    assert calls == ["lambert", "ggx"]  # cheapest first, once each
+    assert sorted(calls) == ["ggx", "lambert"]  # once each (side by side: in any order)
+    calls.clear()
+    select(ggx_table, ("ggx", "lambert"), threads=1, **FAST)
+    assert calls == ["lambert", "ggx"]  # one at a time: cheapest first
     for row in sel.ranking:
         assert sel.fits[row["model"]].params == row["params"]
     # renders at another size when asked: a PSNR of its own, as good a ranking
@@ -192,6 +195,22 @@ def test_bad_options_are_input_errors(ggx_table):
         select(ggx_table, ("lambert", "nope"))
     with pytest.raises(FitInputError, match="duplicate"):
         select(ggx_table, ("lambert", "lambert"))
+    for bad in (0, 1.5, "2"):
+        with pytest.raises(FitInputError, match="threads"):
+            select(ggx_table, ("lambert",), threads=bad)
+
+
+def test_candidates_fitted_side_by_side_are_the_fits_made_one_at_a_time(ggx_selection,
+                                                                         ggx_table):
+    """Threads only change when each candidate runs: every fit, nested ones (ggx2
+    from ggx, oren_nayar from lambert) included, is the same to the last bit."""
+    one = select(ggx_table, threads=1, **FAST)
+    for sel in (ggx_selection, select(ggx_table, threads=4, **FAST)):
+        assert sel.chosen == one.chosen and sel.reason == one.reason
+        assert list(sel.fits) == list(one.fits)
+        for name, r in one.fits.items():
+            assert sel.fits[name].params == r.params, name
+            assert sel.fits[name].error == r.error, name
 
 
 # -- the service and the client -------------------------------------------------------------

@@ -51,6 +51,7 @@ from brdffit.fitting.starts import TableHints, table_hints
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io import merl
+from brdffit.io.buffers import aligned_copy
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.models.frame import Frame, shading_frame
@@ -227,11 +228,17 @@ FULL_TABLE_DTYPE = jnp.float32
 _TABLE_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
+_TABLE_CACHE_LOCK = threading.RLock()
+
+
 def _cached(table: MerlTable, key, make):
-    per_table = _TABLE_CACHE.setdefault(table, {})
-    if key not in per_table:
-        per_table[key] = make()
-    return per_table[key]
+    # One lock for every table: fits running beside each other (``auto``'s
+    # candidates) wait for the first one's preparation instead of repeating it.
+    with _TABLE_CACHE_LOCK:
+        per_table = _TABLE_CACHE.setdefault(table, {})
+        if key not in per_table:
+            per_table[key] = make()
+        return per_table[key]
 
 
 def _device_rgb(table: MerlTable):
@@ -280,7 +287,7 @@ def _full_errors(model, u, rgb, weight, frame, peak):
     def sums(part):
         fit_cos = _fit_cos(model, u, part["frame"])
         meas_cos = part["rgb"].astype(u.dtype) * jnp.maximum(part["frame"].cos_i, 0.0)
-        w = part["weight"]
+        w = part["weight"].astype(u.dtype)
         d_log = jnp.log1p(fit_cos) - jnp.log1p(meas_cos)
         d_cube = compress_values(fit_cos, "cube_root") - compress_values(meas_cos, "cube_root")
         lin = fit_cos - meas_cos
@@ -322,7 +329,7 @@ def full_table_metrics(
     rgb = _device_rgb(table)
     for dt in (dtype, jnp.float64):
         frame = _device_frames(jnp.dtype(dt).name)
-        ut, w = jnp.asarray(u, dt), jnp.asarray(weight, dt)
+        ut, w = jnp.asarray(u, dt), jnp.asarray(weight)
         errors = _full_errors(model, ut, rgb, w, frame, peak)
         metrics = {k: float(errors[k])  # in this order (a pytree's keys come sorted)
                    for k in ("log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error")}
@@ -386,7 +393,7 @@ def _weights_and_samples(usable: np.ndarray, bin_weight, weight_key, samples, se
         if hit is not None:
             _SAMPLE_SETS.move_to_end(key)
             return hit
-    weight = bin_weights(usable, bin_weight)
+    weight = aligned_copy(bin_weights(usable, bin_weight))  # used in place by the device
     weight.setflags(write=False)
     hit = (weight, stratified_sample(weight, samples, seed))
     with _SAMPLE_SETS_LOCK:

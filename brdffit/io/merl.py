@@ -39,6 +39,7 @@ from brdffit.io.angles import (
     dirs_to_half_diff,
     half_diff_to_bins,
 )
+from brdffit.io.buffers import aligned_empty
 
 SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 HEADER_BYTES = 12
@@ -219,19 +220,11 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     return MerlTable(rgb, measured, source, n_nonfinite)
 
 
-#: JAX on the CPU uses a host array in place, without a copy, when its data start
-#: on a 64-byte boundary; numpy's large allocations start 16 bytes past one.
-_DEVICE_ALIGNMENT = 64
-
-
 def _aligned_values() -> np.ndarray:
     """An uninitialised little-endian float64 array for a table's 3 x N_BINS values,
-    64-byte aligned, so that the fits' full-table passes read the table where it
-    lies (``brdffit.fitting.pipeline``) instead of copying 35 MB per table."""
-    size = 3 * N_BINS * 8
-    buffer = np.empty(size + _DEVICE_ALIGNMENT, dtype=np.uint8)
-    offset = -buffer.ctypes.data % _DEVICE_ALIGNMENT
-    return buffer[offset:offset + size].view("<f8")
+    64-byte aligned (``brdffit.io.buffers``), so that the fits' full-table passes
+    read the table where it lies instead of copying 35 MB per table."""
+    return aligned_empty(3 * N_BINS, "<f8")
 
 
 def read(path: str | os.PathLike) -> MerlTable:
