@@ -85,3 +85,11 @@ def in_float64(fn: F) -> F:
             return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity: a container's or a batch
+    scheduler's share, not the machine's count)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1

@@ -31,7 +31,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import os
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -349,14 +348,6 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     return selection
 
 
-def _usable_cores() -> int:
-    """Cores this process may run on (its CPU affinity: a container's or a batch
-    scheduler's share, not the machine's count)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 class _CandidateFits:
     """The candidates' fits, running beside each other on a pool of threads.
 
@@ -371,7 +362,7 @@ class _CandidateFits:
 
     def __init__(self, table, ordered, scene, fit_options: dict, threads: int | None):
         self._futures: dict[str, Future] = {}
-        n = threads if threads is not None else _usable_cores()
+        n = threads if threads is not None else runtime.usable_cores()
         self._pool = ThreadPoolExecutor(max(1, min(n, len(ordered))),
                                         thread_name_prefix="brdffit-auto")
         for m in ordered:

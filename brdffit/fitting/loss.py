@@ -169,24 +169,39 @@ def normal_equations(u: Float[Array, " p"], args):
     return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
 
 
-def sum_over_blocks(terms, data, n: int | None = None):
+def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1):
     """``terms(data)`` for a function that returns sums over the samples (any pytree
     of arrays), evaluated block by block when there are many samples: the sum of
     ``terms`` over consecutive blocks of :data:`BLOCK` samples or so. ``data`` is
     a pytree whose arrays all have the samples on their last axis (``n`` of them;
-    a :class:`LossData`'s own count by default)."""
+    a :class:`LossData`'s own count by default).
+
+    With ``parts`` > 1 (static; it must divide the number of blocks, see
+    :func:`block_count`), only the ``part``-th of ``parts`` equal runs of blocks is
+    summed (``part`` may be traced): the runs can go on separate threads, and their
+    sums add up to the whole."""
     n = data.weight.shape[-1] if n is None else n
     block = _block_size(n)
     if block is None:
         return terms(data)
+    per_part = n // block // parts
+    first_block = 0 if part is None else part * per_part
+
+    def block_at(i):
+        return jax.tree_util.tree_map(
+            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1), data)
 
     def add_block(i, total):
-        part = jax.tree_util.tree_map(
-            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1), data)
-        return jax.tree_util.tree_map(jnp.add, total, terms(part))
+        return jax.tree_util.tree_map(jnp.add, total, terms(block_at(i)))
 
-    first = jax.tree_util.tree_map(lambda a: a[..., :block], data)
-    return jax.lax.fori_loop(1, n // block, add_block, terms(first))
+    return jax.lax.fori_loop(first_block + 1, first_block + per_part, add_block,
+                             terms(block_at(first_block)))
+
+
+def block_count(n: int) -> int:
+    """How many blocks :func:`sum_over_blocks` sums for ``n`` samples (1: one pass)."""
+    block = _block_size(n)
+    return 1 if block is None else n // block
 
 
 def _block_size(n: int) -> int | None:
