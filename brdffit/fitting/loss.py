@@ -216,7 +216,7 @@ def _block_size(n: int) -> int | None:
     return None
 
 
-def _normal_equations(u: Float[Array, " p"], model, data):
+def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False):
     """:func:`normal_equations` on one block of samples.
 
     A model ``f = kd/pi + sum_k scale_k * lobe_k`` (``model.lobe_scales``: one lobe
@@ -227,11 +227,12 @@ def _normal_equations(u: Float[Array, " p"], model, data):
     colour columns follow in closed form, and the blocks of J^T J and J^T r are
     sums over the samples, without the (3 S, p) Jacobian: ~4x less work per step
     than ``jacfwd`` for one lobe, ~4x for two, and no (3 S, p) Jacobian in memory.
-    Other models get :func:`_generic_normal_equations`.
+    Other models get :func:`_generic_normal_equations`. With ``sandwich``: (J^T J,
+    sum_i r_i^2 J_i^T J_i) instead (:func:`sandwich_terms`).
     """
     layout = _colour_layout(model)
     if layout is None:
-        return _generic_normal_equations(u, (model, data))
+        return _generic_normal_equations(u, (model, data), sandwich)
     frame = data.frame
     n_lobes = len(layout.scale_specs)
 
@@ -264,25 +265,39 @@ def _normal_equations(u: Float[Array, " p"], model, data):
     a2, ar = a * a, a * r
     shape_cols = jnp.einsum("kc,jks->jcs", scales, d_lobes)  # d f_c / d shape_j, (J, 3, S)
 
-    colour_colour = (jnp.einsum("cs,ms,ns->cmn", a2, basis, basis)
-                     * slope.T[:, :, None] * slope.T[:, None, :])  # (3, K+1, K+1)
-    colour_shape = jnp.einsum("cs,ms,jcs->cmj", a2, basis, shape_cols) * slope.T[:, :, None]
-    shape_shape = jnp.einsum("ics,cs,jcs->ij", shape_cols, a2, shape_cols)
-    colour_r = jnp.einsum("cs,ms->cm", ar, basis) * slope.T  # (3, K+1)
-    shape_r = jnp.einsum("cs,jcs->j", ar, shape_cols)
-
-    # scatter the blocks to the model's parameter order (index arrays are static)
     colour_at = layout.colour_at  # (3, K+1): u index of colour parameter m, channel c
     n = u.size
-    rows = colour_at[:, :, None].repeat(n_lobes + 1, axis=2)
-    cols = colour_at[:, None, :].repeat(n_lobes + 1, axis=1)
-    jtj = jnp.zeros((n, n), u.dtype).at[rows, cols].set(colour_colour)
-    cs_rows = colour_at[:, :, None].repeat(shape_u.size, axis=2)
-    cs_cols = np.broadcast_to(layout.shape_at, cs_rows.shape)
-    jtj = jtj.at[cs_rows, cs_cols].set(colour_shape).at[cs_cols, cs_rows].set(colour_shape)
-    jtj = jtj.at[np.ix_(layout.shape_at, layout.shape_at)].set(shape_shape)
+
+    def gram(w2):
+        """sum_i w2_i J_i^T J_i over the residuals i = (c, s), J_i their gradient rows
+        divided by a_i: J^T J for w2 = a^2."""
+        colour_colour = (jnp.einsum("cs,ms,ns->cmn", w2, basis, basis)
+                         * slope.T[:, :, None] * slope.T[:, None, :])  # (3, K+1, K+1)
+        colour_shape = jnp.einsum("cs,ms,jcs->cmj", w2, basis, shape_cols) * slope.T[:, :, None]
+        shape_shape = jnp.einsum("ics,cs,jcs->ij", shape_cols, w2, shape_cols)
+        # scatter the blocks to the model's parameter order (index arrays are static)
+        rows = colour_at[:, :, None].repeat(n_lobes + 1, axis=2)
+        cols = colour_at[:, None, :].repeat(n_lobes + 1, axis=1)
+        out = jnp.zeros((n, n), u.dtype).at[rows, cols].set(colour_colour)
+        cs_rows = colour_at[:, :, None].repeat(shape_u.size, axis=2)
+        cs_cols = np.broadcast_to(layout.shape_at, cs_rows.shape)
+        out = out.at[cs_rows, cs_cols].set(colour_shape).at[cs_cols, cs_rows].set(colour_shape)
+        return out.at[np.ix_(layout.shape_at, layout.shape_at)].set(shape_shape)
+
+    if sandwich:
+        return gram(a2), gram(ar * ar)
+    colour_r = jnp.einsum("cs,ms->cm", ar, basis) * slope.T  # (3, K+1)
+    shape_r = jnp.einsum("cs,jcs->j", ar, shape_cols)
     jtr = jnp.zeros(n, u.dtype).at[colour_at].set(colour_r).at[layout.shape_at].set(shape_r)
-    return jnp.sum(r * r), jtj, jtr
+    return jnp.sum(r * r), gram(a2), jtr
+
+
+def sandwich_terms(u: Float[Array, " p"], model, data):
+    """(J^T J, sum_i r_i^2 J_i^T J_i) of :func:`residuals` at ``u``, in the
+    unconstrained parameters: the bread and the meat of the sandwich covariance
+    (``brdffit.fitting.uncertainty``), summed as :func:`normal_equations` sums, with
+    the same closed-form Jacobian (~4x less work than ``jacfwd``)."""
+    return sum_over_blocks(lambda part: _normal_equations(u, model, part, sandwich=True), data)
 
 
 class _ColourLayout(NamedTuple):
@@ -322,6 +337,9 @@ def _colour_layout(model) -> _ColourLayout | None:
     )
 
 
-def _generic_normal_equations(u, args):
+def _generic_normal_equations(u, args, sandwich: bool = False):
     jac, r = jax.jacfwd(lambda v: (residuals(v, args).reshape(-1),) * 2, has_aux=True)(u)
+    if sandwich:
+        jr = jac * r[:, None]
+        return jac.T @ jac, jr.T @ jr
     return jnp.sum(r * r), jac.T @ jac, jac.T @ r

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdffit import executables
-from brdffit.fitting.loss import LossData, compress, sum_over_blocks
+from brdffit.fitting.loss import LossData, sandwich_terms
 from brdffit.models import AbstractBRDFModel
 
 #: Bins beyond which the Jacobian is taken on every k-th one (its memory is
@@ -79,33 +79,22 @@ def names_of(model: AbstractBRDFModel) -> set[str]:
     return {s.name for s in model.param_specs}
 
 
-def _unflatten(model: AbstractBRDFModel, theta):
-    params, i = {}, 0
-    for s in model.param_specs:
-        params[s.name] = theta[i:i + 3] if s.rgb else theta[i]
-        i += s.size
-    return params
-
-
 @executables.jit
-def _jacobian_terms(model, theta, data: LossData):
+def _jacobian_terms(model, u, data: LossData):
     """(A, B, n) of the module docstring, on the parameters' own scale.
 
-    Both are sums over the samples: an every-bin fit (1.46M samples) sums them
-    block by block, as its normal equations do (``brdffit.fitting.loss``), instead
-    of holding a (3 S, p) Jacobian of ~0.5 GB."""
-
-    def terms(part: LossData):
-        def r_of(t):
-            f = model.eval_channels(_unflatten(model, t), part.frame)
-            r = jnp.sqrt(part.weight) * (compress(f, part.frame.cos_i, part.loss) - part.target)
-            return r.reshape(-1)
-
-        jac = jax.jacfwd(r_of)(theta)  # (3 S, p)
-        jr = jac * r_of(theta)[:, None]
-        return jac.T @ jac, jr.T @ jr
-
-    return (*sum_over_blocks(terms, data), 3 * jnp.sum(data.weight > 0))
+    Both are sums over the samples, taken in the unconstrained parameters ``u`` as
+    the solver's own normal equations take them (``brdffit.fitting.loss.sandwich_terms``:
+    the closed-form Jacobian of a colour-linear model, block by block for an
+    every-bin fit), then moved to the parameters' scale: the transforms are
+    elementwise, so ``J_theta = J_u diag(1 / (d theta / d u))``. A slope that
+    underflows to 0 (a coordinate hundreds of units down a tail: at its bound) leaves
+    its row and column at 0, as a parameter without effect."""
+    a_u, b_u = sandwich_terms(u, model, data)
+    _, _, slopes = _linearisation(model, u)
+    inverse = jnp.where(slopes != 0, 1.0 / jnp.where(slopes != 0, slopes, 1.0), 0.0)
+    scale = inverse[:, None] * inverse[None, :]
+    return a_u * scale, b_u * scale, 3 * jnp.sum(data.weight > 0)
 
 
 @executables.jit
@@ -154,7 +143,7 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         data = jax.tree_util.tree_map(lambda a: a[..., ::k], data)
     theta, bound_side, slopes = (np.asarray(x, np.float64) for x in _linearisation(
         model, np.asarray(u, np.float64)))
-    a, b, n = _jacobian_terms(model, theta, data)
+    a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), data)
     a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
 
     at_bound = bound_side != 0
