@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 
+import jax.numpy as jnp
 import numpy as np
 
 from brdffit import executables, runtime
@@ -142,21 +143,43 @@ class SphereReference:
             self.images.append(tonemap(np.nan_to_num(rad), exposure))
             self.masks.append(ok)
             self.exposures.append(exposure)
+        self._scored = None  # made on the first psnr
 
+    @runtime.in_float64
     def psnr(self, model: AbstractBRDFModel, params: dict) -> float:
-        se, n = 0.0, 0
-        for light, ref, ok, exposure in zip(self.lights, self.images, self.masks,
-                                            self.exposures, strict=True):
-            rad, _ = render_model(model, params, light, self.size)
-            d = tonemap(rad, exposure)[ok] - ref[ok]
-            if not np.all(np.isfinite(d)):
-                return float("nan")
-            se += float(np.sum(d * d))
-            n += d.size
+        if self._scored is None:
+            # every lit pixel of both lights (a shape fixed by the size: one compiled
+            # score for every table), the measured ones weighted 1
+            parts = []
+            for light, ref, ok, exposure in zip(self.lights, self.images, self.masks,
+                                                self.exposures, strict=True):
+                wi, wo, lit = sphere_directions(self.size, light)
+                parts.append((wi[lit], wo[lit], ref[lit], ok[lit].astype(np.float64),
+                              np.full(int(lit.sum()), exposure)))
+            self._scored = tuple(np.concatenate(a) for a in zip(*parts))
+        n = 3 * int(self._scored[3].sum())
         if n == 0:
             return float("nan")
-        mse = se / n
+        p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
+        se, finite = _tonemapped_error(model, p, *self._scored)
+        if not bool(finite):
+            return float("nan")
+        mse = float(se) / n
         return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+
+
+@executables.jit
+def _tonemapped_error(model, params, wi, wo, ref, scored, exposure):
+    """Sum of squared differences between the model's tone-mapped render and ``ref``
+    over the ``scored`` pixels (weight 1; 0 elsewhere), and whether every scored one
+    is finite: :func:`render_model`, :func:`radiance` and :func:`tonemap` in one
+    compiled call (~0.5 ms instead of ~2.5 ms of numpy around the model)."""
+    f = model(params, wi, wo)
+    x = jnp.maximum(f * jnp.pi * jnp.clip(wi[:, 2:3], 0.0, None) * exposure[:, None], 0.0)
+    x = x / (1.0 + x)
+    mapped = jnp.where(x <= 0.0031308, 12.92 * x, 1.055 * jnp.power(x, 1 / 2.4) - 0.055)
+    d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
+    return jnp.sum(d * d), jnp.all(jnp.isfinite(d))
 
 
 def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:
