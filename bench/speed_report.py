@@ -121,6 +121,9 @@ def write_markdown(report: dict, path: str) -> None:
         if k in sp:
             lines.append(f"| {k[:-2].replace('_', ' ')} | {sp[k]:.2f} s |")
     lines += ["", "## Every configuration", "",
+              "Rows with samples `all` are each table's full-table optimum, the reference "
+              "of `excess` (2 starts, up to 1000 steps, every bin): timed once, on its "
+              "first call, compilation included, not warm.", "",
               "| table | model | solver | samples | precision | warm ms | compile s | steps "
               "| log_rmse | excess | param err | result |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]

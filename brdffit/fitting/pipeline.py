@@ -6,9 +6,11 @@ The pipeline, and where each decision is documented:
 2. a fixed-size stratified subsample for the solver (``brdffit.fitting.sampling``);
 3. data-driven start candidates scored in one batched call
    (``brdffit.fitting.starts``), the best ``starts`` kept;
-4. an optimistix least-squares solve from each start, batched with ``vmap``,
-   on the compressed loss of ``brdffit.fitting.loss``; failures stay values
-   (``throw=False``) and are reported, never raised;
+4. an optimistix least-squares solve from each start, the starts one after the
+   other in one compiled call (``lax.map``), on the compressed loss of
+   ``brdffit.fitting.loss``; failures stay values (``throw=False``) and are
+   reported, never raised; a model that contains another is refitted from that
+   one's optimum where its own start did not do;
 5. the error metrics of the best solution on **every** usable bin of the table.
 
 Compiled functions are keyed on (model, solver, sample count, precision, loss) only:
