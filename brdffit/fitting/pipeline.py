@@ -24,6 +24,7 @@ from __future__ import annotations
 import collections
 import functools
 import hashlib
+import os
 import threading
 import time
 import weakref
@@ -307,8 +308,8 @@ def _full_errors(model, u, rgb, weight, frame, peak, part, parts: int):
 
 #: The full-table pass is a loop over blocks on one core: on a machine with more,
 #: its runs of blocks go to separate threads (~1.7x faster on 2 cores). Created on
-#: first use.
-_ERROR_THREADS: list = []
+#: first use, per process (a forked child has none of its parent's threads).
+_ERROR_THREADS: dict = {}
 _ERROR_THREADS_LOCK = threading.Lock()
 
 
@@ -326,9 +327,12 @@ def _error_pool(parts: int):
     from concurrent.futures import ThreadPoolExecutor
 
     with _ERROR_THREADS_LOCK:
-        if not _ERROR_THREADS:
-            _ERROR_THREADS.append(ThreadPoolExecutor(parts, thread_name_prefix="brdffit-errors"))
-        return _ERROR_THREADS[0]
+        pool = _ERROR_THREADS.get(os.getpid())
+        if pool is None:
+            _ERROR_THREADS.clear()
+            pool = _ERROR_THREADS[os.getpid()] = ThreadPoolExecutor(
+                parts, thread_name_prefix="brdffit-errors")
+        return pool
 
 
 def _full_error_sums(model, u, rgb, weight, frame, peak):
