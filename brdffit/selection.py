@@ -351,9 +351,10 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
 class _CandidateFits:
     """The candidates' fits, running beside each other on a pool of threads.
 
-    A fit spends most of its time in one XLA computation on one core (the solver's
-    loop), so on a machine with two cores two candidates fit in about the time of
-    one (issue 15: ``auto`` at 4x a single fit). A candidate that contains another
+    Much of a fit is the solver's loop, one XLA computation on one core, and the
+    rest keeps a second core only partly busy: on 2 cores, candidates side by side
+    take ~15% less time than one after another (a fit alone keeps ~1.7 cores busy;
+    the gain grows with the cores). A candidate that contains another
     (ggx2 contains ggx) waits for that one's fit, which it starts from; the
     candidates are submitted in the given order, parents first, so a waiting fit
     never holds up its own parent. Every fit is the one a sequential run makes:
