@@ -418,7 +418,8 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
     fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
                  label="stops (+1: fit 2× brighter)")
     axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
-                           "(a stop saturates)", fontsize=9)
+                           "(a stop saturates); black: unlit, or\ntoo dark to judge "
+                           "(< 0.5% of the brightest)", fontsize=9)
     return axes
 
 
