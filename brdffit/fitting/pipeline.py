@@ -512,10 +512,11 @@ def fit(
             are excluded from the loss and from the error.
         parent_fit: for a model that contains another (``model.parent``: ggx2
             contains ggx, oren_nayar contains lambert), that model's fit to the same
-            table with the same settings; fitted here when not given. Its optimum,
-            embedded, is always one of the starts, and the solver only accepts
-            steps that lower the loss: the richer model never ends worse on the
-            fit's samples than the one it contains.
+            table with the same settings; fitted here when not given. Where the
+            model's own start does not converge, or ends above the parent's loss,
+            the fit is refitted from the parent's optimum, embedded; the solver only
+            accepts steps that lower the loss: the richer model never ends worse on
+            the fit's samples than the one it contains.
         physical: constrain the fit to conserve energy (directional albedo <= 1)
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
@@ -614,16 +615,22 @@ def fit(
         # coordinate moves (|u| <= LIVE_U); the exact embedding comes last, so the
         # fit never ends worse than the parent on its samples.
         parent_loss = float(_score(m, jnp.asarray(parent_start[None], dtype), data)[0])
-        live = None if polish else np.clip(parent_start, -LIVE_U, LIVE_U)
-        for retry in (live, parent_start):
-            best = np.min(np.where(np.isfinite(losses), losses, np.inf))
-            converged = np.any(codes == STATUS_NAMES.index("successful"))
-            if retry is None or (best <= parent_loss and (converged or retry is parent_start)):
-                continue
-            extra = [np.asarray(a) for a in solve(u_batch=jnp.asarray(retry[None], dtype))]
+
+        def above_parent() -> bool:
+            return bool(np.min(np.where(np.isfinite(losses), losses, np.inf)) > parent_loss)
+
+        def solve_also(u) -> None:
+            nonlocal values, codes, steps, losses, best_starts
+            extra = [np.asarray(a) for a in solve(u_batch=jnp.asarray(u[None], dtype))]
             values, codes, steps, losses = (np.concatenate([a, b]) for a, b in
                                             zip((values, codes, steps, losses), extra))
-            best_starts = np.concatenate([best_starts, retry[None]])
+            best_starts = np.concatenate([best_starts, u[None]])
+
+        converged = np.any(codes == STATUS_NAMES.index("successful"))
+        if not polish and (not converged or above_parent()):
+            solve_also(np.clip(parent_start, -LIVE_U, LIVE_U))
+        if above_parent():
+            solve_also(parent_start)
     values = values.astype(np.float64)
     losses = losses.astype(np.float64)
     finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
