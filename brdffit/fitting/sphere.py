@@ -76,16 +76,18 @@ def sphere_disc(size: int, light: np.ndarray):
     return wi, wo, inside
 
 
-def radiance(f: np.ndarray, wi: np.ndarray) -> np.ndarray:
-    """Outgoing radiance of BRDF values ``f`` under irradiance pi from ``wi``."""
-    return f * np.pi * np.clip(wi[..., 2:3], 0.0, None)
+def radiance(f: np.ndarray, wi: np.ndarray, xp=np) -> np.ndarray:
+    """Outgoing radiance of BRDF values ``f`` under irradiance pi from ``wi``
+    (``xp``: numpy, or ``jax.numpy`` inside a compiled function)."""
+    return f * np.pi * xp.clip(wi[..., 2:3], 0.0, None)
 
 
-def tonemap(rad: np.ndarray, exposure: float) -> np.ndarray:
-    """Reinhard, then the sRGB curve: highlights compress, nothing clips; in [0, 1)."""
-    x = np.maximum(rad * exposure, 0.0)
+def tonemap(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
+    """Reinhard, then the sRGB curve: highlights compress, nothing clips; in [0, 1)
+    (``xp``: numpy, or ``jax.numpy`` inside a compiled function)."""
+    x = xp.maximum(rad * exposure, 0.0)
     x = x / (1.0 + x)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return xp.where(x <= 0.0031308, 12.92 * x, 1.055 * xp.power(x, 1 / 2.4) - 0.055)
 
 
 def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
@@ -174,10 +176,7 @@ def _tonemapped_error(model, params, wi, wo, ref, scored, exposure):
     over the ``scored`` pixels (weight 1; 0 elsewhere), and whether every scored one
     is finite: :func:`render_model`, :func:`radiance` and :func:`tonemap` in one
     compiled call (~0.5 ms instead of ~2.5 ms of numpy around the model)."""
-    f = model(params, wi, wo)
-    x = jnp.maximum(f * jnp.pi * jnp.clip(wi[:, 2:3], 0.0, None) * exposure[:, None], 0.0)
-    x = x / (1.0 + x)
-    mapped = jnp.where(x <= 0.0031308, 12.92 * x, 1.055 * jnp.power(x, 1 / 2.4) - 0.055)
+    mapped = tonemap(radiance(model(params, wi, wo), wi, jnp), exposure[:, None], jnp)
     d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
     return jnp.sum(d * d), jnp.all(jnp.isfinite(d))
 
