@@ -80,18 +80,18 @@ def names_of(model: AbstractBRDFModel) -> set[str]:
 
 
 @executables.jit
-def _jacobian_terms(model, u, data: LossData):
+def _jacobian_terms(model, u, slopes, data: LossData):
     """(A, B, n) of the module docstring, on the parameters' own scale.
 
     Both are sums over the samples, taken in the unconstrained parameters ``u`` as
     the solver's own normal equations take them (``brdffit.fitting.loss.sandwich_terms``:
     the closed-form Jacobian of a colour-linear model, block by block for an
     every-bin fit), then moved to the parameters' scale: the transforms are
-    elementwise, so ``J_theta = J_u diag(1 / (d theta / d u))``. A slope that
+    elementwise, so ``J_theta = J_u diag(1 / slopes)`` with ``slopes = d theta / d u``
+    (:func:`_linearisation`). A slope that
     underflows to 0 (a coordinate hundreds of units down a tail: at its bound) leaves
     its row and column at 0, as a parameter without effect."""
     a_u, b_u = sandwich_terms(u, model, data)
-    _, _, slopes = _linearisation(model, u)
     inverse = jnp.where(slopes != 0, 1.0 / jnp.where(slopes != 0, slopes, 1.0), 0.0)
     scale = inverse[:, None] * inverse[None, :]
     return a_u * scale, b_u * scale, 3 * jnp.sum(data.weight > 0)
@@ -143,7 +143,7 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         data = jax.tree_util.tree_map(lambda a: a[..., ::k], data)
     theta, bound_side, slopes = (np.asarray(x, np.float64) for x in _linearisation(
         model, np.asarray(u, np.float64)))
-    a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), data)
+    a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
     a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
 
     at_bound = bound_side != 0
