@@ -182,6 +182,8 @@ def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1
     sums add up to the whole."""
     n = data.weight.shape[-1] if n is None else n
     block = _block_size(n)
+    if block_count(n) % parts:
+        raise ValueError(f"{parts} parts do not divide the {block_count(n)} blocks of {n} samples")
     if block is None:
         return terms(data)
     per_part = n // block // parts
