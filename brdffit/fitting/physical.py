@@ -62,7 +62,7 @@ from brdffit.fitting.loss import (
     residuals,
     sum_squares,
 )
-from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS
+from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, _plain
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.fitting.uncertainty import parameter_uncertainty
@@ -252,11 +252,6 @@ def _solve_bounded(model, solver, u_batch, data, grid, mu, max_steps):
 
 
 # -- ranges, the exact check and the clamp ----------------------------------------------
-
-
-def _plain(params: dict) -> dict:
-    return {k: (np.asarray(v, float).tolist() if np.ndim(v) else float(v))
-            for k, v in params.items()}
 
 
 def clip_to_ranges(model: AbstractBRDFModel, params: dict) -> tuple[dict, list[str]]:
