@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from brdffit import models
+from brdffit.export.validate import gltf_spec_eval
 from brdffit.fitting.pipeline import fit
 from brdffit.io.merl import MerlTable
+from brdffit.models.frame import shading_frame
 from brdffit.models.microfacet import dielectric_fresnel
 from brdffit.models.renderer_terms import conductor_fresnel
 from tests.test_models import _albedo, _jnp  # the same midpoint albedo and parameter cast
@@ -34,37 +36,39 @@ def _pairs(n, seed=0):
     return v[0], v[1]
 
 
-def _gltf_appendix_b(p, wi, wo):
-    """glTF 2.0 Appendix B, term by term as the spec writes it (its V = G / (4 N.L N.V)
-    with G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2)))."""
-    base, m, a = np.asarray(p["base_color"]), p["metallic"], p["roughness"] ** 2
-    # KHR_materials_ior: the dielectric's f0 from its ior; the core spec's is 0.04
-    dielectric_f0 = ((p["ior"] - 1) / (p["ior"] + 1)) ** 2 if "ior" in p else 0.04
-    h = wi + wo
-    h /= np.linalg.norm(h, axis=-1, keepdims=True)
-    nl, nv, nh, vh = wi[:, 2:3], wo[:, 2:3], h[:, 2:3], np.sum(wo * h, -1, keepdims=True)
-    f0 = dielectric_f0 * (1 - m) + base * m
-    fresnel = f0 + (1 - f0) * (1 - np.abs(vh)) ** 5
-    d = a**2 / (np.pi * (nh**2 * (a**2 - 1) + 1) ** 2)
-
-    def g1(x):
-        return 2 * x / (x + np.sqrt(a**2 + (1 - a**2) * x**2))
-
-    vis = g1(nl) * g1(nv) / (4 * nl * nv)
-    return (1 - fresnel) * base * (1 - m) / np.pi + fresnel * d * vis
-
-
 def test_gltf_pbr_is_the_spec_brdf():
     wi, wo = _pairs(5000)
     keep = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3)
     wi, wo = wi[keep], wo[keep]
+    frame = shading_frame(jnp.asarray(wi), jnp.asarray(wo))
     for p in (GLTF, {"base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.04},
               {"base_color": [0.1, 0.5, 0.9], "metallic": 0.0, "roughness": 1.0}):
         for name, extra in (("gltf_pbr", {}), ("gltf_pbr_ior", {"ior": 1.5}),
                             ("gltf_pbr_ior", {"ior": 2.2})):
             q = {**p, **extra}
-            ours = np.asarray(models.get(name)(_jnp(q), jnp.asarray(wi), jnp.asarray(wo)))
-            np.testing.assert_allclose(ours, _gltf_appendix_b(q, wi, wo), rtol=1e-9, atol=1e-12)
+            model = models.get(name)
+            ours = np.asarray(model(_jnp(q), jnp.asarray(wi), jnp.asarray(wo)))
+            np.testing.assert_allclose(ours, gltf_spec_eval(q, wi, wo), rtol=1e-9, atol=1e-12)
+            pseudo = np.moveaxis(np.asarray(model.pseudocode_channels(_jnp(q), frame)), 0, -1)
+            np.testing.assert_allclose(pseudo, gltf_spec_eval(q, wi, wo, pseudocode=True),
+                                       rtol=1e-9, atol=1e-12)
+
+
+def test_gltf_definition_and_pseudocode_differ_only_in_the_diffuse_between_metal_and_not():
+    """The two forms agree at metallic 0 and 1; between, the definition's diffuse is the
+    larger (the pseudocode also dims it by the metal's Fresnel)."""
+    wi, wo = _pairs(2000, seed=3)
+    keep = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3)
+    wi, wo = wi[keep], wo[keep]
+    for m in (0.0, 1.0):
+        q = {**GLTF, "metallic": m}
+        np.testing.assert_allclose(gltf_spec_eval(q, wi, wo),
+                                   gltf_spec_eval(q, wi, wo, pseudocode=True), rtol=1e-12)
+    q = {"base_color": [0.9, 0.8, 0.7], "metallic": 0.73, "roughness": 0.2}
+    spec = gltf_spec_eval(q, wi, wo)
+    pseudo = gltf_spec_eval(q, wi, wo, pseudocode=True)
+    assert np.all(spec >= pseudo - 1e-12)
+    assert np.median(spec / pseudo) > 1.2
 
 
 def test_conductor_fresnel_limits():

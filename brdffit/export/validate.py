@@ -10,7 +10,9 @@ exporting never do.
   ``log_rmse_to_fit`` is computed on);
 - :func:`mitsuba_sphere` renders the unit sphere of ``brdffit.fitting.sphere`` (orthographic
   camera along -z, a directional light of irradiance pi) with Mitsuba's path tracer;
-- :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks.
+- :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks;
+- :func:`gltf_spec_eval`: glTF's BRDF as its spec writes it, independently of brdffit's
+  model (no renderer here evaluates glTF's BRDF, so the spec is the reference).
 """
 
 from __future__ import annotations
@@ -138,6 +140,43 @@ def materialx_validate(text: str) -> tuple[bool, str]:
     if unresolved:
         return False, f"{message}nodes without a node definition: {unresolved}"
     return bool(ok), message
+
+
+def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = False):
+    """f_r (n, 3) of a glTF material (``base_color``, ``metallic``, ``roughness`` and
+    optionally KHR_materials_ior's ``ior``) at direction pairs ``wi``, ``wo`` (n, 3)
+    strictly above the horizon: glTF 2.0 Appendix B, term by term as the spec writes it
+    (its V = G / (4 N.L N.V), G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2))): its
+    definition, ``mix(dielectric_brdf, metal_brdf, metallic)`` with
+    ``dielectric_brdf = fresnel_mix(ior, diffuse_brdf(base), specular_brdf)`` and
+    ``metal_brdf = conductor_fresnel(base, specular_brdf)``, or with ``pseudocode`` its
+    implementation pseudocode (one Fresnel from the lerped f0). Written from the spec's
+    text in numpy, sharing no code with ``brdffit.models``: the independent evaluation
+    the glTF model and export are checked against."""
+    base, m, a = np.asarray(p["base_color"]), p["metallic"], p["roughness"] ** 2
+    # KHR_materials_ior: the dielectric's f0 from its ior; the core spec's is 0.04
+    dielectric_f0 = ((p["ior"] - 1) / (p["ior"] + 1)) ** 2 if "ior" in p else 0.04
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    nl, nv, nh, vh = wi[:, 2:3], wo[:, 2:3], h[:, 2:3], np.sum(wo * h, -1, keepdims=True)
+    d = a**2 / (np.pi * (nh**2 * (a**2 - 1) + 1) ** 2)
+
+    def g1(x):
+        return 2 * x / (x + np.sqrt(a**2 + (1 - a**2) * x**2))
+
+    specular_brdf = g1(nl) * g1(nv) / (4 * nl * nv) * d
+    diffuse_brdf = base / np.pi
+
+    def schlick(f0):
+        return f0 + (1 - f0) * (1 - np.abs(vh)) ** 5
+
+    if pseudocode:
+        fresnel = schlick(dielectric_f0 * (1 - m) + base * m)
+        return (1 - fresnel) * base * (1 - m) / np.pi + fresnel * specular_brdf
+    fr = schlick(dielectric_f0)
+    dielectric_brdf = diffuse_brdf * (1 - fr) + specular_brdf * fr  # mix(base, layer, fr)
+    metal_brdf = specular_brdf * schlick(base)
+    return dielectric_brdf * (1 - m) + metal_brdf * m
 
 
 _GLTF_SCRIPT = """

@@ -1,18 +1,28 @@
-"""glTF 2.0 metallic-roughness BRDF (glTF 2.0 spec, Appendix B), separable Smith GGX.
+"""glTF 2.0 metallic-roughness BRDF as the spec defines it (Appendix B), separable Smith GGX.
 
 ``gltf_pbr``: the core material. ``gltf_pbr_ior`` (``GltfPBR(ior=True)``): the same with
 the extension ``KHR_materials_ior``, whose ``ior`` sets the dielectric reflectance
 ``((ior - 1)/(ior + 1))^2`` in place of 0.04 (the metal part is unchanged).
 
-    c_diff = base_color (1 - metallic),   f0 = 0.04 (1 - metallic) + base_color metallic
-    alpha  = roughness^2
-    F      = f0 + (1 - f0) (1 - cos_d)^5                       (RGB)
-    f      = (1 - F) c_diff / pi + F D G1(wi) G1(wo) / (4 cos_i cos_o)
+The spec defines the material as a mix of two BRDFs (Appendix B, "Complete model"):
 
+    alpha      = roughness^2,  c = |v.h| (= cos_d),  s = (1 - c)^5
+    specular   = D G1(wi) G1(wo) / (4 cos_i cos_o)                (white, GGX, separable Smith)
+    dielectric = mix(base_color / pi, specular, F_d),  F_d = f0_d + (1 - f0_d) s,  f0_d = 0.04
+    metal      = specular F_m,                          F_m = base_color + (1 - base_color) s
+    f          = mix(dielectric, metal, metallic)
+
+Its Appendix B also gives an "implementation" in pseudocode that lerps one Fresnel
+from ``f0 = mix(0.04, base_color, metallic)`` and weights the diffuse by ``1 - F``
+(:func:`pseudocode_channels`). Schlick's F is linear in f0, so the two agree on the
+specular term exactly; the diffuse agrees only at metallic 0 or 1: between, the
+pseudocode dims it by the metal's Fresnel too (1.5-2.2x less diffuse at metallic
+0.73 on a bright base; a known erratum of the pseudocode, glTF issue 2386). This model
+is the definition, the spec's normative text: a fit of it exported to glTF
+(``brdffit.export.gltf``, a copy of the three parameters) is the material the spec
+defines, with nothing lost.
 D and G1 are the GGX terms of ``brdffit.models.renderer_terms``; 0.04 is the
 reflectance of the default glTF index of refraction 1.5 (``((1.5 - 1)/(1.5 + 1))^2``).
-A fit of this model *is* a glTF material: its export (``brdffit.export.gltf``) copies
-the three parameters and loses nothing.
 
 | name       | range              | meaning                                        |
 |------------|--------------------|------------------------------------------------|
@@ -88,19 +98,32 @@ class GltfPBR(AbstractBRDFModel):
         return r * r
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = params["base_color"]
-        m = params["metallic"]
-        rough = params["roughness"]
-        expand = (slice(None),) + (None,) * frame.cos_i.ndim
-        base = base[expand]
+        base, m, dg, s = self._terms(params, frame)
+        f0_d = self.dielectric_f0(params)
+        fresnel_d = f0_d + (1.0 - f0_d) * s  # the dielectric's, colourless
+        fresnel_m = base + (1.0 - base) * s  # the metal's, coloured by base_color
+        dielectric = (1.0 - fresnel_d) * base / jnp.pi + fresnel_d * dg
+        return (1.0 - m) * dielectric + m * fresnel_m * dg
+
+    def pseudocode_channels(self, params: Params, frame: Frame):
+        """Appendix B's implementation pseudocode, (3, ...): one Fresnel from the
+        lerped f0 weights the diffuse by ``1 - F``. Not this model: what a renderer
+        that follows the pseudocode shows for the same parameters."""
+        base, m, dg, s = self._terms(params, frame)
         f0 = self.dielectric_f0(params) * (1.0 - m) + base * m
-        c_diff = base * (1.0 - m)
-        fresnel = f0 + (1.0 - f0) * (1.0 - frame.cos_d)[None] ** 5
+        fresnel = f0 + (1.0 - f0) * s
+        return (1.0 - fresnel) * base * (1.0 - m) / jnp.pi + fresnel * dg
+
+    def _terms(self, params: Params, frame: Frame):
+        """base_color (3, 1...), metallic, the white lobe D V and Schlick's (1 - c)^5."""
+        expand = (slice(None),) + (None,) * frame.cos_i.ndim
+        rough = params["roughness"]
         dg = separable_ggx_dg(
             rough * rough, frame.cos_h, frame.sin2_h,
             frame.cos_i, frame.sin2_i, frame.cos_o, frame.sin2_o,
         )
-        return (1.0 - fresnel) * c_diff / jnp.pi + fresnel * dg[None]
+        return params["base_color"][expand], params["metallic"], dg[None], \
+            ((1.0 - frame.cos_d) ** 5)[None]
 
     def eval_frame(self, params: Params, frame: Frame):
         return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
