@@ -295,10 +295,13 @@ class Client:
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
                              params=params).content
 
-    def export(self, job: JobRef, target: str, model: str | None = None) -> Export:
+    def export(self, job: JobRef, target: str, model: str | None = None,
+               target_model: str | None = None) -> Export:
         """A finished fit as a renderer's material: ``mitsuba``, ``gltf`` or
-        ``materialx`` (``brdffit.export``; its files in ``Export.files``)."""
-        params = {"model": model} if model else None
+        ``materialx`` (``brdffit.export``; its files in ``Export.files``), as
+        ``target_model`` (one of the renderer's models; default its first)."""
+        params = {k: v for k, v in (("model", model), ("target_model", target_model)) if v}
+        params = params or None
         return Export.from_dict(self._request(
             "GET", f"/v1/fits/{_job_id(job)}/exports/{target}", params=params).json())
 

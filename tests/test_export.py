@@ -29,10 +29,15 @@ def result(model, params, **kw) -> FitResult:
 
 def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     r = result("gltf_pbr", GLTF)
-    g = export(r, "gltf")
+    made = fit_as_table(r)  # the measured table: the fit's own BRDF, so it is met exactly
+    g = export(r, "gltf", table=made)
     energy = {k: g.fidelity.pop(k) for k in ("albedo_max", "albedo_max_theta_deg")}
+    to_table = g.fidelity.pop("log_rmse_to_table")
+    colour = g.fidelity.pop("sphere_colour_error")
     assert g.fidelity == {"exact": True, "target_model": "gltf_pbr", "log_rmse_to_fit": 0.0,
-                          "fit_log_rmse": 0.02}
+                          "fit_log_rmse": 0.02, "renderer_model": "gltf_pbr"}
+    # the table's sphere reads each pixel's nearest bin: 0.1% from the exact render
+    assert to_table < 1e-6 and max(map(abs, colour)) < 0.005
     assert 0 < max(energy["albedo_max"]) < 1 and g.warnings == []
     (mat,) = g.material["materials"]
     assert g.material["asset"]["version"] == "2.0"
@@ -40,14 +45,14 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
                                            "metallicFactor": 0.4, "roughnessFactor": 0.45}
     assert json.loads(g.files["gold_gltf_pbr.gltf"]) == g.material
 
-    x = export(r, "materialx")
+    x = export(r, "materialx", target_model="gltf_pbr")
     root = ET.fromstring(x.material)
     node = root.find("gltf_pbr")
     inputs = {i.get("name"): i.get("value") for i in node.findall("input")}
     assert inputs == {"base_color": "0.8, 0.35, 0.1", "metallic": "0.4", "roughness": "0.45"}
     assert root.find("surfacematerial/input").get("nodename") == node.get("name")
-    # exact parameters, but MaterialX's own shading graph: said, not hidden
-    assert x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
+    # glTF's parameters, but MaterialX's own shading graph: not exact, and said
+    assert not x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
 
 
 def test_an_ior_fit_writes_khr_materials_ior():
@@ -57,14 +62,15 @@ def test_an_ior_fit_writes_khr_materials_ior():
     assert g.material["extensionsUsed"] == ["KHR_materials_ior"]
     assert g.material["materials"][0]["extensions"] == {"KHR_materials_ior": {"ior": 1.9}}
     assert any("KHR_materials_ior" in w for w in g.warnings)  # viewers without it: 0.04
-    x = ET.fromstring(export(r, "materialx").material)
+    x = ET.fromstring(export(r, "materialx", target_model="gltf_pbr_ior").material)
     assert x.find("gltf_pbr/input[@name='ior']").get("value") == "1.9"
     # a core fit writes no extension at all
     assert "extensionsUsed" not in export(result("gltf_pbr", GLTF), "gltf").material
 
 
 def test_conductor_fit_exports_exactly_to_mitsuba():
-    e = export(result("rough_conductor", CONDUCTOR), "mitsuba")
+    r = result("rough_conductor", CONDUCTOR)
+    e = export(r, "mitsuba", table=fit_as_table(r))
     assert e.fidelity["exact"] and e.warnings == []
     m = e.material
     assert m["type"] == "blendbsdf" and m["weight"] == 0.2
@@ -93,7 +99,7 @@ def test_other_fits_are_refitted_and_their_loss_is_the_measured_one():
     measured = table_error(fit_as_table(r), "gltf_pbr", e.target_params)["log_rmse"]
     assert measured == pytest.approx(loss, rel=1e-9)
     # the same refit behind both glTF-model targets
-    assert export(r, "materialx").target_params == e.target_params  # deterministic
+    assert export(r, "materialx", target_model="gltf_pbr").target_params == e.target_params
 
 
 def test_every_clamp_is_a_warning():
@@ -118,6 +124,7 @@ def test_a_material_that_reflects_more_than_it_receives_is_a_warning():
     assert any(w.startswith("energy: the gltf_pbr material reflects up to 1.1") for w in
                white.warnings)
     # the conductor conserves energy by construction, even at its brightest
+    assert any("in R, G, B from" in w and "--physical" in w for w in white.warnings)
     bright = {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3, "weight": 0.5}
     e = export(result("rough_conductor", bright), "mitsuba")
     assert max(e.fidelity["albedo_max"]) <= 1.0
@@ -148,3 +155,20 @@ def test_bad_requests_are_clear_errors():
         export(failed, "gltf")
     with pytest.raises(ValueError, match="roughness"):
         export(result("gltf_pbr", {**GLTF, "roughness": 3.0}), "gltf")
+
+
+def test_fidelity_to_the_measured_table_and_the_colour_a_sphere_shows():
+    """A refit's error to the measured table is the exported material's own, under the
+    renderer's semantics; a table not at hand is said, never guessed."""
+    r = result("ggx", GGX)
+    measured = fit_as_table(result("ggx", {**GGX, "ks": [0.9, 0.6, 0.6]}))  # a redder table
+    e = export(r, "gltf", table=measured)
+    expected = table_error(measured, "gltf_pbr", e.target_params)["log_rmse"]
+    assert e.fidelity["log_rmse_to_table"] == pytest.approx(expected, rel=1e-9)
+    red, green, _ = e.fidelity["sphere_colour_error"]
+    assert red < green  # the export follows the fit, which is less red than the table
+    absent = export(r, "gltf")  # mats/gold.binary is not there
+    assert absent.fidelity["log_rmse_to_table"] is None
+    assert absent.fidelity["sphere_colour_error"] is None
+    assert any(w.startswith("fidelity: log_rmse_to_table not measured") and "mats/gold.binary"
+               in w for w in absent.warnings)

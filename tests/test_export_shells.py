@@ -11,7 +11,9 @@ import pytest
 
 from brdffit.client import ApiError, Client
 from brdffit.export import Export, export
+from brdffit.fitting.pipeline import table_error
 from brdffit.fitting.result import FitResult
+from brdffit.io import merl
 from tests.api_fixtures import FAST, Server, table_bytes, write
 from tests.cli_helpers import run
 
@@ -131,8 +133,12 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
         c.wait(job, timeout=300)
         conductor = c.result(job, model="rough_conductor")
         got = c.export(job, "mitsuba", model="rough_conductor")
-        assert got == export(conductor, "mitsuba")
-        assert got.fidelity["exact"]
+        # the service judges the export against the job's own table
+        assert got == export(conductor, "mitsuba", table=ggx_file)
+        expected = table_error(merl.read(ggx_file), "rough_conductor", conductor.params)
+        assert got.fidelity["exact"] and got.fidelity["log_rmse_to_table"] == pytest.approx(
+            expected["log_rmse"], rel=1e-9)
+        assert len(got.fidelity["sphere_colour_error"]) == 3
         best = c.export(job, "gltf")  # default: the best fit of the job
         assert best.source_model == c.result(job).model
         with pytest.raises(ApiError) as e:

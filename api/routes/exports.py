@@ -11,8 +11,9 @@ from __future__ import annotations
 import logging
 import traceback
 from enum import Enum
+from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, status
+from fastapi import APIRouter, Depends, HTTPException, Query, status
 from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import RunnerDep, StoreDep, require_token
@@ -41,14 +42,16 @@ class ExportOut(BaseModel):
     material: dict | str = Field(description="Mitsuba load_dict dictionary, glTF JSON "
                                              "document, or MaterialX XML text")
     files: dict[str, str] = Field(description="file name -> text, ready to save")
-    fidelity: dict = Field(description="exact, target_model, log_rmse_to_fit, fit_log_rmse, "
+    fidelity: dict = Field(description="exact, target_model, renderer_model, log_rmse_to_fit, "
+                                       "fit_log_rmse, log_rmse_to_table, sphere_colour_error, "
                                        "albedo_max, albedo_max_theta_deg")
     target_params: dict = Field(description="the target model's parameters")
     warnings: list[str] = Field(description="every clamp and approximation")
     table: str | None = None
 
 
-def export_task(result: dict, target: str) -> dict:
+def export_task(result: dict, target: str, table_path: str | None = None,
+                target_model: str | None = None) -> dict:
     """Worker side: ``{"ok": True, "export": {...}}``, ``{"ok": False, "input": True,
     "reason": ...}`` for a fit that cannot be exported, or ``{"ok": False, ...}`` with a
     traceback for a bug."""
@@ -57,7 +60,8 @@ def export_task(result: dict, target: str) -> dict:
     from brdffit.fitting.result import FitResult
 
     try:
-        out = export(FitResult.from_dict(result), target)
+        out = export(FitResult.from_dict(result), target, table=table_path,
+                     target_model=target_model)
         return {"ok": True, "export": jsonout.strict(out.to_dict())}
     except (ExportError, ValueError) as e:
         return {"ok": False, "input": True, "reason": str(e)}
@@ -82,10 +86,17 @@ async def get_export(
     store: StoreDep,
     runner: RunnerDep,
     model: FitModel = None,
+    target_model: Annotated[str | None, Query(
+        description="which of the renderer's models the file carries: "
+                    + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
+                    + " (default: the first)")] = None,
 ) -> ExportOut:
-    _, result = await finished_fit(store, job_id, model, "exports")
+    job, result = await finished_fit(store, job_id, model, "exports")
+    # the job's table, for the export's error to the measurement (a deleted one: said)
+    path = store.table_path(job.table_id)
     try:
-        outcome = await runner.run(export_task, result, target.value)
+        outcome = await runner.run(export_task, result, target.value,
+                                   str(path) if path.exists() else None, target_model)
     except WorkerLost as e:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                             headers={"Retry-After": "5"}) from None

@@ -28,7 +28,14 @@ def add_arguments(p) -> None:
                                   "or a batch results file (brdffit batch --out)")
     p.add_argument("--to", required=True, choices=list(TARGETS), dest="target",
                    help="the renderer: mitsuba (load_dict + scene XML), gltf (glTF 2.0 "
-                        "material), materialx (gltf_pbr node)")
+                        "material), materialx (standard_surface node)")
+    p.add_argument("--target-model", metavar="MODEL",
+                   help="which of the renderer's models the file carries: "
+                        + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
+                        + " (default: the first)")
+    p.add_argument("--measured", metavar="TABLE",
+                   help="the measured .binary table the fidelity is judged against "
+                        "(default: the fit's own table file, where it is still there)")
     p.add_argument("--out", "-o", metavar="DIR",
                    help="write the material's files into DIR (created if missing)")
     p.add_argument("--json", action="store_true",
@@ -68,7 +75,8 @@ def _export(args):
         if args.table is not None or args.model is not None:
             raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
                                "--model choose a fit of a batch results file (brdffit batch)")
-        return export(_read_result(args.result), args.target)
+        return export(_read_result(args.result), args.target, table=args.measured,
+                      target_model=args.target_model)
     if args.table is None:
         from brdffit.batch.store import read_attrs, read_index
 
@@ -78,7 +86,8 @@ def _export(args):
                                          else "")
         raise BrdffitError(f"{args.result}: a batch results file; choose a table with "
                            f"--table (it holds {shown or 'no tables'})")
-    return export_from_store(args.result, args.table, args.target, args.model)
+    return export_from_store(args.result, args.table, args.target, args.model,
+                             table_file=args.measured, target_model=args.target_model)
 
 
 def run(args) -> int:
@@ -98,8 +107,13 @@ def run(args) -> int:
     fid = out.fidelity
     how = ("exact" if fid["exact"]
            else f"approximated, log_rmse to the fit {fid['log_rmse_to_fit']:.4g}")
-    print(f"{args.target}: {out.source_model} fit as {fid['target_model']} ({how})",
-          file=sys.stderr)
+    line = f"{args.target}: {out.source_model} fit as {fid['target_model']} ({how})"
+    if fid.get("log_rmse_to_table") is not None:
+        colour = " ".join(f"{c} {e:+.1%}" for c, e in zip("RGB", fid["sphere_colour_error"],
+                                                          strict=True) if e is not None)
+        line += (f"; to the table: log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
+                 f"{fid['fit_log_rmse']:.4g}), lit sphere colour {colour}")
+    print(line, file=sys.stderr)
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

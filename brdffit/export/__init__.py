@@ -11,12 +11,14 @@ the target's own model (exact, or refitted with its loss measured) is
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, field
 
 from brdffit import jsonout
 from brdffit.errors import BrdffitError
 from brdffit.export import gltf, materialx, mitsuba
 from brdffit.fitting.result import FitResult
+from brdffit.io.merl import MerlTable
 
 #: The version of the export schema that :meth:`Export.to_dict` writes.
 SCHEMA = "brdffit.export/1"
@@ -68,17 +70,20 @@ class Export:
         return cls(**d)
 
 
-def export_from_store(store: str, table: str, target: str, model: str | None = None) -> Export:
+def export_from_store(store: str, table: str, target: str, model: str | None = None, *,
+                      table_file=None, target_model: str | None = None) -> Export:
     """The ``model`` fit (None: the best) of ``table`` in the batch results file
     ``store`` (``brdffit batch``) as a material of ``target``: :func:`export` of
     ``brdffit.batch.store.read_fit``'s result. ``table`` is the table's name in the
     file, its path or its file name; an unknown one is an error that lists what the
-    file holds."""
+    file holds. ``table_file``, ``target_model``: as :func:`export`'s ``table`` and
+    ``target_model``."""
     from brdffit.batch.store import read_fit
 
     if target not in TARGETS:  # before the file is opened
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
-    return export(FitResult.from_dict(read_fit(store, table, model)), target)
+    return export(FitResult.from_dict(read_fit(store, table, model)), target, table=table_file,
+                  target_model=target_model)
 
 
 def _material_name(result: FitResult) -> str:
@@ -86,31 +91,68 @@ def _material_name(result: FitResult) -> str:
     return f"{stem.removesuffix('.binary')}_{result.model}"
 
 
-def export(result: FitResult, target: str) -> Export:
-    """``result`` as a material of ``target`` (one of ``TARGETS``)."""
+def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[str]]:
+    """The measured table the fidelity is judged against: ``table`` (a MerlTable or a
+    path), else the file the fit was read from where it is still there; None, with a
+    warning that says so, where neither is at hand."""
+    from brdffit.io import merl
+
+    if isinstance(table, MerlTable):
+        return table, []
+    if table is not None:
+        return merl.read(table), []
+    source = result.table
+    if source and os.path.isfile(source):
+        try:
+            return merl.read(source), []
+        except BrdffitError as e:
+            return None, [f"fidelity: log_rmse_to_table not measured: {e}"]
+    return None, [f"fidelity: log_rmse_to_table not measured: the fitted table "
+                  f"{source or '(unnamed)'} is not at hand (pass the table: "
+                  "export(..., table=...), brdffit export --measured PATH)"]
+
+
+def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,
+           target_model: str | None = None) -> Export:
+    """``result`` as a material of ``target`` (one of ``TARGETS``).
+
+    ``target_model``: which of the target's models the file carries (default the
+    target's first, e.g. MaterialX's ``standard_surface``). ``table``: the measured
+    table, for ``fidelity.log_rmse_to_table`` and the sphere's colour error (default:
+    the fit's own table file, where it is still there).
+    """
+    from brdffit import models
     from brdffit.export.conversion import convert
     from brdffit.export.energy import energy_report
+    from brdffit.fitting.pipeline import table_error
+    from brdffit.fitting.sphere import sphere_colour_error
 
     if target not in TARGETS:
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = TARGETS[target]
-    conv = convert(result, module.TARGET_MODELS)
-    energy, energy_warnings = energy_report(conv.target_model, conv.params)
-    warnings = conv.warnings + energy_warnings
+    if target_model is not None and target_model not in module.SHADED_AS:
+        raise ExportError(f"{target} carries {', '.join(module.SHADED_AS)}, not {target_model!r}")
+    conv = convert(result, (target_model,) if target_model else module.TARGET_MODELS)
+    # the brdffit model that evaluates the file as the renderer shades it, checked
+    # against the renderer's own evaluation (None: the renderer's shading of this
+    # node is not modelled, so nothing about it can be measured)
+    shaded_as = module.SHADED_AS[conv.target_model]
+    measured, warnings = _measured_table(result, table)
+    warnings = conv.warnings + warnings
+    fidelity = conv.fidelity(result)
+    fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
+                    log_rmse_to_table=None, sphere_colour_error=None)
+    if shaded_as is None:
+        warnings.append(module.UNMODELLED_NOTE)
+    elif measured is not None:
+        fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
+        fidelity["sphere_colour_error"] = sphere_colour_error(
+            measured, models.get(shaded_as), conv.params)
+    energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
+    warnings += energy_warnings
     name = _material_name(result)
-    if target == "mitsuba":
-        material = mitsuba.load_dict(conv.params)
-        files = {f"{name}.xml": mitsuba.scene_xml(material, name)}
-    elif target == "gltf":
-        material = gltf.document(conv.params, name)
-        files = {f"{name}.gltf": jsonout.dumps(material, indent=1)}
-        if "ior" in conv.params:
-            warnings.append(gltf.IOR_NOTE)
-    else:
-        material = materialx.document(conv.params, name)
-        files = {f"{name}.mtlx": material}
-        warnings.append(materialx.SHADING_NOTE)
+    material, files, notes = module.write(conv.params, name, conv.target_model)
     return Export(target, result.model, module.MEDIA_TYPE, material, files,
-                  {**conv.fidelity(result), **energy}, conv.params, warnings, result.table)
+                  {**fidelity, **energy}, conv.params, warnings + notes, result.table)

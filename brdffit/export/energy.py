@@ -82,14 +82,20 @@ def directional_albedo(model: str, params: dict) -> np.ndarray:
 
 def energy_report(model: str, params: dict) -> tuple[dict, list[str]]:
     """``{"albedo_max": [r, g, b], "albedo_max_theta_deg": angle}`` and a warning when
-    the largest albedo passes 1 (by more than the integration's 0.5%)."""
+    the largest albedo passes 1 (by more than the integration's 0.5%), naming the
+    channels and the incidences where it does."""
     a = directional_albedo(model, params)
     i = int(np.argmax(a.max(axis=1)))
     report = {"albedo_max": a[i].tolist(), "albedo_max_theta_deg": THETA_I_DEG[i]}
     warnings = []
-    if a[i].max() > 1.005:
+    over = a > 1.005
+    if over.any():
+        channels = [c for c, o in zip("RGB", over.any(axis=0), strict=True) if o]
+        angles = [THETA_I_DEG[j] for j in np.flatnonzero(over.any(axis=1))]
         warnings.append(
             f"energy: the {model} material reflects up to {a[i].max():.3f} of the light "
-            f"arriving at {THETA_I_DEG[i]:g} deg (directional albedo > 1): a renderer "
-            "brightens it with every bounce")
+            f"arriving at {THETA_I_DEG[i]:g} deg in {'RGB'[int(np.argmax(a[i]))]} "
+            f"(directional albedo > 1 in {', '.join(channels)} from {angles[0]:g} to "
+            f"{angles[-1]:g} deg incidence): a renderer brightens it with every bounce; "
+            "a fit with --physical (physical=True) stays below 1")
     return report, warnings

@@ -22,6 +22,9 @@ from __future__ import annotations
 
 #: The models this target shades exactly; other fits are refitted as the first.
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior")
+#: target model -> the model that evaluates the file as the spec defines it (the same:
+#: gltf_pbr is the spec's definition, tests/test_target_models.py)
+SHADED_AS = {m: m for m in TARGET_MODELS}
 MEDIA_TYPE = "model/gltf+json"
 IOR_EXTENSION = "KHR_materials_ior"
 IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the dielectric "
@@ -50,3 +53,12 @@ def document(params: dict, name: str) -> dict:
         doc["extensionsUsed"] = [IOR_EXTENSION]
     doc["materials"] = [material(params, name)]
     return doc
+
+
+def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, str], list[str]]:
+    """The material (the glTF document), its files and the notes on them."""
+    from brdffit import jsonout
+
+    doc = document(params, name)
+    notes = [IOR_NOTE] if "ior" in params else []
+    return doc, {f"{name}.gltf": jsonout.dumps(doc, indent=1)}, notes

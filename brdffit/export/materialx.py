@@ -22,6 +22,11 @@ from __future__ import annotations
 from xml.sax.saxutils import quoteattr
 
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior")
+#: target model -> the model that evaluates the file as MaterialX shades it (None: not
+#: modelled)
+SHADED_AS = {m: None for m in TARGET_MODELS}
+UNMODELLED_NOTE = ("fidelity: MaterialX's own shading of its gltf_pbr node is not modelled, "
+                   "so log_rmse_to_table is not measured")
 MEDIA_TYPE = "application/mtlx+xml"
 SHADING_NOTE = ("MaterialX's gltf_pbr node layers its specular lobe over the diffuse by "
                 "directional albedo, not glTF Appendix B's (1 - F): the parameters are exact, "
@@ -55,3 +60,9 @@ def document(params: dict, name: str) -> str:
         "</materialx>",
         "",
     ])
+
+
+def write(params: dict, name: str, target_model: str) -> tuple[str, dict[str, str], list[str]]:
+    """The material (the XML text), its files and the notes on them."""
+    text = document(params, name)
+    return text, {f"{name}.mtlx": text}, [SHADING_NOTE]

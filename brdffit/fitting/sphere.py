@@ -184,3 +184,21 @@ def _tonemapped_error(model, params, wi, wo, ref, scored, exposure):
 def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:
     """PSNR (dB) of the model's sphere renders against the table's own."""
     return SphereReference(table, size).psnr(model, params)
+
+
+def sphere_colour_error(table: MerlTable, model: AbstractBRDFModel, params: dict,
+                        size: int = 64) -> list[float]:
+    """Per channel, the relative error of the model's mean radiance over the lit,
+    measured pixels of the key-light sphere against the table's (R, G, B; 0.1 is 10%
+    too bright): the colour a viewer sees of the material as a whole. A channel the
+    table leaves black (mean below 1e-9) is reported as 0 when the model's is too, and
+    as None otherwise."""
+    light = LIGHTS[0][1]
+    ref, lit = render_table(table, light, size)
+    img, _ = render_model(model, params, light, size)
+    ok = lit & np.all(np.isfinite(ref), axis=-1)
+    if not ok.any():
+        return [None, None, None]
+    a, b = img[ok].mean(axis=0), ref[ok].mean(axis=0)
+    return [float(x / y - 1.0) if y > 1e-9 else (0.0 if abs(x) <= 1e-9 else None)
+            for x, y in zip(a, b, strict=True)]
