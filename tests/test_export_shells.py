@@ -42,7 +42,18 @@ def test_cli_writes_the_files_and_reports_fidelity(fit_json, tmp_path):
     assert written.name == "ggx_gltf_pbr.gltf" and str(written) in r.stdout
     want = export(FitResult.from_dict(json.loads(fit_json.read_text())), "gltf")
     assert json.loads(written.read_text()) == want.material
-    assert "gltf_pbr fit as gltf_pbr (exact)" in r.stderr
+    # the fit's own table is still there: the export is judged against it
+    assert "gltf_pbr fit as gltf_pbr (exact); to the table: log_rmse" in r.stderr
+    assert "lit sphere colour R " in r.stderr
+
+    # another measurement, named: judged against that one instead
+    other = write(tmp_path / "other.binary", table_bytes("lambert"))
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--json",
+            "--measured", str(other))
+    assert r.returncode == 0, r.stderr
+    out = Export.from_dict(json.loads(r.stdout))
+    expected = table_error(merl.read(other), "gltf_pbr", out.target_params)["log_rmse"]
+    assert out.fidelity["log_rmse_to_table"] == pytest.approx(expected, rel=1e-9)
 
     r = run("brdffit.cli", "export", str(fit_json), "--to", "mitsuba", "--json")
     assert r.returncode == 0, r.stderr
@@ -57,6 +68,10 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
     for args, message in (
         ([str(bad), "--to", "gltf"], "not JSON"),
         ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
+        ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
+         "gltf carries gltf_pbr, gltf_pbr_ior, not 'ggx'"),
+        ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
+         "No such file"),
         ([str(tmp_path / "missing.json"), "--to", "gltf"], "No such file"),
     ):
         r = run("brdffit.cli", "export", *args)
