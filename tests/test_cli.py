@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import struct
+import subprocess
+import sys
 
 import pytest
 
@@ -78,3 +80,13 @@ def test_models_lists_every_model_with_ranges():
     assert "alpha" in r.stdout and "[0.001, 2]" in r.stdout
     d = json.loads(run("brdffit.cli", "models", "--json").stdout)
     assert {m["name"] for m in d} >= set(TRUTH)
+
+
+def test_a_reader_that_goes_away_is_no_error():
+    """`brdffit models --json | head -c 1`: the reader closes the pipe; brdffit stops
+    quietly (no 'Broken pipe' message, no traceback) with the shell's SIGPIPE status."""
+    proc = subprocess.Popen([sys.executable, "-m", "brdffit.cli", "models", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # before it writes anything
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 141 and err.decode() == "", err.decode()

@@ -32,6 +32,8 @@ COMMANDS = {
 
 EXIT_INPUT = 2  # bad input: malformed table, unknown model, bad option
 EXIT_INTERRUPTED = 130
+#: what a shell reports for a process ended by SIGPIPE: the reader went away
+EXIT_BROKEN_PIPE = 141
 
 
 def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
@@ -73,6 +75,14 @@ def main(argv: list[str] | None = None) -> int:
     except BrdffitError as e:  # includes a missing extra (brdffit.extras)
         print(f"brdffit: error: {e}", file=sys.stderr)
         return EXIT_INPUT
+    except BrokenPipeError:
+        # the reader stopped reading (`brdffit export --json | head`): as any Unix tool,
+        # stop quietly; the rest of the output goes nowhere instead of failing again
+        # when the interpreter flushes stdout at exit
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except (ValueError, OSError) as e:  # bad option values, unreadable paths
         print(f"brdffit: error: {e}", file=sys.stderr)
         return EXIT_INPUT
