@@ -537,3 +537,16 @@ def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path)
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
+
+
+@pytest.mark.unit
+def test_the_summary_line_counts_in_words():
+    from brdffit.batch.job import BatchSummary
+    from brdffit.cli.batch import summary_line
+
+    one = BatchSummary("out.h5", tables=2, skipped=1, fits=1, elapsed_s=3.1)
+    assert summary_line(one) == "out.h5: 1 fit on 1 table in 3s; 1 table was already done"
+    many = BatchSummary("out.h5", tables=5, skipped=2, fits=6, elapsed_s=3.1)
+    assert summary_line(many).endswith("6 fits on 3 tables in 3s; 2 tables were already done")
+    fresh = BatchSummary("out.h5", tables=2, fits=4, elapsed_s=3.1)
+    assert summary_line(fresh).endswith("; none was done before")

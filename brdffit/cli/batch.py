@@ -47,6 +47,19 @@ def _models(text: str) -> list[str]:
     return [m.strip() for m in text.split(",") if m.strip()]
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def summary_line(s) -> str:
+    """The run's last line: ``out.h5: 4 fits on 2 tables in 3s; 1 table was already
+    done``."""
+    done = (f"{_count(s.skipped, 'table')} {'was' if s.skipped == 1 else 'were'} already done"
+            if s.skipped else "none was done before")
+    return (f"{s.out}: {_count(s.fits, 'fit')} on {_count(s.tables - s.skipped, 'table')} in "
+            f"{format_duration(s.elapsed_s)}; {done}")
+
+
 def run(args) -> int:
     options = options_from_args(args)
     s = run_batch(args.inputs, args.models, args.out, options=options, workers=args.workers,
@@ -54,8 +67,7 @@ def run(args) -> int:
                   checkpoint_s=args.checkpoint)
     if s.recovered:
         print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
-    print(f"{s.out}: {s.fits} fits on {s.tables - s.skipped} tables in "
-          f"{format_duration(s.elapsed_s)}; {s.skipped} tables were already done")
+    print(summary_line(s))
     if s.ok:
         return 0
     for path, message in s.failed_tables:
