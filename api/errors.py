@@ -49,9 +49,23 @@ def _location(loc) -> str:
     return ".".join(parts)
 
 
+def _message(error: dict) -> tuple[list[str], str]:
+    """Where and what, in a reader's words: pydantic's "Value error, " prefix goes (the
+    validator's own sentence is the message), and a body that is not JSON says so and
+    where, instead of "12: JSON decode error"."""
+    loc = [str(p) for p in error.get("loc", ())]
+    msg = str(error.get("msg", ""))
+    if error.get("type") == "json_invalid":
+        why = (error.get("ctx") or {}).get("error")
+        at = f" at character {loc[-1]}" if len(loc) > 1 else ""
+        return ["body"], f"not valid JSON{at}" + (f": {why}" if why else "")
+    if error.get("type") == "value_error":
+        msg = msg.removeprefix("Value error, ")
+    return loc, msg
+
+
 async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
-    errors = [{"loc": [str(p) for p in e.get("loc", ())], "msg": str(e.get("msg", ""))}
-              for e in exc.errors()]
+    errors = [dict(zip(("loc", "msg"), _message(e), strict=True)) for e in exc.errors()]
     detail = "; ".join(f"{_location(e['loc'])}: {e['msg']}" for e in errors) or "invalid request"
     return JSONResponse({"detail": detail, "errors": errors},
                         status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
