@@ -479,3 +479,11 @@ def test_worker_tasks_return_failures_as_values(tmp_path):
     from brdffit.jsonout import strict
 
     assert strict({"a": [float("nan"), 1.0, float("inf")]}) == {"a": [None, 1.0, None]}
+
+
+def test_the_browser_finds_an_icon(http):
+    for path in ("/favicon.ico", "/page/icon.svg"):
+        r = http.get(path)
+        assert r.status_code == 200 and r.headers["content-type"] == "image/svg+xml"
+        assert r.text.startswith("<svg") and "<circle" in r.text
+    assert '<link rel="icon" href="/page/icon.svg"' in http.get("/").text

@@ -24,7 +24,7 @@ FILES = Path(__file__).resolve().parent.parent / "static" / "page"
 #: The files the page loads, and what they are: a fixed list, so no path from a
 #: request reaches the disk.
 MEDIA = {"index.html": "text/html; charset=utf-8", "page.js": "text/javascript; charset=utf-8",
-         "page.css": "text/css; charset=utf-8"}
+         "page.css": "text/css; charset=utf-8", "icon.svg": "image/svg+xml"}
 # The page changes with the server's version: a short cache, so an upgrade shows.
 CACHE = {"Cache-Control": "no-cache"}
 
@@ -35,6 +35,12 @@ choices_router = APIRouter(include_in_schema=False, dependencies=[Depends(requir
 @router.get("/")
 def page() -> FileResponse:
     return FileResponse(FILES / "index.html", media_type=MEDIA["index.html"], headers=CACHE)
+
+
+@router.get("/favicon.ico")
+def favicon() -> FileResponse:
+    # browsers ask for /favicon.ico whatever the page links; an SVG answers them all
+    return FileResponse(FILES / "icon.svg", media_type=MEDIA["icon.svg"], headers=CACHE)
 
 
 @router.get("/page/{name}")
