@@ -182,3 +182,17 @@ def test_report_page_lists_parameters_with_errors_and_every_metric(ggx):
     assert [m.split()[0] for m in metrics[:5]] == ["log_rmse", "cube_root_rmse", "rmse_cos",
                                                   "rel_peak_error", "sphere"]
     assert "(bound)" in "".join(plots.summary_lines(fit(table("lambert"), "ggx", **FAST))[0])
+
+
+def test_saved_plots_respect_the_umask(ggx, tmp_path):
+    import os
+    import stat
+
+    t, r = ggx
+    old = os.umask(0o022)
+    try:
+        (path,) = plots.save_all(t, r, tmp_path / "plots", kinds=("slices",))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o644  # not mkstemp's 0600
+    assert not [p for p in os.listdir(tmp_path / "plots") if p != "slices.png"]  # no leftovers

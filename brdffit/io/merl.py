@@ -25,12 +25,12 @@ Bad input policy (every case raises :class:`MerlFormatError` naming the source):
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from brdffit.errors import MerlFormatError
+from brdffit.io import atomic
 from brdffit.io.angles import (
     N_PHI_D,
     N_THETA_D,
@@ -262,24 +262,7 @@ def to_bytes(table: MerlTable) -> bytes:
 
 
 def write(path: str | os.PathLike, table: MerlTable) -> None:
-    """Write ``table`` as a MERL file, atomically (temp file + rename)."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".merl-", dir=directory)
-    try:
-        # mkstemp makes the file 0600; a table is data to share (cluster workers
-        # may run as another user), so give it the permissions open() would.
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(to_bytes(table))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+    """Write ``table`` as a MERL file, atomically (temp file + rename), with the
+    permissions ``open`` would give it: a table is data to share (cluster workers may
+    run as another user)."""
+    atomic.write_bytes(path, to_bytes(table), prefix=".merl-")

@@ -21,10 +21,8 @@ the few degrees around the specular peak get as much room as the rest.
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
-import tempfile
 import warnings
 from collections.abc import Callable
 
@@ -44,6 +42,7 @@ except ModuleNotFoundError:
 
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
+from brdffit.io import atomic
 from brdffit.io.angles import (
     N_PHI_D,
     N_THETA_D,
@@ -632,22 +631,14 @@ def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.Pat
     """Write ``<directory>/<kind>.png`` for each kind; returns the paths.
 
     Each file is rendered first, then written beside its place and renamed over
-    it: a plot that fails to render leaves no file (not a 0-byte one), and a
-    reader never sees half a PNG.
+    it (``brdffit.io.atomic``): a plot that fails to render leaves no file (not a
+    0-byte one), a reader never sees half a PNG, and the file has the permissions
+    the umask gives, as any file the user writes.
     """
     os.makedirs(directory, exist_ok=True)
     paths = []
     for kind in kinds:
         path = os.path.join(directory, f"{kind}.png")
-        png = render(kind, table, result)
-        fd, tmp = tempfile.mkstemp(prefix=f".{kind}.", suffix=".png.part", dir=directory)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(png)
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        atomic.write_bytes(path, render(kind, table, result), prefix=f".{kind}.")
         paths.append(path)
     return paths
