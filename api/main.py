@@ -24,20 +24,23 @@ from api.routes import docs, exports, fits, health, materials, models, page, tab
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
 from api.store import Store
+from brdffit.view.plots import KINDS as PLOT_KINDS
 
 log = logging.getLogger("brdffit.api")
 
-DESCRIPTION = """\
+DESCRIPTION = f"""\
 Fit analytic BRDF models to measured MERL tables.
 
 1. `POST /v1/tables` with the `.binary` file as the body: a table id.
-2. `POST /v1/fits` with `{"table_id": ..., "model": "ggx"}`: a job id (202).
-3. `GET /v1/fits/{id}` until `status` is `done` (or `failed`, with a `reason`).
-4. `GET /v1/fits/{id}/plots/{kind}.png`: slices, error_map, spheres, polar.
+2. `POST /v1/fits` with `{{"table_id": ..., "model": "ggx"}}`: a job id (202).
+3. `GET /v1/fits/{{id}}` until `status` is `done` (or `failed`, with a `reason`).
+4. `GET /v1/fits/{{id}}/plots/{{kind}}.png`: {", ".join(PLOT_KINDS)}.
+5. `GET /v1/fits/{{id}}/exports/{{target}}`: the fit as a Mitsuba 3, glTF 2.0 or MaterialX
+   material, with its error to the measured table under the renderer's own shading.
 
 The same steps without a line of code: the web page at `/`.
 
-Every error is JSON `{"detail": "..."}`. When the server sets `BRDFFIT_API_TOKEN`,
+Every error is JSON `{{"detail": "..."}}`. When the server sets `BRDFFIT_API_TOKEN`,
 every route but `/healthz` needs `Authorization: Bearer <token>`.
 """
 

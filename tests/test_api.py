@@ -487,3 +487,10 @@ def test_the_browser_finds_an_icon(http):
         assert r.status_code == 200 and r.headers["content-type"] == "image/svg+xml"
         assert r.text.startswith("<svg") and "<circle" in r.text
     assert '<link rel="icon" href="/page/icon.svg"' in http.get("/").text
+
+
+def test_the_api_description_lists_every_plot_kind(http):
+    from brdffit.view.plots import KINDS
+
+    description = http.get("/openapi.json").json()["info"]["description"]
+    assert f"plots/{{kind}}.png`: {', '.join(KINDS)}." in description and "report" in KINDS
