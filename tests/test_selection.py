@@ -254,6 +254,7 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
                             "models": ["auto"], "options": options, "attempts": 1,
                             "result": chosen, "results": out["results"]})
     assert job.selection["chosen"] == "ggx"
+    _auto_job_answers_model_auto_with_its_choice(out["results"])
     # A scene goes to single-model jobs too: the full-table error comes beside.
     options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
     out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
@@ -330,3 +331,30 @@ def test_cli_auto_prints_progress_on_stderr_and_json_on_stdout(tmp_path, capsys)
     assert json.loads(out.out)["selection"]["chosen"] == "lambert"  # stdout: one JSON object
     assert "auto: [1/2] fitting lambert ... log_rmse" in out.err
     assert "auto: [2/2] fitting oren_nayar ... log_rmse" in out.err
+
+
+def _auto_job_answers_model_auto_with_its_choice(results: list[dict]) -> None:
+    """``?model=auto`` on an auto job is its chosen fit; on another job, or a model it
+    did not fit, a 404 that lists the fits it has (not "it has auto")."""
+    import asyncio
+
+    from fastapi import HTTPException
+
+    from api.routes.fits import finished_fit
+    from api.store import JobRecord
+
+    class Store:
+        def __init__(self, models):
+            self.job = JobRecord("1" * 32, "0" * 64, models, {}, "done", None, None, results,
+                                 1, 0.0, 0.0, 0.0)
+
+        def get_job(self, job_id):
+            return self.job
+
+    _, chosen = asyncio.run(finished_fit(Store(["auto"]), "1" * 32, "auto", "exports"))
+    assert chosen["model"] == "ggx" and chosen["selection"]["chosen"] == "ggx"
+    fitted = ", ".join(r["model"] for r in results)
+    for job_models, asked in ((["auto"], "gltf_pbr"), ([r["model"] for r in results], "auto")):
+        with pytest.raises(HTTPException) as e:
+            asyncio.run(finished_fit(Store(job_models), "1" * 32, asked, "exports"))
+        assert e.value.status_code == 404 and e.value.detail.endswith(f"it has {fitted}")

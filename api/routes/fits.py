@@ -235,12 +235,13 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
         why = f": {job.reason}" if job.reason else ""
         raise HTTPException(status.HTTP_409_CONFLICT,
                             f"fit job {job_id} is {job.status}{why}; {what} exist once it is done")
-    if model is None:
-        return job, best_result(job.results)
+    fitted = ", ".join(r["model"] for r in job.results)
+    if model is None or (model == options.AUTO and options.AUTO in job.models):
+        return job, best_result(job.results)  # an auto job's: the chosen fit
     result = next((r for r in job.results if r["model"] == model), None)
     if result is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"fit job {job_id} has no {model!r} fit; "
-                                                       f"it has {', '.join(job.models)}")
+                                                       f"it has {fitted}")
     return job, result
 
 
