@@ -16,16 +16,20 @@ f_r cos_i, so f_r = response / cos_i (divided out in closed form below):
               (mx_ggx_dir_albedo_analytic: a rational fit, A + B)
     comp(F) = 1 + F (1 - E) / E                          (mx_ggx_energy_compensation)
     F_d     = exact dielectric Fresnel(cos_d; specular_IOR)     (mx_fresnel_dielectric)
-    spec    = specular specular_color D V2 F_d comp(F_d)             (mx_dielectric_bsdf)
-    T       = 1 - specular comp(F_d) (F0 A + B),  F0 = ((ior-1)/(ior+1))^2  (its throughput)
-    diff    = base base_color ON(sigma = diffuse_roughness) / pi  (mx_oren_nayar_diffuse)
-    n, k    = artistic_ior(base base_color, specular specular_color)  (mx_artistic_ior)
+    spec    = specular_color D V2 F_d comp(F_d)                      (mx_dielectric_bsdf)
+    T       = 1 - comp(F_d) (F0 A + B),  F0 = ((ior-1)/(ior+1))^2       (its throughput)
+    diff    = base_color ON(sigma = diffuse_roughness) / pi       (mx_oren_nayar_diffuse)
+    n, k    = artistic_ior(base_color, specular_color)                 (mx_artistic_ior)
     metal   = D V2 F_c(cos_d; n, k) comp(F_c)            (mx_conductor_bsdf, mx_fresnel_conductor)
     f       = metalness metal + (1 - metalness) (spec + T diff)       (mix, layer)
 
 ``base`` and ``base_color`` enter only as their product (the diffuse colour and the
-metal's reflectivity), so ``base`` is not fitted: it is 1 in the export and in the
-model. The other inputs are MaterialX's names. ON is MaterialX's Oren-Nayar
+metal's reflectivity), so ``base`` is not fitted: it is 1. ``specular`` (the dielectric's
+weight) is MaterialX's default 1, not fitted: it multiplies ``specular_color`` everywhere
+but in the throughput T, and where the diffuse is black the two are one parameter (a fit
+then ran to its step limit: nickel, gold-metallic-paint); fitted, it gained 2-4% log_rmse
+on red-plastic and pink-fabric (measured 2026-11-26). The other parameters are
+MaterialX's inputs under their names. ON is MaterialX's Oren-Nayar
 (``A + B max(0, wi_xy . wo_xy) / max(cos_i, cos_o)``, sigma = ``diffuse_roughness``
 in radians, as docs/models.md's ``oren_nayar``).
 
@@ -33,10 +37,9 @@ in radians, as docs/models.md's ``oren_nayar``).
 |--------------------|--------------------|-----------------------------------------------------------|
 | base_color         | [0, 1], RGB        | ``base_color``: diffuse colour; the metal's reflectivity  |
 | metalness          | [0, 1]             | ``metalness``: mix weight of the conductor                |
-| specular           | [0, 1]             | ``specular``: weight of the dielectric lobe (and edge tint) |
 | specular_color     | [0, 1], RGB        | ``specular_color``: tint of the dielectric lobe; the metal's edge colour |
 | specular_roughness | [0.0316, 1] (log)  | ``specular_roughness`` (alpha = roughness^2; bound: 1e-3) |
-| specular_IOR       | [1, 3]             | ``specular_IOR``: the dielectric's index of refraction    |
+| specular_IOR       | [1, 50] (log)      | ``specular_IOR``: the dielectric's index of refraction    |
 | diffuse_roughness  | [0, 1]             | ``diffuse_roughness``: Oren-Nayar sigma (radians)         |
 
 Not reciprocal: E and comp are functions of the view cosine (as MaterialX's are).
@@ -54,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .base import AbstractBRDFModel, Params, ParamSpec
-from .frame import Frame
+from .frame import Frame, shading_frame
 from .guarded import safe_div, safe_sqrt
 from .microfacet import ALPHA_GRID, dielectric_fresnel
 from .renderer_terms import conductor_fresnel
@@ -62,21 +65,22 @@ from .renderer_terms import conductor_fresnel
 BASE_COLOR = ParamSpec("base_color", "base_color: diffuse colour and metal reflectivity (RGB)",
                        0.0, 1.0, rgb=True)
 METALNESS = ParamSpec("metalness", "metalness: mix weight of the conductor", 0.0, 1.0)
-SPECULAR = ParamSpec("specular", "specular: weight of the dielectric specular lobe", 0.0, 1.0)
 SPECULAR_COLOR = ParamSpec("specular_color", "specular_color: specular tint, metal edge colour",
                            0.0, 1.0, rgb=True)
 SPECULAR_ROUGHNESS = ParamSpec("specular_roughness", "specular_roughness (alpha = roughness^2)",
                                math.sqrt(1e-3), 1.0, scale="log")
+#: MaterialX's soft range is [1, 3] (no hard bound above): a measured metal fits best as
+#: a tinted dielectric of a large index, whose Fresnel curve is flat (F0 0.8 at 18;
+#: nickel and gold-metallic-paint fitted 17.8-20 with this bound; upper bounds 10 and 3,
+#: where those fits stopped, cost them 3-8% and 60-85% of their log_rmse, 2026-11-26).
 SPECULAR_IOR = ParamSpec("specular_IOR", "specular_IOR: index of refraction of the dielectric",
-                         1.0, 3.0)
+                         1.0, 50.0, scale="log")
 DIFFUSE_ROUGHNESS = ParamSpec("diffuse_roughness", "diffuse_roughness: Oren-Nayar sigma",
                               0.0, 1.0)
 
-#: The MaterialX ``standard_surface`` inputs the model sets, at MaterialX's defaults
-#: where the model does not fit them (``base`` is folded into ``base_color``).
-DEFAULTS = {"base": 1.0, "base_color": (0.8, 0.8, 0.8), "diffuse_roughness": 0.0,
-            "metalness": 0.0, "specular": 1.0, "specular_color": (1.0, 1.0, 1.0),
-            "specular_roughness": 0.2, "specular_IOR": 1.5}
+#: The ``standard_surface`` inputs the model holds at a value instead of fitting them
+#: (MaterialX's defaults; the export writes them); every other input not fitted is off.
+FIXED_INPUTS = {"base": 1.0, "specular": 1.0}
 
 # mx_ggx_dir_albedo_analytic's rational fit: rows (A numerator, B numerator, A
 # denominator, B denominator), columns the coefficients of 1, x, y, x y, x^2, y^2,
@@ -114,30 +118,45 @@ def artistic_ior(reflectivity, edge_color):
     return n, safe_sqrt(k2)
 
 
+def specular_alpha(roughness):
+    """GGX alpha of ``specular_roughness``: MaterialX's ``mx_roughness_anisotropy``
+    (anisotropy 0) and the BSDFs' ``clamp(alpha, 1e-8, 1)``."""
+    return jnp.clip(roughness * roughness, 1e-8, 1.0)
+
+
+def ggx_dv(alpha, frame: Frame):
+    """``D G2 / (4 cos_i cos_o)``: MaterialX's ``mx_ggx_NDF`` and height-correlated
+    ``mx_ggx_smith_G2`` (cosines clamped to 1e-8 as there), written
+    ``D / (2 (lam_i cos_o + lam_o cos_i))``, ``lam = sqrt(cos^2 + alpha^2 sin^2)``: no
+    cosine in a denominator."""
+    ci = jnp.maximum(frame.cos_i, 1e-8)
+    co = jnp.maximum(frame.cos_o, 1e-8)
+    a2 = alpha * alpha
+    t = frame.cos_h * frame.cos_h * a2 + frame.sin2_h  # (sin_h^2/a^2 + cos_h^2) a^2
+    d = safe_div(a2, jnp.pi * t * t, 1e-30)
+    lam_i = safe_sqrt(ci * ci + a2 * frame.sin2_i)
+    lam_o = safe_sqrt(co * co + a2 * frame.sin2_o)
+    return safe_div(d, 2.0 * (lam_i * co + lam_o * ci), 1e-30)
+
+
 class StandardSurface(AbstractBRDFModel):
     name = "standard_surface"
-    param_specs = (BASE_COLOR, METALNESS, SPECULAR, SPECULAR_COLOR, SPECULAR_ROUGHNESS,
-                   SPECULAR_IOR, DIFFUSE_ROUGHNESS)
+    param_specs = (BASE_COLOR, METALNESS, SPECULAR_COLOR, SPECULAR_ROUGHNESS, SPECULAR_IOR,
+                   DIFFUSE_ROUGHNESS)
     shape_grid = tuple(
-        {"specular_roughness": min(math.sqrt(a), 1.0), "metalness": m}
+        {"specular_roughness": min(math.sqrt(a), 1.0), "metalness": m, "specular_IOR": ior}
         for a in ALPHA_GRID
-        for m in (0.0, 0.5, 1.0)
+        for m, ior in ((0.0, 1.5), (0.0, 4.0), (0.0, 15.0), (0.5, 1.5), (1.0, 1.5))
     )
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
+        alpha = specular_alpha(params["specular_roughness"])
         # MaterialX clamps N.L, N.V, V.H to [1e-8, 1] (M_FLOAT_EPS)
         ci = jnp.maximum(frame.cos_i, 1e-8)
         co = jnp.maximum(frame.cos_o, 1e-8)
         cd = jnp.maximum(frame.cos_d, 1e-8)
-        rough = params["specular_roughness"]
-        alpha = jnp.clip(rough * rough, 1e-8, 1.0)
-        a2 = alpha * alpha
-        t = frame.cos_h * frame.cos_h * a2 + frame.sin2_h
-        d = safe_div(a2, jnp.pi * t * t, 1e-30)
-        lam_i = safe_sqrt(ci * ci + a2 * frame.sin2_i)
-        lam_o = safe_sqrt(co * co + a2 * frame.sin2_o)
-        dv = safe_div(d, 2.0 * (lam_i * co + lam_o * ci), 1e-30)  # D G2 / (4 cos_i cos_o)
+        dv = ggx_dv(alpha, frame)
 
         big_a, big_b = ggx_dir_albedo_ab(co, alpha)
         e_ss = big_a + big_b
@@ -147,10 +166,9 @@ class StandardSurface(AbstractBRDFModel):
         f_d = dielectric_fresnel(ior, cd)
         comp_d = 1.0 + f_d * loss
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        w_spec = params["specular"]
         tint = params["specular_color"][expand]
-        spec = w_spec * tint * (dv * f_d * comp_d)[None]
-        throughput = 1.0 - w_spec * (comp_d * (f0 * big_a + big_b))
+        spec = tint * (dv * f_d * comp_d)[None]
+        throughput = 1.0 - comp_d * (f0 * big_a + big_b)
 
         s2 = params["diffuse_roughness"] ** 2
         on_a = 1.0 - 0.5 * s2 / (s2 + 0.33)
@@ -159,8 +177,11 @@ class StandardSurface(AbstractBRDFModel):
         base = params["base_color"][expand]
         diffuse = base * (on / jnp.pi)[None]
 
-        n, k = artistic_ior(base, w_spec * tint)
-        f_c = conductor_fresnel(n, k, cd[None])
+        n, k = artistic_ior(base, tint)
+        # >= 0 as the formula is; the floor only catches rounding of an index of 1 at
+        # V.H = 1e-8 (reflectivity 0: n = 1, k = 0), which renderer_terms' guards round
+        # below 0 there
+        f_c = jnp.maximum(conductor_fresnel(n, k, cd[None]), 0.0)
         metal = dv[None] * f_c * (1.0 + f_c * loss[None])
 
         m = params["metalness"]
@@ -170,21 +191,32 @@ class StandardSurface(AbstractBRDFModel):
         return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
 
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """Unconstrained starts, one per (specular_roughness, metalness) on ``shape_grid``.
+        """Unconstrained starts, one per (specular_roughness, metalness, specular_IOR) on
+        ``shape_grid``, each put on the measured highlight.
 
-        A dielectric start takes the diffuse estimate as its base colour, a metal's the
-        peak bin's colour normalised to 0.9 (its reflectivity); the specular at
-        MaterialX's defaults (weight 0.9, white, ior 1.5), diffuse roughness 0.1.
+        At the peak bin (near normal incidence, where F ~ F0 and comp ~ 1) the lobe is
+        ``F0 D G2 / (4 cos_i cos_o)``: the metal's reflectivity (``base_color``, also its
+        edge colour: a flat Fresnel curve) is the excess over the diffuse floor divided
+        by that lobe; the dielectric's ``specular_color`` the excess divided by
+        ``F0(ior)`` times it, its base colour the diffuse estimate.
         """
-        from brdffit.io.grid import peak_bin
+        from brdffit.io.grid import bin_grid, peak_bin
 
-        peak = table.rgb.reshape(3, -1)[:, peak_bin(table, usable)]
-        metal = 0.9 * peak / max(float(np.max(peak)), 1e-12)
+        b = peak_bin(table, usable)
+        g = bin_grid()
+        frame = shading_frame(jnp.asarray(g.wi[b]), jnp.asarray(g.wo[b]))
+        f_peak = table.rgb.reshape(3, -1)[:, b]
+        excess = np.maximum(f_peak - kd / np.pi, 1e-3 * np.maximum(f_peak, 1e-6))
         starts = []
         for shape in self.shape_grid:
-            m = shape["metalness"]
-            base = np.clip((1 - m) * kd + m * metal, 0.02, 0.98)
+            m, ior = shape["metalness"], shape["specular_IOR"]
+            lobe = max(float(ggx_dv(specular_alpha(shape["specular_roughness"]), frame)), 1e-12)
+            reflectivity = np.clip(excess / lobe, 0.02, 0.98)
+            f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+            colour = np.clip(excess / (f0 * lobe), 0.02, 0.98)
+            base = np.clip((1 - m) * kd + m * reflectivity, 0.02, 0.98)
+            edge = (1 - m) * colour + m * reflectivity
             starts.append(self.unconstrain({
-                "base_color": base, "specular": 0.9, "specular_color": np.full(3, 0.9),
-                "specular_IOR": 1.5, "diffuse_roughness": 0.1, **shape}))
+                "base_color": base, "specular_color": edge, "diffuse_roughness": 0.1,
+                **shape}))
         return np.stack(starts)
