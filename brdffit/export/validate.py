@@ -199,9 +199,10 @@ def materialx_glsl(text: str) -> str:
     directional light bound (``ND_directional_light``), no environment light
     (``SPECULAR_ENVIRONMENT_NONE``), no shadow map; every other option at its default
     (analytic directional albedo, no sRGB encoding, no transparency)."""
-    mx = _import("MaterialX", "brdffit.export.validate.materialx_glsl")
-    gen_shader = _import("MaterialX.PyMaterialXGenShader", "brdffit.export.validate.materialx_glsl")
-    gen_glsl = _import("MaterialX.PyMaterialXGenGlsl", "brdffit.export.validate.materialx_glsl")
+    who = "brdffit.export.validate.materialx_glsl"
+    mx = _import("MaterialX", who)
+    gen_shader = _import("MaterialX.PyMaterialXGenShader", who)
+    gen_glsl = _import("MaterialX.PyMaterialXGenGlsl", who)
     doc = mx.createDocument()
     mx.readFromXmlString(doc, text)
     lib = mx.createDocument()
@@ -214,7 +215,8 @@ def materialx_glsl(text: str) -> str:
     ctx = gen_shader.GenContext(gen)
     ctx.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
     opt = ctx.getOptions()
-    opt.hwSpecularEnvironmentMethod = gen_shader.HwSpecularEnvironmentMethod.SPECULAR_ENVIRONMENT_NONE
+    methods = gen_shader.HwSpecularEnvironmentMethod
+    opt.hwSpecularEnvironmentMethod = methods.SPECULAR_ENVIRONMENT_NONE
     opt.hwShadowMap = False
     opt.hwMaxActiveLightSources = 1
     gen_shader.HwShaderGenerator.bindLightShader(doc.getNodeDef("ND_directional_light"), 1, ctx)

@@ -1,4 +1,4 @@
-"""MaterialX 1.39 standard_surface as MaterialX's GLSL shades it: a layered dielectric over Oren-Nayar, mixed with an artistic-IOR conductor.
+"""MaterialX standard_surface as its GLSL shades it: dielectric over Oren-Nayar, and a metal.
 
 The BRDF of the ``standard_surface`` node (``libraries/bxdf/standard_surface.mtlx``,
 nodegraph ``NG_standard_surface_surfaceshader_100``) for a direct light, with coat,
@@ -20,7 +20,7 @@ f_r cos_i, so f_r = response / cos_i (divided out in closed form below):
     T       = 1 - comp(F_d) (F0 A + B),  F0 = ((ior-1)/(ior+1))^2       (its throughput)
     diff    = base_color ON(sigma = diffuse_roughness) / pi       (mx_oren_nayar_diffuse)
     n, k    = artistic_ior(base_color, specular_color)                 (mx_artistic_ior)
-    metal   = D V2 F_c(cos_d; n, k) comp(F_c)            (mx_conductor_bsdf, mx_fresnel_conductor)
+    metal   = D V2 F_c(cos_d; n, k) comp(F_c)   (mx_conductor_bsdf, mx_fresnel_conductor)
     f       = metalness metal + (1 - metalness) (spec + T diff)       (mix, layer)
 
 ``base`` and ``base_color`` enter only as their product (the diffuse colour and the
@@ -33,20 +33,20 @@ MaterialX's inputs under their names. ON is MaterialX's Oren-Nayar
 (``A + B max(0, wi_xy . wo_xy) / max(cos_i, cos_o)``, sigma = ``diffuse_roughness``
 in radians, as docs/models.md's ``oren_nayar``).
 
-| name               | range              | meaning (MaterialX input)                                 |
-|--------------------|--------------------|-----------------------------------------------------------|
-| base_color         | [0, 1], RGB        | ``base_color``: diffuse colour; the metal's reflectivity  |
-| metalness          | [0, 1]             | ``metalness``: mix weight of the conductor                |
-| specular_color     | [0, 1], RGB        | ``specular_color``: tint of the dielectric lobe; the metal's edge colour |
-| specular_roughness | [0.0316, 1] (log)  | ``specular_roughness`` (alpha = roughness^2; bound: 1e-3) |
-| specular_IOR       | [1, 50] (log)      | ``specular_IOR``: the dielectric's index of refraction    |
-| diffuse_roughness  | [0, 1]             | ``diffuse_roughness``: Oren-Nayar sigma (radians)         |
+| name               | range             | meaning (the MaterialX input)                  |
+|--------------------|-------------------|------------------------------------------------|
+| base_color         | [0, 1], RGB       | diffuse colour; the metal's reflectivity       |
+| metalness          | [0, 1]            | mix weight of the conductor                    |
+| specular_color     | [0, 1], RGB       | tint of the dielectric; the metal's edge colour |
+| specular_roughness | [0.0316, 1] (log) | alpha = roughness^2; lower bound alpha = 1e-3  |
+| specular_IOR       | [1, 50] (log)     | the dielectric's index of refraction           |
+| diffuse_roughness  | [0, 1]            | Oren-Nayar sigma (radians)                     |
 
-Not reciprocal: E and comp are functions of the view cosine (as MaterialX's are).
-Where MaterialX clamps a cosine to 1e-8 (``M_FLOAT_EPS``) the model uses the
-closed-form limit, and its Oren-Nayar term reads ``max(0, wi_xy . wo_xy)`` where
-MaterialX reads ``max(L.V, 1e-8) - cos_i cos_o``: they differ only for
-cos_i cos_o < 1e-8.
+Not reciprocal: E, comp and T read the view's cosine (as MaterialX's do). Cosines are
+clamped to 1e-8 as MaterialX clamps them (``M_FLOAT_EPS``); its Oren-Nayar reads
+``max(L.V, 1e-8) - cos_i cos_o`` where the model reads ``max(0, wi_xy . wo_xy)``, which
+differ only for cos_i cos_o < 1e-8. T can dip below 0 (to -0.007 at cos_o = 1e-8, alpha
+1e-3, index 50; E's fit reaches 1.03), as MaterialX's does.
 """
 
 from __future__ import annotations
