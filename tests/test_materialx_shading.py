@@ -183,6 +183,12 @@ def test_the_export_writes_the_inputs_the_model_holds_fixed():
         s.name for s in models.get("standard_surface").param_specs}
 
 
+def test_only_the_gltf_node_needs_the_shading_note():
+    assert materialx.shading_notes("standard_surface") == []
+    assert materialx.shading_notes("gltf_pbr") == [materialx.SHADING_NOTE]
+    assert materialx.shading_notes("gltf_pbr_ior") == [materialx.SHADING_NOTE]
+
+
 def test_document_refuses_other_models():
     with pytest.raises(ValueError, match="standard_surface"):
         materialx.document({"kd": [0.1] * 3}, "x", "ggx")

@@ -47,6 +47,13 @@ GLTF_PBR_INPUTS = {"base_color": "color3", "metallic": "float", "roughness": "fl
                    "ior": "float"}
 
 
+def shading_notes(model: str) -> list[str]:
+    """The export warnings a MaterialX document of ``model`` parameters needs: the
+    ``gltf_pbr`` node's :data:`SHADING_NOTE`; none for ``standard_surface``, whose
+    model is MaterialX's own shading."""
+    return [] if model == "standard_surface" else [SHADING_NOTE]
+
+
 def _identifier(name: str) -> str:
     """A MaterialX element name: letters, digits and underscores, not starting with a digit."""
     out = "".join(c if c.isalnum() or c == "_" else "_" for c in name) or "brdffit"

@@ -160,11 +160,11 @@ class StandardSurface(AbstractBRDFModel):
 
         big_a, big_b = ggx_dir_albedo_ab(co, alpha)
         e_ss = big_a + big_b
-        loss = safe_div(1.0 - e_ss, e_ss, 1e-6)  # (1 - E) / E
+        ms_gain = safe_div(1.0 - e_ss, e_ss, 1e-6)  # (1 - E) / E, what comp adds per F
 
         ior = params["specular_IOR"]
         f_d = dielectric_fresnel(ior, cd)
-        comp_d = 1.0 + f_d * loss
+        comp_d = 1.0 + f_d * ms_gain
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         tint = params["specular_color"][expand]
         spec = tint * (dv * f_d * comp_d)[None]
@@ -182,7 +182,7 @@ class StandardSurface(AbstractBRDFModel):
         # V.H = 1e-8 (reflectivity 0: n = 1, k = 0), which renderer_terms' guards round
         # below 0 there
         f_c = jnp.maximum(conductor_fresnel(n, k, cd[None]), 0.0)
-        metal = dv[None] * f_c * (1.0 + f_c * loss[None])
+        metal = dv[None] * f_c * (1.0 + f_c * ms_gain[None])
 
         m = params["metalness"]
         return m * metal + (1.0 - m) * (spec + throughput[None] * diffuse)
