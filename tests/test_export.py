@@ -51,8 +51,7 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
 
 
 STANDARD = {"base_color": [0.8, 0.35, 0.1], "metalness": 0.2,
-            "specular_color": [1.0, 0.9, 0.8], "specular_roughness": 0.45, "specular_IOR": 1.6,
-            "diffuse_roughness": 0.3}
+            "specular_color": [1.0, 0.9, 0.8], "specular_roughness": 0.45, "specular_IOR": 1.6}
 
 
 def test_standard_surface_fit_exports_exactly_to_materialx():
@@ -65,7 +64,7 @@ def test_standard_surface_fit_exports_exactly_to_materialx():
     assert inputs == {"base": "1.0", "base_color": "0.8, 0.35, 0.1", "metalness": "0.2",
                       "specular": "1.0", "specular_color": "1.0, 0.9, 0.8",
                       "specular_roughness": "0.45", "specular_IOR": "1.6",
-                      "diffuse_roughness": "0.3"}
+                      "diffuse_roughness": "0.0"}
     assert root.find("surfacematerial/input").get("nodename") == node.get("name")
 
 

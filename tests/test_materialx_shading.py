@@ -48,14 +48,11 @@ WI = np.array([_dir(*a) for a, _ in PAIRS])
 WO = np.array([_dir(*b) for _, b in PAIRS])
 
 PLASTIC = {"base_color": [0.8, 0.35, 0.1], "metalness": 0.0,
-           "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.3, "specular_IOR": 1.5,
-           "diffuse_roughness": 0.0}
+           "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.3, "specular_IOR": 1.5}
 METAL = {"base_color": [0.9, 0.7, 0.3], "metalness": 1.0,
-         "specular_color": [0.95, 0.9, 0.8], "specular_roughness": 0.25, "specular_IOR": 1.5,
-         "diffuse_roughness": 0.0}
+         "specular_color": [0.95, 0.9, 0.8], "specular_roughness": 0.25, "specular_IOR": 1.5}
 BLEND = {"base_color": [0.2, 0.5, 0.9], "metalness": 0.4,
-         "specular_color": [0.7, 0.8, 0.9], "specular_roughness": 0.08, "specular_IOR": 2.2,
-         "diffuse_roughness": 0.7}
+         "specular_color": [0.7, 0.8, 0.9], "specular_roughness": 0.08, "specular_IOR": 2.2}
 
 #: MaterialX's generated GLSL's f_r (1/sr) at PAIRS, float32 (materialx_eval).
 PINNED = [
@@ -67,29 +64,24 @@ PINNED = [
              [0.01182334, 0.009194353, 0.003963867], [0.5546991, 0.4319413, 0.2681663],
              [0.01433896, 0.01112503, 0.005130233], [0.01050562, 0.008037951, 0.003461076],
              [17871.1, 18207.9, 18133.77], [0.001977069, 0.001533057, 0.0006530278]]),
-    (BLEND, [[270.0805, 519.2438, 845.472], [366.2361, 695.2094, 1130.853],
-             [0.0230199, 0.05753802, 0.1035619], [0.01967613, 0.04723837, 0.08423374],
-             [0.02299354, 0.05746482, 0.1034275], [0.009384141, 0.02344891, 0.04220329],
-             [4624474, 4966663, 5149590], [0.03423549, 0.08558688, 0.1540553]]),
+    (BLEND, [[270.0903, 519.2682, 845.5161], [366.2459, 695.2339, 1130.897],
+             [0.03281987, 0.08203792, 0.1476617], [0.02731708, 0.06634074, 0.118618],
+             [0.03277935, 0.08192937, 0.1474637], [0.01221324, 0.03052166, 0.05493423],
+             [4624474, 4966663, 5149590], [0.03265848, 0.08164435, 0.1469588]]),
 ]
 
 #: Further parameter sets for the live comparison: grey, rough, high-index, bounds.
 MORE = [
     {"base_color": [0.05, 0.05, 0.05], "metalness": 0.0,
-     "specular_color": [1.0, 0.5, 0.2], "specular_roughness": 0.9, "specular_IOR": 1.2,
-     "diffuse_roughness": 1.0},
+     "specular_color": [1.0, 0.5, 0.2], "specular_roughness": 0.9, "specular_IOR": 1.2},
     {"base_color": [1.0, 1.0, 1.0], "metalness": 0.7,
-     "specular_color": [0.2, 0.3, 1.0], "specular_roughness": 0.05, "specular_IOR": 3.0,
-     "diffuse_roughness": 0.3},
+     "specular_color": [0.2, 0.3, 1.0], "specular_roughness": 0.05, "specular_IOR": 3.0},
     {"base_color": [0.04, 0.03, 0.02], "metalness": 0.1,
-     "specular_color": [0.3, 0.2, 0.1], "specular_roughness": 0.5, "specular_IOR": 18.0,
-     "diffuse_roughness": 0.5},
+     "specular_color": [0.3, 0.2, 0.1], "specular_roughness": 0.5, "specular_IOR": 18.0},
     {"base_color": [0.5, 0.5, 0.5], "metalness": 0.0,
-     "specular_color": [0.9, 0.9, 0.9], "specular_roughness": 0.032, "specular_IOR": 50.0,
-     "diffuse_roughness": 0.0},
+     "specular_color": [0.9, 0.9, 0.9], "specular_roughness": 0.032, "specular_IOR": 50.0},
     {"base_color": [0.0, 0.3, 1.0], "metalness": 0.0,
-     "specular_color": [0.0, 0.0, 0.0], "specular_roughness": 1.0, "specular_IOR": 1.0,
-     "diffuse_roughness": 0.0},
+     "specular_color": [0.0, 0.0, 0.0], "specular_roughness": 1.0, "specular_IOR": 1.0},
 ]
 
 

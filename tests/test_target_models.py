@@ -126,10 +126,9 @@ EDGES = {
                         for e in (0.02, 1.0, 10.0) for k in (0.0, 15.0)
                         for a in (1e-3, 2.0) for w in (0.0, 1.0)],
     "standard_surface": [{"base_color": b, "metalness": m, "specular_color": c,
-                          "specular_roughness": r, "specular_IOR": i, "diffuse_roughness": d}
+                          "specular_roughness": r, "specular_IOR": i}
                          for b in (0.0, 1.0) for m in (0.0, 1.0) for c in (0.0, 1.0)
-                         for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 50.0)
-                         for d in (0.0, 1.0)],
+                         for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 50.0)],
 }
 
 
@@ -175,7 +174,7 @@ def test_rough_conductor_fit_reproduces_its_table():
 
 
 STANDARD = {"base_color": [0.6, 0.3, 0.1], "metalness": 0.3, "specular_color": [0.9, 0.8, 0.7],
-            "specular_roughness": 0.4, "specular_IOR": 2.0, "diffuse_roughness": 0.4}
+            "specular_roughness": 0.4, "specular_IOR": 2.0}
 
 
 def test_standard_surface_fit_reproduces_its_table():
@@ -192,8 +191,7 @@ def test_standard_surface_layers_by_albedo_not_by_fresnel():
     a black tint still darkens the diffuse, alike in every channel."""
     m = models.get("standard_surface")
     wi, wo = _pairs(300, seed=4)
-    p = {**STANDARD, "metalness": 0.0, "specular_color": [0.0, 0.0, 0.0],
-         "diffuse_roughness": 0.0}
+    p = {**STANDARD, "metalness": 0.0, "specular_color": [0.0, 0.0, 0.0]}
     f = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
     base = np.asarray(STANDARD["base_color"]) / np.pi
     ratio = f / base

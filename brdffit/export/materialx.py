@@ -6,10 +6,10 @@ Target models (docs/models.md), the first the default:
   (``ND_standard_surface_surfaceshader``) as MaterialX's own GLSL shades it. The model's
   parameters are the node's inputs under the same names, so the mapping is a copy:
 
-      base_color, metalness, specular_color, specular_roughness, specular_IOR,
-      diffuse_roughness
+      base_color, metalness, specular_color, specular_roughness, specular_IOR
 
-  and ``base = 1``, ``specular = 1`` (MaterialX's defaults, which the model holds:
+  and ``base = 1``, ``specular = 1``, ``diffuse_roughness = 0`` (MaterialX's defaults,
+  which the model holds:
   ``brdffit.models.standard_surface.FIXED_INPUTS``); every other input
   at its default (no coat, sheen, subsurface, transmission, thin film or emission,
   ``specular_anisotropy`` 0): the model's own assumptions. The export is exact: the
@@ -39,10 +39,10 @@ SHADING_NOTE = ("MaterialX's gltf_pbr node layers its specular lobe over the dif
 #: standard_surface model parameter -> (MaterialX input type); the names are the inputs'.
 STANDARD_SURFACE_INPUTS = {
     "base_color": "color3", "metalness": "float", "specular_color": "color3",
-    "specular_roughness": "float", "specular_IOR": "float", "diffuse_roughness": "float",
+    "specular_roughness": "float", "specular_IOR": "float",
 }
 #: the inputs the model holds fixed (models/standard_surface.py FIXED_INPUTS), written too
-STANDARD_SURFACE_FIXED = {"base": 1.0, "specular": 1.0}
+STANDARD_SURFACE_FIXED = {"base": 1.0, "specular": 1.0, "diffuse_roughness": 0.0}
 GLTF_PBR_INPUTS = {"base_color": "color3", "metallic": "float", "roughness": "float",
                    "ior": "float"}
 

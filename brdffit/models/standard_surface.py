@@ -18,7 +18,7 @@ f_r cos_i, so f_r = response / cos_i (divided out in closed form below):
     F_d     = exact dielectric Fresnel(cos_d; specular_IOR)     (mx_fresnel_dielectric)
     spec    = specular_color D V2 F_d comp(F_d)                      (mx_dielectric_bsdf)
     T       = 1 - comp(F_d) (F0 A + B),  F0 = ((ior-1)/(ior+1))^2       (its throughput)
-    diff    = base_color ON(sigma = diffuse_roughness) / pi       (mx_oren_nayar_diffuse)
+    diff    = base_color / pi            (mx_oren_nayar_diffuse at diffuse_roughness 0)
     n, k    = artistic_ior(base_color, specular_color)                 (mx_artistic_ior)
     metal   = D V2 F_c(cos_d; n, k) comp(F_c)   (mx_conductor_bsdf, mx_fresnel_conductor)
     f       = metalness metal + (1 - metalness) (spec + T diff)       (mix, layer)
@@ -28,10 +28,10 @@ metal's reflectivity), so ``base`` is not fitted: it is 1. ``specular`` (the die
 weight) is MaterialX's default 1, not fitted: it multiplies ``specular_color`` everywhere
 but in the throughput T, and where the diffuse is black the two are one parameter (a fit
 then ran to its step limit: nickel, gold-metallic-paint); fitted, it gained 2-4% log_rmse
-on red-plastic and pink-fabric (measured 2026-11-26). The other parameters are
-MaterialX's inputs under their names. ON is MaterialX's Oren-Nayar
-(``A + B max(0, wi_xy . wo_xy) / max(cos_i, cos_o)``, sigma = ``diffuse_roughness``
-in radians, as docs/models.md's ``oren_nayar``).
+on red-plastic and pink-fabric (measured 2026-11-26). ``diffuse_roughness`` (MaterialX's
+Oren-Nayar sigma) is its default 0, Lambert: fitted, it gained nothing on nickel, brass,
+chrome, blue-fabric and pink-felt and 0.2% on red-plastic and pink-fabric (2026-11-26).
+The other parameters are MaterialX's inputs under their names.
 
 | name               | range             | meaning (the MaterialX input)                  |
 |--------------------|-------------------|------------------------------------------------|
@@ -40,13 +40,10 @@ in radians, as docs/models.md's ``oren_nayar``).
 | specular_color     | [0, 1], RGB       | tint of the dielectric; the metal's edge colour |
 | specular_roughness | [0.0316, 1] (log) | alpha = roughness^2; lower bound alpha = 1e-3  |
 | specular_IOR       | [1, 50] (log)     | the dielectric's index of refraction           |
-| diffuse_roughness  | [0, 1]            | Oren-Nayar sigma (radians)                     |
 
 Not reciprocal: E, comp and T read the view's cosine (as MaterialX's do). Cosines are
-clamped to 1e-8 as MaterialX clamps them (``M_FLOAT_EPS``); its Oren-Nayar reads
-``max(L.V, 1e-8) - cos_i cos_o`` where the model reads ``max(0, wi_xy . wo_xy)``, which
-differ only for cos_i cos_o < 1e-8. T can dip below 0 (to -0.007 at cos_o = 1e-8, alpha
-1e-3, index 50; E's fit reaches 1.03), as MaterialX's does.
+clamped to 1e-8 as MaterialX clamps them (``M_FLOAT_EPS``). T can dip below 0 (to
+-0.007 at cos_o = 1e-8, alpha 1e-3, index 50; E's fit reaches 1.03), as MaterialX's does.
 """
 
 from __future__ import annotations
@@ -75,12 +72,10 @@ SPECULAR_ROUGHNESS = ParamSpec("specular_roughness", "specular_roughness (alpha 
 #: where those fits stopped, cost them 3-8% and 60-85% of their log_rmse, 2026-11-26).
 SPECULAR_IOR = ParamSpec("specular_IOR", "specular_IOR: index of refraction of the dielectric",
                          1.0, 50.0, scale="log")
-DIFFUSE_ROUGHNESS = ParamSpec("diffuse_roughness", "diffuse_roughness: Oren-Nayar sigma",
-                              0.0, 1.0)
 
 #: The ``standard_surface`` inputs the model holds at a value instead of fitting them
 #: (MaterialX's defaults; the export writes them); every other input not fitted is off.
-FIXED_INPUTS = {"base": 1.0, "specular": 1.0}
+FIXED_INPUTS = {"base": 1.0, "specular": 1.0, "diffuse_roughness": 0.0}
 
 # mx_ggx_dir_albedo_analytic's rational fit: rows (A numerator, B numerator, A
 # denominator, B denominator), columns the coefficients of 1, x, y, x y, x^2, y^2,
@@ -141,8 +136,7 @@ def ggx_dv(alpha, frame: Frame):
 
 class StandardSurface(AbstractBRDFModel):
     name = "standard_surface"
-    param_specs = (BASE_COLOR, METALNESS, SPECULAR_COLOR, SPECULAR_ROUGHNESS, SPECULAR_IOR,
-                   DIFFUSE_ROUGHNESS)
+    param_specs = (BASE_COLOR, METALNESS, SPECULAR_COLOR, SPECULAR_ROUGHNESS, SPECULAR_IOR)
     shape_grid = tuple(
         {"specular_roughness": min(math.sqrt(a), 1.0), "metalness": m, "specular_IOR": ior}
         for a in ALPHA_GRID
@@ -152,8 +146,7 @@ class StandardSurface(AbstractBRDFModel):
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         alpha = specular_alpha(params["specular_roughness"])
-        # MaterialX clamps N.L, N.V, V.H to [1e-8, 1] (M_FLOAT_EPS)
-        ci = jnp.maximum(frame.cos_i, 1e-8)
+        # MaterialX clamps N.V, V.H to [1e-8, 1] (M_FLOAT_EPS)
         co = jnp.maximum(frame.cos_o, 1e-8)
         cd = jnp.maximum(frame.cos_d, 1e-8)
         dv = ggx_dv(alpha, frame)
@@ -170,12 +163,9 @@ class StandardSurface(AbstractBRDFModel):
         spec = tint * (dv * f_d * comp_d)[None]
         throughput = 1.0 - comp_d * (f0 * big_a + big_b)
 
-        s2 = params["diffuse_roughness"] ** 2
-        on_a = 1.0 - 0.5 * s2 / (s2 + 0.33)
-        on_b = 0.45 * s2 / (s2 + 0.09)
-        on = on_a + on_b * safe_div(jnp.maximum(frame.dot_xy, 0.0), jnp.maximum(ci, co), 1e-12)
+        # mx_oren_nayar_diffuse at roughness 0: A = 1, B = 0
         base = params["base_color"][expand]
-        diffuse = base * (on / jnp.pi)[None]
+        diffuse = base / jnp.pi
 
         n, k = artistic_ior(base, tint)
         # >= 0 as the formula is; the floor only catches rounding of an index of 1 at
@@ -217,6 +207,5 @@ class StandardSurface(AbstractBRDFModel):
             base = np.clip((1 - m) * kd + m * reflectivity, 0.02, 0.98)
             edge = (1 - m) * colour + m * reflectivity
             starts.append(self.unconstrain({
-                "base_color": base, "specular_color": edge, "diffuse_roughness": 0.1,
-                **shape}))
+                "base_color": base, "specular_color": edge, **shape}))
         return np.stack(starts)
