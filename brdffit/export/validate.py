@@ -10,7 +10,10 @@ exporting never do.
   ``log_rmse_to_fit`` is computed on);
 - :func:`mitsuba_sphere` renders the unit sphere of ``brdffit.fitting.sphere`` (orthographic
   camera along -z, a directional light of irradiance pi) with Mitsuba's path tracer;
-- :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks.
+- :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks;
+- :func:`materialx_eval` evaluates a MaterialX document as MaterialX shades it: the
+  GLSL its own generator writes (:func:`materialx_glsl`), run on a headless OpenGL 4
+  context (moderngl on EGL; Mesa's llvmpipe where there is no GPU), divided by cos_i.
 """
 
 from __future__ import annotations
