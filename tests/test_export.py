@@ -55,6 +55,26 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     assert not x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
 
 
+STANDARD = {"base_color": [0.8, 0.35, 0.1], "metalness": 0.2,
+            "specular_color": [1.0, 0.9, 0.8], "specular_roughness": 0.45, "specular_IOR": 1.6}
+
+
+def test_standard_surface_fit_exports_exactly_to_materialx():
+    x = export(result("standard_surface", STANDARD), "materialx")
+    assert x.fidelity["exact"] and x.fidelity["target_model"] == "standard_surface"
+    assert x.fidelity["renderer_model"] == "standard_surface"
+    assert not any("layers its specular" in w for w in x.warnings)  # MaterialX's own shading
+    assert x.fidelity["log_rmse_to_fit"] == 0.0 and x.target_params == STANDARD
+    root = ET.fromstring(x.material)
+    node = root.find("standard_surface")
+    inputs = {i.get("name"): i.get("value") for i in node.findall("input")}
+    assert inputs == {"base": "1.0", "base_color": "0.8, 0.35, 0.1", "metalness": "0.2",
+                      "specular": "1.0", "specular_color": "1.0, 0.9, 0.8",
+                      "specular_roughness": "0.45", "specular_IOR": "1.6",
+                      "diffuse_roughness": "0.0"}
+    assert root.find("surfacematerial/input").get("nodename") == node.get("name")
+
+
 def test_an_ior_fit_writes_khr_materials_ior():
     r = result("gltf_pbr_ior", {**GLTF, "ior": 1.9})
     g = export(r, "gltf")
@@ -100,6 +120,14 @@ def test_other_fits_are_refitted_and_their_loss_is_the_measured_one():
     assert measured == pytest.approx(loss, rel=1e-9)
     # the same refit behind both glTF-model targets
     assert export(r, "materialx", target_model="gltf_pbr").target_params == e.target_params
+    # MaterialX's default target is its standard_surface node, refitted the same way
+    x = export(r, "materialx")
+    assert not x.fidelity["exact"] and x.fidelity["target_model"] == "standard_surface"
+    measured = table_error(fit_as_table(r), "standard_surface", x.target_params)["log_rmse"]
+    # 5e-9 apart (measured): the reported figure is the refit's own, before its
+    # parameters are written out as plain floats
+    assert measured == pytest.approx(x.fidelity["log_rmse_to_fit"], rel=1e-6)
+    assert "<standard_surface " in x.material
 
 
 def test_every_clamp_is_a_warning():

@@ -1,6 +1,7 @@
-"""The renderer target models gltf_pbr and rough_conductor: each against its
-renderer's formula written independently, reciprocity, energy, NaN-free everywhere,
-and recovery of their parameters from a table they made."""
+"""The renderer target models gltf_pbr, rough_conductor and standard_surface: each against
+its renderer's formula written independently, reciprocity, energy, NaN-free everywhere,
+and recovery of their parameters from a table they made (standard_surface against
+MaterialX's own shading: tests/test_materialx_shading.py)."""
 
 from __future__ import annotations
 
@@ -128,6 +129,10 @@ EDGES = {
     "rough_conductor": [{"eta": e, "k": k, "alpha": a, "kd": 0.5, "weight": w}
                         for e in (0.02, 1.0, 10.0) for k in (0.0, 15.0)
                         for a in (1e-3, 2.0) for w in (0.0, 1.0)],
+    "standard_surface": [{"base_color": b, "metalness": m, "specular_color": c,
+                          "specular_roughness": r, "specular_IOR": i}
+                         for b in (0.0, 1.0) for m in (0.0, 1.0) for c in (0.0, 1.0)
+                         for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 50.0)],
 }
 
 
@@ -172,10 +177,41 @@ def test_rough_conductor_fit_reproduces_its_table():
     assert r.params["alpha"] == pytest.approx(CONDUCTOR["alpha"], rel=1e-2)
 
 
+STANDARD = {"base_color": [0.6, 0.3, 0.1], "metalness": 0.3, "specular_color": [0.9, 0.8, 0.7],
+            "specular_roughness": 0.4, "specular_IOR": 2.0}
+
+
+def test_standard_surface_fit_reproduces_its_table():
+    # metalness, base_color and specular_color share the colour between the metal, the
+    # diffuse and the tint, so the test is on the BRDF and on the roughness
+    r = fit(_table_of("standard_surface", STANDARD), "standard_surface", samples=4096)
+    assert r.log_rmse < 1e-4, r
+    assert r.params["specular_roughness"] == pytest.approx(0.4, rel=1e-2)
+
+
+def test_standard_surface_layers_by_albedo_not_by_fresnel():
+    """MaterialX's layer: the diffuse under the dielectric is weighted by the lobe's
+    throughput 1 - E_spec(cos_o) comp(F(cos_d)), which the specular tint does not enter:
+    a black tint still darkens the diffuse, alike in every channel."""
+    m = models.get("standard_surface")
+    wi, wo = _pairs(300, seed=4)
+    p = {**STANDARD, "metalness": 0.0, "specular_color": [0.0, 0.0, 0.0]}
+    f = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
+    base = np.asarray(STANDARD["base_color"]) / np.pi
+    ratio = f / base
+    assert np.all(ratio < 1.0) and np.all(ratio > 0.5)
+    np.testing.assert_allclose(ratio[:, 0], ratio[:, 2], rtol=1e-12)
+    metal = {**p, "metalness": 1.0, "specular_color": [1.0, 1.0, 1.0]}
+    lobe = np.asarray(m(_jnp(metal), jnp.asarray(wi), jnp.asarray(wo)))
+    f_black = np.asarray(m(_jnp({**metal, "base_color": [0.0] * 3}), jnp.asarray(wi),
+                           jnp.asarray(wo)))
+    assert np.all(f_black >= 0) and np.all(lobe > f_black)
+
+
 def test_auto_candidates_leave_the_target_models_out():
     from brdffit.selection import DEFAULT_CANDIDATES
 
-    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor"}
+    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor", "standard_surface"}
     assert not targets & set(DEFAULT_CANDIDATES)
     assert targets <= set(models.names())
 

@@ -92,10 +92,12 @@ def energy_report(model: str, params: dict) -> tuple[dict, list[str]]:
     if over.any():
         channels = [c for c, o in zip("RGB", over.any(axis=0), strict=True) if o]
         angles = [THETA_I_DEG[j] for j in np.flatnonzero(over.any(axis=1))]
+        where = (f"at {angles[0]:g} deg" if len(angles) == 1
+                 else f"from {angles[0]:g} to {angles[-1]:g} deg")
         warnings.append(
             f"energy: the {model} material reflects up to {a[i].max():.3f} of the light "
             f"arriving at {THETA_I_DEG[i]:g} deg in {'RGB'[int(np.argmax(a[i]))]} "
-            f"(directional albedo > 1 in {', '.join(channels)} from {angles[0]:g} to "
-            f"{angles[-1]:g} deg incidence): a renderer brightens it with every bounce; "
-            "a fit with --physical (physical=True) stays below 1")
+            f"(directional albedo > 1 in {', '.join(channels)} {where} incidence): a "
+            "renderer brightens it with every bounce; a fit with --physical "
+            "(physical=True) stays below 1")
     return report, warnings

@@ -1,36 +1,65 @@
-"""MaterialX export: a ``gltf_pbr`` surface shader and its material (MaterialX 1.39).
+"""MaterialX export: a ``standard_surface`` or ``gltf_pbr`` shader and its material (1.39).
 
-Target model ``gltf_pbr`` (docs/models.md). MaterialX's standard library has the glTF
-shading model as a node (``ND_gltf_pbr_surfaceshader``), whose inputs are glTF's
-parameters under the same names, so the mapping is a copy:
+Target models (docs/models.md), the first the default:
 
-    base_color = base_color,  metallic = metallic,  roughness = roughness
+- ``standard_surface``: MaterialX's ``standard_surface`` node
+  (``ND_standard_surface_surfaceshader``) as MaterialX's own GLSL shades it. The model's
+  parameters are the node's inputs under the same names, so the mapping is a copy:
 
-and ``ior = ior`` for a ``gltf_pbr_ior`` fit; the node's other inputs at their
-defaults (ior 1.5, specular 1, no clearcoat, transmission, sheen or emission): the
-gltf_pbr model's own assumptions.
+      base_color, metalness, specular_color, specular_roughness, specular_IOR
 
-What is not exact: MaterialX implements the node as a graph of its BSDF nodes, which
-layers the dielectric lobe over the diffuse one by the lobe's directional albedo
-rather than by glTF Appendix B's ``(1 - F)``; the parameters are glTF's exactly, the
-shading agrees with the spec's formula only as closely as that graph does. The
-export says so in its warnings.
+  and ``base = 1``, ``specular = 1``, ``diffuse_roughness = 0`` (MaterialX's defaults,
+  which the model holds:
+  ``brdffit.models.standard_surface.FIXED_INPUTS``); every other input
+  at its default (no coat, sheen, subsurface, transmission, thin film or emission,
+  ``specular_anisotropy`` 0): the model's own assumptions. The export is exact: the
+  generated GLSL run on OpenGL agrees with the model to 1e-5 relative (7e-5 at
+  89.9 degrees, the shader's float32)
+  (``brdffit.export.validate.materialx_eval``, ``tests/test_materialx_shading.py``).
+- ``gltf_pbr``, ``gltf_pbr_ior``: MaterialX's ``gltf_pbr`` node
+  (``ND_gltf_pbr_surfaceshader``), inputs glTF's parameters under the same names:
+  ``base_color``, ``metallic``, ``roughness`` (and ``ior``); the other inputs at their
+  defaults. Not exact: MaterialX implements that node as a graph of its BSDF nodes,
+  which layers the dielectric lobe over the diffuse one by the lobe's directional
+  albedo rather than by glTF Appendix B's ``(1 - F)``; the parameters are glTF's
+  exactly, the shading agrees with the spec's formula only as closely as that graph
+  does (:data:`SHADING_NOTE`, for the export's warnings).
 """
 
 from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior")
-#: target model -> the model that evaluates the file as MaterialX shades it (None: not
-#: modelled)
-SHADED_AS = {m: None for m in TARGET_MODELS}
+#: the models a fit is copied to by default (any other fit is refitted as the first);
+#: ``export(..., target_model=)`` chooses among every key of SHADED_AS
+TARGET_MODELS = ("standard_surface",)
+#: target model -> the model that evaluates the file as MaterialX shades it: its
+#: generated GLSL agrees with standard_surface to 1e-5 (validate.materialx_eval); its
+#: shading of the gltf_pbr node is not modelled (None)
+SHADED_AS = {"standard_surface": "standard_surface", "gltf_pbr": None, "gltf_pbr_ior": None}
 UNMODELLED_NOTE = ("fidelity: MaterialX's own shading of its gltf_pbr node is not modelled, "
-                   "so log_rmse_to_table is not measured")
+                   "so log_rmse_to_table is not measured; the default standard_surface is")
 MEDIA_TYPE = "application/mtlx+xml"
 SHADING_NOTE = ("MaterialX's gltf_pbr node layers its specular lobe over the diffuse by "
                 "directional albedo, not glTF Appendix B's (1 - F): the parameters are exact, "
                 "the shading there is MaterialX's approximation of the spec")
+
+#: standard_surface model parameter -> (MaterialX input type); the names are the inputs'.
+STANDARD_SURFACE_INPUTS = {
+    "base_color": "color3", "metalness": "float", "specular_color": "color3",
+    "specular_roughness": "float", "specular_IOR": "float",
+}
+#: the inputs the model holds fixed (models/standard_surface.py FIXED_INPUTS), written too
+STANDARD_SURFACE_FIXED = {"base": 1.0, "specular": 1.0, "diffuse_roughness": 0.0}
+GLTF_PBR_INPUTS = {"base_color": "color3", "metallic": "float", "roughness": "float",
+                   "ior": "float"}
+
+
+def shading_notes(model: str) -> list[str]:
+    """The export warnings a MaterialX document of ``model`` parameters needs: the
+    ``gltf_pbr`` node's :data:`SHADING_NOTE`; none for ``standard_surface``, whose
+    model is MaterialX's own shading."""
+    return [] if model == "standard_surface" else [SHADING_NOTE]
 
 
 def _identifier(name: str) -> str:
@@ -39,21 +68,41 @@ def _identifier(name: str) -> str:
     return out if not out[0].isdigit() else f"m_{out}"
 
 
-def document(params: dict, name: str) -> str:
-    """The MaterialX document (XML text) of ``gltf_pbr`` parameters."""
+def _input(name: str, kind: str, value) -> str:
+    if kind == "color3":
+        text = ", ".join(repr(float(x)) for x in value)
+    else:
+        text = repr(float(value))
+    return f'    <input name="{name}" type="{kind}" value="{text}"/>'
+
+
+def document(params: dict, name: str, model: str | None = None) -> str:
+    """The MaterialX document (XML text) of ``model`` parameters (one of
+    :data:`SHADED_AS`): a ``standard_surface`` node for ``standard_surface``, a
+    ``gltf_pbr`` node for ``gltf_pbr`` and ``gltf_pbr_ior``, and its ``surfacematerial``.
+    ``model=None``: the model whose parameters ``params`` holds (``metalness``:
+    standard_surface; ``ior``: gltf_pbr_ior; else gltf_pbr)."""
+    if model is None:
+        model = ("standard_surface" if "metalness" in params
+                 else "gltf_pbr_ior" if "ior" in params else "gltf_pbr")
+    if model not in SHADED_AS:
+        raise ValueError(f"MaterialX writes {', '.join(SHADED_AS)} parameters, not {model!r}")
     ident = _identifier(name)
     shader = quoteattr("SR_" + ident)
-    colour = ", ".join(repr(float(x)) for x in params["base_color"])
+    if model == "standard_surface":
+        node = "standard_surface"
+        inputs = [_input(k, "float", v) for k, v in STANDARD_SURFACE_FIXED.items()]
+        inputs += [_input(k, kind, params[k]) for k, kind in STANDARD_SURFACE_INPUTS.items()]
+    else:
+        node = "gltf_pbr"
+        inputs = [_input(k, kind, params[k]) for k, kind in GLTF_PBR_INPUTS.items()
+                  if k in params]
     return "\n".join([
         '<?xml version="1.0"?>',
         '<materialx version="1.39">',
-        f'  <gltf_pbr name={shader} type="surfaceshader">',
-        f'    <input name="base_color" type="color3" value="{colour}"/>',
-        f'    <input name="metallic" type="float" value="{float(params["metallic"])!r}"/>',
-        f'    <input name="roughness" type="float" value="{float(params["roughness"])!r}"/>',
-        *([f'    <input name="ior" type="float" value="{float(params["ior"])!r}"/>']
-          if "ior" in params else []),
-        "  </gltf_pbr>",
+        f'  <{node} name={shader} type="surfaceshader">',
+        *inputs,
+        f"  </{node}>",
         f'  <surfacematerial name={quoteattr("M_" + ident)} type="material">',
         f'    <input name="surfaceshader" type="surfaceshader" nodename={shader}/>',
         "  </surfacematerial>",
@@ -64,5 +113,5 @@ def document(params: dict, name: str) -> str:
 
 def write(params: dict, name: str, target_model: str) -> tuple[str, dict[str, str], list[str]]:
     """The material (the XML text), its files and the notes on them."""
-    text = document(params, name)
-    return text, {f"{name}.mtlx": text}, [SHADING_NOTE]
+    text = document(params, name, target_model)
+    return text, {f"{name}.mtlx": text}, shading_notes(target_model)

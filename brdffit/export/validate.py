@@ -12,7 +12,10 @@ exporting never do.
   camera along -z, a directional light of irradiance pi) with Mitsuba's path tracer;
 - :func:`materialx_validate`, :func:`gltf_validate`: the tools' own document checks;
 - :func:`gltf_spec_eval`: glTF's BRDF as its spec writes it, independently of brdffit's
-  model (no renderer here evaluates glTF's BRDF, so the spec is the reference).
+  model (no renderer here evaluates glTF's BRDF, so the spec is the reference);
+- :func:`materialx_eval` evaluates a MaterialX document as MaterialX shades it: the
+  GLSL its own generator writes (:func:`materialx_glsl`), run on a headless OpenGL 4
+  context (moderngl on EGL; Mesa's llvmpipe where there is no GPU), divided by cos_i.
 """
 
 from __future__ import annotations
@@ -205,3 +208,118 @@ def gltf_validate(document: dict, validator: str) -> dict:
     if out.returncode != 0:
         raise RuntimeError(f"gltf-validator failed: {out.stderr.decode()[-2000:]}")
     return json.loads(out.stdout)
+
+
+# -- MaterialX's own shading: its generated GLSL, run on OpenGL ------------------------
+
+#: The harness's vertex stage: one point per direction pair, at its own pixel, carrying
+#: the generated pixel shader's ``VertexData`` (normal +z, the surface point at -wo so
+#: that the shader's V = normalize(u_viewPosition - positionWorld) is wo).
+_MTLX_VERTEX = """#version 400
+in vec3 i_position;
+in vec2 i_pixel;
+out VertexData
+{
+    vec3 normalWorld;
+    vec3 tangentWorld;
+    vec3 positionWorld;
+} vd;
+void main()
+{
+    vd.normalWorld = vec3(0.0, 0.0, 1.0);
+    vd.tangentWorld = vec3(1.0, 0.0, 0.0);
+    vd.positionWorld = i_position;
+    gl_Position = vec4(i_pixel, 0.0, 1.0);
+    gl_PointSize = 1.0;
+}
+"""
+
+
+def materialx_glsl(text: str) -> str:
+    """The GLSL pixel shader MaterialX's own generator (``GlslShaderGenerator``, GLSL
+    4.0) writes for the first surface shader node of the document ``text``: one
+    directional light bound (``ND_directional_light``), no environment light
+    (``SPECULAR_ENVIRONMENT_NONE``), no shadow map; every other option at its default
+    (analytic directional albedo, no sRGB encoding, no transparency)."""
+    who = "brdffit.export.validate.materialx_glsl"
+    mx = _import("MaterialX", who)
+    gen_shader = _import("MaterialX.PyMaterialXGenShader", who)
+    gen_glsl = _import("MaterialX.PyMaterialXGenGlsl", who)
+    doc = mx.createDocument()
+    mx.readFromXmlString(doc, text)
+    lib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+    doc.importLibrary(lib)
+    shaders = [n for n in doc.getNodes() if n.getType() == "surfaceshader"]
+    if not shaders:
+        raise ValueError("the document has no surface shader node")
+    gen = gen_glsl.GlslShaderGenerator.create()
+    ctx = gen_shader.GenContext(gen)
+    ctx.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
+    opt = ctx.getOptions()
+    methods = gen_shader.HwSpecularEnvironmentMethod
+    opt.hwSpecularEnvironmentMethod = methods.SPECULAR_ENVIRONMENT_NONE
+    opt.hwShadowMap = False
+    opt.hwMaxActiveLightSources = 1
+    gen_shader.HwShaderGenerator.bindLightShader(doc.getNodeDef("ND_directional_light"), 1, ctx)
+    shader = gen.generate("brdffit", shaders[0], ctx)
+    source = shader.getSourceCode(gen_shader.PIXEL_STAGE)
+    if "uniform bool u_refractionTwoSided" not in source:
+        # MaterialX 1.39.5 declares this transmission option only with an environment
+        # method, but its mx_environment_none.glsl reads it; false is its default
+        source = source.replace("uniform int u_numActiveLightSources",
+                                "uniform bool u_refractionTwoSided = false;\n"
+                                "uniform int u_numActiveLightSources", 1)
+    return source
+
+
+def materialx_eval(text: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """f_r (n, 3) of the MaterialX document ``text`` as MaterialX's generated GLSL shades
+    it (:func:`materialx_glsl`), run on an OpenGL 4 context without a display (moderngl,
+    EGL; Mesa's llvmpipe where there is no GPU), at the direction pairs ``wi`` (light),
+    ``wo`` (view), local frame, normal +z.
+
+    Each pair is one point drawn with a directional light of colour 1 and intensity 1
+    from ``wi``; the shader writes ``sum over lights of intensity * response``, and a
+    BSDF's response is f_r cos_i, so the value read back is divided by cos_i
+    (MaterialX's clamp to [1e-8, 1]). Single precision, as the shader.
+    """
+    moderngl = _import("moderngl", "brdffit.export.validate.materialx_eval")
+    wi = np.asarray(wi, np.float64).reshape(-1, 3)
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    n = wi.shape[0]
+    width = min(n, 1024)
+    height = -(-n // width)
+    j = np.arange(n)
+    pixel = np.stack([(2 * (j % width) + 1) / width - 1, (2 * (j // width) + 1) / height - 1], -1)
+    ctx = moderngl.create_standalone_context(backend="egl", require=400)
+    try:
+        prog = ctx.program(vertex_shader=_MTLX_VERTEX, fragment_shader=materialx_glsl(text))
+        target = ctx.renderbuffer((width, height), components=4, dtype="f4")
+        fbo = ctx.framebuffer(color_attachments=[target])
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        data = np.hstack([-wo, pixel]).astype("f4")
+        vbo = ctx.buffer(reserve=data.nbytes)
+        vao = ctx.vertex_array(prog, [(vbo, "3f 2f", "i_position", "i_pixel")])
+        prog["u_viewPosition"].value = (0.0, 0.0, 0.0)
+        prog["u_numActiveLightSources"].value = 1
+        prog["u_lightData[0].type"].value = 1
+        prog["u_lightData[0].color"].value = (1.0, 1.0, 1.0)
+        prog["u_lightData[0].intensity"].value = 1.0
+        # one draw per distinct light direction
+        lights, inverse = np.unique(wi, axis=0, return_inverse=True)
+        order = np.argsort(inverse.ravel(), kind="stable")
+        counts = np.bincount(inverse.ravel(), minlength=len(lights))
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        vbo.write(data[order].tobytes())
+        for light, first, count in zip(lights, starts, counts, strict=True):
+            prog["u_lightData[0].direction"].value = tuple(float(x) for x in -light)
+            vao.render(moderngl.POINTS, vertices=int(count), first=int(first))
+        raw = np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32)
+        # each point carries its own pair's pixel, whatever its place in the buffer
+        out = raw.reshape(height, width, 4)[..., :3].reshape(-1, 3)[:n].astype(np.float64)
+    finally:
+        ctx.release()
+    return out / np.clip(wi[:, 2:3], 1e-8, 1.0)

@@ -21,13 +21,14 @@ from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 from brdffit.models.oren_nayar import OrenNayar
 from brdffit.models.phong import Phong
 from brdffit.models.rough_conductor import RoughConductor
+from brdffit.models.standard_surface import StandardSurface
 
 #: The built-in models, cheapest to richest (``auto`` tries them in this order).
 BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
-    GltfPBR(), GltfPBR(ior=True), RoughConductor(),
+    GltfPBR(), GltfPBR(ior=True), RoughConductor(), StandardSurface(),
     GGX2(),
 )
 
