@@ -67,7 +67,8 @@ def test_spectral_sphere_has_the_rgb_colour(case):
 
 
 @pytest.mark.parametrize("source", [("gold-metallic-paint", "rough_conductor"),
-                                    ("red-plastic", "ggx")])  # the ggx fit is refitted
+                                    ("red-plastic", "ggx")],  # the ggx fit is refitted
+                         ids=["gold-metallic-paint", "red-plastic-ggx"])
 def test_spectral_sphere_of_a_real_fit_has_the_rgb_colour(source):
     _agree(_real_params(*source))
 

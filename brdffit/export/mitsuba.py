@@ -25,10 +25,10 @@ reflectance, which keeps its sRGB colour).
   ``regular`` spectra over [360, 830] nm, fitted so that Mitsuba's projection of the
   spectral Fresnel onto sRGB is the RGB variants' Fresnel colour
   (:mod:`brdffit.export.spectral_ior`); a triple whose channels are equal is the
-  number itself. The RGB form of the same spectra would be their linear projection,
-  not the triples, so each kind of variant has its own dictionary:
-  :func:`load_dict_for_variant` picks by the variant's name. Monochrome variants are
-  refused (they render one luminance Fresnel, not a colour).
+  number itself. An RGB variant loads this form but cannot render it (Mitsuba 3.6.4:
+  ``RegularSpectrum::eval(): not implemented``), so each kind of variant has its own
+  dictionary: :func:`load_dict_for_variant` picks by the variant's name. Monochrome
+  variants are refused (they render one luminance Fresnel, not a colour).
 """
 
 from __future__ import annotations
