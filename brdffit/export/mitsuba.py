@@ -4,26 +4,55 @@ Target model ``rough_conductor`` (docs/models.md), which is Mitsuba's own plugin
 
     {"type": "blendbsdf", "weight": weight,
      "bsdf_0": {"type": "roughconductor", "distribution": "ggx", "alpha": alpha,
-                "eta": <eta RGB>, "k": <k RGB>},
+                "eta": <eta>, "k": <k>},
      "bsdf_1": {"type": "diffuse", "reflectance": <kd RGB>}}
 
 ``blendbsdf`` evaluates ``(1 - weight) bsdf_0 + weight bsdf_1``; with ``weight = 0``
-the export is the ``roughconductor`` alone. ``eta`` and ``k`` are not reflectances
-(they exceed 1), so they are written as ``srgb`` textures with ``unbounded = true``,
-which Mitsuba's RGB variants take as given (in the XML a plain ``<rgb>``, which the
-XML reader leaves unbounded where the plugin does not expect a reflectance); ``kd`` is a
-reflectance in [0, 1], the model's bound, so Mitsuba accepts it unchanged.
+the export is the ``roughconductor`` alone. ``kd`` is a reflectance in [0, 1], the
+model's bound, so every variant takes it as it is (a spectral one upsamples it as a
+reflectance, which keeps its sRGB colour).
+
+``eta`` and ``k`` are not reflectances, and their meaning depends on the variant:
+
+- **RGB variants** (``scalar_rgb``, ``llvm_ad_rgb``, ...; ``load_dict(params)``): the
+  triples, as ``srgb`` textures with ``unbounded = true``, which these variants take
+  as given (in the XML a plain ``<rgb>``, which the XML reader leaves unbounded where
+  the plugin does not expect a reflectance).
+- **Spectral variants** (``scalar_spectral``, ``llvm_ad_spectral``, their
+  ``_polarized`` kin; ``load_dict(params, spectral=True)``): such an ``srgb`` texture
+  is upsampled as a reflectance there and clipped to [0, 1] (``eta = [5, 10, 10]``
+  becomes 1 at every wavelength: no reflection at all), so the spectral form writes
+  ``regular`` spectra over [360, 830] nm, fitted so that Mitsuba's projection of the
+  spectral Fresnel onto sRGB is the RGB variants' Fresnel colour
+  (:mod:`brdffit.export.spectral_ior`); a triple whose channels are equal is the
+  number itself. An RGB variant loads this form but cannot render it (Mitsuba 3.6.4:
+  ``RegularSpectrum::eval(): not implemented``), so each kind of variant has its own
+  dictionary: :func:`load_dict_for_variant` picks by the variant's name. Monochrome
+  variants are refused (they render one luminance Fresnel, not a colour).
 """
 
 from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
+import numpy as np
+
+from brdffit.errors import BrdffitError
+from brdffit.export import spectral_ior
+
 TARGET_MODELS = ("rough_conductor",)
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
 #: agrees with rough_conductor to 2.1e-5 relative (docs/exports.md)
 SHADED_AS = {"rough_conductor": "rough_conductor"}
 MEDIA_TYPE = "application/json"
+
+#: Largest relative error (floored at F = 0.01, over cos_d in [0, 1] and the channels)
+#: of the spectral form's projected Fresnel against the RGB one that an export accepts.
+SPECTRAL_TOLERANCE = 0.02
+
+
+class SpectralExportError(BrdffitError, ValueError):
+    """A material that a Mitsuba variant cannot render as the RGB variants do."""
 
 
 def _rgb(value, unbounded: bool) -> dict:
@@ -33,14 +62,45 @@ def _rgb(value, unbounded: bool) -> dict:
     return {"type": "rgb", "value": colour}
 
 
-def load_dict(params: dict) -> dict:
-    """The Mitsuba 3 BSDF dictionary of ``rough_conductor`` parameters."""
+def _spectrum(nodes: np.ndarray) -> dict:
+    return {"type": "regular", "wavelength_min": float(spectral_ior.NODES[0]),
+            "wavelength_max": float(spectral_ior.NODES[-1]),
+            "values": ", ".join(f"{float(v):.9g}" for v in nodes)}
+
+
+def _spectral_ior(eta, k) -> tuple[float | dict, float | dict]:
+    """eta, k for a spectral variant: numbers where every channel is equal, else the
+    fitted ``regular`` spectra; refused where the fit misses the RGB Fresnel."""
+    eta = np.asarray(eta, float)
+    k = np.asarray(k, float)
+    if np.all(eta == eta[0]) and np.all(k == k[0]):
+        return float(eta[0]), float(k[0])
+    fitted = spectral_ior.fit_spectra(eta, k)
+    if not fitted.error <= SPECTRAL_TOLERANCE:
+        raise SpectralExportError(
+            f"rough_conductor eta={eta.tolist()}, k={k.tolist()}: in Mitsuba's spectral "
+            f"variants (scalar_spectral, llvm_ad_spectral, ...) no eta, k spectra found give "
+            f"its RGB Fresnel colour: the closest is {100 * fitted.error:.1f}% off "
+            f"(tolerance {100 * SPECTRAL_TOLERANCE:g}%); render it in an RGB variant "
+            f"(scalar_rgb, llvm_ad_rgb) with load_dict(params)")
+    return _spectrum(fitted.eta), _spectrum(fitted.k)
+
+
+def load_dict(params: dict, spectral: bool = False) -> dict:
+    """The Mitsuba 3 BSDF dictionary of ``rough_conductor`` parameters, for Mitsuba's
+    RGB variants, or with ``spectral=True`` for its spectral ones (module docstring).
+    Raises :class:`SpectralExportError` where a spectral form would not be the same
+    material."""
+    if spectral:
+        eta, k = _spectral_ior(params["eta"], params["k"])
+    else:
+        eta, k = _rgb(params["eta"], True), _rgb(params["k"], True)
     conductor = {
         "type": "roughconductor",
         "distribution": "ggx",
         "alpha": float(params["alpha"]),
-        "eta": _rgb(params["eta"], True),
-        "k": _rgb(params["k"], True),
+        "eta": eta,
+        "k": k,
     }
     weight = float(params["weight"])
     if weight == 0.0:
@@ -53,6 +113,28 @@ def load_dict(params: dict) -> dict:
     }
 
 
+def load_dict_for_variant(params: dict, variant: str | None = None) -> dict:
+    """:func:`load_dict`'s form for the Mitsuba ``variant`` (default: the one set,
+    ``mitsuba.variant()``): the spectral form in a ``*_spectral*`` variant, the RGB form
+    in an ``*_rgb`` one; a monochrome variant is refused."""
+    if variant is None:
+        import mitsuba as mi
+
+        variant = mi.variant()
+        if variant is None:
+            raise SpectralExportError("no Mitsuba variant is set: call mitsuba.set_variant "
+                                      "first, or pass variant=")
+    if "_mono" in variant:
+        raise SpectralExportError(
+            f"Mitsuba variant {variant!r} renders one luminance channel; brdffit's "
+            f"rough_conductor export is an RGB material (use an _rgb or _spectral variant)")
+    if "_spectral" in variant:
+        return load_dict(params, spectral=True)
+    if variant.endswith("_rgb"):
+        return load_dict(params)
+    raise SpectralExportError(f"unknown Mitsuba variant {variant!r}")
+
+
 def _xml(node: dict, name: str | None, indent: str) -> list[str]:
     """One dictionary node as Mitsuba scene XML (the subset ``load_dict`` above writes).
 
@@ -63,6 +145,12 @@ def _xml(node: dict, name: str | None, indent: str) -> list[str]:
         return [f'{indent}<rgb name={quoteattr(name)} value="{_floats(node["value"])}"/>']
     if kind == "srgb":  # the XML reader keeps an <rgb> of a non-reflectance unbounded
         return [f'{indent}<rgb name={quoteattr(name)} value="{_floats(node["color"])}"/>']
+    if kind == "regular":
+        return [f'{indent}<spectrum name={quoteattr(name)} type="regular">',
+                f'{indent}    <float name="wavelength_min" value="{node["wavelength_min"]!r}"/>',
+                f'{indent}    <float name="wavelength_max" value="{node["wavelength_max"]!r}"/>',
+                f'{indent}    <string name="values" value={quoteattr(node["values"])}/>',
+                f"{indent}</spectrum>"]
     lines = [f'{indent}<bsdf type="{kind}">']
     for key, value in node.items():
         if key == "type":
@@ -83,7 +171,9 @@ def _floats(values) -> str:
 
 def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
     """A Mitsuba 3 scene file declaring the material (``<bsdf id=...>``), ready to
-    reference from a shape with ``<ref id=.../>``."""
+    reference from a shape with ``<ref id=.../>``. The file is for the variants its
+    dictionary is for: ``scene_xml(load_dict(params))`` for RGB variants,
+    ``scene_xml(load_dict(params, spectral=True))`` for spectral ones."""
     lines = _xml(material, None, "    ")
     lines[0] = lines[0].replace(f'<bsdf type="{material["type"]}"',
                                 f'<bsdf type="{material["type"]}" id="{material_id}"', 1)

@@ -42,11 +42,18 @@ def _import(module: str, who: str):
         raise MissingExtraError(who, "export-check", (module,)) from None
 
 
-def mitsuba():
-    """The ``mitsuba`` module with an RGB variant set (the first of MITSUBA_VARIANTS
-    that runs here)."""
+def mitsuba(variant: str | None = None):
+    """The ``mitsuba`` module with a variant set: ``variant`` (e.g. ``"scalar_spectral"``),
+    or by default an RGB one (the first of MITSUBA_VARIANTS that runs here)."""
     mi = _import("mitsuba", "brdffit.export.validate.mitsuba")
 
+    if variant is not None:
+        if variant not in mi.variants():
+            raise RuntimeError(f"Mitsuba variant {variant!r} is not built here; "
+                               f"these are: {', '.join(mi.variants())}")
+        if mi.variant() != variant:
+            mi.set_variant(variant)
+        return mi
     if mi.variant() in MITSUBA_VARIANTS:
         return mi
     for variant in MITSUBA_VARIANTS:
@@ -103,10 +110,17 @@ def mitsuba_log_rmse(material: dict, reference: np.ndarray) -> float:
     return log_rmse(f_mi, ref, g.cos_i[idx], g.weight[idx])
 
 
-def mitsuba_sphere(material: dict, light: np.ndarray, size: int = 128, spp: int = 64):
-    """Radiance image (size, size, 3) of the unit sphere with ``material``, rendered by
-    Mitsuba's ``direct`` integrator: the camera and light of ``brdffit.fitting.sphere``."""
-    mi = mitsuba()
+def mitsuba_sphere(material: dict, light: np.ndarray, size: int = 128, spp: int = 64,
+                   variant: str | None = None):
+    """Radiance image (size, size, 3, linear sRGB) of the unit sphere with ``material``,
+    rendered by Mitsuba's ``direct`` integrator: the camera and light of
+    ``brdffit.fitting.sphere``. ``variant``: as :func:`mitsuba` (default an RGB one); in
+    a spectral variant pass the material's spectral form
+    (``brdffit.export.mitsuba.load_dict(params, spectral=True)``). The light is white
+    in both: in a spectral variant its ``rgb`` irradiance becomes D65, which Mitsuba's
+    film maps back to sRGB white (a white diffuse sphere renders the same mean colour
+    in ``scalar_rgb`` and ``scalar_spectral``, tested)."""
+    mi = mitsuba(variant)
     light = np.asarray(light, float) / np.linalg.norm(light)
     scene = mi.load_dict({
         "type": "scene",
