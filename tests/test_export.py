@@ -99,6 +99,15 @@ def test_conductor_fit_exports_exactly_to_mitsuba():
                            "k": {"type": "srgb", "color": [3.9, 2.4, 1.6], "unbounded": True}}
     assert m["bsdf_1"] == {"type": "diffuse", "reflectance": {"type": "rgb",
                                                               "value": [0.3, 0.2, 0.1]}}
+    # RGB variants read NAME.xml; spectral ones NAME_spectral.xml, eta and k as spectra
+    assert set(e.files) == {"gold_rough_conductor.xml", "gold_rough_conductor_spectral.xml"}
+    spectral = ET.fromstring(e.files["gold_rough_conductor_spectral.xml"])
+    assert [x.get("name") for x in spectral.iter("spectrum")] == ["eta", "k"]
+    # a colour no reflectance spectrum has: no spectral file, and a note that says why
+    red = export(result("rough_conductor", {**CONDUCTOR, "eta": [1.0] * 3, "k": [10.0, 0.0, 0.0]}),
+                 "mitsuba")
+    assert list(red.files) == ["gold_rough_conductor.xml"]
+    assert any(w.startswith("spectral: ") and "scalar_spectral" in w for w in red.warnings)
     scene = ET.fromstring(e.files["gold_rough_conductor.xml"])
     bsdf = scene.find("bsdf")
     assert bsdf.get("id") == "gold_rough_conductor" and bsdf.get("type") == "blendbsdf"

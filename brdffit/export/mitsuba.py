@@ -181,6 +181,15 @@ def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
 
 
 def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, str], list[str]]:
-    """The material (the load_dict dictionary), its files and the notes on them."""
+    """The material (the load_dict dictionary, for RGB variants), its files and the
+    notes on them: ``NAME.xml`` for Mitsuba's RGB variants and ``NAME_spectral.xml``
+    for its spectral ones (eta, k as fitted spectra), or a note where no spectrum
+    reproduces the RGB colour within SPECTRAL_TOLERANCE."""
     material = load_dict(params)
-    return material, {f"{name}.xml": scene_xml(material, name)}, []
+    files = {f"{name}.xml": scene_xml(material, name)}
+    notes = []
+    try:
+        files[f"{name}_spectral.xml"] = scene_xml(load_dict(params, spectral=True), name)
+    except SpectralExportError as e:
+        notes.append(f"spectral: {e}")
+    return material, files, notes
