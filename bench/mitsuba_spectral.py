@@ -50,19 +50,26 @@ def _real(source: str) -> dict:
     return export(r, "mitsuba").target_params
 
 
-def spheres(cases: dict, size: int, spp: int, before: bool) -> None:
+def mean_colours(params: dict, size: int = 64, spp: int = 64,
+                 before: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Mean linear sRGB of the key-light sphere of ``rough_conductor`` ``params`` in
+    ``scalar_rgb`` (the RGB form) and in ``scalar_spectral`` (the spectral form; with
+    ``before``, the RGB form too). Raises ``SpectralExportError`` where it is refused."""
     from brdffit.export import mitsuba
     from brdffit.export import validate as check
     from brdffit.fitting import sphere as render
 
     light = render.LIGHTS[0][1]
+    rgb_form = mitsuba.load_dict(params)
+    spectral_form = rgb_form if before else mitsuba.load_dict(params, spectral=True)
+    a = check.mitsuba_sphere(rgb_form, light, size=size, spp=spp, variant="scalar_rgb")
+    b = check.mitsuba_sphere(spectral_form, light, size=size, spp=spp, variant="scalar_spectral")
+    return a.reshape(-1, 3).mean(0), b.reshape(-1, 3).mean(0)
+
+
+def spheres(cases: dict, size: int, spp: int, before: bool) -> None:
     for name, params in cases.items():
-        rgb_form = mitsuba.load_dict(params)
-        spectral_form = rgb_form if before else mitsuba.load_dict(params, spectral=True)
-        a = check.mitsuba_sphere(rgb_form, light, size=size, spp=spp, variant="scalar_rgb")
-        b = check.mitsuba_sphere(spectral_form, light, size=size, spp=spp,
-                                 variant="scalar_spectral")
-        ma, mb = a.reshape(-1, 3).mean(0), b.reshape(-1, 3).mean(0)
+        ma, mb = mean_colours(params, size, spp, before)
         rel = " / ".join(f"{100 * x:+.1f}%" for x in mb / ma - 1)
         print(f"{name:34s} rgb {np.round(ma, 4)} spectral {np.round(mb, 4)}  {rel}", flush=True)
 
