@@ -15,7 +15,12 @@ The loss is a choice (:data:`LOSSES`, docs/fitting.md says when to use which):
   it cancels in every difference of values well above 1e-6 1/sr;
 - ``"linear_cos"``: ``g(x) = x``, the linear radiance-like error under uniform
   lighting: the energy of the highlight decides, as in a rendered image without
-  tone mapping.
+  tone mapping;
+- ``"render"``: ``g_c(x) = tone(e_c x)``, the error of rendered views after a
+  smooth tone curve (:func:`tone`), with one exposure ``e_c`` per channel taken
+  from the table (``LossData.exposure``, data, not static) and bin weights that
+  count how often each bin is seen over sphere renders under several lights
+  (``brdffit.fitting.render_loss``, docs/fitting.md).
 
 with w_b the bin's solid-angle weight (see ``brdffit.io.grid``; times the scene
 weight for scene-aware fits), normalised to sum 1 over the bins used. Only
@@ -47,14 +52,47 @@ from brdffit.models.base import ParamSpec
 from brdffit.models.frame import Frame
 
 #: The losses a fit can minimise; the first is the default.
-LOSSES = ("log", "cube_root", "linear_cos")
+LOSSES = ("log", "cube_root", "linear_cos", "render")
 DEFAULT_LOSS = "log"
 #: The full-table metric that each loss is the (weighted) mean square of: every
 #: result reports all three, whatever was optimised.
-LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos"}
+LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos",
+               "render": "render_rmse"}
 #: Offset inside the cube root (1/sr, times cos_i): finite slope at 0, far below
 #: any measured value (``merl.MIN_PEAK`` is 1e-5 for the brightest bin).
 CUBE_ROOT_OFFSET = 1e-6
+
+
+#: The tone curve of the render loss (:func:`tone`): Reinhard's ``y / (1 + y)``, then
+#: a display gamma whose toe is offset by TONE_TOE so that its slope stays finite at 0
+#: (the sRGB curve's linear toe, without its kink).
+TONE_GAMMA = 1 / 2.2
+TONE_TOE = 0.003
+_TOE_P = TONE_TOE**TONE_GAMMA
+_TONE_NORM = (1.0 + TONE_TOE) ** TONE_GAMMA - _TOE_P
+
+
+def tone(y, xp=jnp):
+    """The render loss's smooth tone curve of exposed radiance ``y >= 0``, in [0, 1):
+    ``((v + t)^gamma - t^gamma) / ((1 + t)^gamma - t^gamma)`` of ``v = y / (1 + y)``,
+    ``t`` = :data:`TONE_TOE`. Nothing clips: a highlight 100x the exposure still
+    differs from one 50x it (~0.4% of the range)."""
+    v = y / (1.0 + y)
+    return (xp.exp(xp.log(v + TONE_TOE) * TONE_GAMMA) - _TOE_P) / _TONE_NORM
+
+
+def tone_slope(y):
+    """``d tone / dy`` (``y >= 0``), for the closed-form Jacobian."""
+    v = y / (1.0 + y)
+    return TONE_GAMMA * jnp.exp(jnp.log(v + TONE_TOE) * (TONE_GAMMA - 1.0)) / (
+        _TONE_NORM * (1.0 + y) ** 2)
+
+
+def tone_inverse(t, xp=jnp):
+    """The exposed radiance whose :func:`tone` is ``t`` (0 <= t < 1)."""
+    v = xp.exp(xp.log(t * _TONE_NORM + _TOE_P) / TONE_GAMMA) - TONE_TOE
+    v = xp.clip(v, 0.0, 1.0 - 1e-12)
+    return v / (1.0 - v)
 
 
 def _cbrt(x):
@@ -72,6 +110,8 @@ def compress_values(x, loss: str):
         return _cbrt(x + CUBE_ROOT_OFFSET)
     if loss == "linear_cos":
         return x
+    if loss == "render":  # x already times the channel's exposure (see ``exposed``)
+        return tone(x)
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
@@ -84,6 +124,8 @@ def compress_slope(x, loss: str):
         return 1.0 / (3.0 * c * c)
     if loss == "linear_cos":
         return jnp.ones_like(x)
+    if loss == "render":
+        return tone_slope(x)
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
@@ -95,19 +137,29 @@ class LossData(eqx.Module):
     target: Float[Array, "3 s"]  # g(f_meas * cos_i) of the loss
     weight: Float[Array, " s"]  # sums to 1; 0 on padding and unusable bins
     loss: str = eqx.field(static=True, default=DEFAULT_LOSS)
+    # the render loss's exposure per channel (times f cos_i before the tone curve);
+    # None for the other losses. Data, not static: one compiled fit for every table.
+    exposure: Float[Array, "3 1"] | None = None
+
+
+def exposed(x, exposure):
+    """``x`` times the per-channel exposure, where the loss has one."""
+    return x if exposure is None else x * exposure
 
 
 def compress(
-    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS
+    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS, exposure=None
 ) -> Float[Array, "3 s"]:
     """The compressed value g(f cos_i) that the loss compares."""
-    return compress_values(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), loss)
+    return compress_values(exposed(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), exposure),
+                           loss)
 
 
 def residuals(u: Float[Array, " p"], args) -> Float[Array, "3 s"]:
     model, data = args
     f = model.eval_channels(model.constrain(u), data.frame)
-    return jnp.sqrt(data.weight) * (compress(f, data.frame.cos_i, data.loss) - data.target)
+    return jnp.sqrt(data.weight) * (
+        compress(f, data.frame.cos_i, data.loss, data.exposure) - data.target)
 
 
 def sum_squares(u, model: AbstractBRDFModel, data: LossData):
@@ -126,7 +178,7 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     """
     f = model.eval_channels(model.constrain(u), data.frame)
     fit_cos = jnp.maximum(f, 0.0) * jnp.maximum(data.frame.cos_i, 0.0)
-    meas_cos = _uncompress(data.target, data.loss)
+    meas_cos = _uncompress(data.target, data.loss, data.exposure)
 
     def rmse(d):
         return jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
@@ -143,7 +195,9 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     }
 
 
-def _uncompress(target, loss: str):
+def _uncompress(target, loss: str, exposure=None):
+    if loss == "render":
+        return tone_inverse(target) / exposure
     if loss == "log":
         return jnp.expm1(target)
     if loss == "cube_root":
@@ -189,9 +243,10 @@ def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1
     per_part = n // block // parts
     first_block = 0 if part is None else part * per_part
 
-    def block_at(i):
+    def block_at(i):  # arrays without the sample axis (an exposure) are shared
         return jax.tree_util.tree_map(
-            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1), data)
+            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1)
+            if a.shape[-1] == n else a, data)
 
     def add_block(i, total):
         return jax.tree_util.tree_map(jnp.add, total, terms(block_at(i)))
@@ -262,8 +317,9 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
     cos_i = jnp.maximum(frame.cos_i, 0.0)
     f = jnp.maximum(kd[:, None] / jnp.pi + jnp.einsum("kc,ks->cs", scales, lobes), 0.0)
     sqrt_w = jnp.sqrt(data.weight)
-    r = sqrt_w * (compress_values(f * cos_i, data.loss) - data.target)  # (3, S)
-    a = sqrt_w * cos_i * compress_slope(f * cos_i, data.loss)  # dr/df, (3, S)
+    x = exposed(f * cos_i, data.exposure)
+    r = sqrt_w * (compress_values(x, data.loss) - data.target)  # (3, S)
+    a = sqrt_w * exposed(cos_i * compress_slope(x, data.loss), data.exposure)  # dr/df, (3, S)
     a2, ar = a * a, a * r
     shape_cols = jnp.einsum("kc,jks->jcs", scales, d_lobes)  # d f_c / d shape_j, (J, 3, S)
 
