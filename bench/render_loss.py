@@ -127,9 +127,12 @@ class Views:
     def model_radiance(self, model, params):
         import jax.numpy as jnp
 
-        p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
-        return [np.asarray(model(p, jnp.asarray(wi), jnp.asarray(wo))) * np.pi * wi[:, 2:3]
-                for wi, wo, _ in self.parts]
+        from brdffit import runtime
+
+        with runtime.float64():
+            p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
+            return [np.asarray(model(p, jnp.asarray(wi), jnp.asarray(wo))) * np.pi * wi[:, 2:3]
+                    for wi, wo, _ in self.parts]
 
 
 def display(rad: np.ndarray, exposure: float) -> np.ndarray:

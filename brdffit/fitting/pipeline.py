@@ -50,6 +50,7 @@ from brdffit.fitting.loss import (
     sum_squares,
     tone,
 )
+from brdffit.fitting.quality import quality
 from brdffit.fitting.result import STATUS_NAMES, FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.sphere import SphereReference
@@ -670,6 +671,7 @@ def fit(
     # compares fits made under different losses.
     metrics["psnr_db"] = _cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
     uncertainty = parameter_uncertainty(m, u_best, data) if result != "nonfinite" else None
+    look = quality(table, m, params, metrics["psnr_db"])
     return FitResult(
         model=m.name,
         params=params,
@@ -694,4 +696,5 @@ def fit(
         starts=len(best_starts),
         uncertainty=uncertainty,
         table=table.source,
+        quality=look,
     )
