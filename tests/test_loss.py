@@ -219,7 +219,8 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
 def _numpy_render_loss(table, index, weight, params, model):
     """The render loss of docs/fitting.md written out in numpy, from the table's values:
     per channel the exposure 0.35 / weighted median of f cos_i over the bins, the tone
-    curve of the exposed f cos_i, the weighted squared difference."""
+    curve of the exposed f cos_i, the weighted squared difference; plus, per channel,
+    0.01 log^2 of the ratio of the weighted means of f cos_i (fit over table)."""
     from brdffit.io.grid import bin_grid
 
     g = bin_grid()
@@ -229,12 +230,14 @@ def _numpy_render_loss(table, index, weight, params, model):
     fit_f = np.asarray(model(p, g.wi[index], g.wo[index])).T  # (3, S)
     fit = np.maximum(fit_f, 0.0) * cos_i
     used = weight > 0
-    exposure = []
+    level = []
     for c in range(3):
         order = np.argsort(meas[c][used])
         cum = np.cumsum(weight[used][order])
-        exposure.append(0.35 / meas[c][used][order][np.searchsorted(cum, cum[-1] / 2)])
-    e = np.array(exposure)[:, None]
+        median = meas[c][used][order][np.searchsorted(cum, cum[-1] / 2)]
+        level.append(max(median, 0.1 * (meas[c] @ weight) / weight.sum()))
+    level = np.maximum(level, max(level) / 30)  # no channel exposed 30x the brightest
+    e = 0.35 / np.array(level)[:, None]
 
     def curve(y):
         v = y / (1 + y)
@@ -242,7 +245,8 @@ def _numpy_render_loss(table, index, weight, params, model):
             1.003 ** (1 / 2.2) - 0.003 ** (1 / 2.2))
 
     d = curve(e * fit) - curve(e * meas)
-    return float(np.sum(weight * d * d))
+    ratio = (fit @ weight) / (meas @ weight)
+    return float(np.sum(weight * d * d) + 0.01 * np.sum(np.log(ratio) ** 2))
 
 
 def test_render_loss_value_is_the_numpy_definition(noisy_ggx):

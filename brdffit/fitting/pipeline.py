@@ -182,10 +182,12 @@ _shading_frame = executables.jit(shading_frame)
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
     values = table.rgb.reshape(3, -1)[:, index]
     x = values * np.maximum(bin_grid().cos_i[index], 0.0)
-    exposure = None
+    exposure = energy = None
     if loss == "render":
-        exposure = render_loss.exposures(np.maximum(x, 0.0), np.asarray(weight))
+        w = np.asarray(weight)
+        exposure = render_loss.exposures(np.maximum(x, 0.0), w)
         target = tone(np.maximum(x, 0.0) * exposure, np)
+        energy = (np.maximum(x, 0.0) @ w / max(float(w.sum()), 1e-300))[:, None]
     else:
         # numpy's log1p for the default: the same targets, to the last bit, as before
         # the loss was a choice (JAX's log1p differs in the last place on some values)
@@ -193,6 +195,7 @@ def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> Los
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
         loss=loss, exposure=None if exposure is None else jnp.asarray(exposure, dtype),
+        energy=None if energy is None else jnp.asarray(energy, dtype),
     )
 
 
