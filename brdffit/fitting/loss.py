@@ -20,7 +20,8 @@ The loss is a choice (:data:`LOSSES`, docs/fitting.md says when to use which):
   smooth tone curve (:func:`tone`), with one exposure ``e_c`` per channel taken
   from the table (``LossData.exposure``, data, not static) and bin weights that
   count how often each bin is seen over sphere renders under several lights
-  (``brdffit.fitting.render_loss``, docs/fitting.md).
+  (``brdffit.fitting.render_loss``, docs/fitting.md); plus three residuals that
+  hold each channel's mean radiance over the views (:func:`energy_residuals`).
 
 with w_b the bin's solid-angle weight (see ``brdffit.io.grid``; times the scene
 weight for scene-aware fits), normalised to sum 1 over the bins used. Only
@@ -55,7 +56,9 @@ from brdffit.models.frame import Frame
 LOSSES = ("log", "cube_root", "linear_cos", "render")
 DEFAULT_LOSS = "log"
 #: The full-table metric that each loss is the (weighted) mean square of: every
-#: result reports all three, whatever was optimised.
+#: result reports all three, whatever was optimised. The render loss has no
+#: full-table metric (it is defined on its views): results report
+#: ``sample_render_rmse``, on the solver's subsample, and the sphere ``psnr_db``.
 LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos",
                "render": "render_rmse"}
 #: Offset inside the cube root (1/sr, times cos_i): finite slope at 0, far below
