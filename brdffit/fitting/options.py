@@ -132,7 +132,7 @@ class FitOptions:
     loss: str = _option(
         _FIT_DEFAULTS["loss"], kind=str, choices=LOSSES,
         doc="what the solver minimises: log (log1p(f cos), default), cube_root, linear_cos "
-            "(f cos), or render (tone-mapped sphere renders under six lights, exposed per "
+            "(f cos), or render (tone-mapped sphere renders under eight lights, exposed per "
             "channel); every metric is reported whatever the choice (docs/fitting.md)")
     solver: str = _option(
         _FIT_DEFAULTS["solver"], kind=str, choices=SOLVERS,
