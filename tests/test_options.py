@@ -89,6 +89,22 @@ def test_api_request_schema_has_every_option_with_the_contract_default_and_range
         assert ("anyOf" in prop) == (opt.none is not None), name
 
 
+def test_every_shell_offers_the_render_loss():
+    """A new loss is one FitOptions value: the CLI's fit and batch, the service's
+    request schema and the client's options take it without code of their own."""
+    from api.routes.fits import FitOptions as RequestOptions
+
+    assert "render" in options.spec("loss")[1].choices
+    assert build_parser().parse_args(["fit", "t.binary", "--loss", "render"]).loss == "render"
+    batch = build_parser().parse_args(["batch", "d", "--models", "ggx", "--out", "o.h5",
+                                       "--loss", "render"])
+    assert batch.loss == "render"
+    schema = RequestOptions.model_json_schema()["properties"]["loss"]
+    assert "render" in schema["enum"]
+    assert RequestOptions(loss="render").loss == "render"
+    assert FitOptions.from_dict({"loss": "render"}).key() != FitOptions().key()
+
+
 def test_batch_options_are_the_library_options():
     from brdffit.batch import job as batch
     from brdffit.batch import tasks as batch_tasks

@@ -165,6 +165,10 @@ class FitResultOut(BaseModel):
         None, description="on a physically bounded fit (options.physical): the unconstrained "
                           "and bounded log_rmse, the relative cost, the largest albedo before "
                           "and after, the active constraints (docs/results.md)")
+    quality: dict | None = Field(
+        None, description="how the fit looks next to the measurement: render_psnr_db, "
+                          "colour_shift (per channel), verdict (good, visible or poor) and "
+                          "reason (docs/results.md)")
 
 
 class Progress(BaseModel):

@@ -117,6 +117,8 @@ def format_result(r: FitResult) -> str:
                  f"{_g(e.get('cube_root_rmse'))}   rmse_cos {e['rmse_cos']:.4g} 1/sr   "
                  f"rel_peak_error {_g(e.get('rel_peak_error'))}   sphere PSNR "
                  f"{_g(e.get('psnr_db'), '.1f')} dB")
+    if r.quality is not None:
+        lines.append(f"  looks {r.quality['verdict']}: {r.quality['reason']}")
     if r.full_table_error is not None:
         lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} (full table)   "
                      f"scene {r.scene['description']}")

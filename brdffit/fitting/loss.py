@@ -15,7 +15,13 @@ The loss is a choice (:data:`LOSSES`, docs/fitting.md says when to use which):
   it cancels in every difference of values well above 1e-6 1/sr;
 - ``"linear_cos"``: ``g(x) = x``, the linear radiance-like error under uniform
   lighting: the energy of the highlight decides, as in a rendered image without
-  tone mapping.
+  tone mapping;
+- ``"render"``: ``g_c(x) = tone(e_c x)``, the error of rendered views after a
+  smooth tone curve (:func:`tone`), with one exposure ``e_c`` per channel taken
+  from the table (``LossData.exposure``, data, not static) and bin weights that
+  count how often each bin is seen over sphere renders under several lights
+  (``brdffit.fitting.render_loss``, docs/fitting.md); plus three residuals that
+  hold each channel's mean radiance over the views (:func:`energy_residuals`).
 
 with w_b the bin's solid-angle weight (see ``brdffit.io.grid``; times the scene
 weight for scene-aware fits), normalised to sum 1 over the bins used. Only
@@ -47,14 +53,49 @@ from brdffit.models.base import ParamSpec
 from brdffit.models.frame import Frame
 
 #: The losses a fit can minimise; the first is the default.
-LOSSES = ("log", "cube_root", "linear_cos")
+LOSSES = ("log", "cube_root", "linear_cos", "render")
 DEFAULT_LOSS = "log"
 #: The full-table metric that each loss is the (weighted) mean square of: every
-#: result reports all three, whatever was optimised.
-LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos"}
+#: result reports all three, whatever was optimised. The render loss has no
+#: full-table metric (it is defined on its views): results report
+#: ``sample_render_rmse``, on the solver's subsample, and the sphere ``psnr_db``.
+LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos",
+               "render": "render_rmse"}
 #: Offset inside the cube root (1/sr, times cos_i): finite slope at 0, far below
 #: any measured value (``merl.MIN_PEAK`` is 1e-5 for the brightest bin).
 CUBE_ROOT_OFFSET = 1e-6
+
+
+#: The tone curve of the render loss (:func:`tone`): Reinhard's ``y / (1 + y)``, then
+#: a display gamma whose toe is offset by TONE_TOE so that its slope stays finite at 0
+#: (the sRGB curve's linear toe, without its kink).
+TONE_GAMMA = 1 / 2.2
+TONE_TOE = 0.003
+_TOE_P = TONE_TOE**TONE_GAMMA
+_TONE_NORM = (1.0 + TONE_TOE) ** TONE_GAMMA - _TOE_P
+
+
+def tone(y, xp=jnp):
+    """The render loss's smooth tone curve of exposed radiance ``y >= 0``, in [0, 1):
+    ``((v + t)^gamma - t^gamma) / ((1 + t)^gamma - t^gamma)`` of ``v = y / (1 + y)``,
+    ``t`` = :data:`TONE_TOE`. Nothing clips: a highlight 100x the exposure still
+    differs from one 50x it (~0.4% of the range)."""
+    v = y / (1.0 + y)
+    return (xp.exp(xp.log(v + TONE_TOE) * TONE_GAMMA) - _TOE_P) / _TONE_NORM
+
+
+def tone_slope(y):
+    """``d tone / dy`` (``y >= 0``), for the closed-form Jacobian."""
+    v = y / (1.0 + y)
+    return TONE_GAMMA * jnp.exp(jnp.log(v + TONE_TOE) * (TONE_GAMMA - 1.0)) / (
+        _TONE_NORM * (1.0 + y) ** 2)
+
+
+def tone_inverse(t, xp=jnp):
+    """The exposed radiance whose :func:`tone` is ``t`` (0 <= t < 1)."""
+    v = xp.exp(xp.log(t * _TONE_NORM + _TOE_P) / TONE_GAMMA) - TONE_TOE
+    v = xp.clip(v, 0.0, 1.0 - 1e-12)
+    return v / (1.0 - v)
 
 
 def _cbrt(x):
@@ -72,6 +113,8 @@ def compress_values(x, loss: str):
         return _cbrt(x + CUBE_ROOT_OFFSET)
     if loss == "linear_cos":
         return x
+    if loss == "render":  # x already times the channel's exposure (see ``exposed``)
+        return tone(x)
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
@@ -84,6 +127,8 @@ def compress_slope(x, loss: str):
         return 1.0 / (3.0 * c * c)
     if loss == "linear_cos":
         return jnp.ones_like(x)
+    if loss == "render":
+        return tone_slope(x)
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
@@ -95,19 +140,82 @@ class LossData(eqx.Module):
     target: Float[Array, "3 s"]  # g(f_meas * cos_i) of the loss
     weight: Float[Array, " s"]  # sums to 1; 0 on padding and unusable bins
     loss: str = eqx.field(static=True, default=DEFAULT_LOSS)
+    # the render loss's exposure per channel (times f cos_i before the tone curve);
+    # None for the other losses. Data, not static: one compiled fit for every table.
+    exposure: Float[Array, "3 1"] | None = None
+    # the render loss's measured mean radiance per channel over the views (the
+    # weighted mean of f cos_i), which the fit's must hold (:func:`energy_residuals`)
+    energy: Float[Array, "3 1"] | None = None
+
+
+#: Weight of the render loss's colour-holding term: the residual of channel c is
+#: sqrt(ENERGY_WEIGHT) * log(mean fitted f cos_i / mean measured f cos_i) over the
+#: views, beside the per-bin tone-mapped residuals (whose sum of squares is ~1e-3
+#: for a fit that looks right). The tone curve alone lets a glossy fit lose most of
+#: its highlight's energy (a highlight at 30x or 300x the exposure looks alike), and
+#: with it the material's colour and brightness as a whole.
+ENERGY_WEIGHT = 0.01
+
+def exposed(x, exposure):
+    """``x`` times the per-channel exposure, where the loss has one."""
+    return x if exposure is None else x * exposure
 
 
 def compress(
-    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS
+    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS, exposure=None
 ) -> Float[Array, "3 s"]:
     """The compressed value g(f cos_i) that the loss compares."""
-    return compress_values(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), loss)
+    return compress_values(exposed(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), exposure),
+                           loss)
 
 
 def residuals(u: Float[Array, " p"], args) -> Float[Array, "3 s"]:
+    """Per-sample residuals (3, S); with the render loss's energy term, (3, S + 1):
+    the last column is :func:`energy_residuals`."""
+    model, data = args
+    r = _sample_residuals(u, args)
+    if data.energy is None:
+        return r
+    f = jnp.maximum(model.eval_channels(model.constrain(u), data.frame), 0.0)
+    total = f @ (data.weight * jnp.maximum(data.frame.cos_i, 0.0))
+    return jnp.concatenate([r, energy_residuals(total, jnp.sum(data.weight), data)[:, None]],
+                           axis=1)
+
+
+def _sample_residuals(u, args):
     model, data = args
     f = model.eval_channels(model.constrain(u), data.frame)
-    return jnp.sqrt(data.weight) * (compress(f, data.frame.cos_i, data.loss) - data.target)
+    return jnp.sqrt(data.weight) * (
+        compress(f, data.frame.cos_i, data.loss, data.exposure) - data.target)
+
+
+def energy_residuals(total, weight_sum, data):
+    """The colour-holding residual per channel (3,): ``sqrt(ENERGY_WEIGHT) log(M_c /
+    M*_c)``, ``M_c = total_c / weight_sum`` the fit's weighted mean of ``f cos_i``."""
+    mean = jnp.maximum(total / weight_sum, 1e-30)
+    return jnp.sqrt(ENERGY_WEIGHT) * (jnp.log(mean) - jnp.log(jnp.maximum(data.energy[:, 0],
+                                                                        1e-30)))
+
+
+def _energy_sums(u, model, data):
+    """(sum_s w_s f_c cos_i (3,), its derivative in ``u`` (3, p)) over ``data``'s
+    samples: closed form for a colour-linear model (as :func:`_normal_equations`),
+    else ``jacfwd``."""
+    wc = data.weight * jnp.maximum(data.frame.cos_i, 0.0)
+    layout = _colour_layout(model)
+    if layout is None:
+        def total(v):
+            f = jnp.maximum(model.eval_channels(model.constrain(v), data.frame), 0.0)
+            return f @ wc
+        return total(u), jax.jacfwd(total)(u)
+    p = _colour_parts(u, model, data.frame, layout)
+    total = p.f @ wc  # (3,)
+    colour = p.slope.T * (p.basis @ wc)[None, :]  # (3, K+1)
+    shape = jnp.einsum("jcs,s->cj", p.shape_cols, wc)  # (3, J)
+    grad = jnp.zeros((3, u.size), u.dtype)
+    grad = grad.at[np.arange(3)[:, None], layout.colour_at].set(colour)
+    grad = grad.at[:, layout.shape_at].set(shape)
+    return total, grad
 
 
 def sum_squares(u, model: AbstractBRDFModel, data: LossData):
@@ -126,7 +234,7 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     """
     f = model.eval_channels(model.constrain(u), data.frame)
     fit_cos = jnp.maximum(f, 0.0) * jnp.maximum(data.frame.cos_i, 0.0)
-    meas_cos = _uncompress(data.target, data.loss)
+    meas_cos = _uncompress(data.target, data.loss, data.exposure)
 
     def rmse(d):
         return jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
@@ -143,7 +251,9 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     }
 
 
-def _uncompress(target, loss: str):
+def _uncompress(target, loss: str, exposure=None):
+    if loss == "render":
+        return tone_inverse(target) / exposure
     if loss == "log":
         return jnp.expm1(target)
     if loss == "cube_root":
@@ -166,7 +276,21 @@ def normal_equations(u: Float[Array, " p"], args):
     count with no such divisor is summed in one pass.
     """
     model, data = args
-    return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
+    if data.energy is None:
+        return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
+    (loss, jtj, jtr), (total, grad) = sum_over_blocks(
+        lambda part: (_normal_equations(u, model, part), _energy_sums(u, model, part)), data)
+    rho, g = _energy_rows(total, grad, data)
+    return loss + jnp.sum(rho * rho), jtj + g.T @ g, jtr + g.T @ rho
+
+
+def _energy_rows(total, grad, data):
+    """The render loss's energy residuals (3,) and their gradient rows (3, p) from the
+    sums of :func:`_energy_sums` over every sample."""
+    weight_sum = jnp.sum(data.weight)
+    rho = energy_residuals(total, weight_sum, data)
+    g = jnp.sqrt(ENERGY_WEIGHT) * grad / jnp.maximum(total, 1e-30 * weight_sum)[:, None]
+    return rho, g
 
 
 def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1):
@@ -189,9 +313,10 @@ def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1
     per_part = n // block // parts
     first_block = 0 if part is None else part * per_part
 
-    def block_at(i):
+    def block_at(i):  # arrays without the sample axis (an exposure) are shared
         return jax.tree_util.tree_map(
-            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1), data)
+            lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1)
+            if a.shape[-1] == n else a, data)
 
     def add_block(i, total):
         return jax.tree_util.tree_map(jnp.add, total, terms(block_at(i)))
@@ -234,38 +359,18 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
     """
     layout = _colour_layout(model)
     if layout is None:
-        return _generic_normal_equations(u, (model, data), sandwich)
+        return _generic_normal_equations(u, (model, data), sandwich, energy=False)
     frame = data.frame
     n_lobes = len(layout.scale_specs)
-
-    def lobes_of(shape_u):
-        shape = {s.name: s.constrain(shape_u[j]) for j, s in enumerate(layout.shape_specs)}
-        return model.unit_lobes(shape, frame)  # (K, S)
-
-    shape_u = u[layout.shape_at]
-    lobes = lobes_of(shape_u)
-    d_lobes = jax.vmap(lambda t: jax.jvp(lobes_of, (shape_u,), (t,))[1])(
-        jnp.eye(shape_u.size, dtype=u.dtype)
-    )  # (J, K, S)
-
-    def value_and_slope(spec, x):  # a colour parameter and d(value)/du, elementwise
-        return jax.jvp(spec.constrain, (x,), (jnp.ones_like(x),))
-
-    kd, dkd = value_and_slope(layout.kd_spec, u[layout.kd_at])
-    scales, dscales = zip(*(value_and_slope(s, u[at])
-                            for s, at in zip(layout.scale_specs, layout.scale_at)))
-    scales = jnp.stack(scales)  # (K, 3)
-    # d f_c / d u of colour parameter m (0: kd, k: scale k) is slope[m, c] * basis[m]
-    slope = jnp.concatenate([dkd[None] / jnp.pi, jnp.stack(dscales)])  # (K+1, 3)
-    basis = jnp.concatenate([jnp.ones_like(lobes[:1]), lobes])  # (K+1, S)
-
+    parts = _colour_parts(u, model, frame, layout)
+    shape_u, f, slope, basis, shape_cols = (parts.shape_u, parts.f, parts.slope, parts.basis,
+                                            parts.shape_cols)
     cos_i = jnp.maximum(frame.cos_i, 0.0)
-    f = jnp.maximum(kd[:, None] / jnp.pi + jnp.einsum("kc,ks->cs", scales, lobes), 0.0)
     sqrt_w = jnp.sqrt(data.weight)
-    r = sqrt_w * (compress_values(f * cos_i, data.loss) - data.target)  # (3, S)
-    a = sqrt_w * cos_i * compress_slope(f * cos_i, data.loss)  # dr/df, (3, S)
+    x = exposed(f * cos_i, data.exposure)
+    r = sqrt_w * (compress_values(x, data.loss) - data.target)  # (3, S)
+    a = sqrt_w * exposed(cos_i * compress_slope(x, data.loss), data.exposure)  # dr/df, (3, S)
     a2, ar = a * a, a * r
-    shape_cols = jnp.einsum("kc,jks->jcs", scales, d_lobes)  # d f_c / d shape_j, (J, 3, S)
 
     colour_at = layout.colour_at  # (3, K+1): u index of colour parameter m, channel c
     n = u.size
@@ -294,12 +399,54 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
     return jnp.sum(r * r), gram(a2), jtr
 
 
+class _ColourParts(NamedTuple):
+    shape_u: Array  # (J,) the lobes' shape parameters, unconstrained
+    f: Array  # (3, S) the model's values, clamped at 0
+    slope: Array  # (K+1, 3): d f_c / d u of colour parameter m is slope[m, c] * basis[m]
+    basis: Array  # (K+1, S): 1, then each unit lobe
+    shape_cols: Array  # (J, 3, S): d f_c / d shape_j
+
+
+def _colour_parts(u, model, frame, layout) -> _ColourParts:
+    """What the closed-form Jacobian of a colour-linear model needs on ``frame``."""
+
+    def lobes_of(shape_u):
+        shape = {s.name: s.constrain(shape_u[j]) for j, s in enumerate(layout.shape_specs)}
+        return model.unit_lobes(shape, frame)  # (K, S)
+
+    shape_u = u[layout.shape_at]
+    lobes = lobes_of(shape_u)
+    d_lobes = jax.vmap(lambda t: jax.jvp(lobes_of, (shape_u,), (t,))[1])(
+        jnp.eye(shape_u.size, dtype=u.dtype)
+    )  # (J, K, S)
+
+    def value_and_slope(spec, x):  # a colour parameter and d(value)/du, elementwise
+        return jax.jvp(spec.constrain, (x,), (jnp.ones_like(x),))
+
+    kd, dkd = value_and_slope(layout.kd_spec, u[layout.kd_at])
+    scales, dscales = zip(*(value_and_slope(s, u[at])
+                            for s, at in zip(layout.scale_specs, layout.scale_at)))
+    scales = jnp.stack(scales)  # (K, 3)
+    slope = jnp.concatenate([dkd[None] / jnp.pi, jnp.stack(dscales)])  # (K+1, 3)
+    basis = jnp.concatenate([jnp.ones_like(lobes[:1]), lobes])  # (K+1, S)
+    f = jnp.maximum(kd[:, None] / jnp.pi + jnp.einsum("kc,ks->cs", scales, lobes), 0.0)
+    shape_cols = jnp.einsum("kc,jks->jcs", scales, d_lobes)  # (J, 3, S)
+    return _ColourParts(shape_u, f, slope, basis, shape_cols)
+
+
 def sandwich_terms(u: Float[Array, " p"], model, data):
     """(J^T J, sum_i r_i^2 J_i^T J_i) of :func:`residuals` at ``u``, in the
     unconstrained parameters: the bread and the meat of the sandwich covariance
     (``brdffit.fitting.uncertainty``), summed as :func:`normal_equations` sums, with
     the same closed-form Jacobian (~4x less work than ``jacfwd``)."""
-    return sum_over_blocks(lambda part: _normal_equations(u, model, part, sandwich=True), data)
+    if data.energy is None:
+        return sum_over_blocks(lambda part: _normal_equations(u, model, part, sandwich=True),
+                               data)
+    (bread, meat), (total, grad) = sum_over_blocks(
+        lambda part: (_normal_equations(u, model, part, sandwich=True),
+                      _energy_sums(u, model, part)), data)
+    rho, g = _energy_rows(total, grad, data)
+    return bread + g.T @ g, meat + (g * (rho * rho)[:, None]).T @ g
 
 
 class _ColourLayout(NamedTuple):
@@ -339,8 +486,12 @@ def _colour_layout(model) -> _ColourLayout | None:
     )
 
 
-def _generic_normal_equations(u, args, sandwich: bool = False):
-    jac, r = jax.jacfwd(lambda v: (residuals(v, args).reshape(-1),) * 2, has_aux=True)(u)
+def _generic_normal_equations(u, args, sandwich: bool = False, energy: bool = True):
+    """From ``jacfwd`` of the residuals: of :func:`residuals` (the render loss's energy
+    term included), or with ``energy=False`` of the per-sample ones only (one block
+    of a sum, :func:`normal_equations` adds the energy term to the whole)."""
+    fn = residuals if energy else _sample_residuals
+    jac, r = jax.jacfwd(lambda v: (fn(v, args).reshape(-1),) * 2, has_aux=True)(u)
     if sandwich:
         jr = jac * r[:, None]
         return jac.T @ jac, jr.T @ jr

@@ -131,8 +131,9 @@ class FitOptions:
         doc="model name (see `brdffit models`), or 'auto' to choose one (docs/selection.md)")
     loss: str = _option(
         _FIT_DEFAULTS["loss"], kind=str, choices=LOSSES,
-        doc="what the solver minimises: log (log1p(f cos), default), cube_root, or linear_cos "
-            "(f cos); every metric is reported whatever the choice (docs/fitting.md)")
+        doc="what the solver minimises: log (log1p(f cos), default), cube_root, linear_cos "
+            "(f cos), or render (tone-mapped sphere renders under eight lights, exposed per "
+            "channel); every metric is reported whatever the choice (docs/fitting.md)")
     solver: str = _option(
         _FIT_DEFAULTS["solver"], kind=str, choices=SOLVERS,
         doc="least-squares solver; lm is brdffit's Levenberg-Marquardt")

@@ -63,6 +63,7 @@ from brdffit.fitting.loss import (
     sum_squares,
 )
 from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, _plain
+from brdffit.fitting.quality import quality
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.fitting.uncertainty import parameter_uncertainty
@@ -458,6 +459,6 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
     return dataclasses.replace(
         free, params=params, error=metrics, converged=result == "successful", result=result,
         steps=n_steps, time_s=free.time_s + time.perf_counter() - t0, starts=1,
-        uncertainty=uncertainty,
+        uncertainty=uncertainty, quality=quality(table, model, params, metrics["psnr_db"]),
         physical=report(free, metrics, before, after, active, scale))
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from brdffit import executables, models, runtime
 from brdffit.errors import FitInputError
+from brdffit.fitting import render_loss
 from brdffit.fitting.loss import (
     DEFAULT_LOSS,
     LOSS_METRIC,
@@ -47,7 +48,9 @@ from brdffit.fitting.loss import (
     residuals,
     sum_over_blocks,
     sum_squares,
+    tone,
 )
+from brdffit.fitting.quality import quality
 from brdffit.fitting.result import STATUS_NAMES, FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.sphere import SphereReference
@@ -105,7 +108,8 @@ SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 @executables.jit
 def _score(model, u_batch, data, every: int = 1):
     """Loss of each start, on every ``every``-th sample (``every`` is static)."""
-    data = jax.tree_util.tree_map(lambda a: a[..., ::every], data)
+    n = data.weight.shape[-1]
+    data = jax.tree_util.tree_map(lambda a: a[..., ::every] if a.shape[-1] == n else a, data)
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
@@ -178,12 +182,20 @@ _shading_frame = executables.jit(shading_frame)
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
     values = table.rgb.reshape(3, -1)[:, index]
     x = values * np.maximum(bin_grid().cos_i[index], 0.0)
-    # numpy's log1p for the default: the same targets, to the last bit, as before the
-    # loss was a choice (JAX's log1p differs in the last place on some values)
-    target = np.log1p(x) if loss == "log" else compress_values(x, loss)
+    exposure = energy = None
+    if loss == "render":
+        w = np.asarray(weight)
+        exposure = render_loss.exposures(np.maximum(x, 0.0), w)
+        target = tone(np.maximum(x, 0.0) * exposure, np)
+        energy = (np.maximum(x, 0.0) @ w / max(float(w.sum()), 1e-300))[:, None]
+    else:
+        # numpy's log1p for the default: the same targets, to the last bit, as before
+        # the loss was a choice (JAX's log1p differs in the last place on some values)
+        target = np.log1p(x) if loss == "log" else compress_values(x, loss)
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
-        loss=loss,
+        loss=loss, exposure=None if exposure is None else jnp.asarray(exposure, dtype),
+        energy=None if energy is None else jnp.asarray(energy, dtype),
     )
 
 
@@ -214,6 +226,8 @@ def full_table_data(
     """Every bin of the table (a fixed shape), weighted by ``weight`` (flat; 0 below
     the horizon and on unmeasured bins), as a :class:`LossData` for ``loss``."""
     frame = _device_frames(jnp.dtype(dtype).name)
+    if loss == "render":  # the exposures need the table's values in numpy anyway
+        return _make_loss_data(table, np.arange(weight.size), weight, dtype, frame, loss)
     rgb = jnp.asarray(table.rgb.reshape(3, -1), dtype)
     return LossData(
         frame=frame, target=_compress_all(rgb, frame.cos_i, loss),
@@ -463,6 +477,12 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
             return _Prepared(counts, n_usable, None, None, None, -1, brightest, None)
         weight, sample_set = _weights_and_samples(counts.usable, bin_weight, weight_key,
                                                   samples, seed)
+        if loss == "render" and bin_weight is None:
+            # the solver sees the bins of the render loss's views, weighted by how
+            # many pixels see them; the error is still judged on every usable bin
+            views = render_loss.view_bin_weight()
+            _, sample_set = _weights_and_samples(counts.usable & (views > 0), views,
+                                                 "render-views", samples, seed)
         data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision],
                            loss)
         return _Prepared(counts, n_usable, weight, sample_set, data, _peak_bin(table, weight),
@@ -497,7 +517,8 @@ def fit(
         table: the measured table (``brdffit.io.merl.read``).
         model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
         loss: what the solver minimises (``brdffit.fitting.loss.LOSSES``): ``"log"``
-            (default), ``"cube_root"`` or ``"linear_cos"``. Every metric is reported
+            (default), ``"cube_root"``, ``"linear_cos"`` or ``"render"``
+            (``brdffit.fitting.render_loss``). Every metric is reported
             whatever the loss.
         solver: ``"lm"`` (Levenberg-Marquardt, default), ``"dogleg"`` or ``"bfgs"``.
         samples: bins the solver sees (stratified subsample), ``None`` for all.
@@ -653,6 +674,7 @@ def fit(
     # compares fits made under different losses.
     metrics["psnr_db"] = _cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
     uncertainty = parameter_uncertainty(m, u_best, data) if result != "nonfinite" else None
+    look = quality(table, m, params, metrics["psnr_db"])
     return FitResult(
         model=m.name,
         params=params,
@@ -677,4 +699,5 @@ def fit(
         starts=len(best_starts),
         uncertainty=uncertainty,
         table=table.source,
+        quality=look,
     )

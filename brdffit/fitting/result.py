@@ -48,6 +48,9 @@ class FitResult:
       (``brdffit.fitting.uncertainty``); None for a fit whose every start diverged;
     - ``selection``: on the fit ``model="auto"`` chose, how and why it was chosen
       (``brdffit.selection.Selection.summary``: ranking of every candidate, reason);
+    - ``quality``: how the fit looks next to the measurement: sphere-render PSNR,
+      per-channel colour shift, a verdict (good / visible / poor) and its reason
+      (``brdffit.fitting.quality``); None on a result stored before it existed;
     - ``physical``: on a physically bounded fit (``physical=True``), what the bounds
       cost against the unconstrained fit and which were active
       (``brdffit.fitting.physical``, docs/results.md).
@@ -71,6 +74,7 @@ class FitResult:
     selection: dict | None = None
     uncertainty: dict | None = None
     physical: dict | None = None
+    quality: dict | None = None
 
     @property
     def log_rmse(self) -> float:
