@@ -25,6 +25,7 @@ import httpx
 import pytest
 
 from brdffit.export import validate as check
+from brdffit.fitting.loss import LOSSES
 from tests import api_fixtures as fx
 from tests.test_export_tools import gltf_validator  # noqa: F401 (a fixture, used by name)
 
@@ -111,7 +112,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         assert "http://" not in html and "https://" not in html  # nothing from elsewhere
         assert http.get("/page/..%2Fmain.py").status_code == 404
         page.locator("#model-boxes input[value=ggx]").wait_for(timeout=STEP_MS)
-        assert page.locator("#loss-select option").count() == 3
+        assert page.locator("#loss-select option").count() == len(LOSSES)
         visit.shot("start")
 
         page.set_input_files("#upload-file", str(table_file))

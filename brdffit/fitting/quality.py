@@ -12,7 +12,7 @@
   decided it, in words (the CLI prints both on one line).
 
 The thresholds (:data:`GOOD`, :data:`POOR`) were set by looking at sphere plots
-(``brdffit plot --kind spheres``) of ggx fits to the 100 real MERL materials under
+(``brdffit fit --plots``, its spheres.png) of ggx fits to the 100 real MERL materials under
 every loss (docs/results.md shows examples at each level): at 28 dB and within 10%
 per channel the fit and the measurement are hard to tell apart side by side
 (polyethylene, delrin, teflon); below 20 dB, or half a stop off in a channel, the
