@@ -102,7 +102,7 @@ def test_conductor_fit_exports_exactly_to_mitsuba():
     # RGB variants read NAME.xml; spectral ones NAME_spectral.xml, eta and k as spectra
     assert set(e.files) == {"gold_rough_conductor.xml", "gold_rough_conductor_spectral.xml"}
     spectral = ET.fromstring(e.files["gold_rough_conductor_spectral.xml"])
-    assert [x.get("name") for x in spectral.iter("spectrum")] == ["eta", "k"]
+    assert [x.get("name") for x in spectral.iter("spectrum")] == ["eta", "k", "reflectance"]
     # a colour no reflectance spectrum has: no spectral file, and a note that says why
     red = export(result("rough_conductor", {**CONDUCTOR, "eta": [1.0] * 3, "k": [10.0, 0.0, 0.0]}),
                  "mitsuba")

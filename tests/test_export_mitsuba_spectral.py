@@ -34,6 +34,13 @@ CASES = {
              **NO_DIFFUSE},
     "red diffuse": {"eta": [1.5, 1.5, 1.5], "k": [0.0, 0.0, 0.0], "alpha": 0.3,
                     "kd": [0.8, 0.1, 0.05], "weight": 1.0},
+    # blue-metallic-paint's ggx export: a dark, saturated diffuse under a conductor,
+    # which Mitsuba's own rgb upsampling rendered 8% too blue (kd as a fitted spectrum)
+    "dark blue diffuse": {"eta": [3.75, 3.72, 10.0], "k": [0.95, 0.0, 4.7], "alpha": 0.26,
+                          "kd": [0.0, 0.0, 0.00198], "weight": 0.807},
+    # ... and its conductor fit: kd ~1e-8, 'black', which the rgb upsampling made 6% red
+    "near-black diffuse": {"eta": [3.75, 3.72, 10.0], "k": [0.95, 0.0, 4.7], "alpha": 0.26,
+                           "kd": [1.2e-8, 7.8e-9, 2e-11], "weight": 0.791},
 }
 
 

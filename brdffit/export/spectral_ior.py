@@ -184,3 +184,35 @@ def _fit_spectra(eta: tuple, k: tuple) -> SpectralIOR:
     eta_n.flags.writeable = False
     k_n.flags.writeable = False
     return SpectralIOR(eta_n, k_n, fresnel_error(eta_n, k_n, eta, k))
+
+
+@functools.lru_cache(maxsize=1)
+def _reflectance_system():
+    """The projection (3, NODES) of node values to linear sRGB, and a second-difference
+    penalty that keeps a reflectance spectrum smooth."""
+    return _quadrature() @ _interp_matrix(), np.diff(np.eye(NODES.size), 2, axis=0)
+
+
+def fit_reflectance(rgb, steps: int = 4000) -> np.ndarray:
+    """A smooth reflectance spectrum (values in [0, 1] at :data:`NODES`) whose sRGB
+    projection in Mitsuba's spectral variants is ``rgb``: bounded least squares by
+    projected gradient (a 32-value problem). Mitsuba's own ``rgb`` upsampling is right
+    to the eye, not in relative terms where a colour is dark and saturated (a diffuse
+    kd = [0, 0, 0.002] came out 8% too blue on a sphere); this one is, to ~1e-5."""
+    project, smooth = _reflectance_system()
+    a = np.vstack([project, np.sqrt(SMOOTHNESS * 0.1) * smooth])
+    b = np.concatenate([np.asarray(rgb, float), np.zeros(smooth.shape[0])])
+    h, g = a.T @ a, a.T @ b
+    step = 1.0 / np.linalg.eigvalsh(h).max()
+    r = np.clip(np.linalg.lstsq(a, b, rcond=None)[0], 0.0, 1.0)
+    for _ in range(steps):
+        r = np.clip(r - step * (h @ r - g), 0.0, 1.0)
+    return r
+
+
+def reflectance_error(values, rgb) -> float:
+    """Largest per-channel error of the spectrum's projection against ``rgb``, relative
+    to the brightest channel (a dark channel beside a bright one needs no more)."""
+    project, _ = _reflectance_system()
+    rgb = np.asarray(rgb, float)
+    return float(np.max(np.abs(project @ values - rgb)) / max(rgb.max(), 1e-12))
