@@ -139,14 +139,17 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)
     shaded_as = module.SHADED_AS[conv.target_model]
-    measured, warnings = _measured_table(result, table)
-    warnings = conv.warnings + warnings
+    warnings = list(conv.warnings)
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
                     log_rmse_to_table=None, sphere_colour_error=None)
-    if shaded_as is None:
+    measured = None
+    if shaded_as is None:  # no table to read: nothing could be measured against it
         warnings.append(module.UNMODELLED_NOTE)
-    elif measured is not None:
+    else:
+        measured, missing = _measured_table(result, table)
+        warnings += missing
+    if measured is not None:
         fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
         fidelity["sphere_colour_error"] = sphere_colour_error(
             measured, models.get(shaded_as), conv.params)
