@@ -275,6 +275,8 @@ def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:
         result=r.result,
         steps=r.steps,
         fit_time_s=r.time_s,
+        # how the candidate looks beside the measurement (brdffit.fitting.quality)
+        verdict=(r.quality or {}).get("verdict"),
         status="fitted" if math.isfinite(err) else "failed",
     )
     rows.append(row)
@@ -480,7 +482,7 @@ def format_selection(sel: Selection) -> str:
     scene = sel.scene is not None
     head = (f"{'model':<14}{'k':>3} {'log_rmse':>10} "
             + (f"{'full':>10} " if scene else "")
-            + f"{'excess':>9} {'PSNR dB':>8} {'ns/eval':>8} {'BIC':>12}  status")
+            + f"{'excess':>9} {'PSNR dB':>8} {'looks':>8} {'ns/eval':>8} {'BIC':>12}  status")
     lines = [f"{sel.table}: model selection ({sel.time_s:.1f} s)", head]
     for r in sel.ranking:
         if r["status"] == "failed":
@@ -490,7 +492,8 @@ def format_selection(sel: Selection) -> str:
         lines.append(
             f"{r['model']:<14}{r['n_params']:>3} {r['log_rmse']:>10.3g} "
             + (f"{r['full_log_rmse']:>10.3g} " if scene else "")
-            + f"{r['excess']:>9.3g} {r['psnr_db']:>8.1f} {r['cost_ns']:>8.1f} {r['bic']:>12.4g}"
+            + f"{r['excess']:>9.3g} {r['psnr_db']:>8.1f} {r.get('verdict') or '-':>8} "
+            + f"{r['cost_ns']:>8.1f} {r['bic']:>12.4g}"
             + f"  {r['status']}" + ("" if r["converged"] else " (not converged)")
         )
     lines.append("")

@@ -126,6 +126,10 @@ def test_ranking_reports_every_candidate(ggx_selection):
     assert d["model"] == "ggx" and d["selection"]["chosen"] == "ggx" and d["selection"]["reason"]
     text = format_selection(sel)
     assert "ggx2" in text and sel.reason in text
+    # each row says how its fit looks, as the fit's own quality block does
+    assert all(row["verdict"] == sel.fits[row["model"]].quality["verdict"] for row in sel.ranking)
+    assert by_name["ggx"]["verdict"] == "good" and by_name["lambert"]["verdict"] != "good"
+    assert "looks" in text.splitlines()[1]
 
 
 def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
