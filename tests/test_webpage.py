@@ -145,6 +145,10 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         assert chosen in page.locator("#selection-reason").inner_text()
         shown_rmse = float(best.locator("td.num").first.inner_text())
         assert shown_rmse == pytest.approx(job["result"]["error"]["log_rmse"], rel=1e-3)
+        # how the chosen fit looks, with its reason on hover
+        looks = best.locator("td.verdict")
+        assert looks.inner_text() == job["result"]["quality"]["verdict"]
+        assert looks.get_attribute("title") == job["result"]["quality"]["reason"]
 
         visit.wait_image("#plot-spheres")
         visit.wait_image("#plot-slices")

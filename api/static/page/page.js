@@ -339,6 +339,9 @@ function showResults(job) {
     if (best && r.model === best.model) row.classList.add("best");
     row.append(el("td", r.model + (best && r.model === best.model ? " ★" : "")));
     for (const m of METRICS) row.append(el("td", fmt(r.error[m]), { class: "num" }));
+    const q = r.quality || {};
+    row.append(el("td", q.verdict || "—", { class: `verdict ${q.verdict || ""}`,
+                                            title: q.reason || "not measured" }));
     row.append(paramsCell(r));
     row.append(el("td", (r.converged ? `${r.result}, ${r.steps} steps`
       : `NOT converged: ${r.result}, ${r.steps} steps`) + physicalNote(r.physical),
@@ -441,8 +444,11 @@ async function exportTo(event) {
   const f = out.fidelity || {};
   const head = el("p");
   head.append(el("strong", `${target}`), `: ${out.source_model} as ${f.target_model || "?"}`
-    + (f.exact ? " (exact)" : `, log_rmse to the fit ${fmt(f.log_rmse_to_fit)}`
-      + ` (the fit's own: ${fmt(f.fit_log_rmse)})`) + ". Files: ");
+    + (f.exact ? " (exact)" : `, log_rmse to the fit ${fmt(f.log_rmse_to_fit)}`)
+    + (f.log_rmse_to_table != null
+      ? `; as the renderer shades it, log_rmse to the table ${fmt(f.log_rmse_to_table)}`
+        + ` (the fit's own: ${fmt(f.fit_log_rmse)})`
+      : ` (the fit's own: ${fmt(f.fit_log_rmse)})`) + ". Files: ");
   for (const [name, text] of Object.entries(out.files)) {
     const blob = new Blob([text], { type: "application/octet-stream" });
     const link = el("a", name, { href: "#", class: "file" });
