@@ -175,6 +175,10 @@ def test_report_ranks_each_table_own_model_first(cluster_batch, tmp_path):
     assert all(by_model[m].fitted == 3 and by_model[m].wins == 1 for m in MODELS)
     text = format_ranking(r, "results.h5")
     assert "a_ggx" in text and "FAILED" in text and "mean log_rmse" in text
+    # every fit that ran has its verdict counted, as its stored result says
+    for s in r.summary:
+        assert sum(s.looks.values()) == s.fitted
+    assert "looks good/visible/poor" in text
     png = plot_summary(r, tmp_path / "summary.png")
     assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
 

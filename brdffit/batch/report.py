@@ -16,7 +16,8 @@ import os
 from dataclasses import dataclass, field
 
 from brdffit import extras, models
-from brdffit.batch.store import read_attrs, read_index
+from brdffit.batch.store import read_attrs, read_index, read_verdicts
+from brdffit.fitting.quality import VERDICTS
 from brdffit.selection import DEFAULT_TOLERANCE, choose
 
 METRIC = "log_rmse"
@@ -62,6 +63,8 @@ class ModelSummary:
     mean: float  # of log_rmse over the tables it fitted
     median: float
     not_converged: int
+    #: how many of its fits look good, visible, poor (quality.verdict)
+    looks: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -93,6 +96,7 @@ def rank(path: str | os.PathLike) -> Ranking:
             else:
                 row.failed_models[model] = f.message
         tables.append(row)
+    verdicts = read_verdicts(path)
     summary = []
     for m in models:
         values = sorted(e for t in tables if math.isfinite(e := t.errors.get(m, math.nan)))
@@ -104,6 +108,8 @@ def rank(path: str | os.PathLike) -> Ranking:
             mean=sum(values) / len(values) if values else math.nan,
             median=_median(values),
             not_converged=not_converged.get(m, 0),
+            looks={v: sum(verdicts.get((t.name, m)) == v for t in tables if m in t.errors)
+                   for v in VERDICTS},
         ))
     return Ranking(attrs, list(models), tables, summary)
 
@@ -136,10 +142,12 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
         lines.append(f"{t.name:<{width}}  {t.best or '-':<{cols}}{auto or '-':<{cols}}"
                      + "".join(f"{c:>{cols + 1}}" for c in cells))
     lines += ["", f"{'model':<{cols}} {'fitted':>7} {'failed':>7} {'wins':>6} "
-                  f"{'mean ' + METRIC:>14} {'median':>10} {'not conv.':>10}"]
+                  f"{'mean ' + METRIC:>14} {'median':>10} {'not conv.':>10}  "
+                  "looks good/visible/poor"]
     for s in sorted(r.summary, key=lambda s: (math.isnan(s.mean), s.mean)):
+        looks = "/".join(str(s.looks.get(v, 0)) for v in VERDICTS)
         lines.append(f"{s.model:<{cols}} {s.fitted:>7} {s.failed:>7} {s.wins:>6} "
-                     f"{s.mean:>14.4g} {s.median:>10.4g} {s.not_converged:>10}")
+                     f"{s.mean:>14.4g} {s.median:>10.4g} {s.not_converged:>10}  {looks}")
     if n_failed:
         lines += ["", "failures:"]
         for t in r.failed_tables:
