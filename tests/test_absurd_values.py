@@ -271,7 +271,8 @@ def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):
     assert cli_main(["batch-report", str(only_blank), "--json", "--no-png"]) == 0
     summary = strict_loads(capsys.readouterr().out)["models"]
     assert summary == [{"model": "lambert", "fitted": 0, "failed": 0, "wins": 0, "mean": None,
-                        "median": None, "not_converged": 0}]
+                        "median": None, "not_converged": 0,
+                        "looks": {"good": 0, "visible": 0, "poor": 0}}]
 
 
 # -- the CLI, as a user runs it --------------------------------------------------------------
