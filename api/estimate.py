@@ -57,26 +57,24 @@ def _n_params() -> dict[str, int]:
     return {d["name"]: d["n_params"] for d in catalogue.describe()}
 
 
-def estimate(models: list[str], options: dict, usable_bins: int) -> Estimate:
-    """The cost of fitting ``models`` (or ``["auto"]``) with ``options`` (the
-    request's fit options) to a table with ``usable_bins`` measured bins."""
-    from brdffit.selection import DEFAULT_CANDIDATES
-
+def estimate(request, usable_bins: int) -> Estimate:
+    """The cost of the fits ``request`` (a ``brdffit.request.FitRequest``) asks for on
+    a table with ``usable_bins`` measured bins."""
     n_params = _n_params()
-    samples = options.get("samples")
-    samples = usable_bins if samples is None else min(samples, usable_bins)
-    starts, steps = options["starts"], options["max_steps"]
-    auto = models == [catalogue.AUTO]
-    fitted = list(DEFAULT_CANDIDATES) if auto else models
+    options = request.options
+    samples = usable_bins if options.samples is None else min(options.samples, usable_bins)
+    starts, steps = options.starts, options.max_steps
+    auto = request.auto
+    fitted = list(request.fitted_models)
     memory, seconds = FIXED_BYTES, 0.0
     for name in fitted:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
         memory = max(memory, FIXED_BYTES + BYTES_PER_UNIT * samples * starts * (k + 1))
         seconds += SECONDS_PER_MODEL + SECONDS_PER_UNIT_STEP * samples * starts * k * steps
-        if options.get("physical"):
+        if options.physical:
             seconds += PHYSICAL_SOLVES * SECONDS_PER_UNIT_STEP * samples * k * steps
     what = "the auto candidates " + ", ".join(fitted) if auto else ", ".join(fitted)
     detail = (f"{what} on {samples:,} samples x {starts} start(s), at most {steps} steps "
-              f"each{', and the physically bounded solves' if options.get('physical') else ''} "
+              f"each{', and the physically bounded solves' if options.physical else ''} "
               "(an upper bound: fits usually stop sooner)")
     return Estimate(int(memory), seconds, detail)

@@ -180,12 +180,12 @@ class JobQueue:
             log.exception("job %s: runner error", job.id)
             settle = (self.store.fail, (job.id, f"internal error: {e!r}"), "failed")
         else:
-            if outcome["ok"]:
-                settle = (self.store.finish, (job.id, outcome["results"]), "done")
+            if outcome.ok:
+                settle = (self.store.finish, (job.id, outcome.value, outcome.notes), "done")
             else:
-                if "traceback" in outcome:
-                    log.error("job %s failed:\n%s", job.id, outcome["traceback"])
-                settle = (self.store.fail, (job.id, outcome["reason"]), "failed")
+                if outcome.internal:
+                    log.error("job %s failed:\n%s", job.id, outcome.traceback)
+                settle = (self.store.fail, (job.id, outcome.reason), "failed")
         call, args, status = settle
         try:
             await self._store(name, f"store the outcome of job {job.id}", call, *args,

@@ -32,7 +32,7 @@ from api.settings import Settings
 log = logging.getLogger("brdffit.api")
 
 #: ``progress(stage, fraction)``, awaited for each report a task makes.
-Progress = Callable[[str, float], Awaitable[None]]
+OnProgress = Callable[[str, float], Awaitable[None]]
 
 
 class Stopped(RuntimeError):
@@ -53,7 +53,7 @@ class Cancelled(Stopped):
 
 class AbstractRunner(abc.ABC):
     @abc.abstractmethod
-    async def run(self, fn: Callable[..., Any], /, *args: Any, progress: Progress | None = None,
+    async def run(self, fn: Callable[..., Any], /, *args: Any, progress: OnProgress | None = None,
                   limit_s: float | None = None, cancel: asyncio.Event | None = None) -> Any:
         """``fn(*args)`` away from the event loop. Raises :class:`WorkerLost` if the
         worker dies under it, :class:`TimeLimitExceeded` after ``limit_s`` seconds,

@@ -313,12 +313,18 @@ class Store:
             ).fetchall()  # fetch all: the statement (and its commit) completes
         return _job(rows[0]) if rows else None
 
-    def finish(self, job_id: str, results: list[dict]) -> None:
+    def finish(self, job_id: str, results: list[dict], notes=()) -> None:
+        """The job is done with ``results``; ``notes`` (what happened on the way, e.g.
+        a model that could not be fitted beside others) go to its note."""
         with self._connect() as con:
+            row = con.execute("SELECT note FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            note = row["note"] if row else None
+            for text in notes:
+                note = _add_note(note, text)
             con.execute(
-                "UPDATE jobs SET status = 'done', results = ?, reason = NULL, finished_at = ? "
-                "WHERE id = ? AND status = 'running'",
-                (jsonout.dumps(results), time.time(), job_id),
+                "UPDATE jobs SET status = 'done', results = ?, reason = NULL, note = ?, "
+                "finished_at = ? WHERE id = ? AND status = 'running'",
+                (jsonout.dumps(results), note, time.time(), job_id),
             )
 
     def fail(self, job_id: str, reason: str) -> None:

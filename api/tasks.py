@@ -15,6 +15,8 @@ import threading
 import time
 import traceback
 
+from brdffit.outcome import Outcome
+
 #: Where :func:`report` sends a running task's progress (set by :func:`serve`).
 _reporter = None
 
@@ -34,68 +36,62 @@ def _read(table_path: str, source: str):
     return dataclasses.replace(table, source=source)
 
 
-def fit_models(table_path: str, source: str, models: list[str], options: dict) -> dict:
-    """Fit each model to the table: ``{"ok": True, "results": [FitResult dict, ...]}``
-    or ``{"ok": False, "reason": "..."}``."""
-    from brdffit import BrdffitError
-    from brdffit.fitting.scene import Scene, fit_in_scene
+def fit_models(table_path: str, source: str, models: list[str], options: dict) -> Outcome:
+    """The fits a job asks for (``brdffit.request.run``): an :class:`Outcome` whose
+    value is the list of every fit made (``FitResult`` dicts; for ``auto`` every
+    candidate's, the chosen one carrying its ``selection``), its notes the models
+    that could not be fitted beside ones that could."""
     from brdffit.jsonout import strict
-    from brdffit.models import UnknownModelError
+    from brdffit.request import FitRequest, run
 
     try:
+        request = FitRequest.from_flat(models, options)
         report("reading the table", 0.0)
         table = _read(table_path, source)
-        options = dict(options)
-        rule = {"tolerance": options.pop("tolerance", None), "budget": options.pop("budget", None)}
-        scene = options.pop("scene", None)
-        scene = None if scene is None else Scene.from_dict(scene)
-        if models == ["auto"]:
-            report("fitting the candidates and choosing (model auto)", 0.0)
-            return {"ok": True, "results": _select(table, scene, rule, options)}
-        # Strict before it is stored and served: a metric a fit could not measure is null.
-        # The fraction counts finished models: a fit does not report its own steps.
-        results = []
-        for i, m in enumerate(models):
-            report(f"fitting {m} ({i + 1} of {len(models)})", i / len(models))
-            results.append(strict(fit_in_scene(table, m, scene, **options).to_dict()))
+
+        def progress(i: int, n: int, model: str, row: dict | None) -> None:
+            if row is None:  # before model i; after it, the fraction counts it done
+                what = "candidates, model auto" if request.auto else "models"
+                report(f"fitting {model} ({i + 1} of {n} {what})", i / n)
+
+        fitted = run(table, request, progress=progress)
         report("storing the results", 1.0)
-        return {"ok": True, "results": results}
-    except (BrdffitError, UnknownModelError, ValueError) as e:
-        return {"ok": False, "reason": str(e)}
-    except Exception as e:  # a bug, not the input's fault: keep the evidence
-        return {"ok": False, "reason": f"internal error: {type(e).__name__}: {e}",
-                "traceback": traceback.format_exc()}
-
-
-def _select(table, scene, rule: dict, options: dict) -> list[dict]:
-    """``model="auto"``: every candidate's fit, the chosen one carrying the selection
-    (ranking, reason) in ``selection``."""
-    from brdffit.jsonout import strict
-    from brdffit.selection import DEFAULT_TOLERANCE, select
-
-    def progress(i: int, n: int, model: str, row: dict | None) -> None:
-        if row is None:  # before candidate i; after it, the fraction counts it done
-            report(f"fitting {model} ({i + 1} of {n} candidates, model auto)", i / n)
-
-    tolerance = DEFAULT_TOLERANCE if rule["tolerance"] is None else rule["tolerance"]
-    sel = select(table, tolerance=tolerance, budget=rule["budget"], scene=scene,
-                 progress=progress, **options)
-    return [strict(sel.fits[row["model"]].to_dict())
-            for row in sel.ranking if row["model"] in sel.fits]
+        # Strict before it is stored and served: a metric a fit could not measure is null.
+        return Outcome.success([strict(r.to_dict()) for r in fitted.fits.values()],
+                               notes=[f"{m} could not be fitted: {why}"
+                                      for m, why in fitted.failed.items()])
+    except Exception as e:  # noqa: BLE001 - a failure is the job's outcome, not a crash
+        return Outcome.failure(e)
 
 
 def render_plot(table_path: str, source: str, result: dict, kind: str,
-                exposure_ev: float = 0.0) -> dict:
-    """One plot of a finished fit: ``{"ok": True, "png": bytes}`` (``brdffit.view.plots``)
-    or ``{"ok": False, "reason": "..."}``."""
+                exposure_ev: float = 0.0) -> Outcome:
+    """One plot of a finished fit: an :class:`Outcome` whose value is the PNG's bytes
+    (``brdffit.view.plots``)."""
     from brdffit.view import plots
 
     try:
-        return {"ok": True, "png": plots.render(kind, _read(table_path, source), result,
-                                                exposure_ev)}
-    except Exception as e:  # a stored table gone bad, or a plotting bug
-        return {"ok": False, "reason": f"{type(e).__name__}: {e}",
-                "traceback": traceback.format_exc()}
+        return Outcome.success(plots.render(kind, _read(table_path, source), result,
+                                            exposure_ev))
+    except Exception as e:  # noqa: BLE001 - a stored table gone bad, or a plotting bug
+        return Outcome.failure(e)
+
+
+def export_fit(result: dict, target: str, table_path: str | None = None,
+               target_model: str | None = None) -> Outcome:
+    """A finished fit as a renderer's material (``brdffit.export.export``): an
+    :class:`Outcome` whose value is the export's dict; a fit that cannot be exported
+    so is a failure that is not ``internal``."""
+    from brdffit import jsonout
+    from brdffit.export import export
+    from brdffit.fitting.result import FitResult
+
+    try:
+        out = export(FitResult.from_dict(result), target, table=table_path,
+                     target_model=target_model)
+        return Outcome.success(jsonout.strict(out.to_dict()))
+    except Exception as e:  # noqa: BLE001 - an ExportError is the request's, else a bug
+        return Outcome.failure(e)
 
 
 def warm_up() -> int:

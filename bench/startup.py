@@ -79,7 +79,7 @@ def bench_new_process(path: str) -> dict:
     code = ("import time; t0 = time.perf_counter()\n"
             "from brdffit.io import merl\nfrom brdffit.selection import select\n"
             f"s = select(merl.read({path!r}))\n"
-            "print(time.perf_counter() - t0, s.chosen, s.result.log_rmse)")
+            "print(time.perf_counter() - t0, s.chosen, s.chosen_fit.log_rmse)")
     _process([sys.executable, "-c", code], cache)  # fills the cache with auto's fits
     wall, stdout = _process([sys.executable, "-c", code], cache)
     inner, chosen, err = stdout.split()

@@ -49,7 +49,10 @@ from brdffit.fitting.sphere import SphereReference, evaluate
 from brdffit.io.merl import MerlTable
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 
-DEFAULT_CANDIDATES = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
+#: auto's candidates, cheapest first: the registry's models that declare themselves
+#: candidates (``AbstractBRDFModel.auto_candidate``; lambert, oren_nayar, blinn_phong,
+#: phong, beckmann, ggx, ggx2 built in).
+DEFAULT_CANDIDATES = models.catalogue.auto_candidates()
 #: A specular colour is grey when (max - min) / max over R, G, B is at most this.
 DEFAULT_GREY_TOLERANCE = 0.05
 
@@ -60,7 +63,7 @@ class Selection:
 
     ``ranking`` has one row per candidate, cheapest first; ``fits`` holds the
     :class:`FitResult` behind each row that fitted (the very fits the ranking
-    reports: nothing is fitted twice); ``result`` is the chosen one.
+    reports: nothing is fitted twice); ``chosen_fit`` is the chosen one.
     """
 
     chosen: str
@@ -75,7 +78,7 @@ class Selection:
     fits: dict[str, FitResult] = field(default_factory=dict, repr=False)
 
     @property
-    def result(self) -> FitResult:
+    def chosen_fit(self) -> FitResult:
         return self.fits[self.chosen]
 
     @property
@@ -92,7 +95,7 @@ class Selection:
     def to_dict(self) -> dict:
         """The chosen fit in the result schema, its ``selection`` set: the same JSON
         shape as any fit's (``brdffit fit --json``, the service, the batch store)."""
-        return self.result.to_dict()
+        return self.chosen_fit.to_dict()
 
 
 # -- measured evaluation cost -------------------------------------------------------------
@@ -429,8 +432,9 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tup
     if budget is not None:
         under = [row for row in ok if row["log_rmse"] <= budget]
         if under:
-            c = under[0]
-            cheaper = ", ".join(f"{r['model']} {_fmt(r['log_rmse'])}" for r in ok[: ok.index(c)])
+            c = _lowest_of_its_size(under[0], under)
+            cheaper = ", ".join(f"{r['model']} {_fmt(r['log_rmse'])}" for r in ok[: ok.index(c)]
+                                if r not in under)
             return c, (
                 f"Chose {c['model']}: the cheapest candidate with log_rmse "
                 f"{_fmt(c['log_rmse'])} <= budget {_fmt(budget)}"
@@ -439,8 +443,9 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tup
             )
         prefix = (f"No candidate reaches the budget {_fmt(budget)} (best: {best['model']} "
                   f"{_fmt(best['log_rmse'])}), so the tolerance rule decides. ")
-    c = next(row for row in ok if row["excess"] <= tolerance)
-    cheaper = ok[: ok.index(c)]
+    within = [row for row in ok if row["excess"] <= tolerance]
+    c = _lowest_of_its_size(within[0], within)
+    cheaper = [row for row in ok[: ok.index(c)] if row not in within]
     if c is best:
         why = (f"Chose {c['model']}: the best log_rmse ({_fmt(c['log_rmse'])}) and no cheaper "
                f"candidate within tolerance {_fmt(tolerance)} of it")
@@ -451,7 +456,70 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tup
     if cheaper:
         why += "; cheaper ones are further off (" + ", ".join(
             f"{r['model']} +{_fmt(r['excess'])}" for r in cheaper) + ")"
+    same_size = [r for r in within if r is not c and r.get("n_params") == c.get("n_params")]
+    if same_size:
+        why += ("; as cheap and within tolerance too, but with a higher error: " + ", ".join(
+            f"{r['model']} {_fmt(r['log_rmse'])}" for r in same_size))
     return c, prefix + why + "."
+
+
+def _lowest_of_its_size(first: dict, eligible: list[dict]) -> dict:
+    """The cheapest eligible row is ``first``; candidates as large as it (beckmann and
+    ggx, 8 values each) cost the same to store, so among those the lower error wins:
+    registry order is not a reason to keep a worse fit."""
+    size = first.get("n_params")
+    same = [row for row in eligible if size is not None and row.get("n_params") == size]
+    return min(same, key=lambda row: row["log_rmse"]) if same else first
+
+
+#: Fits whose log_rmse differ by less than this are tied (far below any difference a
+#: reader would act on); a tie goes to the model with fewer parameters.
+TIE = 1e-6
+
+
+def best(rows: list[dict]) -> tuple[dict, str]:
+    """The one "best" rule for a list of fitted models (not ``auto``, which is
+    :func:`choose`): the lowest ``log_rmse``; a tie goes to fewer parameters.
+    ``rows`` are ranking rows (``model``, ``n_params``, ``log_rmse``, ``status``);
+    returns the best row and the reason, in words."""
+    fitted = [row for row in rows if row.get("status", "fitted") != "failed"]
+    if not fitted:
+        raise FitInputError("no model could be fitted")
+    finite = [row for row in fitted if row.get("log_rmse") is not None
+              and math.isfinite(row["log_rmse"])]
+    if not finite:
+        return fitted[0], (f"No fit has a finite log_rmse; {fitted[0]['model']} is shown "
+                           "first as fitted.")
+    lowest = min(row["log_rmse"] for row in finite)
+    tied = [row for row in finite if row["log_rmse"] <= lowest + TIE]
+    b = min(tied, key=lambda row: (row.get("n_params") or 0, row["log_rmse"]))
+    if len(finite) == 1:
+        return b, f"{b['model']}: the only model fitted (log_rmse {_fmt(b['log_rmse'])})."
+    others = ", ".join(f"{row['model']} {_fmt(row['log_rmse'])}" for row in finite
+                       if row is not b)
+    return b, f"Best {b['model']}: the lowest log_rmse ({_fmt(b['log_rmse'])}; {others})."
+
+
+def chosen_result(results: list[dict]) -> dict:
+    """The fit that stands for a set of stored fits of one table (result-schema
+    dicts: a service job's, a batch table's): the one ``auto`` chose where one carries
+    its ``selection``, else the best by :func:`best` (the lowest log_rmse, a tie to
+    fewer parameters; an unknown model counts as the largest)."""
+    if not results:
+        raise FitInputError("no fits to choose from")
+    for r in results:
+        if r.get("selection"):
+            return r
+    rows = []
+    for i, r in enumerate(results):
+        try:
+            n_params = models.get(r["model"]).n_params
+        except models.UnknownModelError:  # stored by a version with another registry
+            n_params = math.inf
+        e = r["error"].get("log_rmse")
+        rows.append({"model": r["model"], "n_params": n_params, "index": i,
+                     "log_rmse": float("nan") if e is None else float(e)})
+    return results[best(rows)[0]["index"]]
 
 
 def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):

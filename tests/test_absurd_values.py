@@ -16,7 +16,7 @@ import pytest
 
 from brdffit import FitResult, MerlFormatError, fit, jsonout, models
 from brdffit.batch.store import BatchStore, read_attrs, read_results
-from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord
+from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord
 from brdffit.cli import main as cli_main
 from brdffit.fitting.pipeline import full_table_metrics
 from brdffit.fitting.sampling import bin_weights, usable_bins
@@ -225,7 +225,7 @@ def test_batch_journal_is_strict_and_a_null_metric_is_nan_in_hdf5(tmp_path):
     out = tmp_path / "r.h5"
     error = {"log_rmse": math.nan, "sample_log_rmse": math.inf, "rmse_cos": 0.25}
     with BatchStore(out) as store:  # no checkpoint: the journal is all there is
-        store.add(TableRecord(path="/t.binary", status="ok", sha256="1"),
+        store.add(TableReadRecord(path="/t.binary", status="ok", sha256="1"),
                   [_fit_record("/t.binary", error)])
     with open(str(out) + ".journal") as f:
         lines = [strict_loads(line) for line in f]
@@ -298,13 +298,16 @@ def test_cli_json_writes_a_missing_metric_as_null(capsys):
     NaN; no table makes one on demand)."""
     from argparse import Namespace
 
-    from brdffit.cli.fit import _report
+    from brdffit.cli.fit import write_report
+    from brdffit.request import FitReport, FitRequest
 
     r = FitResult(model="lambert", params={"kd": [0.1, 0.2, 0.3]},
                   error={"log_rmse": 0.5, "rmse_cos": 0.1, "rel_peak_error": 0.2,
                          "sample_log_rmse": math.nan},
                   converged=False, result="nonfinite", steps=0, time_s=0.1, samples={})
-    assert _report(Namespace(json=True, plots=None), None, r, r.to_dict(), "") == 0
+    report = FitReport(request=FitRequest.of("lambert"), fits={"lambert": r}, failed={},
+                       chosen="lambert", reason="", ranking=[])
+    assert write_report(Namespace(json=True, plots=None), None, report, "") == 0
     out = capsys.readouterr().out
     assert out.count("\n") == 1
     assert strict_loads(out)["error"]["sample_log_rmse"] is None

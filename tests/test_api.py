@@ -473,9 +473,9 @@ def test_worker_tasks_return_failures_as_values(tmp_path):
 
     missing = str(tmp_path / "gone.binary")
     out = tasks.fit_models(missing, "gone.binary", ["lambert"], FAST)
-    assert out["ok"] is False and "cannot read" in out["reason"]
+    assert not out.ok and "cannot read" in out.reason and not out.internal
     out = tasks.render_plot(missing, "gone.binary", {}, "slices")
-    assert out["ok"] is False and "MerlFormatError" in out["reason"]
+    assert not out.ok and "cannot read" in out.reason and out.error_type == "MerlFormatError"
     from brdffit.jsonout import strict
 
     assert strict({"a": [float("nan"), 1.0, float("inf")]}) == {"a": [None, 1.0, None]}
@@ -494,3 +494,31 @@ def test_the_api_description_lists_every_plot_kind(http):
 
     description = http.get("/openapi.json").json()["info"]["description"]
     assert f"plots/{{kind}}.png`: {', '.join(KINDS)}." in description and "report" in KINDS
+
+
+def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
+    """``api.services.fits.create``, the one place the service checks a request: the
+    library's meaning (a tolerance with a fixed model is refused, not ignored), the
+    cost against the limits (saying what to ask for instead: the page has samples and
+    starts), then a queued job in a real SQLite store."""
+    from api.services import fits
+    from api.settings import Settings
+    from brdffit.errors import FitInputError
+
+    store = Store(tmp_path)
+    tmp = tmp_path / "t.binary"
+    merl.write(tmp, table("lambert"))
+    store.add_table("a" * 64, tmp, 1, "t.binary", {"measured_bins": 1_000_000})
+    settings = Settings(data_dir=tmp_path, max_job_estimate_s=60.0)
+    with pytest.raises(fits.TableNotFound, match="upload it with POST /v1/tables"):
+        fits.create(store, settings, "b" * 64, "ggx", {})
+    with pytest.raises(FitInputError, match="tolerance 0.02 choose among auto's candidates"):
+        fits.create(store, settings, "a" * 64, "ggx", {"tolerance": 0.02})
+    with pytest.raises(fits.OverLimits) as over:
+        fits.create(store, settings, "a" * 64, "auto", {"samples": 200_000, "starts": 8})
+    why = str(over.value)
+    assert "BRDFFIT_MAX_JOB_ESTIMATE_S" in why and "the auto candidates lambert" in why
+    assert why.endswith("Ask for fewer samples or starts.") and "max_steps)" not in why
+    assert store.list_jobs(limit=10).total == 0  # nothing queued by a refusal
+    job = fits.create(store, settings, "a" * 64, ["ggx", "lambert", "ggx"], {"samples": 4096})
+    assert job.models == ["ggx", "lambert"] and job.status == "queued"

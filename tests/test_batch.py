@@ -22,9 +22,9 @@ import pytest
 from brdffit import MerlFormatError, models
 from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
 from brdffit.batch.job import BatchInputError, FitOptions, find_tables, run_batch
-from brdffit.batch.report import format_ranking, plot_summary, rank
+from brdffit.batch.report import format_ranking, plot_summary, rank, summary_figure
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
-from brdffit.batch.tasks import TableRecord
+from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
 from brdffit.models import UnknownModelError
 
@@ -181,6 +181,9 @@ def test_report_ranks_each_table_own_model_first(cluster_batch, tmp_path):
     assert "looks good/visible/poor" in text
     png = plot_summary(r, tmp_path / "summary.png")
     assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+    # the count of tables each model wins is ticked in whole tables
+    wins_axis = summary_figure(r).axes[1]
+    assert all(float(t).is_integer() for t in wins_axis.get_yticks())
 
 
 def test_report_cli(cluster_batch, tmp_path, capsys):
@@ -343,7 +346,7 @@ def _h5_fits(out) -> int:
 _STORE_WRITER = """
 import sys, time
 from brdffit.batch.store import BatchStore
-from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord
+from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord
 out, n = sys.argv[1], int(sys.argv[2])
 fit = {"model": "lambert", "params": {"kd": [0.5, 0.4, 0.3]}, "error": {"log_rmse": 0.01},
        "converged": True, "result": "successful", "steps": 3, "time_s": 0.1, "starts": 1,
@@ -354,7 +357,7 @@ with BatchStore(out) as store:
     print("ready", flush=True)
     for i in range(start, start + n):
         path = f"/tables/t{i:05d}.binary"
-        store.add(TableRecord(path=path, status="ok", sha256=str(i)),
+        store.add(TableReadRecord(path=path, status="ok", sha256=str(i)),
                   [FitRecord(path=path, model="lambert", sha256=str(i),
                              options=FitOptions().fit_keywords(), status="ok", fit=fit)])
         store.checkpoint({"models": ["lambert"]})
@@ -390,12 +393,12 @@ def test_store_survives_sigkill_at_random_moments(tmp_path):
 
 def test_torn_journal_line_is_dropped(tmp_path):
     out = tmp_path / "torn.h5"
-    rec = {"kind": "table", **TableRecord(path="/x.binary", status="ok", sha256="1").__dict__}
+    rec = {"kind": "table", **TableReadRecord(path="/x.binary", status="ok", sha256="1").__dict__}
     with open(str(out) + ".journal", "w") as f:
         f.write(json.dumps(rec) + "\n" + json.dumps(rec)[:17])
     with BatchStore(out) as store:
         assert store.recovered == 1
-        store.add(TableRecord(path="/y.binary", status="ok", sha256="2"), [])
+        store.add(TableReadRecord(path="/y.binary", status="ok", sha256="2"), [])
         with open(str(out) + ".journal") as f:
             assert [json.loads(line)["path"] for line in f] == ["/x.binary", "/y.binary"]
         store.checkpoint()

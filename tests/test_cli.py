@@ -90,3 +90,9 @@ def test_a_reader_that_goes_away_is_no_error():
     proc.stdout.close()  # before it writes anything
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 141 and err.decode() == "", err.decode()
+
+
+def test_a_selection_option_with_a_fixed_model_is_said_not_ignored(ggx_file):
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--tolerance", "0.01")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "tolerance 0.01" in r.stderr and "ignored" in r.stderr and "model auto" in r.stderr

@@ -1,5 +1,5 @@
-"""brdffit.export.energy: directional albedo over the half vector, against closed forms
-and a brute-force integral over the outgoing direction."""
+"""Directional albedo (brdffit.models.albedo, and the export energy check) over the half vector,
+against closed forms and a brute-force integral over the outgoing direction."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.export.energy import THETA_I_DEG, directional_albedo
+from brdffit.models.albedo import THETA_I_DEG, directional_albedo
 
 pytestmark = pytest.mark.unit
 

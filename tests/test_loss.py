@@ -184,7 +184,8 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
 
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitResultOut, best_result
+    from api.routes.fits import FitResultOut
+    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
     from brdffit.fitting.options import FitOptions
@@ -202,7 +203,7 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
 
     out = tasks.fit_models(str(path), "t.binary", ["ggx"],
                            RequestOptions(loss="linear_cos", samples=2048).model_dump())
-    served = FitResultOut.model_validate(best_result(out["results"]))
+    served = FitResultOut.model_validate(best_result(out.value))
     assert served.loss == "linear_cos" and "sample_rmse_cos" in served.error
 
     run_batch([str(path)], ["ggx"], tmp_path / "r.h5",
@@ -366,7 +367,8 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
 
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitResultOut, best_result
+    from api.routes.fits import FitResultOut
+    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
     from brdffit.fitting.options import FitOptions
@@ -383,7 +385,7 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     assert cli["loss"] == "render" and "sample_render_rmse" in cli["error"]
     out = tasks.fit_models(str(path), "t.binary", ["ggx"],
                            RequestOptions(loss="render", samples=2048).model_dump())
-    served = FitResultOut.model_validate(best_result(out["results"]))
+    served = FitResultOut.model_validate(best_result(out.value))
     assert served.loss == "render"
     run_batch([str(path)], ["ggx"], tmp_path / "r.h5",
               options=FitOptions(loss="render", samples=2048), workers=0, progress=False)

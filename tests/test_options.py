@@ -241,17 +241,24 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     physically bounded fit (``--physical``) too."""
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitResultOut, best_result
+    from api.routes.fits import FitResultOut
+    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
-    from brdffit.batch.store import read_results
+    from brdffit.batch.report import rank
+    from brdffit.batch.store import read_fit, read_results
+    from brdffit.request import FitRequest
+    from brdffit.request import run as run_request
     from brdffit.selection import select
 
     path = str(bright_table if physical else noisy_table)
     fast = {**FAST, "physical": physical}
     candidates = ["lambert", "oren_nayar"]
     if model == AUTO:
-        library = select(merl.read(path), candidates, **fast).to_dict()
+        library = run_request(merl.read(path), FitRequest.of(
+            AUTO, candidates=candidates, **fast)).result.to_dict()
         assert library["selection"]["chosen"] == library["model"]
+        # the front door is select's choice, nothing added
+        _same_fit(select(merl.read(path), candidates, **fast).to_dict(), library)
     else:
         library = fit(merl.read(path), model, **fast).to_dict()
     assert list(library) == FitResult.keys() and library["schema"] == "brdffit.fit/1"
@@ -267,20 +274,27 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     assert r.returncode == 0, r.stderr
     _same_fit(json.loads(r.stdout), library)
 
-    if model != AUTO:  # the service's auto uses the default candidates
-        out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**fast).model_dump())
-        assert out["ok"], out
-        served = FitResultOut.model_validate(best_result(out["results"])).model_dump(
-            by_alias=True)
-        _same_fit(served, {**library, "table": "noisy.binary"})
-        assert set(FitResultOut.model_fields) | {"schema"} - {"schema_"} >= set(library)
+    request = {**fast, "candidates": candidates} if model == AUTO else fast
+    out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**request).model_dump())
+    assert out.ok, out
+    served = FitResultOut.model_validate(best_result(out.value)).model_dump(by_alias=True)
+    renamed = {**library, "table": "noisy.binary"}  # named as the uploader named it
+    if model == AUTO:
+        renamed["selection"] = {**library["selection"], "table": "noisy.binary"}
+    _same_fit(served, renamed)
+    assert set(FitResultOut.model_fields) | {"schema"} - {"schema_"} >= set(library)
 
-    names = candidates if model == AUTO else [model]
-    run_batch([path], names, tmp_path / "r.h5", options=FitOptions(**fast), workers=0,
-              progress=False)
+    run_batch([path], [model], tmp_path / "r.h5", options=FitOptions(**fast), workers=0,
+              progress=False, candidates=candidates)
     stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]
-    batch = stored[library["model"]]["fit"]
-    _same_fit(batch, {**library, "selection": None})  # a batch stores every candidate
+    # a batch stores every candidate, the chosen one carrying auto's ranking and reason
+    _same_fit(stored[library["model"]]["fit"], {**library, "table": path})
+    if model == AUTO:
+        assert set(stored) == set(candidates)
+        (ranked,) = rank(tmp_path / "r.h5").tables
+        assert ranked.chosen()[0] == library["selection"]["chosen"]
+        assert read_fit(tmp_path / "r.h5", ranked.name)["selection"] == stored[
+            library["model"]]["fit"]["selection"]
 
 
 def test_fit_seed_reaches_the_fit(noisy_table):

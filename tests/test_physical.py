@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from brdffit import FitInputError, FitResult, fit, models
-from brdffit.export.energy import directional_albedo
 from brdffit.fitting import physical
+from brdffit.models.albedo import directional_albedo
 from data_synth import make_table
 
 pytestmark = pytest.mark.unit
@@ -37,7 +37,7 @@ FAST = {"samples": 4096}
     ("lambert", {"kd": [1, 0.5, 0.2]}),
 ])
 def test_coarse_albedo_is_the_exact_one_to_within_its_margin(name, params):
-    """The fit's cheap quadrature (1,792 half vectors) against brdffit.export.energy's
+    """The fit's cheap quadrature (1,792 half vectors) against brdffit.models.albedo's
     (131,072): within MARGIN where the albedo is largest, 1% at every incidence."""
     m = models.get(name)
     exact = directional_albedo(name, params)  # (incidences, 3)
@@ -167,8 +167,9 @@ def test_physical_must_be_a_bool():
 
 def test_the_service_estimate_counts_the_bounded_solves():
     from api.estimate import PHYSICAL_SOLVES, estimate
+    from brdffit.request import FitRequest
 
     assert PHYSICAL_SOLVES == len(physical.BARRIERS)
     base = {"samples": 16384, "starts": 1, "max_steps": 256}
-    assert (estimate(["ggx"], {**base, "physical": True}, 10**6).seconds
-            > estimate(["ggx"], base, 10**6).seconds)
+    assert (estimate(FitRequest.of("ggx", **base, physical=True), 10**6).seconds
+            > estimate(FitRequest.of("ggx", **base), 10**6).seconds)

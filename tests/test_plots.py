@@ -181,7 +181,14 @@ def test_report_page_lists_parameters_with_errors_and_every_metric(ggx):
     assert any("±" in line for line in params)
     assert [m.split()[0] for m in metrics[:5]] == ["log_rmse", "cube_root_rmse", "rmse_cos",
                                                   "rel_peak_error", "sphere"]
-    assert "(bound)" in "".join(plots.summary_lines(fit(table("lambert"), "ggx", **FAST))[0])
+    bound = plots.summary_lines(fit(table("lambert"), "ggx", **FAST))[0]
+    assert "(bound)" in "".join(bound)
+    # a long line (three bound RGB values) wraps under its first value, clear of the
+    # errors column beside it
+    assert all(len(line) <= plots.PARAM_LINE_CHARS for line in params + bound
+               if not line.startswith("  "))
+    assert plots.wrap_values("kd     ", ["2.215e-09 (bound)"] * 3) == [
+        "kd     2.215e-09 (bound),  2.215e-09 (bound),", "       2.215e-09 (bound)"]
 
 
 def test_saved_plots_respect_the_umask(ggx, tmp_path):

@@ -7,6 +7,7 @@ Tables and selections are built once per module.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -69,14 +70,27 @@ def test_ggx_table_selects_ggx(ggx_selection):
     assert "beckmann +" in ggx_selection.reason  # why the cheaper one lost
 
 
-def test_beckmann_is_chosen_only_within_tolerance(ggx_table, ggx_selection):
-    beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
-    loose = beckmann["excess"] * 1.5
-    sel = select(ggx_table, ("beckmann", "ggx"), tolerance=loose, **FAST)
-    assert sel.chosen == "beckmann"
+def test_a_cheaper_model_is_chosen_only_within_tolerance(ggx_table, ggx_selection):
+    phong = next(r for r in ggx_selection.ranking if r["model"] == "phong")
+    loose = phong["excess"] * 1.5
+    sel = select(ggx_table, ("phong", "ggx"), tolerance=loose, **FAST)
+    assert sel.chosen == "phong"
     assert "within tolerance" in sel.reason and "(ggx," in sel.reason
-    tight = select(ggx_table, ("beckmann", "ggx"), tolerance=beckmann["excess"] / 1.5, **FAST)
+    tight = select(ggx_table, ("phong", "ggx"), tolerance=phong["excess"] / 1.5, **FAST)
     assert tight.chosen == "ggx"
+
+
+def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
+    """beckmann and ggx both have 8 parameters: within tolerance of each other, the
+    registry's order (beckmann first) is no reason to keep the worse fit."""
+    beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
+    ggx = next(r for r in ggx_selection.ranking if r["model"] == "ggx")
+    assert beckmann["n_params"] == ggx["n_params"] and beckmann["log_rmse"] > ggx["log_rmse"]
+    sel = select(ggx_table, ("beckmann", "ggx"), tolerance=beckmann["excess"] * 1.5, **FAST)
+    assert sel.chosen == "ggx"
+    assert "as cheap and within tolerance too, but with a higher error: beckmann" in sel.reason
+    under = select(ggx_table, ("beckmann", "ggx"), budget=beckmann["log_rmse"] * 1.01, **FAST)
+    assert under.chosen == "ggx" and "cheaper ones miss it" not in under.reason
 
 
 def test_two_lobe_table_selects_ggx2():
@@ -86,7 +100,7 @@ def test_two_lobe_table_selects_ggx2():
     ])
     sel = select(table, **FAST)
     assert sel.chosen == "ggx2", format_selection(sel)
-    p = sel.result.params
+    p = sel.chosen_fit.params
     assert sorted([p["alpha1"], p["alpha2"]]) == pytest.approx([0.03, 0.3], rel=1e-3)
 
 
@@ -158,10 +172,11 @@ def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
 def test_budget_picks_the_cheapest_under_it(ggx_table, ggx_selection):
     errors = {r["model"]: r["log_rmse"] for r in ggx_selection.ranking}
     budget = (errors["beckmann"] + errors["phong"]) / 2  # beckmann under, phong over
-    cands = ("lambert", "phong", "beckmann", "ggx")
+    cands = ("lambert", "phong", "beckmann")
     sel = select(ggx_table, cands, budget=budget, **FAST)
     assert sel.chosen == "beckmann" and "budget" in sel.reason
-    sel = select(ggx_table, cands, budget=1e-30, **FAST)
+    assert "cheaper ones miss it: lambert" in sel.reason
+    sel = select(ggx_table, (*cands, "ggx"), budget=1e-30, **FAST)
     assert sel.chosen == "ggx" and sel.reason.startswith("No candidate reaches the budget")
 
 
@@ -223,7 +238,8 @@ def test_candidates_fitted_side_by_side_are_the_fits_made_one_at_a_time(ggx_sele
 def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path,
                                                                  monkeypatch):
     from api import tasks
-    from api.routes.fits import FitOptions, FitRequest, best_result
+    from api.routes.fits import FitOptions, FitRequest
+    from api.services.fits import result_of as best_result
     from brdffit.client import FitJob
     from brdffit.io import merl
 
@@ -242,27 +258,27 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     reports = []
     monkeypatch.setattr(tasks, "_reporter", lambda stage, f: reports.append((stage, f)))
     out = tasks.fit_models(str(path), "ggx.binary", ["auto"], options)
-    assert out["ok"], out
+    assert out.ok, out
     # the job's progress moves candidate by candidate, not from 0 straight to done
     fractions = [f for stage, f in reports if " candidates, model auto" in stage]
     assert len(fractions) == len(DEFAULT_CANDIDATES) and fractions == sorted(fractions)
     assert fractions[-1] == pytest.approx((len(DEFAULT_CANDIDATES) - 1) / len(DEFAULT_CANDIDATES))
-    assert [r["model"] for r in out["results"]] == list(DEFAULT_CANDIDATES)
-    chosen = best_result(out["results"])  # what the job reports as its result
+    assert [r["model"] for r in out.value] == list(DEFAULT_CANDIDATES)
+    chosen = best_result(out.value)  # what the job reports as its result
     assert chosen["model"] == "ggx"
     selection = chosen["selection"]
     assert selection["chosen"] == "ggx" and "tolerance" in selection["reason"]
     assert len(selection["ranking"]) == len(DEFAULT_CANDIDATES)
-    json.dumps(out["results"], allow_nan=False)
+    json.dumps(out.value, allow_nan=False)
     job = FitJob.from_json({"id": "1" * 32, "status": "done", "table_id": "0" * 64,
                             "models": ["auto"], "options": options, "attempts": 1,
-                            "result": chosen, "results": out["results"]})
+                            "result": chosen, "results": out.value})
     assert job.selection["chosen"] == "ggx"
-    _auto_job_answers_model_auto_with_its_choice(out["results"])
+    _auto_job_answers_model_auto_with_its_choice(out.value)
     # A scene goes to single-model jobs too: the full-table error comes beside.
     options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
     out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
-    assert out["ok"] and out["results"][0]["full_table_error"] is not None
+    assert out.ok and out.value[0]["full_table_error"] is not None
 
 
 def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_path, capsys):
@@ -362,3 +378,21 @@ def _auto_job_answers_model_auto_with_its_choice(results: list[dict]) -> None:
         with pytest.raises(HTTPException) as e:
             asyncio.run(finished_fit(Store(job_models), "1" * 32, asked, "exports"))
         assert e.value.status_code == 404 and e.value.detail.endswith(f"it has {fitted}")
+
+
+def test_auto_plots_add_a_ranking_figure(ggx_table, ggx_selection, tmp_path):
+    """``brdffit fit --model auto --plots`` draws the chosen fit and the ranking of
+    every candidate (``ranking.png``), from the chosen fit's own ``selection``."""
+    from types import SimpleNamespace
+
+    from brdffit.view import plots
+
+    png = plots.ranking(ggx_selection.chosen_fit.selection)
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+    report = SimpleNamespace(chosen_fit=ggx_selection.chosen_fit)
+    paths = plots.save_report(ggx_table, report, tmp_path, kinds=("slices",))
+    assert [p.rsplit("/", 1)[-1] for p in paths] == ["slices.png", "ranking.png"]
+    unselected = dataclasses.replace(ggx_selection.chosen_fit, selection=None)
+    plain = SimpleNamespace(chosen_fit=unselected)
+    assert plots.save_report(ggx_table, plain, tmp_path / "one", kinds=("slices",)) == [
+        str(tmp_path / "one" / "slices.png")]

@@ -319,8 +319,9 @@ def test_materials_where_data_synth_is_not_installed(monkeypatch):
     from fastapi import HTTPException, Response
 
     from api.routes import materials
+    from api.services import tables
 
-    monkeypatch.setattr(materials, "_nbrdf", lambda: None)
+    monkeypatch.setattr(tables, "nbrdf", lambda: None)
     listed = materials.list_materials()
     assert listed.names == [] and "data_synth" in listed.note
     with pytest.raises(HTTPException) as e:

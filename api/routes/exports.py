@@ -9,13 +9,13 @@ model to the fit (seconds of JAX), so it runs in a worker process like a fit.
 from __future__ import annotations
 
 import logging
-import traceback
 from enum import Enum
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Query, status
 from pydantic import BaseModel, ConfigDict, Field
 
+from api import tasks
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
 from api.routes.fits import FitModel, JobId, finished_fit
@@ -50,26 +50,6 @@ class ExportOut(BaseModel):
     table: str | None = None
 
 
-def export_task(result: dict, target: str, table_path: str | None = None,
-                target_model: str | None = None) -> dict:
-    """Worker side: ``{"ok": True, "export": {...}}``, ``{"ok": False, "input": True,
-    "reason": ...}`` for a fit that cannot be exported, or ``{"ok": False, ...}`` with a
-    traceback for a bug."""
-    from brdffit import jsonout
-    from brdffit.export import ExportError, export
-    from brdffit.fitting.result import FitResult
-
-    try:
-        out = export(FitResult.from_dict(result), target, table=table_path,
-                     target_model=target_model)
-        return {"ok": True, "export": jsonout.strict(out.to_dict())}
-    except (ExportError, ValueError) as e:
-        return {"ok": False, "input": True, "reason": str(e)}
-    except Exception as e:  # a bug: the server's fault
-        return {"ok": False, "input": False, "reason": f"{type(e).__name__}: {e}",
-                "traceback": traceback.format_exc()}
-
-
 @router.get(
     "/{job_id}/exports/{target}",
     summary="A finished fit as a Mitsuba 3, glTF 2.0 or MaterialX material",
@@ -95,15 +75,15 @@ async def get_export(
     # the job's table, for the export's error to the measurement (a deleted one: said)
     path = store.table_path(job.table_id)
     try:
-        outcome = await runner.run(export_task, result, target.value,
+        outcome = await runner.run(tasks.export_fit, result, target.value,
                                    str(path) if path.exists() else None, target_model)
     except WorkerLost as e:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                             headers={"Retry-After": "5"}) from None
-    if not outcome["ok"]:
-        if outcome["input"]:
-            raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, outcome["reason"])
-        log.error("export %s of job %s failed:\n%s", target.value, job_id, outcome["traceback"])
+    if not outcome.ok:
+        if not outcome.internal:  # this fit cannot be exported so: the request's answer
+            raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, outcome.reason)
+        log.error("export %s of job %s failed:\n%s", target.value, job_id, outcome.traceback)
         raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
-                            f"the {target.value} export failed: {outcome['reason']}")
-    return ExportOut.model_validate(outcome["export"])
+                            f"the {target.value} export failed: {outcome.reason}")
+    return ExportOut.model_validate(outcome.value)

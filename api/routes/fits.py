@@ -8,8 +8,10 @@ find out (say, too few usable bins), and says so in ``reason``.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import os
+import typing
 from datetime import UTC, datetime
 from enum import Enum
 from typing import Annotated, Literal
@@ -29,13 +31,13 @@ from pydantic import (
 from api import tasks
 from api.deps import QueueDep, RunnerDep, SettingsDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.estimate import estimate
 from api.runner import WorkerLost
+from api.services import fits
 from api.store import STATUSES, JobRecord, Store
 from brdffit import models
 from brdffit.errors import FitInputError
 from brdffit.fitting import options
-from brdffit.fitting.result import SCHEMA
+from brdffit.fitting.result import SCHEMA, FitResult
 from brdffit.fitting.scene import Scene, SceneError
 from brdffit.view.plots import EXPOSURE_EV_RANGE, KINDS, exposure_refused
 
@@ -82,6 +84,23 @@ class FitOptions(_ContractOptions):
         "preset, max_theta_i, max_theta_o, pairs, lights, views, spread, name",
     )
 
+    candidates: list[str] | None = Field(
+        None, max_length=32, description="model 'auto': the models to choose among "
+        "(default: GET /v1/models' auto candidates, cheapest first)")
+
+    @field_validator("candidates")
+    @classmethod
+    def _known_candidates(cls, v: list[str] | None) -> list[str] | None:
+        if v is not None:
+            if not v:
+                raise ValueError("candidates: give at least one model, or leave it out")
+            for name in v:
+                try:
+                    models.check_name(name)
+                except models.UnknownModelError as e:
+                    raise ValueError(f"candidates: {e}") from None
+        return v
+
     @field_validator("scene")
     @classmethod
     def _valid_scene(cls, v: dict | None) -> dict | None:
@@ -98,7 +117,7 @@ class FitOptions(_ContractOptions):
     def _valid_for_the_library(self) -> FitOptions:
         # Pydantic has checked the bounds it was given; the library has the last word.
         try:
-            options.FitOptions(**self.model_dump(exclude={"scene"}))
+            options.FitOptions(**self.model_dump(exclude={"scene", "candidates"}))
         except FitInputError as e:
             raise ValueError(str(e)) from None
         return self
@@ -134,41 +153,29 @@ class FitRequest(BaseModel):
         return v
 
 
-class FitResultOut(BaseModel):
-    """``FitResult.to_dict()``, the result schema (docs/results.md): the JSON of
-    ``brdffit fit --json`` (NaN as null). Extra keys are kept, not dropped: a job
-    stored by an older version is served as it was stored."""
+def _result_field(f: dataclasses.Field, hints: dict):
+    """``(annotation, Field)`` of one ``FitResult`` field. JSON is strict: a metric a
+    fit could not measure (NaN) is null, so every float may be null."""
+    annotation = hints[f.name]
+    if f.name in ("error", "full_table_error"):
+        annotation = dict[str, float | None] | (None if f.name == "full_table_error"
+                                                 else dict[str, float | None])
+    required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    return annotation, Field(... if required else f.default,
+                             description=FitResult.described().get(f.name))
 
-    model_config = ConfigDict(extra="allow", populate_by_name=True)
 
-    schema_: str = Field(SCHEMA, alias="schema", description="the result schema's version")
-    model: str
-    params: dict[str, float | list[float]]
-    error: dict[str, float | None]
-    converged: bool
-    result: str
-    steps: int
-    time_s: float
-    samples: dict
-    solver: str
-    precision: str
-    loss: str = Field("log", description="the loss the solver minimised (docs/fitting.md)")
-    starts: int
-    table: str | None = None
-    scene: dict | None = None
-    full_table_error: dict[str, float | None] | None = None
-    selection: dict | None = None
-    uncertainty: dict | None = Field(
-        None, description="standard errors, correlations and undetermined parameters "
-                          "(docs/results.md)")
-    physical: dict | None = Field(
-        None, description="on a physically bounded fit (options.physical): the unconstrained "
-                          "and bounded log_rmse, the relative cost, the largest albedo before "
-                          "and after, the active constraints (docs/results.md)")
-    quality: dict | None = Field(
-        None, description="how the fit looks next to the measurement: render_psnr_db, "
-                          "colour_shift (per channel), verdict (good, visible or poor) and "
-                          "reason (docs/results.md)")
+# ``FitResult.to_dict()``, the result schema (docs/results.md), derived from the class: a
+# key added to FitResult is served without another declaration here. Extra keys are
+# kept, not dropped: a job stored by an older version is served as it was stored.
+FitResultOut = create_model(
+    "FitResultOut", __config__=ConfigDict(extra="allow", populate_by_name=True),
+    __doc__="``FitResult.to_dict()``, the result schema (docs/results.md): the JSON of "
+            "``brdffit fit --json`` (NaN as null).",
+    schema_=(str, Field(SCHEMA, alias="schema", description="the result schema's version")),
+    **{f.name: _result_field(f, typing.get_type_hints(FitResult))
+       for f in dataclasses.fields(FitResult)},
+)
 
 
 class Progress(BaseModel):
@@ -197,20 +204,6 @@ def _time(t: float | None) -> datetime | None:
     return None if t is None else datetime.fromtimestamp(t, UTC)
 
 
-def best_result(results: list[dict]) -> dict:
-    """The fit with the lowest log_rmse (a null one counts as worst); for a
-    ``model="auto"`` job, the chosen one."""
-    for r in results:
-        if r.get("selection"):
-            return r
-
-    def key(r):
-        e = r["error"].get("log_rmse")
-        return float("inf") if e is None else e
-
-    return min(results, key=key)
-
-
 def _out(job: JobRecord) -> JobOut:
     return JobOut(
         id=job.id, status=job.status, table_id=job.table_id, models=job.models,
@@ -219,7 +212,7 @@ def _out(job: JobRecord) -> JobOut:
         finished_at=_time(job.finished_at),
         progress=(Progress(stage=job.stage, fraction=job.fraction or 0.0)
                   if job.status == "running" and job.stage else None),
-        result=best_result(job.results) if job.results else None, results=job.results,
+        result=fits.result_of(job.results) if job.results else None, results=job.results,
     )
 
 
@@ -241,7 +234,7 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
                             f"fit job {job_id} is {job.status}{why}; {what} exist once it is done")
     fitted = ", ".join(r["model"] for r in job.results)
     if model is None or (model == options.AUTO and options.AUTO in job.models):
-        return job, best_result(job.results)  # an auto job's: the chosen fit
+        return job, fits.result_of(job.results)  # an auto job's: the chosen fit
     result = next((r for r in job.results if r["model"] == model), None)
     if result is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"fit job {job_id} has no {model!r} fit; "
@@ -263,29 +256,12 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
 )
 def create_fit(body: FitRequest, response: Response, store: StoreDep, queue: QueueDep,
                settings: SettingsDep) -> JobOut:
-    table = store.get_table(body.table_id)
-    if table is None:
-        raise HTTPException(status.HTTP_404_NOT_FOUND,
-                            f"no table {body.table_id}; upload it with POST /v1/tables")
-    names = [body.model] if isinstance(body.model, str) else body.model
-    names = list(dict.fromkeys(names))  # a model twice is fitted once
-    fit_options = body.options.model_dump()
-    cost = estimate(names, fit_options, table.summary["measured_bins"])
-    over = []
-    if cost.memory_mib > settings.max_job_memory_mib:
-        over.append(f"memory {cost.memory_mib:,.0f} MiB > {settings.max_job_memory_mib:,} MiB "
-                    "(BRDFFIT_MAX_JOB_MEMORY_MIB)")
-    if cost.seconds > settings.max_job_estimate_s:
-        over.append(f"time {cost.seconds:,.0f} s > {settings.max_job_estimate_s:,.0f} s "
-                    "(BRDFFIT_MAX_JOB_ESTIMATE_S)")
-    if over:
-        # Refused before anything is queued or allocated: say by how much, and why.
-        raise HTTPException(
-            status.HTTP_422_UNPROCESSABLE_CONTENT,
-            f"this fit is estimated over the server's limits: {'; '.join(over)}; estimate "
-            f"for {cost.detail}. Ask for fewer samples or starts (or max_steps).",
-        )
-    job = store.create_job(body.table_id, names, fit_options)
+    try:
+        job = fits.create(store, settings, body.table_id, body.model, body.options.model_dump())
+    except fits.TableNotFound as e:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, str(e)) from None
+    except (fits.OverLimits, FitInputError) as e:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(e)) from None
     queue.notify()
     response.headers["Location"] = f"/v1/fits/{job.id}"
     return _out(job)
@@ -409,12 +385,12 @@ async def get_plot(
         except WorkerLost as e:
             raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                                 headers={"Retry-After": "5"}) from None
-        if not outcome["ok"]:  # the server's fault, not the request's
-            log.error("plot %s of job %s failed:\n%s", kind.value, job_id, outcome["traceback"])
+        if not outcome.ok:  # the server's fault, not the request's
+            log.error("plot %s of job %s failed:\n%s", kind.value, job_id, outcome.traceback)
             raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
-                                f"rendering the {kind.value} plot failed: {outcome['reason']}")
-        await run_in_threadpool(_write_atomic, path, outcome["png"])
-        return Response(outcome["png"], media_type="image/png")
+                                f"rendering the {kind.value} plot failed: {outcome.reason}")
+        await run_in_threadpool(_write_atomic, path, outcome.value)
+        return Response(outcome.value, media_type="image/png")
     return Response(await run_in_threadpool(path.read_bytes), media_type="image/png")
 
 

@@ -9,9 +9,6 @@ image ships without ``data_synth``: there the list is empty and says why.
 
 from __future__ import annotations
 
-import hashlib
-import tempfile
-from pathlib import Path as FilePath
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Response, status
@@ -20,23 +17,14 @@ from pydantic import BaseModel, Field
 
 from api.deps import StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.routes.tables import TableOut, _out, _validate_and_store
-from api.store import Store, TableRecord
-from brdffit.io import merl
+from api.routes.tables import TableOut, table_out
+from api.services import tables
 
 router = APIRouter(prefix="/v1/materials", tags=["tables"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
 
 MaterialName = Annotated[str, Path(pattern=r"^[a-z0-9][a-z0-9-]{0,63}$",
                                    description="a name from GET /v1/materials")]
-
-
-def _nbrdf():
-    try:
-        from data_synth import nbrdf
-    except ImportError:  # the service image holds brdffit and api only
-        return None
-    return nbrdf
 
 
 class MaterialList(BaseModel):
@@ -46,24 +34,11 @@ class MaterialList(BaseModel):
 
 @router.get("", summary="The shipped real materials (MERL, rebuilt offline)")
 def list_materials() -> MaterialList:
-    nbrdf = _nbrdf()
-    if nbrdf is None:
+    names = tables.material_names()
+    if names is None:
         return MaterialList(names=[], note="this installation has no data_synth package: "
                                            "upload a .binary table instead")
-    return MaterialList(names=list(nbrdf.material_names()))
-
-
-def _make_and_store(store: Store, name: str) -> tuple[TableRecord, bool]:
-    nbrdf = _nbrdf()
-    fd, tmp = tempfile.mkstemp(prefix="material-", suffix=".binary", dir=store.tmp_dir)
-    path = FilePath(tmp)
-    try:
-        with open(fd, "wb") as f:
-            f.write(merl.to_bytes(nbrdf.make_table(name)))
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-        return _validate_and_store(store, path, digest, path.stat().st_size, f"{name}.binary")
-    finally:
-        path.unlink(missing_ok=True)
+    return MaterialList(names=names)
 
 
 @router.post(
@@ -74,13 +49,12 @@ def _make_and_store(store: Store, name: str) -> tuple[TableRecord, bool]:
                404: {"model": ErrorMessage, "description": "no such material here"}},
 )
 async def add_material(name: MaterialName, response: Response, store: StoreDep) -> TableOut:
-    nbrdf = _nbrdf()
-    if nbrdf is None or name not in nbrdf.material_names():
+    if name not in (tables.material_names() or ()):
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             f"no shipped material {name!r}; GET /v1/materials lists them")
     # About a second of numpy and a 35 MB write: off the event loop.
-    record, created = await run_in_threadpool(_make_and_store, store, name)
+    record, created = await run_in_threadpool(tables.store_material, store, name)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"/v1/tables/{record.id}"
-    return _out(record)
+    return table_out(record)

@@ -26,9 +26,8 @@ from starlette.requests import ClientDisconnect
 
 from api.deps import SettingsDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.store import Store, TableRecord
-from brdffit.errors import MerlFormatError
-from brdffit.io import merl
+from api.services import tables
+from api.store import TableRecord
 
 router = APIRouter(prefix="/v1/tables", tags=["tables"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -81,7 +80,7 @@ class _TooLarge(Exception):
     pass
 
 
-def _out(record: TableRecord) -> TableOut:
+def table_out(record: TableRecord) -> TableOut:
     summary = {k: v for k, v in record.summary.items() if k != "source"}
     return TableOut(id=record.id, name=record.name, size_bytes=record.size,
                     created_at=datetime.fromtimestamp(record.created_at, UTC),
@@ -132,19 +131,6 @@ async def _spool(chunks: AsyncIterator[bytes], directory: FilePath) -> tuple[Fil
         path.unlink(missing_ok=True)
         raise
     return path, digest.hexdigest(), size
-
-
-def _validate_and_store(store: Store, tmp: FilePath, digest: str, size: int,
-                        name: str) -> tuple[TableRecord, bool]:
-    record = store.get_table(digest)
-    if record is not None:  # known bytes: already validated
-        tmp.unlink(missing_ok=True)
-        return record, False
-    try:
-        table = merl.read(tmp)
-    except MerlFormatError as e:  # name the upload, not the temp file
-        raise MerlFormatError(name, e.problem) from None
-    return store.add_table(digest, tmp, size, name, table.summary())
 
 
 def _too_large(cap: int) -> HTTPException:
@@ -218,14 +204,14 @@ async def upload_table(
             await form.close()
     try:
         record, created = await run_in_threadpool(
-            _validate_and_store, store, tmp, digest, size, name or "upload"
+            tables.validate_and_store, store, tmp, digest, size, name or "upload"
         )
     finally:
         tmp.unlink(missing_ok=True)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"/v1/tables/{record.id}"
-    return _out(record)
+    return table_out(record)
 
 
 @router.get("/{table_id}", summary="A table's summary",
@@ -234,7 +220,7 @@ def get_table(table_id: TableId, store: StoreDep) -> TableOut:
     record = store.get_table(table_id)
     if record is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no table {table_id}")
-    return _out(record)
+    return table_out(record)
 
 
 class TablePage(BaseModel):
@@ -256,7 +242,7 @@ def list_tables(
 ) -> TablePage:
     page = store.list_tables(limit=limit, cursor=None if cursor is None else int(cursor),
                              name=name)
-    return TablePage(items=[_out(t) for t in page.items], total=page.total,
+    return TablePage(items=[table_out(t) for t in page.items], total=page.total,
                      next_cursor=page.next_cursor)
 
 

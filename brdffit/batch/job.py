@@ -31,12 +31,12 @@ from dataclasses import asdict, dataclass, field
 
 from brdffit import models
 from brdffit.batch.cluster import DaskRunner, connect, require_dask
-from brdffit.batch.progress import Progress
+from brdffit.batch.progress import ProgressLine
 from brdffit.batch.store import BatchStore
 from brdffit.batch.tasks import (
     FitOptions,
     FitRecord,
-    TableRecord,
+    TableReadRecord,
     fit_read_table,
     fit_table,
     now,
@@ -125,19 +125,25 @@ def find_tables(inputs: Iterable[str]) -> list[str]:
     return list(found)
 
 
-def parse_models(names: Iterable[str]) -> list[str]:
+def parse_models(names: Iterable[str], candidates: Iterable[str] | None = None) -> list[str]:
     """Registry names, deduplicated in order; an unknown name is an input error.
-    ``auto`` stands for the selection's candidates (``brdffit.selection``): each is
-    fitted and stored like any model, and ``batch-report`` shows the choice."""
+    ``auto`` stands for the selection's ``candidates`` (default
+    ``brdffit.selection.DEFAULT_CANDIDATES``): each is fitted and stored like any
+    model, and ``batch-report`` shows the choice."""
     from brdffit.selection import DEFAULT_CANDIDATES
 
+    candidates = DEFAULT_CANDIDATES if candidates is None else tuple(candidates)
     out: dict[str, None] = {}
     for name in names:
         name = name.strip()
         if not name:
             continue
         if name == "auto":
-            out.update(dict.fromkeys(DEFAULT_CANDIDATES))
+            for c in candidates:
+                try:
+                    out.setdefault(models.check_name(c))
+                except models.UnknownModelError as e:
+                    raise BatchInputError(f"candidates: {e}") from None
             continue
         try:
             out.setdefault(models.check_name(name))
@@ -146,6 +152,17 @@ def parse_models(names: Iterable[str]) -> list[str]:
     if not out:
         raise BatchInputError("no models to fit")
     return list(out)
+
+
+def auto_candidates(names: Iterable[str], candidates: Iterable[str] | None = None
+                    ) -> tuple[str, ...]:
+    """auto's candidates (``candidates``, default the selection's) where ``names`` ask
+    for ``auto``, else ``()``."""
+    from brdffit.selection import DEFAULT_CANDIDATES
+
+    if not any(n.strip() == "auto" for n in names):
+        return ()
+    return DEFAULT_CANDIDATES if candidates is None else tuple(candidates)
 
 
 def file_sha256(path: str) -> str | None:
@@ -178,7 +195,8 @@ def _plan(paths: list[str], model_names: list[str], options: FitOptions, store: 
     return tasks, skipped
 
 
-def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict) -> Iterator[dict]:
+def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict,
+                    auto: tuple[str, ...] = ()) -> Iterator[dict]:
     """One table after another in this process, the next one read (and hashed: ~60
     ms for 35 MB) in a thread while this one is fitted: file reading and hashing
     release the GIL."""
@@ -187,16 +205,17 @@ def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict) -
         for i, t in enumerate(tasks):
             read = ahead.result()
             ahead = pool.submit(read_table, tasks[i + 1].path) if i + 1 < len(tasks) else None
-            yield fit_read_table(read, model_names, options, t.expected_sha256, t.done_models)
+            yield fit_read_table(read, model_names, options, t.expected_sha256, t.done_models,
+                                 auto)
 
 
 def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: dict,
-                 timeout_s: float | None) -> Iterator[dict]:
+                 timeout_s: float | None, auto: tuple[str, ...] = ()) -> Iterator[dict]:
     from distributed import as_completed
 
     futures = {
         client.submit(fit_table, t.path, model_names, options, t.expected_sha256,
-                      t.done_models, pure=False): t
+                      t.done_models, auto, pure=False): t
         for t in tasks
     }
     try:
@@ -207,7 +226,7 @@ def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: di
             except Exception as exc:  # noqa: BLE001 - the task failed, not the batch
                 # fit_table returns failures as records, so this is a worker that
                 # died on the table (after Dask's retries) or a lost cluster.
-                result = {"table": asdict(TableRecord(
+                result = {"table": asdict(TableReadRecord(
                     path=t.path, status="failed", worker=worker_name(), finished_at=now(),
                     message=f"worker failed on this table: {type(exc).__name__}: {exc}",
                 )), "fits": []}
@@ -226,10 +245,11 @@ def run_batch(
     workers: int = 1,
     scheduler: str | None = None,
     refit: bool = False,
-    progress: bool | Progress = True,
+    progress: bool | ProgressLine = True,
     checkpoint_s: float = 10.0,
-    on_result: Callable[[TableRecord, list[FitRecord]], None] | None = None,
+    on_result: Callable[[TableReadRecord, list[FitRecord]], None] | None = None,
     timeout_s: float | None = None,
+    candidates: Iterable[str] | None = None,
 ) -> BatchSummary:
     """Fit every table of ``inputs`` with every model of ``model_names`` into ``out``.
 
@@ -241,15 +261,22 @@ def run_batch(
         workers: local Dask worker processes; 0 fits in this process.
         scheduler: ``tcp://HOST:PORT`` of an existing Dask cluster (``workers`` ignored).
         refit: fit again even what the file already holds.
-        progress: draw a progress line on stderr (or pass a :class:`Progress`).
+        progress: draw a progress line on stderr (or pass a
+            :class:`~brdffit.batch.progress.ProgressLine`).
         checkpoint_s: at most this long between rewrites of ``out``; every
             result is journaled at once whatever this is.
         on_result: called with each table's records as they are journaled.
         timeout_s: give up (``TimeoutError``) when a Dask batch has not finished
             after this long; what finished is kept. None waits for ever.
+        candidates: the models ``auto`` in ``model_names`` chooses among (default
+            ``brdffit.selection.DEFAULT_CANDIDATES``), fitted as ``brdffit fit --model
+            auto`` fits them; ``batch-report`` shows the choice.
     """
     t0 = time.monotonic()
-    model_names = parse_models(model_names)
+    model_names = list(model_names)
+    # auto's candidates are fitted together, as `brdffit fit --model auto` fits them
+    auto = auto_candidates(model_names, candidates)
+    model_names = parse_models(model_names, candidates)
     options = options or FitOptions()  # validated when it was built
     if not scheduler and (not isinstance(workers, int) or workers < 0):
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
@@ -268,7 +295,7 @@ def run_batch(
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
         tasks, summary.skipped = _plan(paths, model_names, options, store, refit)
-        bar = progress if isinstance(progress, Progress) else Progress(
+        bar = progress if isinstance(progress, ProgressLine) else ProgressLine(
             len(tasks), skipped=summary.skipped, enabled=bool(progress))
         bar.draw(force=True)
         next_checkpoint = time.monotonic() + checkpoint_s
@@ -276,7 +303,7 @@ def run_batch(
         def take(results: Iterator[dict]) -> None:
             nonlocal next_checkpoint
             for r in results:
-                table = TableRecord(**r["table"])
+                table = TableReadRecord(**r["table"])
                 fits = [FitRecord(**f) for f in r["fits"]]
                 store.add(table, fits)
                 summary.fits += len(fits)
@@ -298,11 +325,11 @@ def run_batch(
 
         try:
             if tasks and workers == 0 and not scheduler:
-                take(_run_in_process(tasks, model_names, options.fit_keywords()))
+                take(_run_in_process(tasks, model_names, options.fit_keywords(), auto))
             elif tasks:
                 with connect(workers, scheduler) as client:
                     take(_run_on_dask(client, tasks, model_names, options.fit_keywords(),
-                                      timeout_s))
+                                      timeout_s, auto))
         finally:
             bar.finish()
             # Interrupted or not, what was journaled goes into the file now; if

@@ -21,7 +21,7 @@ def format_duration(seconds: float) -> str:
     return f"{s // 3600}h{s % 3600 // 60:02d}m"
 
 
-class Progress:
+class ProgressLine:
     """Counts tables and fits as they finish and draws the line."""
 
     def __init__(self, total_tables: int, *, skipped: int = 0, stream=None,

@@ -2,7 +2,7 @@
 
 The ranking metric is ``log_rmse`` on the full table (``brdffit.fitting.loss``): the
 error a fit is judged by everywhere in brdffit, comparable across models.
-Models within ``TIE`` of the lowest error are tied, and a tie goes to the model
+Models within ``brdffit.selection.TIE`` of the lowest error are tied, and a tie goes to the model
 with fewer parameters: a Lambertian table is fitted exactly by GGX with ks = 0
 too, but it is Lambert's table. Fits that failed, and tables that could not be
 read, are counted, never ranked.
@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 from brdffit import extras, models
 from brdffit.batch.store import read_attrs, read_index, read_verdicts
 from brdffit.fitting.quality import VERDICTS
-from brdffit.selection import DEFAULT_TOLERANCE, choose
+from brdffit.selection import DEFAULT_TOLERANCE, best, choose
 
 METRIC = "log_rmse"
-TIE = 1e-6  # in log_rmse: far below any difference a reader would act on
 
 
 @dataclass
@@ -33,23 +32,26 @@ class TableRanking:
     errors: dict[str, float]  # model -> log_rmse, successful fits only
     failed_models: dict[str, str] = field(default_factory=dict)  # model -> message
 
+    def _rows(self) -> list[dict]:
+        """The successful fits as ranking rows, cheapest first (the registry's order)."""
+        order = models.names()
+        rows = [{"model": m, "log_rmse": e, "n_params": _n_params(m)}
+                for m, e in self.errors.items() if math.isfinite(e)]
+        rows.sort(key=lambda r: order.index(r["model"]) if r["model"] in order else len(order))
+        return rows
+
     @property
     def best(self) -> str | None:
-        finite = {m: e for m, e in self.errors.items() if math.isfinite(e)}
-        if not finite:
-            return None
-        lowest = min(finite.values())
-        tied = [m for m, e in finite.items() if e <= lowest + TIE]
-        return min(tied, key=lambda m: (_n_params(m), finite[m]))
+        """The lowest error, a tie to fewer parameters (``brdffit.selection.best``)."""
+        rows = self._rows()
+        return best(rows)[0]["model"] if rows else None
 
     def chosen(self, tolerance: float = DEFAULT_TOLERANCE) -> tuple[str | None, str]:
         """What ``model="auto"`` picks from these fits, and why: the cheapest model
         within ``tolerance`` of the best, in quadrature (``brdffit.selection.choose``)."""
-        order = models.names()
-        rows = [{"model": m, "log_rmse": e} for m, e in self.errors.items() if math.isfinite(e)]
+        rows = self._rows()
         if not rows:
             return None, "no successful fit"
-        rows.sort(key=lambda r: order.index(r["model"]) if r["model"] in order else len(order))
         row, reason = choose(rows, tolerance)
         return row["model"], reason
 
@@ -165,7 +167,15 @@ def plot_summary(r: Ranking, png: str | os.PathLike, source: str = "") -> str:
     first. Sized for ten tables or ten thousand. ``source`` (the results file)
     goes in the title."""
     extras.require("plots", "the batch summary figure", hint="--no-png prints the ranking only")
+    png = os.fspath(png)
+    summary_figure(r, source).savefig(png, dpi=110, facecolor="white")
+    return png
+
+
+def summary_figure(r: Ranking, source: str = ""):
+    """:func:`plot_summary`'s figure (a ``matplotlib.figure.Figure``)."""
     from matplotlib.figure import Figure  # no pyplot: no global state, safe in workers
+    from matplotlib.ticker import MaxNLocator
 
     medians = {s.model: s.median for s in r.summary}
     order = sorted(r.models, key=lambda m: (not math.isfinite(medians.get(m, math.nan)),
@@ -196,14 +206,13 @@ def plot_summary(r: Ranking, png: str | os.PathLike, source: str = "") -> str:
     ax_win.set_xticks(positions, order, rotation=30, ha="right")
     ax_win.set_ylabel("tables where it is the best fit")
     ax_win.set_ylim(0, max(wins + [1]) * 1.15)
+    ax_win.yaxis.set_major_locator(MaxNLocator(integer=True))  # a count has no half tables
     n_failed = len(r.failed_tables)
     ax_win.set_title("best model per table (ties go to fewer parameters)"
                      + (f"; {n_failed} tables with failures" if n_failed else ""), fontsize=11)
     name = os.path.basename(os.fspath(source)) if source else "batch"
     fig.suptitle(f"{name}: {len(r.tables)} tables x {len(order)} models", fontsize=13)
-    png = os.fspath(png)
-    fig.savefig(png, dpi=110, facecolor="white")
-    return png
+    return fig
 
 
 def _n_params(model: str) -> float:

@@ -56,7 +56,7 @@ import h5py
 import numpy as np
 
 from brdffit import __version__, jsonout
-from brdffit.batch.tasks import FitOptions, FitRecord, TableRecord, now
+from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord, now
 from brdffit.errors import BrdffitError
 
 FORMAT = "brdffit-batch"
@@ -106,7 +106,7 @@ _INDEX_DTYPE = np.dtype([(n, h5py.string_dtype() if k is str else k) for n, k in
 
 
 def _index_row(r: dict, name: str) -> dict:
-    """The index row of a journal record (``TableRecord`` or ``FitRecord`` as a dict)."""
+    """The index row of a journal record (``TableReadRecord`` or ``FitRecord`` as a dict)."""
     row = {"kind": r["kind"], "name": name, "path": r["path"], "model": r.get("model", ""),
            "sha256": r["sha256"] or "", "options": "", "status": r["status"],
            "message": r["message"], "result": "", "converged": False, "steps": -1,
@@ -229,7 +229,7 @@ class BatchStore:
 
     # -- recording ---------------------------------------------------------------------
 
-    def add(self, table: TableRecord, fits: list[FitRecord]) -> None:
+    def add(self, table: TableReadRecord, fits: list[FitRecord]) -> None:
         """Journal one table's results (fsynced before returning), then apply them."""
         records = [{"kind": "table", **asdict(table)}]
         records += [{"kind": "fit", **asdict(f)} for f in fits]
@@ -479,7 +479,8 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
 
     ``table``: its group name (``brdffit batch-report`` shows it), the path it was
     read from, or that path's file name (with or without ``.binary``); ``model``: the
-    fitted model, or None for the table's best fit (lowest ``log_rmse``). Raises
+    fitted model, or None for the table's best fit (auto's choice where the batch fitted
+    auto, else the lowest ``log_rmse``: ``brdffit.selection.chosen_result``). Raises
     :class:`BatchFileError` naming what the file holds when there is no such table,
     no such model, or the fit failed.
     """
@@ -494,7 +495,9 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
             if not ok:
                 raise BatchFileError(f"{path}: table {name!r} has no successful fit"
                                      f"{_failed(fits)}")
-            model = min(ok, key=lambda m: _rank(json.loads(ok[m]["fit_json"])))
+            from brdffit.selection import chosen_result  # the library's one rule
+
+            model = chosen_result([json.loads(a["fit_json"]) for a in ok.values()])["model"]
         if model not in fits:
             raise BatchFileError(
                 f"{path}: table {name!r} has no {model} fit; it has "
@@ -526,12 +529,6 @@ def _find_table(path: str, groups: h5py.Group, table: str) -> str:
     shown = ", ".join(names[:20]) + (f" and {len(names) - 20} more" if len(names) > 20 else "")
     raise BatchFileError(f"{path}: no table {table!r}; the file holds "
                          f"{shown or 'no tables'}")
-
-
-def _rank(fit: dict) -> float:
-    """A fit's log_rmse for choosing the best; one that could not be measured is last."""
-    e = _float(fit["error"].get("log_rmse"))
-    return e if np.isfinite(e) else float("inf")
 
 
 def _failed(fits: dict) -> str:

@@ -28,7 +28,7 @@ from brdffit.io import merl
 
 
 @dataclass
-class TableRecord:
+class TableReadRecord:
     """One table as a worker found it. ``sha256`` is None when it could not be read."""
 
     path: str
@@ -77,7 +77,7 @@ def _describe(e: BaseException) -> str:
     return f"{type(e).__name__}: {e}"
 
 
-def read_table(path: str) -> tuple[merl.MerlTable | None, TableRecord]:
+def read_table(path: str) -> tuple[merl.MerlTable | None, TableReadRecord]:
     """Read and hash ``path`` from one read of its bytes.
 
     Hashing the very bytes that are parsed means the recorded sha256 is the
@@ -87,7 +87,7 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableRecord]:
     says what is wrong with it.
     """
     t0 = time.perf_counter()
-    record = TableRecord(path=path, status="failed", worker=worker_name())
+    record = TableReadRecord(path=path, status="failed", worker=worker_name())
     h = hashlib.sha256()
     data = None
     try:
@@ -120,46 +120,65 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableRecord]:
     return table, record
 
 
-def fit_record(table: merl.MerlTable, record: TableRecord, model: str,
-               options: FitOptions) -> FitRecord:
-    """Fit one model to a table that was read; a failure is recorded, not raised."""
-    out = FitRecord(path=record.path, model=model, sha256=record.sha256 or "",
-                    options=options.fit_keywords(), status="failed", worker=record.worker)
-    try:
-        result = fit(table, model, **options.fit_keywords())
-    except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
-        out.message = _describe(e)
-    else:
-        out.status = "ok"
-        out.fit = result.to_dict()
-    out.finished_at = now()
-    return out
+def fit_records(table: merl.MerlTable, record: TableReadRecord, models: list[str],
+                options: FitOptions, auto: bool = False) -> list[FitRecord]:
+    """Fit ``models`` to a table that was read (``brdffit.request.run``), one record
+    per model; a failure is recorded, not raised. ``auto``: ``models`` are auto's
+    candidates, fitted and ranked as ``brdffit fit --model auto`` fits them (each
+    seeded from the model it contains, refitted when it did not converge), the
+    chosen one carrying its ``selection``."""
+    from brdffit.request import FitRequest, run
+
+    def one(model: str, fit: dict | None = None, failure: str = "") -> FitRecord:
+        return FitRecord(path=record.path, model=model, sha256=record.sha256 or "",
+                         options=options.fit_keywords(), status="failed" if fit is None else "ok",
+                         message=failure, fit=fit, worker=record.worker, finished_at=now())
+
+    def records(request: FitRequest) -> list[FitRecord]:
+        try:
+            report = run(table, request)
+        except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
+            return [one(m, failure=_describe(e)) for m in request.fitted_models]
+        return [one(m, fit=report.fits[m].to_dict()) if m in report.fits
+                else one(m, failure=report.failed.get(m, "not fitted"))
+                for m in request.fitted_models]
+
+    if auto:
+        return records(FitRequest(models=("auto",), options=options.replace(model="auto"),
+                                  candidates=tuple(models)))
+    return [r for m in models for r in records(FitRequest(models=(m,), options=options))]
 
 
 def fit_table(path: str, models: list[str], options: dict, expected_sha256: str | None = None,
-              done_models: tuple[str, ...] = ()) -> dict:
+              done_models: tuple[str, ...] = (), auto: tuple[str, ...] = ()) -> dict:
     """Read ``path`` and fit every model of ``models`` not already done.
 
     ``done_models`` are the models the client already holds finished fits for,
     valid only for the content ``expected_sha256``: if the file changed since
-    the client hashed it, every model is fitted again.
+    the client hashed it, every model is fitted again. ``auto``: auto's
+    candidates among ``models``, fitted together as ``model="auto"`` fits them
+    (all again when any is missing: each is seeded from another's fit).
 
-    Returns ``{"table": TableRecord dict, "fits": [FitRecord dict, ...]}``.
+    Returns ``{"table": TableReadRecord dict, "fits": [FitRecord dict, ...]}``.
     """
-    return fit_read_table(read_table(path), models, options, expected_sha256, done_models)
+    return fit_read_table(read_table(path), models, options, expected_sha256, done_models,
+                          auto)
 
 
-def fit_read_table(read: tuple[merl.MerlTable | None, TableRecord], models: list[str],
+def fit_read_table(read: tuple[merl.MerlTable | None, TableReadRecord], models: list[str],
                    options: dict, expected_sha256: str | None = None,
-                   done_models: tuple[str, ...] = ()) -> dict:
+                   done_models: tuple[str, ...] = (), auto: tuple[str, ...] = ()) -> dict:
     """:func:`fit_table` for a table :func:`read_table` already read."""
     opts = FitOptions.from_dict(options)
     table, record = read
     fits = []
     if table is not None:
         done = set(done_models) if record.sha256 == expected_sha256 else set()
-        fits = [asdict(fit_record(table, record, m, opts)) for m in models if m not in done]
-    return {"table": asdict(record), "fits": fits}
+        if auto and not set(auto) <= done:
+            fits += fit_records(table, record, list(auto), opts, auto=True)
+            done |= set(auto)
+        fits += fit_records(table, record, [m for m in models if m not in done], opts)
+    return {"table": asdict(record), "fits": [asdict(f) for f in fits]}
 
 
 def fit_one(source: str | bytes, model: str, options: dict) -> dict:

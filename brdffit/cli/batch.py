@@ -20,6 +20,9 @@ def add_arguments(p) -> None:
     p.add_argument("--models", required=True, type=_models,
                    help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
                         "for the selection's candidates (batch-report shows the choice)")
+    p.add_argument("--candidates", type=_models, default=None,
+                   help="with --models auto: the models to choose among (default "
+                        "the selection's, as brdffit fit --model auto)")
     p.add_argument("--out", required=True, help="results file (.h5), created or resumed")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=_default_workers(),
@@ -64,7 +67,7 @@ def run(args) -> int:
     options = options_from_args(args)
     s = run_batch(args.inputs, args.models, args.out, options=options, workers=args.workers,
                   scheduler=args.scheduler, refit=args.refit, progress=not args.quiet,
-                  checkpoint_s=args.checkpoint)
+                  checkpoint_s=args.checkpoint, candidates=args.candidates)
     if s.recovered:
         print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
     print(summary_line(s))

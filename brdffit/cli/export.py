@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from brdffit.errors import BrdffitError
-from brdffit.export import TARGETS, export, export_from_store
+from brdffit.export import TARGETS, export
 from brdffit.fitting.result import FitResult
 
 #: The first bytes of every HDF5 file (a batch results file is one).
@@ -86,6 +86,8 @@ def _export(args):
                                          else "")
         raise BrdffitError(f"{args.result}: a batch results file; choose a table with "
                            f"--table (it holds {shown or 'no tables'})")
+    from brdffit.batch.exports import export_from_store
+
     return export_from_store(args.result, args.table, args.target, args.model,
                              table_file=args.measured, target_model=args.target_model)
 

@@ -7,12 +7,14 @@ import sys
 
 from brdffit import extras, jsonout
 from brdffit.fitting import options
-from brdffit.fitting.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.fitting.options import FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
-from brdffit.fitting.scene import Scene, fit_in_scene
+from brdffit.fitting.scene import Scene
 from brdffit.io import merl
-from brdffit.selection import DEFAULT_CANDIDATES, format_selection, select
+from brdffit.request import FitReport, FitRequest
+from brdffit.request import run as fit_request
+from brdffit.selection import DEFAULT_CANDIDATES, format_selection
 
 
 def add_option_arguments(p, names) -> None:
@@ -141,21 +143,25 @@ def _with_error(x: float, se: float | None, at_bound: bool) -> str:
     return f"{x:.5g}" if se is None else f"{x:.5g} ± {se:.2g}"
 
 
+def request_from_args(args) -> FitRequest:
+    """The :class:`~brdffit.request.FitRequest` of parsed ``brdffit fit`` arguments;
+    raises ``FitInputError`` (or ``SceneError``) for what the library refuses."""
+    scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
+                               max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
+    opts = options_from_args(args)
+    return FitRequest(models=(opts.model,), options=opts, scene=scene,
+                      candidates=tuple(args.candidates), mono_ks=args.mono_ks)
+
+
 def run(args) -> int:
-    opts = options_from_args(args)  # refused before the table is read
+    request = request_from_args(args)  # refused before the table is read
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
     table = merl.read(args.table)
-    scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
-                               max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
-    if opts.model == AUTO:
-        selection = select(table, args.candidates, scene=scene, mono_ks=args.mono_ks,
-                           progress=print_progress, **opts.selection_keywords(),
-                           **opts.fit_keywords())
-        return _report(args, table, selection.result, selection.to_dict(),
-                       format_selection(selection))
-    result = fit_in_scene(table, opts.model, scene, **opts.fit_keywords())
-    return _report(args, table, result, result.to_dict(), format_result(result))
+    report = fit_request(table, request, progress=print_progress if request.auto else None)
+    text = (format_selection(report.selection) if report.selection is not None
+            else format_result(report.chosen_fit))
+    return write_report(args, table, report, text)
 
 
 def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
@@ -171,17 +177,18 @@ def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
               file=sys.stderr, flush=True)
 
 
-def _report(args, table, result, as_dict: dict, as_text: str) -> int:
-    """Print JSON or text, write the plots of ``result`` if asked."""
+def write_report(args, table, report: FitReport, as_text: str) -> int:
+    """Print JSON (the chosen fit in the result schema; auto's carries its
+    ``selection``) or text, write the plots if asked."""
     if args.json:
-        jsonout.dump(as_dict, sys.stdout)  # a metric a fit could not measure is null
+        jsonout.dump(report.chosen_fit.to_dict(), sys.stdout)  # a metric not measured is null
         sys.stdout.write("\n")
     else:
         print(as_text)
     if args.plots:
         from brdffit.view import plots  # matplotlib only when asked for
 
-        for path in plots.save_all(table, result, args.plots):
+        for path in plots.save_report(table, report, args.plots):
             # stderr: with --json, stdout stays one JSON object
             print(f"wrote {path}", file=sys.stderr)
     # A fit that ran is a result, converged or not: `converged` says which.

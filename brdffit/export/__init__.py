@@ -6,7 +6,7 @@ Each target has a module with its mapping and formulas; the conversion of a fit 
 the target's own model (exact, or refitted with its loss measured) is
 :mod:`brdffit.export.conversion`. CLI (``brdffit export``), service
 (``GET /v1/fits/{job_id}/exports/{target}``) and client call this function;
-:func:`export_from_store` exports a fit of a batch results file.
+``brdffit.batch.exports.export_from_store`` exports a fit of a batch results file.
 """
 
 from __future__ import annotations
@@ -68,22 +68,6 @@ class Export:
         if schema != SCHEMA:
             raise ValueError(f"export schema {schema!r}; this brdffit reads {SCHEMA!r}")
         return cls(**d)
-
-
-def export_from_store(store: str, table: str, target: str, model: str | None = None, *,
-                      table_file=None, target_model: str | None = None) -> Export:
-    """The ``model`` fit (None: the best) of ``table`` in the batch results file
-    ``store`` (``brdffit batch``) as a material of ``target``: :func:`export` of
-    ``brdffit.batch.store.read_fit``'s result. ``table`` is the table's name in the
-    file, its path or its file name; an unknown one is an error that lists what the
-    file holds. ``table_file``, ``target_model``: as :func:`export`'s ``table`` and
-    ``target_model``."""
-    from brdffit.batch.store import read_fit
-
-    if target not in TARGETS:  # before the file is opened
-        raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
-    return export(FitResult.from_dict(read_fit(store, table, model)), target, table=table_file,
-                  target_model=target_model)
 
 
 def _material_name(result: FitResult) -> str:

@@ -6,12 +6,12 @@ The fit of ``model`` under the two constraints a renderer's material must meet:
    (``kd`` and the lobe scales ``ks``...; ``brdffit.models.base``); ranges already
    within [0, 1] (``f0``, glTF's factors) are kept;
 2. **energy**: the directional albedo ``a_c(theta_i) = int f_c cos_o dw_o <= 1`` at
-   every incidence and in every channel (``brdffit.export.energy``).
+   every incidence and in every channel (``brdffit.models.albedo``).
 
 How it is solved:
 
 - the unconstrained fit comes first (``physical=False``, the same options). Where it
-  already meets both constraints (the exact check of ``brdffit.export.energy``) it
+  already meets both constraints (the exact check of ``brdffit.models.albedo``) it
   is the bounded optimum too, and is returned as it is, with its report;
 - otherwise the model with its physical ranges (``kd`` and the scales on a sigmoid
   bounded at 1, :class:`PhysicalRanges`) is solved again by the fit's own least
@@ -26,10 +26,10 @@ How it is solved:
   solver's normal equations exactly in ``s`` (:func:`_normal_equations`). ``mu`` is
   each of BARRIERS in turn times the data loss at the start, so the pull is the same
   on a dim table and a bright one. ``a_c`` is a coarse quadrature
-  (:func:`coarse_albedo`: the incidences of ``brdffit.export.energy`` and 1,792 half
+  (:func:`coarse_albedo`: the incidences of ``brdffit.models.albedo`` and 1,792 half
   vectors; for lobes from alpha = 1e-3 to 2 within 0.2% of the exact albedo where it
   is largest, 1% at any incidence), cheap enough for every step;
-- a final exact check with ``brdffit.export.energy`` (512 x 256 half vectors per
+- a final exact check with ``brdffit.models.albedo`` (512 x 256 half vectors per
   incidence): where the albedo still passes 1, the linear reflectance parameters
   (``kd``, the lobe scales, ``base_color``) are scaled by one factor below 1 until it
   does not, reported as a clamp.
@@ -131,7 +131,7 @@ class PhysicalRanges(AbstractBRDFModel):
 
 class AlbedoGrid(eqx.Module):
     """Direction pairs and weights of :func:`coarse_albedo`: for each incidence of
-    ``brdffit.export.energy.THETA_I_DEG``, wo = the mirror of wi about each half
+    ``brdffit.models.albedo.THETA_I_DEG``, wo = the mirror of wi about each half
     vector h, weight cos_o * 4 (wi.h) dw_h (0 where wo is below the horizon)."""
 
     frame: Frame  # (n_incidences * n_h,)
@@ -157,7 +157,7 @@ def theta_h_nodes() -> tuple[np.ndarray, np.ndarray]:
 @functools.cache
 @runtime.in_float64
 def albedo_grid(dtype_name: str = "float64") -> AlbedoGrid:
-    from brdffit.export.energy import mirrored_directions
+    from brdffit.models.albedo import mirrored_directions
 
     theta, band = theta_h_nodes()
     phi = (np.arange(N_PHI_H) + 0.5) / N_PHI_H * np.pi
@@ -271,7 +271,7 @@ def clip_to_ranges(model: AbstractBRDFModel, params: dict) -> tuple[dict, list[s
 
 
 def _albedo(model: AbstractBRDFModel, params: dict) -> np.ndarray:
-    from brdffit.export.energy import directional_albedo
+    from brdffit.models.albedo import directional_albedo
 
     return directional_albedo(model, params)
 
@@ -306,12 +306,12 @@ def scale_to_limit(model: AbstractBRDFModel, params: dict, albedo_of, limit: flo
 
 def energy_clamp(model: AbstractBRDFModel, params: dict,
                  albedo: np.ndarray | None = None) -> tuple[dict, float, np.ndarray]:
-    """:func:`scale_to_limit` under the exact albedo (``brdffit.export.energy``) and 1."""
+    """:func:`scale_to_limit` under the exact albedo (``brdffit.models.albedo``) and 1."""
     return scale_to_limit(model, params, lambda p: _albedo(model, p), 1.0, albedo)
 
 
 def _argmax(albedo: np.ndarray) -> tuple[list[float], float]:
-    from brdffit.export.energy import THETA_I_DEG
+    from brdffit.models.albedo import THETA_I_DEG
 
     i = int(np.argmax(albedo.max(axis=1)))
     return albedo[i].tolist(), float(THETA_I_DEG[i])
@@ -319,7 +319,7 @@ def _argmax(albedo: np.ndarray) -> tuple[list[float], float]:
 
 def _binding(albedo: np.ndarray) -> list[str]:
     """One line per channel whose albedo is at its limit 1 (within BINDING)."""
-    from brdffit.export.energy import THETA_I_DEG
+    from brdffit.models.albedo import THETA_I_DEG
 
     out = []
     for c, name in enumerate("RGB"):

@@ -23,7 +23,7 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 SCHEMA = "brdffit.fit/1"
 
 
-@dataclass
+@dataclass(frozen=True)
 class FitResult:
     """The outcome of one fit, failed or not, as plain Python values.
 
@@ -76,6 +76,12 @@ class FitResult:
     physical: dict | None = None
     quality: dict | None = None
 
+    @classmethod
+    def described(cls) -> dict[str, str]:
+        """A one-line meaning per key, for schemas generated from this class (the
+        service's ``FitResultOut``)."""
+        return dict(FIELD_DOCS)
+
     @property
     def log_rmse(self) -> float:
         return self.error["log_rmse"]
@@ -112,3 +118,32 @@ class FitResult:
         import numpy as np
 
         return {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
+
+
+#: What each key of the result schema means, in a line (docs/results.md says more).
+FIELD_DOCS = {
+    "model": "the fitted model's registry name",
+    "params": "fitted parameters by their docs/models.md names; RGB ones as 3 floats",
+    "error": "log_rmse, cube_root_rmse, rmse_cos, rel_peak_error, psnr_db and the loss on "
+             "the solver's samples; null where a fit could not measure one",
+    "converged": "true only where the optimality test holds at the returned point",
+    "result": "how the solve ended: successful, nonlinear_max_steps_reached, stalled, "
+              "nonfinite",
+    "steps": "solver steps taken",
+    "time_s": "wall time of the fit",
+    "samples": "bins used, usable, measured, and dropped by reason",
+    "solver": "the least-squares solver",
+    "precision": "float64 or float32, of the solve",
+    "loss": "the loss the solver minimised (docs/fitting.md)",
+    "starts": "start candidates refined",
+    "table": "the table's name",
+    "scene": "the scene the fit was weighted to, or null",
+    "full_table_error": "with a scene: the same metrics on the whole table",
+    "selection": "on the fit model auto chose: the ranking and the reason",
+    "uncertainty": "standard errors, correlations and undetermined parameters "
+                   "(docs/results.md)",
+    "physical": "on a physically bounded fit: the unconstrained and bounded log_rmse, the "
+                "relative cost, the largest albedo before and after, the active constraints",
+    "quality": "how the fit looks next to the measurement: render_psnr_db, colour_shift "
+               "(per channel), verdict (good, visible or poor) and reason",
+}

@@ -34,6 +34,7 @@ at or below the horizon are dropped and counted in :attr:`Scene.dropped_pairs`.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -387,6 +388,5 @@ def fit_in_scene(table, model, scene: Scene | None, **fit_options):
     if scene is None:
         return fit(table, model, **fit_options)
     result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
-    result.scene = scene.to_dict()
-    result.full_table_error = full_table_error(table, model, result.params)
-    return result
+    return dataclasses.replace(result, scene=scene.to_dict(),
+                               full_table_error=full_table_error(table, model, result.params))

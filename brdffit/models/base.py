@@ -118,6 +118,10 @@ class AbstractBRDFModel(eqx.Module):
     #: contains ggx), or None. A fit seeds itself from the parent's optimum
     #: (:meth:`embed_parent`), so it can never end worse than its parent.
     parent: ClassVar[str | None] = None
+    #: Whether ``model="auto"`` tries this model by default (``brdffit.selection``): the
+    #: docs/models.md models are candidates; a renderer's target model is not (its fit
+    #: is what an export makes, not a choice among the measured material's models).
+    auto_candidate: ClassVar[bool] = False
     #: For a model of the form ``f = kd/pi + sum_k scale_k * lobe_k`` (each scale an
     #: RGB parameter, each lobe shared by R, G and B): the scales' names, in the order
     #: of :meth:`unit_lobes`. The fit then forms its normal equations in closed form

@@ -23,6 +23,7 @@ from .phong import N_EXP, N_GRID
 
 class BlinnPhong(AbstractLobeModel):
     name = "blinn_phong"
+    auto_candidate = True
     param_specs = (KD, KS, N_EXP)
     shape_grid = N_GRID
 

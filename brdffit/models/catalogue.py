@@ -83,6 +83,13 @@ def describe() -> list[dict]:
     return known
 
 
+def auto_candidates() -> tuple[str, ...]:
+    """The models ``model="auto"`` tries by default, cheapest first: every model of the
+    catalogue that declares itself one (``auto_candidate``), in the registry's order;
+    a plugin model may declare itself one too."""
+    return tuple(d["name"] for d in describe() if d.get("auto"))
+
+
 def names() -> list[str]:
     """The registered model names, cheapest first."""
     return [m["name"] for m in describe()]
@@ -121,6 +128,7 @@ def describe_model(model) -> dict:
         "n_params": model.n_params,
         "parent": model.parent,
         "mono": bool(specular_colour_specs(model)),
+        "auto": bool(getattr(model, "auto_candidate", False)),
     }
 
 

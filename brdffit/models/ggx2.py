@@ -53,6 +53,7 @@ _SEED_BINS = 512
 
 class GGX2(AbstractBRDFModel):
     name = "ggx2"
+    auto_candidate = True
     param_specs = (KD, KS1, ALPHA1, KS2, ALPHA2, F0)
     # Lobe pairs at least 3x apart in roughness: closer pairs are one lobe twice.
     # f0 starts below 1: at the bound the sigmoid is flat and a fit could not leave it.

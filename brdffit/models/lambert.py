@@ -14,6 +14,7 @@ from .base import KD, AbstractBRDFModel
 
 class Lambert(AbstractBRDFModel):
     name = "lambert"
+    auto_candidate = True
     param_specs = (KD,)
 
     def eval_channels(self, params, frame):

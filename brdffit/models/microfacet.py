@@ -98,6 +98,11 @@ class AbstractMicrofacetModel(AbstractLobeModel):
         return self.family if self.fresnel == "schlick" else f"{self.family}_{self.fresnel}"
 
     @property
+    def auto_candidate(self) -> bool:
+        """The docs/models.md form (Schlick's Fresnel) is one of auto's candidates."""
+        return self.fresnel == "schlick"
+
+    @property
     def param_specs(self) -> tuple[ParamSpec, ...]:
         return (KD, KS, ALPHA, FRESNELS[self.fresnel][0])
 

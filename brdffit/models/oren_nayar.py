@@ -30,6 +30,7 @@ SIGMA = ParamSpec("sigma", "facet slope std. deviation (radians)", 0.0, math.pi 
 
 class OrenNayar(AbstractBRDFModel):
     name = "oren_nayar"
+    auto_candidate = True
     param_specs = (KD, SIGMA)
     shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
     parent = "lambert"

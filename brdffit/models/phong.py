@@ -22,6 +22,7 @@ N_GRID = tuple({"n": float(n)} for n in (2, 8, 30, 100, 400, 1500, 6000, 25000))
 
 class Phong(AbstractLobeModel):
     name = "phong"
+    auto_candidate = True
     param_specs = (KD, KS, N_EXP)
     shape_grid = N_GRID
 

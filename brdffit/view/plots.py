@@ -475,8 +475,9 @@ def polar(
         ax.set_rlabel_position(-90)
         ax.set_thetagrids(range(-90, 91, 30), [f"{d}°" for d in range(-90, 91, 30)],
                           fontsize=8)
-        ax.text(0.0, 0.74, f"{name} channel", transform=ax.transAxes, ha="left",
-                fontsize=12, color=CHANNELS[c][1], fontweight="bold")
+        # above the half disc (its top is at 0.75 of the box), clear of the -30° label
+        ax.text(0.5, 0.83, f"{name} channel", transform=ax.transAxes, ha="center",
+                va="bottom", fontsize=12, color=CHANNELS[c][1], fontweight="bold")
     fig.legend(
         handles=ax.get_legend_handles_labels()[0]
         + [Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
@@ -539,7 +540,7 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
                               listed(flags, False), strict=True):
             text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
             parts.append(text + (" ?" if f else ""))
-        params.append(f"{name:<7}" + ",  ".join(parts))
+        params += wrap_values(f"{name:<7}", parts)
     params += [f"  ? {k}: {why}" for k, why in u.get("why", {}).items()]
     params += [f"  {k} ~ {', '.join(v)} (|corr| > 0.95)"
                for k, v in u.get("strongly_correlated", {}).items()]
@@ -554,9 +555,29 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
                f"rmse_cos        {g('rmse_cos')} 1/sr",
                f"rel_peak_error  {g('rel_peak_error')}",
                f"sphere PSNR     {g('psnr_db', '.1f')} dB",
+               *([f"looks           {result.quality['verdict']}"] if result.quality else []),
                f"loss {result.loss}, {result.result}, {result.steps} steps, "
                f"{result.samples['used']:,} of {result.samples['usable']:,} bins"]
     return params, metrics
+
+
+#: Characters a parameter line of the report's header may take before its values
+#: wrap: past it, the line runs into the errors column beside it.
+PARAM_LINE_CHARS = 60
+
+
+def wrap_values(label: str, parts: list[str]) -> list[str]:
+    """``label`` then ``parts`` joined by commas, wrapped under the first value where a
+    line would pass :data:`PARAM_LINE_CHARS` (three bound RGB values do)."""
+    lines, line, fresh = [], label, True
+    for i, part in enumerate(parts):
+        piece = part + ("," if i < len(parts) - 1 else "")
+        if not fresh and len(line) + 2 + len(piece) > PARAM_LINE_CHARS:
+            lines.append(line)
+            line, fresh = " " * len(label), True
+        line += piece if fresh else "  " + piece
+        fresh = False
+    return lines + [line]
 
 
 def _draw_summary(fig, result: FitResult) -> None:
@@ -640,5 +661,91 @@ def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.Pat
     for kind in kinds:
         path = os.path.join(directory, f"{kind}.png")
         atomic.write_bytes(path, render(kind, table, result), prefix=f".{kind}.")
+        paths.append(path)
+    return paths
+
+
+# -- auto's ranking ----------------------------------------------------------------------
+
+#: Bar colours of :func:`ranking` by the row's status in the selection.
+RANKING_COLOURS = {"chosen": "#2ca02c", "within tolerance": "#98df8a",
+                   "under budget": "#98df8a", "too far": "#c7c7c7"}
+
+
+def ranking(selection: dict) -> bytes:
+    """``model="auto"``'s choice as a picture: each candidate's log_rmse (cheapest at
+    the top), the best error and the tolerance line the chosen one had to be within,
+    and each candidate's sphere PSNR with its verdict; the reason under it.
+
+    ``selection`` is a chosen fit's ``selection`` (``FitResult.selection``), so a
+    stored result draws it as well as a fresh one.
+    """
+    import textwrap
+
+    rows = selection["ranking"]
+    fitted = [r for r in rows if r["status"] != "failed"]
+    n = len(rows)
+    fig = Figure(figsize=(10, 2.2 + 0.42 * n), layout="constrained")
+    ax_err, ax_psnr = fig.subplots(1, 2, sharey=True, width_ratios=(3, 2))
+    y = np.arange(n)
+    for i, r in enumerate(rows):
+        if r["status"] == "failed":
+            why = textwrap.shorten(str(r.get("message", r.get("result", ""))), 60)
+            ax_err.text(0.01, i, f"failed: {why}", va="center", fontsize=8,
+                        transform=ax_err.get_yaxis_transform(), color="#d62728")
+            continue
+        colour = RANKING_COLOURS.get(r["status"], "#c7c7c7")
+        ax_err.barh(i, r["log_rmse"], color=colour, edgecolor="#333333", linewidth=0.5)
+        ax_err.text(r["log_rmse"], i, f" {r['log_rmse']:.3g}"
+                    + ("" if r.get("converged", True) else " (not converged)"),
+                    va="center", fontsize=8)
+        psnr = r.get("psnr_db")
+        if psnr is not None and np.isfinite(psnr):
+            ax_psnr.barh(i, psnr, color=colour, edgecolor="#333333", linewidth=0.5)
+            ax_psnr.text(psnr, i, f" {psnr:.1f} dB" + (f", {r['verdict']}" if r.get("verdict")
+                                                       else ""), va="center", fontsize=8)
+    if fitted:
+        best = min(r["log_rmse"] for r in fitted)
+        limit = float(np.hypot(best, selection["tolerance"]))
+        ax_err.axvline(best, color="#333333", linewidth=1)
+        ax_err.axvline(limit, color="#333333", linewidth=1, linestyle="--")
+        ax_err.text(limit, -0.6, f" best + tolerance {selection['tolerance']:g} (in quadrature)",
+                    fontsize=7, va="center", ha="left")
+        if selection.get("budget") is not None:
+            ax_err.axvline(selection["budget"], color="#1f77b4", linewidth=1, linestyle=":")
+        ax_err.set_xlim(0, 1.3 * max(r["log_rmse"] for r in fitted))
+        top = max((r.get("psnr_db") or 0.0) for r in fitted)
+        ax_psnr.set_xlim(0, max(1.35 * top, 1.0))
+    ax_err.set_yticks(y, [f"{r['model']} ({r['n_params']})" for r in rows])
+    ax_err.set_ylim(n - 0.5, -1.0)
+    ax_err.set_xlabel("log_rmse (lower is better)")
+    ax_psnr.set_xlabel("sphere PSNR, dB (higher is better)")
+    ax_err.set_title("candidates, cheapest first (parameter count)", fontsize=10)
+    ax_psnr.set_title("how each looks", fontsize=10)
+    table = str(selection.get("table") or "table").replace("$", r"\$")
+    fig.suptitle(f"{os.path.basename(table)}: auto chose {selection['chosen']}", fontsize=12)
+    reason = selection["reason"].replace("$", r"\$")
+    fig.text(0.01, 0.0, textwrap.fill(reason, 150), fontsize=8, va="top", ha="left")
+    return _png_with_footer(fig)
+
+
+def _png_with_footer(fig: Figure) -> bytes:
+    """As :func:`_png`, keeping text placed below the axes (the reason) in the image."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, facecolor="white", bbox_inches="tight",
+                pad_inches=0.15)
+    return buf.getvalue()
+
+
+def save_report(table: MerlTable, report, directory: str | os.PathLike,
+                kinds=KINDS) -> list[str]:
+    """The plots of a :class:`brdffit.request.FitReport`'s chosen fit
+    (:func:`save_all`), and for ``auto`` the ranking of every candidate
+    (``ranking.png``, :func:`ranking`)."""
+    paths = save_all(table, report.chosen_fit, directory, kinds)
+    selection = report.chosen_fit.selection
+    if selection is not None:
+        path = os.path.join(directory, "ranking.png")
+        atomic.write_bytes(path, ranking(selection), prefix=".ranking.")
         paths.append(path)
     return paths

@@ -1,0 +1,61 @@
+"""Fit jobs: what a request means and costs, its creation, and which fit is its result.
+
+The meaning is the library's (``brdffit.request.FitRequest``): a request the
+library would refuse is refused here, before anything is queued, with the
+library's own words. The cost policy (``api.estimate`` against the server's
+limits) and the one rule for a job's result (``brdffit.selection``) live here
+too, so that every handler and the page say the same.
+"""
+
+from __future__ import annotations
+
+from api.estimate import Estimate, estimate
+from api.settings import Settings
+from api.store import JobRecord, Store
+from brdffit.request import FitRequest
+from brdffit.selection import chosen_result
+
+
+class TableNotFound(LookupError):
+    """The request names a table the store does not hold."""
+
+
+class OverLimits(ValueError):
+    """The request's estimated cost is over the server's limits; the message says
+    by how much and what to ask for instead."""
+
+
+def over_limits(cost: Estimate, settings: Settings) -> str | None:
+    """Why ``cost`` is over the server's limits, or None."""
+    over = []
+    if cost.memory_mib > settings.max_job_memory_mib:
+        over.append(f"memory {cost.memory_mib:,.0f} MiB > {settings.max_job_memory_mib:,} MiB "
+                    "(BRDFFIT_MAX_JOB_MEMORY_MIB)")
+    if cost.seconds > settings.max_job_estimate_s:
+        over.append(f"time {cost.seconds:,.0f} s > {settings.max_job_estimate_s:,.0f} s "
+                    "(BRDFFIT_MAX_JOB_ESTIMATE_S)")
+    if not over:
+        return None
+    return (f"this fit is estimated over the server's limits: {'; '.join(over)}; estimate "
+            f"for {cost.detail}. Ask for fewer samples or starts.")
+
+
+def create(store: Store, settings: Settings, table_id: str, models: str | list[str],
+           options: dict) -> JobRecord:
+    """Queue a fit job: the request checked by the library, its cost against the
+    limits, then stored. Raises ``TableNotFound``, ``FitInputError``, ``OverLimits``."""
+    table = store.get_table(table_id)
+    if table is None:
+        raise TableNotFound(f"no table {table_id}; upload it with POST /v1/tables")
+    request = FitRequest.from_flat(models, options)
+    cost = estimate(request, table.summary["measured_bins"])
+    if (why := over_limits(cost, settings)) is not None:
+        # Refused before anything is queued or allocated: say by how much, and why.
+        raise OverLimits(why)
+    return store.create_job(table_id, list(request.models), options)
+
+
+def result_of(results: list[dict]) -> dict:
+    """A done job's result among its fits: for ``auto`` the chosen one, else the best
+    (``brdffit.selection.chosen_result``: the library's one rule)."""
+    return chosen_result(results)
