@@ -67,6 +67,9 @@ def connect(workers: int = 1, scheduler: str | None = None,
     cluster = LocalCluster(
         n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
         dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, env=local_worker_env(workers),
+        # Ctrl-C reaches these workers too (same process group): they ignore it and
+        # are stopped by this process instead (brdffit.batch.local_worker).
+        preload=["brdffit.batch.local_worker"],
     )
     try:
         with Client(cluster, set_as_default=False) as client:
