@@ -107,7 +107,22 @@ def _wait_until(what, timeout: float, poll: float = 0.5):
         time.sleep(poll)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def _finished(out: Path) -> dict[tuple[str, str], str]:
+    """(table name, model) -> finished_at of each good fit in the file or its journal
+    (what a killed batch left to the next run)."""
+    done = {(t["name"], m): f["finished_at"] for t in read_results(out)["tables"]
+            for m, f in t["fits"].items() if f["status"] == "ok"}
+    with contextlib.suppress(FileNotFoundError):
+        for line in Path(f"{out}.journal").read_text().splitlines():
+            with contextlib.suppress(ValueError):
+                r = json.loads(line)
+                if r.get("kind") == "fit" and r["status"] == "ok":
+                    done[(Path(r["path"]).stem, r["model"])] = r["finished_at"]
+    return done
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL],
+                         ids=["SIGINT", "SIGTERM", "SIGKILL"])
 def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, tmp_path, sig):
     address, client = cluster
     out = tmp_path / "results.h5"
@@ -115,11 +130,16 @@ def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, 
            "--out", str(out), "--scheduler", address, "--quiet", *HEAVY]
     r = _interrupt_after_first_fit(cmd, out, sig, group=False)
 
-    assert r.returncode == 130, r.stderr
-    assert r.stderr.strip().splitlines() == [
-        f"brdffit: interrupted; the finished fits are in {out}, run the same command again "
-        "to go on"], r.stderr
-    # the scheduler dropped every task of the batch, at once
+    if sig == signal.SIGKILL:  # nothing to say, nothing cleaned up: the journal stays
+        assert r.returncode == -signal.SIGKILL and r.stderr == "", r.stderr
+    else:
+        assert r.returncode == 130, r.stderr
+        assert r.stderr.strip().splitlines() == [
+            f"brdffit: interrupted; the finished fits are in {out}, run the same command "
+            "again to go on"], r.stderr
+        assert not os.path.exists(f"{out}.journal"), "the interrupt checkpointed the journal"
+    # the scheduler dropped every task of the batch (a killed client: when its
+    # connection closed)
     assert _wait_until(lambda: client.run_on_scheduler(scheduler_tasks) == 0, 30), \
         client.run_on_scheduler(scheduler_tasks)
     # the workers finish the fit each was running, and start none
@@ -128,26 +148,19 @@ def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, 
     assert client.run_on_scheduler(scheduler_tasks) == 0
 
     # the file is whole and holds each fit that finished, by itself
-    results = read_results(out)
-    assert not os.path.exists(f"{out}.journal"), "the interrupt checkpointed the journal"
-    fits = {(t["name"], m) for t in results["tables"] for m, f in t["fits"].items()
-            if f["status"] == "ok"}
-    assert fits and len(fits) < 2 * len(TABLES), fits
+    kept = _finished(out)
+    assert kept and len(kept) < 2 * len(TABLES), kept
     # a fit is kept while its table's other model was still running: per-model resume
-    assert any(len([m for n, m in fits if n == name]) == 1 for name in TABLES), fits
+    assert any(len([m for n, m in kept if n == name]) == 1 for name in TABLES), kept
 
     # the same command again makes only the fits that are missing
-    rerun = subprocess.run(cmd, cwd=REPO, capture_output=True,
-                           text=True, timeout=900)
+    rerun = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900)
     assert rerun.returncode == 0, rerun.stderr
-    assert f"{2 * len(TABLES) - len(fits)} fits on" in rerun.stdout, rerun.stdout
-    final = read_results(out)
-    for t in final["tables"]:
-        assert sorted(t["fits"]) == sorted(MODELS.split(","))
-        for model, f in t["fits"].items():
-            if (t["name"], model) in fits:  # kept, not made again
-                before = next(x for x in results["tables"] if x["name"] == t["name"])
-                assert f["finished_at"] == before["fits"][model]["finished_at"]
+    assert f"{2 * len(TABLES) - len(kept)} fits on" in rerun.stdout, rerun.stdout
+    final = _finished(out)
+    assert {m for _, m in final} == set(MODELS.split(",")) and len(final) == 2 * len(TABLES)
+    for key, finished_at in kept.items():  # kept, not made again
+        assert final[key] == finished_at, key
 
 
 def test_ctrl_c_on_local_workers_is_one_line(table_dir, tmp_path):
