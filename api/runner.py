@@ -101,6 +101,12 @@ class _Worker:
         self.kill()
 
 
+def _retrieve(future: asyncio.Future) -> None:
+    """Mark a future's outcome as seen: a task that is abandoned on purpose."""
+    if not future.cancelled():
+        future.exception()
+
+
 class ProcessRunner(AbstractRunner):
     """``workers`` processes, each running one task at a time."""
 
@@ -146,6 +152,7 @@ class ProcessRunner(AbstractRunner):
         loop = asyncio.get_running_loop()
         deadline = None if limit_s is None else loop.time() + limit_s
         waiter = asyncio.ensure_future(cancel.wait()) if cancel is not None else None
+        message = None
         try:
             while True:
                 message = loop.run_in_executor(self._readers, worker.receive)
@@ -179,6 +186,11 @@ class ProcessRunner(AbstractRunner):
         except asyncio.CancelledError:
             # The caller went away (server stopping): the task's process is of no use.
             self._replace(worker)
+            if message is not None:
+                # The pipe reader now ends with EOFError from the killed process, and
+                # no one awaits it any more: retrieve it, or asyncio logs "Future
+                # exception was never retrieved" with a traceback at every clean stop.
+                message.add_done_callback(_retrieve)
             raise
         finally:
             if waiter is not None:

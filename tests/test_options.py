@@ -255,7 +255,7 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     candidates = ["lambert", "oren_nayar"]
     if model == AUTO:
         library = run_request(merl.read(path), FitRequest.of(
-            AUTO, candidates=candidates, **fast)).result.to_dict()
+            AUTO, candidates=candidates, **fast)).chosen_fit.to_dict()
         assert library["selection"]["chosen"] == library["model"]
         # the front door is select's choice, nothing added
         _same_fit(select(merl.read(path), candidates, **fast).to_dict(), library)

@@ -27,3 +27,53 @@ def test_jobs_run_on_the_dask_cluster(tmp_path):
             assert c.plot(job, "spheres").startswith(b"\x89PNG")
         # the work ran on the cluster, not in a local worker process
         assert {"fit_models", "render_plot"} <= set(cluster.scheduler.task_prefixes)
+
+
+def test_a_worker_killed_mid_job_on_a_separate_cluster_the_job_ends_once(tmp_path):
+    """docs/service.md, "On a Dask cluster": the service with BRDFFIT_DASK_SCHEDULER
+    pointing at a separately started scheduler and two workers. A worker is killed
+    (SIGKILL) while it runs the job; Dask runs the task again on the other worker,
+    and the job ends once: done, on its first attempt, one result per model."""
+    import os
+    import signal
+    import time
+
+    import httpx
+
+    from tests.api_fixtures import wait_status
+    from tests.dask_fixtures import processing, separate_cluster
+
+    with separate_cluster(2) as (address, dask), \
+            Server(tmp_path / "srv", env={"BRDFFIT_DASK_SCHEDULER": address}) as srv, \
+            httpx.Client(base_url=srv.url, timeout=60) as http:
+        table = http.post("/v1/tables", content=table_bytes("ggx"),
+                          headers={"content-type": "application/octet-stream"}).json()["id"]
+        # heavy enough to be running for seconds when the worker is killed
+        answer = http.post("/v1/fits", json={"table_id": table, "model": "ggx2",
+                                             "options": {"samples": 131072, "starts": 4}})
+        assert answer.status_code == 202, answer.text
+        job_id = answer.json()["id"]
+        deadline = time.monotonic() + 300
+        while not (running := {k: w for k, w in dask.run_on_scheduler(processing).items()
+                               if k.startswith("fit_models")}):
+            assert time.monotonic() < deadline, http.get(f"/v1/fits/{job_id}").json()
+            time.sleep(0.2)
+        (worker,) = running.values()
+        pid = dask.run(os.getpid, workers=[worker])[worker]
+        assert pid != srv.proc.pid
+        os.kill(pid, signal.SIGKILL)
+        # Dask runs the task again on a live worker (the other one, or the killed one
+        # restarted by its nanny under a new address)
+        deadline = time.monotonic() + 300
+        while not {w for k, w in dask.run_on_scheduler(processing).items()
+                   if k.startswith("fit_models")} - {worker}:
+            assert http.get(f"/v1/fits/{job_id}").json()["status"] == "running"
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+
+        job = wait_status(http, job_id, ("done", "failed", "cancelled"), timeout=900)
+        assert job["status"] == "done", job
+        assert job["attempts"] == 1 and not job["reason"], job  # not retried by the service
+        assert [r["model"] for r in job["results"]] == ["ggx2"]
+        listing = http.get("/v1/fits").json()
+        assert listing["total"] == 1 and listing["items"][0]["id"] == job_id

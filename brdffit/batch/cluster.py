@@ -64,10 +64,23 @@ def connect(workers: int = 1, scheduler: str | None = None,
         return
     if workers < 1:
         raise ValueError(f"a local cluster needs at least 1 worker, got {workers}")
-    cluster = LocalCluster(
-        n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-        dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR, env=local_worker_env(workers),
-    )
+    try:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+            dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR,
+            env=local_worker_env(workers),
+            # Ctrl-C reaches these workers too (same process group): they ignore it
+            # and are stopped by this process instead (brdffit.batch.local_worker).
+            preload=["brdffit.batch.local_worker"],
+        )
+    except (RuntimeError, OSError, TimeoutError) as e:
+        # e.g. "Nanny failed to start" where worker processes cannot start (a
+        # container without /dev/shm): one line for the user, not distributed's
+        # traceback
+        cause = e.__cause__ or e
+        raise OSError(f"cannot start {workers} local Dask worker process(es): "
+                      f"{type(cause).__name__}: {cause}; --workers 0 fits in this "
+                      "process without Dask") from None
     try:
         with Client(cluster, set_as_default=False) as client:
             yield client

@@ -38,8 +38,10 @@ class ProgressLine:
         self.t0 = time.monotonic()
         self._last_draw = float("-inf")
 
-    def update(self, *, fits: int, failed: bool) -> None:
-        self.tables += 1
+    def update(self, *, fits: int, failed: bool, tables: int = 1) -> None:
+        """``fits`` more fits; ``tables`` more tables finished (0 while a table's
+        other fits are still running), ``failed`` if the table had a failure."""
+        self.tables += tables
         self.fits += fits
         self.failed_tables += failed
         self.draw()

@@ -230,15 +230,19 @@ class BatchStore:
     # -- recording ---------------------------------------------------------------------
 
     def add(self, table: TableReadRecord, fits: list[FitRecord]) -> None:
-        """Journal one table's results (fsynced before returning), then apply them."""
+        """Apply one table's results, and journal them (fsynced before returning)."""
         records = [{"kind": "table", **asdict(table)}]
         records += [{"kind": "fit", **asdict(f)} for f in fits]
         # Strict JSON: a metric a fit could not measure is null here, NaN again in HDF5.
         data = "".join(jsonout.dumps(r, separators=(",", ":")) + "\n" for r in records).encode()
-        _write_all(self._journal_fd, data)
-        os.fsync(self._journal_fd)
+        # Applied before they are journaled: a Ctrl-C that lands between the fsync and
+        # the apply would leave records in the journal only, and the checkpoint that
+        # follows an interrupt empties the journal, losing them. Applied first, the
+        # checkpoint writes them whatever point the interrupt reached.
         for r in records:
             self._apply(r)
+        _write_all(self._journal_fd, data)
+        os.fsync(self._journal_fd)
 
     def _apply(self, r: dict) -> None:
         _apply_row(self._tables, _index_row(r, self._group_name(r["path"])))

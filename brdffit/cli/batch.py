@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 
 from brdffit.batch.job import run_batch
 from brdffit.batch.progress import format_duration
+from brdffit.cli import EXIT_INTERRUPTED
 from brdffit.cli.fit import add_fit_options, options_from_args
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
@@ -63,11 +66,30 @@ def summary_line(s) -> str:
             f"{format_duration(s.elapsed_s)}; {done}")
 
 
+def _terminate(signum, frame):
+    # SIGTERM (kill, a scheduler's job stop) ends a batch as Ctrl-C does: its work on
+    # the cluster is cancelled and what finished is checkpointed, rather than the
+    # process vanishing with its tasks left running.
+    raise KeyboardInterrupt
+
+
 def run(args) -> int:
     options = options_from_args(args)
-    s = run_batch(args.inputs, args.models, args.out, options=options, workers=args.workers,
-                  scheduler=args.scheduler, refit=args.refit, progress=not args.quiet,
-                  checkpoint_s=args.checkpoint, candidates=args.candidates)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    try:
+        s = run_batch(args.inputs, args.models, args.out, options=options,
+                      workers=args.workers, scheduler=args.scheduler, refit=args.refit,
+                      progress=not args.quiet, checkpoint_s=args.checkpoint,
+                      candidates=args.candidates)
+    except KeyboardInterrupt:
+        # One line: run_batch has cancelled the batch's tasks and checkpointed.
+        print(f"brdffit: interrupted; the finished fits are in {args.out}, run the same "
+              "command again to go on", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    finally:
+        if main_thread:  # an in-process caller (a test) keeps its own handler
+            signal.signal(signal.SIGTERM, previous)
     if s.recovered:
         print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
     print(summary_line(s))

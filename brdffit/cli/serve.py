@@ -6,13 +6,18 @@ flags here override the ones a command line is expected to set.
 
 from __future__ import annotations
 
+import os
+
 from brdffit import extras
 
 
 def add_arguments(p) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (default 127.0.0.1; 0.0.0.0 in a container)")
-    p.add_argument("--port", type=int, default=8000)
+    # BRDFFIT_PORT is the default so that one variable moves the server and the
+    # container's health check (python -m api.healthcheck) together.
+    p.add_argument("--port", type=int, default=os.environ.get("BRDFFIT_PORT", "8000"),
+                   help="port to listen on (default: env BRDFFIT_PORT, else 8000)")
     p.add_argument("--data-dir", help="tables, jobs database, plots (env BRDFFIT_DATA_DIR)")
     p.add_argument("--workers", type=int, help="fit worker processes (env BRDFFIT_WORKERS)")
     p.add_argument("--log-level", default="info",
