@@ -234,7 +234,7 @@ class DaskClusterRunner(AbstractRunner):
         self._dask = DaskRunner(address)
 
     async def run(self, fn, /, *args, progress=None, limit_s=None, cancel=None):
-        from brdffit.batch.cluster import WorkerLost as DaskWorkerLost
+        from brdffit.batch.cluster import DaskWorkerLost
 
         if progress is not None:
             await progress("running on the Dask cluster", 0.0)

@@ -19,14 +19,13 @@ import time
 import numpy as np
 import pytest
 
-from brdffit import MerlFormatError, models
+from brdffit import models
 from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
 from brdffit.batch.job import BatchInputError, FitOptions, find_tables, run_batch
 from brdffit.batch.report import format_ranking, plot_summary, rank, summary_figure
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
 from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
-from brdffit.models import UnknownModelError
 
 pytestmark = pytest.mark.system
 
@@ -198,22 +197,22 @@ def test_report_cli(cluster_batch, tmp_path, capsys):
 # -- the service runner ---------------------------------------------------------------------
 
 
-def test_dask_runner_fits_and_raises_like_fit(cluster, table_dir):
+def test_dask_runner_runs_a_call_on_the_cluster(cluster, table_dir):
+    """What the service's job runner uses (api.runner): any importable function, its
+    value back (the service's tasks return an Outcome rather than raise)."""
+    from api import tasks
+
     with DaskRunner(cluster.scheduler_address) as runner:
-        result = runner.fit(str(table_dir / "c_lambert.binary"), "lambert", timeout_s=300,
-                            samples=4096, starts=1)
-        assert _close(result.params["kd"], TRUTHS["c_lambert"][1]["kd"], 0.02)
-        with pytest.raises(MerlFormatError, match="truncated"):
-            runner.fit(str(table_dir / "d_truncated.binary"), "lambert", timeout_s=300)
-        with pytest.raises(UnknownModelError):
-            runner.submit_fit(str(table_dir / "c_lambert.binary"), "no-such-model")
-        # any importable function, as the service's job runner needs
         assert runner.submit_call(os.path.getsize, str(table_dir / "e_text.binary")).result(
             timeout=60) == (table_dir / "e_text.binary").stat().st_size
-        # bytes for a service whose storage the workers cannot see
-        data = (table_dir / "c_lambert.binary").read_bytes()
-        result = runner.fit(data, "lambert", timeout_s=300, samples=4096, starts=1)
-        assert result.table == "<upload>"
+        path = str(table_dir / "c_lambert.binary")
+        out = runner.submit_call(tasks.fit_models, path, "c.binary", ["lambert"],
+                                 {"samples": 4096, "starts": 1}).result(timeout=300)
+        assert out.ok and _close(out.value[0]["params"]["kd"], TRUTHS["c_lambert"][1]["kd"],
+                                 0.02)
+        bad = runner.submit_call(tasks.fit_models, str(table_dir / "d_truncated.binary"),
+                                 "d.binary", ["lambert"], {}).result(timeout=300)
+        assert not bad.ok and "truncated" in bad.reason and not bad.internal
     assert DaskRunner.from_env({}) is None
     runner = DaskRunner.from_env({SCHEDULER_ENV: cluster.scheduler_address})
     assert runner is not None and runner.address == cluster.scheduler_address
@@ -224,13 +223,13 @@ def test_dask_runner_reports_a_dead_worker():
     import dask
     from distributed import LocalCluster
 
-    from brdffit.batch.cluster import WorkerLost
+    from brdffit.batch.cluster import DaskWorkerLost
 
     with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
         with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
                           dashboard_address="127.0.0.1:0") as c, \
                 DaskRunner(c.scheduler_address) as r:
-            with pytest.raises(WorkerLost, match="died"):
+            with pytest.raises(DaskWorkerLost, match="died"):
                 r.submit_call(os._exit, 3).result(timeout=120)
 
 

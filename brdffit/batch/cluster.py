@@ -1,11 +1,11 @@
-"""The Dask side of batch fitting: a local cluster, a remote one, and single fits for the service.
+"""The Dask side of batch fitting: a local cluster, a remote one, and single calls for the service.
 
 - :func:`connect` gives a ``distributed.Client``: to an existing scheduler
   (``tcp://HOST:PORT``) or to a fresh ``LocalCluster`` of worker *processes* on
   loopback, one thread each (a JAX fit already uses the cores it is given; two
   fits in one process would only contend for its XLA threads), single-threaded
   when there are several (:func:`local_worker_env`).
-- :class:`DaskRunner` runs one fit on a cluster for a job runner that is not a
+- :class:`DaskRunner` runs one call on a cluster for a job runner that is not a
   batch (the REST service): ``DaskRunner.from_env()`` reads
   ``BRDFFIT_DASK_SCHEDULER``.
 
@@ -21,9 +21,7 @@ import logging
 import os
 from collections.abc import Iterator
 
-from brdffit import extras, models
-from brdffit.batch.tasks import FitOptions, fit_one, raise_remote_error
-from brdffit.fitting.result import FitResult
+from brdffit import extras
 
 SCHEDULER_ENV = "BRDFFIT_DASK_SCHEDULER"
 #: XLA's CPU backend spreads one fit over every core it sees. Several worker
@@ -88,7 +86,7 @@ def connect(workers: int = 1, scheduler: str | None = None,
         cluster.close()
 
 
-class WorkerLost(RuntimeError):
+class DaskWorkerLost(RuntimeError):
     """The Dask worker running a call died under it (killed, out of memory, crashed),
     and the scheduler gave up on it (``distributed.KilledWorker``)."""
 
@@ -97,15 +95,11 @@ class DaskRunner:
     """Calls on a Dask cluster, for a job runner that is not a batch (the REST service).
 
         runner = DaskRunner.from_env()         # None when BRDFFIT_DASK_SCHEDULER is unset
-        fut = runner.submit_fit("/shared/gold.binary", "ggx", samples=8192)
-        result: FitResult = fut.result()       # raises MerlFormatError etc. as fit would
-        fut = runner.submit_call(some_module.top_level_fn, arg1, arg2)
+        fut = runner.submit_call(api.tasks.fit_models, path, name, models, options)
 
-    Both return ``concurrent.futures.Future`` (``asyncio.wrap_future`` makes them
-    awaitable). A worker that dies under a call raises :class:`WorkerLost`. Bad
-    models and options raise at once, as a local ``fit`` call would. Tables
-    travel as paths the workers can read (shared storage) or, failing that, as
-    bytes.
+    It returns a ``concurrent.futures.Future`` (``asyncio.wrap_future`` makes it
+    awaitable); the service's tasks return an ``Outcome`` rather than raise. A worker
+    that dies under a call raises :class:`DaskWorkerLost`.
     """
 
     def __init__(self, address: str, *, timeout_s: float = 30.0):
@@ -128,33 +122,6 @@ class DaskRunner:
         function of an installed module) and its result picklable."""
         return self._bridge(self._client.submit(fn, *args, pure=False), lambda value: value)
 
-    def submit_fit(self, source: str | bytes, model: str,
-                   **fit_options) -> concurrent.futures.Future:
-        """Fit ``model`` to the table at ``source`` (a path the workers can read, or
-        the file's bytes). ``fit_options`` are ``fit``'s keyword arguments
-        (solver, samples, precision, starts, max_steps, seed). The future's
-        result is a :class:`brdffit.FitResult`."""
-        name = models.get(model).name
-        options = FitOptions.from_dict(fit_options)
-        if isinstance(source, os.PathLike):
-            source = os.fspath(source)
-        elif isinstance(source, (bytes, bytearray, memoryview)):
-            # 35 MB travels once, as data, not inside the task description.
-            source = self._client.scatter(bytes(source), direct=True)
-        remote = self._client.submit(fit_one, source, name, options.fit_keywords(), pure=False)
-
-        def to_result(payload: dict) -> FitResult:
-            if not payload["ok"]:
-                raise_remote_error(payload["error"])
-            return FitResult.from_dict(payload["fit"])
-
-        return self._bridge(remote, to_result)
-
-    def fit(self, source: str | bytes, model: str, *, timeout_s: float | None = None,
-            **fit_options) -> FitResult:
-        """Blocking form of :meth:`submit_fit`."""
-        return self.submit_fit(source, model, **fit_options).result(timeout=timeout_s)
-
     @staticmethod
     def _bridge(remote, convert) -> concurrent.futures.Future:
         from distributed import KilledWorker
@@ -165,7 +132,7 @@ class DaskRunner:
             try:
                 done.set_result(convert(f.result()))
             except KilledWorker as e:
-                done.set_exception(WorkerLost(f"the Dask worker running it died: {e}"))
+                done.set_exception(DaskWorkerLost(f"the Dask worker running it died: {e}"))
             except BaseException as e:  # noqa: BLE001 - handed to the waiting caller
                 done.set_exception(e)
             finally:

@@ -21,9 +21,8 @@ from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 
 from brdffit import __version__
-from brdffit.errors import BrdffitError, FitInputError, MerlFormatError
+from brdffit.errors import BrdffitError, MerlFormatError
 from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
-from brdffit.fitting.pipeline import fit
 from brdffit.io import merl
 
 
@@ -179,52 +178,3 @@ def fit_read_table(read: tuple[merl.MerlTable | None, TableReadRecord], models: 
             done |= set(auto)
         fits += fit_records(table, record, [m for m in models if m not in done], opts)
     return {"table": asdict(record), "fits": [asdict(f) for f in fits]}
-
-
-def fit_one(source: str | bytes, model: str, options: dict) -> dict:
-    """One fit for a service job (``brdffit.batch.cluster.DaskRunner``).
-
-    ``source`` is a path the worker can read, or the table's bytes when it
-    cannot. Returns ``{"ok": True, "fit": FitResult dict, "sha256": ...}``, or
-    ``{"ok": False, "error": {...}}`` describing the exception so the caller can
-    raise it again (see ``raise_remote_error``).
-    """
-    try:
-        if isinstance(source, str):
-            with open(source, "rb") as f:
-                data = f.read()
-            table = merl.from_bytes(data, source=source)
-        else:
-            data = source
-            table = merl.from_bytes(data, source="<upload>")
-        result = fit(table, model, **FitOptions.from_dict(options).fit_keywords())
-    except Exception as e:  # noqa: BLE001 - crosses the wire as a value
-        return {"ok": False, "error": {
-            "type": type(e).__name__, "message": str(e),
-            "source": getattr(e, "source", None) or getattr(e, "filename", None),
-            "problem": getattr(e, "problem", None),
-            "strerror": getattr(e, "strerror", None),
-        }}
-    return {"ok": True, "fit": result.to_dict(), "sha256": hashlib.sha256(data).hexdigest(),
-            "worker": worker_name()}
-
-
-def raise_remote_error(error: dict) -> None:
-    """Raise the exception ``fit_one`` described, as the same brdffit type where it is one.
-
-    (``MerlFormatError`` cannot be pickled and rebuilt by its message alone, so
-    exceptions travel as these dicts.)
-    """
-    from brdffit.models import UnknownModelError
-
-    kind, message = error["type"], error["message"]
-    if kind == "MerlFormatError":
-        raise MerlFormatError(error["source"], error["problem"])
-    if kind == "FitInputError":
-        raise FitInputError(message)
-    if kind == "UnknownModelError":
-        raise UnknownModelError(message)
-    if kind in ("FileNotFoundError", "PermissionError", "IsADirectoryError"):
-        reason = error["strerror"] or message
-        raise MerlFormatError(error["source"] or "<table>", f"cannot read: {reason}")
-    raise RuntimeError(f"fit failed on the worker: {kind}: {message}")
