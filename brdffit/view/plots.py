@@ -698,7 +698,8 @@ def ranking(selection: dict) -> bytes:
         ax_err.barh(i, r["log_rmse"], color=colour, edgecolor="#333333", linewidth=0.5)
         ax_err.text(r["log_rmse"], i, f" {r['log_rmse']:.3g}"
                     + ("" if r.get("converged", True) else " (not converged)"),
-                    va="center", fontsize=8)
+                    va="center", fontsize=8, zorder=4,  # over the tolerance lines
+                    bbox={"facecolor": "white", "edgecolor": "none", "pad": 0.5, "alpha": 0.8})
         psnr = r.get("psnr_db")
         if psnr is not None and np.isfinite(psnr):
             ax_psnr.barh(i, psnr, color=colour, edgecolor="#333333", linewidth=0.5)
