@@ -122,6 +122,10 @@ class AbstractBRDFModel(eqx.Module):
     #: docs/models.md models are candidates; a renderer's target model is not (its fit
     #: is what an export makes, not a choice among the measured material's models).
     auto_candidate: ClassVar[bool] = False
+    #: A well-posed set of parameters (docs/models.md names) that a fit of a table made
+    #: from them recovers: the tests' ground truth for every model that gives one, so a
+    #: new model is tested by giving it (tests/truths.py). None: not tested that way.
+    example_params: ClassVar[dict | None] = None
     #: For a model of the form ``f = kd/pi + sum_k scale_k * lobe_k`` (each scale an
     #: RGB parameter, each lobe shared by R, G and B): the scales' names, in the order
     #: of :meth:`unit_lobes`. The fit then forms its normal equations in closed form

@@ -28,6 +28,8 @@ _SQRT_PI = math.sqrt(math.pi)
 
 class Beckmann(AbstractMicrofacetModel):
     family = "beckmann"
+    #: with Schlick's Fresnel (the docs/models.md form; ``example_params``)
+    schlick_example = {"kd": [0.15, 0.1, 0.3], "ks": [0.5, 0.6, 0.7], "alpha": 0.25, "f0": 0.4}
 
     def ndf(self, alpha, cos_h, sin2_h):
         a2 = alpha * alpha

@@ -24,6 +24,7 @@ from .phong import N_EXP, N_GRID
 class BlinnPhong(AbstractLobeModel):
     name = "blinn_phong"
     auto_candidate = True
+    example_params = {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 120.0}
     param_specs = (KD, KS, N_EXP)
     shape_grid = N_GRID
 

@@ -22,6 +22,8 @@ from .microfacet import AbstractMicrofacetModel
 
 class GGX(AbstractMicrofacetModel):
     family = "ggx"
+    #: with Schlick's Fresnel (the docs/models.md form; ``example_params``)
+    schlick_example = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "f0": 0.6}
 
     def ndf(self, alpha, cos_h, sin2_h):
         a2 = alpha * alpha

@@ -15,6 +15,7 @@ from .base import KD, AbstractBRDFModel
 class Lambert(AbstractBRDFModel):
     name = "lambert"
     auto_candidate = True
+    example_params = {"kd": [0.5, 0.35, 0.2]}
     param_specs = (KD,)
 
     def eval_channels(self, params, frame):

@@ -97,6 +97,13 @@ class AbstractMicrofacetModel(AbstractLobeModel):
     def name(self) -> str:
         return self.family if self.fresnel == "schlick" else f"{self.family}_{self.fresnel}"
 
+    #: ``example_params`` of the Schlick form; the other Fresnel forms give none.
+    schlick_example: ClassVar[dict | None] = None
+
+    @property
+    def example_params(self) -> dict | None:
+        return self.schlick_example if self.fresnel == "schlick" else None
+
     @property
     def auto_candidate(self) -> bool:
         """The docs/models.md form (Schlick's Fresnel) is one of auto's candidates."""

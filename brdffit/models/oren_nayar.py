@@ -31,6 +31,7 @@ SIGMA = ParamSpec("sigma", "facet slope std. deviation (radians)", 0.0, math.pi 
 class OrenNayar(AbstractBRDFModel):
     name = "oren_nayar"
     auto_candidate = True
+    example_params = {"kd": [0.5, 0.35, 0.2], "sigma": 0.5}
     param_specs = (KD, SIGMA)
     shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
     parent = "lambert"

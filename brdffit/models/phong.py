@@ -23,6 +23,7 @@ N_GRID = tuple({"n": float(n)} for n in (2, 8, 30, 100, 400, 1500, 6000, 25000))
 class Phong(AbstractLobeModel):
     name = "phong"
     auto_candidate = True
+    example_params = {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 80.0}
     param_specs = (KD, KS, N_EXP)
     shape_grid = N_GRID
 
