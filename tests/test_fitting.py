@@ -149,3 +149,26 @@ def test_params_come_in_the_model_order():
     r = fit(table, "ggx", samples=2048)
     assert list(r.params) == ["kd", "ks", "alpha", "f0"]
     assert list(r.uncertainty["std_error"]) == list(r.params)
+
+
+@pytest.mark.parametrize(("model", "kwargs"), [("ggx", {"samples": 3000}),
+                                                ("ggx", {"samples": 20000, "loss": "cube_root"})])
+def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, monkeypatch):
+    """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``),
+    its arrays padded with zero weights: the fit is the unpadded one, to rounding."""
+    from brdffit.fitting import pipeline, sampling
+
+    table, _ = make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)
+    bucketed = fit(table, model, **kwargs)
+    n = bucketed.samples["used"]
+    assert sampling.bucket_size(kwargs["samples"]) in sampling.SAMPLE_BUCKETS
+    monkeypatch.setattr(pipeline, "padded", lambda sample_set: sample_set)
+    exact = fit(make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)[0], model,
+                **kwargs)
+    assert exact.samples["used"] == n == kwargs["samples"]
+    assert exact.result == bucketed.result == "successful"
+    assert exact.steps == bucketed.steps
+    for name, value in exact.params.items():
+        np.testing.assert_allclose(bucketed.params[name], value, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(bucketed.log_rmse, exact.log_rmse, rtol=1e-9)
+    assert bucketed.uncertainty["residuals"] == exact.uncertainty["residuals"]
