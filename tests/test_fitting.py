@@ -152,7 +152,7 @@ def test_params_come_in_the_model_order():
 
 
 @pytest.mark.parametrize(("model", "kwargs"), [("ggx", {"samples": 3000}),
-                                                ("ggx", {"samples": 20000, "loss": "cube_root"})])
+                                                ("ggx", {"samples": 5000, "loss": "cube_root"})])
 def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, monkeypatch):
     """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``),
     its arrays padded with zero weights: the fit is the unpadded one, to rounding."""
@@ -172,3 +172,18 @@ def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, m
         np.testing.assert_allclose(bucketed.params[name], value, rtol=1e-9, atol=0)
     np.testing.assert_allclose(bucketed.log_rmse, exact.log_rmse, rtol=1e-9)
     assert bucketed.uncertainty["residuals"] == exact.uncertainty["residuals"]
+
+
+def test_one_compiled_fit_serves_every_selectable_loss_and_sample_count(synth_tables):
+    """Another loss of ``loss.SELECTABLE`` or a sample count up to a bucket is data
+    for the default fit's programs: none is compiled (or loaded) again."""
+    from brdffit import executables
+
+    table = synth_tables["ggx"]
+    fit(table, "ggx")
+    before = len(executables.events)
+    for kwargs in ({"loss": "cube_root"}, {"loss": "linear_cos"}, {"samples": 4096},
+                   {"samples": 2048, "loss": "cube_root"}):
+        r = fit(table, "ggx", **kwargs)
+        assert r.converged, (kwargs, r.result)
+    assert [e.name for e in executables.events[before:]] == []

@@ -41,6 +41,8 @@ from brdffit.fitting.loss import (
     DEFAULT_LOSS,
     LOSS_METRIC,
     LOSSES,
+    SELECTABLE,
+    SELECTED,
     LossData,
     block_count,
     compress_values,
@@ -115,7 +117,8 @@ SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 def _score(model, u_batch, data, every: int = 1):
     """Loss of each start, on every ``every``-th sample (``every`` is static)."""
     n = data.weight.shape[-1]
-    data = jax.tree_util.tree_map(lambda a: a[..., ::every] if a.shape[-1] == n else a, data)
+    data = jax.tree_util.tree_map(lambda a: a[..., ::every] if a.ndim and a.shape[-1] == n else a,
+                                  data)
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
@@ -204,10 +207,14 @@ def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> Los
         # numpy's log1p for the default: the same targets, to the last bit, as before
         # the loss was a choice (JAX's log1p differs in the last place on some values)
         target = np.log1p(x) if loss == "log" else compress_values(x, loss)
+    # the losses of SELECTABLE share one compiled fit: the loss travels as data
+    selector = (jnp.asarray(SELECTABLE.index(loss), jnp.int32) if loss in SELECTABLE
+                else None)
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
-        loss=loss, exposure=None if exposure is None else jnp.asarray(exposure, dtype),
-        energy=None if energy is None else jnp.asarray(energy, dtype),
+        loss=loss if selector is None else SELECTED,
+        exposure=None if exposure is None else jnp.asarray(exposure, dtype),
+        energy=None if energy is None else jnp.asarray(energy, dtype), selector=selector,
     )
 
 
