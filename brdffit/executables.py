@@ -50,7 +50,7 @@ KEEP_DAYS = 7
 _KEYED_MODULES = ("brdffit.", "optimistix.", "lineax.", "equinox.", "jax.", "builtins",
                   "collections", "numpy")
 _FORMAT = 1  # of the files written here
-_lock = threading.Lock()
+_lock = threading.Lock()  # guards each function's table of per-program locks
 
 
 class Event(NamedTuple):
@@ -176,6 +176,7 @@ def jit(fn: Callable) -> Callable:
 
     plain = eqx.filter_jit(fn)
     entries: dict = {}
+    key_locks: dict = {}
     name = f"{fn.__module__}.{fn.__qualname__}"
     own_code = fn.__module__.startswith("brdffit.")  # the fingerprint covers its code
 
@@ -286,7 +287,13 @@ def jit(fn: Callable) -> Callable:
         except TypeError:  # an unhashable static argument: no caching of ours
             return plain(*args, **kwargs)
         if entry is None:
+            # One lock per program, not one for all: threads that need different
+            # programs (``auto``'s candidates, fitted side by side) compile them at
+            # the same time, XLA's compilation releasing the GIL (a cold ``auto``:
+            # bench/results/startup.md). Threads that need the same one wait for it.
             with _lock:
+                key_lock = key_locks.setdefault(key, threading.Lock())
+            with key_lock:
                 entry = entries.get(key)
                 if entry is None:
                     path = disk_path(leaves, treedef)
