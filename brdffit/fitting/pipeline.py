@@ -368,6 +368,53 @@ def _error_pool(parts: int):
         return pool
 
 
+_REPORT_THREADS: dict = {}
+#: The kinds of fit (model, precision, loss, sample shape, scene) whose report's
+#: programs this process has made ready (:func:`_ready_report_once`).
+_REPORTS_READY: set = set()
+
+
+def _ready_report_once(table, model, u, prep: _Prepared, loss: str, precision: str) -> None:
+    """The first fit of its kind in a process: make the programs of its report (the
+    full-table error, the parameters, the sphere, the uncertainty) ready on another
+    thread, by running them on a start vector, while this thread compiles (or loads)
+    the scoring and the solve. They depend on shapes alone, not on the solution: on
+    2 cores a new process compiles both sets at the same time (bench/results/
+    startup.md). Later fits of the kind skip this; the results here are dropped."""
+    kind = (type(model), model.name, precision, loss, prep.data.weight.shape,
+            prep.weight is None or prep.weight.size)
+    with _ERROR_THREADS_LOCK:
+        if kind in _REPORTS_READY:
+            return
+        _REPORTS_READY.add(kind)
+
+    def report() -> None:
+        try:
+            u0 = np.asarray(u, np.float64)
+            full_table_metrics(table, model, u0, prep.weight, peak=prep.peak)
+            params = _plain(constrained(model, u0))
+            _cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
+            parameter_uncertainty(model, u0, prep.data)
+        except Exception as e:  # noqa: BLE001 - a start far off the table: speed only
+            runtime.log.debug("brdffit: report of %s not made ready ahead (%s)", model.name, e)
+
+    _report_pool().submit(runtime.in_float64(report))
+
+
+def _report_pool():
+    """One thread per process for the parts of a fit's report that overlap the
+    full-table pass (a forked child makes its own, as :func:`_error_pool`)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _ERROR_THREADS_LOCK:
+        pool = _REPORT_THREADS.get(os.getpid())
+        if pool is None:
+            _REPORT_THREADS.clear()
+            pool = _REPORT_THREADS[os.getpid()] = ThreadPoolExecutor(
+                1, thread_name_prefix="brdffit-report")
+        return pool
+
+
 def _full_error_sums(model, u, rgb, weight, frame, peak):
     n = weight.shape[-1]
     parts = _error_parts(n)
@@ -623,6 +670,7 @@ def fit(
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
         u_candidates = start_vectors(m, table, counts.usable, prep.hints)
+    _ready_report_once(table, m, u_candidates[0], prep, loss, precision)
     if len(u_candidates) > 1:  # one candidate (init, a polish) has nothing to rank
         # Score candidates on every 8th sample: ranking starts needs no more.
         scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))
@@ -682,6 +730,12 @@ def fit(
         i = 0
         u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
 
+    # The uncertainty needs the solution alone: it runs on another thread while this
+    # one measures the full table and the sphere. Warm, that overlaps a few ms; in a
+    # new process each of them compiles its programs first, and side by side they
+    # compile at the same time (bench/results/startup.md).
+    pending = (_report_pool().submit(runtime.in_float64(parameter_uncertainty), m, u_best, data)
+               if result != "nonfinite" else None)
     metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
     # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
     metrics[f"sample_{LOSS_METRIC[loss]}"] = (
@@ -693,7 +747,11 @@ def fit(
     # The image error of the whole sphere (no scene weighting): one figure that
     # compares fits made under different losses.
     metrics["psnr_db"] = _cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
-    uncertainty = parameter_uncertainty(m, u_best, data) if result != "nonfinite" else None
+    uncertainty = None
+    if pending is not None and result != "nonfinite":
+        uncertainty = pending.result()
+    elif pending is not None:  # the metrics say nonfinite: no uncertainty, whatever it was
+        pending.exception()
     look = quality(table, m, params, metrics["psnr_db"])
     return FitResult(
         model=m.name,
