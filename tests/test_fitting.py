@@ -187,3 +187,18 @@ def test_one_compiled_fit_serves_every_selectable_loss_and_sample_count(synth_ta
         r = fit(table, "ggx", **kwargs)
         assert r.converged, (kwargs, r.result)
     assert [e.name for e in executables.events[before:]] == []
+
+
+def test_max_steps_is_data_for_the_lm_solve(synth_tables):
+    """Every ``max_steps`` runs the same compiled solve; running out of them is
+    reported as it was when the limit was static."""
+    from brdffit import executables
+
+    table = synth_tables["ggx"]
+    fit(table, "ggx")
+    before = len(executables.events)
+    short = [fit(table, "ggx", max_steps=n, starts=1) for n in (1, 2, 3)]
+    assert [e.name for e in executables.events[before:]] == []
+    for n, r in zip((1, 2, 3), short, strict=True):
+        assert (r.result, r.steps) == ("nonlinear_max_steps_reached", n)
+    assert fit(table, "ggx", max_steps=500).result == "successful"

@@ -79,6 +79,10 @@ DEFAULT_STARTS = 1
 #: Steps per start. A default fit of a real material converges in 3-80 steps
 #: (bench/results/real_materials.md); the limit only ends a fit that cannot.
 DEFAULT_MAX_STEPS = 256
+#: The largest ``max_steps`` that the "lm" solve takes as data (a traced limit, one
+#: compiled solve for every value up to it: ``FitOptions`` allows no more); a larger
+#: one is a static argument of its own solve.
+STEP_CAP = 10_000
 #: |u| within which every parameter transform has a useful slope (softplus(-8) =
 #: 3e-4 with slope 3e-4): a nested model's start from its parent is pulled back here.
 LIVE_U = 8.0
@@ -151,6 +155,10 @@ def _solve_batch(model, solver_name: str, u_batch, data, max_steps):
     floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
     options = {"normal_equations": normal_equations, "bound_side": _bound_side,
                "loss_floor": floor}
+    if isinstance(solver, solvers.NormalLevenbergMarquardt) and isinstance(max_steps, jax.Array):
+        # the step limit is data (fit passes an array): one solve for every max_steps
+        options["step_limit"] = max_steps
+        max_steps = STEP_CAP
 
     def one(u0):
         sol = optx.least_squares(
@@ -687,8 +695,9 @@ def fit(
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
 
-    solve = functools.partial(_solve_batch, m, solver,
-                              data=data, max_steps=max_steps)
+    solve = functools.partial(_solve_batch, m, solver, data=data,
+                              max_steps=jnp.asarray(max_steps) if solver == "lm"
+                              and max_steps <= STEP_CAP else max_steps)
     values, codes, steps, losses = (np.asarray(a) for a in solve(
         u_batch=jnp.asarray(best_starts, dtype)))
     if parent_start is not None:
