@@ -205,7 +205,10 @@ def cold_markdown(cold: dict, material: str) -> list[str]:
              "`BRDFFIT_CACHE_DIR`, the others reuse the cache the row above left. XLA "
              "programs: compiled by XLA in that process; compile: XLA's seconds; "
              "trace+lower: JAX's; loaded: brdffit's own compiled programs read from the "
-             "store (`brdffit.executables`).", ""]
+             "store (`brdffit.executables`). Compile seconds add up the programs: "
+             "where they compile side by side (this checkout), they exceed the wall "
+             "time they cost. On a loaded machine (the load average above) compare the "
+             "two checkouts' rows, run alternately, rather than the absolute figures.", ""]
     for c, r in cold.items():
         title = "this checkout" if c == "this" else f"baseline ({r['code']})"
         lines += [f"### {title}", "",
@@ -215,10 +218,13 @@ def cold_markdown(cold: dict, material: str) -> list[str]:
             row = r["rows"][label]
             cmd = "brdffit " + " ".join(a for a in args if a != "{table}" and a != "--json")
             err = "" if row["log_rmse"] is None else f"{row['log_rmse']:.5f}"
+            # a brdffit from before issue 25 records no events: nothing to count
+            loaded = (f"{row['brdffit_loaded']:.0f}" if row["brdffit_loaded"]
+                      or row["brdffit_compiled"] else "n/a")
             lines.append(f"| {label}{' (*empty*)' if empty else ''}: `{cmd}` | "
                          f"{row['wall_s']:.2f} s | {row['xla_programs']:.0f} | "
                          f"{row['xla_compile_s']:.2f} s | {row['trace_lower_s']:.2f} s | "
-                         f"{row['brdffit_loaded']:.0f} | {err} |")
+                         f"{loaded} | {err} |")
         lines += ["", "One model per new process, each from an empty cache:", "",
                   "| model | wall | XLA programs | compile | trace+lower | slowest programs |",
                   "|---|---|---|---|---|---|"]
@@ -226,7 +232,7 @@ def cold_markdown(cold: dict, material: str) -> list[str]:
             slowest = sorted(row["programs"], key=lambda p: -p[1])[:3]
             lines.append(f"| {m} | {row['wall_s']:.2f} s | {row['xla_programs']:.0f} | "
                          f"{row['xla_compile_s']:.2f} s | {row['trace_lower_s']:.2f} s | "
-                         + ", ".join(f"{n} {t:.2f} s" for n, t in slowest) + " |")
+                         + (", ".join(f"{n} {t:.2f} s" for n, t in slowest) or "n/a") + " |")
         lines.append("")
     return lines
 
