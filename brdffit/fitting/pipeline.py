@@ -175,7 +175,7 @@ def _solve_batch(model, solver_name: str, u_batch, data, max_steps):
         if isinstance(solver, solvers.NormalLevenbergMarquardt):
             # Its final state holds that test, made at that point with the same
             # tolerances and floor: no third copy of the normal equations (after
-            # its init's and its step's) in the program, ~20% of its compile time.
+            # its init's and its step's) to compile into the program.
             loss, optimal = sol.stats["loss"], sol.stats["stop"] == solvers.OPTIMAL
         else:
             loss, jtj, jtr = normal_equations(sol.value, (model, data))
