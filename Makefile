@@ -21,13 +21,17 @@ demo: $(STAMP)
 		--noise 0.03 --missing 0.05
 	$(BIN)/brdffit fit $(OUT)/demo.binary --model ggx --plots $(OUT)/plots
 	@echo "plots: $(OUT)/plots/*.png"
+	@# compiles every default model's fit into brdffit's cache (~/.cache/brdffit, or
+	@# BRDFFIT_CACHE_DIR) once: a user's first fit, auto or a service then loads them
+	$(BIN)/brdffit warmup
 
+# the slowest tests are listed at the end: what to look at when the suite slows down
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15
 
 # unit and contract tests only (no subprocess, server or cluster): a few minutes
 test-quick: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not system"
+	$(BIN)/python -m pytest -q -m "not system" --durations=15
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

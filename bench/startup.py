@@ -58,10 +58,15 @@ def bench_read(path: str) -> dict:
     return {"fromfile_ms": plain * 1e3, "read_ms": ours * 1e3, "ratio": ours / plain}
 
 
-def _process(argv: list[str], cache: str) -> tuple[float, str]:
+def _process(argv: list[str], cache: str, code: str | None = None) -> tuple[float, str]:
+    """``argv`` in a new process with brdffit's cache at ``cache``, brdffit imported
+    from ``code`` (a checkout) when given."""
     env = dict(os.environ, BRDFFIT_CACHE_DIR=cache)
+    if code is not None:
+        env["PYTHONPATH"] = os.pathsep.join([code, env.get("PYTHONPATH", "")])
     t0 = time.perf_counter()
-    p = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=900)
+    # run in ``code``: ``python -c`` puts the working directory first on sys.path
+    p = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=900, cwd=code)
     wall = time.perf_counter() - t0
     if p.returncode != 0:
         raise RuntimeError(f"{argv} failed: {p.stderr[-2000:]}")
@@ -86,6 +91,150 @@ def bench_new_process(path: str) -> dict:
     out.update(auto_first_call_process_s=wall, auto_first_call_s=float(inner),
                auto_chosen=chosen, auto_log_rmse=float(err))
     return out
+
+
+#: Run in a new process: brdffit's command line in process (``brdffit.cli.main``),
+#: with JAX's compile events counted; what it compiled goes to the file ``argv[1]``.
+COLD_PROBE = r"""
+import json, os, sys, time
+from jax import monitoring
+totals = {}
+def on_duration(event, secs, **kwargs):
+    t = totals.setdefault(event, [0, 0.0])
+    t[0] += 1
+    t[1] += secs
+monitoring.register_event_duration_secs_listener(on_duration)
+from brdffit import cli, executables
+t0 = time.perf_counter()
+code = cli.main(sys.argv[2:])
+sys.stdout.flush()
+events = getattr(executables, "events", [])  # a brdffit from before issue 25 has none
+compiled = [e for e in events if e.how == "compiled"]
+stats = {
+    "command_s": time.perf_counter() - t0,
+    "xla_programs": totals.get("/jax/core/compile/backend_compile_duration", [0, 0.0])[0],
+    "xla_compile_s": totals.get("/jax/core/compile/backend_compile_duration", [0, 0.0])[1],
+    "trace_lower_s": sum(totals.get(k, [0, 0.0])[1] for k in (
+        "/jax/core/compile/jaxpr_trace_duration",
+        "/jax/core/compile/jaxpr_to_mlir_module_duration")),
+    "brdffit_compiled": len(compiled),
+    "brdffit_loaded": sum(e.how == "loaded" for e in events),
+    "programs": [[e.name.rsplit(".", 1)[-1], round(e.lower_s + e.compile_s, 3)]
+                 for e in compiled],
+}
+with open(sys.argv[1], "w") as f:
+    json.dump(stats, f)
+sys.stderr.flush()
+os._exit(code)
+"""
+
+#: The rows of the empty-cache table: (label, command line after ``brdffit``, whether
+#: the row starts from an empty cache); each later row reuses the cache its row above
+#: left, as a user's next command does.
+COLD_ROWS = (
+    ("first ggx", ["fit", "{table}", "--model", "ggx", "--json"], True),
+    ("ggx again (cached)", ["fit", "{table}", "--model", "ggx", "--json"], False),
+    ("then --samples 4096", ["fit", "{table}", "--model", "ggx", "--samples", "4096", "--json"],
+     False),
+    ("then --loss cube_root", ["fit", "{table}", "--model", "ggx", "--loss", "cube_root",
+                               "--json"], False),
+    ("first auto", ["fit", "{table}", "--model", "auto", "--json"], True),
+    ("auto again (cached)", ["fit", "{table}", "--model", "auto", "--json"], False),
+)
+#: Models timed one by one, each from an empty cache (``auto``'s candidates).
+COLD_MODELS = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
+
+
+def _probe(args: list[str], cache: str, code: str | None = None) -> dict:
+    """One new process running ``brdffit ARGS``: its wall time and what it compiled."""
+    fd, stats_path = tempfile.mkstemp(suffix=".json")
+    os.close(fd)
+    wall, stdout = _process([sys.executable, "-c", COLD_PROBE, stats_path, *args], cache, code)
+    with open(stats_path) as f:
+        stats = json.load(f)
+    os.unlink(stats_path)
+    stats["wall_s"] = wall
+    try:
+        out = json.loads(stdout)
+        stats["log_rmse"] = (out.get("error") or out["result"]["error"])["log_rmse"]
+    except (ValueError, KeyError, TypeError):
+        stats["log_rmse"] = None
+    return stats
+
+
+def _median_rows(runs: list[dict]) -> dict:
+    """Per key, the median over repeats of the numbers; the first run's others."""
+    out = dict(runs[0])
+    for key, value in runs[0].items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            out[key] = statistics.median(r[key] for r in runs)
+    out["repeats"] = len(runs)
+    return out
+
+
+def bench_cold(path: str, repeats: int = 3, baseline: str | None = None,
+               models: tuple[str, ...] = COLD_MODELS) -> dict:
+    """The empty-cache rows (:data:`COLD_ROWS`) and one empty-cache fit per model, each
+    a new process; medians over ``repeats`` (a fresh cache per repeat). With
+    ``baseline`` (another checkout), its rows too, run alternately with this one's so
+    that both see the same machine load."""
+    codes = {"this": None} if baseline is None else {"this": None, "baseline": baseline}
+    rows = {c: {label: [] for label, _, _ in COLD_ROWS} for c in codes}
+    per_model = {c: {m: [] for m in models} for c in codes}
+    for _ in range(repeats):
+        for c, code in codes.items():
+            cache = None
+            for label, args, empty in COLD_ROWS:
+                if empty:
+                    cache = tempfile.mkdtemp(prefix="brdffit-cold-")
+                rows[c][label].append(_probe([a.format(table=path) for a in args], cache, code))
+        for m in models:
+            for c, code in codes.items():
+                per_model[c][m].append(_probe(["fit", path, "--model", m, "--json"],
+                                              tempfile.mkdtemp(prefix="brdffit-cold-"), code))
+    return {c: {"code": codes[c] or ".", "rows": {k: _median_rows(v) for k, v in rows[c].items()},
+                "models": {k: _median_rows(v) for k, v in per_model[c].items()}}
+            for c in codes}
+
+
+def cold_markdown(cold: dict, material: str) -> list[str]:
+    """The empty-cache tables of :func:`bench_cold`'s report."""
+    lines = [f"## From an empty cache: {material}", "",
+             "Each row a new process (`brdffit ...` run in process by a probe that counts "
+             "JAX's compile events); a row marked *empty* starts from an empty "
+             "`BRDFFIT_CACHE_DIR`, the others reuse the cache the row above left. XLA "
+             "programs: compiled by XLA in that process; compile: XLA's seconds; "
+             "trace+lower: JAX's; loaded: brdffit's own compiled programs read from the "
+             "store (`brdffit.executables`). Compile seconds add up the programs: "
+             "where they compile side by side (this checkout), they exceed the wall "
+             "time they cost. On a loaded machine (the load average above) compare the "
+             "two checkouts' rows, run alternately, rather than the absolute figures.", ""]
+    for c, r in cold.items():
+        title = "this checkout" if c == "this" else f"baseline ({r['code']})"
+        lines += [f"### {title}", "",
+                  "| command | wall | XLA programs | compile | trace+lower | loaded | log_rmse |",
+                  "|---|---|---|---|---|---|---|"]
+        for label, args, empty in COLD_ROWS:
+            row = r["rows"][label]
+            cmd = "brdffit " + " ".join(a for a in args if a != "{table}" and a != "--json")
+            err = "" if row["log_rmse"] is None else f"{row['log_rmse']:.5f}"
+            # a brdffit from before issue 25 records no events: nothing to count
+            loaded = (f"{row['brdffit_loaded']:.0f}" if row["brdffit_loaded"]
+                      or row["brdffit_compiled"] else "n/a")
+            lines.append(f"| {label}{' (*empty*)' if empty else ''}: `{cmd}` | "
+                         f"{row['wall_s']:.2f} s | {row['xla_programs']:.0f} | "
+                         f"{row['xla_compile_s']:.2f} s | {row['trace_lower_s']:.2f} s | "
+                         f"{loaded} | {err} |")
+        lines += ["", "One model per new process, each from an empty cache:", "",
+                  "| model | wall | XLA programs | compile | trace+lower | slowest programs |",
+                  "|---|---|---|---|---|---|"]
+        for m, row in r["models"].items():
+            slowest = sorted(row["programs"], key=lambda p: -p[1])[:3]
+            lines.append(f"| {m} | {row['wall_s']:.2f} s | {row['xla_programs']:.0f} | "
+                         f"{row['xla_compile_s']:.2f} s | {row['trace_lower_s']:.2f} s | "
+                         + (", ".join(f"{n} {t:.2f} s" for n, t in slowest) or "n/a") + " |")
+        lines.append("")
+    return lines
 
 
 def bench_in_process(path: str) -> dict:
@@ -188,6 +337,14 @@ def write_markdown(report: dict, path: str) -> None:
                 f"{ip[model + '_all_log_rmse']:.5f} (default samples: "
                 f"{ip[model + '_default_log_rmse']:.5f}) |")
         lines.append("")
+    cold = report.get("cold")
+    if cold:
+        cm = cold["machine"]
+        lines += [f"`{cold['command']}`: {cm['cpu']}, {cm['cores']} cores, {cm['date']}, load "
+                  f"average {cm['loadavg']} at the start, {cm['loadavg_end']} at the end; "
+                  f"medians of {cold['runs']['this']['rows']['first ggx']['repeats']} runs.",
+                  ""]
+        lines += cold_markdown(cold["runs"], cold["material"])
     a = report.get("across")
     if a:
         lines += [f"## Across {a['n']} real materials", "",
@@ -213,21 +370,43 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=RESULTS)
     ap.add_argument("--across", type=int, default=100,
                     help="also time ggx and auto on this many real materials (0: none)")
+    ap.add_argument("--cold-only", action="store_true",
+                    help="only the empty-cache rows (on the first material); the other rows "
+                         "of an existing startup.json are kept")
+    ap.add_argument("--cold-repeats", type=int, default=3)
+    ap.add_argument("--baseline", metavar="CHECKOUT",
+                    help="also run the empty-cache rows with brdffit from this checkout, "
+                         "alternately with this one's")
     args = ap.parse_args(argv)
     directory = os.path.join(cache_dir(), "nbrdf")
-    report = {"machine": machine(), "materials": {}}
-    for name in args.materials.split(","):
-        path = nbrdf.cached_table(name, directory)
-        print(f"{name} ...", file=sys.stderr)
-        report["materials"][name] = {"read": bench_read(path),
-                                     "new_process": bench_new_process(path),
-                                     "in_process": bench_in_process(path)}
-    if args.across:
-        print(f"ggx and auto across {args.across} materials ...", file=sys.stderr)
-        report["across"] = bench_across(list(nbrdf.material_names())[:args.across], directory)
-    report["machine"]["loadavg_end"] = os.getloadavg()
+    names = args.materials.split(",")
+    json_path = os.path.join(args.out, "startup.json")
+    if args.cold_only and os.path.exists(json_path):
+        with open(json_path) as f:
+            report = json.load(f)
+    else:
+        report = {"machine": machine(), "materials": {}}
+    if not args.cold_only:
+        for name in names:
+            path = nbrdf.cached_table(name, directory)
+            print(f"{name} ...", file=sys.stderr)
+            report["materials"][name] = {"read": bench_read(path),
+                                         "new_process": bench_new_process(path),
+                                         "in_process": bench_in_process(path)}
+        if args.across:
+            print(f"ggx and auto across {args.across} materials ...", file=sys.stderr)
+            report["across"] = bench_across(list(nbrdf.material_names())[:args.across],
+                                            directory)
+        report["machine"]["loadavg_end"] = os.getloadavg()
+    print(f"empty-cache rows on {names[0]} ...", file=sys.stderr)
+    cold_machine = machine()
+    cold = bench_cold(nbrdf.cached_table(names[0], directory), args.cold_repeats, args.baseline)
+    cold_machine["loadavg_end"] = os.getloadavg()
+    report["cold"] = {"material": names[0], "machine": cold_machine, "runs": cold,
+                      "command": "python -m bench.startup " + " ".join(
+                          sys.argv[1:] if argv is None else argv)}
     os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "startup.json"), "w") as f:
+    with open(json_path, "w") as f:
         jsonout.dump(report, f, indent=1)
     write_markdown(report, os.path.join(args.out, "startup.md"))
     print(f"wrote {args.out}/startup.json, startup.md", file=sys.stderr)

@@ -39,6 +39,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 from brdffit import runtime
 
@@ -49,7 +50,23 @@ KEEP_DAYS = 7
 _KEYED_MODULES = ("brdffit.", "optimistix.", "lineax.", "equinox.", "jax.", "builtins",
                   "collections", "numpy")
 _FORMAT = 1  # of the files written here
-_lock = threading.Lock()
+_lock = threading.Lock()  # guards each function's table of per-program locks
+
+
+class Event(NamedTuple):
+    """One program that :func:`jit` made ready: compiled (``how`` = "compiled", its
+    tracing and lowering in ``lower_s``, XLA's compilation in ``compile_s``) or
+    loaded from disk ("loaded", the load and first run in ``compile_s``)."""
+
+    name: str
+    how: str
+    lower_s: float
+    compile_s: float
+
+
+#: Every program made ready in this process, in order: what a cold start spends
+#: (``bench/startup.py``, ``brdffit warmup``). A few dozen entries per process.
+events: list[Event] = []
 
 
 @functools.cache
@@ -159,6 +176,7 @@ def jit(fn: Callable) -> Callable:
 
     plain = eqx.filter_jit(fn)
     entries: dict = {}
+    key_locks: dict = {}
     name = f"{fn.__module__}.{fn.__qualname__}"
     own_code = fn.__module__.startswith("brdffit.")  # the fingerprint covers its code
 
@@ -184,13 +202,16 @@ def jit(fn: Callable) -> Callable:
             out_defs.append(out_def)
             return out_leaves
 
+        t0 = time.perf_counter()
         lowered = jax.jit(flat).lower(*(leaves[i] for i in dynamic))
+        t1 = time.perf_counter()
         # An executable that JAX's own cache loaded serialises without its machine
         # code (its fused kernels are then "not found" when run): the one kept on
         # disk is compiled afresh, once per fingerprint.
         with (jax_config.enable_compilation_cache(False) if to_store
               else contextlib.nullcontext()):
             compiled = lowered.compile()
+        events.append(Event(name, "compiled", t1 - t0, time.perf_counter() - t1))
         return _Entry(compiled, out_defs[0])
 
     def disk_path(leaves, treedef) -> Path | None:
@@ -241,11 +262,14 @@ def jit(fn: Callable) -> Callable:
     def loaded_and_run(path: Path, arrays):
         """The executable kept at ``path`` and its outputs on ``arrays``, or None when
         it is missing, does not load or does not run (its file is then removed)."""
+        t0 = time.perf_counter()
         entry = load(path) if path.exists() else None
         if entry is None:
             return None
         try:
-            return entry, jax.block_until_ready(entry.call(*arrays))
+            out = jax.block_until_ready(entry.call(*arrays))
+            events.append(Event(name, "loaded", 0.0, time.perf_counter() - t0))
+            return entry, out
         except Exception as e:  # noqa: BLE001 - a file that loads but cannot run
             runtime.log.info("brdffit: compiled %s in %s does not run (%s); compiling again",
                              name, path, e)
@@ -263,7 +287,13 @@ def jit(fn: Callable) -> Callable:
         except TypeError:  # an unhashable static argument: no caching of ours
             return plain(*args, **kwargs)
         if entry is None:
+            # One lock per program, not one for all: threads that need different
+            # programs (``auto``'s candidates, fitted side by side) compile them at
+            # the same time, XLA's compilation releasing the GIL (a cold ``auto``:
+            # bench/results/startup.md). Threads that need the same one wait for it.
             with _lock:
+                key_lock = key_locks.setdefault(key, threading.Lock())
+            with key_lock:
                 entry = entries.get(key)
                 if entry is None:
                     path = disk_path(leaves, treedef)

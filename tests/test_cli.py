@@ -96,3 +96,20 @@ def test_a_selection_option_with_a_fixed_model_is_said_not_ignored(ggx_file):
     r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--tolerance", "0.01")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "tolerance 0.01" in r.stderr and "ignored" in r.stderr and "model auto" in r.stderr
+
+
+def test_warmup_keeps_the_fits_for_the_next_process(tmp_path, monkeypatch):
+    """`brdffit warmup` compiles a model's fit into the cache it is given; a second
+    process finds every program there and compiles none."""
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "cache"))
+    first = run("brdffit.cli", "warmup", "--models", "lambert")
+    assert first.returncode == 0, first.stderr
+    assert f"compiling into {tmp_path / 'cache'}" in first.stderr
+    line = next(ln for ln in first.stderr.splitlines() if "lambert" in ln and "compiled" in ln)
+    assert int(line.split(" compiled")[0].split()[-1]) > 0, first.stderr
+    assert list((tmp_path / "cache" / "executables").glob("*/_solve_batch-*.xla"))
+    again = run("brdffit.cli", "warmup", "--models", "lambert")
+    assert again.returncode == 0, again.stderr
+    assert " 0 compiled" in again.stderr, again.stderr
+    bad = run("brdffit.cli", "warmup", "--models", "no_such_model")
+    assert bad.returncode == 2 and "no_such_model" in bad.stderr

@@ -149,3 +149,56 @@ def test_params_come_in_the_model_order():
     r = fit(table, "ggx", samples=2048)
     assert list(r.params) == ["kd", "ks", "alpha", "f0"]
     assert list(r.uncertainty["std_error"]) == list(r.params)
+
+
+@pytest.mark.parametrize(("model", "kwargs"), [("ggx", {"samples": 3000}),
+                                                ("ggx", {"samples": 5000, "loss": "cube_root"})])
+def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, monkeypatch):
+    """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``),
+    its arrays padded with zero weights: the fit is the unpadded one, to rounding."""
+    from brdffit.fitting import pipeline, sampling
+
+    table, _ = make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)
+    bucketed = fit(table, model, **kwargs)
+    n = bucketed.samples["used"]
+    assert sampling.bucket_size(kwargs["samples"]) in sampling.SAMPLE_BUCKETS
+    monkeypatch.setattr(pipeline, "padded", lambda sample_set: sample_set)
+    exact = fit(make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)[0], model,
+                **kwargs)
+    assert exact.samples["used"] == n == kwargs["samples"]
+    assert exact.result == bucketed.result == "successful"
+    assert exact.steps == bucketed.steps
+    for name, value in exact.params.items():
+        np.testing.assert_allclose(bucketed.params[name], value, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(bucketed.log_rmse, exact.log_rmse, rtol=1e-9)
+    assert bucketed.uncertainty["residuals"] == exact.uncertainty["residuals"]
+
+
+def test_one_compiled_fit_serves_every_selectable_loss_and_sample_count(synth_tables):
+    """Another loss of ``loss.SELECTABLE`` or a sample count up to a bucket is data
+    for the default fit's programs: none is compiled (or loaded) again."""
+    from brdffit import executables
+
+    table = synth_tables["ggx"]
+    fit(table, "ggx")
+    before = len(executables.events)
+    for kwargs in ({"loss": "cube_root"}, {"loss": "linear_cos"}, {"samples": 4096},
+                   {"samples": 2048, "loss": "cube_root"}):
+        r = fit(table, "ggx", **kwargs)
+        assert r.converged, (kwargs, r.result)
+    assert [e.name for e in executables.events[before:]] == []
+
+
+def test_max_steps_is_data_for_the_lm_solve(synth_tables):
+    """Every ``max_steps`` runs the same compiled solve; running out of them is
+    reported as it was when the limit was static."""
+    from brdffit import executables
+
+    table = synth_tables["ggx"]
+    fit(table, "ggx")
+    before = len(executables.events)
+    short = [fit(table, "ggx", max_steps=n, starts=1) for n in (1, 2, 3)]
+    assert [e.name for e in executables.events[before:]] == []
+    for n, r in zip((1, 2, 3), short, strict=True):
+        assert (r.result, r.steps) == ("nonlinear_max_steps_reached", n)
+    assert fit(table, "ggx", max_steps=500).result == "successful"

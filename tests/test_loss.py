@@ -111,7 +111,7 @@ def test_structured_normal_equations_equal_plain_jacobian_for_every_loss(choice,
     c = sampling.usable_bins(noisy_ggx)
     s = sampling.stratified_sample(sampling.bin_weights(c.usable), 2048)
     data = fitting.sample_data(noisy_ggx, s.index, s.weight, loss=choice)
-    assert data.loss == choice
+    assert data.loss_name == choice
     m = models.get("ggx")
     u = jnp.asarray(m.unconstrain(TRUTH["ggx"])) + 0.3
     fast = loss.normal_equations(u, (m, data))

@@ -28,6 +28,7 @@ COMMANDS = {
     "fit": "fit a model to a MERL .binary table",
     "models": "list the models with their parameters and ranges",
     "serve": "run the REST API (fits in worker processes)",
+    "warmup": "compile the default models' fits into the cache, before a first user waits",
 }
 
 EXIT_INPUT = 2  # bad input: malformed table, unknown model, bad option

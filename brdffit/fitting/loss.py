@@ -46,7 +46,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from brdffit.models import AbstractBRDFModel
 from brdffit.models.base import ParamSpec
@@ -104,9 +104,23 @@ def _cbrt(x):
     return jnp.exp(jnp.log(x) * (1.0 / 3.0))
 
 
-def compress_values(x, loss: str):
+#: The losses whose compression is one elementwise function with no data of its
+#: own: a fit's compiled programs serve all of them, the choice being data
+#: (``LossData.selector``, :data:`SELECTED`), so another of them costs a fit, not
+#: a compile. ``render`` carries exposures and an energy term: its own programs.
+SELECTABLE = ("log", "cube_root", "linear_cos")
+#: ``LossData.loss`` of data whose loss is one of :data:`SELECTABLE`, chosen by its
+#: ``selector`` at run time (``lax.switch``: only the chosen branch runs).
+SELECTED = "selected"
+
+
+def compress_values(x, loss: str, selector=None):
     """``g(x)`` of the module docstring, for ``x = f cos_i >= 0``: the caller clamps
-    (``compress`` does), so that the hot path holds no second clamp."""
+    (``compress`` does), so that the hot path holds no second clamp. ``loss`` may be
+    :data:`SELECTED`, the loss then being ``SELECTABLE[selector]``."""
+    if loss == SELECTED:
+        return jax.lax.switch(selector, [lambda v, n=n: compress_values(v, n)
+                                         for n in SELECTABLE], x)
     if loss == "log":
         return jnp.log1p(x)
     if loss == "cube_root":
@@ -118,8 +132,11 @@ def compress_values(x, loss: str):
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
-def compress_slope(x, loss: str):
+def compress_slope(x, loss: str, selector=None):
     """``g'(x)``, for the closed-form Jacobian of :func:`normal_equations` (``x >= 0``)."""
+    if loss == SELECTED:
+        return jax.lax.switch(selector, [lambda v, n=n: compress_slope(v, n)
+                                         for n in SELECTABLE], x)
     if loss == "log":
         return 1.0 / (1.0 + x)
     if loss == "cube_root":
@@ -132,9 +149,18 @@ def compress_slope(x, loss: str):
     raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
 
 
+def compress_with_slope(x, loss: str, selector=None):
+    """``(g(x), g'(x))`` in one branch: a :data:`SELECTED` loss switches once."""
+    if loss == SELECTED:
+        return jax.lax.switch(selector, [lambda v, n=n: compress_with_slope(v, n)
+                                         for n in SELECTABLE], x)
+    return compress_values(x, loss), compress_slope(x, loss)
+
+
 class LossData(eqx.Module):
     """One fixed-size batch of bins: geometry, compressed targets, weights, and the
-    loss they are compressed for (static: each loss compiles its own fit)."""
+    loss they are compressed for (static: each loss compiles its own fit), or
+    :data:`SELECTED` with the loss in ``selector`` (data: one fit for them all)."""
 
     frame: Frame  # per-bin geometry, precomputed (see brdffit.models.frame), (S,)
     target: Float[Array, "3 s"]  # g(f_meas * cos_i) of the loss
@@ -146,6 +172,14 @@ class LossData(eqx.Module):
     # the render loss's measured mean radiance per channel over the views (the
     # weighted mean of f cos_i), which the fit's must hold (:func:`energy_residuals`)
     energy: Float[Array, "3 1"] | None = None
+    # the index into SELECTABLE of the loss, where ``loss`` is SELECTED
+    selector: Int[Array, ""] | None = None
+
+    @property
+    def loss_name(self) -> str:
+        """The loss the targets are compressed for, whether static or selected (on
+        concrete data only: a traced selector has no value)."""
+        return SELECTABLE[int(self.selector)] if self.loss == SELECTED else self.loss
 
 
 #: Weight of the render loss's colour-holding term: the residual of channel c is
@@ -162,11 +196,12 @@ def exposed(x, exposure):
 
 
 def compress(
-    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS, exposure=None
+    f: Float[Array, "3 s"], cos_i: Float[Array, " s"], loss: str = DEFAULT_LOSS, exposure=None,
+    selector=None,
 ) -> Float[Array, "3 s"]:
     """The compressed value g(f cos_i) that the loss compares."""
     return compress_values(exposed(jnp.maximum(f, 0.0) * jnp.maximum(cos_i, 0.0), exposure),
-                           loss)
+                           loss, selector)
 
 
 def residuals(u: Float[Array, " p"], args) -> Float[Array, "3 s"]:
@@ -186,7 +221,7 @@ def _sample_residuals(u, args):
     model, data = args
     f = model.eval_channels(model.constrain(u), data.frame)
     return jnp.sqrt(data.weight) * (
-        compress(f, data.frame.cos_i, data.loss, data.exposure) - data.target)
+        compress(f, data.frame.cos_i, data.loss, data.exposure, data.selector) - data.target)
 
 
 def energy_residuals(total, weight_sum, data):
@@ -234,7 +269,7 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     """
     f = model.eval_channels(model.constrain(u), data.frame)
     fit_cos = jnp.maximum(f, 0.0) * jnp.maximum(data.frame.cos_i, 0.0)
-    meas_cos = _uncompress(data.target, data.loss, data.exposure)
+    meas_cos = _uncompress(data.target, data.loss, data.exposure, data.selector)
 
     def rmse(d):
         return jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
@@ -251,7 +286,10 @@ def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Arra
     }
 
 
-def _uncompress(target, loss: str, exposure=None):
+def _uncompress(target, loss: str, exposure=None, selector=None):
+    if loss == SELECTED:
+        return jax.lax.switch(selector, [lambda t, n=n: _uncompress(t, n) for n in SELECTABLE],
+                              target)
     if loss == "render":
         return tone_inverse(target) / exposure
     if loss == "log":
@@ -316,7 +354,7 @@ def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1
     def block_at(i):  # arrays without the sample axis (an exposure) are shared
         return jax.tree_util.tree_map(
             lambda a: jax.lax.dynamic_slice_in_dim(a, i * block, block, axis=a.ndim - 1)
-            if a.shape[-1] == n else a, data)
+            if a.ndim and a.shape[-1] == n else a, data)
 
     def add_block(i, total):
         return jax.tree_util.tree_map(jnp.add, total, terms(block_at(i)))
@@ -368,8 +406,9 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
     cos_i = jnp.maximum(frame.cos_i, 0.0)
     sqrt_w = jnp.sqrt(data.weight)
     x = exposed(f * cos_i, data.exposure)
-    r = sqrt_w * (compress_values(x, data.loss) - data.target)  # (3, S)
-    a = sqrt_w * exposed(cos_i * compress_slope(x, data.loss), data.exposure)  # dr/df, (3, S)
+    g, slope_x = compress_with_slope(x, data.loss, data.selector)
+    r = sqrt_w * (g - data.target)  # (3, S)
+    a = sqrt_w * exposed(cos_i * slope_x, data.exposure)  # dr/df, (3, S)
     a2, ar = a * a, a * r
 
     colour_at = layout.colour_at  # (3, K+1): u index of colour parameter m, channel c

@@ -41,6 +41,8 @@ from brdffit.fitting.loss import (
     DEFAULT_LOSS,
     LOSS_METRIC,
     LOSSES,
+    SELECTABLE,
+    SELECTED,
     LossData,
     block_count,
     compress_values,
@@ -52,7 +54,13 @@ from brdffit.fitting.loss import (
 )
 from brdffit.fitting.quality import quality
 from brdffit.fitting.result import STATUS_NAMES, FitResult
-from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
+from brdffit.fitting.sampling import (
+    DEFAULT_SAMPLES,
+    bin_weights,
+    padded,
+    stratified_sample,
+    usable_bins,
+)
 from brdffit.fitting.sphere import SphereReference
 from brdffit.fitting.starts import TableHints, table_hints
 from brdffit.fitting.starts import candidates as start_vectors
@@ -71,6 +79,10 @@ DEFAULT_STARTS = 1
 #: Steps per start. A default fit of a real material converges in 3-80 steps
 #: (bench/results/real_materials.md); the limit only ends a fit that cannot.
 DEFAULT_MAX_STEPS = 256
+#: The largest ``max_steps`` that the "lm" solve takes as data (a traced limit, one
+#: compiled solve for every value up to it: ``FitOptions`` allows no more); a larger
+#: one is a static argument of its own solve.
+STEP_CAP = 10_000
 #: |u| within which every parameter transform has a useful slope (softplus(-8) =
 #: 3e-4 with slope 3e-4): a nested model's start from its parent is pulled back here.
 LIVE_U = 8.0
@@ -109,7 +121,8 @@ SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 def _score(model, u_batch, data, every: int = 1):
     """Loss of each start, on every ``every``-th sample (``every`` is static)."""
     n = data.weight.shape[-1]
-    data = jax.tree_util.tree_map(lambda a: a[..., ::every] if a.shape[-1] == n else a, data)
+    data = jax.tree_util.tree_map(lambda a: a[..., ::every] if a.ndim and a.shape[-1] == n else a,
+                                  data)
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
@@ -142,6 +155,10 @@ def _solve_batch(model, solver_name: str, u_batch, data, max_steps):
     floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
     options = {"normal_equations": normal_equations, "bound_side": _bound_side,
                "loss_floor": floor}
+    if isinstance(solver, solvers.NormalLevenbergMarquardt) and isinstance(max_steps, jax.Array):
+        # the step limit is data (fit passes an array): one solve for every max_steps
+        options["step_limit"] = max_steps
+        max_steps = STEP_CAP
 
     def one(u0):
         sol = optx.least_squares(
@@ -155,10 +172,16 @@ def _solve_batch(model, solver_name: str, u_batch, data, max_steps):
         )
         # Whatever the solver and however it stopped, "successful" means the
         # optimality test holds at the point it returns (brdffit.fitting.solver).
-        loss, jtj, jtr = normal_equations(sol.value, (model, data))
-        optimal = solvers.is_optimal(
-            loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
-        )
+        if isinstance(solver, solvers.NormalLevenbergMarquardt):
+            # Its final state holds that test, made at that point with the same
+            # tolerances and floor: no third copy of the normal equations (after
+            # its init's and its step's) to compile into the program.
+            loss, optimal = sol.stats["loss"], sol.stats["stop"] == solvers.OPTIMAL
+        else:
+            loss, jtj, jtr = normal_equations(sol.value, (model, data))
+            optimal = solvers.is_optimal(
+                loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
+            )
         # Return values, not the Solution: its state holds a jaxpr.
         return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
 
@@ -192,10 +215,14 @@ def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> Los
         # numpy's log1p for the default: the same targets, to the last bit, as before
         # the loss was a choice (JAX's log1p differs in the last place on some values)
         target = np.log1p(x) if loss == "log" else compress_values(x, loss)
+    # the losses of SELECTABLE share one compiled fit: the loss travels as data
+    selector = (jnp.asarray(SELECTABLE.index(loss), jnp.int32) if loss in SELECTABLE
+                else None)
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
-        loss=loss, exposure=None if exposure is None else jnp.asarray(exposure, dtype),
-        energy=None if energy is None else jnp.asarray(energy, dtype),
+        loss=loss if selector is None else SELECTED,
+        exposure=None if exposure is None else jnp.asarray(exposure, dtype),
+        energy=None if energy is None else jnp.asarray(energy, dtype), selector=selector,
     )
 
 
@@ -349,6 +376,53 @@ def _error_pool(parts: int):
         return pool
 
 
+_REPORT_THREADS: dict = {}
+#: The kinds of fit (model, precision, loss, sample shape, scene) whose report's
+#: programs this process has made ready (:func:`_ready_report_once`).
+_REPORTS_READY: set = set()
+
+
+def _ready_report_once(table, model, u, prep: _Prepared, loss: str, precision: str) -> None:
+    """The first fit of its kind in a process: make the programs of its report (the
+    full-table error, the parameters, the sphere, the uncertainty) ready on another
+    thread, by running them on a start vector, while this thread compiles (or loads)
+    the scoring and the solve. They depend on shapes alone, not on the solution: on
+    2 cores a new process compiles both sets at the same time (bench/results/
+    startup.md). Later fits of the kind skip this; the results here are dropped."""
+    kind = (type(model), model.name, precision, loss, prep.data.weight.shape,
+            prep.weight is None or prep.weight.size)
+    with _ERROR_THREADS_LOCK:
+        if kind in _REPORTS_READY:
+            return
+        _REPORTS_READY.add(kind)
+
+    def report() -> None:
+        try:
+            u0 = np.asarray(u, np.float64)
+            full_table_metrics(table, model, u0, prep.weight, peak=prep.peak)
+            params = _plain(constrained(model, u0))
+            _cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
+            parameter_uncertainty(model, u0, prep.data)
+        except Exception as e:  # noqa: BLE001 - a start far off the table: speed only
+            runtime.log.debug("brdffit: report of %s not made ready ahead (%s)", model.name, e)
+
+    _report_pool().submit(runtime.in_float64(report))
+
+
+def _report_pool():
+    """One thread per process for the parts of a fit's report that overlap the
+    full-table pass (a forked child makes its own, as :func:`_error_pool`)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _ERROR_THREADS_LOCK:
+        pool = _REPORT_THREADS.get(os.getpid())
+        if pool is None:
+            _REPORT_THREADS.clear()
+            pool = _REPORT_THREADS[os.getpid()] = ThreadPoolExecutor(
+                1, thread_name_prefix="brdffit-report")
+        return pool
+
+
 def _full_error_sums(model, u, rgb, weight, frame, peak):
     n = weight.shape[-1]
     parts = _error_parts(n)
@@ -483,6 +557,7 @@ def _prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
             views = render_loss.view_bin_weight()
             _, sample_set = _weights_and_samples(counts.usable & (views > 0), views,
                                                  "render-views", samples, seed)
+        sample_set = padded(sample_set)  # one compiled fit for every count up to a bucket
         data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision],
                            loss)
         return _Prepared(counts, n_usable, weight, sample_set, data, _peak_bin(table, weight),
@@ -603,6 +678,7 @@ def fit(
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
         u_candidates = start_vectors(m, table, counts.usable, prep.hints)
+    _ready_report_once(table, m, u_candidates[0], prep, loss, precision)
     if len(u_candidates) > 1:  # one candidate (init, a polish) has nothing to rank
         # Score candidates on every 8th sample: ranking starts needs no more.
         scores = np.asarray(_score(m, jnp.asarray(u_candidates, dtype), data, 8))
@@ -619,8 +695,9 @@ def fit(
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
 
-    solve = functools.partial(_solve_batch, m, solver,
-                              data=data, max_steps=max_steps)
+    solve = functools.partial(_solve_batch, m, solver, data=data,
+                              max_steps=jnp.asarray(max_steps) if solver == "lm"
+                              and max_steps <= STEP_CAP else max_steps)
     values, codes, steps, losses = (np.asarray(a) for a in solve(
         u_batch=jnp.asarray(best_starts, dtype)))
     if parent_start is not None:
@@ -662,6 +739,12 @@ def fit(
         i = 0
         u_best, result = np.asarray(best_starts[0], np.float64), "nonfinite"
 
+    # The uncertainty needs the solution alone: it runs on another thread while this
+    # one measures the full table and the sphere. Warm, that overlaps a few ms; in a
+    # new process each of them compiles its programs first, and side by side they
+    # compile at the same time (bench/results/startup.md).
+    pending = (_report_pool().submit(runtime.in_float64(parameter_uncertainty), m, u_best, data)
+               if result != "nonfinite" else None)
     metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
     # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
     metrics[f"sample_{LOSS_METRIC[loss]}"] = (
@@ -673,7 +756,11 @@ def fit(
     # The image error of the whole sphere (no scene weighting): one figure that
     # compares fits made under different losses.
     metrics["psnr_db"] = _cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
-    uncertainty = parameter_uncertainty(m, u_best, data) if result != "nonfinite" else None
+    uncertainty = None
+    if pending is not None and result != "nonfinite":
+        uncertainty = pending.result()
+    elif pending is not None:  # the metrics say nonfinite: no uncertainty, whatever it was
+        pending.exception()
     look = quality(table, m, params, metrics["psnr_db"])
     return FitResult(
         model=m.name,

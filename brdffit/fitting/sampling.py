@@ -29,6 +29,15 @@ from brdffit.io.merl import MerlTable
 DEFAULT_SAMPLES = 16384
 
 
+#: The sample counts a fit's compiled programs are made for: a count up to the
+#: largest is padded with zero-weight slots to the first bucket that holds it, so
+#: ``samples=4096`` or ``5000`` runs the default fit's programs (compiled, or kept on
+#: disk by ``brdffit.executables``) instead of compiling its own; zero weights add
+#: nothing to any sum (tests/test_fitting.py checks the fits agree to 1e-9). Larger
+#: counts keep their own shape: their steps, not their compilation, dominate.
+SAMPLE_BUCKETS = (DEFAULT_SAMPLES, 2 * DEFAULT_SAMPLES, 4 * DEFAULT_SAMPLES)
+
+
 @dataclass(frozen=True)
 class SampleSet:
     """Flat bin indices and normalised weights (sum 1); padded slots have weight 0."""
@@ -126,3 +135,21 @@ def _row_quota(row_count: np.ndarray, samples: int) -> np.ndarray:
         budget -= int(take.sum())
         open_rows &= quota < row_count
     return quota
+
+
+def bucket_size(n: int) -> int:
+    """The length of a sample set of ``n`` slots once padded (:data:`SAMPLE_BUCKETS`)."""
+    return next((b for b in SAMPLE_BUCKETS if n <= b), n)
+
+
+def padded(sample_set: SampleSet) -> SampleSet:
+    """``sample_set`` padded with zero-weight slots (bin 0) to its :func:`bucket_size`;
+    the slots it had keep their order, so every k-th sample is still the same bin."""
+    n = sample_set.index.size
+    size = bucket_size(n)
+    if size == n:
+        return sample_set
+    index = np.zeros(size, dtype=sample_set.index.dtype)
+    weight = np.zeros(size, dtype=sample_set.weight.dtype)
+    index[:n], weight[:n] = sample_set.index, sample_set.weight
+    return SampleSet(index, weight, sample_set.n_used)

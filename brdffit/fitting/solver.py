@@ -210,6 +210,7 @@ class _LMState(eqx.Module):
     nu: Float[Array, ""]
     stall: Array  # consecutive accepted steps that changed the loss by < ftol
     stop: Array  # RUNNING, OPTIMAL, STALLED or STUCK
+    steps: Array  # steps taken, for the optional traced step limit (``terminate``)
     # split_decrement at the current point, kept for the next step's use
     pinned: Bool[Array, " p"]
     free_dec: Float[Array, ""]
@@ -223,7 +224,8 @@ def _no_bounds(y, args):
 class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     """Levenberg-Marquardt for small parameter vectors and many residuals.
 
-    ``options`` may hold ``"normal_equations"`` (see :func:`_residual_and_normal`),
+    ``options`` may hold ``"step_limit"`` (a step limit that may be traced: see
+    ``terminate``), ``"normal_equations"`` (see :func:`_residual_and_normal`),
     ``"bound_side"``, ``(y, args) -> (p,) int`` (-1 / +1 where a coordinate sits in
     the flat tail of its transform; see the module docstring) and ``"loss_floor"``,
     the loss of an exact fit on this problem's scale (default ``atol``).
@@ -264,6 +266,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             nu=jnp.asarray(2.0, dtype),
             stall=jnp.asarray(0),
             stop=jnp.where(finite & optimal, OPTIMAL, RUNNING),
+            steps=jnp.asarray(0),
             pinned=pinned,
             free_dec=free_dec,
             result=optx.RESULTS.where(finite, optx.RESULTS.successful, optx.RESULTS.nonfinite),
@@ -321,6 +324,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             nu=nu,
             stall=stall,
             stop=stop,
+            steps=state.steps + 1,
             pinned=pinned,
             free_dec=free_dec,
             result=optx.RESULTS.successful,
@@ -328,7 +332,15 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return unravel(y_out), state, None
 
     def terminate(self, fn, y, args, options, state: _LMState, tags):
-        return state.stop != RUNNING, state.result
+        # ``options["step_limit"]``, when given, is a step limit that may be traced
+        # (``least_squares``' own ``max_steps`` is static: each value would compile
+        # its own solve); running out reads as running out of ``max_steps``.
+        limit = (options or {}).get("step_limit")
+        if limit is None:
+            return state.stop != RUNNING, state.result
+        out_of_steps = (state.stop == RUNNING) & (state.steps >= limit)
+        return (state.stop != RUNNING) | out_of_steps, optx.RESULTS.where(
+            out_of_steps, optx.RESULTS.nonlinear_max_steps_reached, state.result)
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result) -> tuple[Any, Any, dict]:
         return y, aux, {"loss": state.loss, "damping": state.lam, "stop": state.stop}

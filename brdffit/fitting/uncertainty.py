@@ -140,7 +140,8 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     n_bins = int(data.weight.shape[-1])
     k = max(1, -(-n_bins // MAX_JACOBIAN_BINS))
     if k > 1:
-        data = jax.tree_util.tree_map(lambda a: a[..., ::k], data)
+        # a scalar (the loss's selector) has no bins to thin
+        data = jax.tree_util.tree_map(lambda a: a[..., ::k] if a.ndim else a, data)
     theta, bound_side, slopes = (np.asarray(x, np.float64) for x in _linearisation(
         model, np.asarray(u, np.float64)))
     a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
