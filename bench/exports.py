@@ -237,7 +237,7 @@ def material_row(name: str, validator: str | None) -> dict:
     from brdffit.export import export, validate
     from brdffit.export.conversion import fit_as_table
     from brdffit.fitting.physical import bound
-    from brdffit.fitting.pipeline import table_error
+    from brdffit.fitting.problem import table_error
 
     table = _table(name)
     fits, row = {}, {"material": name, "fits": {}, "exports": []}

@@ -70,7 +70,7 @@ def _scipy_polish(table, model_name, params, samples=32768, seed=0):
     from scipy.optimize import least_squares
 
     from brdffit import models
-    from brdffit.fitting import pipeline as fitting
+    from brdffit.fitting import problem as fitting
     from brdffit.fitting.loss import residuals
     from brdffit.fitting.sampling import bin_weights, stratified_sample, usable_bins
 
@@ -85,7 +85,7 @@ def _scipy_polish(table, model_name, params, samples=32768, seed=0):
         lambda u: np.asarray(res(u, data)), u0, jac=lambda u: np.asarray(jac(u, data)),
         method="trf", x_scale="jac", ftol=1e-14, xtol=1e-14, gtol=1e-14, max_nfev=60,
     )
-    return fitting._plain(m.constrain(sol.x))
+    return fitting.plain_params(m.constrain(sol.x))
 
 
 def _embed(child: str, parent_params: dict) -> dict:
@@ -101,7 +101,7 @@ def _embed(child: str, parent_params: dict) -> dict:
 
 def reference_fit(table, model: str, default_params: dict, parent: dict | None) -> dict:
     from brdffit import fit
-    from brdffit.fitting.pipeline import table_error
+    from brdffit.fitting.problem import table_error
 
     tried = {"default": (default_params, table_error(table, model, default_params)["log_rmse"])}
     multi = fit(table, model, starts=8, samples=32768, max_steps=500)
@@ -116,7 +116,7 @@ def reference_fit(table, model: str, default_params: dict, parent: dict | None) 
     polished = _scipy_polish(table, model, start)
     tried["scipy TRF polish"] = (polished, table_error(table, model, polished)["log_rmse"])
     how, (params, log_rmse) = min(tried.items(), key=lambda kv: kv[1][1])
-    from brdffit.fitting.pipeline import _plain
+    from brdffit.fitting.problem import plain_params as _plain
 
     return {"log_rmse": log_rmse, "params": _plain(params), "how": how,
             "tried": {k: v[1] for k, v in tried.items()}}

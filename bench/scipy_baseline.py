@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from brdffit import models
-from brdffit.fitting.pipeline import table_error
+from brdffit.fitting.problem import table_error
 from brdffit.fitting.sampling import bin_weights, usable_bins
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable

@@ -50,7 +50,7 @@ KEEP_DAYS = 7
 _KEYED_MODULES = ("brdffit.", "optimistix.", "lineax.", "equinox.", "jax.", "builtins",
                   "collections", "numpy")
 _FORMAT = 1  # of the files written here
-_lock = threading.Lock()  # guards each function's table of per-program locks
+_lock = threading.Lock()  # one program made ready at a time (see call())
 
 
 class Event(NamedTuple):
@@ -176,7 +176,6 @@ def jit(fn: Callable) -> Callable:
 
     plain = eqx.filter_jit(fn)
     entries: dict = {}
-    key_locks: dict = {}
     name = f"{fn.__module__}.{fn.__qualname__}"
     own_code = fn.__module__.startswith("brdffit.")  # the fingerprint covers its code
 
@@ -287,13 +286,13 @@ def jit(fn: Callable) -> Callable:
         except TypeError:  # an unhashable static argument: no caching of ours
             return plain(*args, **kwargs)
         if entry is None:
-            # One lock per program, not one for all: threads that need different
-            # programs (``auto``'s candidates, fitted side by side) compile them at
-            # the same time, XLA's compilation releasing the GIL (a cold ``auto``:
-            # bench/results/startup.md). Threads that need the same one wait for it.
+            # One lock for every program, held while one is loaded or compiled and
+            # first run. A lock per program let threads (auto's candidates, a fit's
+            # report made ready ahead) load and run different deserialised
+            # executables at the same time, and a test run crashed in one's first
+            # run (a segmentation fault in block_until_ready); the cold-auto gain it
+            # bought was within noise (bench/results/startup.md).
             with _lock:
-                key_lock = key_locks.setdefault(key, threading.Lock())
-            with key_lock:
                 entry = entries.get(key)
                 if entry is None:
                     path = disk_path(leaves, treedef)

@@ -42,7 +42,7 @@ import numpy as np
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
 from brdffit.fitting.options import DEFAULT_TOLERANCE, FIT_KEYWORDS
-from brdffit.fitting.pipeline import constrained
+from brdffit.fitting.problem import constrained
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
 from brdffit.fitting.sphere import SphereReference, evaluate
@@ -402,7 +402,7 @@ def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:
     """The candidate's fit, seeded from its parent's when it has one; refitted once
     with more starts and steps when it did not converge, so that the choice rests
     on optima (an unconverged error would make a model look worse than it is)."""
-    from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+    from brdffit.fitting.problem import DEFAULT_MAX_STEPS, DEFAULT_STARTS
 
     parent = {"parent_fit": fits[m.parent]} if m.parent in fits else {}
     r = fit_in_scene(table, m, scene, **parent, **fit_options)

@@ -18,7 +18,7 @@ from brdffit import FitResult, MerlFormatError, fit, jsonout, models
 from brdffit.batch.store import BatchStore, read_attrs, read_results
 from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord
 from brdffit.cli import main as cli_main
-from brdffit.fitting.pipeline import full_table_metrics
+from brdffit.fitting.problem import full_table_metrics
 from brdffit.fitting.sampling import bin_weights, usable_bins
 from brdffit.io import merl
 from brdffit.io.merl import MAX_VALUE, MIN_PEAK, SCALE, MerlTable

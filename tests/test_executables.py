@@ -54,11 +54,11 @@ def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path)
     cache = tmp_path / "cache"
     first, log1 = _run(cache)
     files = _stored(cache)
-    assert any(f.name.startswith("_solve_batch-") for f in files), files
+    assert any(f.name.startswith("solve_batch-") for f in files), files
     assert "loaded compiled" not in log1
 
     second, log2 = _run(cache)
-    assert "loaded compiled brdffit.fitting.pipeline._solve_batch" in log2
+    assert "loaded compiled brdffit.fitting.problem.solve_batch" in log2
     assert second == first  # to the last bit: the same executable, the same data
 
     # damaged files (a disk error, a killed writer) are compiled again and replaced

@@ -11,7 +11,7 @@ import pytest
 
 from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export
 from brdffit.export.conversion import fit_as_table
-from brdffit.fitting.pipeline import table_error
+from brdffit.fitting.problem import table_error
 from brdffit.fitting.result import FitResult
 
 pytestmark = pytest.mark.unit

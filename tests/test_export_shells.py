@@ -11,7 +11,7 @@ import pytest
 
 from brdffit.client import ApiError, Client
 from brdffit.export import Export, export
-from brdffit.fitting.pipeline import table_error
+from brdffit.fitting.problem import table_error
 from brdffit.fitting.result import FitResult
 from brdffit.io import merl
 from tests.api_fixtures import FAST, Server, table_bytes, write

@@ -156,13 +156,13 @@ def test_params_come_in_the_model_order():
 def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, monkeypatch):
     """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``),
     its arrays padded with zero weights: the fit is the unpadded one, to rounding."""
-    from brdffit.fitting import pipeline, sampling
+    from brdffit.fitting import problem, sampling
 
     table, _ = make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)
     bucketed = fit(table, model, **kwargs)
     n = bucketed.samples["used"]
     assert sampling.bucket_size(kwargs["samples"]) in sampling.SAMPLE_BUCKETS
-    monkeypatch.setattr(pipeline, "padded", lambda sample_set: sample_set)
+    monkeypatch.setattr(problem, "padded", lambda sample_set: sample_set)
     exact = fit(make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)[0], model,
                 **kwargs)
     assert exact.samples["used"] == n == kwargs["samples"]

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.fitting import loss, sampling
-from brdffit.fitting import pipeline as fitting
+from brdffit.fitting import loss, pipeline, sampling
+from brdffit.fitting import problem as fitting
 from data_synth import make_table
 from tests.truths import TRUTH
 
@@ -123,7 +123,7 @@ def test_structured_normal_equations_equal_plain_jacobian_for_every_loss(choice,
 @pytest.mark.parametrize("choice", loss.LOSSES)
 def test_every_loss_recovers_the_truth_and_reports_every_metric(choice):
     table, _ = make_table("ggx", TRUTH["ggx"])
-    r = fitting.fit(table, "ggx", loss=choice, samples=2048)
+    r = pipeline.fit(table, "ggx", loss=choice, samples=2048)
     assert r.converged and r.loss == choice
     for name in ("kd", "ks"):
         np.testing.assert_allclose(r.params[name], TRUTH["ggx"][name], rtol=1e-3, atol=1e-5)
@@ -140,7 +140,7 @@ def test_each_loss_minimises_its_own_metric():
     ends lowest on the metric it optimised, so the choice matters and is reported.
     The render loss has no full-table metric: it is judged on its own data."""
     table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35, "f0": 0.1})
-    fits = {c: fitting.fit(table, "blinn_phong", loss=c, samples=4096) for c in loss.LOSSES}
+    fits = {c: pipeline.fit(table, "blinn_phong", loss=c, samples=4096) for c in loss.LOSSES}
     for c, r in fits.items():
         if c == "render":
             continue
@@ -148,7 +148,7 @@ def test_each_loss_minimises_its_own_metric():
         for other in fits.values():
             assert r.error[metric] <= other.error[metric] * 1.01, (c, metric)
     m = models.get("blinn_phong")
-    prep = fitting._prepare(table, None, 4096, 0, "float64", "render")
+    prep = fitting.prepare(table, None, 4096, 0, "float64", "render")
     render_loss_of = {c: float(loss.sum_squares(jnp.asarray(m.unconstrain(r.params)), m,
                                                 prep.data)) for c, r in fits.items()}
     assert render_loss_of["render"] == min(render_loss_of.values()), render_loss_of
@@ -162,7 +162,7 @@ def test_an_unknown_loss_is_refused_everywhere():
 
     table, _ = make_table("lambert", TRUTH["lambert"])
     with pytest.raises(FitInputError, match="unknown loss 'l1'; choose one of log, cube_root"):
-        fitting.fit(table, "lambert", loss="l1")
+        pipeline.fit(table, "lambert", loss="l1")
     with pytest.raises(FitInputError, match="unknown loss 'l1'"):
         FitOptions(loss="l1")
 
@@ -252,7 +252,7 @@ def _numpy_render_loss(table, index, weight, params, model):
 
 def test_render_loss_value_is_the_numpy_definition(noisy_ggx):
     m = models.get("ggx")
-    prep = fitting._prepare(noisy_ggx, None, 4096, 0, "float64", "render")
+    prep = fitting.prepare(noisy_ggx, None, 4096, 0, "float64", "render")
     params = {**TRUTH["ggx"], "alpha": 0.2, "kd": [0.3, 0.05, 0.01]}
     got = float(loss.sum_squares(jnp.asarray(m.unconstrain(params)), m, prep.data))
     want = _numpy_render_loss(noisy_ggx, prep.sample_set.index, prep.sample_set.weight,
@@ -272,7 +272,7 @@ def test_render_loss_exposes_each_channel_from_the_table():
     """A channel 20x darker has a 20x larger exposure: its relative error counts."""
     base = {"kd": [0.4, 0.1, 0.02], "ks": [0.2, 0.2, 0.2], "alpha": 0.3, "f0": 0.5}
     table = make_table("ggx", base)[0]
-    prep = fitting._prepare(table, None, 4096, 0, "float64", "render")
+    prep = fitting.prepare(table, None, 4096, 0, "float64", "render")
     e = np.asarray(prep.data.exposure)[:, 0]
     assert e[2] > 5 * e[0] and e[1] > 2 * e[0]
     # a 10% error in the dark blue channel costs about what one in red does
@@ -287,7 +287,7 @@ def test_render_loss_exposes_each_channel_from_the_table():
         return float(loss.sum_squares(u, m, prep.data))
 
     assert 0.3 < cost(2) / cost(0) < 3
-    logp = fitting._prepare(table, None, 4096, 0, "float64", "log")
+    logp = fitting.prepare(table, None, 4096, 0, "float64", "log")
 
     def log_cost(channel):
         kd = list(base["kd"])
@@ -305,7 +305,7 @@ def test_render_loss_gradients_are_finite(name, noisy_ggx):
     import jax
 
     m = models.get(name)
-    prep = fitting._prepare(noisy_ggx, None, 2048, 0, "float64", "render")
+    prep = fitting.prepare(noisy_ggx, None, 2048, 0, "float64", "render")
     p = {**TRUTH, **MORE}[name]
     for shift in (-12.0, -3.0, 0.0, 3.0, 12.0):  # down to black, up to far too bright
         u = jnp.asarray(m.unconstrain(p)) + shift
@@ -337,11 +337,11 @@ def test_render_loss_fits_share_one_compiled_program(caplog):
     first = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.2}, noise=0.02, seed=4)[0]
     second = make_table("ggx", {"kd": [0.05, 0.3, 0.6], "ks": [0.5, 0.2, 0.1],
                                 "alpha": 0.4, "f0": 0.3}, noise=0.02, seed=5)[0]
-    fitting.fit(first, "ggx", loss="render", samples=2048)
+    pipeline.fit(first, "ggx", loss="render", samples=2048)
     jax.config.update("jax_log_compiles", True)
     try:
         with caplog.at_level(logging.DEBUG):
-            r = fitting.fit(second, "ggx", loss="render", samples=2048)
+            r = pipeline.fit(second, "ggx", loss="render", samples=2048)
     finally:
         jax.config.update("jax_log_compiles", False)
     compiles = [rec.getMessage() for rec in caplog.records if "Compiling" in rec.getMessage()]
@@ -352,10 +352,10 @@ def test_render_loss_with_a_scene_uses_the_scene_views(noisy_ggx):
     from brdffit.fitting.scene import Scene
 
     scene = Scene.preset("camera-normal")
-    prep = fitting._prepare(noisy_ggx, scene.bin_weight(), 2048, 0, "float64", "render")
+    prep = fitting.prepare(noisy_ggx, scene.bin_weight(), 2048, 0, "float64", "render")
     used = prep.sample_set.index[prep.sample_set.weight > 0]
     assert np.all(scene.bin_weight()[used] > 0)
-    r = fitting.fit(noisy_ggx, "ggx", loss="render", samples=2048,
+    r = pipeline.fit(noisy_ggx, "ggx", loss="render", samples=2048,
                     bin_weight=scene.bin_weight())
     assert r.converged and r.loss == "render"
 

@@ -203,3 +203,35 @@ def test_saved_plots_respect_the_umask(ggx, tmp_path):
         os.umask(old)
     assert stat.S_IMODE(os.stat(path).st_mode) == 0o644  # not mkstemp's 0600
     assert not [p for p in os.listdir(tmp_path / "plots") if p != "slices.png"]  # no leftovers
+
+
+def test_polar_channel_labels_clear_every_tick_label(ggx):
+    """Each channel's name sits above its half disc, overlapping no angle or radius
+    label (it once covered the -30 degree one)."""
+    t, r = ggx
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = plots.polar_figure(t, r)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    for ax in fig.axes:
+        names = [x for x in ax.texts if x.get_text().endswith(" channel")]
+        assert len(names) == 1
+        box = names[0].get_window_extent(renderer)
+        ticks = [lab for lab in ax.get_xticklabels() + ax.get_yticklabels()
+                 if lab.get_text() and lab.get_visible()]
+        assert ticks
+        assert not [lab.get_text() for lab in ticks
+                    if box.overlaps(lab.get_window_extent(renderer))]
+
+
+def test_the_readme_layout_names_only_paths_that_exist():
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "README.md").read_text(encoding="utf-8")
+    layout = text[text.index("## Layout"):]
+    layout = layout[:layout.index("\n## ", 5)] if "\n## " in layout[5:] else layout
+    named = {p for p in re.findall(r"`((?:brdffit|api|data_synth|bench|tests)/[\w/.]*)`", layout)}
+    assert len(named) > 10
+    assert sorted(p for p in named if not (root / p).exists()) == []

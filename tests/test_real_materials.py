@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from brdffit import fit, models
-from brdffit.fitting import pipeline as fitting
+from brdffit.fitting import problem as fitting
 from brdffit.fitting.loss import residuals
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.solver import MAX_STEP

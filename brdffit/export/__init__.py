@@ -108,7 +108,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     from brdffit import models
     from brdffit.export.conversion import convert
     from brdffit.export.energy import energy_report
-    from brdffit.fitting.pipeline import table_error
+    from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour_error
 
     if target not in TARGETS:

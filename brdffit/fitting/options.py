@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from brdffit import jsonout, models
 from brdffit.errors import FitInputError
 from brdffit.fitting.loss import LOSSES
-from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, DEFAULT_STARTS, PRECISIONS, SOLVERS, fit
+from brdffit.fitting.pipeline import fit
+from brdffit.fitting.problem import DEFAULT_MAX_STEPS, DEFAULT_STARTS, PRECISIONS, SOLVERS
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.io.angles import N_PHI_D, N_THETA_D, N_THETA_H
 from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name

@@ -54,6 +54,7 @@ import numpy as np
 import optimistix as optx
 
 from brdffit import runtime
+from brdffit.fitting import problem
 from brdffit.fitting import solver as solvers
 from brdffit.fitting.loss import (
     DEFAULT_LOSS,
@@ -62,7 +63,7 @@ from brdffit.fitting.loss import (
     residuals,
     sum_squares,
 )
-from brdffit.fitting.pipeline import DEFAULT_MAX_STEPS, _plain
+from brdffit.fitting.problem import DEFAULT_MAX_STEPS, plain_params
 from brdffit.fitting.quality import quality
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
@@ -267,7 +268,7 @@ def clip_to_ranges(model: AbstractBRDFModel, params: dict) -> tuple[dict, list[s
                 label = spec.name + (f"[{c}]" if v.ndim else "")
                 clipped.append(f"range: {label} <= {hi:g}")
         out[spec.name] = np.clip(v, spec.lower, hi)
-    return _plain(out), clipped
+    return plain_params(out), clipped
 
 
 def _albedo(model: AbstractBRDFModel, params: dict) -> np.ndarray:
@@ -368,22 +369,7 @@ def report(free: FitResult, bounded_error: dict, before: np.ndarray, after: np.n
     }
 
 
-# -- the front door ---------------------------------------------------------------------
-
-
-def physical_fit(table, model: AbstractBRDFModel, *, loss: str, solver: str, samples,
-                 precision: str, starts: int, max_steps: int, seed: int, init, bin_weight,
-                 parent_fit) -> FitResult:
-    """``fit(table, model, physical=True, ...)``: see the module docstring."""
-    from brdffit.fitting import pipeline
-
-    if parent_fit is not None and parent_fit.physical is not None:
-        parent_fit = None  # a nested fit seeds from the parent's *unconstrained* optimum
-    free = pipeline.fit(table, model, loss=loss, solver=solver, samples=samples,
-                        precision=precision, starts=starts, max_steps=max_steps, seed=seed,
-                        init=init, bin_weight=bin_weight, parent_fit=parent_fit)
-    return bound(table, free, model=model, loss=loss, solver=solver, samples=samples,
-                 precision=precision, max_steps=max_steps, seed=seed, bin_weight=bin_weight)
+# -- the bounded step over a free fit -------------------------------------------------
 
 
 @runtime.in_float64
@@ -397,7 +383,6 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
     reports both). ``model``: the model instance, where ``free.model`` is not a
     registry name."""
     from brdffit import models
-    from brdffit.fitting import pipeline
     from brdffit.fitting.sphere import SphereReference
 
     t0 = time.perf_counter()
@@ -413,8 +398,8 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
                             _at_upper(model, free.params) + _binding(before), 1.0))
 
     bounded = PhysicalRanges(model)
-    dtype = pipeline.PRECISIONS[precision]
-    prep = pipeline._prepare(table, bin_weight, samples, seed, precision, loss)
+    dtype = problem.PRECISIONS[precision]
+    prep = problem.prepare(table, bin_weight, samples, seed, precision, loss)
     grid = albedo_grid(jnp.dtype(dtype).name)
 
     def coarse(p):
@@ -431,23 +416,23 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
     for weight in BARRIERS:  # each solve starts from the previous one's optimum
         mu = jnp.asarray(weight * max(start_loss, 1e-30), dtype)
         values, codes, steps, totals, _ = (np.asarray(a) for a in _solve_bounded(
-            bounded, pipeline._solver(solver, precision), jnp.asarray(u[None], dtype),
+            bounded, problem.solver_for(solver, precision), jnp.asarray(u[None], dtype),
             prep.data, grid, mu, max_steps))
         if not (np.all(np.isfinite(values[0])) and np.isfinite(totals[0])):
             break  # diverged: keep the last finite point (at worst the start)
         u, result = values[0].astype(np.float64), solvers.STATUS_NAMES[int(codes[0])]
         n_steps += int(steps[0])
-    params = _plain(pipeline.constrained(bounded, np.asarray(u)))
+    params = plain_params(problem.constrained(bounded, np.asarray(u)))
     params, scale, after = energy_clamp(model, params)
     if scale < 1.0:
         u = bounded.unconstrain(params)
-    metrics = pipeline.full_table_metrics(table, model, model.unconstrain(params),
+    metrics = problem.full_table_metrics(table, model, model.unconstrain(params),
                                           prep.weight, peak=prep.peak)
     metrics["sample_" + LOSS_METRIC[loss]] = float(np.sqrt(max(float(
         sum_squares(jnp.asarray(u, dtype), bounded, prep.data)), 0.0) / 3.0))
     if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
         result = "nonfinite"
-    metrics["psnr_db"] = pipeline._cached(
+    metrics["psnr_db"] = problem.cached(
         table, "sphere", lambda: SphereReference(table)).psnr(model, params)
     active = outside + [a for a in _at_upper(model, params) if a not in outside]
     active += _binding(after)

@@ -369,7 +369,7 @@ def _pair_weight(pairs: np.ndarray, spread: float) -> np.ndarray:
 def full_table_error(table, model, params: dict) -> dict[str, float]:
     """Error metrics (``brdffit.fitting.loss``) of ``params`` on every usable bin of ``table``,
     solid-angle weighted, whatever scene the fit used."""
-    from brdffit.fitting.pipeline import table_error
+    from brdffit.fitting.problem import table_error
 
     return table_error(table, model, params)
 

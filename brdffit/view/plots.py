@@ -431,6 +431,12 @@ def polar(
     """f_r in the plane of incidence, log radius, per incident angle: one half disc
     per channel (R, G, B) on one radial scale, so a colour misfit shows as curves
     that fit in one channel and miss in another."""
+    return _png(polar_figure(table, result, theta_i_deg=theta_i_deg))
+
+
+def polar_figure(table: MerlTable, result: FitResult | dict, *,
+                 theta_i_deg=(10.0, 30.0, 50.0, 70.0)) -> Figure:
+    """:func:`polar`'s figure."""
     result = _as_result(result)
     theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
     theta_i = np.radians(np.asarray(theta_i_deg, dtype=float))[:, None]
@@ -490,7 +496,7 @@ def polar(
              "towards\nthe light; > 0: forward", fontsize=9, va="bottom")
     fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel",
                  fontsize=12)
-    return _png(fig)
+    return fig
 
 
 def _discrete_colours(name: str, n: int):
