@@ -185,6 +185,7 @@ def client(url: str, requests: list[dict], barrier: threading.Barrier, out: list
 
 def run(args) -> dict:
     from api.estimate import estimate
+    from brdffit.request import FitRequest
 
     options = {"samples": None if args.samples == "all" else int(args.samples),
                "starts": args.starts, "max_steps": args.max_steps}
@@ -226,7 +227,7 @@ def run(args) -> dict:
             stop_server(proc)
 
     bins = max(t["summary"]["measured_bins"] for t in tables)
-    bound = estimate([args.model], options, bins)
+    bound = estimate(FitRequest.from_flat([args.model], options), bins)
     accepted = sum(s == 202 for s in statuses)
     by_status: dict[str, int] = {}
     for job in jobs:
