@@ -26,6 +26,7 @@ from brdffit.batch.report import format_ranking, plot_summary, rank, summary_fig
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
 from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
+from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
 
@@ -44,13 +45,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 @pytest.fixture(scope="module")
 def table_dir(tmp_path_factory):
-    from data_synth import make_table
-    from data_synth.synth import write_table
-
-    d = tmp_path_factory.mktemp("tables")
-    for name, (model, params) in TRUTHS.items():
-        table, truth = make_table(model, params, source=name)
-        write_table(str(d / f"{name}.binary"), table, truth)
+    d = write_tables(tmp_path_factory.mktemp("tables"), TRUTHS)
     good = (d / "a_ggx.binary").read_bytes()
     (d / "d_truncated.binary").write_bytes(good[: len(good) // 3])
     (d / "e_text.binary").write_text("# not a table\n0.1 0.2 0.3\n")

@@ -27,6 +27,7 @@ import pytest
 
 from brdffit.batch.store import read_results
 from tests.dask_fixtures import REPO, executing, scheduler_tasks, separate_cluster
+from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
 
@@ -42,14 +43,7 @@ TABLES = {
 
 @pytest.fixture(scope="module")
 def table_dir(tmp_path_factory):
-    from data_synth import make_table
-    from data_synth.synth import write_table
-
-    d = tmp_path_factory.mktemp("tables")
-    for name, (model, params) in TABLES.items():
-        table, truth = make_table(model, params, source=name)
-        write_table(str(d / f"{name}.binary"), table, truth)
-    return d
+    return write_tables(tmp_path_factory.mktemp("tables"), TABLES)
 
 
 @pytest.fixture(scope="module")
