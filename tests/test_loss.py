@@ -185,11 +185,11 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut
-    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
     from brdffit.fitting.options import FitOptions
     from brdffit.io import merl
+    from brdffit.selection import chosen_result as best_result
 
     table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35}, noise=0.02, seed=2)
     path = tmp_path / "t.binary"
@@ -368,11 +368,11 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut
-    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
     from brdffit.fitting.options import FitOptions
     from brdffit.io import merl
+    from brdffit.selection import chosen_result as best_result
 
     table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35}, noise=0.02, seed=2)
     path = tmp_path / "t.binary"

@@ -242,12 +242,12 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     from api import tasks
     from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut
-    from api.services.fits import result_of as best_result
     from brdffit.batch.job import run_batch
     from brdffit.batch.report import rank
     from brdffit.batch.store import read_fit, read_results
     from brdffit.request import FitRequest
     from brdffit.request import run as run_request
+    from brdffit.selection import chosen_result as best_result
     from brdffit.selection import select
 
     path = str(bright_table if physical else noisy_table)

@@ -239,9 +239,9 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
                                                                  monkeypatch):
     from api import tasks
     from api.routes.fits import FitOptions, FitRequest
-    from api.services.fits import result_of as best_result
     from brdffit.client import FitJob
     from brdffit.io import merl
+    from brdffit.selection import chosen_result as best_result
 
     assert FitRequest(table_id="0" * 64, model="auto").model == "auto"
     for bad in (["auto"], ["ggx", "auto"]):

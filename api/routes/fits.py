@@ -39,6 +39,7 @@ from brdffit.errors import FitInputError
 from brdffit.fitting import options
 from brdffit.fitting.result import SCHEMA, FitResult
 from brdffit.fitting.scene import Scene, SceneError
+from brdffit.selection import chosen_result
 from brdffit.view.plots import EXPOSURE_EV_RANGE, KINDS, exposure_refused
 
 log = logging.getLogger("brdffit.api")
@@ -212,7 +213,7 @@ def _out(job: JobRecord) -> JobOut:
         finished_at=_time(job.finished_at),
         progress=(Progress(stage=job.stage, fraction=job.fraction or 0.0)
                   if job.status == "running" and job.stage else None),
-        result=fits.result_of(job.results) if job.results else None, results=job.results,
+        result=chosen_result(job.results) if job.results else None, results=job.results,
     )
 
 
@@ -234,7 +235,7 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
                             f"fit job {job_id} is {job.status}{why}; {what} exist once it is done")
     fitted = ", ".join(r["model"] for r in job.results)
     if model is None or (model == options.AUTO and options.AUTO in job.models):
-        return job, fits.result_of(job.results)  # an auto job's: the chosen fit
+        return job, chosen_result(job.results)  # an auto job's: the chosen fit
     result = next((r for r in job.results if r["model"] == model), None)
     if result is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"fit job {job_id} has no {model!r} fit; "

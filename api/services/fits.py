@@ -1,10 +1,10 @@
-"""Fit jobs: what a request means and costs, its creation, and which fit is its result.
+"""Fit jobs: what a request means and costs, and its creation.
 
 The meaning is the library's (``brdffit.request.FitRequest``): a request the
 library would refuse is refused here, before anything is queued, with the
 library's own words. The cost policy (``api.estimate`` against the server's
-limits) and the one rule for a job's result (``brdffit.selection``) live here
-too, so that every handler and the page say the same.
+limits) lives here too, so that every handler and the page say the same. A job's
+result among its fits is the library's one rule (``brdffit.selection.chosen_result``).
 """
 
 from __future__ import annotations
@@ -13,7 +13,6 @@ from api.estimate import Estimate, estimate
 from api.settings import Settings
 from api.store import JobRecord, Store
 from brdffit.request import FitRequest
-from brdffit.selection import chosen_result
 
 
 class TableNotFound(LookupError):
@@ -53,9 +52,3 @@ def create(store: Store, settings: Settings, table_id: str, models: str | list[s
         # Refused before anything is queued or allocated: say by how much, and why.
         raise OverLimits(why)
     return store.create_job(table_id, list(request.models), options)
-
-
-def result_of(results: list[dict]) -> dict:
-    """A done job's result among its fits: for ``auto`` the chosen one, else the best
-    (``brdffit.selection.chosen_result``: the library's one rule)."""
-    return chosen_result(results)
