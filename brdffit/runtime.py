@@ -10,7 +10,7 @@
 - **One cache directory**, created on first use, never on import:
   ``$BRDFFIT_CACHE_DIR`` or ``$XDG_CACHE_HOME/brdffit`` (``~/.cache/brdffit``); an
   empty ``BRDFFIT_CACHE_DIR`` switches caching off. It holds the MERL bin grid
-  (``merl-grid-v1.npz``, ~140 MB, ~20x faster than recomputing it in a new
+  (``merl-grid-v2.npz``, ~140 MB, ~20x faster than recomputing it in a new
   process), under ``executables/`` the compiled fits themselves
   (``brdffit.executables``: a second process runs them without tracing), and under
   ``jax/`` JAX's persistent compilation cache, for everything else. The compilation cache is only

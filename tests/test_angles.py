@@ -108,3 +108,25 @@ def test_grid_cache_round_trip(tmp_path, monkeypatch):
         np.testing.assert_array_equal(again.weight, first.weight)
     finally:
         grid.bin_grid.cache_clear()
+
+
+def test_the_separable_grid_equals_the_flat_conversion():
+    """brdffit.io.grid computes the directions axis by axis; they are what
+    half_diff_to_dirs gives for every bin centre, and the weights follow the
+    documented measure (cos td sin th sin td, dtheta_h = pi u / 90)."""
+    from brdffit.io import grid
+
+    g = grid._compute_grid()
+    i_th, i_td, i_pd = np.meshgrid(*(np.arange(n) for n in angles.SHAPE), indexing="ij")
+    theta_h, theta_d, phi_d = (a.ravel() for a in angles.bin_centres(i_th, i_td, i_pd))
+    np.testing.assert_array_equal(g.theta_h, theta_h)
+    np.testing.assert_array_equal(g.theta_d, theta_d)
+    np.testing.assert_array_equal(g.phi_d, phi_d)
+    wi, wo = angles.half_diff_to_dirs(theta_h, theta_d, phi_d)
+    np.testing.assert_allclose(g.wi, wi, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(g.wo, wo, rtol=0, atol=1e-15)
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    np.testing.assert_array_equal(g.above_horizon, above)
+    u = (i_th.ravel() + 0.5) / angles.N_THETA_H
+    w = np.where(above, np.cos(theta_d) * np.sin(theta_h) * np.sin(theta_d) * u, 0.0)
+    np.testing.assert_allclose(g.weight, w / w.sum(), rtol=1e-12, atol=0)

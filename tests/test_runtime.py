@@ -60,7 +60,7 @@ def test_fit_leaves_x64_off_and_writes_the_cache_on_first_use(tmp_path):
     assert out["x64_before"] is False
     assert out["x64_after_import"] is False and out["x64_after_fit"] is False
     assert out["cache_after_import"] is False, "import must write nothing"
-    assert "jax" in out["cache_files"] and "merl-grid-v1.npz" in out["cache_files"]
+    assert "jax" in out["cache_files"] and "merl-grid-v2.npz" in out["cache_files"]
     assert out["jax_cache_dir"] == str(cache / "jax")
     # the fit ran in float64 although the caller's JAX is float32: a near-mirror
     # alpha comes back to many digits
@@ -72,5 +72,5 @@ def test_cache_off_and_xdg_location(tmp_path):
     assert off["jax_cache_dir"] is None and off["converged"]
     assert not (tmp_path / "home").exists()
     xdg = _probe(_env(XDG_CACHE_HOME=str(tmp_path / "xdg")))
-    assert (tmp_path / "xdg" / "brdffit" / "merl-grid-v1.npz").exists()
+    assert (tmp_path / "xdg" / "brdffit" / "merl-grid-v2.npz").exists()
     assert xdg["jax_cache_dir"] == str(tmp_path / "xdg" / "brdffit" / "jax")
