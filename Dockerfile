@@ -16,6 +16,11 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     # The one port setting: `brdffit serve` listens on it and the health check
     # (python -m api.healthcheck) asks it, so `-e BRDFFIT_PORT=9000` moves both.
     BRDFFIT_PORT=8000 \
+    # At start, `brdffit serve` compiles the default fits into the cache in a
+    # low-priority background process (`brdffit warmup`), so that a new volume's
+    # first users load them; on a filled cache it only loads them. -e BRDFFIT_WARMUP=
+    # switches it off, -e BRDFFIT_WARMUP=ggx,lambert picks models.
+    BRDFFIT_WARMUP=default \
     # matplotlib wants a writable config dir; the image's home is not one.
     MPLCONFIGDIR=/tmp/matplotlib
 

@@ -22,6 +22,13 @@ def add_arguments(p) -> None:
     p.add_argument("--workers", type=int, help="fit worker processes (env BRDFFIT_WORKERS)")
     p.add_argument("--log-level", default="info",
                    choices=["critical", "error", "warning", "info", "debug"])
+    # The container sets BRDFFIT_WARMUP=default: a new volume's first users then find
+    # the default fits compiled instead of waiting for their compilation.
+    p.add_argument("--warmup", default=os.environ.get("BRDFFIT_WARMUP", ""),
+                   metavar="MODELS",
+                   help="at start, compile these models' fits in a low-priority background "
+                        "process (`brdffit warmup --models MODELS`; 'default' for its "
+                        "default models and auto; env BRDFFIT_WARMUP; default: none)")
 
 
 def run(args) -> int:
@@ -38,6 +45,49 @@ def run(args) -> int:
     settings = Settings(**overrides)  # a bad value raises ValueError: a one-line CLI error
     # The service's own messages (recovered jobs, worker crashes) beside uvicorn's.
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s:     %(message)s")
-    # One server process: the job queue lives in it (the workers are its children).
-    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
+    warmup = _start_warmup(args.warmup)  # an unknown model: a one-line CLI error
+    try:
+        # One server process: the job queue lives in it (the workers are its children).
+        uvicorn.run(create_app(settings), host=args.host, port=args.port,
+                    log_level=args.log_level)
+    finally:
+        if warmup is not None and warmup.poll() is None:
+            warmup.terminate()  # a half-filled cache is fine: what is written is whole
+            warmup.wait()
     return 0
+
+
+def _start_warmup(models: str):
+    """``brdffit warmup`` beside the server, at the lowest CPU priority, so that it
+    takes only what the server and its workers leave; its lines go to the server's
+    log. The server answers at once: a job that comes first compiles what it needs
+    itself, as without a warm-up."""
+    import subprocess
+    import sys
+
+    models = models.strip()
+    if models.lower() in ("", "0", "off", "none", "false"):
+        return None
+    from brdffit.models import catalogue
+
+    argv = [sys.executable, "-m", "brdffit.cli", "warmup"]
+    if models.lower() not in ("1", "default", "on", "true"):
+        for name in models.split(","):  # an unknown name stops the server, not the warm-up
+            catalogue.check_name(name.strip(), allow_auto=True)
+        argv += ["--models", models]
+    return subprocess.Popen(argv, preexec_fn=_lowest_priority_and_die_with_parent)
+
+
+def _lowest_priority_and_die_with_parent() -> None:
+    """In the warm-up's process, before it runs: nice 19, and SIGTERM when the server
+    ends. uvicorn re-raises the SIGTERM that stopped it, so the server's own cleanup
+    (``run``'s ``finally``) does not always run; the kernel's parent-death signal
+    (Linux's prctl PR_SET_PDEATHSIG) stops the warm-up even then, and after a SIGKILL."""
+    os.nice(19)
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: the finally in run() is what stops it
