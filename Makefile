@@ -26,12 +26,15 @@ demo: $(STAMP)
 	$(BIN)/brdffit warmup
 
 # the slowest tests are listed at the end: what to look at when the suite slows down
+# pytest-xdist: one worker per core, at most 4 (each holds JAX and starts servers);
+# tests that share a module's fixture stay on one worker (tests/conftest.py)
+TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest -q --durations=15
+	$(BIN)/python -m pytest -q --durations=15 -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
 
 # unit and contract tests only (no subprocess, server or cluster): a few minutes
 test-quick: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not system" --durations=15
+	$(BIN)/python -m pytest -q -m "not system" --durations=15 -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

@@ -33,6 +33,34 @@ def pytest_collection_modifyitems(config, items):
                 if next((m for m in i.iter_markers() if m.name in LAYERS), None) is None]
     if unmarked:
         raise pytest.UsageError(f"tests without a layer mark {LAYERS}: {unmarked[:5]}")
+    _spread_over_workers(items)
+
+
+def _uses_a_module_fixture(item) -> bool:
+    info = getattr(item, "_fixtureinfo", None)
+    return info is not None and any(
+        getattr(d, "scope", None) in ("module", "package")
+        for name in info.names_closure for d in info.name2fixturedefs.get(name, ()))
+
+
+def _layer(item) -> str:
+    return next(m.name for m in item.iter_markers() if m.name in LAYERS)
+
+
+def _spread_over_workers(items) -> None:
+    """How ``make test`` (pytest-xdist, ``--dist loadgroup``) shares the tests out.
+
+    A test that uses a module-scoped fixture (a server, a cluster, a fitted table)
+    runs on the worker that holds its file's other such tests, so that the fixture
+    starts once; every other test goes to whichever worker is free. The ``system``
+    tests (processes, servers, real materials: most of the run's time) are handed out
+    first, so that the last minutes are not one worker finishing a long file alone.
+    Without xdist the marks are inert and the order is the only change.
+    """
+    for item in items:
+        if _uses_a_module_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+    items.sort(key=lambda i: _layer(i) != "system")  # stable: files keep their order
 
 
 @pytest.fixture(autouse=True)

@@ -34,7 +34,7 @@ pytestmark = pytest.mark.system
 #: lambert is fitted in a second; ggx2 with these options takes far longer, so the
 #: batch is interrupted with fits in flight
 MODELS = "lambert,ggx2"
-HEAVY = ["--samples", "131072", "--starts", "4"]
+HEAVY = ["--samples", "65536", "--starts", "2"]
 TABLES = {
     "a_ggx": ("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.2, "f0": 0.6}),
     "b_ggx": ("ggx", {"kd": [0.1, 0.15, 0.2], "ks": [0.6, 0.6, 0.5], "alpha": 0.1, "f0": 0.8}),
