@@ -189,6 +189,27 @@ def test_one_compiled_fit_serves_every_selectable_loss_and_sample_count(synth_ta
     assert [e.name for e in executables.events[before:]] == []
 
 
+def test_start_counts_share_the_compiled_solve_of_their_bucket(synth_tables, monkeypatch):
+    """3 starts run the solve compiled for 4 (``problem.start_bucket``), the extra slot
+    taking no step, and give what an unpadded batch of 3 gives; 4 starts then compile
+    nothing."""
+    from brdffit import executables
+    from brdffit.fitting import pipeline, problem
+
+    assert [problem.start_bucket(n) for n in (1, 2, 3, 4, 5, 9)] == [1, 2, 4, 4, 8, 16]
+    table = synth_tables["ggx"]
+    padded = fit(table, "ggx", starts=3, samples=2048)
+    assert padded.starts == 3  # the padding is not reported as a start
+    before = len(executables.events)
+    fit(table, "ggx", starts=4, samples=2048)
+    assert [e.name for e in executables.events[before:]] == []
+    monkeypatch.setattr(pipeline, "start_bucket", lambda n: n)  # no padding
+    exact = fit(table, "ggx", starts=3, samples=2048)
+    assert (exact.result, exact.steps) == (padded.result, padded.steps)
+    for name, value in exact.params.items():
+        np.testing.assert_allclose(padded.params[name], value, rtol=1e-9, atol=0)
+
+
 def test_max_steps_is_data_for_the_lm_solve(synth_tables):
     """Every ``max_steps`` runs the same compiled solve; running out of them is
     reported as it was when the limit was static."""

@@ -20,7 +20,6 @@ bounded step over this free fit (``brdffit.fitting.physical``).
 
 from __future__ import annotations
 
-import functools
 import time
 
 import jax.numpy as jnp
@@ -50,6 +49,7 @@ from brdffit.fitting.problem import (
     report_pool,
     score_starts,
     solve_batch,
+    start_bucket,
 )
 from brdffit.fitting.quality import quality
 from brdffit.fitting.result import STATUS_NAMES, FitResult
@@ -194,11 +194,21 @@ def fit(
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
 
-    solve = functools.partial(solve_batch, m, solver, data=data,
-                              max_steps=jnp.asarray(max_steps) if solver == "lm"
-                              and max_steps <= STEP_CAP else max_steps)
-    values, codes, steps, losses = (np.asarray(a) for a in solve(
-        u_batch=jnp.asarray(best_starts, dtype)))
+    steps_as_data = solver == "lm" and max_steps <= STEP_CAP
+
+    def solve(u_batch: np.ndarray) -> list[np.ndarray]:
+        """values, codes, steps, losses of a solve from each start of ``u_batch``."""
+        if not steps_as_data:
+            return [np.asarray(a) for a in solve_batch(
+                m, solver, jnp.asarray(u_batch, dtype), data, max_steps)]
+        # one compiled solve per start_bucket: the padding takes no step
+        k = len(u_batch)
+        padded = np.concatenate([u_batch, np.repeat(u_batch[:1], start_bucket(k) - k, 0)])
+        return [np.asarray(a)[:k] for a in solve_batch(
+            m, solver, jnp.asarray(padded, dtype), data, jnp.asarray(max_steps),
+            n_live=jnp.asarray(k))]
+
+    values, codes, steps, losses = solve(best_starts)
     if parent_start is not None:
         # A model that contains its parent starts from the parent's optimum too, but
         # only where its own starts did not do: they ended without converging, or
@@ -218,7 +228,7 @@ def fit(
 
         def solve_also(u) -> None:
             nonlocal values, codes, steps, losses, best_starts
-            extra = [np.asarray(a) for a in solve(u_batch=jnp.asarray(u[None], dtype))]
+            extra = solve(u[None])
             values, codes, steps, losses = (np.concatenate([a, b]) for a, b in
                                             zip((values, codes, steps, losses), extra))
             best_starts = np.concatenate([best_starts, u[None]])

@@ -137,8 +137,19 @@ def _bound_side(u, args):
     return model.bound_side(u)
 
 
+def start_bucket(n: int) -> int:
+    """How many starts a compiled solve holds for ``n`` starts: the next power of two.
+    With the step limit as data (the lm solver), the slots past ``n`` stop at their
+    first step, so 3 starts cost 3 solves (and one evaluation), and one compiled
+    solve serves 3 and 4."""
+    return 1 << max(n - 1, 0).bit_length()
+
+
 @executables.jit
-def solve_batch(model, solver_name: str, u_batch, data, max_steps):
+def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
+    """Solve from each start of ``u_batch``; with ``max_steps`` an array (the lm
+    solver), only the first ``n_live`` (data) take steps: the rest pad the batch to
+    :func:`start_bucket` and stop where they start."""
     import optimistix as optx
 
     from brdffit.fitting import solver as solvers
@@ -148,18 +159,21 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps):
     floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
     options = {"normal_equations": normal_equations, "bound_side": _bound_side,
                "loss_floor": floor}
+    limits = None
     if isinstance(solver, solvers.NormalLevenbergMarquardt) and isinstance(max_steps, jax.Array):
-        # the step limit is data (fit passes an array): one solve for every max_steps
-        options["step_limit"] = max_steps
+        # the step limit is data (fit passes an array): one solve for every max_steps,
+        # and every start count up to the batch's length
+        live = jnp.arange(u_batch.shape[0]) < (u_batch.shape[0] if n_live is None else n_live)
+        limits = jnp.where(live, max_steps, 0)
         max_steps = STEP_CAP
 
-    def one(u0):
+    def one(u0, limit):
         sol = optx.least_squares(
             residuals,
             solver,
             u0,
             args=(model, data),
-            options=options,
+            options=options if limit is None else {**options, "step_limit": limit},
             max_steps=max_steps,
             throw=False,
         )
@@ -178,7 +192,9 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps):
         # Return values, not the Solution: its state holds a jaxpr.
         return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
 
-    return jax.lax.map(one, u_batch)
+    if limits is None:
+        return jax.lax.map(lambda u0: one(u0, None), u_batch)
+    return jax.lax.map(lambda a: one(*a), (u_batch, limits))
 
 
 # -- data preparation --------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The MERL bin grid: each bin's centre directions and solid-angle weight.
 
-Computed once per cache directory (about 0.2 s), then read from it and shared by fitting, plotting and the
-synthetic tables.
+Computed once per cache directory (about 0.2 s), then read from it; shared by
+fitting, plotting and the synthetic tables.
 
 Why these weights: the measure of direction pairs in half/difference angles is
 dw_i dw_o = 4 cos(theta_d) sin(theta_h) sin(theta_d) dtheta_h dphi_h dtheta_d dphi_d
