@@ -39,6 +39,7 @@ def run(args) -> int:
 
     from api.main import create_app
     from api.settings import Settings
+    from brdffit.cli import children
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
                  if v is not None}
@@ -51,9 +52,7 @@ def run(args) -> int:
         uvicorn.run(create_app(settings), host=args.host, port=args.port,
                     log_level=args.log_level)
     finally:
-        if warmup is not None and warmup.poll() is None:
-            warmup.terminate()  # a half-filled cache is fine: what is written is whole
-            warmup.wait()
+        children.stop(warmup)  # a half-filled cache is fine: what is written is whole
     return 0
 
 
@@ -62,32 +61,15 @@ def _start_warmup(models: str):
     takes only what the server and its workers leave; its lines go to the server's
     log. The server answers at once: a job that comes first compiles what it needs
     itself, as without a warm-up."""
-    import subprocess
-    import sys
+    from brdffit.cli import children
+    from brdffit.models import catalogue
 
     models = models.strip()
     if models.lower() in ("", "0", "off", "none", "false"):
         return None
-    from brdffit.models import catalogue
-
-    argv = [sys.executable, "-m", "brdffit.cli", "warmup"]
+    argv = ["warmup"]
     if models.lower() not in ("1", "default", "on", "true"):
         for name in models.split(","):  # an unknown name stops the server, not the warm-up
             catalogue.check_name(name.strip(), allow_auto=True)
         argv += ["--models", models]
-    return subprocess.Popen(argv, preexec_fn=_lowest_priority_and_die_with_parent)
-
-
-def _lowest_priority_and_die_with_parent() -> None:
-    """In the warm-up's process, before it runs: nice 19, and SIGTERM when the server
-    ends. uvicorn re-raises the SIGTERM that stopped it, so the server's own cleanup
-    (``run``'s ``finally``) does not always run; the kernel's parent-death signal
-    (Linux's prctl PR_SET_PDEATHSIG) stops the warm-up even then, and after a SIGKILL."""
-    os.nice(19)
-    try:
-        import ctypes
-        import signal
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1: PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: the finally in run() is what stops it
+    return children.start(argv, nice=19)
