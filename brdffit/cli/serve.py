@@ -39,7 +39,7 @@ def run(args) -> int:
 
     from api.main import create_app
     from api.settings import Settings
-    from brdffit.cli import children
+    from brdffit import child_process as children
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
                  if v is not None}
@@ -61,7 +61,7 @@ def _start_warmup(models: str):
     takes only what the server and its workers leave; its lines go to the server's
     log. The server answers at once: a job that comes first compiles what it needs
     itself, as without a warm-up."""
-    from brdffit.cli import children
+    from brdffit import child_process as children
     from brdffit.models import catalogue
 
     models = models.strip()

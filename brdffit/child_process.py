@@ -1,5 +1,5 @@
-"""Processes a command starts beside itself (the server's warm-up, the warm-up's
-per-core helpers): they must not outlive it.
+"""Processes a command starts beside itself (``brdffit serve``'s warm-up): they
+must not outlive it.
 
 uvicorn re-raises the SIGTERM that stopped it, so a ``finally`` in the parent does
 not always run, and nothing runs after a SIGKILL. Linux's parent-death signal
