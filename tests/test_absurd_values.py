@@ -161,6 +161,12 @@ def test_odd_but_physical_tables_fit_honestly(case, model):
         # subsample saw.
         if model == "lambert":
             assert r.error["log_rmse"] > 1e-5 and r.error["rel_peak_error"] > 0.5
+        # The subsample misses the hot bin: it holds zeros, which a reflectance
+        # near 0 fits exactly. That is an optimum (solver.ZERO_SCALE), reached in
+        # few steps; it used to take every allowed step and end not converged.
+        if case == "one hot bin in zeros":
+            assert max(np.ravel(r.params["kd"])) < 1e-20
+            assert r.converged and r.steps < 100, (r.result, r.steps)
     else:  # 1000 dark bins among 1.1M: still the table's own parameters
         assert r.converged
         if model == "ggx":

@@ -236,7 +236,7 @@ def _bound_side(u, args):
 
 @eqx.filter_jit
 def _solve_bounded(model, solver, u_batch, data, grid, mu, max_steps):
-    floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
+    floor = solvers.loss_floor(data.target, data.weight)
     options = {"normal_equations": _normal_equations, "bound_side": _bound_side,
                "loss_floor": floor}
     args = (model, data, grid, mu)

@@ -156,7 +156,7 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
 
     solver = solver_for(solver_name, jnp.dtype(data.target.dtype).name)
     # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
-    floor = solvers.exact_fit_floor(data.target.dtype) * jnp.sum(data.weight * data.target**2)
+    floor = solvers.loss_floor(data.target, data.weight)
     options = {"normal_equations": normal_equations, "bound_side": _bound_side,
                "loss_floor": floor}
     limits = None
