@@ -146,7 +146,9 @@ class FitOptions:
         doc="floating point precision of the solve")
     starts: int = _option(
         DEFAULT_STARTS, kind=int, least=1, most=32,
-        doc="best-scoring start candidates refined side by side; the best result is kept")
+        doc="best-scoring start candidates refined, one after another; the best result is "
+            "kept (a count runs the solve compiled for the next power of two: 3 and 4 "
+            "share one)")
     max_steps: int = _option(
         DEFAULT_MAX_STEPS, kind=int, least=1, most=10_000,
         doc="solver step limit per start; running out is reported, not raised")
