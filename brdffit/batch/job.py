@@ -26,6 +26,7 @@ import contextlib
 import glob
 import hashlib
 import os
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -51,6 +52,13 @@ __all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "FitOptions", "find_
            "run_batch"]
 
 TABLE_SUFFIX = ".binary"
+
+
+#: Set by the shell's SIGINT/SIGTERM handler (``brdffit batch``) with the
+#: KeyboardInterrupt it raises: the batch stops at its next result even where that
+#: exception was lost. Python prints and ignores one raised inside a weakref callback
+#: or a ``__del__``, and the batch then ran to its end and exited 0 after a Ctrl-C.
+stop_requested = threading.Event()
 
 
 class BatchInputError(BrdffitError, ValueError):
@@ -376,6 +384,8 @@ def run_batch(
         def take(results: Iterator[dict]) -> None:
             nonlocal next_checkpoint
             for r in results:
+                if stop_requested.is_set():
+                    raise KeyboardInterrupt  # the signal's own exception was lost
                 table = TableReadRecord(**r["table"])
                 fits = [FitRecord(**f) for f in r["fits"]]
                 store.add(table, fits)

@@ -7,7 +7,7 @@ import signal
 import sys
 import threading
 
-from brdffit.batch.job import run_batch
+from brdffit.batch.job import run_batch, stop_requested
 from brdffit.batch.progress import format_duration
 from brdffit.cli import EXIT_INTERRUPTED
 from brdffit.cli.fit import add_fit_options, options_from_args
@@ -66,17 +66,31 @@ def summary_line(s) -> str:
             f"{format_duration(s.elapsed_s)}; {done}")
 
 
-def _terminate(signum, frame):
+def _interrupt(signum, frame):
     # SIGTERM (kill, a scheduler's job stop) ends a batch as Ctrl-C does: its work on
     # the cluster is cancelled and what finished is checkpointed, rather than the
-    # process vanishing with its tasks left running.
+    # process vanishing with its tasks left running. The flag stops the batch at its
+    # next result should this exception be lost (raised inside a weakref callback).
+    stop_requested.set()
     raise KeyboardInterrupt
+
+
+def _quiet_lost_interrupt(unraisable) -> None:
+    # A KeyboardInterrupt raised where Python cannot raise it (a weakref callback, a
+    # __del__) is printed as "Exception ignored in ..." and dropped; the batch stops
+    # at its next result anyway (stop_requested), so the user sees one line.
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and stop_requested.is_set():
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def run(args) -> int:
     options = options_from_args(args)
     main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    stop_requested.clear()
+    previous = ({sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+                if main_thread else None)
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _quiet_lost_interrupt
     try:
         s = run_batch(args.inputs, args.models, args.out, options=options,
                       workers=args.workers, scheduler=args.scheduler, refit=args.refit,
@@ -88,8 +102,10 @@ def run(args) -> int:
               "command again to go on", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
-        if main_thread:  # an in-process caller (a test) keeps its own handler
-            signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = previous_hook
+        if main_thread:  # an in-process caller (a test) keeps its own handlers
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
     if s.recovered:
         print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
     print(summary_line(s))
