@@ -406,7 +406,8 @@ def test_a_second_writer_is_refused(tmp_path):
             BatchStore(out).open()
 
 
-def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
+def _two_lambert_tables(tmp_path):
+    """A folder of two small Lambert tables, m0 and m1, and fast options."""
     from brdffit.io import merl
     from data_synth import make_table
 
@@ -414,8 +415,15 @@ def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     d.mkdir()
     for i, kd in enumerate(([0.5, 0.3, 0.2], [0.2, 0.3, 0.4])):
         merl.write(d / f"m{i}.binary", make_table("lambert", {"kd": kd})[0])
+    return d, FitOptions(samples=1024, starts=1)
+
+
+def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    d, opts = _two_lambert_tables(tmp_path)
     out = tmp_path / "r.h5"
-    opts = FitOptions(samples=1024, starts=1)
     first = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
     assert first.ok and first.fits == 2
     merl.write(d / "m1.binary", make_table("lambert", {"kd": [0.1, 0.1, 0.1]})[0])
@@ -441,8 +449,6 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
     dropped exception is not printed."""
     from brdffit.batch import job
     from brdffit.cli import batch as batch_cli
-    from brdffit.io import merl
-    from data_synth import make_table
 
     class RaisesWhenCollected:
         def __del__(self):
@@ -456,12 +462,8 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
             sys.unraisablehook = hook
         return capsys.readouterr().err
 
-    d = tmp_path / "t"
-    d.mkdir()
-    for i, kd in enumerate(([0.5, 0.3, 0.2], [0.2, 0.3, 0.4])):
-        merl.write(d / f"m{i}.binary", make_table("lambert", {"kd": kd})[0])
+    d, opts = _two_lambert_tables(tmp_path)
     out = tmp_path / "r.h5"
-    opts = FitOptions(samples=1024, starts=1)
     job.stop_requested.set()
     try:
         with pytest.raises(KeyboardInterrupt):
