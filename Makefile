@@ -29,12 +29,13 @@ demo: $(STAMP)
 # pytest-xdist: one worker per core, at most 4 (each holds JAX and starts servers);
 # tests that share a module's fixture stay on one worker (tests/conftest.py)
 TEST_WORKERS ?= auto
+XDIST := -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
 test: $(STAMP)
-	$(BIN)/python -m pytest -q --durations=15 -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
+	$(BIN)/python -m pytest -q --durations=15 $(XDIST)
 
 # unit and contract tests only (no subprocess, server or cluster): a few minutes
 test-quick: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not system" --durations=15 -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
+	$(BIN)/python -m pytest -q -m "not system" --durations=15 $(XDIST)
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

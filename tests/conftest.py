@@ -29,8 +29,7 @@ LAYERS = ("unit", "contract", "system")
 
 
 def pytest_collection_modifyitems(config, items):
-    unmarked = [i.nodeid for i in items
-                if next((m for m in i.iter_markers() if m.name in LAYERS), None) is None]
+    unmarked = [i.nodeid for i in items if _layer(i) is None]
     if unmarked:
         raise pytest.UsageError(f"tests without a layer mark {LAYERS}: {unmarked[:5]}")
     _spread_over_workers(items)
@@ -43,8 +42,8 @@ def _uses_a_module_fixture(item) -> bool:
         for name in info.names_closure for d in info.name2fixturedefs.get(name, ()))
 
 
-def _layer(item) -> str:
-    return next(m.name for m in item.iter_markers() if m.name in LAYERS)
+def _layer(item) -> str | None:
+    return next((m.name for m in item.iter_markers() if m.name in LAYERS), None)
 
 
 def _spread_over_workers(items) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 
-from brdffit import extras
+from brdffit import child_process, extras
 
 
 def add_arguments(p) -> None:
@@ -39,7 +39,6 @@ def run(args) -> int:
 
     from api.main import create_app
     from api.settings import Settings
-    from brdffit import child_process as children
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
                  if v is not None}
@@ -52,7 +51,7 @@ def run(args) -> int:
         uvicorn.run(create_app(settings), host=args.host, port=args.port,
                     log_level=args.log_level)
     finally:
-        children.stop(warmup)  # a half-filled cache is fine: what is written is whole
+        child_process.stop(warmup)  # a half-filled cache is fine: what is written is whole
     return 0
 
 
@@ -61,7 +60,6 @@ def _start_warmup(models: str):
     takes only what the server and its workers leave; its lines go to the server's
     log. The server answers at once: a job that comes first compiles what it needs
     itself, as without a warm-up."""
-    from brdffit import child_process as children
     from brdffit.models import catalogue
 
     models = models.strip()
@@ -72,4 +70,4 @@ def _start_warmup(models: str):
         for name in models.split(","):  # an unknown name stops the server, not the warm-up
             catalogue.check_name(name.strip(), allow_auto=True)
         argv += ["--models", models]
-    return children.start(argv, nice=19)
+    return child_process.start(argv, nice=19)

@@ -139,8 +139,8 @@ def _bound_side(u, args):
 
 def start_bucket(n: int) -> int:
     """How many starts a compiled solve holds for ``n`` starts: the next power of two.
-    With the step limit as data (the lm solver), the slots past ``n`` stop at their
-    first step, so 3 starts cost 3 solves (and one evaluation), and one compiled
+    With the step limit as data (the lm solver), the slots past ``n`` take no step
+    (a limit of 0), so 3 starts cost 3 solves (and one evaluation), and one compiled
     solve serves 3 and 4."""
     return 1 << max(n - 1, 0).bit_length()
 
