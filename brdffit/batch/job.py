@@ -384,8 +384,6 @@ def run_batch(
         def take(results: Iterator[dict]) -> None:
             nonlocal next_checkpoint
             for r in results:
-                if stop_requested.is_set():
-                    raise KeyboardInterrupt  # the signal's own exception was lost
                 table = TableReadRecord(**r["table"])
                 fits = [FitRecord(**f) for f in r["fits"]]
                 store.add(table, fits)
@@ -410,6 +408,9 @@ def run_batch(
                     # them so that they take at most ~10 % of the batch.
                     took = time.monotonic() - started
                     next_checkpoint = time.monotonic() + max(checkpoint_s, 10 * took)
+                # after the result is stored: a finished fit is never dropped
+                if stop_requested.is_set():
+                    raise KeyboardInterrupt  # the signal's own exception was lost
 
         try:
             if tasks and workers == 0 and not scheduler:
