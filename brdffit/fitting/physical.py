@@ -243,7 +243,7 @@ def _solve_bounded(model, solver, u_batch, data, grid, mu, max_steps):
 
     def one(u0):
         sol = optx.least_squares(_residuals, solver, u0, args=args, options=options,
-                                 max_steps=max_steps, throw=False)
+                                 max_steps=solvers.loop_steps(solver, max_steps), throw=False)
         loss, jtj, jtr = _normal_equations(sol.value, args)
         optimal = solvers.is_optimal(loss, jtj, jtr, model.bound_side(sol.value),
                                      solvers.gtol_for(loss.dtype), floor)

@@ -174,7 +174,7 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
             u0,
             args=(model, data),
             options=options if limit is None else {**options, "step_limit": limit},
-            max_steps=max_steps,
+            max_steps=solvers.loop_steps(solver, max_steps),
             throw=False,
         )
         # Whatever the solver and however it stopped, "successful" means the
