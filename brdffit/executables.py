@@ -50,7 +50,47 @@ KEEP_DAYS = 7
 _KEYED_MODULES = ("brdffit.", "optimistix.", "lineax.", "equinox.", "jax.", "builtins",
                   "collections", "numpy")
 _FORMAT = 1  # of the files written here
-_lock = threading.Lock()  # one program made ready at a time (see call())
+
+
+class _SharedLock:
+    """Many holders of the shared side (compiling), or one of the exclusive side
+    (loading from disk): see ``call`` in :func:`jit`."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._shared = 0
+        self._exclusive = False
+
+    @contextlib.contextmanager
+    def shared(self):
+        with self._cond:
+            self._cond.wait_for(lambda: not self._exclusive)
+            self._shared += 1
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._shared -= 1
+                self._cond.notify_all()
+
+    @contextlib.contextmanager
+    def exclusive(self):
+        with self._cond:
+            self._cond.wait_for(lambda: not self._exclusive and not self._shared)
+            self._exclusive = True
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._exclusive = False
+                self._cond.notify_all()
+
+
+_ready = _SharedLock()
+#: One lock per program (function and argument key): a second caller waits for the
+#: first one's compile instead of repeating it.
+_key_locks: dict = {}
+_key_locks_lock = threading.Lock()
 
 
 class Event(NamedTuple):
@@ -286,24 +326,31 @@ def jit(fn: Callable) -> Callable:
         except TypeError:  # an unhashable static argument: no caching of ours
             return plain(*args, **kwargs)
         if entry is None:
-            # One lock for every program, held while one is loaded or compiled and
-            # first run. A lock per program let threads (auto's candidates, a fit's
-            # report made ready ahead) load and run different deserialised
-            # executables at the same time, and a test run crashed in one's first
-            # run (a segmentation fault in block_until_ready); the cold-auto gain it
-            # bought was within noise (bench/results/startup.md).
-            with _lock:
+            # Programs compile side by side (auto's candidates, a fit's report made
+            # ready while its solve compiles: XLA compiles outside the GIL), but a
+            # program read from disk is loaded and first run alone: when threads
+            # loaded and ran deserialised executables while others compiled or
+            # loaded, one crashed in its first run (a segmentation fault in
+            # block_until_ready, once in a test run).
+            with _key_locks_lock:
+                key_lock = _key_locks.setdefault((name, key), threading.Lock())
+            with key_lock:  # one thread makes a program ready; the others wait for it
                 entry = entries.get(key)
                 if entry is None:
                     path = disk_path(leaves, treedef)
-                    found = loaded_and_run(path, arrays) if path is not None else None
-                    if found is not None:  # already run once, to check it
-                        entries[key], out = found
-                        return jax.tree_util.tree_unflatten(found[0].out_def, out)
-                    entry = entries[key] = compile_entry(leaves, treedef, dynamic,
-                                                         path is not None)
+                    if path is not None and path.exists():
+                        with _ready.exclusive():
+                            found = loaded_and_run(path, arrays)
+                        if found is not None:  # already run once, to check it
+                            entries[key], out = found
+                            return jax.tree_util.tree_unflatten(found[0].out_def, out)
+                    with _ready.shared():
+                        entry = compile_entry(leaves, treedef, dynamic, path is not None)
+                        out = jax.block_until_ready(entry.call(*arrays))
                     if path is not None:
                         store(path, entry)
+                    entries[key] = entry
+                    return jax.tree_util.tree_unflatten(entry.out_def, out)
         return jax.tree_util.tree_unflatten(entry.out_def, entry.call(*arrays))
 
     return call

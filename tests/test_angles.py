@@ -95,7 +95,8 @@ def test_grid_cache_round_trip(tmp_path, monkeypatch):
     monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path))
     grid.bin_grid.cache_clear()
     try:
-        first = grid.bin_grid()  # computes and stores
+        first = grid.bin_grid()  # computes and stores (on another thread)
+        grid.wait_until_stored()
         stored = list(tmp_path.glob("merl-grid-*.npz"))
         assert len(stored) == 1
         grid.bin_grid.cache_clear()

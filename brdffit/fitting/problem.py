@@ -393,11 +393,11 @@ _REPORTS_READY: set = set()
 
 def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str) -> None:
     """The first fit of its kind in a process: make the programs of its report (the
-    full-table error, the parameters, the sphere, the uncertainty) ready on another
-    thread, by running them on a start vector, while this thread compiles (or loads)
-    the scoring and the solve. They depend on shapes alone, not on the solution: on
-    2 cores a new process compiles both sets at the same time (bench/results/
-    startup.md). Later fits of the kind skip this; the results here are dropped."""
+    full-table error, the parameters, the sphere, the uncertainty) ready on the
+    report pool's threads, by running them on a start vector, while this thread
+    compiles (or loads) the scoring and the solve. They depend on shapes alone, not
+    on the solution: a new process compiles them at the same time as the solve
+    (``brdffit.executables`` compiles programs side by side; bench/results/startup.md). Later fits of the kind skip this; the results here are dropped."""
     kind = (type(model), model.name, precision, loss, prep.data.weight.shape,
             prep.weight is None or prep.weight.size)
     with _ERROR_THREADS_LOCK:
@@ -405,22 +405,27 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
             return
         _REPORTS_READY.add(kind)
 
-    def report() -> None:
+    def ready(part) -> None:
         try:
-            u0 = np.asarray(u, np.float64)
-            full_table_metrics(table, model, u0, prep.weight, peak=prep.peak)
-            params = plain_params(constrained(model, u0))
-            cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
-            parameter_uncertainty(model, u0, prep.data)
+            part(np.asarray(u, np.float64))
         except Exception as e:  # noqa: BLE001 - a start far off the table: speed only
             runtime.log.debug("brdffit: report of %s not made ready ahead (%s)", model.name, e)
 
-    report_pool().submit(runtime.in_float64(report))
+    def measures(u0) -> None:
+        full_table_metrics(table, model, u0, prep.weight, peak=prep.peak)
+        params = plain_params(constrained(model, u0))
+        cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
+
+    # two parts, one per thread of the report pool: on 2 cores they compile beside
+    # each other and beside the solve
+    for part in (measures, lambda u0: parameter_uncertainty(model, u0, prep.data)):
+        report_pool().submit(runtime.in_float64(ready), part)
 
 
 def report_pool():
-    """One thread per process for the parts of a fit's report that overlap the
-    full-table pass (a forked child makes its own, as :func:`_error_pool`)."""
+    """Two threads per process for the parts of a fit's report that overlap the
+    full-table pass and, in a new process, the solve's compilation (a forked child
+    makes its own, as :func:`_error_pool`)."""
     from concurrent.futures import ThreadPoolExecutor
 
     with _ERROR_THREADS_LOCK:
@@ -428,7 +433,7 @@ def report_pool():
         if pool is None:
             _REPORT_THREADS.clear()
             pool = _REPORT_THREADS[os.getpid()] = ThreadPoolExecutor(
-                1, thread_name_prefix="brdffit-report")
+                2, thread_name_prefix="brdffit-report")
         return pool
 
 

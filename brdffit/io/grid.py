@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -62,15 +63,33 @@ def bin_grid() -> BinGrid:
             pass  # damaged or from another layout: recompute below
     grid = _compute_grid()
     if path:
-        try:
-            tmp = f"{path}.{os.getpid()}.tmp.npz"
-            os.makedirs(directory, exist_ok=True)
-            np.savez(tmp, **{k: getattr(grid, k) for k in grid.__dataclass_fields__})
-            os.replace(tmp, path)
-            runtime.log.info("brdffit: cached the MERL bin grid in %s", path)
-        except OSError as e:
-            runtime.log.info("brdffit: bin grid not cached (%s)", e)  # costs speed only
+        # written beside the fit, not before it (~0.3 s of a new process's first fit);
+        # not a daemon, so that the interpreter finishes the file before it exits
+        writer = threading.Thread(target=_store, args=(grid, directory, path),
+                                  name="brdffit-grid-store")
+        writer.start()
+        _writers.append(writer)
     return grid
+
+
+_writers: list[threading.Thread] = []
+
+
+def wait_until_stored() -> None:
+    """Wait for the grid's file that :func:`bin_grid` is writing, if any."""
+    while _writers:
+        _writers.pop().join()
+
+
+def _store(grid: BinGrid, directory: str, path: str) -> None:
+    try:
+        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        os.makedirs(directory, exist_ok=True)
+        np.savez(tmp, **{k: getattr(grid, k) for k in grid.__dataclass_fields__})
+        os.replace(tmp, path)
+        runtime.log.info("brdffit: cached the MERL bin grid in %s", path)
+    except OSError as e:
+        runtime.log.info("brdffit: bin grid not cached (%s)", e)  # costs speed only
 
 
 def _freeze(grid: BinGrid) -> BinGrid:
