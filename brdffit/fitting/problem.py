@@ -397,7 +397,8 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
     report pool's threads, by running them on a start vector, while this thread
     compiles (or loads) the scoring and the solve. They depend on shapes alone, not
     on the solution: a new process compiles them at the same time as the solve
-    (``brdffit.executables`` compiles programs side by side; bench/results/startup.md). Later fits of the kind skip this; the results here are dropped."""
+    (``brdffit.executables`` compiles programs side by side; bench/results/
+    startup.md). Later fits of the kind skip this; the results here are dropped."""
     kind = (type(model), model.name, precision, loss, prep.data.weight.shape,
             prep.weight is None or prep.weight.size)
     with _ERROR_THREADS_LOCK:
