@@ -57,7 +57,7 @@ from brdffit.fitting.sampling import (
 )
 from brdffit.fitting.sphere import SphereReference
 from brdffit.fitting.starts import TableHints, table_hints
-from brdffit.fitting.uncertainty import parameter_uncertainty
+from brdffit.fitting.uncertainty import linearisation, parameter_uncertainty
 from brdffit.io import merl
 from brdffit.io.buffers import aligned_copy
 from brdffit.io.grid import bin_grid
@@ -119,17 +119,16 @@ def score_starts(model, u_batch, data, every: int = 1):
     return jax.vmap(lambda u: sum_squares(u, model, data))(u_batch)
 
 
-@executables.jit
-def _constrain_jit(model, u):
-    return model.constrain(u)
-
-
 def constrained(model, u) -> dict:
-    """``model.constrain(u)`` in one compiled call, not one per eager operation (a
-    new process compiles each of those); in the model's parameter order, which a
-    pytree (sorted keys) does not keep."""
-    values = _constrain_jit(model, u)
-    return {s.name: values[s.name] for s in model.param_specs}
+    """``model.constrain(u)`` in the model's parameter order (which a pytree, with
+    sorted keys, does not keep), in one compiled call: the uncertainty's
+    linearisation, so that a new process compiles one program for both."""
+    theta = np.asarray(linearisation(model, np.asarray(u, np.float64))[0])
+    out, i = {}, 0
+    for s in model.param_specs:
+        out[s.name] = theta[i:i + s.size] if s.rgb else theta[i]
+        i += s.size
+    return out
 
 
 def _bound_side(u, args):

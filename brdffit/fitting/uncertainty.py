@@ -88,7 +88,7 @@ def _jacobian_terms(model, u, slopes, data: LossData):
     the closed-form Jacobian of a colour-linear model, block by block for an
     every-bin fit), then moved to the parameters' scale: the transforms are
     elementwise, so ``J_theta = J_u diag(1 / slopes)`` with ``slopes = d theta / d u``
-    (:func:`_linearisation`). A slope that
+    (:func:`linearisation`). A slope that
     underflows to 0 (a coordinate hundreds of units down a tail: at its bound) leaves
     its row and column at 0, as a parameter without effect."""
     a_u, b_u = sandwich_terms(u, model, data)
@@ -98,7 +98,7 @@ def _jacobian_terms(model, u, slopes, data: LossData):
 
 
 @executables.jit
-def _linearisation(model: AbstractBRDFModel, u):
+def linearisation(model: AbstractBRDFModel, u):
     """The parameters ``theta`` (flat, in the model's order), which of them sit on a
     bound, and d theta / d u of every entry (the transforms are elementwise): one
     compiled call, not one per eager operation."""
@@ -142,7 +142,7 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     if k > 1:
         # a scalar (the loss's selector) has no bins to thin
         data = jax.tree_util.tree_map(lambda a: a[..., ::k] if a.ndim else a, data)
-    theta, bound_side, slopes = (np.asarray(x, np.float64) for x in _linearisation(
+    theta, bound_side, slopes = (np.asarray(x, np.float64) for x in linearisation(
         model, np.asarray(u, np.float64)))
     a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
     a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
