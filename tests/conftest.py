@@ -9,6 +9,9 @@ fresh process by tests/test_runtime.py.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import time
 
 # Tests keep brdffit's cache (bin grid, compiled code) inside the checkout unless told
 # otherwise.
@@ -26,6 +29,27 @@ from brdffit import runtime  # noqa: E402
 #: processes: the CLI, a uvicorn server, a Dask cluster, real materials).
 #: ``make test-quick`` runs all but ``system``.
 LAYERS = ("unit", "contract", "system")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session):
+    """Under pytest-xdist (``make test``), the controller fills the tests' compile
+    cache with ``brdffit warmup`` before it starts the workers. Otherwise the first
+    minutes compile the same default programs in several processes at once (the two
+    workers, the servers, CLIs and Dask workers they start), each before any other
+    has stored them: half the compile time of a run was such repeats. A cache that is
+    already filled makes this a ~3 s load. A failed warmup costs speed only."""
+    config = session.config
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+        return
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "brdffit.cli", "warmup"], capture_output=True,
+                       text=True, timeout=900, cwd=os.path.dirname(os.path.dirname(__file__)))
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        what = "done" if r.returncode == 0 else f"failed ({r.stderr.strip()[-300:]})"
+        reporter.write_line(f"brdffit warmup into {os.environ['BRDFFIT_CACHE_DIR']}: {what} "
+                            f"in {time.perf_counter() - t0:.0f} s")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -24,10 +24,13 @@ def add_arguments(p) -> None:
     from brdffit.fitting.loss import DEFAULT_LOSS, LOSSES
     from brdffit.selection import DEFAULT_CANDIDATES
 
+    # auto first: it fits its candidates side by side, so their programs compile in
+    # parallel (~23 s on 2 cores for all of them, against ~35 s one model after
+    # another); the models' own fits after it then load nearly everything
     p.add_argument("--models", type=lambda t: [m for m in t.split(",") if m],
-                   default=[*DEFAULT_CANDIDATES, AUTO],
+                   default=[AUTO, *DEFAULT_CANDIDATES],
                    help="comma-separated models to compile, 'auto' for the selection "
-                        f"itself (default {','.join(DEFAULT_CANDIDATES)},{AUTO})")
+                        f"itself (default {AUTO},{','.join(DEFAULT_CANDIDATES)})")
     p.add_argument("--loss", action="append", choices=LOSSES, dest="losses",
                    help=f"a loss to compile for (repeatable; default {DEFAULT_LOSS})")
 
