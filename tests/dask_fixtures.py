@@ -29,15 +29,17 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def separate_cluster(n_workers: int = 2) -> Iterator[tuple[str, object]]:
+def separate_cluster(n_workers: int = 2, env: dict | None = None
+                     ) -> Iterator[tuple[str, object]]:
     """``(address, client)``: a scheduler and ``n_workers`` single-threaded worker
     processes (each under its own nanny, which restarts it if it dies), and a
-    ``distributed.Client`` to watch them."""
+    ``distributed.Client`` to watch them; ``env``: their environment (default this
+    process's, with the repository on the path)."""
     from distributed import Client
 
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, **local_worker_env(n_workers), "PYTHONPATH": REPO}
+    env = {**(env or {**os.environ, "PYTHONPATH": REPO}), **local_worker_env(n_workers)}
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
                                "--host", "127.0.0.1", "--port", str(port),

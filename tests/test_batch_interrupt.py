@@ -10,6 +10,12 @@ table whose other model was still running keeps the model that was done.
 
 On a local cluster (``--workers 2``), a Ctrl-C at a terminal reaches the whole
 process group, the workers included: the batch still ends with one line.
+
+The fits in flight are of a plugin model (installed for these processes as a
+package would be, as in tests/test_adding_a_model.py) that waits at each step of
+its solve: a fit that stays in flight for seconds without taking the CPU that a
+long real fit takes from the rest of the suite (ggx2 on 65,536 samples cost these
+tests ~100 s of CPU, most of it compiling and solving on a loaded machine).
 """
 
 from __future__ import annotations
@@ -31,14 +37,57 @@ from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
 
-#: lambert is fitted in a second; ggx2 with these options takes far longer, so the
+#: lambert is fitted in a fraction of a second; the slow model takes seconds, so the
 #: batch is interrupted with fits in flight
-MODELS = "lambert,ggx2"
-HEAVY = ["--samples", "65536", "--starts", "2"]
+MODELS = "lambert,slow_diffuse"
 TABLES = {
     "a_ggx": ("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.2, "f0": 0.6}),
     "b_ggx": ("ggx", {"kd": [0.1, 0.15, 0.2], "ks": [0.6, 0.6, 0.5], "alpha": 0.1, "f0": 0.8}),
 }
+
+
+#: The plugin: Lambert's formula, with a wait at each evaluation on the solver's
+#: samples (the default sample count, in float64; the full-table error, in float32
+#: blocks, and the start scoring, on every 8th sample, do not wait).
+SLOW_MODEL = """
+import time
+
+import jax
+import jax.numpy as jnp
+
+from brdffit.models.base import KD, AbstractBRDFModel
+
+WAIT_S = 0.4
+
+
+def _wait():
+    time.sleep(WAIT_S)
+
+
+class SlowDiffuse(AbstractBRDFModel):
+    name = "slow_diffuse"
+    param_specs = (KD,)
+
+    def eval_frame(self, params, frame):
+        if frame.cos_i.shape[-1] == 16384 and frame.cos_i.dtype == jnp.float64:
+            jax.debug.callback(_wait)
+        return jnp.broadcast_to(params["kd"] / jnp.pi, frame.cos_i.shape + (3,)).astype(
+            frame.cos_i.dtype)
+"""
+
+
+@pytest.fixture(scope="module")
+def plugin_env(tmp_path_factory) -> dict:
+    """The environment of a process that has the slow model installed."""
+    root = tmp_path_factory.mktemp("site")
+    (root / "slow_diffuse.py").write_text(SLOW_MODEL)
+    info = root / "brdffit_slow_diffuse-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: brdffit-slow-diffuse\n"
+                                   "Version: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[brdffit.models]\nslow_diffuse = slow_diffuse:SlowDiffuse\n")
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), REPO])}
 
 
 @pytest.fixture(scope="module")
@@ -47,8 +96,8 @@ def table_dir(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    with separate_cluster(2) as (address, client):
+def cluster(plugin_env):
+    with separate_cluster(2, env=plugin_env) as (address, client):
         yield address, client
 
 
@@ -117,12 +166,13 @@ def _finished(out: Path) -> dict[tuple[str, str], str]:
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL],
                          ids=["SIGINT", "SIGTERM", "SIGKILL"])
-def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, tmp_path, sig):
+def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, plugin_env, table_dir,
+                                                            tmp_path, sig):
     address, client = cluster
     out = tmp_path / "results.h5"
     cmd = [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models", MODELS,
-           "--out", str(out), "--scheduler", address, "--quiet", *HEAVY]
-    r = _interrupt_after_first_fit(cmd, out, sig, group=False)
+           "--out", str(out), "--scheduler", address, "--quiet"]
+    r = _interrupt_after_first_fit(cmd, out, sig, group=False, env=plugin_env)
 
     if sig == signal.SIGKILL:  # nothing to say, nothing cleaned up: the journal stays
         assert r.returncode == -signal.SIGKILL and r.stderr == "", r.stderr
@@ -148,7 +198,8 @@ def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, 
     assert any(len([m for n, m in kept if n == name]) == 1 for name in TABLES), kept
 
     # the same command again makes only the fits that are missing
-    rerun = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900)
+    rerun = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900,
+                           env=plugin_env)
     assert rerun.returncode == 0, rerun.stderr
     assert f"{2 * len(TABLES) - len(kept)} fits on" in rerun.stdout, rerun.stdout
     final = _finished(out)
@@ -157,13 +208,13 @@ def test_an_interrupted_batch_leaves_nothing_on_the_cluster(cluster, table_dir, 
         assert final[key] == finished_at, key
 
 
-def test_ctrl_c_on_local_workers_is_one_line(table_dir, tmp_path):
+def test_ctrl_c_on_local_workers_is_one_line(plugin_env, table_dir, tmp_path):
     """Ctrl-C at a terminal signals the process group: the batch and its local Dask
     worker processes. The user sees one line, none of the workers' tracebacks."""
     out = tmp_path / "results.h5"
     cmd = [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models", MODELS,
-           "--out", str(out), "--workers", "2", "--quiet", *HEAVY]
-    r = _interrupt_after_first_fit(cmd, out, signal.SIGINT, group=True)
+           "--out", str(out), "--workers", "2", "--quiet"]
+    r = _interrupt_after_first_fit(cmd, out, signal.SIGINT, group=True, env=plugin_env)
     assert r.returncode == 130, r.stderr
     assert r.stderr.strip().splitlines() == [
         f"brdffit: interrupted; the finished fits are in {out}, run the same command again "
