@@ -34,13 +34,15 @@ LAYERS = ("unit", "contract", "system")
 @pytest.hookimpl(tryfirst=True)
 def pytest_sessionstart(session):
     """Under pytest-xdist (``make test``), the controller fills the tests' compile
-    cache with ``brdffit warmup`` before it starts the workers. Otherwise the first
-    minutes compile the same default programs in several processes at once (the two
-    workers, the servers, CLIs and Dask workers they start), each before any other
-    has stored them: half the compile time of a run was such repeats. A cache that is
-    already filled makes this a ~3 s load. A failed warmup costs speed only."""
+    cache with ``brdffit warmup`` before it starts the workers, so that the default
+    programs are compiled once, side by side (~25 s), rather than by several
+    processes at once (the two workers, the servers, CLIs and Dask workers they
+    start) each before any other has stored them. A cache that is already filled
+    makes this a ~3 s load; ``BRDFFIT_TEST_WARMUP=0`` skips it. A failed warmup costs
+    speed only."""
     config = session.config
-    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+    if (hasattr(config, "workerinput") or not config.getoption("numprocesses", None)
+            or os.environ.get("BRDFFIT_TEST_WARMUP") == "0"):
         return
     t0 = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "brdffit.cli", "warmup"], capture_output=True,
