@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdffit import executables, models
+from brdffit import executables, models, runtime
 from brdffit.fitting import sphere
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -125,3 +125,33 @@ def test_no_cache_directory_keeps_nothing(tmp_path, monkeypatch):
                                               {"kd": np.array([0.5, 0.5, 0.5])}, wi, wo))
     np.testing.assert_allclose(out, 0.5 / np.pi)
     assert not any(tmp_path.iterdir())
+
+
+def test_threads_compile_each_program_once_and_side_by_side_programs_all_run(cache):
+    """Auto's candidates and a fit's report make programs ready from several threads:
+    threads asking for the same program wait for one compile of it; different
+    programs (here: two models, and one already on disk) all come back right."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    wi, wo = _directions()
+    lambert, ggx = models.get("lambert"), models.get("ggx")
+    p_lambert = {"kd": np.array([0.5, 0.4, 0.3])}
+    p_ggx = {"kd": np.array([0.2, 0.1, 0.05]), "ks": np.array([0.5, 0.5, 0.5]),
+             "alpha": np.array(0.1), "f0": np.array(0.04)}
+    _fresh(sphere.evaluate)(lambert, p_lambert, wi[:16], wo[:16])  # on disk, to be loaded
+    expected = {name: np.asarray(sphere.evaluate.__wrapped__(m, p, wi, wo))
+                for name, m, p in (("lambert", lambert, p_lambert), ("ggx", ggx, p_ggx))}
+    expected_small = np.asarray(sphere.evaluate.__wrapped__(lambert, p_lambert, wi[:16], wo[:16]))
+
+    evaluate = _fresh(sphere.evaluate)
+    before = len(executables.events)
+    calls = [("lambert", lambert, p_lambert, wi, wo)] * 4 + [("ggx", ggx, p_ggx, wi, wo)] * 4 \
+        + [("small", lambert, p_lambert, wi[:16], wo[:16])] * 4
+    in_threads = runtime.in_float64(evaluate)  # float64 is a per-thread setting in JAX
+    with ThreadPoolExecutor(6) as pool:
+        runs = [(name, pool.submit(in_threads, m, p, a, b)) for name, m, p, a, b in calls]
+        for name, run in runs:
+            want = expected_small if name == "small" else expected[name]
+            np.testing.assert_allclose(np.asarray(run.result()), want, rtol=1e-12)
+    made = [(e.name, e.how) for e in executables.events[before:]]
+    assert sorted(how for _, how in made) == ["compiled", "compiled", "loaded"], made
