@@ -48,13 +48,14 @@ TABLES = {
 
 #: The plugin: Lambert's formula, with a wait at each evaluation on the solver's
 #: samples (the default sample count, in float64; the full-table error, in float32
-#: blocks, and the start scoring, on every 8th sample, do not wait).
+#: blocks of the same size, and the start scoring, on every 8th sample, do not wait).
 SLOW_MODEL = """
 import time
 
 import jax
 import jax.numpy as jnp
 
+from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.models.base import KD, AbstractBRDFModel
 
 WAIT_S = 0.4
@@ -69,7 +70,7 @@ class SlowDiffuse(AbstractBRDFModel):
     param_specs = (KD,)
 
     def eval_frame(self, params, frame):
-        if frame.cos_i.shape[-1] == 16384 and frame.cos_i.dtype == jnp.float64:
+        if frame.cos_i.shape[-1] == DEFAULT_SAMPLES and frame.cos_i.dtype == jnp.float64:
             jax.debug.callback(_wait)
         return jnp.broadcast_to(params["kd"] / jnp.pi, frame.cos_i.shape + (3,)).astype(
             frame.cos_i.dtype)
