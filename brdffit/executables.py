@@ -93,6 +93,48 @@ _key_locks: dict = {}
 _key_locks_lock = threading.Lock()
 
 
+_jax_cache_off = {"count": 0, "saved": None}
+_jax_cache_off_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def _without_jax_cache():
+    """JAX's persistent compilation cache neither read nor written by the compiles in
+    this block (and, meanwhile, by any other thread's: that costs those speed only).
+
+    ``jax.config.enable_compilation_cache(False)`` is not enough: JAX decides once
+    per process, at its first compile, whether the cache is used, and later
+    switches are not read. Once a process had compiled anything with the cache
+    on, a program compiled to be kept on disk came from JAX's cache, and was kept
+    without its machine code: every later process found it broken ("function ...
+    not found"), compiled it again, and kept it broken again. JAX's own record of
+    that decision is set aside while such compiles run; where this JAX version
+    keeps it elsewhere, the config switch is all there is."""
+    from jax._src import compilation_cache as jax_cache
+    from jax._src import config as jax_config
+
+    if not all(hasattr(jax_cache, a) for a in ("_cache_checked", "_cache_used",
+                                               "_cache_initialized_mutex")):
+        with jax_config.enable_compilation_cache(False):
+            yield
+        return
+    with _jax_cache_off_lock:
+        if _jax_cache_off["count"] == 0:
+            with jax_cache._cache_initialized_mutex:
+                _jax_cache_off["saved"] = (jax_cache._cache_checked, jax_cache._cache_used)
+                jax_cache._cache_checked, jax_cache._cache_used = True, False
+        _jax_cache_off["count"] += 1
+    try:
+        with jax_config.enable_compilation_cache(False):
+            yield
+    finally:
+        with _jax_cache_off_lock:
+            _jax_cache_off["count"] -= 1
+            if _jax_cache_off["count"] == 0:
+                with jax_cache._cache_initialized_mutex:
+                    jax_cache._cache_checked, jax_cache._cache_used = _jax_cache_off["saved"]
+
+
 class Event(NamedTuple):
     """One program that :func:`jit` made ready: compiled (``how`` = "compiled", its
     tracing and lowering in ``lower_s``, XLA's compilation in ``compile_s``) or
@@ -228,8 +270,6 @@ def jit(fn: Callable) -> Callable:
         return leaves, treedef, dynamic, key
 
     def compile_entry(leaves, treedef, dynamic, to_store: bool) -> _Entry:
-        from jax._src import config as jax_config
-
         out_defs = []
 
         def flat(*arrays):
@@ -247,8 +287,7 @@ def jit(fn: Callable) -> Callable:
         # An executable that JAX's own cache loaded serialises without its machine
         # code (its fused kernels are then "not found" when run): the one kept on
         # disk is compiled afresh, once per fingerprint.
-        with (jax_config.enable_compilation_cache(False) if to_store
-              else contextlib.nullcontext()):
+        with _without_jax_cache() if to_store else contextlib.nullcontext():
             compiled = lowered.compile()
         events.append(Event(name, "compiled", t1 - t0, time.perf_counter() - t1))
         return _Entry(compiled, out_defs[0])
@@ -315,6 +354,49 @@ def jit(fn: Callable) -> Callable:
             path.unlink(missing_ok=True)
             return None
 
+    def make_ready(leaves, treedef, dynamic, key, arrays, run: bool):
+        """(entry, its outputs on ``arrays`` or None): the program compiled, or loaded
+        from disk (and run once, to check it), and kept; compiled, it is run only
+        when ``run`` says so."""
+        # Programs compile side by side (auto's candidates, a fit's report made
+        # ready while its solve compiles: XLA compiles outside the GIL), but a
+        # program read from disk is loaded and first run alone: when threads
+        # loaded and ran deserialised executables while others compiled or
+        # loaded, one crashed in its first run (a segmentation fault in
+        # block_until_ready, once in a test run).
+        with _key_locks_lock:
+            key_lock = _key_locks.setdefault((name, key), threading.Lock())
+        with key_lock:  # one thread makes a program ready; the others wait for it
+            entry = entries.get(key)
+            if entry is not None:
+                return entry, None
+            path = disk_path(leaves, treedef)
+            if path is not None and path.exists():
+                with _ready.exclusive():
+                    found = loaded_and_run(path, arrays)
+                if found is not None:  # already run once, to check it
+                    entries[key] = found[0]
+                    return found
+            with _ready.shared():
+                entry = compile_entry(leaves, treedef, dynamic, path is not None)
+                out = jax.block_until_ready(entry.call(*arrays)) if run else None
+            if path is not None:
+                store(path, entry)
+            entries[key] = entry
+            return entry, out
+
+    def ready(*args, **kwargs) -> None:
+        """Make the program for these arguments ready, as a call would, without
+        running it where it is compiled: a caller that knows the shapes of a later
+        call compiles it beside other work (a fit's solve, beside its scoring)."""
+        leaves, treedef, dynamic, key = split(args, kwargs)
+        try:
+            if entries.get(key) is not None:
+                return
+        except TypeError:  # an unhashable static argument: nothing to keep
+            return
+        make_ready(leaves, treedef, dynamic, key, [leaves[i] for i in dynamic], run=False)
+
     @functools.wraps(fn)
     def call(*args, **kwargs):
         leaves, treedef, dynamic, key = split(args, kwargs)
@@ -325,32 +407,12 @@ def jit(fn: Callable) -> Callable:
             entry = entries.get(key)
         except TypeError:  # an unhashable static argument: no caching of ours
             return plain(*args, **kwargs)
+        out = None
         if entry is None:
-            # Programs compile side by side (auto's candidates, a fit's report made
-            # ready while its solve compiles: XLA compiles outside the GIL), but a
-            # program read from disk is loaded and first run alone: when threads
-            # loaded and ran deserialised executables while others compiled or
-            # loaded, one crashed in its first run (a segmentation fault in
-            # block_until_ready, once in a test run).
-            with _key_locks_lock:
-                key_lock = _key_locks.setdefault((name, key), threading.Lock())
-            with key_lock:  # one thread makes a program ready; the others wait for it
-                entry = entries.get(key)
-                if entry is None:
-                    path = disk_path(leaves, treedef)
-                    if path is not None and path.exists():
-                        with _ready.exclusive():
-                            found = loaded_and_run(path, arrays)
-                        if found is not None:  # already run once, to check it
-                            entries[key], out = found
-                            return jax.tree_util.tree_unflatten(found[0].out_def, out)
-                    with _ready.shared():
-                        entry = compile_entry(leaves, treedef, dynamic, path is not None)
-                        out = jax.block_until_ready(entry.call(*arrays))
-                    if path is not None:
-                        store(path, entry)
-                    entries[key] = entry
-                    return jax.tree_util.tree_unflatten(entry.out_def, out)
-        return jax.tree_util.tree_unflatten(entry.out_def, entry.call(*arrays))
+            entry, out = make_ready(leaves, treedef, dynamic, key, arrays, run=True)
+        if out is None:
+            out = entry.call(*arrays)
+        return jax.tree_util.tree_unflatten(entry.out_def, out)
 
+    call.ready = ready
     return call

@@ -70,6 +70,49 @@ def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path)
     assert all(f.stat().st_size > 100 for f in _stored(cache))
 
 
+EVALUATE_PROBE = r"""
+import json, logging, sys
+logging.basicConfig(level=logging.INFO, stream=sys.stderr)
+import numpy as np
+import jax.numpy as jnp
+from brdffit import executables, models, runtime
+from brdffit.fitting import sphere
+with runtime.float64():  # a fit's context: JAX's persistent cache under the cache dir
+    jnp.sin(jnp.arange(3.0)).block_until_ready()  # JAX has used its cache in this process
+    rng = np.random.default_rng(0)
+    wi, wo = (v / np.linalg.norm(v, axis=-1, keepdims=True)
+              for v in np.abs(rng.normal(size=(2, 32, 3))))
+    out = sphere.evaluate(models.get("lambert"), {"kd": np.array([0.5, 0.4, 0.3])}, wi, wo)
+print(json.dumps({"how": [e.how for e in executables.events], "sum": float(out.sum())}))
+"""
+
+
+def test_a_program_kept_in_a_process_that_used_jax_cache_loads_later(tmp_path):
+    """A program kept on disk is compiled afresh even where JAX's persistent cache
+    holds it (JAX serves it from there without its machine code): the kept file is
+    lost, the next process compiles it again while JAX's cache has it, and the one
+    after loads what that one kept, instead of finding it broken."""
+    env = {**os.environ, "BRDFFIT_CACHE_DIR": str(tmp_path)}
+
+    def run() -> tuple[dict, str]:
+        r = subprocess.run([sys.executable, "-c", EVALUATE_PROBE], capture_output=True,
+                           text=True, timeout=120, cwd=ROOT, env=env)
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout.strip().splitlines()[-1]), r.stderr
+
+    first, _ = run()
+    assert first["how"] == ["compiled"]
+    assert any((tmp_path / "jax").iterdir())  # JAX's own cache holds it too
+    for f in _stored(tmp_path):
+        f.unlink()
+    second, _ = run()
+    assert second["how"] == ["compiled"]
+    third, log = run()
+    assert third["how"] == ["loaded"], log[-3000:]
+    assert "does not run" not in log
+    assert third["sum"] == first["sum"]
+
+
 def _fresh(fn):
     """The decorated function as a new process sees it: nothing in memory."""
     return executables.jit(fn.__wrapped__)
@@ -138,7 +181,10 @@ def test_threads_compile_each_program_once_and_side_by_side_programs_all_run(cac
     p_lambert = {"kd": np.array([0.5, 0.4, 0.3])}
     p_ggx = {"kd": np.array([0.2, 0.1, 0.05]), "ks": np.array([0.5, 0.5, 0.5]),
              "alpha": np.array(0.1), "f0": np.array(0.04)}
-    _fresh(sphere.evaluate)(lambert, p_lambert, wi[:16], wo[:16])  # on disk, to be loaded
+    # on disk, to be loaded: made in float64, as the threads below ask for it (the
+    # precision is part of a program's key; the main thread's depends on what ran
+    # before in this process)
+    runtime.in_float64(_fresh(sphere.evaluate))(lambert, p_lambert, wi[:16], wo[:16])
     expected = {name: np.asarray(sphere.evaluate.__wrapped__(m, p, wi, wo))
                 for name, m, p in (("lambert", lambert, p_lambert), ("ggx", ggx, p_ggx))}
     expected_small = np.asarray(sphere.evaluate.__wrapped__(lambert, p_lambert, wi[:16], wo[:16]))
