@@ -131,3 +131,22 @@ def test_the_separable_grid_equals_the_flat_conversion():
     u = (i_th.ravel() + 0.5) / angles.N_THETA_H
     w = np.where(above, np.cos(theta_d) * np.sin(theta_h) * np.sin(theta_d) * u, 0.0)
     np.testing.assert_allclose(g.weight, w / w.sum(), rtol=1e-12, atol=0)
+
+
+def test_the_grids_frame_from_its_axes_is_the_frame_of_its_directions():
+    """brdffit.fitting.problem makes the frame of every bin from the grid's axes (the
+    half vector and cos theta_d known exactly); it is models.frame.shading_frame of
+    the bins' directions to rounding, in float64 and float32."""
+    from brdffit import runtime
+    from brdffit.fitting.problem import _device_frames
+    from brdffit.models.frame import shading_frame
+
+    g = bin_grid()
+    expected = shading_frame(g.wi, g.wo, np)
+    with runtime.float64():
+        for dtype, atol in (("float64", 1e-14), ("float32", 3e-7)):
+            made = _device_frames(dtype)
+            for name, a, b in zip(made._fields, made, expected, strict=True):
+                assert np.asarray(a).dtype == dtype
+                np.testing.assert_allclose(np.asarray(a, np.float64), b, rtol=0, atol=atol,
+                                           err_msg=name)

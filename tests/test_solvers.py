@@ -64,14 +64,14 @@ def test_without_bound_information_the_optimality_test_does_not_hold_there():
     sol = _solve(_pinned_problem, jnp.array([-20.0, 1.0, 0.0]),
                  options={"bound_side": _bounds})
     y = sol.value.at[0].set(-30.0)  # a = 1e-13: at its bound for every purpose
-    loss, jtj, jtr = solvers._residual_and_normal(
+    loss, jtj, jtr, _ = solvers._residual_and_normal(
         lambda v, a: (_pinned_problem(v, a), None), y, None, None)
     free = jnp.zeros(3, jnp.int32)
     assert not bool(solvers.is_optimal(loss, jtj, jtr, free, 1e-7, 0.0))
     assert bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
     # still in the tail but not yet at the bound: the pinned gain is counted
     y = y.at[0].set(-13.0)
-    loss, jtj, jtr = solvers._residual_and_normal(
+    loss, jtj, jtr, _ = solvers._residual_and_normal(
         lambda v, a: (_pinned_problem(v, a), None), y, None, None)
     assert not bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
 
@@ -91,7 +91,7 @@ def test_step_limit_is_not_success():
 
     sol = _solve(fn, jnp.array([0.1, 8.0]), max_steps=2)
     assert sol.result == optx.RESULTS.nonlinear_max_steps_reached
-    loss, jtj, jtr = solvers._residual_and_normal(
+    loss, jtj, jtr, _ = solvers._residual_and_normal(
         lambda v, a: (fn(v, a), None), sol.value, None, None)
     status = solvers.status(sol.result, solvers.is_optimal(loss, jtj, jtr, jnp.zeros(2, jnp.int32),
                                                            1e-7, 0.0))
@@ -107,7 +107,7 @@ def test_a_kink_stalls_and_says_so():
 
     sol = _solve(fn, jnp.array([0.3]), max_steps=500)
     assert int(sol.stats["stop"]) in (solvers.STUCK, solvers.STALLED)
-    loss, jtj, jtr = solvers._residual_and_normal(
+    loss, jtj, jtr, _ = solvers._residual_and_normal(
         lambda v, a: (fn(v, a), None), sol.value, None, None)
     optimal = solvers.is_optimal(loss, jtj, jtr, jnp.zeros(1, jnp.int32), 1e-7, 0.0)
     assert solvers.STATUS_NAMES[int(solvers.status(sol.result, optimal))] == "stalled"

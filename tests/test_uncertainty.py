@@ -100,3 +100,31 @@ def test_fit_text_shows_errors_and_flags():
     text = format_result(fit(table, "ggx", samples=SAMPLES))
     assert "±" in text and "UNDETERMINED" in text and "alpha: no lobe" in text
     assert "sphere PSNR" in text and "cube_root_rmse" in text
+
+
+@pytest.mark.parametrize("model,loss", [("ggx", "log"), ("oren_nayar", "cube_root"),
+                                        ("ggx", "render")])
+def test_the_solvers_terms_give_the_uncertainty_computed_afresh(model, loss):
+    """The lm solve carries the sandwich's bread and meat at its solution (its own
+    normal equations, the render loss's energy rows included; the generic Jacobian
+    of a model that is not colour-linear): the uncertainty from them is the one
+    computed afresh at the fitted point."""
+    import jax.numpy as jnp
+
+    from brdffit.fitting import problem
+    from brdffit.fitting.uncertainty import parameter_uncertainty
+
+    table, _ = make_table(model, noise=0.05, seed=7)
+    m = get(model)
+    prep = problem.prepare(table, None, SAMPLES, 0, "float64", loss)
+    u0 = m.unconstrain(m.check_params(fit(table, model, samples=SAMPLES, loss=loss).params))
+    values, _, _, _, terms = problem.solve_batch(
+        m, "lm", jnp.asarray(u0[None]), prep.data, jnp.asarray(50), n_live=jnp.asarray(1))
+    u = np.asarray(values[0])
+    carried = parameter_uncertainty(m, u, prep.data, (terms[0][0], terms[1][0]))
+    afresh = parameter_uncertainty(m, u, prep.data)
+    assert carried["residuals"] == afresh["residuals"] > 0
+    np.testing.assert_allclose(np.asarray(_flat(carried["std_error"]), float),
+                               np.asarray(_flat(afresh["std_error"]), float), rtol=1e-8)
+    np.testing.assert_allclose(np.asarray(carried["correlation"], float),
+                               np.asarray(afresh["correlation"], float), atol=1e-8)

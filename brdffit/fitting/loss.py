@@ -303,8 +303,11 @@ def _uncompress(target, loss: str, exposure=None, selector=None):
 BLOCK = 16384
 
 
-def normal_equations(u: Float[Array, " p"], args):
-    """(sum r^2, J^T J, J^T r) of :func:`residuals`, for the solver's step.
+def normal_equations(u: Float[Array, " p"], args, meat: bool = False):
+    """(sum r^2, J^T J, J^T r) of :func:`residuals`, for the solver's step; with
+    ``meat`` also sum_i r_i^2 J_i^T J_i, the meat of the sandwich covariance
+    (``brdffit.fitting.uncertainty``): the solver carries it at its current point,
+    so that a fit's uncertainty needs no program of its own.
 
     Every term is a sum over the samples, so a large sample set (every bin of a
     table: 1.46M) is summed block by block (:data:`BLOCK` samples at a time, a
@@ -315,11 +318,19 @@ def normal_equations(u: Float[Array, " p"], args):
     """
     model, data = args
     if data.energy is None:
-        return sum_over_blocks(lambda part: _normal_equations(u, model, part), data)
-    (loss, jtj, jtr), (total, grad) = sum_over_blocks(
-        lambda part: (_normal_equations(u, model, part), _energy_sums(u, model, part)), data)
+        return sum_over_blocks(lambda part: _normal_equations(u, model, part, meat), data)
+    sums, (total, grad) = sum_over_blocks(
+        lambda part: (_normal_equations(u, model, part, meat), _energy_sums(u, model, part)),
+        data)
     rho, g = _energy_rows(total, grad, data)
-    return loss + jnp.sum(rho * rho), jtj + g.T @ g, jtr + g.T @ rho
+    loss, jtj, jtr = sums[:3]
+    out = (loss + jnp.sum(rho * rho), jtj + g.T @ g, jtr + g.T @ rho)
+    return out + ((sums[3] + (g * (rho * rho)[:, None]).T @ g,) if meat else ())
+
+
+def normal_equations_with_meat(u: Float[Array, " p"], args):
+    """:func:`normal_equations` with the sandwich's meat: (sum r^2, J^T J, J^T r, meat)."""
+    return normal_equations(u, args, meat=True)
 
 
 def _energy_rows(total, grad, data):
@@ -359,8 +370,12 @@ def sum_over_blocks(terms, data, n: int | None = None, part=None, parts: int = 1
     def add_block(i, total):
         return jax.tree_util.tree_map(jnp.add, total, terms(block_at(i)))
 
-    return jax.lax.fori_loop(first_block + 1, first_block + per_part, add_block,
-                             terms(block_at(first_block)))
+    # from zeros, not from the first block's terms: those outside the loop were a
+    # second copy of ``terms`` in every compiled program (a model's evaluation and
+    # its derivatives), for one block's worth of work
+    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
+                                   jax.eval_shape(terms, block_at(first_block)))
+    return jax.lax.fori_loop(first_block, first_block + per_part, add_block, zeros)
 
 
 def block_count(n: int) -> int:
@@ -381,7 +396,7 @@ def _block_size(n: int) -> int | None:
     return None
 
 
-def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False):
+def _normal_equations(u: Float[Array, " p"], model, data, meat: bool = False):
     """:func:`normal_equations` on one block of samples.
 
     A model ``f = kd/pi + sum_k scale_k * lobe_k`` (``model.lobe_scales``: one lobe
@@ -392,12 +407,13 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
     colour columns follow in closed form, and the blocks of J^T J and J^T r are
     sums over the samples, without the (3 S, p) Jacobian: ~4x less work per step
     than ``jacfwd`` for one lobe, ~4x for two, and no (3 S, p) Jacobian in memory.
-    Other models get :func:`_generic_normal_equations`. With ``sandwich``: (J^T J,
-    sum_i r_i^2 J_i^T J_i) instead (:func:`sandwich_terms`).
+    Other models get :func:`_generic_normal_equations`. With ``meat``: the
+    sandwich's meat, sum_i r_i^2 J_i^T J_i, too (:func:`normal_equations`); its
+    terms share the Jacobian's, so it costs a few sums per step.
     """
     layout = _colour_layout(model)
     if layout is None:
-        return _generic_normal_equations(u, (model, data), sandwich, energy=False)
+        return _generic_normal_equations(u, (model, data), meat, energy=False)
     frame = data.frame
     n_lobes = len(layout.scale_specs)
     parts = _colour_parts(u, model, frame, layout)
@@ -416,26 +432,32 @@ def _normal_equations(u: Float[Array, " p"], model, data, sandwich: bool = False
 
     def gram(w2):
         """sum_i w2_i J_i^T J_i over the residuals i = (c, s), J_i their gradient rows
-        divided by a_i: J^T J for w2 = a^2."""
-        colour_colour = (jnp.einsum("cs,ms,ns->cmn", w2, basis, basis)
-                         * slope.T[:, :, None] * slope.T[:, None, :])  # (3, K+1, K+1)
-        colour_shape = jnp.einsum("cs,ms,jcs->cmj", w2, basis, shape_cols) * slope.T[:, :, None]
-        shape_shape = jnp.einsum("ics,cs,jcs->ij", shape_cols, w2, shape_cols)
+        divided by a_i, for each row of ``w2`` (W, 3, S): J^T J for w2 = a^2. The
+        weights go through the sums together: one pass over the Jacobian's columns
+        for J^T J and the sandwich's meat."""
+        colour_colour = (jnp.einsum("wcs,ms,ns->wcmn", w2, basis, basis)
+                         * slope.T[:, :, None] * slope.T[:, None, :])  # (W, 3, K+1, K+1)
+        colour_shape = (jnp.einsum("wcs,ms,jcs->wcmj", w2, basis, shape_cols)
+                        * slope.T[:, :, None])
+        shape_shape = jnp.einsum("ics,wcs,jcs->wij", shape_cols, w2, shape_cols)
         # scatter the blocks to the model's parameter order (index arrays are static)
         rows = colour_at[:, :, None].repeat(n_lobes + 1, axis=2)
         cols = colour_at[:, None, :].repeat(n_lobes + 1, axis=1)
-        out = jnp.zeros((n, n), u.dtype).at[rows, cols].set(colour_colour)
+        out = jnp.zeros((w2.shape[0], n, n), u.dtype).at[:, rows, cols].set(colour_colour)
         cs_rows = colour_at[:, :, None].repeat(shape_u.size, axis=2)
         cs_cols = np.broadcast_to(layout.shape_at, cs_rows.shape)
-        out = out.at[cs_rows, cs_cols].set(colour_shape).at[cs_cols, cs_rows].set(colour_shape)
-        return out.at[np.ix_(layout.shape_at, layout.shape_at)].set(shape_shape)
+        out = (out.at[:, cs_rows, cs_cols].set(colour_shape)
+               .at[:, cs_cols, cs_rows].set(colour_shape))
+        at = np.ix_(layout.shape_at, layout.shape_at)
+        return out.at[:, at[0], at[1]].set(shape_shape)
 
-    if sandwich:
-        return gram(a2), gram(ar * ar)
     colour_r = jnp.einsum("cs,ms->cm", ar, basis) * slope.T  # (3, K+1)
     shape_r = jnp.einsum("cs,jcs->j", ar, shape_cols)
     jtr = jnp.zeros(n, u.dtype).at[colour_at].set(colour_r).at[layout.shape_at].set(shape_r)
-    return jnp.sum(r * r), gram(a2), jtr
+    if meat:
+        jtj, meat_sum = gram(jnp.stack([a2, ar * ar]))
+        return jnp.sum(r * r), jtj, jtr, meat_sum
+    return jnp.sum(r * r), gram(a2[None])[0], jtr
 
 
 class _ColourParts(NamedTuple):
@@ -476,16 +498,9 @@ def _colour_parts(u, model, frame, layout) -> _ColourParts:
 def sandwich_terms(u: Float[Array, " p"], model, data):
     """(J^T J, sum_i r_i^2 J_i^T J_i) of :func:`residuals` at ``u``, in the
     unconstrained parameters: the bread and the meat of the sandwich covariance
-    (``brdffit.fitting.uncertainty``), summed as :func:`normal_equations` sums, with
-    the same closed-form Jacobian (~4x less work than ``jacfwd``)."""
-    if data.energy is None:
-        return sum_over_blocks(lambda part: _normal_equations(u, model, part, sandwich=True),
-                               data)
-    (bread, meat), (total, grad) = sum_over_blocks(
-        lambda part: (_normal_equations(u, model, part, sandwich=True),
-                      _energy_sums(u, model, part)), data)
-    rho, g = _energy_rows(total, grad, data)
-    return bread + g.T @ g, meat + (g * (rho * rho)[:, None]).T @ g
+    (``brdffit.fitting.uncertainty``), as :func:`normal_equations` sums them."""
+    _, bread, _, meat = normal_equations(u, (model, data), meat=True)
+    return bread, meat
 
 
 class _ColourLayout(NamedTuple):
@@ -525,13 +540,14 @@ def _colour_layout(model) -> _ColourLayout | None:
     )
 
 
-def _generic_normal_equations(u, args, sandwich: bool = False, energy: bool = True):
+def _generic_normal_equations(u, args, meat: bool = False, energy: bool = True):
     """From ``jacfwd`` of the residuals: of :func:`residuals` (the render loss's energy
     term included), or with ``energy=False`` of the per-sample ones only (one block
     of a sum, :func:`normal_equations` adds the energy term to the whole)."""
     fn = residuals if energy else _sample_residuals
     jac, r = jax.jacfwd(lambda v: (fn(v, args).reshape(-1),) * 2, has_aux=True)(u)
-    if sandwich:
+    out = (jnp.sum(r * r), jac.T @ jac, jac.T @ r)
+    if meat:
         jr = jac * r[:, None]
-        return jac.T @ jac, jr.T @ jr
-    return jnp.sum(r * r), jac.T @ jac, jac.T @ r
+        return out + (jr.T @ jr,)
+    return out

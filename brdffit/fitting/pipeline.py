@@ -177,15 +177,23 @@ def fit(
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
         u_candidates = start_vectors(m, table, counts.usable, prep.hints)
-    ready_report_once(table, m, u_candidates[0], prep, loss, precision)
+    steps_as_data = solver == "lm" and max_steps <= STEP_CAP
+    n_starts = min(starts, len(u_candidates))
+    ready_here = ready_report_once(table, m, u_candidates[0], prep, loss, precision, solver)
+    if ready_here is not None and steps_as_data:
+        # the solve's program depends on the number of starts, not on which: in a new
+        # process it compiles here, beside the scoring below
+        report_pool().submit(runtime.in_float64(_ready_solve), m, solver, u_candidates,
+                             n_starts, dtype, data, max_steps)
     if len(u_candidates) > 1:  # one candidate (init, a polish) has nothing to rank
         # Score candidates on every 8th sample: ranking starts needs no more.
         scores = np.asarray(score_starts(m, jnp.asarray(u_candidates, dtype), data, 8))
         scores = np.where(np.isfinite(scores), scores, np.inf)
-        k = min(starts, len(u_candidates))
-        best_starts = u_candidates[np.argsort(scores, kind="stable")[:k]]
+        best_starts = u_candidates[np.argsort(scores, kind="stable")[:n_starts]]
     else:
         best_starts = u_candidates
+    if ready_here is not None:
+        ready_here()
     parent_start = None
     if init is None and m.parent is not None:
         on_every_bin = parent_fit is not None and parent_fit.samples["used"] == n_usable
@@ -194,21 +202,28 @@ def fit(
             parent_fit = fit(table, m.parent, samples=samples, **again)
         parent_start = m.unconstrain(m.check_params(m.embed_parent(parent_fit.params)))
 
-    steps_as_data = solver == "lm" and max_steps <= STEP_CAP
+    bucket = start_bucket(len(best_starts))  # the starts the first solve's program holds
 
-    def solve(u_batch: np.ndarray) -> list[np.ndarray]:
-        """values, codes, steps, losses of a solve from each start of ``u_batch``."""
-        if not steps_as_data:
-            return [np.asarray(a) for a in solve_batch(
-                m, solver, jnp.asarray(u_batch, dtype), data, max_steps)]
-        # one compiled solve per start_bucket: the padding takes no step
+    def solve(u_batch: np.ndarray, take_steps: bool = True) -> list[np.ndarray | None]:
+        """values, codes, steps, losses, and the uncertainty's (bread, meat) or None,
+        of a solve from each start of ``u_batch``; without ``take_steps`` (the lm
+        solver only), the losses of the starts themselves."""
         k = len(u_batch)
-        padded = np.concatenate([u_batch, np.repeat(u_batch[:1], start_bucket(k) - k, 0)])
-        return [np.asarray(a)[:k] for a in solve_batch(
-            m, solver, jnp.asarray(padded, dtype), data, jnp.asarray(max_steps),
-            n_live=jnp.asarray(k))]
+        if not steps_as_data:
+            *out, terms = solve_batch(m, solver, jnp.asarray(u_batch, dtype), data, max_steps)
+        else:
+            # Every solve of this fit (a nested model's retries from its parent, the
+            # parent's own loss) runs in the program of its first: one compile in a
+            # new process, where a retry of one start compiled a second solve. The
+            # padding takes no step; it costs one evaluation of the loss per slot.
+            padded = _padded(u_batch, max(bucket, start_bucket(k)))
+            *out, terms = solve_batch(m, solver, jnp.asarray(padded, dtype), data,
+                                      jnp.asarray(max_steps),
+                                      n_live=jnp.asarray(k if take_steps else 0))
+        bread, meat = (None, None) if terms is None else terms
+        return [None if a is None else np.asarray(a)[:k] for a in (*out, bread, meat)]
 
-    values, codes, steps, losses = solve(best_starts)
+    values, codes, steps, losses, bread, meat = solve(best_starts)
     if parent_start is not None:
         # A model that contains its parent starts from the parent's optimum too, but
         # only where its own starts did not do: they ended without converging, or
@@ -221,16 +236,20 @@ def fit(
         # steps. The first retry starts from that point pulled back to where every
         # coordinate moves (|u| <= LIVE_U); the exact embedding comes last, so the
         # fit never ends worse than the parent on its samples.
-        parent_loss = float(score_starts(m, jnp.asarray(parent_start[None], dtype), data)[0])
+        if steps_as_data:  # the solve's own loss, from the same normal equations
+            parent_loss = float(solve(parent_start[None], take_steps=False)[3][0])
+        else:
+            parent_loss = float(score_starts(m, jnp.asarray(parent_start[None], dtype), data)[0])
 
         def above_parent() -> bool:
             return bool(np.min(np.where(np.isfinite(losses), losses, np.inf)) > parent_loss)
 
         def solve_also(u) -> None:
-            nonlocal values, codes, steps, losses, best_starts
+            nonlocal values, codes, steps, losses, bread, meat, best_starts
             extra = solve(u[None])
-            values, codes, steps, losses = (np.concatenate([a, b]) for a, b in
-                                            zip((values, codes, steps, losses), extra))
+            values, codes, steps, losses, bread, meat = (
+                None if a is None else np.concatenate([a, b]) for a, b in
+                zip((values, codes, steps, losses, bread, meat), extra))
             best_starts = np.concatenate([best_starts, u[None]])
 
         converged = np.any(codes == STATUS_NAMES.index("successful"))
@@ -252,7 +271,9 @@ def fit(
     # one measures the full table and the sphere. Warm, that overlaps a few ms; in a
     # new process each of them compiles its programs first, and side by side they
     # compile at the same time (bench/results/startup.md).
-    pending = (report_pool().submit(runtime.in_float64(parameter_uncertainty), m, u_best, data)
+    terms = None if bread is None or result == "nonfinite" else (bread[i], meat[i])
+    pending = (report_pool().submit(runtime.in_float64(parameter_uncertainty), m, u_best, data,
+                                    terms)
                if result != "nonfinite" else None)
     metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
     # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
@@ -297,3 +318,20 @@ def fit(
         table=table.source,
         quality=look,
     )
+
+
+def _padded(u_batch: np.ndarray, size: int | None = None) -> np.ndarray:
+    """``u_batch`` padded to ``size`` starts, by default its :func:`start_bucket` (one
+    compiled solve per bucket; the padding takes no step)."""
+    k = len(u_batch)
+    size = start_bucket(k) if size is None else size
+    return np.concatenate([u_batch, np.repeat(u_batch[:1], size - k, 0)])
+
+
+def _ready_solve(m, solver, u_candidates, n_starts, dtype, data, max_steps) -> None:
+    """Compile (or load) the solve that ``fit`` is about to run, without running it."""
+    try:
+        solve_batch.ready(m, solver, jnp.asarray(_padded(u_candidates[:n_starts]), dtype), data,
+                          jnp.asarray(max_steps), n_live=jnp.asarray(n_starts))
+    except Exception as e:  # noqa: BLE001 - speed only: the solve itself will say
+        runtime.log.debug("brdffit: solve of %s not made ready ahead (%s)", m.name, e)

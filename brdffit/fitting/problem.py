@@ -44,11 +44,13 @@ from brdffit.fitting.loss import (
     block_count,
     compress_values,
     normal_equations,
+    normal_equations_with_meat,
     residuals,
     sum_over_blocks,
     sum_squares,
     tone,
 )
+from brdffit.fitting.quality import quality
 from brdffit.fitting.sampling import (
     bin_weights,
     padded,
@@ -58,7 +60,7 @@ from brdffit.fitting.sampling import (
 from brdffit.fitting.sphere import SphereReference
 from brdffit.fitting.starts import TableHints, table_hints
 from brdffit.fitting.uncertainty import linearisation, parameter_uncertainty
-from brdffit.io import merl
+from brdffit.io import angles, merl
 from brdffit.io.buffers import aligned_copy
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
@@ -146,9 +148,16 @@ def start_bucket(n: int) -> int:
 
 @executables.jit
 def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
-    """Solve from each start of ``u_batch``; with ``max_steps`` an array (the lm
-    solver), only the first ``n_live`` (data) take steps: the rest pad the batch to
-    :func:`start_bucket` and stop where they start."""
+    """Solve from each start of ``u_batch``: (values, status, steps, loss, terms) per
+    start; with ``max_steps`` an array (the lm solver), only the first ``n_live``
+    (data) take steps: the rest pad the batch to :func:`start_bucket` and stop where
+    they start.
+
+    ``terms`` are the sandwich covariance's (bread, meat) at each solution, in the
+    unconstrained parameters (``brdffit.fitting.uncertainty``): the lm solver
+    carries them from its own normal equations, so a fit's uncertainty compiles no
+    program of its own (~1.3 s of a new process's first GGX fit on 2 cores); None
+    for the other solvers, whose fits have it computed afterwards."""
     import optimistix as optx
 
     from brdffit.fitting import solver as solvers
@@ -156,8 +165,9 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
     solver = solver_for(solver_name, jnp.dtype(data.target.dtype).name)
     # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
     floor = solvers.loss_floor(data.target, data.weight)
-    options = {"normal_equations": normal_equations, "bound_side": _bound_side,
-               "loss_floor": floor}
+    lm = isinstance(solver, solvers.NormalLevenbergMarquardt)
+    options = {"normal_equations": normal_equations_with_meat if lm else normal_equations,
+               "bound_side": _bound_side, "loss_floor": floor}
     limits = None
     if isinstance(solver, solvers.NormalLevenbergMarquardt) and isinstance(max_steps, jax.Array):
         # the step limit is data (fit passes an array): one solve for every max_steps,
@@ -178,18 +188,20 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
         )
         # Whatever the solver and however it stopped, "successful" means the
         # optimality test holds at the point it returns (brdffit.fitting.solver).
-        if isinstance(solver, solvers.NormalLevenbergMarquardt):
+        if lm:
             # Its final state holds that test, made at that point with the same
             # tolerances and floor: no third copy of the normal equations (after
             # its init's and its step's) to compile into the program.
             loss, optimal = sol.stats["loss"], sol.stats["stop"] == solvers.OPTIMAL
+            terms = (sol.stats["jtj"], sol.stats["meat"])
         else:
             loss, jtj, jtr = normal_equations(sol.value, (model, data))
             optimal = solvers.is_optimal(
                 loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
             )
+            terms = None
         # Return values, not the Solution: its state holds a jaxpr.
-        return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss
+        return sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss, terms
 
     if limits is None:
         return jax.lax.map(lambda u0: one(u0, None), u_batch)
@@ -201,13 +213,32 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
 
 @functools.cache
 def _device_frames(dtype_name: str) -> Frame:
-    """The shading frame of every bin centre, on the device, computed once per
-    process: only targets and weights travel per table."""
+    """The shading frame of every bin centre, on the device, made once per process
+    (only targets and weights travel per table).
+
+    In numpy, from the grid's own axes rather than from its 1.46M direction pairs:
+    with phi_h = 0 the half vector is (sin theta_h, 0, cos theta_h) and wi . h =
+    cos theta_d, exactly, so half of the frame is a product of one-dimensional
+    arrays (~40 ms; a compiled frame cost ~0.3 s of a new process's first fit).
+    Equal to :func:`shading_frame` of the directions to rounding
+    (tests/test_angles.py)."""
     g = bin_grid()
-    return _shading_frame(np.asarray(g.wi, dtype_name), np.asarray(g.wo, dtype_name))
+    theta_h = g.theta_h.reshape(angles.SHAPE)[:, :1, :1]
+    theta_d = g.theta_d.reshape(angles.SHAPE)[:1, :, :1]
+    wi, wo = g.wi, g.wo
 
+    def flat(a) -> jax.Array:  # one value per bin, or per bin of an axis
+        a = a if a.ndim == 1 else np.broadcast_to(a, angles.SHAPE).reshape(-1)
+        return jnp.asarray(a.astype(dtype_name))
 
-_shading_frame = executables.jit(shading_frame)
+    return Frame(
+        cos_i=flat(np.clip(g.cos_i, 0.0, 1.0)), cos_o=flat(np.clip(g.cos_o, 0.0, 1.0)),
+        cos_h=flat(np.cos(theta_h)), cos_d=flat(np.cos(theta_d)),
+        sin2_i=flat(np.minimum(wi[:, 0] ** 2 + wi[:, 1] ** 2, 1.0)),
+        sin2_o=flat(np.minimum(wo[:, 0] ** 2 + wo[:, 1] ** 2, 1.0)),
+        sin2_h=flat(np.sin(theta_h) ** 2),
+        dot_xy=flat(wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1]),
+    )
 
 
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
@@ -239,8 +270,18 @@ def sample_data(
     loss: str = DEFAULT_LOSS,
 ) -> LossData:
     """The bins ``index`` (flat) of ``table`` with their ``weight``s, ready for ``loss``."""
-    frame = _gather(_device_frames(jnp.dtype(dtype).name), jnp.asarray(index))
-    return _make_loss_data(table, index, weight, dtype, frame, loss)
+    return _make_loss_data(table, index, weight, dtype, _sample_frame(index, dtype), loss)
+
+
+def _sample_frame(index: np.ndarray, dtype) -> Frame:
+    """The shading frame of the bins ``index``, made in numpy from their directions:
+    a fit's samples need neither the whole grid's frame nor a compiled program
+    (in a new process, ~0.3 s before the first fit could start compiling)."""
+    g = bin_grid()
+    # in the solve's own precision, as its frame was when it came from the grid's
+    name = jnp.dtype(dtype).name
+    frame = shading_frame(g.wi[index].astype(name), g.wo[index].astype(name), np)
+    return Frame(*(jnp.asarray(a, dtype) for a in frame))
 
 
 @executables.jit
@@ -349,7 +390,7 @@ def _full_errors(model, u, rgb, weight, frame, peak, part, parts: int):
 
     arrays = {"frame": frame, "weight": weight, "rgb": rgb}
     total = sum_over_blocks(sums, arrays, weight.shape[-1], part, parts)
-    at = _gather(frame, peak[None])
+    at = jax.tree_util.tree_map(lambda a: a[peak][None], frame)
     meas_peak = rgb[:, peak].astype(u.dtype) * jnp.maximum(at.cos_i[0], 0.0)
     at_peak = _fit_cos(model, u, at)[:, 0] - meas_peak
     return total, jnp.max(jnp.abs(at_peak) / jnp.maximum(meas_peak, 1e-12))
@@ -390,19 +431,27 @@ _REPORT_THREADS: dict = {}
 _REPORTS_READY: set = set()
 
 
-def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str) -> None:
+def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str,
+                      solver: str = "lm"):
     """The first fit of its kind in a process: make the programs of its report (the
-    full-table error, the parameters, the sphere, the uncertainty) ready on the
-    report pool's threads, by running them on a start vector, while this thread
-    compiles (or loads) the scoring and the solve. They depend on shapes alone, not
-    on the solution: a new process compiles them at the same time as the solve
-    (``brdffit.executables`` compiles programs side by side; bench/results/
-    startup.md). Later fits of the kind skip this; the results here are dropped."""
+    full-table error, the parameters, the sphere, the uncertainty) ready by running
+    them on a start vector, while the scoring and the solve compile (or load). They
+    depend on shapes alone, not on the solution: a new process compiles them at the
+    same time as the solve (``brdffit.executables`` compiles programs side by side;
+    bench/results/startup.md). Later fits of the kind skip this; the results here
+    are dropped.
+
+    The full-table error (and, but for the float64 lm solve, which carries the
+    uncertainty's terms itself, the uncertainty) go to the report pool's threads
+    now. The rest (the parameters, the sphere, the quality block) is returned, for
+    the caller to run on its own thread once it has scored its starts: it would
+    otherwise wait there, idle, for the solve compiling on the pool. None when this
+    is not the first fit of its kind."""
     kind = (type(model), model.name, precision, loss, prep.data.weight.shape,
             prep.weight is None or prep.weight.size)
     with _ERROR_THREADS_LOCK:
         if kind in _REPORTS_READY:
-            return
+            return None
         _REPORTS_READY.add(kind)
 
     def ready(part) -> None:
@@ -411,15 +460,17 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
         except Exception as e:  # noqa: BLE001 - a start far off the table: speed only
             runtime.log.debug("brdffit: report of %s not made ready ahead (%s)", model.name, e)
 
-    def measures(u0) -> None:
-        full_table_metrics(table, model, u0, prep.weight, peak=prep.peak)
+    def sphere(u0) -> None:
         params = plain_params(constrained(model, u0))
-        cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
+        psnr = cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
+        quality(table, model, params, psnr)
 
-    # two parts, one per thread of the report pool: on 2 cores they compile beside
-    # each other and beside the solve
-    for part in (measures, lambda u0: parameter_uncertainty(model, u0, prep.data)):
-        report_pool().submit(runtime.in_float64(ready), part)
+    report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
+        table, model, u0, prep.weight, peak=prep.peak))
+    if solver != "lm" or precision != "float64":
+        report_pool().submit(runtime.in_float64(ready),
+                             lambda u0: parameter_uncertainty(model, u0, prep.data))
+    return functools.partial(runtime.in_float64(ready), sphere)
 
 
 def report_pool():

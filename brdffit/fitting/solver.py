@@ -104,13 +104,16 @@ def loss_floor(target, weight):
 
 
 def _residual_and_normal(fn, y, args, options):
-    """sum r^2, J^T J and J^T r at y.
+    """sum r^2, J^T J, J^T r and the meat at y (None where not asked for).
 
     ``options["normal_equations"]``, when given, computes them from (y, args)
-    exploiting the problem's structure; otherwise one forward-mode pass.
+    exploiting the problem's structure, the meat too where it returns four terms
+    (``brdffit.fitting.loss.normal_equations_with_meat``); otherwise one
+    forward-mode pass, without the meat.
     """
     if options and "normal_equations" in options:
-        return options["normal_equations"](y, args)
+        out = options["normal_equations"](y, args)
+        return (*out, None) if len(out) == 3 else out
     flat, unravel = ravel_pytree(y)
 
     def flat_fn(v):
@@ -119,7 +122,7 @@ def _residual_and_normal(fn, y, args, options):
         return r, r
 
     jac, r = jax.jacfwd(flat_fn, has_aux=True)(flat)
-    return jnp.sum(r * r), jac.T @ jac, jac.T @ r
+    return jnp.sum(r * r), jac.T @ jac, jac.T @ r, None
 
 
 def _solve_spd(a: Float[Array, "p p"], b: Float[Array, " p"]) -> Float[Array, " p"]:
@@ -232,6 +235,9 @@ class _LMState(eqx.Module):
     pinned: Bool[Array, " p"]
     free_dec: Float[Array, ""]
     fresh: Bool[Array, ""]  # the start not yet evaluated: the next step evaluates it
+    # sum_i r_i^2 J_i^T J_i at the current point, where the normal equations give it
+    # (zeros otherwise): with jtj, the sandwich covariance's terms at the solution
+    meat: Float[Array, "p p"]
     result: optx.RESULTS
 
 
@@ -290,6 +296,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             pinned=jnp.zeros(p, bool),
             free_dec=jnp.asarray(0.0, dtype),
             fresh=jnp.asarray(True),
+            meat=jnp.zeros((p, p), dtype),
             result=optx.RESULTS.successful,
         )
 
@@ -316,7 +323,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         delta = jnp.where(state.fresh, 0.0, delta)
         y_new_flat = flat + delta
         y_new = unravel(y_new_flat)
-        loss_new, jtj_new, jtr_new = _residual_and_normal(fn, y_new, args, options)
+        loss_new, jtj_new, jtr_new, meat_new = _residual_and_normal(fn, y_new, args, options)
 
         predicted = -(2.0 * delta @ state.jtr + delta @ state.jtj @ delta)
         actual = state.loss - loss_new
@@ -335,6 +342,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         loss, jtj, jtr = (keep(a, b) for a, b in ((loss_new, state.loss), (jtj_new, state.jtj),
                                                    (jtr_new, state.jtr)))
         y_out = keep(y_new_flat, flat)
+        meat = state.meat if meat_new is None else keep(meat_new, state.meat)
         pinned, free_dec, optimal = self._assess(loss, jtj, jtr, unravel(y_out), args, options)
         no_progress = jnp.abs(actual) < self.ftol * jnp.abs(state.loss)
         stall = jnp.where(accept & ~state.fresh, jnp.where(no_progress, state.stall + 1, 0),
@@ -353,6 +361,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             pinned=pinned,
             free_dec=free_dec,
             fresh=jnp.asarray(False),
+            meat=meat,
             result=optx.RESULTS.successful,
         )
         return unravel(y_out), state, None
@@ -369,9 +378,10 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             out_of_steps, optx.RESULTS.nonlinear_max_steps_reached, state.result)
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result) -> tuple[Any, Any, dict]:
-        # num_steps: the steps taken, not counting the evaluation of the start
+        # num_steps: the steps taken, not counting the evaluation of the start;
+        # jtj and meat at y: the sandwich covariance's bread and meat
         return y, aux, {"loss": state.loss, "damping": state.lam, "stop": state.stop,
-                        "num_steps": state.steps}
+                        "num_steps": state.steps, "jtj": state.jtj, "meat": state.meat}
 
 
 def loop_steps(solver, max_steps: int) -> int:

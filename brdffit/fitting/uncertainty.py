@@ -132,20 +132,34 @@ def _grouped(model: AbstractBRDFModel, flat) -> dict:
     return d
 
 
-def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossData) -> dict:
+def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossData,
+                          terms=None) -> dict:
     """The ``uncertainty`` of a :class:`~brdffit.fitting.result.FitResult` (schema in
-    docs/results.md) of unconstrained parameters ``u`` on the solver's ``data``."""
+    docs/results.md) of unconstrained parameters ``u`` on the solver's ``data``.
+
+    ``terms``: (A, B) in the unconstrained parameters at ``u`` on every sample of
+    ``data``, where the solver already has them (``brdffit.fitting.problem.
+    solve_batch``); only float64 ones are used. Otherwise they are computed here,
+    on every k-th sample beyond :data:`MAX_JACOBIAN_BINS`."""
     names = entry_names(model)
     p = len(names)
-    n_bins = int(data.weight.shape[-1])
-    k = max(1, -(-n_bins // MAX_JACOBIAN_BINS))
-    if k > 1:
-        # a scalar (the loss's selector) has no bins to thin
-        data = jax.tree_util.tree_map(lambda a: a[..., ::k] if a.ndim else a, data)
     theta, bound_side, slopes = (np.asarray(x, np.float64) for x in linearisation(
         model, np.asarray(u, np.float64)))
-    a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
-    a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
+    if terms is not None and all(np.asarray(t).dtype == np.float64 for t in terms):
+        # the same moves to the parameters' scale as _jacobian_terms makes
+        inverse = np.where(slopes != 0, 1.0 / np.where(slopes != 0, slopes, 1.0), 0.0)
+        scale = np.outer(inverse, inverse)
+        with np.errstate(invalid="ignore", over="ignore"):  # a diverged fit: see below
+            a, b = (np.asarray(t, np.float64) * scale for t in terms)
+        n, k = 3 * int(np.count_nonzero(np.asarray(data.weight) > 0)), 1
+    else:
+        n_bins = int(data.weight.shape[-1])
+        k = max(1, -(-n_bins // MAX_JACOBIAN_BINS))
+        if k > 1:
+            # a scalar (the loss's selector) has no bins to thin
+            data = jax.tree_util.tree_map(lambda a: a[..., ::k] if a.ndim else a, data)
+        a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
+        a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
 
     at_bound = bound_side != 0
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):

@@ -47,11 +47,20 @@ class BinGrid:
 _CACHE_VERSION = 2  # 2: the separable computation (equal to ~1e-16)
 
 
-@functools.cache
+_GRID_LOCK = threading.Lock()
+
+
 def bin_grid() -> BinGrid:
     """The grid, from brdffit's cache directory (``brdffit.runtime.cache_dir``; about
     20x faster than computing it, which matters for a new process's first fit) or
-    computed and stored there."""
+    computed and stored there. Made once per process: a thread that asks while
+    another makes it (the command line starts it early, beside its imports) waits."""
+    with _GRID_LOCK:
+        return _bin_grid()
+
+
+@functools.cache
+def _bin_grid() -> BinGrid:
     directory = runtime.cache_dir()
     path = os.path.join(directory, f"merl-grid-v{_CACHE_VERSION}.npz") if directory else None
     if path and os.path.exists(path):
@@ -71,6 +80,8 @@ def bin_grid() -> BinGrid:
         _writers.append(writer)
     return grid
 
+
+bin_grid.cache_clear = _bin_grid.cache_clear  # as functools.cache's (tests)
 
 _writers: list[threading.Thread] = []
 
@@ -123,8 +134,9 @@ def _compute_grid() -> BinGrid:
     cos_i, cos_o = wi[:, 2], wo[:, 2]
     above = (cos_i > 0) & (cos_o > 0)
     u = (np.arange(angles.N_THETA_H)[:, None, None] + 0.5) / angles.N_THETA_H
-    d_theta_h = np.broadcast_to(np.pi * u / angles.N_THETA_H, shape).ravel()
-    weight = np.cos(theta_d) * np.sin(theta_h) * np.sin(theta_d) * d_theta_h
+    d_theta_h = np.pi * u / angles.N_THETA_H
+    # separable too: cos_d sin_h sin_d d_theta_h, one factor per axis
+    weight = np.broadcast_to(cos_d * sin_d * (sin_h * d_theta_h), shape).ravel()
     weight = np.where(above, weight, 0.0)
     weight /= weight.sum()
     return _freeze(BinGrid(theta_h, theta_d, phi_d, wi, wo, cos_i, cos_o, weight, above))

@@ -35,14 +35,16 @@ class Frame(NamedTuple):
     dot_xy: Float[Array, ...]
 
 
-def shading_frame(wi: Float[Array, "... 3"], wo: Float[Array, "... 3"]) -> Frame:
-    h = safe_normalize(wi + wo)
-    cos_i = jnp.clip(wi[..., 2], 0.0, 1.0)
-    cos_o = jnp.clip(wo[..., 2], 0.0, 1.0)
-    cos_h = jnp.clip(h[..., 2], 0.0, 1.0)
-    cos_d = jnp.clip(jnp.sum(wi * h, axis=-1), 0.0, 1.0)
-    sin2_i = jnp.clip(wi[..., 0] ** 2 + wi[..., 1] ** 2, 0.0, 1.0)
-    sin2_o = jnp.clip(wo[..., 0] ** 2 + wo[..., 1] ** 2, 0.0, 1.0)
-    sin2_h = jnp.clip(h[..., 0] ** 2 + h[..., 1] ** 2, 0.0, 1.0)
+def shading_frame(wi: Float[Array, "... 3"], wo: Float[Array, "... 3"], xp=jnp) -> Frame:
+    """The frame of each (wi, wo) pair; ``xp``: ``jax.numpy``, or ``numpy`` for the
+    frames of the bin grid, made once per process without a compiled program."""
+    h = safe_normalize(wi + wo, xp)
+    cos_i = xp.clip(wi[..., 2], 0.0, 1.0)
+    cos_o = xp.clip(wo[..., 2], 0.0, 1.0)
+    cos_h = xp.clip(h[..., 2], 0.0, 1.0)
+    cos_d = xp.clip(xp.sum(wi * h, axis=-1), 0.0, 1.0)
+    sin2_i = xp.clip(wi[..., 0] ** 2 + wi[..., 1] ** 2, 0.0, 1.0)
+    sin2_o = xp.clip(wo[..., 0] ** 2 + wo[..., 1] ** 2, 0.0, 1.0)
+    sin2_h = xp.clip(h[..., 0] ** 2 + h[..., 1] ** 2, 0.0, 1.0)
     dot_xy = wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1]
     return Frame(cos_i, cos_o, cos_h, cos_d, sin2_i, sin2_o, sin2_h, dot_xy)

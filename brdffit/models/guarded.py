@@ -41,12 +41,13 @@ def safe_pow(base: Float[Array, ...], exponent) -> Float[Array, ...]:
     return jnp.where(positive, jnp.exp(exponent * log_base), 0.0)
 
 
-def safe_normalize(v: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
-    """v / |v|; the zero vector (wi = -wo, both grazing) maps to the normal +z."""
-    sq = jnp.sum(v * v, axis=-1, keepdims=True)
+def safe_normalize(v: Float[Array, "... 3"], xp=jnp) -> Float[Array, "... 3"]:
+    """v / |v|; the zero vector (wi = -wo, both grazing) maps to the normal +z.
+    ``xp``: ``jax.numpy``, or ``numpy`` for arrays made once, without compiling."""
+    sq = xp.sum(v * v, axis=-1, keepdims=True)
     ok = sq > TINY
-    unit = v / jnp.sqrt(jnp.where(ok, sq, 1.0))
-    return jnp.where(ok, unit, jnp.array([0.0, 0.0, 1.0], dtype=v.dtype))
+    unit = v / xp.sqrt(xp.where(ok, sq, 1.0))
+    return xp.where(ok, unit, xp.array([0.0, 0.0, 1.0], dtype=v.dtype))
 
 
 def sin_from_cos(c: Float[Array, ...]) -> Float[Array, ...]:
