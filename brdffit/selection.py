@@ -101,16 +101,13 @@ class Selection:
 # -- measured evaluation cost -------------------------------------------------------------
 
 
-@functools.cache
-@runtime.in_float64
-def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
-    """Median wall time (ns) per direction pair of ``model(params, wi, wo)``.
+#: Direction pairs that :func:`eval_cost_ns` times a model on.
+EVAL_COST_PAIRS = 100_000
 
-    Measured once per model per process: the model jitted over ``n`` random pairs
-    in float32 (what a renderer uses), shading frame included (a renderer pays for
-    it too), after one warm-up call. Absolute values depend on the machine; the
-    ratios between models are what the ranking is for.
-    """
+
+@functools.cache
+def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
+    """The model, its default parameters (float32) and ``n`` random direction pairs."""
     m = models.get(model_name)
     rng = np.random.default_rng(0)
     v = rng.normal(size=(2, n, 3))
@@ -119,6 +116,28 @@ def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
     wi, wo = (jnp.asarray(a, jnp.float32) for a in v)
     params = {k: np.asarray(x, np.float32) for k, x in
               constrained(m, np.zeros(m.n_params)).items()}
+    return m, params, wi, wo
+
+
+@runtime.in_float64
+def ready_eval_cost(model_name: str) -> None:
+    """Compile (or load) the evaluation that :func:`eval_cost_ns` times, without
+    timing it: threads may make several ready side by side."""
+    evaluate.ready(*_eval_cost_inputs(model_name))
+
+
+@functools.cache
+@runtime.in_float64
+def eval_cost_ns(model_name: str, repeats: int = 7) -> float:
+    """Median wall time (ns) per direction pair of ``model(params, wi, wo)``.
+
+    Measured once per model per process: the model jitted over
+    :data:`EVAL_COST_PAIRS` random pairs in float32 (what a renderer uses), shading
+    frame included (a renderer pays for it too), after one warm-up call. Absolute
+    values depend on the machine; the ratios between models are what the ranking
+    is for.
+    """
+    m, params, wi, wo = _eval_cost_inputs(model_name)
     # the renders' compiled evaluation: kept on disk, so a new process's first
     # `auto` loads it instead of compiling one per candidate
     evaluate(m, params, wi, wo).block_until_ready()
@@ -127,7 +146,7 @@ def eval_cost_ns(model_name: str, n: int = 100_000, repeats: int = 7) -> float:
         t0 = time.perf_counter()
         evaluate(m, params, wi, wo).block_until_ready()
         times.append(time.perf_counter() - t0)
-    return float(np.median(times) / n * 1e9)
+    return float(np.median(times) / wi.shape[0] * 1e9)
 
 
 # -- helpers -----------------------------------------------------------------------------
@@ -238,8 +257,7 @@ def select(
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
     ordered = _order(candidates)
     reference = None if image_size is None else SphereReference(table, image_size)
-    for m in ordered:  # measured before the fits run beside each other, not during
-        eval_cost_ns(m.name)
+    _measure_eval_costs(ordered)
 
     rows, fits = [], {}
     with _CandidateFits(table, ordered, scene, fit_options, threads) as running:
@@ -260,6 +278,21 @@ def select(
                 progress(i, len(ordered), m.name, dict(row))  # the choice edits row later
     return _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance,
                    fit_options, t0)
+
+
+def _measure_eval_costs(ordered) -> None:
+    """Every candidate's evaluation cost, measured before the fits run beside each
+    other, not during them. In a new process their programs compile first, side by
+    side on the cores this process may use (one after the other, they held up the
+    first fit by ~2.5 s on 2 cores); the timings then run one by one."""
+    names = [m.name for m in ordered]
+    threads = min(runtime.usable_cores(), len(names))
+    if threads > 1:
+        with ThreadPoolExecutor(threads, thread_name_prefix="brdffit-cost") as pool:
+            for done in [pool.submit(ready_eval_cost, name) for name in names]:
+                done.result()
+    for name in names:
+        eval_cost_ns(name)
 
 
 def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:
