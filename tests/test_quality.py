@@ -48,3 +48,23 @@ def test_the_cli_prints_the_verdict_and_its_reason_on_one_line(tmp_path):
     r = fitting.fit(table, "blinn_phong", samples=2048)
     line = [x for x in format_result(r).splitlines() if x.strip().startswith("looks ")]
     assert len(line) == 1 and r.quality["verdict"] in line[0] and r.quality["reason"] in line[0]
+
+
+@pytest.mark.parametrize("model", ["ggx", "oren_nayar"])
+def test_the_fits_colour_shift_is_the_sphere_colour_error(model):
+    """A fit takes its PSNR and its colour shift from one evaluation of the model
+    (SphereReference.psnr_and_colour); the shift is sphere_colour_error's, made on
+    its own, and the PSNR the reference's psnr."""
+    import numpy as np
+
+    from brdffit.fitting.sphere import SphereReference, sphere_colour_error
+    from brdffit.models import get
+
+    table, _ = make_table("ggx", noise=0.05, seed=3)
+    r = fitting.fit(table, model, samples=2048)
+    m = get(model)
+    alone = sphere_colour_error(table, m, r.params)
+    np.testing.assert_allclose(r.quality["colour_shift"], alone, rtol=1e-12, atol=1e-15)
+    assert r.quality["colour_shift"][0] != 0.0  # a model-vs-table difference, not a copy
+    assert r.error["psnr_db"] == pytest.approx(SphereReference(table).psnr(m, r.params),
+                                               rel=1e-12)

@@ -285,13 +285,14 @@ def fit(
     params = plain_params(constrained(m, np.asarray(u_best)))
     # The image error of the whole sphere (no scene weighting): one figure that
     # compares fits made under different losses.
-    metrics["psnr_db"] = cached(table, "sphere", lambda: SphereReference(table)).psnr(m, params)
+    metrics["psnr_db"], colour_shift = cached(
+        table, "sphere", lambda: SphereReference(table)).psnr_and_colour(m, params)
     uncertainty = None
     if pending is not None and result != "nonfinite":
         uncertainty = pending.result()
     elif pending is not None:  # the metrics say nonfinite: no uncertainty, whatever it was
         pending.exception()
-    look = quality(table, m, params, metrics["psnr_db"])
+    look = quality(table, m, params, metrics["psnr_db"], colour_shift)
     return FitResult(
         model=m.name,
         params=params,

@@ -50,7 +50,6 @@ from brdffit.fitting.loss import (
     sum_squares,
     tone,
 )
-from brdffit.fitting.quality import quality
 from brdffit.fitting.sampling import (
     bin_weights,
     padded,
@@ -462,8 +461,7 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
 
     def sphere(u0) -> None:
         params = plain_params(constrained(model, u0))
-        psnr = cached(table, "sphere", lambda: SphereReference(table)).psnr(model, params)
-        quality(table, model, params, psnr)
+        cached(table, "sphere", lambda: SphereReference(table)).psnr_and_colour(model, params)
 
     report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
         table, model, u0, prep.weight, peak=prep.peak))

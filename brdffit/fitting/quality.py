@@ -62,9 +62,12 @@ def _percent(colour_shift, channel: str) -> str:
     return f"{colour_shift['RGB'.index(channel)]:+.0%}"
 
 
-def quality(table, model, params: dict, render_psnr_db: float) -> dict:
-    """The quality block of a fit with ``params`` of ``model`` to ``table``."""
-    shift = sphere_colour_error(table, model, params)
+def quality(table, model, params: dict, render_psnr_db: float, colour_shift=None) -> dict:
+    """The quality block of a fit with ``params`` of ``model`` to ``table``;
+    ``colour_shift``: its :func:`sphere_colour_error` where the caller has it
+    (``SphereReference.psnr_and_colour``)."""
+    shift = (sphere_colour_error(table, model, params) if colour_shift is None
+             else colour_shift)
     shift = [None if s is None or not math.isfinite(s) else float(s) for s in shift]
     word, reason = verdict(render_psnr_db, shift)
     psnr = float(render_psnr_db) if render_psnr_db is not None else None

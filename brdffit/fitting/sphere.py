@@ -146,9 +146,22 @@ class SphereReference:
             self.masks.append(ok)
             self.exposures.append(exposure)
         self._scored = None  # made on the first psnr
+        # the colour error's sphere (no reference to the table itself is kept: a
+        # reference is cached per table, weakly)
+        key = LIGHTS[0][1]
+        self._colour = (*sphere_directions(COLOUR_SIZE, key),
+                        render_table(table, key, COLOUR_SIZE)[0])
 
     @runtime.in_float64
     def psnr(self, model: AbstractBRDFModel, params: dict) -> float:
+        return self.psnr_and_colour(model, params)[0]
+
+    @runtime.in_float64
+    def psnr_and_colour(self, model: AbstractBRDFModel, params: dict,
+                        ) -> tuple[float, list[float | None]]:
+        """The PSNR and :func:`sphere_colour_error`, from one evaluation of the model
+        (one compiled program per model: a new process's fit compiled two)."""
+        wi_c, wo_c, lit_c, ref_c = self._colour
         if self._scored is None:
             # every lit pixel of both lights (a shape fixed by the size: one compiled
             # score for every table), the measured ones weighted 1
@@ -160,25 +173,34 @@ class SphereReference:
                               np.full(int(lit.sum()), exposure)))
             self._scored = tuple(np.concatenate(a) for a in zip(*parts))
         n = 3 * int(self._scored[3].sum())
-        if n == 0:
-            return float("nan")
         p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-        se, finite = _tonemapped_error(model, p, *self._scored)
-        if not bool(finite):
-            return float("nan")
+        se, finite, f_c = _sphere_measures(model, p, *self._scored, wi_c, wo_c)
+        colour = _colour_error(np.asarray(f_c, np.float64), wi_c, lit_c, ref_c)
+        if n == 0 or not bool(finite):
+            return float("nan"), colour
         mse = float(se) / n
-        return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+        psnr = PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+        return psnr, colour
+
+
+#: Pixels per side of the key-light sphere behind :func:`sphere_colour_error`.
+COLOUR_SIZE = 64
 
 
 @executables.jit
-def _tonemapped_error(model, params, wi, wo, ref, scored, exposure):
+def _sphere_measures(model, params, wi, wo, ref, scored, exposure, wi_c, wo_c):
     """Sum of squared differences between the model's tone-mapped render and ``ref``
-    over the ``scored`` pixels (weight 1; 0 elsewhere), and whether every scored one
-    is finite: :func:`render_model`, :func:`radiance` and :func:`tonemap` in one
-    compiled call (~0.5 ms instead of ~2.5 ms of numpy around the model)."""
-    mapped = tonemap(radiance(model(params, wi, wo), wi, jnp), exposure[:, None], jnp)
+    over the ``scored`` pixels (weight 1; 0 elsewhere), whether every scored one is
+    finite, and the model's values at ``(wi_c, wo_c)`` (the colour error's sphere):
+    :func:`render_model`, :func:`radiance` and :func:`tonemap` in one compiled call
+    (~0.5 ms instead of ~2.5 ms of numpy around the model), the model evaluated once
+    over both sets of directions."""
+    n = wi.shape[0]
+    f = model(params, jnp.concatenate([wi, wi_c.reshape(-1, 3)]),
+              jnp.concatenate([wo, wo_c.reshape(-1, 3)]))
+    mapped = tonemap(radiance(f[:n], wi, jnp), exposure[:, None], jnp)
     d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
-    return jnp.sum(d * d), jnp.all(jnp.isfinite(d))
+    return jnp.sum(d * d), jnp.all(jnp.isfinite(d)), f[n:].reshape(wi_c.shape)
 
 
 def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:
@@ -187,15 +209,25 @@ def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: 
 
 
 def sphere_colour_error(table: MerlTable, model: AbstractBRDFModel, params: dict,
-                        size: int = 64) -> list[float]:
+                        size: int = COLOUR_SIZE) -> list[float]:
     """Per channel, the relative error of the model's mean radiance over the lit,
     measured pixels of the key-light sphere against the table's (R, G, B; 0.1 is 10%
     too bright): the colour a viewer sees of the material as a whole. A channel the
     table leaves black (mean below 1e-9) is reported as 0 when the model's is too, and
     as None otherwise."""
     light = LIGHTS[0][1]
-    ref, lit = render_table(table, light, size)
-    img, _ = render_model(model, params, light, size)
+    ref, _ = render_table(table, light, size)
+    wi, wo, lit = sphere_directions(size, light)
+    p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
+    with runtime.float64():
+        f = np.asarray(evaluate(model, p, wi, wo), dtype=np.float64)
+    return _colour_error(f, wi, lit, ref)
+
+
+def _colour_error(f: np.ndarray, wi: np.ndarray, lit: np.ndarray, ref: np.ndarray) -> list:
+    """:func:`sphere_colour_error` from the model's values ``f`` on the sphere's
+    pixels and the table's render ``ref``."""
+    img = radiance(np.where(lit[..., None], f, 0.0), wi)
     ok = lit & np.all(np.isfinite(ref), axis=-1)
     if not ok.any():
         return [None, None, None]
