@@ -439,10 +439,10 @@ def _normal_equations(u: Float[Array, " p"], model, data, meat: bool = False):
         # d f / d shape] (q = K+1+J of them) weighted and multiplied by themselves.
         # Three-operand einsums here cost ~4x the model and its derivatives.
         k1 = basis.shape[0]
-        rows = jnp.concatenate([jnp.broadcast_to(basis, (3, *basis.shape)),
-                                jnp.moveaxis(shape_cols, 0, 1)], axis=1)  # (3, q, S)
-        g = jnp.matmul(rows[None] * w2[:, :, None, :],
-                       jnp.swapaxes(rows, -1, -2)[None])  # (W, 3, q, q)
+        jac_rows = jnp.concatenate([jnp.broadcast_to(basis, (3, *basis.shape)),
+                                    jnp.moveaxis(shape_cols, 0, 1)], axis=1)  # (3, q, S)
+        g = jnp.matmul(jac_rows[None] * w2[:, :, None, :],
+                       jnp.swapaxes(jac_rows, -1, -2)[None])  # (W, 3, q, q)
         colour_colour = (g[:, :, :k1, :k1]
                          * slope.T[:, :, None] * slope.T[:, None, :])  # (W, 3, K+1, K+1)
         colour_shape = g[:, :, :k1, k1:] * slope.T[:, :, None]  # (W, 3, K+1, J)

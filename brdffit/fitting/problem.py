@@ -168,7 +168,7 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
     options = {"normal_equations": normal_equations_with_meat if lm else normal_equations,
                "bound_side": _bound_side, "loss_floor": floor}
     limits = None
-    if isinstance(solver, solvers.NormalLevenbergMarquardt) and isinstance(max_steps, jax.Array):
+    if lm and isinstance(max_steps, jax.Array):
         # the step limit is data (fit passes an array): one solve for every max_steps,
         # and every start count up to the batch's length
         live = jnp.arange(u_batch.shape[0]) < (u_batch.shape[0] if n_live is None else n_live)
@@ -281,11 +281,6 @@ def _sample_frame(index: np.ndarray, dtype) -> Frame:
     name = jnp.dtype(dtype).name
     frame = shading_frame(g.wi[index].astype(name), g.wo[index].astype(name), np)
     return Frame(*(jnp.asarray(a, dtype) for a in frame))
-
-
-@executables.jit
-def _gather(tree, index):
-    return jax.tree_util.tree_map(lambda a: a[..., index], tree)
 
 
 @executables.jit

@@ -117,7 +117,12 @@ def render_model(model: AbstractBRDFModel, params: dict, light: np.ndarray, size
     wi, wo, lit = sphere_directions(size, light)
     p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
     f = np.asarray(evaluate(model, p, wi, wo), dtype=np.float64)
-    return radiance(np.where(lit[..., None], f, 0.0), wi), lit
+    return _lit_radiance(f, wi, lit), lit
+
+
+def _lit_radiance(f: np.ndarray, wi: np.ndarray, lit: np.ndarray) -> np.ndarray:
+    """The radiance image of BRDF values ``f`` on a sphere's pixels, 0 where unlit."""
+    return radiance(np.where(lit[..., None], f, 0.0), wi)
 
 
 @executables.jit
@@ -175,7 +180,8 @@ class SphereReference:
         n = 3 * int(self._scored[3].sum())
         p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
         se, finite, f_c = _sphere_measures(model, p, *self._scored, wi_c, wo_c)
-        colour = _colour_error(np.asarray(f_c, np.float64), wi_c, lit_c, ref_c)
+        colour = _colour_error(_lit_radiance(np.asarray(f_c, np.float64), wi_c, lit_c),
+                               lit_c, ref_c)
         if n == 0 or not bool(finite):
             return float("nan"), colour
         mse = float(se) / n
@@ -216,18 +222,14 @@ def sphere_colour_error(table: MerlTable, model: AbstractBRDFModel, params: dict
     table leaves black (mean below 1e-9) is reported as 0 when the model's is too, and
     as None otherwise."""
     light = LIGHTS[0][1]
-    ref, _ = render_table(table, light, size)
-    wi, wo, lit = sphere_directions(size, light)
-    p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-    with runtime.float64():
-        f = np.asarray(evaluate(model, p, wi, wo), dtype=np.float64)
-    return _colour_error(f, wi, lit, ref)
+    ref, lit = render_table(table, light, size)
+    img, _ = render_model(model, params, light, size)
+    return _colour_error(img, lit, ref)
 
 
-def _colour_error(f: np.ndarray, wi: np.ndarray, lit: np.ndarray, ref: np.ndarray) -> list:
-    """:func:`sphere_colour_error` from the model's values ``f`` on the sphere's
-    pixels and the table's render ``ref``."""
-    img = radiance(np.where(lit[..., None], f, 0.0), wi)
+def _colour_error(img: np.ndarray, lit: np.ndarray, ref: np.ndarray) -> list:
+    """:func:`sphere_colour_error` from the model's render ``img`` (as
+    :func:`render_model` makes it) and the table's ``ref`` of the same sphere."""
     ok = lit & np.all(np.isfinite(ref), axis=-1)
     if not ok.any():
         return [None, None, None]

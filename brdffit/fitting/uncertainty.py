@@ -80,21 +80,29 @@ def names_of(model: AbstractBRDFModel) -> set[str]:
 
 
 @executables.jit
-def _jacobian_terms(model, u, slopes, data: LossData):
-    """(A, B, n) of the module docstring, on the parameters' own scale.
+def _jacobian_terms(model, u, data: LossData):
+    """(A, B, n) of the module docstring, in the unconstrained parameters ``u``.
 
-    Both are sums over the samples, taken in the unconstrained parameters ``u`` as
-    the solver's own normal equations take them (``brdffit.fitting.loss.sandwich_terms``:
-    the closed-form Jacobian of a colour-linear model, block by block for an
-    every-bin fit), then moved to the parameters' scale: the transforms are
-    elementwise, so ``J_theta = J_u diag(1 / slopes)`` with ``slopes = d theta / d u``
-    (:func:`linearisation`). A slope that
-    underflows to 0 (a coordinate hundreds of units down a tail: at its bound) leaves
-    its row and column at 0, as a parameter without effect."""
+    Both are sums over the samples, taken as the solver's own normal equations take
+    them (``brdffit.fitting.loss.sandwich_terms``: the closed-form Jacobian of a
+    colour-linear model, block by block for an every-bin fit); the lm solver's
+    float64 solve returns the same terms at its solution, and this program is for
+    the other fits. :func:`_on_parameter_scale` moves them to the parameters."""
     a_u, b_u = sandwich_terms(u, model, data)
-    inverse = jnp.where(slopes != 0, 1.0 / jnp.where(slopes != 0, slopes, 1.0), 0.0)
-    scale = inverse[:, None] * inverse[None, :]
-    return a_u * scale, b_u * scale, 3 * jnp.sum(data.weight > 0)
+    return a_u, b_u, 3 * jnp.sum(data.weight > 0)
+
+
+def _on_parameter_scale(terms, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) in the unconstrained parameters moved to the parameters' own scale: the
+    transforms are elementwise, so ``J_theta = J_u diag(1 / slopes)`` with ``slopes =
+    d theta / d u`` (:func:`linearisation`). A slope that underflows to 0 (a
+    coordinate hundreds of units down a tail: at its bound) leaves its row and
+    column at 0, as a parameter without effect."""
+    inverse = np.where(slopes != 0, 1.0 / np.where(slopes != 0, slopes, 1.0), 0.0)
+    scale = np.outer(inverse, inverse)
+    with np.errstate(invalid="ignore", over="ignore"):  # a diverged fit: the caller checks
+        a, b = (np.asarray(t, np.float64) * scale for t in terms)
+    return a, b
 
 
 @executables.jit
@@ -146,11 +154,6 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     theta, bound_side, slopes = (np.asarray(x, np.float64) for x in linearisation(
         model, np.asarray(u, np.float64)))
     if terms is not None and all(np.asarray(t).dtype == np.float64 for t in terms):
-        # the same moves to the parameters' scale as _jacobian_terms makes
-        inverse = np.where(slopes != 0, 1.0 / np.where(slopes != 0, slopes, 1.0), 0.0)
-        scale = np.outer(inverse, inverse)
-        with np.errstate(invalid="ignore", over="ignore"):  # a diverged fit: see below
-            a, b = (np.asarray(t, np.float64) * scale for t in terms)
         n, k = 3 * int(np.count_nonzero(np.asarray(data.weight) > 0)), 1
     else:
         n_bins = int(data.weight.shape[-1])
@@ -158,8 +161,9 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         if k > 1:
             # a scalar (the loss's selector) has no bins to thin
             data = jax.tree_util.tree_map(lambda a: a[..., ::k] if a.ndim else a, data)
-        a, b, n = _jacobian_terms(model, np.asarray(u, np.float64), slopes, data)
-        a, b, n = np.asarray(a, np.float64), np.asarray(b, np.float64), int(n)
+        *terms, n = _jacobian_terms(model, np.asarray(u, np.float64), data)
+        n = int(n)
+    a, b = _on_parameter_scale(terms, slopes)
 
     at_bound = bound_side != 0
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
