@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -13,6 +14,12 @@ from data_synth import make_table
 from tests.truths import TRUTH
 
 pytestmark = pytest.mark.unit
+
+# The two sides of each comparison, compiled: op by op, every primitive of a Jacobian
+# compiles on its own (seconds per model in a new process), and fits run them compiled.
+normal_equations = eqx.filter_jit(loss.normal_equations)
+generic_normal_equations = eqx.filter_jit(loss._generic_normal_equations)
+one_pass_normal_equations = eqx.filter_jit(loss._normal_equations)
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +44,8 @@ def test_structured_normal_equations_equal_plain_jacobian(name, noisy_ggx):
     data = fitting.sample_data(noisy_ggx, s.index, s.weight)
     m = models.get(name)
     u = jnp.asarray(m.unconstrain({**TRUTH, **MORE}[name])) + 0.3
-    fast = loss.normal_equations(u, (m, data))
-    plain = loss._generic_normal_equations(u, (m, data))
+    fast = normal_equations(u, (m, data))
+    plain = generic_normal_equations(u, (m, data))
     for a, b in zip(fast, plain):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-14)
 
@@ -97,8 +104,8 @@ def test_blocked_normal_equations_equal_one_pass(name, noisy_ggx):
     data = fitting.sample_data(noisy_ggx, s.index, s.weight)
     m = models.get(name)
     u = jnp.asarray(m.unconstrain({**TRUTH, **MORE}[name])) + 0.2
-    blocked = loss.normal_equations(u, (m, data))
-    one_pass = loss._normal_equations(u, m, data)
+    blocked = normal_equations(u, (m, data))
+    one_pass = one_pass_normal_equations(u, m, data)
     for a, b in zip(blocked, one_pass):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-16)
 
@@ -114,8 +121,8 @@ def test_structured_normal_equations_equal_plain_jacobian_for_every_loss(choice,
     assert data.loss_name == choice
     m = models.get("ggx")
     u = jnp.asarray(m.unconstrain(TRUTH["ggx"])) + 0.3
-    fast = loss.normal_equations(u, (m, data))
-    plain = loss._generic_normal_equations(u, (m, data))
+    fast = normal_equations(u, (m, data))
+    plain = generic_normal_equations(u, (m, data))
     for a, b in zip(fast, plain, strict=True):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-14)
 
@@ -307,11 +314,13 @@ def test_render_loss_gradients_are_finite(name, noisy_ggx):
     m = models.get(name)
     prep = fitting.prepare(noisy_ggx, None, 2048, 0, "float64", "render")
     p = {**TRUTH, **MORE}[name]
+    # compiled once (op by op, every primitive compiles on its own in a new process)
+    gradient = jax.jit(lambda u: jax.grad(loss.sum_squares)(u, m, prep.data))
     for shift in (-12.0, -3.0, 0.0, 3.0, 12.0):  # down to black, up to far too bright
         u = jnp.asarray(m.unconstrain(p)) + shift
-        g = jax.grad(loss.sum_squares)(u, m, prep.data)
+        g = gradient(u)
         assert np.all(np.isfinite(np.asarray(g))), (name, shift)
-        for a in loss.normal_equations(u, (m, prep.data)):
+        for a in normal_equations(u, (m, prep.data)):
             assert np.all(np.isfinite(np.asarray(a))), (name, shift)
 
 

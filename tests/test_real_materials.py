@@ -56,8 +56,8 @@ def _independent_decrement(table, model_name, params, samples=DEFAULT_SAMPLES, s
     def r_of(v):
         return residuals(v, (m, data)).ravel()
 
-    r = np.asarray(r_of(u))
-    jac = np.asarray(jax.jacfwd(r_of)(u))
+    r = np.asarray(jax.jit(r_of)(u))
+    jac = np.asarray(jax.jit(jax.jacfwd(r_of))(u))
     side = np.asarray(m.bound_side(u))
     # a coordinate in a flat tail whose descent and Gauss-Newton step point out of
     # range, by more than one capped step, is held at its bound (KKT)
