@@ -31,6 +31,11 @@ TABLES = {
 
 #: Fit options that keep a test's fit to a second or so.
 FAST = {"samples": 2048, "starts": 1}
+#: A job (the body of ``POST /v1/fits`` less ``table_id``) that runs for seconds in a
+#: new worker process without compiling anything that the suite's warmup did not:
+#: auto with default options, every candidate loaded, then fitted. For the tests that
+#: catch a job while it runs (cancel it, kill its worker, stop the server).
+SLOW_JOB = {"model": "auto"}
 
 
 @functools.cache

@@ -16,7 +16,16 @@ from brdffit.client import ApiError, Client, ClientError, FitCancelled, FitFaile
 from brdffit.io import merl
 from brdffit.io.grid import bin_grid
 from brdffit.view.plots import KINDS
-from tests.api_fixtures import FAST, TABLES, Server, scaled_table_bytes, table, table_bytes, write
+from tests.api_fixtures import (
+    FAST,
+    SLOW_JOB,
+    TABLES,
+    Server,
+    scaled_table_bytes,
+    table,
+    table_bytes,
+    write,
+)
 
 pytestmark = pytest.mark.system
 
@@ -127,7 +136,7 @@ def test_list_cancel_and_delete(client, files):
     table_id = client.upload(files["lambert"])
     # Queued behind nothing but cancelled at once, or running and stopped: either
     # way it ends cancelled, and result() says so.
-    job = client.fit(table_id, "ggx2", samples=65536, starts=8)
+    job = client.fit(table_id, SLOW_JOB["model"])
     cancelled = client.cancel(job)
     assert cancelled.status == "cancelled" and cancelled.reason, cancelled
     with pytest.raises(FitCancelled):

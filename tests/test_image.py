@@ -36,7 +36,7 @@ from packaging.specifiers import SpecifierSet
 from packaging.utils import canonicalize_name
 
 from api import healthcheck
-from tests.api_fixtures import TABLES, free_port, table_bytes
+from tests.api_fixtures import SLOW_JOB, free_port, table_bytes
 
 ROOT = Path(__file__).resolve().parent.parent
 LOCK = ROOT / "requirements" / "service.lock"
@@ -242,9 +242,8 @@ def test_serve_on_brdffit_port_then_a_clean_stop_mid_fit(tmp_path):
         with httpx.Client(base_url=url, timeout=60) as http:
             table = http.post("/v1/tables", content=table_bytes("ggx"),
                               headers={"content-type": "application/octet-stream"}).json()["id"]
-            # every bin, several starts: long enough to be running at the SIGTERM
-            answer = http.post("/v1/fits", json={"table_id": table, "model": TABLES["ggx"][0],
-                                                 "options": {"samples": 262144, "starts": 4}})
+            # long enough to be running at the SIGTERM
+            answer = http.post("/v1/fits", json={"table_id": table, **SLOW_JOB})
             assert answer.status_code == 202, answer.text
             job = answer.json()
             deadline = time.monotonic() + 120

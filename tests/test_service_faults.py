@@ -24,6 +24,7 @@ from api import repair
 from api.store import Store
 from tests.api_fixtures import (
     FAST,
+    SLOW_JOB,
     Server,
     scaled_table_bytes,
     table,
@@ -84,9 +85,8 @@ def test_storage_failure_is_reported_and_survived(tmp_path):
     with Server(data, env={"BRDFFIT_STORAGE_RETRY_S": "600"}) as s, \
             httpx.Client(base_url=s.url, timeout=60) as http:
         table_id = upload(http, table_bytes("ggx"))
-        # Long enough to be running when the storage goes (a few seconds of ggx2).
-        slow = http.post("/v1/fits", json={"table_id": table_id, "model": "ggx2",
-                                           "options": {"samples": 16384, "starts": 4}}).json()
+        # Long enough to be running when the storage goes
+        slow = http.post("/v1/fits", json={"table_id": table_id, **SLOW_JOB}).json()
         wait_status(http, slow["id"], ("running",), poll=0.02)
         with BrokenStorage(data):
             health = wait_health(http, 503)
@@ -257,8 +257,7 @@ def test_a_fit_over_the_estimate_is_refused_before_it_is_queued(http, table_id):
 
 
 def test_a_running_fit_is_cancelled_and_its_worker_replaced(bounded, http, table_id):
-    job = http.post("/v1/fits", json={"table_id": table_id, "model": "ggx2",
-                                      "options": {"samples": 65536, "starts": 8}}).json()
+    job = http.post("/v1/fits", json={"table_id": table_id, **SLOW_JOB}).json()
     running = wait_status(http, job["id"], ("running",), poll=0.02)
     assert running["progress"]["stage"]
     r = http.post(f"/v1/fits/{job['id']}/cancel")
