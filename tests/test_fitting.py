@@ -152,26 +152,49 @@ def test_params_come_in_the_model_order():
 
 
 @pytest.mark.parametrize(("model", "kwargs"), [("ggx", {"samples": 3000}),
-                                                ("ggx", {"samples": 5000, "loss": "cube_root"})])
+                                                ("ggx", {"samples": 5000, "loss": "cube_root"}),
+                                                ("lambert", {"samples": None})])
 def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, monkeypatch):
-    """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``),
-    its arrays padded with zero weights: the fit is the unpadded one, to rounding."""
+    """A sample count runs the compiled fit of its bucket (``sampling.SAMPLE_BUCKETS``;
+    every bin, a multiple of the largest), its arrays padded with zero weights: the
+    fit is the unpadded one, to rounding."""
     from brdffit.fitting import problem, sampling
 
     table, _ = make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)
     bucketed = fit(table, model, **kwargs)
     n = bucketed.samples["used"]
-    assert sampling.bucket_size(kwargs["samples"]) in sampling.SAMPLE_BUCKETS
+    size = sampling.bucket_size(n)
+    assert size in sampling.SAMPLE_BUCKETS or size % sampling.SAMPLE_BUCKETS[-1] == 0
+    assert size > n  # something was padded
     monkeypatch.setattr(problem, "padded", lambda sample_set: sample_set)
     exact = fit(make_table("ggx", TRUTH["ggx"], noise=0.05, missing=0.1, seed=3)[0], model,
                 **kwargs)
-    assert exact.samples["used"] == n == kwargs["samples"]
+    assert exact.samples["used"] == n == (kwargs["samples"] or bucketed.samples["usable"])
     assert exact.result == bucketed.result == "successful"
     assert exact.steps == bucketed.steps
     for name, value in exact.params.items():
         np.testing.assert_allclose(bucketed.params[name], value, rtol=1e-9, atol=0)
     np.testing.assert_allclose(bucketed.log_rmse, exact.log_rmse, rtol=1e-9)
     assert bucketed.uncertainty["residuals"] == exact.uncertainty["residuals"]
+
+
+def test_tables_of_every_bin_share_the_compiled_fit_of_their_bucket():
+    """Every bin of two tables with different usable counts, padded to the same
+    multiple of the largest bucket: the second table compiles (or loads) nothing."""
+    from brdffit import executables
+    from brdffit.fitting import sampling
+
+    first, _ = make_table("lambert", TRUTH["lambert"], missing=0.1, seed=3)
+    mask = first.mask.copy()
+    mask.reshape(-1)[np.flatnonzero(mask)[::997]] = False  # ~1300 bins fewer
+    second = merl.MerlTable.from_values(first.rgb, mask)
+    a = fit(first, "lambert", samples=None)
+    before = len(executables.events)
+    b = fit(second, "lambert", samples=None)
+    n_a, n_b = a.samples["used"], b.samples["used"]
+    assert n_a > n_b and sampling.bucket_size(n_a) == sampling.bucket_size(n_b)
+    assert [e.name for e in executables.events[before:]] == []
+    assert b.converged
 
 
 def test_one_compiled_fit_serves_every_selectable_loss_and_sample_count(synth_tables):
