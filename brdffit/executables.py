@@ -150,6 +150,12 @@ class Event(NamedTuple):
 #: (``bench/startup.py``, ``brdffit warmup``). A few dozen entries per process.
 events: list[Event] = []
 
+#: Called with a program's name just before :func:`jit` compiles it (not when it is
+#: loaded from disk), from whichever thread compiles: a shell can say that a first
+#: use is compiling (``brdffit fit``) instead of seeming to hang for seconds. The
+#: library says nothing (None).
+on_compile: Callable[[str], None] | None = None
+
 
 @functools.cache
 def _fingerprint() -> str:
@@ -377,6 +383,8 @@ def jit(fn: Callable) -> Callable:
                 if found is not None:  # already run once, to check it
                     entries[key] = found[0]
                     return found
+            if on_compile is not None:
+                on_compile(name)
             with _ready.shared():
                 entry = compile_entry(leaves, treedef, dynamic, path is not None)
                 out = jax.block_until_ready(entry.call(*arrays)) if run else None

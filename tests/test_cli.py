@@ -98,6 +98,28 @@ def test_a_selection_option_with_a_fixed_model_is_said_not_ignored(ggx_file):
     assert "tolerance 0.01" in r.stderr and "ignored" in r.stderr and "model auto" in r.stderr
 
 
+def test_a_fit_that_compiles_says_so_once_and_the_next_run_does_not(ggx_file, tmp_path,
+                                                                    monkeypatch):
+    """A first use (an empty cache) takes seconds of compiling: one line on stderr says
+    why and where the result is kept; the next run loads it and says nothing; with
+    caching off, the line says nothing is kept. stdout stays one JSON object."""
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "cache"))
+    first = run("brdffit.cli", "fit", str(ggx_file), "--model", "lambert", "--json")
+    assert first.returncode == 0, first.stderr
+    said = [ln for ln in first.stderr.splitlines() if "compiling" in ln]
+    assert said == [f"brdffit: first use of these options on this machine: compiling "
+                    f"(seconds; kept in {tmp_path / 'cache'} for the next run)"], first.stderr
+    assert json.loads(first.stdout)["model"] == "lambert"
+    again = run("brdffit.cli", "fit", str(ggx_file), "--model", "lambert", "--json")
+    assert again.returncode == 0 and "compiling" not in again.stderr, again.stderr
+    assert json.loads(again.stdout) == {**json.loads(first.stdout),
+                                        "time_s": json.loads(again.stdout)["time_s"]}
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
+    off = run("brdffit.cli", "fit", str(ggx_file), "--model", "lambert", "--json")
+    assert off.returncode == 0 and "not kept: BRDFFIT_CACHE_DIR is empty" in off.stderr, \
+        off.stderr
+
+
 def test_warmup_keeps_the_fits_for_the_next_process(tmp_path, monkeypatch):
     """`brdffit warmup` compiles a model's fit into the cache it is given; a second
     process finds every program there and compiles none."""

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 
-from brdffit import extras, jsonout
+from brdffit import executables, extras, jsonout, runtime
 from brdffit.fitting import options
 from brdffit.fitting.options import FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
 from brdffit.fitting.result import FitResult
@@ -158,10 +159,30 @@ def run(args) -> int:
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
     table = merl.read(args.table)
+    executables.on_compile = _say_compiling_once()
     report = fit_request(table, request, progress=print_progress if request.auto else None)
     text = (format_selection(report.selection) if report.selection is not None
             else format_result(report.chosen_fit))
     return write_report(args, table, report, text)
+
+
+def _say_compiling_once():
+    """``executables.on_compile`` for one command: the first compile says, on stderr,
+    why this run takes seconds (a first use of these options on this machine), and
+    whether the next run will load what it compiles."""
+    said = threading.Event()
+
+    def say(name: str) -> None:
+        if said.is_set():
+            return
+        said.set()
+        kept = runtime.cache_dir()
+        later = (f"kept in {kept} for the next run" if kept is not None
+                 else "not kept: BRDFFIT_CACHE_DIR is empty")
+        print(f"brdffit: first use of these options on this machine: compiling "
+              f"(seconds; {later})", file=sys.stderr, flush=True)
+
+    return say
 
 
 def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
