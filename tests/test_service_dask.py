@@ -8,7 +8,7 @@ import pytest
 
 from brdffit.batch.cluster import local_worker_env
 from brdffit.client import Client
-from tests.api_fixtures import FAST, Server, table_bytes, write
+from tests.api_fixtures import FAST, SLOW_JOB, Server, table_bytes, write
 
 pytestmark = pytest.mark.system
 
@@ -48,9 +48,8 @@ def test_a_worker_killed_mid_job_on_a_separate_cluster_the_job_ends_once(tmp_pat
             httpx.Client(base_url=srv.url, timeout=60) as http:
         table = http.post("/v1/tables", content=table_bytes("ggx"),
                           headers={"content-type": "application/octet-stream"}).json()["id"]
-        # running for seconds when the worker is killed, without compiling anything the
-        # suite's warmup did not: every candidate of auto, each loaded by a new process
-        answer = http.post("/v1/fits", json={"table_id": table, "model": "auto"})
+        # running for seconds when the worker is killed (api_fixtures.SLOW_JOB)
+        answer = http.post("/v1/fits", json={"table_id": table, **SLOW_JOB})
         assert answer.status_code == 202, answer.text
         job_id = answer.json()["id"]
         deadline = time.monotonic() + 300
