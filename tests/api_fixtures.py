@@ -15,7 +15,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import httpx
 import numpy as np
@@ -60,6 +62,30 @@ def scaled_table_bytes(name: str, scale: float) -> bytes:
 def write(path: Path, data: bytes) -> Path:
     path.write_bytes(data)
     return path
+
+
+class Process(NamedTuple):
+    """One process as /proc shows it: ``state`` "Z" for a zombie; ``cmdline`` its
+    arguments, NUL-separated (empty for a zombie)."""
+
+    pid: int
+    state: str
+    parent: int
+    group: int
+    cmdline: bytes
+
+
+def processes() -> Iterator[Process]:
+    """Every process on this machine, from /proc; one that ends while it is read is
+    left out."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            cmdline = (stat.parent / "cmdline").read_bytes()
+            yield Process(int(stat.parent.name), fields[0], int(fields[1]), int(fields[2]),
+                          cmdline)
+        except (OSError, IndexError, ValueError):
+            continue
 
 
 def free_port() -> int:
@@ -134,30 +160,15 @@ class Server:
 
     def worker_pids(self) -> list[int]:
         """The server's worker processes (its 'spawn' children), from /proc."""
-        pids = []
-        for stat in Path("/proc").glob("[0-9]*/stat"):
-            try:
-                fields = stat.read_text().rsplit(")", 1)[1].split()
-                if int(fields[1]) == self.proc.pid and b"spawn_main" in (
-                        stat.parent / "cmdline").read_bytes():
-                    pids.append(int(stat.parent.name))
-            except (OSError, IndexError, ValueError):
-                continue  # a process that ended while we looked
-        return pids
+        return [p.pid for p in processes()
+                if p.parent == self.proc.pid and b"spawn_main" in p.cmdline]
 
     def group_alive(self) -> bool:
         """Does any process of the server's group (server, workers, multiprocessing's
         resource tracker) still run? A zombie does not count: an orphan's exit is
         reaped by PID 1 in its own time (~1.5 s in this sandbox), which
         ``os.killpg(pgid, 0)`` would wait for on every server stop."""
-        for stat in Path("/proc").glob("[0-9]*/stat"):
-            try:
-                fields = stat.read_text().rsplit(")", 1)[1].split()
-            except (OSError, IndexError):
-                continue  # a process that ended while we looked
-            if int(fields[2]) == self.proc.pid and fields[0] != "Z":
-                return True
-        return False
+        return any(p.group == self.proc.pid and p.state != "Z" for p in processes())
 
     def wait_group_gone(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout

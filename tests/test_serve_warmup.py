@@ -13,22 +13,14 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.api_fixtures import Server, free_port
+from tests.api_fixtures import Server, free_port, processes
 
 pytestmark = pytest.mark.system
 
 
 def _warmup_pids(server_pid: int) -> list[int]:
-    pids = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            parent = int(stat.read_text().rsplit(")", 1)[1].split()[1])
-            argv = (stat.parent / "cmdline").read_bytes().split(b"\0")
-        except (OSError, IndexError, ValueError):
-            continue  # a process that ended while we looked
-        if parent == server_pid and b"warmup" in argv:
-            pids.append(int(stat.parent.name))
-    return pids
+    return [p.pid for p in processes()
+            if p.parent == server_pid and b"warmup" in p.cmdline.split(b"\0")]
 
 
 def _wait_for(predicate, timeout: float, what: str, log) -> None:

@@ -159,8 +159,12 @@ def run(args) -> int:
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
     table = merl.read(args.table)
-    executables.on_compile = _say_compiling_once()
-    report = fit_request(table, request, progress=print_progress if request.auto else None)
+    # for this fit only: a caller of main() in its own process keeps its own hook
+    previous, executables.on_compile = executables.on_compile, _say_compiling_once()
+    try:
+        report = fit_request(table, request, progress=print_progress if request.auto else None)
+    finally:
+        executables.on_compile = previous
     text = (format_selection(report.selection) if report.selection is not None
             else format_result(report.chosen_fit))
     return write_report(args, table, report, text)
@@ -170,12 +174,11 @@ def _say_compiling_once():
     """``executables.on_compile`` for one command: the first compile says, on stderr,
     why this run takes seconds (a first use of these options on this machine), and
     whether the next run will load what it compiles."""
-    said = threading.Event()
+    first = threading.Lock()  # held for good by the first compile, of whichever thread
 
     def say(name: str) -> None:
-        if said.is_set():
+        if not first.acquire(blocking=False):
             return
-        said.set()
         kept = runtime.cache_dir()
         later = (f"kept in {kept} for the next run" if kept is not None
                  else "not kept: BRDFFIT_CACHE_DIR is empty")
