@@ -88,6 +88,13 @@ def test_storage_failure_is_reported_and_survived(tmp_path):
         # Long enough to be running when the storage goes
         slow = http.post("/v1/fits", json={"table_id": table_id, **SLOW_JOB}).json()
         wait_status(http, slow["id"], ("running",), poll=0.02)
+        # ...and in its worker, which reports its first stage: a job claimed ("starting")
+        # whose table the dispatcher has not read yet would retry that read for
+        # BRDFFIT_STORAGE_RETRY_S instead of running (a failure seen once in a full run)
+        deadline = time.monotonic() + 60
+        while http.get(f"/v1/fits/{slow['id']}").json()["progress"]["stage"] == "starting":
+            assert time.monotonic() < deadline, "the job never reached its worker"
+            time.sleep(0.02)
         with BrokenStorage(data):
             health = wait_health(http, 503)
             assert health["status"] == "unavailable"
