@@ -257,6 +257,33 @@ class _Entry:
         self.call, self.out_def = call, out_def
 
 
+#: XLA options for brdffit's programs on the CPU. XLA's newer fusion emitters
+#: (the default since jax 0.5 or so) take ~1.7x the CPU time to compile our
+#: programs and run them no faster: measured on every built-in model, a cold
+#: ``auto`` compiled 45.7 s of programs with them and 25.7 s without, and the warm
+#: programs ran within this machine's noise of each other (bench/results/startup.md,
+#: docs/fitting.md). An XLA that no longer knows an option compiles without it.
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+_options_refused: set[str] = set()
+
+
+def _compile(lowered):
+    """``lowered`` compiled with :data:`CPU_COMPILER_OPTIONS` on the CPU (without,
+    where this XLA refuses one of them), as XLA's default elsewhere."""
+    import jax
+
+    options = {k: v for k, v in CPU_COMPILER_OPTIONS.items() if k not in _options_refused}
+    if not options or jax.default_backend() != "cpu":
+        return lowered.compile()
+    try:
+        return lowered.compile(compiler_options=options)
+    except Exception as e:  # noqa: BLE001 - an option this XLA has dropped or renamed
+        runtime.log.info("brdffit: XLA refused compiler options %s (%s); compiling "
+                         "without them", options, e)
+        _options_refused.update(options)
+        return lowered.compile()
+
+
 def jit(fn: Callable) -> Callable:
     """``fn`` compiled like ``equinox.filter_jit``, its executables kept on disk."""
     import equinox as eqx
@@ -294,7 +321,7 @@ def jit(fn: Callable) -> Callable:
         # code (its fused kernels are then "not found" when run): the one kept on
         # disk is compiled afresh, once per fingerprint.
         with _without_jax_cache() if to_store else contextlib.nullcontext():
-            compiled = lowered.compile()
+            compiled = _compile(lowered)
         events.append(Event(name, "compiled", t1 - t0, time.perf_counter() - t1))
         return _Entry(compiled, out_defs[0])
 

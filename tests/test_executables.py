@@ -201,3 +201,27 @@ def test_threads_compile_each_program_once_and_side_by_side_programs_all_run(cac
             np.testing.assert_allclose(np.asarray(run.result()), want, rtol=1e-12)
     made = [(e.name, e.how) for e in executables.events[before:]]
     assert sorted(how for _, how in made) == ["compiled", "compiled", "loaded"], made
+
+
+def test_programs_compile_with_brdffits_xla_options_and_without_those_xla_refuses(
+        cache, monkeypatch, caplog):
+    """brdffit's programs compile with :data:`executables.CPU_COMPILER_OPTIONS` (this
+    XLA takes them all); an option that an XLA does not know costs its speed only:
+    the program compiles without it, says so once, and gives the same values."""
+    wi, wo = _directions()
+    ggx = models.get("ggx")
+    params = {"kd": np.array([0.2, 0.1, 0.05]), "ks": np.array([0.5, 0.5, 0.5]),
+              "alpha": np.array(0.1), "f0": np.array(0.04)}
+    monkeypatch.setattr(executables, "_options_refused", set())
+    expected = np.asarray(_fresh(sphere.evaluate)(ggx, params, wi, wo))
+    assert executables._options_refused == set()  # none refused
+
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
+    monkeypatch.setattr(executables, "CPU_COMPILER_OPTIONS",
+                        {**executables.CPU_COMPILER_OPTIONS, "xla_cpu_no_such_option": True})
+    with caplog.at_level(logging.INFO, logger="brdffit"):
+        refused = np.asarray(_fresh(sphere.evaluate)(ggx, params, wi, wo))
+        np.asarray(_fresh(sphere.evaluate)(ggx, params, wi[:32], wo[:32]))
+    assert caplog.text.count("XLA refused compiler options") == 1
+    assert "xla_cpu_no_such_option" in executables._options_refused
+    np.testing.assert_allclose(refused, expected, rtol=1e-12)
