@@ -284,6 +284,51 @@ def _compile(lowered):
         return lowered.compile()
 
 
+#: How long a process waits for another one's compile of the same program before it
+#: compiles the program itself (the other may be stopped, not dead: a dead one's lock
+#: is released by the kernel). The longest single compile measured is ~4 s.
+COMPILE_WAIT_S = 300.0
+
+
+@contextlib.contextmanager
+def _compiling_elsewhere_waited(path: Path | None):
+    """Held while this process compiles the program to be kept at ``path``: another
+    process that wants it meanwhile waits here, then finds the file and loads it,
+    instead of compiling the same program at the same time (an exclusive ``flock``
+    on ``<path>.lock``; the kernel releases it when its holder dies). Where locking
+    is not possible (no cache, no ``fcntl``, a file system without locks) or the
+    wait runs past :data:`COMPILE_WAIT_S`, this process compiles it too."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        fcntl = None
+    if path is None or fcntl is None:
+        yield
+        return
+    try:
+        fd = os.open(path.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:  # a read-only cache: nothing will be stored either
+        yield
+        return
+    try:
+        deadline = time.monotonic() + COMPILE_WAIT_S
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:  # another process compiles it now
+                if time.monotonic() > deadline:
+                    runtime.log.info("brdffit: waited %.0f s for another process's compile "
+                                     "of %s; compiling it here", COMPILE_WAIT_S, path.name)
+                    break
+                time.sleep(0.05)
+            except OSError:  # no locks on this file system
+                break
+        yield  # closing the descriptor releases the lock
+    finally:
+        os.close(fd)
+
+
 def jit(fn: Callable) -> Callable:
     """``fn`` compiled like ``equinox.filter_jit``, its executables kept on disk."""
     import equinox as eqx
@@ -404,21 +449,36 @@ def jit(fn: Callable) -> Callable:
             if entry is not None:
                 return entry, None
             path = disk_path(leaves, treedef)
-            if path is not None and path.exists():
-                with _ready.exclusive():
-                    found = loaded_and_run(path, arrays)
-                if found is not None:  # already run once, to check it
-                    entries[key] = found[0]
+            found = loaded(path, key, arrays)
+            if found is not None:
+                return found
+            # one process compiles a program, the others wait for its file and load
+            # it: a batch's Dask workers, a service's worker processes, the tests'
+            # servers and CLIs all start at once on the same empty cache
+            with _compiling_elsewhere_waited(path):
+                found = loaded(path, key, arrays)
+                if found is not None:
                     return found
-            if on_compile is not None:
-                on_compile(name)
-            with _ready.shared():
-                entry = compile_entry(leaves, treedef, dynamic, path is not None)
-                out = jax.block_until_ready(entry.call(*arrays)) if run else None
-            if path is not None:
-                store(path, entry)
+                if on_compile is not None:
+                    on_compile(name)
+                with _ready.shared():
+                    entry = compile_entry(leaves, treedef, dynamic, path is not None)
+                    out = jax.block_until_ready(entry.call(*arrays)) if run else None
+                if path is not None:
+                    store(path, entry)
             entries[key] = entry
             return entry, out
+
+    def loaded(path: Path | None, key, arrays):
+        """(entry, its outputs) from the file at ``path``, kept in ``entries``; None
+        where there is no usable file."""
+        if path is None or not path.exists():
+            return None
+        with _ready.exclusive():
+            found = loaded_and_run(path, arrays)
+        if found is not None:  # already run once, to check it
+            entries[key] = found[0]
+        return found
 
     def ready(*args, **kwargs) -> None:
         """Make the program for these arguments ready, as a call would, without

@@ -9,6 +9,7 @@ import logging
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -225,3 +226,52 @@ def test_programs_compile_with_brdffits_xla_options_and_without_those_xla_refuse
     assert caplog.text.count("XLA refused compiler options") == 1
     assert "xla_cpu_no_such_option" in executables._options_refused
     np.testing.assert_allclose(refused, expected, rtol=1e-12)
+
+
+AT_ONCE_PROBE = r"""
+import json, os, sys, time
+import numpy as np
+import jax.numpy as jnp
+from brdffit import executables, models, runtime
+from brdffit.fitting import sphere
+from brdffit.fitting.problem import constrained
+rng = np.random.default_rng(0)
+wi, wo = (v / np.linalg.norm(v, axis=-1, keepdims=True)
+          for v in np.abs(rng.normal(size=(2, 4096, 3))))
+m = models.get("ggx2")
+with runtime.float64():
+    params = constrained(m, np.zeros(m.n_params))  # compiled before the signal
+jnp.zeros(1).block_until_ready()  # JAX started: both processes now wait for the signal
+open(sys.argv[2], "w").close()
+while not os.path.exists(sys.argv[1]):
+    time.sleep(0.005)
+with runtime.float64():
+    out = sphere.evaluate(m, params, wi, wo)
+print(json.dumps({"how": [e.how for e in executables.events if e.name.endswith(".evaluate")],
+                  "sum": float(out.sum())}))
+"""
+
+
+def test_processes_starting_at_once_compile_a_program_once(tmp_path):
+    """Processes that want the same program at the same moment (a batch's Dask
+    workers, a service's workers on an empty cache): one compiles it, the others
+    wait for its file and load it, and all get the same values."""
+    env = {**os.environ, "BRDFFIT_CACHE_DIR": str(tmp_path / "cache")}
+    go = tmp_path / "go"
+    procs = [subprocess.Popen([sys.executable, "-c", AT_ONCE_PROBE, str(go),
+                               str(tmp_path / f"ready{i}")], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in range(2)]
+    deadline = time.monotonic() + 120
+    while not all((tmp_path / f"ready{i}").exists() for i in range(2)):
+        assert time.monotonic() < deadline and all(p.poll() is None for p in procs), \
+            [p.communicate() for p in procs]
+        time.sleep(0.01)
+    go.touch()
+    outs = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=300)
+        assert p.returncode == 0, stderr
+        outs.append(json.loads(stdout.strip().splitlines()[-1]))
+    assert sorted(h for o in outs for h in o["how"]) == ["compiled", "loaded"]
+    assert outs[0]["sum"] == outs[1]["sum"]
