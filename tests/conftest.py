@@ -58,6 +58,7 @@ def pytest_sessionstart(session):
                             f"in {time.perf_counter() - t0:.0f} s")
 
 
+@pytest.hookimpl(tryfirst=True)  # before xdist turns the xdist_group marks into groups
 def pytest_collection_modifyitems(config, items):
     unmarked = [i.nodeid for i in items if _layer(i) is None]
     if unmarked:
