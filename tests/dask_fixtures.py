@@ -17,7 +17,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from brdffit.batch.cluster import local_worker_env
+from brdffit.batch.cluster import SINGLE_THREADED_XLA
 
 REPO = str(Path(__file__).resolve().parent.parent)
 
@@ -39,7 +39,9 @@ def separate_cluster(n_workers: int = 2, env: dict | None = None
 
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = {**(env or {**os.environ, "PYTHONPATH": REPO}), **local_worker_env(n_workers)}
+    env = env or {**os.environ, "PYTHONPATH": REPO}
+    if n_workers > 1:  # several on one machine: single-threaded XLA, as docs/batch.md says
+        env = {**env, "XLA_FLAGS": SINGLE_THREADED_XLA}
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
                                "--host", "127.0.0.1", "--port", str(port),

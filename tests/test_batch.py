@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_worker_env
+from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_cluster_options
 from brdffit.batch.job import BatchInputError, FitOptions, find_tables, run_batch
 from brdffit.batch.report import format_ranking, plot_summary, rank, summary_figure
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
@@ -59,7 +59,7 @@ def cluster():
     from distributed import LocalCluster
 
     c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                     dashboard_address="127.0.0.1:0", env=local_worker_env(2))
+                     dashboard_address="127.0.0.1:0", **local_cluster_options(2))
     try:
         yield c
     finally:
@@ -212,6 +212,73 @@ def test_dask_runner_runs_a_call_on_the_cluster(cluster, table_dir):
     runner = DaskRunner.from_env({SCHEDULER_ENV: cluster.scheduler_address})
     assert runner is not None and runner.address == cluster.scheduler_address
     runner.close()
+
+
+def _cores_and_fit_events(path: str) -> tuple[list[int], str, list[tuple[str, str]]]:
+    """In a worker: its cores, the key of its compiled programs on disk, and how its
+    programs for a fit it has not run before (no other test gives this cluster a
+    phong fit) were made ready (``brdffit.executables.events``: loaded or compiled)."""
+    from brdffit import executables, fit
+    from brdffit.io import merl
+
+    before = len(executables.events)
+    fit(merl.read(path), "phong", starts=1)
+    return (sorted(os.sched_getaffinity(0)), executables._fingerprint(),
+            [(e.how, e.name.rsplit(".", 1)[-1]) for e in executables.events[before:]])
+
+
+def test_local_workers_take_their_own_cores_and_load_what_others_compiled(cluster, table_dir):
+    """Local workers (``brdffit batch --workers N``) split the batch's cores between
+    them instead of running single-threaded XLA flags: no two fight over a core, and
+    they load the compiled fits that this process (``brdffit warmup``, any fit) keeps
+    rather than compiling their own (the flags were part of the programs' key)."""
+    from distributed import Client
+
+    from brdffit import executables, fit
+    from brdffit.io import merl
+
+    path = str(table_dir / "c_lambert.binary")
+    fit(merl.read(path), "phong", starts=1)  # compiled and kept here
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        workers = list(client.scheduler_info()["workers"])
+        assert len(workers) == 2
+        seen = [client.submit(_cores_and_fit_events, path, workers=[w], pure=False)
+                .result(timeout=300) for w in workers]
+    mine = sorted(os.sched_getaffinity(0))
+    (cores_0, key_0, events_0), (cores_1, key_1, events_1) = seen
+    if len(mine) >= 2:
+        assert not set(cores_0) & set(cores_1) and sorted(cores_0 + cores_1) == mine, seen
+    # the directory of this process's programs is theirs (with the flags it was not:
+    # they compiled each program once more between them, and kept it apart)
+    assert key_0 == key_1 == executables._fingerprint(), seen
+    solves = [how for how, name in events_0 + events_1 if name == "solve_batch"]
+    assert solves and set(solves) == {"loaded"}, seen
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("workers", "cores", "shares"), [
+    (2, [0, 1], [[0], [1]]),
+    (2, [0, 1, 2, 3, 4], [[0, 2, 4], [1, 3]]),
+    (3, [4, 7], [[4], [7], [4]]),  # more workers than cores: one core each, shared
+])
+def test_each_local_worker_gets_a_share_of_the_cores(workers, cores, shares):
+    from brdffit.batch.local_worker import core_share
+
+    assert [core_share(i, workers, cores) for i in range(workers)] == shares
+
+
+@pytest.mark.unit
+def test_a_lone_or_foreign_worker_keeps_its_cores(monkeypatch):
+    from brdffit.batch import local_worker
+
+    calls = []
+    monkeypatch.setattr(os, "sched_setaffinity", lambda pid, cores: calls.append(cores))
+    local_worker.take_cores(0, environ={})  # not started by brdffit's local cluster
+    local_worker.take_cores(0, environ={"BRDFFIT_LOCAL_WORKERS": "1"})
+    local_worker.take_cores("tcp://10.0.0.1:4000", environ={"BRDFFIT_LOCAL_WORKERS": "2"})
+    assert calls == []
+    local_worker.take_cores(1, environ={"BRDFFIT_LOCAL_WORKERS": "2"})
+    assert len(calls) == 1
 
 
 def test_dask_runner_reports_a_dead_worker():
@@ -560,7 +627,7 @@ def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path)
     --scheduler` submits to them."""
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, **local_worker_env(1), "PYTHONPATH": REPO}
+    env = {**os.environ, "PYTHONPATH": REPO}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
                                "--host", "127.0.0.1", "--port", str(port),
                                "--dashboard-address", "127.0.0.1:0"],

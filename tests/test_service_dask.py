@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from brdffit.batch.cluster import local_worker_env
+from brdffit.batch.cluster import local_cluster_options
 from brdffit.client import Client
 from tests.api_fixtures import FAST, SLOW_JOB, Server, table_bytes, write
 
@@ -17,7 +17,7 @@ def test_jobs_run_on_the_dask_cluster(tmp_path):
     from distributed import LocalCluster
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address="127.0.0.1:0", env=local_worker_env(1)) as cluster:
+                      dashboard_address="127.0.0.1:0", **local_cluster_options(1)) as cluster:
         env = {"BRDFFIT_DASK_SCHEDULER": cluster.scheduler_address}
         with Server(tmp_path / "srv", env=env) as srv, Client(srv.url) as c:
             path = write(tmp_path / "lambert.binary", table_bytes("lambert"))

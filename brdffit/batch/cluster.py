@@ -3,8 +3,9 @@
 - :func:`connect` gives a ``distributed.Client``: to an existing scheduler
   (``tcp://HOST:PORT``) or to a fresh ``LocalCluster`` of worker *processes* on
   loopback, one thread each (a JAX fit already uses the cores it is given; two
-  fits in one process would only contend for its XLA threads), single-threaded
-  when there are several (:func:`local_worker_env`).
+  fits in one process would only contend for its XLA threads), each on its own
+  share of the cores when there are several (:func:`local_worker_env`,
+  ``brdffit.batch.local_worker``).
 - :class:`DaskRunner` runs one call on a cluster for a job runner that is not a
   batch (the REST service): ``DaskRunner.from_env()`` reads
   ``BRDFFIT_DASK_SCHEDULER``.
@@ -26,16 +27,34 @@ from brdffit import extras
 SCHEDULER_ENV = "BRDFFIT_DASK_SCHEDULER"
 #: XLA's CPU backend spreads one fit over every core it sees. Several worker
 #: processes doing that on the same cores fight: measured here, 2 workers on 2
-#: cores fitted no faster than 1 until each was made single-threaded.
+#: cores fitted no faster than 1 until each was made single-threaded. Workers
+#: started by hand (``dask worker --nworkers N`` on one machine, docs/batch.md) are
+#: made so with these flags.
 SINGLE_THREADED_XLA = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+#: How many local workers share this machine's cores: set for them by
+#: :func:`local_worker_env`, read by ``brdffit.batch.local_worker`` as each starts.
+LOCAL_WORKERS_ENV = "BRDFFIT_LOCAL_WORKERS"
 
 
 def local_worker_env(workers: int, environ=os.environ) -> dict[str, str]:
-    """Environment for local worker processes: single-threaded XLA when there are
-    several of them, unless the user chose ``XLA_FLAGS`` already."""
+    """Environment for local worker processes, when there are several: their count,
+    by which each worker (``brdffit.batch.local_worker``) takes its own share of the
+    cores; unless the user chose ``XLA_FLAGS``, which are then left to decide.
+
+    Not ``XLA_FLAGS`` of ours: they are part of the compiled programs' fingerprint
+    (``brdffit.executables``), so workers with them could not load what ``brdffit
+    warmup`` and every other process compiled, and compiled it all again."""
     if workers > 1 and "XLA_FLAGS" not in environ:
-        return {"XLA_FLAGS": SINGLE_THREADED_XLA}
+        return {LOCAL_WORKERS_ENV: str(workers)}
     return {}
+
+
+def local_cluster_options(workers: int, environ=os.environ) -> dict:
+    """The ``LocalCluster`` keywords that make its ``workers`` worker processes
+    brdffit's: their environment, and ``brdffit.batch.local_worker`` preloaded
+    (each takes its share of the cores and ignores Ctrl-C)."""
+    return {"env": local_worker_env(workers, environ),
+            "preload": ["brdffit.batch.local_worker"]}
 
 
 def require_dask() -> None:
@@ -66,10 +85,7 @@ def connect(workers: int = 1, scheduler: str | None = None,
         cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
             dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR,
-            env=local_worker_env(workers),
-            # Ctrl-C reaches these workers too (same process group): they ignore it
-            # and are stopped by this process instead (brdffit.batch.local_worker).
-            preload=["brdffit.batch.local_worker"],
+            **local_cluster_options(workers),
         )
     except (RuntimeError, OSError, TimeoutError) as e:
         # e.g. "Nanny failed to start" where worker processes cannot start (a

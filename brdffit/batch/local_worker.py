@@ -1,17 +1,28 @@
 """Preloaded into the local Dask worker processes of a batch (``brdffit batch --workers
 N``): ``distributed`` calls :func:`dask_setup` in each worker as it starts.
 
-A Ctrl-C at a terminal signals the whole process group, and local workers are in
-the batch's group: each died of its own ``KeyboardInterrupt`` in the middle of a
-fit, printing a 30-line traceback under the batch's one-line message. The batch
-process owns its workers and stops them itself when it is interrupted (it cancels
-their tasks and closes the cluster), so a worker ignores SIGINT.
+- **Ctrl-C.** A Ctrl-C at a terminal signals the whole process group, and local
+  workers are in the batch's group: each died of its own ``KeyboardInterrupt`` in
+  the middle of a fit, printing a 30-line traceback under the batch's one-line
+  message. The batch process owns its workers and stops them itself when it is
+  interrupted (it cancels their tasks and closes the cluster), so a worker ignores
+  SIGINT.
+- **Cores.** XLA sizes its CPU thread pools by the cores a process may run on, when
+  JAX first runs (after this, in the worker's first task). Worker ``i`` of ``N``
+  (``BRDFFIT_LOCAL_WORKERS``) is given cores ``i, i + N, ...`` of the batch's own
+  (one core each on a machine with no more cores than workers): the workers do not
+  fight over cores, as with single-threaded XLA flags, but their programs are those
+  every other brdffit process compiles and keeps (the flags are part of their
+  fingerprint), and each worker still uses every core of its share.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
+
+from brdffit.batch.cluster import LOCAL_WORKERS_ENV, SINGLE_THREADED_XLA
 
 
 def dask_setup(worker) -> None:
@@ -19,3 +30,27 @@ def dask_setup(worker) -> None:
     # handlers can be set; elsewhere there is nothing to undo.
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    take_cores(worker.name)
+
+
+def core_share(index: int, workers: int, cores: list[int]) -> list[int]:
+    """The cores of worker ``index`` of ``workers`` among ``cores``: every
+    ``workers``-th from its own, or one core where the workers outnumber them."""
+    if workers <= len(cores):
+        return cores[index % workers::workers]
+    return [cores[index % len(cores)]]
+
+
+def take_cores(name, environ=os.environ) -> None:
+    """Keep this process to its share of the cores (:func:`core_share`), where it is
+    one of several local workers (``LocalCluster`` names them 0, 1, ...)."""
+    try:
+        workers = int(environ.get(LOCAL_WORKERS_ENV, "0"))
+    except ValueError:
+        return
+    if workers < 2 or not isinstance(name, int) or name < 0:
+        return
+    if not hasattr(os, "sched_setaffinity"):  # macOS: no affinity, the flags instead
+        os.environ.setdefault("XLA_FLAGS", SINGLE_THREADED_XLA)
+        return
+    os.sched_setaffinity(0, core_share(name, workers, sorted(os.sched_getaffinity(0))))
