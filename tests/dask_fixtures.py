@@ -40,7 +40,9 @@ def separate_cluster(n_workers: int = 2, env: dict | None = None
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = env or {**os.environ, "PYTHONPATH": REPO}
-    if n_workers > 1:  # several on one machine: single-threaded XLA, as docs/batch.md says
+    if n_workers > 1 and "XLA_FLAGS" not in env:
+        # several on one machine: single-threaded XLA, as docs/batch.md says (flags the
+        # developer set are theirs, as brdffit's own local workers leave them)
         env = {**env, "XLA_FLAGS": SINGLE_THREADED_XLA}
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
