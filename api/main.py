@@ -24,7 +24,7 @@ from api.routes import docs, exports, fits, health, materials, models, page, tab
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
 from api.store import Store
-from brdffit.view.plots import KINDS as PLOT_KINDS
+from brdffit.view.kinds import KINDS as PLOT_KINDS
 
 log = logging.getLogger("brdffit.api")
 

@@ -36,18 +36,24 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 
-import jax.numpy as jnp
 import numpy as np
 
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
-from brdffit.fitting.options import DEFAULT_TOLERANCE, FIT_KEYWORDS
-from brdffit.fitting.problem import constrained
+from brdffit.fitting.options import (
+    DEFAULT_MAX_STEPS,
+    DEFAULT_STARTS,
+    DEFAULT_TOLERANCE,
+    FIT_KEYWORDS,
+)
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
-from brdffit.fitting.sphere import SphereReference, evaluate
 from brdffit.io.merl import MerlTable
-from brdffit.models.mono_ks import MonoKs, specular_colour_specs
+
+# The modules that compute with JAX (the problem, the sphere renders, the grey-ks
+# model) are imported by the functions that fit and render, not here: the service's
+# front imports this module for the one "best" rule (``chosen_result``) and
+# starts without JAX (tests/test_api.py checks the running server).
 
 #: auto's candidates, cheapest first: the registry's models that declare themselves
 #: candidates (``AbstractBRDFModel.auto_candidate``; lambert, oren_nayar, blinn_phong,
@@ -108,6 +114,10 @@ EVAL_COST_PAIRS = 100_000
 @functools.cache
 def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
     """The model, its default parameters (float32) and ``n`` random direction pairs."""
+    import jax.numpy as jnp
+
+    from brdffit.fitting.problem import constrained
+
     m = models.get(model_name)
     rng = np.random.default_rng(0)
     v = rng.normal(size=(2, n, 3))
@@ -123,6 +133,8 @@ def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
 def ready_eval_cost(model_name: str) -> None:
     """Compile (or load) the evaluation that :func:`eval_cost_ns` times, without
     timing it: threads may make several ready side by side."""
+    from brdffit.fitting.sphere import evaluate
+
     evaluate.ready(*_eval_cost_inputs(model_name))
 
 
@@ -137,6 +149,8 @@ def eval_cost_ns(model_name: str, repeats: int = 7) -> float:
     values depend on the machine; the ratios between models are what the ranking
     is for.
     """
+    from brdffit.fitting.sphere import evaluate
+
     m, params, wi, wo = _eval_cost_inputs(model_name)
     # the renders' compiled evaluation: kept on disk, so a new process's first
     # `auto` loads it instead of compiling one per candidate
@@ -155,6 +169,8 @@ def eval_cost_ns(model_name: str, repeats: int = 7) -> float:
 def grey_spread(model: models.AbstractBRDFModel, params: dict) -> float | None:
     """(max - min) / max over R, G, B of the specular scales (worst of ks, ks1, ks2);
     0 for no specular at all; ``None`` for a model without a specular colour."""
+    from brdffit.models.mono_ks import MonoKs, specular_colour_specs
+
     specs = specular_colour_specs(model) if not isinstance(model, MonoKs) else ()
     if not specs:
         return None
@@ -175,6 +191,8 @@ def bic(log_rmse: float, n_bins: int, n_params: int) -> float:
 def _order(candidates) -> list[models.AbstractBRDFModel]:
     """Candidates as models, cheapest first in the registry's order (a grey-ks variant
     just before its base model); unknown names raise ``UnknownModelError``."""
+    from brdffit.models.mono_ks import MonoKs
+
     ms = [models.get(c) for c in candidates]
     if not ms:
         raise FitInputError("select needs at least one candidate model")
@@ -256,6 +274,8 @@ def select(
     if threads is not None and not (isinstance(threads, int) and threads >= 1):
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
     ordered = _order(candidates)
+    from brdffit.fitting.sphere import SphereReference
+
     reference = None if image_size is None else SphereReference(table, image_size)
     _measure_eval_costs(ordered)
 
@@ -435,7 +455,6 @@ def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:
     """The candidate's fit, seeded from its parent's when it has one; refitted once
     with more starts and steps when it did not converge, so that the choice rests
     on optima (an unconverged error would make a model look worse than it is)."""
-    from brdffit.fitting.problem import DEFAULT_MAX_STEPS, DEFAULT_STARTS
 
     parent = {"parent_fit": fits[m.parent]} if m.parent in fits else {}
     r = fit_in_scene(table, m, scene, **parent, **fit_options)
@@ -543,10 +562,13 @@ def chosen_result(results: list[dict]) -> dict:
     for r in results:
         if r.get("selection"):
             return r
+    # counted from the models' descriptions, without JAX (the service's front asks);
+    # a `_mono` variant has none of its own, so is built to count
+    described = {d["name"]: d["n_params"] for d in models.catalogue.describe()}
     rows = []
     for i, r in enumerate(results):
         try:
-            n_params = models.get(r["model"]).n_params
+            n_params = described.get(r["model"]) or models.get(r["model"]).n_params
         except models.UnknownModelError:  # stored by a version with another registry
             n_params = math.inf
         e = r["error"].get("log_rmse")
@@ -557,6 +579,8 @@ def chosen_result(results: list[dict]) -> dict:
 
 def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):
     """The chosen model refitted with a grey ks, started from its RGB fit."""
+    from brdffit.models.mono_ks import MonoKs, specular_colour_specs
+
     mono_model = MonoKs(model)
     init = dict(rgb_fit.params)
     for s in specular_colour_specs(model):

@@ -163,6 +163,12 @@ class Server:
         return [p.pid for p in processes()
                 if p.parent == self.proc.pid and b"spawn_main" in p.cmdline]
 
+    def mapped_files(self, pid: int | None = None) -> set[str]:
+        """The files the server process (or ``pid``) has mapped: its shared
+        libraries, so what it has imported of JAX or matplotlib, from /proc."""
+        maps = Path(f"/proc/{pid or self.proc.pid}/maps").read_text()
+        return {line.split(None, 5)[5] for line in maps.splitlines() if len(line.split()) == 6}
+
     def group_alive(self) -> bool:
         """Does any process of the server's group (server, workers, multiprocessing's
         resource tracker) still run? A zombie does not count: an orphan's exit is

@@ -310,6 +310,29 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
                         params={"exposure_ev": bad}).status_code == 422
 
 
+def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_id):
+    """The server process checks requests, queues jobs and picks a job's chosen fit;
+    its workers fit and draw. The front loads neither JAX nor matplotlib, so it
+    answers a second after start instead of three; the worker loads both."""
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": ["lambert", "oren_nayar"],
+                                    "options": FAST})
+    assert r.status_code == 202, r.text
+    done = wait_status(http, r.json()["id"], ("done", "failed"))
+    assert done["status"] == "done" and done["result"]["model"] in ("lambert", "oren_nayar")
+    assert http.get(f"/v1/fits/{done['id']}/plots/report.png").status_code == 200
+    assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "auto", "options": {
+        **FAST, "candidates": ["lambert", "no_such_model"]}}), 422, "no_such_model")
+
+    def libraries(pid=None):
+        return {part for f in server.mapped_files(pid) if ".so" in f for part in Path(f).parts
+                if part in ("jaxlib", "matplotlib")}
+
+    front = libraries()
+    assert not {"jaxlib", "matplotlib"} & front, sorted(front)
+    worker = set().union(*(libraries(pid) for pid in server.worker_pids()))
+    assert {"jaxlib", "matplotlib"} <= worker, sorted(worker)
+
+
 def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, table_id):
     """A worker that dies (OOM killer, say) is replaced and its job runs again,
     saying why."""

@@ -47,7 +47,7 @@ def test_fit_signature_and_select_take_the_contract_defaults():
 
 def test_defaults_are_the_library_constants():
     # the named constants, not copies of their values: a retune moves every shell
-    from brdffit.fitting.problem import DEFAULT_MAX_STEPS, DEFAULT_STARTS
+    from brdffit.fitting.options import DEFAULT_MAX_STEPS, DEFAULT_STARTS
     from brdffit.fitting.sampling import DEFAULT_SAMPLES
 
     o = FitOptions()

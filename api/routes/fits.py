@@ -40,7 +40,7 @@ from brdffit.fitting import options
 from brdffit.fitting.result import SCHEMA, FitResult
 from brdffit.fitting.scene import Scene, SceneError
 from brdffit.selection import chosen_result
-from brdffit.view.plots import EXPOSURE_EV_RANGE, KINDS, exposure_refused
+from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, exposure_refused
 
 log = logging.getLogger("brdffit.api")
 

@@ -21,7 +21,7 @@ from brdffit.models.catalogue import AUTO  # no JAX for `brdffit --help`
 
 
 def add_arguments(p) -> None:
-    from brdffit.fitting.loss import DEFAULT_LOSS, LOSSES
+    from brdffit.fitting.options import DEFAULT_LOSS, LOSSES
     from brdffit.selection import DEFAULT_CANDIDATES
 
     # auto first: it fits its candidates side by side, so their programs compile in

@@ -48,13 +48,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from brdffit.fitting.options import DEFAULT_LOSS, LOSSES
 from brdffit.models import AbstractBRDFModel
 from brdffit.models.base import ParamSpec
 from brdffit.models.frame import Frame
 
-#: The losses a fit can minimise; the first is the default.
-LOSSES = ("log", "cube_root", "linear_cos", "render")
-DEFAULT_LOSS = "log"
+# LOSSES and DEFAULT_LOSS, the names, are declared with the other options
+# (``brdffit.fitting.options``); each loss is implemented here.
 #: The full-table metric that each loss is the (weighted) mean square of: every
 #: result reports all three, whatever was optimised. The render loss has no
 #: full-table metric (it is defined on its views): results report

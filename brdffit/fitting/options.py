@@ -4,10 +4,14 @@ Every shell takes its options from here rather than declaring its own: the CLI
 builds ``brdffit fit`` and ``brdffit batch`` arguments from the fields
 (``brdffit.cli.fit``), the service builds its request schema's defaults and
 bounds from them (``api/routes/fits.py``), and a batch identifies a finished fit
-by :meth:`FitOptions.key`. The defaults are the library's own constants
-(``DEFAULT_SAMPLES``, ``DEFAULT_STARTS``, ``DEFAULT_MAX_STEPS``, ...), so a default
-retuned there is retuned in every shell and in the docs (``python -m
+by :meth:`FitOptions.key`. The defaults and the choices are declared here
+(``DEFAULT_STARTS``, ``LOSSES``, ...; ``DEFAULT_SAMPLES`` beside the sampling it
+sizes) and ``brdffit.fit``'s signature takes them from here, so a default retuned
+here is retuned in every shell and in the docs (``python -m
 brdffit.fitting.options --docs`` rewrites their tables; a test checks them).
+
+This module imports no JAX: the service's front checks requests with it and
+starts in a second instead of three (``tests/test_api.py`` checks the running server).
 
 Each field carries an :class:`Option` in its metadata: its one-line meaning and
 its valid range, which :class:`FitOptions` enforces on construction, so an
@@ -17,15 +21,11 @@ options object that exists is one a fit accepts.
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import math
 from dataclasses import dataclass
 
 from brdffit import jsonout, models
 from brdffit.errors import FitInputError
-from brdffit.fitting.loss import LOSSES
-from brdffit.fitting.pipeline import fit
-from brdffit.fitting.problem import DEFAULT_MAX_STEPS, DEFAULT_STARTS, PRECISIONS, SOLVERS
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.io.angles import N_PHI_D, N_THETA_D, N_THETA_H
 from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name
@@ -40,9 +40,25 @@ FIT_KEYWORDS = ("loss", "solver", "samples", "precision", "starts", "max_steps",
 SELECTION_KEYWORDS = ("tolerance", "budget")
 N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
-# fit()'s signature is where the defaults without a named constant (model,
-# solver, precision, seed) are declared; reading them here keeps it so.
-_FIT_DEFAULTS = {n: p.default for n, p in inspect.signature(fit).parameters.items()}
+DEFAULT_MODEL = "ggx"
+#: The losses a fit can minimise (each implemented in ``brdffit.fitting.loss``).
+LOSSES = ("log", "cube_root", "linear_cos", "render")
+DEFAULT_LOSS = "log"
+#: "lm" is brdffit's normal-equations Levenberg-Marquardt (``brdffit.fitting.solver``);
+#: "optx-lm" is optimistix's own, kept for comparison.
+SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
+DEFAULT_SOLVER = "lm"
+#: Floating point precisions of the solve (``brdffit.fitting.problem.DTYPES``).
+PRECISIONS = ("float64", "float32")
+DEFAULT_PRECISION = "float64"
+#: One start suffices on every case of the stability suite: the starts are scored
+#: on a lobe-shape grid first, so the best one is already in the right basin.
+#: More starts (refined side by side with vmap) cost ~linearly more.
+DEFAULT_STARTS = 1
+#: Steps per start. A default fit of a real material converges in 3-80 steps
+#: (bench/results/real_materials.md); the limit only ends a fit that cannot.
+DEFAULT_MAX_STEPS = 256
+DEFAULT_SEED = 0
 
 
 @dataclass(frozen=True)
@@ -128,21 +144,21 @@ class FitOptions:
     """
 
     model: str = _option(
-        _FIT_DEFAULTS["model"], kind=str, words="a model name, or auto",
+        DEFAULT_MODEL, kind=str, words="a model name, or auto",
         doc="model name (see `brdffit models`), or 'auto' to choose one (docs/selection.md)")
     loss: str = _option(
-        _FIT_DEFAULTS["loss"], kind=str, choices=LOSSES,
+        DEFAULT_LOSS, kind=str, choices=LOSSES,
         doc="what the solver minimises: log (log1p(f cos), default), cube_root, linear_cos "
             "(f cos), or render (tone-mapped sphere renders under eight lights, exposed per "
             "channel); every metric is reported whatever the choice (docs/fitting.md)")
     solver: str = _option(
-        _FIT_DEFAULTS["solver"], kind=str, choices=SOLVERS,
+        DEFAULT_SOLVER, kind=str, choices=SOLVERS,
         doc="least-squares solver; lm is brdffit's Levenberg-Marquardt")
     samples: int | None = _option(
         DEFAULT_SAMPLES, kind=int, least=64, most=N_BINS, none="every bin; slow", cli_none="all",
         doc="bins the solver sees (stratified subsample); the error is always on the full table")
     precision: str = _option(
-        _FIT_DEFAULTS["precision"], kind=str, choices=tuple(PRECISIONS),
+        DEFAULT_PRECISION, kind=str, choices=PRECISIONS,
         doc="floating point precision of the solve")
     starts: int = _option(
         DEFAULT_STARTS, kind=int, least=1, most=32,
@@ -153,10 +169,10 @@ class FitOptions:
         DEFAULT_MAX_STEPS, kind=int, least=1, most=10_000,
         doc="solver step limit per start; running out is reported, not raised")
     seed: int = _option(
-        _FIT_DEFAULTS["seed"], kind=int, least=0, most=2**32 - 1,
+        DEFAULT_SEED, kind=int, least=0, most=2**32 - 1,
         doc="subsample seed: a fit is deterministic for a given seed")
     physical: bool = _option(
-        _FIT_DEFAULTS["physical"], kind=bool,
+        False, kind=bool,
         doc="physically bounded fit: directional albedo <= 1 at every incidence and "
             "reflectances <= 1; the result's `physical` reports the cost (docs/fitting.md)")
     tolerance: float = _option(
@@ -197,9 +213,10 @@ class FitOptions:
         """:meth:`key` of fit keywords as a results file stored them, not checked
         again: a file written under other ranges must still resume. A keyword the
         file lacks (written before the option existed) takes today's default."""
-        d = {name: fit_keywords.get(name, _FIT_DEFAULTS.get(name)) for name in FIT_KEYWORDS}
+        defaults = {f.name: f.default for f in dataclasses.fields(FitOptions)}
+        d = {name: fit_keywords.get(name, defaults[name]) for name in FIT_KEYWORDS}
         for name in ("loss", "physical"):
-            if d[name] == _FIT_DEFAULTS[name]:
+            if d[name] == defaults[name]:
                 # keys written before the option existed stay the same: resume skips them
                 del d[name]
         return jsonout.dumps(d, sort_keys=True, separators=(",", ":"))

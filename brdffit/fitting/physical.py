@@ -63,7 +63,8 @@ from brdffit.fitting.loss import (
     residuals,
     sum_squares,
 )
-from brdffit.fitting.problem import DEFAULT_MAX_STEPS, plain_params
+from brdffit.fitting.options import DEFAULT_MAX_STEPS
+from brdffit.fitting.problem import plain_params
 from brdffit.fitting.quality import quality
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
@@ -398,7 +399,7 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
                             _at_upper(model, free.params) + _binding(before), 1.0))
 
     bounded = PhysicalRanges(model)
-    dtype = problem.PRECISIONS[precision]
+    dtype = problem.DTYPES[precision]
     prep = problem.prepare(table, bin_weight, samples, seed, precision, loss)
     grid = albedo_grid(jnp.dtype(dtype).name)
 

@@ -27,18 +27,23 @@ import numpy as np
 
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
-from brdffit.fitting.loss import (
+from brdffit.fitting.loss import LOSS_METRIC
+from brdffit.fitting.options import (
     DEFAULT_LOSS,
-    LOSS_METRIC,
+    DEFAULT_MAX_STEPS,
+    DEFAULT_MODEL,
+    DEFAULT_PRECISION,
+    DEFAULT_SEED,
+    DEFAULT_SOLVER,
+    DEFAULT_STARTS,
     LOSSES,
+    PRECISIONS,
+    SOLVERS,
 )
 from brdffit.fitting.physical import bound
 from brdffit.fitting.problem import (
-    DEFAULT_MAX_STEPS,
-    DEFAULT_STARTS,
+    DTYPES,
     LIVE_U,
-    PRECISIONS,
-    SOLVERS,
     STEP_CAP,
     cached,
     constrained,
@@ -66,15 +71,15 @@ from brdffit.io.merl import MerlTable
 @runtime.in_float64
 def fit(
     table: MerlTable,
-    model: str | models.AbstractBRDFModel = "ggx",
+    model: str | models.AbstractBRDFModel = DEFAULT_MODEL,
     *,
     loss: str = DEFAULT_LOSS,
-    solver: str = "lm",
+    solver: str = DEFAULT_SOLVER,
     samples: int | None = DEFAULT_SAMPLES,
-    precision: str = "float64",
+    precision: str = DEFAULT_PRECISION,
     starts: int = DEFAULT_STARTS,
     max_steps: int = DEFAULT_MAX_STEPS,
-    seed: int = 0,
+    seed: int = DEFAULT_SEED,
     init: dict | None = None,
     bin_weight: np.ndarray | None = None,
     parent_fit: FitResult | None = None,
@@ -159,7 +164,7 @@ def fit(
             f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
             f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
         )
-    dtype = PRECISIONS[precision]
+    dtype = DTYPES[precision]
 
     again = dict(loss=loss, solver=solver, precision=precision, starts=starts,
                  max_steps=max_steps, seed=seed, bin_weight=bin_weight)

@@ -37,7 +37,6 @@ import numpy as np
 from brdffit import executables, models, runtime
 from brdffit.fitting import render_loss
 from brdffit.fitting.loss import (
-    DEFAULT_LOSS,
     SELECTABLE,
     SELECTED,
     LossData,
@@ -50,6 +49,7 @@ from brdffit.fitting.loss import (
     sum_squares,
     tone,
 )
+from brdffit.fitting.options import DEFAULT_LOSS, PRECISIONS
 from brdffit.fitting.sampling import (
     bin_weights,
     padded,
@@ -65,14 +65,8 @@ from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.models.frame import Frame, shading_frame
 
-PRECISIONS = {"float64": jnp.float64, "float32": jnp.float32}
-#: One start suffices on every case of the stability suite: the starts are scored
-#: on a lobe-shape grid first, so the best one is already in the right basin.
-#: More starts (refined side by side with vmap) cost ~linearly more.
-DEFAULT_STARTS = 1
-#: Steps per start. A default fit of a real material converges in 3-80 steps
-#: (bench/results/real_materials.md); the limit only ends a fit that cannot.
-DEFAULT_MAX_STEPS = 256
+#: The dtype of each precision a fit may be asked for (``FitOptions.precision``).
+DTYPES = {name: getattr(jnp, name) for name in PRECISIONS}  # jnp.float64, jnp.float32
 #: The largest ``max_steps`` that the "lm" solve takes as data (a traced limit, one
 #: compiled solve for every value up to it: ``FitOptions`` allows no more); a larger
 #: one is a static argument of its own solve.
@@ -94,7 +88,7 @@ def solver_for(name: str, precision: str):
     # float32 cannot resolve relative changes much below 1e-6: looser tolerances
     # there stop the solver at its attainable accuracy instead of at max_steps.
     rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
-    gtol = solvers.gtol_for(PRECISIONS[precision])
+    gtol = solvers.gtol_for(DTYPES[precision])
     return {
         "lm": lambda: solvers.NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
         "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
@@ -102,10 +96,6 @@ def solver_for(name: str, precision: str):
         "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
     }[name]()
 
-
-#: "lm" is brdffit's normal-equations Levenberg-Marquardt (``brdffit.fitting.solver``);
-#: "optx-lm" is optimistix's own, kept for comparison.
-SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 
 
 # -- compiled pieces -----------------------------------------------------------
@@ -616,7 +606,7 @@ def prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
             _, sample_set = _weights_and_samples(counts.usable & (views > 0), views,
                                                  "render-views", samples, seed)
         sample_set = padded(sample_set)  # one compiled fit for every count up to a bucket
-        data = sample_data(table, sample_set.index, sample_set.weight, PRECISIONS[precision],
+        data = sample_data(table, sample_set.index, sample_set.weight, DTYPES[precision],
                            loss)
         return Prepared(counts, n_usable, weight, sample_set, data, peak_bin(table, weight),
                          brightest, table_hints(table, counts.usable))

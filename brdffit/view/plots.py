@@ -53,8 +53,7 @@ from brdffit.io.angles import (
 )
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
-
-KINDS = ("slices", "error_map", "spheres", "polar", "report")
+from brdffit.view.kinds import KINDS, check_exposure_ev, exposure_refused
 
 CHANNELS = (("R", "#d62728"), ("G", "#2ca02c"), ("B", "#1f77b4"))
 #: Rec. 709 luminance weights, for the one-curve-per-angle plots.
@@ -335,23 +334,6 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
     return ratio, colour
 
 
-#: Exposure changes (stops, EV) a sphere plot accepts: +-6 stops span a 4096x range,
-#: from a black coating's diffuse to a mirror's highlight.
-EXPOSURE_EV_RANGE = (-6.0, 6.0)
-
-
-def check_exposure_ev(exposure_ev: float) -> float:
-    """``exposure_ev`` as a float, or ValueError naming the accepted range."""
-    lo, hi = EXPOSURE_EV_RANGE
-    try:
-        ev = float(exposure_ev)
-    except (TypeError, ValueError):
-        raise ValueError(f"exposure_ev must be a number of stops, got {exposure_ev!r}") from None
-    if not lo <= ev <= hi:  # NaN fails this too
-        raise ValueError(f"exposure_ev must be within {lo:g}..{hi:+g} stops, got {exposure_ev!r}")
-    return ev
-
-
 def _composite(rad: np.ndarray, coverage: np.ndarray, background: np.ndarray,
                exposure_ev: float = 0.0) -> np.ndarray:
     # before the tone curve, as a camera's exposure: the highlight compresses, the
@@ -626,23 +608,10 @@ RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
 }
 
 
-#: The plots that show sphere renders, so take an ``exposure_ev``.
-EXPOSED_KINDS = ("spheres", "report")
-
-
-def exposure_refused(kind: str, exposure_ev: float) -> str | None:
-    """Why plot ``kind`` cannot take ``exposure_ev`` (a plot without sphere renders
-    and a non-zero exposure), or None: the service refuses the request with it."""
-    if exposure_ev and kind not in EXPOSED_KINDS:
-        return (f"the {kind} plot has no sphere renders to expose; "
-                f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
-    return None
-
-
 def render(kind: str, table: MerlTable, result: FitResult | dict,
            exposure_ev: float = 0.0) -> bytes:
     """The plot called ``kind`` (one of :data:`KINDS`) as PNG bytes; ``exposure_ev``
-    (stops) for the kinds with sphere renders (:data:`EXPOSED_KINDS`), refused for
+    (stops) for the kinds with sphere renders (``brdffit.view.kinds.EXPOSED_KINDS``), refused for
     the others rather than ignored."""
     if kind not in RENDERERS:
         raise ValueError(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")

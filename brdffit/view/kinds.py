@@ -1,0 +1,39 @@
+"""The plots there are and what each accepts, as names and ranges only.
+
+:mod:`brdffit.view.plots` draws them (matplotlib and JAX); the shells that only
+offer or check a plot request read this module instead, so the service's front
+starts without either (tests/test_api.py checks the running server).
+"""
+
+from __future__ import annotations
+
+#: Every plot of a fit, in the order a person reads them.
+KINDS = ("slices", "error_map", "spheres", "polar", "report")
+
+#: The plots that show sphere renders, so take an ``exposure_ev``.
+EXPOSED_KINDS = ("spheres", "report")
+
+#: Exposure changes (stops, EV) a sphere plot accepts: +-6 stops span a 4096x range,
+#: from a black coating's diffuse to a mirror's highlight.
+EXPOSURE_EV_RANGE = (-6.0, 6.0)
+
+
+def check_exposure_ev(exposure_ev: float) -> float:
+    """``exposure_ev`` as a float, or ValueError naming the accepted range."""
+    lo, hi = EXPOSURE_EV_RANGE
+    try:
+        ev = float(exposure_ev)
+    except (TypeError, ValueError):
+        raise ValueError(f"exposure_ev must be a number of stops, got {exposure_ev!r}") from None
+    if not lo <= ev <= hi:  # NaN fails this too
+        raise ValueError(f"exposure_ev must be within {lo:g}..{hi:+g} stops, got {exposure_ev!r}")
+    return ev
+
+
+def exposure_refused(kind: str, exposure_ev: float) -> str | None:
+    """Why plot ``kind`` cannot take ``exposure_ev`` (a plot without sphere renders
+    and a non-zero exposure), or None: the service refuses the request with it."""
+    if exposure_ev and kind not in EXPOSED_KINDS:
+        return (f"the {kind} plot has no sphere renders to expose; "
+                f"exposure_ev applies to {', '.join(EXPOSED_KINDS)}")
+    return None
