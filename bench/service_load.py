@@ -54,7 +54,7 @@ MiB = 1024 * 1024
 TERMINAL = ("done", "failed", "cancelled")
 
 
-def _free_port() -> int:
+def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -126,7 +126,7 @@ def _seconds(a: str | None, b: str | None) -> float | None:
 
 
 def start_server(data_dir: Path, workers: int, env: dict) -> tuple[subprocess.Popen, str]:
-    port = _free_port()
+    port = free_port()
     log = open(data_dir / "server.log", "ab")
     proc = subprocess.Popen(
         [sys.executable, "-m", "brdffit.cli", "serve", "--host", "127.0.0.1", "--port",

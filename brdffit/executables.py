@@ -419,8 +419,11 @@ def jit(fn: Callable) -> Callable:
         """The executable kept at ``path`` and its outputs on ``arrays``, or None when
         it is missing, does not load or does not run (its file is then removed)."""
         t0 = time.perf_counter()
-        entry = load(path) if path.exists() else None
-        if entry is None:
+        if not path.exists():
+            return None
+        entry = load(path)
+        if entry is None:  # damaged (written whole, then spoilt): read once, not again
+            path.unlink(missing_ok=True)
             return None
         try:
             out = jax.block_until_ready(entry.call(*arrays))

@@ -150,6 +150,19 @@ def test_arguments_key_the_stored_executables(cache, caplog):
     assert len(_stored(cache)) == 3
 
 
+def test_a_damaged_file_is_read_once_then_replaced(cache, caplog):
+    wi, wo = _directions()
+    kd = {"kd": np.array([0.5, 0.4, 0.3])}
+    expected = np.asarray(_fresh(sphere.evaluate)(models.get("lambert"), kd, wi, wo))
+    (path,) = _stored(cache)
+    path.write_bytes(b"not an executable")
+    with caplog.at_level(logging.INFO, logger="brdffit"):
+        again = np.asarray(_fresh(sphere.evaluate)(models.get("lambert"), kd, wi, wo))
+    np.testing.assert_array_equal(again, expected)
+    assert caplog.text.count("not loaded") == 1, caplog.text
+    assert path.stat().st_size > 100  # compiled again and kept
+
+
 def test_plugin_code_is_compiled_in_memory_only(cache):
     evaluate = _fresh(sphere.evaluate)
     wi, wo = _directions()
