@@ -267,6 +267,24 @@ CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 _options_refused: set[str] = set()
 
 
+@functools.cache
+def _native_kernels_ready() -> None:
+    """Give JAX's CPU LAPACK kernels their LAPACK routines, as lowering a linear
+    algebra op does on first use. A program loaded from disk skips lowering: where it
+    calls LAPACK (the QR solves of optimistix's Levenberg-Marquardt and dogleg) its
+    first run crashed the process (a segmentation fault). JAX's own loader of
+    exported programs does the same (``jax._src.export``)."""
+    import jax
+    import jax.numpy as jnp
+
+    try:
+        from jax._src.lax.linalg import initialize_lapack
+    except ImportError:  # a JAX that moved it: lowering a QR initialises them too
+        jax.jit(jnp.linalg.qr).lower(jnp.zeros((2, 2)))
+    else:
+        initialize_lapack()
+
+
 def _compile(lowered):
     """``lowered`` compiled with :data:`CPU_COMPILER_OPTIONS` on the CPU (without,
     where this XLA refuses one of them), as XLA's default elsewhere."""
@@ -390,6 +408,7 @@ def jit(fn: Callable) -> Callable:
         from jax.experimental import serialize_executable
 
         t0 = time.perf_counter()
+        _native_kernels_ready()
         try:
             with open(path, "rb") as f:
                 payload, in_tree, out_tree, out_example = pickle.load(f)

@@ -32,17 +32,20 @@ from data_synth.synth import Component, make_table
 
 table, _ = make_table([Component("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.5, 0.5, 0.5],
                                        "alpha": 0.08, "f0": 0.04})])
-r = fit(table, "ggx", samples=2048, seed=0)
-print(json.dumps({"params": r.params, "error": r.error, "result": r.result,
-                  "uncertainty": r.uncertainty}))
+out = {}
+for solver in sys.argv[1:] or ["lm"]:
+    r = fit(table, "ggx", samples=2048, seed=0, solver=solver)
+    out[solver] = {"params": r.params, "error": r.error, "result": r.result,
+                   "uncertainty": r.uncertainty}
+print(json.dumps(out if sys.argv[1:] else out["lm"]))
 """
 
 
-def _run(cache: Path) -> tuple[dict, str]:
+def _run(cache: Path, *solvers: str) -> tuple[dict, str]:
     env = {k: v for k, v in os.environ.items() if k != "XDG_CACHE_HOME"}
     env["BRDFFIT_CACHE_DIR"] = str(cache)
-    r = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
-                       timeout=600, cwd=ROOT, env=env)
+    r = subprocess.run([sys.executable, "-c", PROBE, *solvers], capture_output=True,
+                       text=True, timeout=600, cwd=ROOT, env=env)
     assert r.returncode == 0, r.stderr
     return json.loads(r.stdout.strip().splitlines()[-1]), r.stderr
 
@@ -69,6 +72,16 @@ def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path)
     assert third == first
     assert "not loaded" in log3
     assert all(f.stat().st_size > 100 for f in _stored(cache))
+
+
+def test_solves_that_call_lapack_run_from_their_stored_programs(tmp_path):
+    # optimistix's Levenberg-Marquardt and dogleg solve with QR (LAPACK): their
+    # stored programs crashed the next process (a segmentation fault on first run)
+    solvers = ("optx-lm", "dogleg")
+    first, _ = _run(tmp_path, *solvers)
+    second, log = _run(tmp_path, *solvers)
+    assert log.count("loaded compiled brdffit.fitting.problem.solve_batch") >= len(solvers)
+    assert second == first
 
 
 EVALUATE_PROBE = r"""
