@@ -1,5 +1,6 @@
-"""`make bench`: the speed-vs-error report, then startup, service start, batch and
-selection benchmarks.
+"""`make bench`: the speed-vs-error report, then startup, batch and selection benchmarks.
+(``python -m bench.service_start --baseline CHECKOUT`` compares two checkouts' service
+start, and is run by hand.)
 
     python -m bench [--quick]
 
@@ -18,8 +19,7 @@ def main(argv=None) -> int:
     from bench import speed
 
     rc = speed.main(["--quick"] if quick else [])
-    for name in ("bench.startup", "bench.service_start", "bench.batch_bench",
-                 "bench.selection_bench"):
+    for name in ("bench.startup", "bench.batch_bench", "bench.selection_bench"):
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError:

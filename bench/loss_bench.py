@@ -18,7 +18,8 @@ import statistics
 import sys
 
 from brdffit import fit, jsonout, merl
-from brdffit.fitting.loss import LOSS_METRIC, LOSSES
+from brdffit.fitting.loss import LOSS_METRIC
+from brdffit.fitting.options import LOSSES
 from data_synth import nbrdf
 
 MODELS = ("blinn_phong", "beckmann", "ggx", "ggx2")

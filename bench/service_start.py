@@ -49,11 +49,12 @@ def one_start(checkout: Path, timeout: float = 120.0) -> dict:
     with tempfile.TemporaryDirectory(prefix="brdffit-start-") as data:
         env = {**os.environ, "BRDFFIT_DATA_DIR": data, "BRDFFIT_WORKERS": "1",
                "PYTHONPATH": str(checkout)}
+        log = open(os.path.join(data, "serve.log"), "w+")  # noqa: SIM115 - closed below
         t0 = time.perf_counter()
         proc = subprocess.Popen(
             [sys.executable, "-m", "brdffit.cli", "serve", "--port", str(port),
              "--log-level", "warning"], cwd=checkout, env=env,
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+            stdout=subprocess.DEVNULL, stderr=log)
         try:
             while True:
                 try:
@@ -61,7 +62,8 @@ def one_start(checkout: Path, timeout: float = 120.0) -> dict:
                     break
                 except OSError:
                     if proc.poll() is not None:
-                        raise RuntimeError(f"server exited: {proc.stderr.read().decode()}")
+                        log.seek(0)
+                        raise RuntimeError(f"server exited: {log.read()}")
                     if time.perf_counter() - t0 > timeout:
                         raise RuntimeError(f"no healthy answer in {timeout:g} s") from None
                     time.sleep(0.02)
@@ -72,7 +74,12 @@ def one_start(checkout: Path, timeout: float = 120.0) -> dict:
                     "server_rss_mib": _proc_rss_mib(proc.pid)}
         finally:
             proc.terminate()
-            proc.wait(timeout=30)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            log.close()
 
 
 def main(argv=None) -> int:

@@ -259,6 +259,10 @@ def select(
         **fit_options: passed to :func:`brdffit.fit` (``solver``, ``samples``,
             ``precision``, ``starts``, ``max_steps``, ``seed``).
     """
+    # JAX's modules, imported here rather than by the threads below (see the imports)
+    from brdffit.fitting import problem  # noqa: F401
+    from brdffit.fitting.sphere import SphereReference
+
     t0 = time.perf_counter()
     # the fit's own options only; select sets parent_fit, init and bin_weight itself
     unknown = set(fit_options) - set(FIT_KEYWORDS)
@@ -274,8 +278,6 @@ def select(
     if threads is not None and not (isinstance(threads, int) and threads >= 1):
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
     ordered = _order(candidates)
-    from brdffit.fitting.sphere import SphereReference
-
     reference = None if image_size is None else SphereReference(table, image_size)
     _measure_eval_costs(ordered)
 
@@ -455,7 +457,6 @@ def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:
     """The candidate's fit, seeded from its parent's when it has one; refitted once
     with more starts and steps when it did not converge, so that the choice rests
     on optima (an unconverged error would make a model look worse than it is)."""
-
     parent = {"parent_fit": fits[m.parent]} if m.parent in fits else {}
     r = fit_in_scene(table, m, scene, **parent, **fit_options)
     if r.converged:
@@ -562,13 +563,10 @@ def chosen_result(results: list[dict]) -> dict:
     for r in results:
         if r.get("selection"):
             return r
-    # counted from the models' descriptions, without JAX (the service's front asks);
-    # a `_mono` variant has none of its own, so is built to count
-    described = {d["name"]: d["n_params"] for d in models.catalogue.describe()}
     rows = []
     for i, r in enumerate(results):
-        try:
-            n_params = described.get(r["model"]) or models.get(r["model"]).n_params
+        try:  # from the models' descriptions, without JAX (the service's front asks)
+            n_params = models.catalogue.n_params(r["model"])
         except models.UnknownModelError:  # stored by a version with another registry
             n_params = math.inf
         e = r["error"].get("log_rmse")

@@ -26,6 +26,7 @@ def test_describe_and_check_name_need_no_jax():
     code = ("import sys, json\nfrom brdffit import models\n"
             "names = models.names()\nmodels.check_name('ggx_mono')\n"
             "models.check_name('auto', allow_auto=True)\n"
+            "assert models.catalogue.n_params('ggx_mono') == 6\n"
             "print(json.dumps([names, 'jax' in sys.modules]))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
@@ -43,6 +44,8 @@ def test_every_name_the_catalogue_accepts_the_registry_builds():
     for info in models.describe():
         m = models.get(info["name"])
         assert [s.name for s in m.param_specs] == [p["name"] for p in info["params"]]
+        assert catalogue.n_params(info["name"]) == m.n_params
         if info["mono"]:
-            assert models.get(info["name"] + "_mono").n_params < m.n_params
+            mono = models.get(info["name"] + "_mono")
+            assert catalogue.n_params(mono.name) == mono.n_params < m.n_params
     assert models.check_name("auto", allow_auto=True) == "auto"

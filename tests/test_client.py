@@ -15,7 +15,7 @@ from brdffit import FitResult
 from brdffit.client import ApiError, Client, ClientError, FitCancelled, FitFailed, FitJob
 from brdffit.io import merl
 from brdffit.io.grid import bin_grid
-from brdffit.view.plots import KINDS
+from brdffit.view.kinds import KINDS
 from tests.api_fixtures import (
     FAST,
     SLOW_JOB,

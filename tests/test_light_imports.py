@@ -42,6 +42,22 @@ def test_client_imports_no_jax():
     assert r.stdout.strip() == "[]"
 
 
+def test_the_service_front_imports_no_jax_nor_matplotlib():
+    # what the server process runs for a request (tests/test_api.py checks a running one)
+    r = python("import sys\nimport api.main\n"
+               "from brdffit.request import FitRequest\n"
+               "from brdffit.selection import chosen_result\n"
+               "scene = {'preset': 'camera-normal'}\n"
+               "FitRequest.from_flat('auto', {'samples': 4096, 'scene': scene})\n"
+               "FitRequest.from_flat(['ggx', 'ggx_mono'], {'loss': 'render'})\n"
+               "r = {'model': 'ggx_mono', 'error': {'log_rmse': 0.1}}\n"
+               "assert chosen_result([{'model': 'ggx', 'error': {'log_rmse': 0.1}}, r]) is r\n"
+               "print(sorted({m.split('.')[0] for m in sys.modules} & "
+               "{'jax', 'jaxlib', 'equinox', 'optimistix', 'matplotlib'}))")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"
+
+
 def test_import_brdffit_is_lazy_and_fit_is_there():
     r = python("import sys, brdffit\n"
                "assert 'jax' not in sys.modules, 'import brdffit loaded JAX'\n"

@@ -45,16 +45,6 @@ def test_fit_signature_and_select_take_the_contract_defaults():
         assert select_sig[name].default == want[name], name
 
 
-def test_defaults_are_the_library_constants():
-    # the named constants, not copies of their values: a retune moves every shell
-    from brdffit.fitting.options import DEFAULT_MAX_STEPS, DEFAULT_STARTS
-    from brdffit.fitting.sampling import DEFAULT_SAMPLES
-
-    o = FitOptions()
-    assert (o.samples, o.starts, o.max_steps) == (DEFAULT_SAMPLES, DEFAULT_STARTS,
-                                                  DEFAULT_MAX_STEPS)
-
-
 def test_cli_fit_has_every_option_with_the_contract_default():
     want = _library_defaults()
     args = build_parser().parse_args(["fit", "t.binary"])

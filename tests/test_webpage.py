@@ -25,7 +25,7 @@ import httpx
 import pytest
 
 from brdffit.export import validate as check
-from brdffit.fitting.loss import LOSSES
+from brdffit.fitting.options import LOSSES
 from tests import api_fixtures as fx
 from tests.test_export_tools import gltf_validator  # noqa: F401 (a fixture, used by name)
 

@@ -31,6 +31,9 @@ class ModelInfo(BaseModel):
     doc: str
     parent: str | None
     mono: bool
+    mono_n_params: int | None = Field(
+        None, description="parameters of the model's `_mono` variant (one grey specular "
+                          "scale), where it has one")
 
 
 @router.get("", summary="The registered models (as `brdffit models --json`)")

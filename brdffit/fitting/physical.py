@@ -63,7 +63,12 @@ from brdffit.fitting.loss import (
     residuals,
     sum_squares,
 )
-from brdffit.fitting.options import DEFAULT_MAX_STEPS
+from brdffit.fitting.options import (
+    DEFAULT_MAX_STEPS,
+    DEFAULT_PRECISION,
+    DEFAULT_SEED,
+    DEFAULT_SOLVER,
+)
 from brdffit.fitting.problem import plain_params
 from brdffit.fitting.quality import quality
 from brdffit.fitting.result import FitResult
@@ -375,8 +380,9 @@ def report(free: FitResult, bounded_error: dict, before: np.ndarray, after: np.n
 
 @runtime.in_float64
 def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
-          loss: str = DEFAULT_LOSS, solver: str = "lm", samples: int | None = DEFAULT_SAMPLES,
-          precision: str = "float64", max_steps: int = DEFAULT_MAX_STEPS, seed: int = 0,
+          loss: str = DEFAULT_LOSS, solver: str = DEFAULT_SOLVER,
+          samples: int | None = DEFAULT_SAMPLES, precision: str = DEFAULT_PRECISION,
+          max_steps: int = DEFAULT_MAX_STEPS, seed: int = DEFAULT_SEED,
           bin_weight=None) -> FitResult:
     """The physically bounded fit from ``free``, an unconstrained fit of ``table`` made
     with these options (those of ``fit``, ``samples=None`` for every bin): what

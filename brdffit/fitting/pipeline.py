@@ -90,7 +90,7 @@ def fit(
     Args:
         table: the measured table (``brdffit.io.merl.read``).
         model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
-        loss: what the solver minimises (``brdffit.fitting.loss.LOSSES``): ``"log"``
+        loss: what the solver minimises (``brdffit.fitting.options.LOSSES``): ``"log"``
             (default), ``"cube_root"``, ``"linear_cos"`` or ``"render"``
             (``brdffit.fitting.render_loss``). Every metric is reported
             whatever the loss.

@@ -97,7 +97,6 @@ def solver_for(name: str, precision: str):
     }[name]()
 
 
-
 # -- compiled pieces -----------------------------------------------------------
 
 

@@ -35,7 +35,7 @@ class FitResult:
     test holds at the returned point, else ``"nonlinear_max_steps_reached"``,
     ``"stalled"`` or ``"nonfinite"``; ``converged`` is True only for
     ``"successful"``.
-    ``loss`` names what the solver minimised (``brdffit.fitting.loss.LOSSES``);
+    ``loss`` names what the solver minimised (``brdffit.fitting.options.LOSSES``);
     ``error`` holds every metric (``log_rmse``, ``cube_root_rmse``, ``rmse_cos``,
     ``rel_peak_error``, ``psnr_db``) whatever it was, and ``sample_<metric>`` of the
     loss on the solver's subsample.

@@ -110,9 +110,19 @@ def check_name(name: str, allow_auto: bool = False) -> str:
     raise UnknownModelError(f"unknown model {name!r}; choose one of {choices}")
 
 
+def n_params(name: str) -> int:
+    """How many numbers model ``name`` (a ``_mono`` variant too) fits, from its
+    description; UnknownModelError for a name that is not a model."""
+    check_name(name)
+    info = {m["name"]: m for m in describe()}
+    if name in info:
+        return info[name]["n_params"]
+    return info[name.removesuffix(MONO_SUFFIX)]["mono_n_params"]
+
+
 def describe_model(model) -> dict:
     """One model instance as plain data (the snapshot's and the API's shape)."""
-    from brdffit.models.mono_ks import specular_colour_specs
+    from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 
     doc = sys.modules[type(model).__module__].__doc__ or model.name
     return {
@@ -128,6 +138,7 @@ def describe_model(model) -> dict:
         "n_params": model.n_params,
         "parent": model.parent,
         "mono": bool(specular_colour_specs(model)),
+        "mono_n_params": MonoKs(model).n_params if specular_colour_specs(model) else None,
         "auto": bool(getattr(model, "auto_candidate", False)),
     }
 

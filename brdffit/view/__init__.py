@@ -1,2 +1,3 @@
-"""Looking at tables and fits: sphere renders (:mod:`.render`, JAX) and the
-figures built on them (:mod:`.plots`, matplotlib, the ``plots`` extra)."""
+"""Looking at tables and fits: the figures (:mod:`.plots`: matplotlib, the ``plots``
+extra, and the sphere renders of ``brdffit.fitting.sphere``, JAX), and their names
+and options (:mod:`.kinds`, neither), which the service's front reads."""
