@@ -113,10 +113,10 @@ def check_name(name: str, allow_auto: bool = False) -> str:
 def n_params(name: str) -> int:
     """How many numbers model ``name`` (a ``_mono`` variant too) fits, from its
     description; UnknownModelError for a name that is not a model."""
-    check_name(name)
     info = {m["name"]: m for m in describe()}
     if name in info:
         return info[name]["n_params"]
+    check_name(name)  # a `_mono` variant, or UnknownModelError
     return info[name.removesuffix(MONO_SUFFIX)]["mono_n_params"]
 
 
@@ -125,6 +125,7 @@ def describe_model(model) -> dict:
     from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 
     doc = sys.modules[type(model).__module__].__doc__ or model.name
+    mono = bool(specular_colour_specs(model))  # it has a `_mono` variant
     return {
         "name": model.name,
         "doc": doc.strip().splitlines()[0],  # the module docstring's first line: the formula
@@ -137,8 +138,8 @@ def describe_model(model) -> dict:
         ],
         "n_params": model.n_params,
         "parent": model.parent,
-        "mono": bool(specular_colour_specs(model)),
-        "mono_n_params": MonoKs(model).n_params if specular_colour_specs(model) else None,
+        "mono": mono,
+        "mono_n_params": MonoKs(model).n_params if mono else None,
         "auto": bool(getattr(model, "auto_candidate", False)),
     }
 
