@@ -351,8 +351,28 @@ def _compiling_elsewhere_waited(path: Path | None):
         os.close(fd)
 
 
-def jit(fn: Callable) -> Callable:
-    """``fn`` compiled like ``equinox.filter_jit``, its executables kept on disk."""
+def _compiled_form(x):
+    form = getattr(x, "compiled_form", None)
+    return form() if callable(form) else x
+
+
+def _compiled_forms(args: tuple, kwargs: dict) -> tuple[tuple, dict]:
+    """The arguments with each one that names a compiled form (a ``compiled_form()``
+    method: brdffit's models) replaced by it: models that differ only in data give
+    one model of them all, and one program serves them (``brdffit.models.shared``)."""
+    return (tuple(_compiled_form(a) for a in args),
+            {k: _compiled_form(v) for k, v in kwargs.items()})
+
+
+def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
+    """``fn`` compiled like ``equinox.filter_jit``, its executables kept on disk.
+
+    Its arguments are taken in their compiled forms (:func:`_compiled_forms`: one
+    program for the lobe models of one family), unless ``compiled_forms=False``
+    (``@jit(compiled_forms=False)``): a program that times a model as a renderer runs
+    it must have that model's own code."""
+    if fn is None:
+        return functools.partial(jit, compiled_forms=compiled_forms)
     import equinox as eqx
     import jax
 
@@ -362,6 +382,8 @@ def jit(fn: Callable) -> Callable:
     own_code = fn.__module__.startswith("brdffit.")  # the fingerprint covers its code
 
     def split(args, kwargs):
+        if compiled_forms:
+            args, kwargs = _compiled_forms(args, kwargs)
         leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
         dynamic = [i for i, x in enumerate(leaves) if eqx.is_array(x)]
         key = (treedef, tuple(
@@ -538,4 +560,5 @@ def jit(fn: Callable) -> Callable:
         return jax.tree_util.tree_unflatten(entry.out_def, out)
 
     call.ready = ready
+    call.compiled_forms = compiled_forms
     return call

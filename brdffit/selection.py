@@ -250,9 +250,10 @@ def select(
             (default) takes each fit's own ``psnr_db`` (128 px), rendered once.
         progress: called as ``progress(i, n, model, None)`` before candidate ``i``
             of ``n`` (0-based) is fitted and ``progress(i, n, model, row)`` after,
-            with its ranking row (``status`` ``"fitted"`` or ``"failed"``): a shell
-            shows it (``brdffit fit --model auto`` on stderr); the library prints
-            nothing. The calls come in candidate order, from the calling thread.
+            with its ranking row (``status`` ``"fitted"`` or ``"failed"``; its
+            ``cost_ns`` still None, timed once every fit is done): a shell shows it
+            (``brdffit fit --model auto`` on stderr); the library prints nothing. The
+            calls come in candidate order, from the calling thread.
         threads: how many candidates are fitted at once, each in its own thread
             (a fit runs on about one core); None: one per core this process may use,
             at most one per candidate. The results do not depend on it.
@@ -279,10 +280,11 @@ def select(
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
     ordered = _order(candidates)
     reference = None if image_size is None else SphereReference(table, image_size)
-    _measure_eval_costs(ordered)
 
     rows, fits = [], {}
-    with _CandidateFits(table, ordered, scene, fit_options, threads) as running:
+    with (_CandidateFits(table, ordered, scene, fit_options, threads) as running,
+          ThreadPoolExecutor(1, thread_name_prefix="brdffit-cost") as cost_thread):
+        costs_ready = cost_thread.submit(_ready_eval_costs, ordered)
         for i, m in enumerate(ordered):
             if progress is not None:
                 progress(i, len(ordered), m.name, None)
@@ -298,23 +300,21 @@ def select(
             _add_row(rows, row, r, m, scene, reference)
             if progress is not None:
                 progress(i, len(ordered), m.name, dict(row))  # the choice edits row later
+        costs_ready.result()
+    # timed once every fit is done: beside running fits, a timing measures their load
+    for row in rows:
+        if row["status"] == "fitted":
+            row["cost_ns"] = eval_cost_ns(row["model"])
     return _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance,
                    fit_options, t0)
 
 
-def _measure_eval_costs(ordered) -> None:
-    """Every candidate's evaluation cost, measured before the fits run beside each
-    other, not during them. In a new process their programs compile first, side by
-    side on the cores this process may use (one after the other, they held up the
-    first fit by ~2.5 s on 2 cores); the timings then run one by one."""
-    names = [m.name for m in ordered]
-    threads = min(runtime.usable_cores(), len(names))
-    if threads > 1:
-        with ThreadPoolExecutor(threads, thread_name_prefix="brdffit-cost") as pool:
-            for done in [pool.submit(ready_eval_cost, name) for name in names]:
-                done.result()
-    for name in names:
-        eval_cost_ns(name)
+def _ready_eval_costs(ordered) -> None:
+    """Every candidate's timed evaluation compiled (or loaded), on a thread of its own
+    beside the fits: in a new process they held up the first fit by ~2 s on 2 cores
+    when they compiled first. The timings (:func:`eval_cost_ns`) run after the fits."""
+    for m in ordered:
+        ready_eval_cost(m.name)
 
 
 def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:
@@ -326,7 +326,7 @@ def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:
         full_log_rmse=full,
         psnr_db=(r.error["psnr_db"] if reference is None
                  else reference.psnr(m, r.params)),
-        cost_ns=eval_cost_ns(m.name),
+        cost_ns=None,  # timed once every fit is done (select)
         bic=bic(err, r.samples["usable"], m.n_params),
         ks_grey_spread=grey_spread(m, r.params),
         converged=r.converged,
@@ -415,10 +415,11 @@ class _CandidateFits:
     rest keeps a second core only partly busy: on 2 cores, candidates side by side
     take ~15% less time than one after another (a fit alone keeps ~1.7 cores busy;
     the gain grows with the cores). A candidate that contains another
-    (ggx2 contains ggx) waits for that one's fit, which it starts from; the
-    candidates are submitted in the given order, parents first, so a waiting fit
-    never holds up its own parent. Every fit is the one a sequential run makes:
-    each depends only on the table, its options and its parent's fit.
+    (ggx2 contains ggx) compiles its programs and scores its starts meanwhile, then
+    waits for that one's fit, which it starts from; the candidates are submitted in
+    the given order, parents first, so a waiting fit never holds up its own parent.
+    Every fit is the one a sequential run makes: each depends only on the table,
+    its options and its parent's fit.
     """
 
     def __init__(self, table, ordered, scene, fit_options: dict, threads: int | None):
@@ -433,12 +434,9 @@ class _CandidateFits:
 
     @staticmethod
     def _fit(table, m, scene, fit_options, parent: Future | None) -> FitResult:
-        fits = {}
-        if parent is not None:
-            try:
-                fits[m.parent] = parent.result()
-            except FitInputError:  # the parent could not be fitted: start without it
-                pass
+        # the parent's fit as a function: this fit compiles its programs and scores its
+        # starts while the parent's runs, and waits for it only to start from it
+        fits = {} if parent is None else {m.parent: parent.result}
         return _fit_converged(table, m, scene, fits, fit_options)
 
     def result(self, name: str) -> FitResult:

@@ -85,7 +85,26 @@ def test_solves_that_call_lapack_run_from_their_stored_programs(tmp_path):
     assert log.count("loaded compiled brdffit.fitting.problem.solve_batch") >= len(solvers)
     # loaded, not compiled again (a compile lowers a QR, which would hide the crash)
     assert not [n for n in second["compiled"] if n.endswith("solve_batch")], second["compiled"]
-    assert second["fits"] == first["fits"]
+    # equal to rounding: the table is fitted exactly, where the last bits of a dogleg
+    # solve differed between processes on a loaded machine (the note of issue 25)
+    _assert_close(second["fits"], first["fits"])
+
+
+def _assert_close(got, want, path=""):
+    """Equal structures, numbers within 1e-9 relative or 1e-12 absolute (the
+    uncertainty of an exact fit is rounding: ~1e-17)."""
+    if isinstance(want, dict):
+        assert got.keys() == want.keys(), path
+        for k in want:
+            _assert_close(got[k], want[k], f"{path}/{k}")
+    elif isinstance(want, list):
+        assert len(got) == len(want), path
+        for i, (g, w) in enumerate(zip(got, want, strict=True)):
+            _assert_close(g, w, f"{path}[{i}]")
+    elif isinstance(want, float):
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), path
+    else:
+        assert got == want, path
 
 
 EVALUATE_PROBE = r"""
@@ -133,7 +152,7 @@ def test_a_program_kept_in_a_process_that_used_jax_cache_loads_later(tmp_path):
 
 def _fresh(fn):
     """The decorated function as a new process sees it: nothing in memory."""
-    return executables.jit(fn.__wrapped__)
+    return executables.jit(fn.__wrapped__, compiled_forms=fn.compiled_forms)
 
 
 @pytest.fixture

@@ -132,6 +132,9 @@ class PhysicalRanges(AbstractBRDFModel):
     def eval_channels(self, params: Params, frame: Frame):
         return self.base.eval_channels(params, frame)
 
+    def compiled_form(self) -> PhysicalRanges:
+        return dataclasses.replace(self, base=self.base.compiled_form())
+
 
 # -- the coarse albedo ------------------------------------------------------------------
 

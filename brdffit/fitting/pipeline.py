@@ -21,6 +21,7 @@ bounded step over this free fit (``brdffit.fitting.physical``).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import jax.numpy as jnp
 import numpy as np
@@ -82,7 +83,7 @@ def fit(
     seed: int = DEFAULT_SEED,
     init: dict | None = None,
     bin_weight: np.ndarray | None = None,
-    parent_fit: FitResult | None = None,
+    parent_fit: FitResult | Callable[[], FitResult] | None = None,
     physical: bool = False,
 ) -> FitResult:
     """Fit ``model`` to ``table``; see the module docstring for the pipeline.
@@ -111,7 +112,10 @@ def fit(
             model's own start does not converge, or ends above the parent's loss,
             the fit is refitted from the parent's optimum, embedded; the solver only
             accepts steps that lower the loss: the richer model never ends worse on
-            the fit's samples than the one it contains.
+            the fit's samples than the one it contains. Or a function that returns
+            that fit (``auto`` passes its parent's fit still running: this fit's
+            programs compile and its starts are scored meanwhile); where it raises
+            ``FitInputError``, the parent is fitted here.
         physical: constrain the fit to conserve energy (directional albedo <= 1)
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
@@ -141,6 +145,7 @@ def fit(
             raise FitInputError(f"physical must be true or false, got {physical!r}")
         # A bounded step over the free fit (brdffit.fitting.physical); a nested fit
         # seeds from its parent's *unconstrained* optimum.
+        parent_fit = _resolved(parent_fit)
         if parent_fit is not None and parent_fit.physical is not None:
             parent_fit = None
         free = fit(table, m, loss=loss, solver=solver, samples=samples, precision=precision,
@@ -201,6 +206,7 @@ def fit(
         ready_here()
     parent_start = None
     if init is None and m.parent is not None:
+        parent_fit = _resolved(parent_fit)
         on_every_bin = parent_fit is not None and parent_fit.samples["used"] == n_usable
         if (parent_fit is None or parent_fit.model != m.parent or parent_fit.loss != loss
                 or (polish and not on_every_bin)):
@@ -324,6 +330,17 @@ def fit(
         table=table.source,
         quality=look,
     )
+
+
+def _resolved(parent_fit) -> FitResult | None:
+    """``fit``'s ``parent_fit`` as a fit: called where it is a function; None where
+    that raised ``FitInputError`` (the parent is then fitted, and fails, here)."""
+    if not callable(parent_fit):
+        return parent_fit
+    try:
+        return parent_fit()
+    except FitInputError:
+        return None
 
 
 def _padded(u_batch: np.ndarray, size: int | None = None) -> np.ndarray:

@@ -125,10 +125,11 @@ def _lit_radiance(f: np.ndarray, wi: np.ndarray, lit: np.ndarray) -> np.ndarray:
     return radiance(np.where(lit[..., None], f, 0.0), wi)
 
 
-@executables.jit
+@executables.jit(compiled_forms=False)
 def evaluate(model, params, wi, wo):
     """``model(params, wi, wo)``, compiled once per model and shape and kept on disk
-    (``brdffit.executables``)."""
+    (``brdffit.executables``). The model's own program, not its family's
+    (``brdffit.models.shared``): ``auto`` times it as a renderer's cost per sample."""
     return model(params, wi, wo)
 
 

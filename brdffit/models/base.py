@@ -21,7 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from .frame import Frame, shading_frame
 
@@ -151,6 +151,12 @@ class AbstractBRDFModel(eqx.Module):
         parameters only. Needed where :attr:`lobe_scales` is not empty."""
         raise NotImplementedError(f"{self.name} declares no lobes")
 
+    def compiled_form(self) -> AbstractBRDFModel:
+        """The model that compiled programs take in this one's place
+        (``brdffit.executables``): itself, but for a member of a family of lobe
+        models that share their programs (:func:`share_programs`)."""
+        return self
+
     def embed_parent(self, parent_params: dict) -> dict:
         """The parent's parameters as a point of this model with the same values."""
         raise NotImplementedError(f"{self.name} contains no other model")
@@ -260,3 +266,67 @@ class AbstractLobeModel(AbstractBRDFModel):
         kd, ks = params["kd"], params["ks"]
         expand = (slice(None),) + (None,) * lobe.ndim
         return kd[expand] / jnp.pi + ks[expand] * lobe[None]
+
+    def compiled_form(self) -> AbstractBRDFModel:
+        family = _PROGRAM_FAMILIES.get(type(self))
+        if family is None:
+            return self
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return SharedLobe(tuple(cls(**fields) for cls in family),
+                          np.asarray(family.index(type(self)), np.int32))
+
+
+# -- lobe models that share their compiled programs ----------------------------------
+
+#: A lobe-model class -> its family (:func:`share_programs`).
+_PROGRAM_FAMILIES: dict[type, tuple[type, ...]] = {}
+
+
+def share_programs(*family: type[AbstractLobeModel]) -> None:
+    """Let these lobe-model classes share their compiled programs.
+
+    Blinn-Phong and Phong have the same parameters (``kd``, ``ks``, ``n``), and so do
+    Beckmann and GGX (``kd``, ``ks``, ``alpha`` and ``f0``, or ``eta`` for the
+    dielectric Fresnel): a fit of one differs from a fit of the other in the lobe
+    alone. Every compiled program of a fit (the solve, the starts' scores, the
+    full-table error, the sphere renders, the linearisation) takes a model's
+    :meth:`~AbstractBRDFModel.compiled_form` in its place (``brdffit.executables``):
+    for a member of a family, one :class:`SharedLobe` of the whole family, so that
+    one compiled program serves every member and ``auto``, which fits all four,
+    compiles two of each program instead of four (docs/fitting.md has the figures).
+
+    The classes must be lobe models with the same parameters and fields (a member is
+    built from another's field values). Membership is by class: a subclass (another
+    lobe under a built-in's name) keeps programs of its own. The registry declares
+    the built-in families (``brdffit.models.registry``).
+    """
+    specs = {cls().param_specs for cls in family}
+    if len(family) < 2 or len(specs) != 1 or not all(
+            issubclass(cls, AbstractLobeModel) for cls in family):
+        raise ValueError(f"a family is two or more lobe models of the same parameters, "
+                         f"not {[cls.__name__ for cls in family]}")
+    for cls in family:
+        _PROGRAM_FAMILIES[cls] = tuple(family)
+
+
+class SharedLobe(AbstractLobeModel):
+    """The members of one family (:func:`share_programs`) as one model: ``kd/pi + ks *
+    lobe`` with the lobe of ``members[which]``, ``which`` an int32 array (data, so one
+    compiled program serves every member). Only the chosen branch runs (XLA's
+    conditional): a member's values are its own, the same formulas rounded the same
+    way (tests/test_shared_programs.py). Never fitted, named or reported itself: a
+    fit's result names the member."""
+
+    members: tuple[AbstractLobeModel, ...] = eqx.field(static=True)
+    which: Int[Array, ""]
+
+    @property
+    def name(self) -> str:
+        return "|".join(m.name for m in self.members)
+
+    @property
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        return self.members[0].param_specs
+
+    def lobe(self, params: Params, frame: Frame) -> Float[Array, ...]:
+        return jax.lax.switch(self.which, [m.lobe for m in self.members], params, frame)

@@ -61,6 +61,9 @@ class MonoKs(AbstractBRDFModel):
     def shape_grid(self):
         return self.base.shape_grid
 
+    def compiled_form(self) -> MonoKs:
+        return dataclasses.replace(self, base=self.base.compiled_form())
+
     def expand(self, params: dict) -> dict:
         """Params of the base model: each grey scale repeated over R, G, B."""
         out = dict(params)

@@ -9,7 +9,7 @@ or passed to :func:`register` (docs/adding-a-model.md).
 from __future__ import annotations
 
 from brdffit.models import catalogue
-from brdffit.models.base import AbstractBRDFModel
+from brdffit.models.base import AbstractBRDFModel, share_programs
 from brdffit.models.beckmann import Beckmann
 from brdffit.models.blinn_phong import BlinnPhong
 from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
@@ -33,6 +33,11 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
 )
 
 REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
+
+# Lobe models of the same parameters: one compiled program per family serves each
+# (brdffit.models.base.share_programs).
+share_programs(BlinnPhong, Phong)
+share_programs(Beckmann, GGX)
 
 
 def register(model: AbstractBRDFModel) -> AbstractBRDFModel:
