@@ -117,6 +117,7 @@ def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
     import jax.numpy as jnp
 
     from brdffit.fitting.problem import constrained
+    from brdffit.models.base import with_shared_programs
 
     m = models.get(model_name)
     rng = np.random.default_rng(0)
@@ -124,8 +125,9 @@ def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
     v[..., 2] = np.abs(v[..., 2])
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     wi, wo = (jnp.asarray(a, jnp.float32) for a in v)
+    # the parameters from auto's program (the timed evaluation is the model's own)
     params = {k: np.asarray(x, np.float32) for k, x in
-              constrained(m, np.zeros(m.n_params)).items()}
+              constrained(with_shared_programs(m), np.zeros(m.n_params)).items()}
     return m, params, wi, wo
 
 
@@ -278,7 +280,10 @@ def select(
         raise FitInputError(f"budget must be a number > 0, got {budget!r}")
     if threads is not None and not (isinstance(threads, int) and threads >= 1):
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
-    ordered = _order(candidates)
+    from brdffit.models.base import with_shared_programs
+
+    # the candidates of one family (ggx and beckmann, ...) compile one program each
+    ordered = [with_shared_programs(m) for m in _order(candidates)]
     reference = None if image_size is None else SphereReference(table, image_size)
 
     rows, fits = [], {}

@@ -1,4 +1,4 @@
-"""Lobe models of one family share their compiled programs
+"""In auto, lobe models of one family share their compiled programs
 (brdffit.models.base.share_programs),
 and a member's values, gradients and fits are its own."""
 
@@ -16,7 +16,8 @@ import pytest
 
 from brdffit import executables, models
 from brdffit.fitting.physical import PhysicalRanges
-from brdffit.models.base import SharedLobe, share_programs
+from brdffit.models.base import SharedLobe, share_programs, with_shared_programs
+from brdffit.models.mono_ks import MonoKs
 
 pytestmark = pytest.mark.unit
 
@@ -43,7 +44,8 @@ def _params(model, seed=0):
 @pytest.mark.parametrize("name", MEMBERS)
 def test_a_member_through_its_family_is_the_member(name):
     model = models.get(name)
-    shared = model.compiled_form()
+    assert model.compiled_form() is model  # alone, its own programs
+    shared = with_shared_programs(model).compiled_form()
     assert isinstance(shared, SharedLobe)
     assert shared.members[int(shared.which)] == model
     assert shared.param_specs == model.param_specs
@@ -67,11 +69,13 @@ def _frame(wi, wo):
 
 
 def test_a_family_is_of_one_parameter_layout_and_other_models_keep_their_own():
-    families = {tuple(m.name for m in models.get(n).compiled_form().members) for n in MEMBERS}
+    families = {tuple(m.name for m in with_shared_programs(models.get(n)).compiled_form().members)
+                for n in MEMBERS}
     assert families == {("blinn_phong", "phong"), ("beckmann", "ggx"),
                         ("beckmann_dielectric", "ggx_dielectric")}
     for name in ("lambert", "oren_nayar", "ggx2", "gltf_pbr", "standard_surface"):
         m = models.get(name)
+        assert with_shared_programs(m) is m
         assert m.compiled_form() is m
     phong, ggx, lambert = (type(models.get(n)) for n in ("phong", "ggx", "lambert"))
     for family in ((phong, ggx), (ggx,), (lambert, ggx)):
@@ -81,12 +85,12 @@ def test_a_family_is_of_one_parameter_layout_and_other_models_keep_their_own():
     class Sharper(ggx):  # another lobe under a built-in's name
         pass
 
-    assert Sharper().compiled_form() == Sharper()
+    assert with_shared_programs(Sharper()).compiled_form() == Sharper()
 
 
 def test_wrapped_members_share_their_base_family():
-    ggx = models.get("ggx")
-    for wrapped in (models.get("ggx_mono"), PhysicalRanges(ggx)):
+    ggx = with_shared_programs(models.get("ggx"))
+    for wrapped in (MonoKs(ggx), PhysicalRanges(ggx)):
         form = wrapped.compiled_form()
         assert type(form) is type(wrapped)
         assert isinstance(form.base, SharedLobe)
@@ -106,7 +110,7 @@ def test_one_program_serves_a_family_and_a_timed_one_is_the_models_own():
         return model(params, wi, wo)
 
     wi, wo = _pairs(256)
-    ggx, beckmann = models.get("ggx"), models.get("beckmann")
+    ggx, beckmann = (with_shared_programs(models.get(n)) for n in ("ggx", "beckmann"))
     p = _params(ggx)
     for fn, programs in ((shared_eval, 1), (own_eval, 2)):
         before = len(executables.events)
@@ -119,7 +123,8 @@ def test_one_program_serves_a_family_and_a_timed_one_is_the_models_own():
 
 FITS = r"""
 import json, sys
-from brdffit import executables, fit
+from brdffit import executables, fit, models
+from brdffit.models.base import with_shared_programs
 from data_synth.synth import make_table
 
 table, _ = make_table("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15,
@@ -127,7 +132,7 @@ table, _ = make_table("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "al
 
 def compiled_by(name):
     before = len(executables.events)
-    r = fit(table, name)
+    r = fit(table, with_shared_programs(models.get(name)))  # as auto fits it
     names = sorted(e.name.rsplit(".", 1)[-1] for e in executables.events[before:]
                    if e.how == "compiled")
     return {"params": {k: [float(x) for x in (v if hasattr(v, "__len__") else [v])]

@@ -249,6 +249,10 @@ class AbstractLobeModel(AbstractBRDFModel):
     """
 
     lobe_scales = ("ks",)
+    #: Whether this model's programs are its family's (:func:`share_programs`): set
+    #: by ``auto`` (:func:`with_shared_programs`), which fits every member; a fit of
+    #: one model alone compiles its own, smaller programs.
+    shared_programs: bool = eqx.field(static=True, default=False)
 
     def unit_lobes(self, shape: Params, frame: Frame) -> Float[Array, "1 ..."]:
         return self.lobe(shape, frame)[None]
@@ -269,11 +273,12 @@ class AbstractLobeModel(AbstractBRDFModel):
 
     def compiled_form(self) -> AbstractBRDFModel:
         family = _PROGRAM_FAMILIES.get(type(self))
-        if family is None:
+        if family is None or not self.shared_programs:
             return self
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        return SharedLobe(tuple(cls(**fields) for cls in family),
-                          np.asarray(family.index(type(self)), np.int32))
+        fields["shared_programs"] = False
+        return SharedLobe(members=tuple(cls(**fields) for cls in family),
+                          which=np.asarray(family.index(type(self)), np.int32))
 
 
 # -- lobe models that share their compiled programs ----------------------------------
@@ -294,6 +299,9 @@ def share_programs(*family: type[AbstractLobeModel]) -> None:
     for a member of a family, one :class:`SharedLobe` of the whole family, so that
     one compiled program serves every member and ``auto``, which fits all four,
     compiles two of each program instead of four (docs/fitting.md has the figures).
+    Only where a model says so (``shared_programs``, :func:`with_shared_programs`):
+    a family's program holds every member's lobe, so a process that fits one model
+    alone compiles its own, smaller one.
 
     The classes must be lobe models with the same parameters and fields (a member is
     built from another's field values). Membership is by class: a subclass (another
@@ -309,6 +317,14 @@ def share_programs(*family: type[AbstractLobeModel]) -> None:
         _PROGRAM_FAMILIES[cls] = tuple(family)
 
 
+def with_shared_programs(model: AbstractBRDFModel) -> AbstractBRDFModel:
+    """``model`` taking its family's compiled programs (:func:`share_programs`); a
+    model of no family as it is."""
+    if type(model) not in _PROGRAM_FAMILIES:
+        return model
+    return dataclasses.replace(model, shared_programs=True)
+
+
 class SharedLobe(AbstractLobeModel):
     """The members of one family (:func:`share_programs`) as one model: ``kd/pi + ks *
     lobe`` with the lobe of ``members[which]``, ``which`` an int32 array (data, so one
@@ -317,8 +333,8 @@ class SharedLobe(AbstractLobeModel):
     way (tests/test_shared_programs.py). Never fitted, named or reported itself: a
     fit's result names the member."""
 
-    members: tuple[AbstractLobeModel, ...] = eqx.field(static=True)
-    which: Int[Array, ""]
+    members: tuple[AbstractLobeModel, ...] = eqx.field(static=True, default=())
+    which: Int[Array, ""] | None = None
 
     @property
     def name(self) -> str:
