@@ -359,7 +359,8 @@ def _compiled_form(x):
 def _compiled_forms(args: tuple, kwargs: dict) -> tuple[tuple, dict]:
     """The arguments with each one that names a compiled form (a ``compiled_form()``
     method: brdffit's models) replaced by it: models that differ only in data give
-    one model of them all, and one program serves them (``brdffit.models.shared``)."""
+    one model of them all, and one program serves them
+    (``brdffit.models.base.share_programs``)."""
     return (tuple(_compiled_form(a) for a in args),
             {k: _compiled_form(v) for k, v in kwargs.items()})
 

@@ -129,7 +129,7 @@ def _lit_radiance(f: np.ndarray, wi: np.ndarray, lit: np.ndarray) -> np.ndarray:
 def evaluate(model, params, wi, wo):
     """``model(params, wi, wo)``, compiled once per model and shape and kept on disk
     (``brdffit.executables``). The model's own program, not its family's
-    (``brdffit.models.shared``): ``auto`` times it as a renderer's cost per sample."""
+    (``brdffit.models.base.share_programs``): ``auto`` times it as a renderer's cost per sample."""
     return model(params, wi, wo)
 
 
