@@ -196,17 +196,20 @@ def run(table: MerlTable, request: FitRequest, *, progress: ModelProgress | None
                          chosen=sel.chosen, reason=sel.reason, ranking=sel.ranking,
                          selection=sel)
     from brdffit.fitting.scene import fit_in_scene
+    from brdffit.models.base import sharing_where_it_pays
 
     fits: dict[str, FitResult] = {}
     failed: dict[str, str] = {}
     rows = []
     names = request.models
-    for i, name in enumerate(names):
+    # models of one family in the list (ggx and beckmann, ...) share their programs
+    to_fit = sharing_where_it_pays([registry.get(name) for name in names])
+    for i, (name, model) in enumerate(zip(names, to_fit, strict=True)):
         if progress is not None:
             progress(i, len(names), name, None)
-        row = {"model": name, "n_params": registry.get(name).n_params}
+        row = {"model": name, "n_params": model.n_params}
         try:
-            r = fit_in_scene(table, name, request.scene, **options.fit_keywords())
+            r = fit_in_scene(table, model, request.scene, **options.fit_keywords())
         except FitInputError as e:
             failed[name] = str(e)
             row.update(status="failed", message=str(e))

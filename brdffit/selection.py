@@ -280,10 +280,10 @@ def select(
         raise FitInputError(f"budget must be a number > 0, got {budget!r}")
     if threads is not None and not (isinstance(threads, int) and threads >= 1):
         raise FitInputError(f"threads must be a positive integer or None, got {threads!r}")
-    from brdffit.models.base import with_shared_programs
+    from brdffit.models.base import sharing_where_it_pays
 
-    # the candidates of one family (ggx and beckmann, ...) compile one program each
-    ordered = [with_shared_programs(m) for m in _order(candidates)]
+    # candidates of one family (ggx and beckmann, ...) compile one program of each kind
+    ordered = sharing_where_it_pays(_order(candidates))
     reference = None if image_size is None else SphereReference(table, image_size)
 
     rows, fits = [], {}

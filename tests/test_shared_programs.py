@@ -16,7 +16,12 @@ import pytest
 
 from brdffit import executables, models
 from brdffit.fitting.physical import PhysicalRanges
-from brdffit.models.base import SharedLobe, share_programs, with_shared_programs
+from brdffit.models.base import (
+    SharedLobe,
+    share_programs,
+    sharing_where_it_pays,
+    with_shared_programs,
+)
 from brdffit.models.mono_ks import MonoKs
 
 pytestmark = pytest.mark.unit
@@ -86,6 +91,41 @@ def test_a_family_is_of_one_parameter_layout_and_other_models_keep_their_own():
         pass
 
     assert with_shared_programs(Sharper()).compiled_form() == Sharper()
+
+
+def test_only_members_fitted_together_share():
+    def sharing(names):
+        return [getattr(m, "shared_programs", None)
+                for m in sharing_where_it_pays([models.get(n) for n in names])]
+
+    assert sharing(["ggx"]) == [False]  # alone: its own, smaller programs
+    assert sharing(["beckmann", "ggx"]) == [True, True]
+    assert sharing(["beckmann", "ggx_dielectric"]) == [False, False]  # two families
+    assert sharing(["lambert", "blinn_phong", "phong", "ggx", "ggx2"]) == [
+        None, True, True, False, None]
+    assert sharing(["ggx", "ggx_mono"]) == [False, None]  # a wrapper keeps its base's
+
+
+def test_a_request_for_several_members_fits_them_on_shared_programs(monkeypatch):
+    from brdffit import request as request_module
+    from brdffit.fitting import scene as scene_module
+    from data_synth.synth import make_table
+
+    fitted = []
+    real = scene_module.fit_in_scene
+
+    def spy(table, model, scene, **options):
+        fitted.append(model)
+        return real(table, model, scene, **options)
+
+    monkeypatch.setattr(scene_module, "fit_in_scene", spy)
+    table, _ = make_table("phong", {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 80.0})
+    report = request_module.run(table, request_module.FitRequest.from_flat(
+        ["phong", "blinn_phong", "lambert"], {"samples": 1024}))
+    assert [m.name for m in fitted] == ["phong", "blinn_phong", "lambert"]
+    assert [getattr(m, "shared_programs", None) for m in fitted] == [True, True, None]
+    assert sorted(report.fits) == ["blinn_phong", "lambert", "phong"]
+    assert report.fits["phong"].model == "phong"
 
 
 def test_wrapped_members_share_their_base_family():

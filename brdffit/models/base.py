@@ -250,8 +250,8 @@ class AbstractLobeModel(AbstractBRDFModel):
 
     lobe_scales = ("ks",)
     #: Whether this model's programs are its family's (:func:`share_programs`): set
-    #: by ``auto`` (:func:`with_shared_programs`), which fits every member; a fit of
-    #: one model alone compiles its own, smaller programs.
+    #: where several members are fitted together (:func:`sharing_where_it_pays`); a
+    #: fit of one model alone compiles its own, smaller programs.
     shared_programs: bool = eqx.field(static=True, default=False)
 
     def unit_lobes(self, shape: Params, frame: Frame) -> Float[Array, "1 ..."]:
@@ -299,9 +299,10 @@ def share_programs(*family: type[AbstractLobeModel]) -> None:
     for a member of a family, one :class:`SharedLobe` of the whole family, so that
     one compiled program serves every member and ``auto``, which fits all four,
     compiles two of each program instead of four (docs/fitting.md has the figures).
-    Only where a model says so (``shared_programs``, :func:`with_shared_programs`):
-    a family's program holds every member's lobe, so a process that fits one model
-    alone compiles its own, smaller one.
+    Only where a model says so (``shared_programs``; :func:`sharing_where_it_pays`
+    sets it where two or more members are fitted together): a family's program holds
+    every member's lobe, so a process that fits one model alone compiles its own,
+    smaller one.
 
     The classes must be lobe models with the same parameters and fields (a member is
     built from another's field values). Membership is by class: a subclass (another
@@ -323,6 +324,18 @@ def with_shared_programs(model: AbstractBRDFModel) -> AbstractBRDFModel:
     if type(model) not in _PROGRAM_FAMILIES:
         return model
     return dataclasses.replace(model, shared_programs=True)
+
+
+def sharing_where_it_pays(models: list[AbstractBRDFModel]) -> list[AbstractBRDFModel]:
+    """``models``, to be fitted in one process, each with its family's programs
+    (:func:`with_shared_programs`) where two or more of them share one family program
+    (``auto``'s candidates, a request's or a batch's list); a lone member keeps its
+    own, smaller programs."""
+    shared = [with_shared_programs(m) for m in models]
+    keys = [m.compiled_form().members if isinstance(m.compiled_form(), SharedLobe) else None
+            for m in shared]
+    return [s if key is not None and keys.count(key) >= 2 else m
+            for m, s, key in zip(models, shared, keys, strict=True)]
 
 
 class SharedLobe(AbstractLobeModel):
