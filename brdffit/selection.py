@@ -112,37 +112,37 @@ EVAL_COST_PAIRS = 100_000
 
 
 @functools.cache
-def _eval_cost_inputs(model_name: str, n: int = EVAL_COST_PAIRS):
-    """The model, its default parameters (float32) and ``n`` random direction pairs."""
+def _eval_cost_inputs(model: models.AbstractBRDFModel, n: int = EVAL_COST_PAIRS):
+    """The registry's model (the code a renderer runs), its default parameters
+    (float32) and ``n`` random direction pairs. The parameters come from the programs
+    of ``model`` as ``auto`` fits it (its family's where it shares them)."""
     import jax.numpy as jnp
 
     from brdffit.fitting.problem import constrained
-    from brdffit.models.base import with_shared_programs
 
-    m = models.get(model_name)
+    m = models.get(model.name)
     rng = np.random.default_rng(0)
     v = rng.normal(size=(2, n, 3))
     v[..., 2] = np.abs(v[..., 2])
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     wi, wo = (jnp.asarray(a, jnp.float32) for a in v)
-    # the parameters from auto's program (the timed evaluation is the model's own)
     params = {k: np.asarray(x, np.float32) for k, x in
-              constrained(with_shared_programs(m), np.zeros(m.n_params)).items()}
+              constrained(model, np.zeros(m.n_params)).items()}
     return m, params, wi, wo
 
 
 @runtime.in_float64
-def ready_eval_cost(model_name: str) -> None:
+def ready_eval_cost(model: models.AbstractBRDFModel) -> None:
     """Compile (or load) the evaluation that :func:`eval_cost_ns` times, without
-    timing it: threads may make several ready side by side."""
+    timing it."""
     from brdffit.fitting.sphere import evaluate
 
-    evaluate.ready(*_eval_cost_inputs(model_name))
+    evaluate.ready(*_eval_cost_inputs(model))
 
 
 @functools.cache
 @runtime.in_float64
-def eval_cost_ns(model_name: str, repeats: int = 7) -> float:
+def eval_cost_ns(model: models.AbstractBRDFModel, repeats: int = 7) -> float:
     """Median wall time (ns) per direction pair of ``model(params, wi, wo)``.
 
     Measured once per model per process: the model jitted over
@@ -153,7 +153,7 @@ def eval_cost_ns(model_name: str, repeats: int = 7) -> float:
     """
     from brdffit.fitting.sphere import evaluate
 
-    m, params, wi, wo = _eval_cost_inputs(model_name)
+    m, params, wi, wo = _eval_cost_inputs(model)
     # the renders' compiled evaluation: kept on disk, so a new process's first
     # `auto` loads it instead of compiling one per candidate
     evaluate(m, params, wi, wo).block_until_ready()
@@ -307,9 +307,10 @@ def select(
                 progress(i, len(ordered), m.name, dict(row))  # the choice edits row later
         costs_ready.result()
     # timed once every fit is done: beside running fits, a timing measures their load
+    fitted = {m.name: m for m in ordered}
     for row in rows:
         if row["status"] == "fitted":
-            row["cost_ns"] = eval_cost_ns(row["model"])
+            row["cost_ns"] = eval_cost_ns(fitted[row["model"]])
     return _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance,
                    fit_options, t0)
 
@@ -319,7 +320,7 @@ def _ready_eval_costs(ordered) -> None:
     beside the fits: in a new process they held up the first fit by ~2 s on 2 cores
     when they compiled first. The timings (:func:`eval_cost_ns`) run after the fits."""
     for m in ordered:
-        ready_eval_cost(m.name)
+        ready_eval_cost(m)
 
 
 def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:

@@ -39,25 +39,28 @@ PRINT_HEAVY = ("import sys\nprint(sorted({m.split('.')[0] for m in sys.modules} 
                "{'jax', 'jaxlib', 'equinox', 'optimistix', 'matplotlib'}))")
 
 
-def test_client_imports_no_jax():
-    r = python("import brdffit.client\n" + PRINT_HEAVY)
+def assert_loads_nothing_heavy(code: str) -> None:
+    """``code`` runs in a fresh interpreter without loading JAX or matplotlib."""
+    r = python(code + PRINT_HEAVY)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]"
+
+
+def test_client_imports_no_jax():
+    assert_loads_nothing_heavy("import brdffit.client\n")
 
 
 def test_the_service_front_imports_no_jax_nor_matplotlib():
     # what the server process runs for a request (tests/test_api.py checks a running one)
-    r = python("import api.main\n"
-               "from brdffit.request import FitRequest\n"
-               "from brdffit.selection import chosen_result\n"
-               "scene = {'preset': 'camera-normal'}\n"
-               "FitRequest.from_flat('auto', {'samples': 4096, 'scene': scene})\n"
-               "FitRequest.from_flat(['ggx', 'ggx_mono'], {'loss': 'render'})\n"
-               "r = {'model': 'ggx_mono', 'error': {'log_rmse': 0.1}}\n"
-               "assert chosen_result([{'model': 'ggx', 'error': {'log_rmse': 0.1}}, r]) is r\n"
-               + PRINT_HEAVY)
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.strip() == "[]"
+    assert_loads_nothing_heavy(
+        "import api.main\n"
+        "from brdffit.request import FitRequest\n"
+        "from brdffit.selection import chosen_result\n"
+        "scene = {'preset': 'camera-normal'}\n"
+        "FitRequest.from_flat('auto', {'samples': 4096, 'scene': scene})\n"
+        "FitRequest.from_flat(['ggx', 'ggx_mono'], {'loss': 'render'})\n"
+        "r = {'model': 'ggx_mono', 'error': {'log_rmse': 0.1}}\n"
+        "assert chosen_result([{'model': 'ggx', 'error': {'log_rmse': 0.1}}, r]) is r\n")
 
 
 def test_import_brdffit_is_lazy_and_fit_is_there():

@@ -332,8 +332,8 @@ def sharing_where_it_pays(models: list[AbstractBRDFModel]) -> list[AbstractBRDFM
     (``auto``'s candidates, a request's or a batch's list); a lone member keeps its
     own, smaller programs."""
     shared = [with_shared_programs(m) for m in models]
-    keys = [m.compiled_form().members if isinstance(m.compiled_form(), SharedLobe) else None
-            for m in shared]
+    forms = [m.compiled_form() for m in shared]
+    keys = [f.members if isinstance(f, SharedLobe) else None for f in forms]
     return [s if key is not None and keys.count(key) >= 2 else m
             for m, s, key in zip(models, shared, keys, strict=True)]
 
