@@ -16,6 +16,7 @@ from brdffit.models.base import KD, KS
 from brdffit.models.ggx import GGX
 from brdffit.models.microfacet import ALPHA, F0, dielectric_fresnel
 from data_synth import DEFAULT_PARAMS, make_table
+from tests.compiled_models import evaluate
 
 pytestmark = pytest.mark.unit
 
@@ -64,7 +65,10 @@ def test_ggx_and_beckmann_keep_their_contract():
         assert len(m.shape_grid) == 20 and set(m.shape_grid[0]) == {"alpha", "f0"}
     wi, wo = _random_pairs(2000)
     p = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.2, "f0": 0.3}
-    got = np.asarray(models.get("ggx")({k: jnp.asarray(v) for k, v in p.items()}, wi, wo))
+    # compiled (tests.compiled_models.evaluate), here and below: op by op, every primitive
+    # of the model compiles on its own
+    got = np.asarray(evaluate(models.get("ggx"), {k: jnp.asarray(v) for k, v in p.items()},
+                              wi, wo))
     np.testing.assert_allclose(got, _ggx_reference(**p, wi=wi, wo=wo), rtol=1e-9)
 
 
@@ -123,7 +127,8 @@ def test_ggx2_is_the_sum_of_two_ggx_lobes():
     wi, wo = _random_pairs(2000)
     p = {"kd": [0.1, 0.08, 0.05], "ks1": [0.5, 0.4, 0.3], "alpha1": 0.05,
          "ks2": [0.2, 0.3, 0.4], "alpha2": 0.4, "f0": 0.5}
-    got = np.asarray(models.get("ggx2")({k: jnp.asarray(v) for k, v in p.items()}, wi, wo))
+    got = np.asarray(evaluate(models.get("ggx2"), {k: jnp.asarray(v) for k, v in p.items()},
+                              wi, wo))
     ref = _ggx_reference(p["kd"], p["ks1"], p["alpha1"], p["f0"], wi, wo) + _ggx_reference(
         0.0, p["ks2"], p["alpha2"], p["f0"], wi, wo
     )
@@ -208,7 +213,8 @@ def test_mono_variant_shares_ks_over_channels():
     wi, wo = _random_pairs(300)
     p = {"kd": jnp.asarray([0.2, 0.1, 0.05]), "ks": jnp.asarray(0.7), "alpha": 0.2, "f0": 0.4}
     rgb = {**p, "ks": jnp.asarray([0.7] * 3)}
-    np.testing.assert_allclose(np.asarray(m(p, wi, wo)), np.asarray(models.get("ggx")(rgb, wi, wo)))
+    np.testing.assert_allclose(np.asarray(evaluate(m, p, wi, wo)),
+                               np.asarray(evaluate(models.get("ggx"), rgb, wi, wo)))
     assert models.get("ggx2_mono").n_params == 3 + 1 + 1 + 1 + 1 + 1
     for bad in ("lambert_mono", "oren_nayar_mono", "nope_mono"):
         with pytest.raises(models.UnknownModelError):

@@ -11,6 +11,7 @@ from brdffit import models
 from brdffit.fitting import loss, pipeline, sampling
 from brdffit.fitting import problem as fitting
 from data_synth import make_table
+from tests.compiled_models import evaluate
 from tests.truths import TRUTH
 
 pytestmark = pytest.mark.unit
@@ -20,6 +21,9 @@ pytestmark = pytest.mark.unit
 normal_equations = eqx.filter_jit(loss.normal_equations)
 generic_normal_equations = eqx.filter_jit(loss._generic_normal_equations)
 one_pass_normal_equations = eqx.filter_jit(loss._normal_equations)
+# the metrics and the loss alike: one compiled program each, as the fit runs them
+error_metrics = eqx.filter_jit(loss.error_metrics)
+sum_squares = eqx.filter_jit(loss.sum_squares)
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +71,7 @@ def test_full_table_metrics_equal_the_loss_definition(noisy_ggx):
     u = jnp.asarray(m.unconstrain(TRUTH["ggx"]))
     w = sampling.bin_weights(sampling.usable_bins(noisy_ggx).usable)
     a = fitting.full_table_metrics(noisy_ggx, m, u, w, dtype=jnp.float64)
-    b = loss.error_metrics(u, m, fitting.full_table_data(noisy_ggx, w))
+    b = error_metrics(u, m, fitting.full_table_data(noisy_ggx, w))
     for k in a:
         assert a[k] == pytest.approx(float(b[k]), rel=1e-10), k
 
@@ -235,7 +239,7 @@ def _numpy_render_loss(table, index, weight, params, model):
     cos_i = np.maximum(g.cos_i[index], 0.0)
     meas = np.maximum(table.rgb.reshape(3, -1)[:, index], 0.0) * cos_i
     p = {k: np.asarray(v, np.float64) for k, v in params.items()}
-    fit_f = np.asarray(model(p, g.wi[index], g.wo[index])).T  # (3, S)
+    fit_f = np.asarray(evaluate(model, p, g.wi[index], g.wo[index])).T  # (3, S), compiled
     fit = np.maximum(fit_f, 0.0) * cos_i
     used = weight > 0
     level = []
@@ -261,7 +265,7 @@ def test_render_loss_value_is_the_numpy_definition(noisy_ggx):
     m = models.get("ggx")
     prep = fitting.prepare(noisy_ggx, None, 4096, 0, "float64", "render")
     params = {**TRUTH["ggx"], "alpha": 0.2, "kd": [0.3, 0.05, 0.01]}
-    got = float(loss.sum_squares(jnp.asarray(m.unconstrain(params)), m, prep.data))
+    got = float(sum_squares(jnp.asarray(m.unconstrain(params)), m, prep.data))
     want = _numpy_render_loss(noisy_ggx, prep.sample_set.index, prep.sample_set.weight,
                               params, m)
     assert got == pytest.approx(want, rel=1e-9)

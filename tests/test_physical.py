@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -131,13 +132,16 @@ def test_the_barrier_is_finite_with_finite_slopes_down_to_a_black_channel():
     grid = physical.albedo_grid("float64")
     u = jnp.asarray(m.unconstrain({"kd": [0.0, 0.3, 0.5], "ks": [0.0, 0.2, 0.4],
                                    "alpha": 0.2, "f0": 0.5}))
-    r = physical._barrier(u, m, grid, 1e-6)
-    jac = jax.jacfwd(physical._barrier)(u, m, grid, 1e-6)
+    # compiled, as the solver runs them: op by op, every primitive of the albedo and of
+    # its Jacobian compiles on its own
+    barrier = eqx.filter_jit(physical._barrier)
+    r = barrier(u, m, grid, 1e-6)
+    jac = eqx.filter_jit(jax.jacfwd(physical._barrier))(u, m, grid, 1e-6)
     assert np.all(np.isfinite(r)) and np.all(np.isfinite(jac))
     # outside the limit: infinite, so that the solver refuses the step
     out = jnp.asarray(m.unconstrain({"kd": [1.0, 1.0, 1.0], "ks": [1.0, 1.0, 1.0],
                                      "alpha": 0.2, "f0": 1.0}))
-    assert np.all(np.isinf(physical._barrier(out, m, grid, 1e-6)))
+    assert np.all(np.isinf(barrier(out, m, grid, 1e-6)))
 
 
 def test_bound_of_a_given_fit_is_the_physical_fit():

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -22,6 +24,19 @@ def _solve(fn, y0, options=None, max_steps=200):
     solver = NormalLevenbergMarquardt(rtol=1e-8, atol=1e-12)
     sol = optx.least_squares(fn, solver, y0, options=options, max_steps=max_steps, throw=False)
     return sol
+
+
+# The checks at a solution, compiled: op by op, every primitive of the Jacobian and of
+# the tests compiles on its own (seconds per test in a new process).
+@functools.partial(jax.jit, static_argnums=0)
+def _normal(fn, y):
+    """sum r^2, J^T J and J^T r of ``fn`` at ``y``, as the solver forms them."""
+    return solvers._residual_and_normal(lambda v, a: (fn(v, a), None), y, None, None)[:3]
+
+
+is_optimal = jax.jit(solvers.is_optimal)
+status = jax.jit(solvers.status)
+decrement = jax.jit(solvers.decrement)
 
 
 def _bounds(y, args):
@@ -64,16 +79,14 @@ def test_without_bound_information_the_optimality_test_does_not_hold_there():
     sol = _solve(_pinned_problem, jnp.array([-20.0, 1.0, 0.0]),
                  options={"bound_side": _bounds})
     y = sol.value.at[0].set(-30.0)  # a = 1e-13: at its bound for every purpose
-    loss, jtj, jtr, _ = solvers._residual_and_normal(
-        lambda v, a: (_pinned_problem(v, a), None), y, None, None)
+    loss, jtj, jtr = _normal(_pinned_problem, y)
     free = jnp.zeros(3, jnp.int32)
-    assert not bool(solvers.is_optimal(loss, jtj, jtr, free, 1e-7, 0.0))
-    assert bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
+    assert not bool(is_optimal(loss, jtj, jtr, free, 1e-7, 0.0))
+    assert bool(is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
     # still in the tail but not yet at the bound: the pinned gain is counted
     y = y.at[0].set(-13.0)
-    loss, jtj, jtr, _ = solvers._residual_and_normal(
-        lambda v, a: (_pinned_problem(v, a), None), y, None, None)
-    assert not bool(solvers.is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
+    loss, jtj, jtr = _normal(_pinned_problem, y)
+    assert not bool(is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
 
 
 def test_exact_fit_converges_through_the_floor_not_the_decrement():
@@ -91,11 +104,9 @@ def test_step_limit_is_not_success():
 
     sol = _solve(fn, jnp.array([0.1, 8.0]), max_steps=2)
     assert sol.result == optx.RESULTS.nonlinear_max_steps_reached
-    loss, jtj, jtr, _ = solvers._residual_and_normal(
-        lambda v, a: (fn(v, a), None), sol.value, None, None)
-    status = solvers.status(sol.result, solvers.is_optimal(loss, jtj, jtr, jnp.zeros(2, jnp.int32),
-                                                           1e-7, 0.0))
-    assert solvers.STATUS_NAMES[int(status)] == "nonlinear_max_steps_reached"
+    loss, jtj, jtr = _normal(fn, sol.value)
+    s = status(sol.result, is_optimal(loss, jtj, jtr, jnp.zeros(2, jnp.int32), 1e-7, 0.0))
+    assert solvers.STATUS_NAMES[int(s)] == "nonlinear_max_steps_reached"
 
 
 def test_a_kink_stalls_and_says_so():
@@ -107,10 +118,9 @@ def test_a_kink_stalls_and_says_so():
 
     sol = _solve(fn, jnp.array([0.3]), max_steps=500)
     assert int(sol.stats["stop"]) in (solvers.STUCK, solvers.STALLED)
-    loss, jtj, jtr, _ = solvers._residual_and_normal(
-        lambda v, a: (fn(v, a), None), sol.value, None, None)
-    optimal = solvers.is_optimal(loss, jtj, jtr, jnp.zeros(1, jnp.int32), 1e-7, 0.0)
-    assert solvers.STATUS_NAMES[int(solvers.status(sol.result, optimal))] == "stalled"
+    loss, jtj, jtr = _normal(fn, sol.value)
+    optimal = is_optimal(loss, jtj, jtr, jnp.zeros(1, jnp.int32), 1e-7, 0.0)
+    assert solvers.STATUS_NAMES[int(status(sol.result, optimal))] == "stalled"
 
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
@@ -121,6 +131,6 @@ def test_gtol_and_floor_are_relative(dtype):
     jtr = jnp.array([1e-3, -2e-3], dtype)
     side = jnp.zeros(2, jnp.int32)
     for s in (1.0, 1e-6):
-        dec = solvers.decrement(jtj * s**2, jtr * s**2, side)
-        np.testing.assert_allclose(float(dec) / s**2, float(solvers.decrement(jtj, jtr, side)),
+        dec = decrement(jtj * s**2, jtr * s**2, side)
+        np.testing.assert_allclose(float(dec) / s**2, float(decrement(jtj, jtr, side)),
                                    rtol=1e-3)

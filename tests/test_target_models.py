@@ -5,9 +5,10 @@ MaterialX's own shading: tests/test_materialx_shading.py)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
-import jax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -19,6 +20,11 @@ from brdffit.io.merl import MerlTable
 from brdffit.models.frame import shading_frame
 from brdffit.models.microfacet import dielectric_fresnel
 from brdffit.models.renderer_terms import conductor_fresnel
+from tests.compiled_models import (
+    assert_finite_transform_gradients,
+    assert_finite_values_and_gradients,
+    evaluate,
+)
 from tests.test_models import _albedo, _jnp  # the same midpoint albedo and parameter cast
 
 pytestmark = pytest.mark.unit
@@ -37,20 +43,25 @@ def _pairs(n, seed=0):
     return v[0], v[1]
 
 
+@eqx.filter_jit  # one program: op by op, every primitive compiles on its own
+def _pseudocode_channels(model, params, wi, wo):
+    return model.pseudocode_channels(params, shading_frame(wi, wo))
+
+
 def test_gltf_pbr_is_the_spec_brdf():
     wi, wo = _pairs(5000)
     keep = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3)
     wi, wo = wi[keep], wo[keep]
-    frame = shading_frame(jnp.asarray(wi), jnp.asarray(wo))
     for p in (GLTF, {"base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.04},
               {"base_color": [0.1, 0.5, 0.9], "metallic": 0.0, "roughness": 1.0}):
         for name, extra in (("gltf_pbr", {}), ("gltf_pbr_ior", {"ior": 1.5}),
                             ("gltf_pbr_ior", {"ior": 2.2})):
             q = {**p, **extra}
             model = models.get(name)
-            ours = np.asarray(model(_jnp(q), jnp.asarray(wi), jnp.asarray(wo)))
+            ours = np.asarray(evaluate(model, _jnp(q), wi, wo))
             np.testing.assert_allclose(ours, gltf_spec_eval(q, wi, wo), rtol=1e-9, atol=1e-12)
-            pseudo = np.moveaxis(np.asarray(model.pseudocode_channels(_jnp(q), frame)), 0, -1)
+            pseudo = np.moveaxis(np.asarray(
+                _pseudocode_channels(model, _jnp(q), jnp.asarray(wi), jnp.asarray(wo))), 0, -1)
             np.testing.assert_allclose(pseudo, gltf_spec_eval(q, wi, wo, pseudocode=True),
                                        rtol=1e-9, atol=1e-12)
 
@@ -107,8 +118,9 @@ def test_reciprocity(name):
                          "weight": 0.5}, 1.0),
 ])
 def test_energy_conservation_at_the_bounds(name, params, bound):
+    model = functools.partial(evaluate, models.get(name))  # one compiled program, not op by op
     for theta_i in (0.0, 0.6, 1.2, 1.5):
-        a = _albedo(models.get(name), params, theta_i, n_theta=500, n_phi=500)
+        a = _albedo(model, params, theta_i, n_theta=500, n_phi=500)
         assert np.all(a <= bound * 1.005) and np.all(a >= 0), (theta_i, a)
 
 
@@ -140,19 +152,9 @@ EDGES = {
 def test_finite_values_and_gradients_on_the_closed_hemisphere(name):
     m = models.get(name)
     wi, wo = _edge_directions()
-    for params in EDGES[name]:
-        p = {s.name: jnp.asarray(params[s.name], jnp.float64) * (jnp.ones(3) if s.rgb else 1.0)
-             for s in m.param_specs}
-        f = m(p, wi, wo)
-        assert bool(jnp.all(jnp.isfinite(f))) and bool(jnp.all(f >= 0)), params
-        for k, g in jax.grad(lambda q: jnp.sum(m(q, wi, wo)))(p).items():
-            assert bool(jnp.all(jnp.isfinite(g))), (params, k)
-        g_dirs = jax.grad(lambda a, b: jnp.sum(m(p, a, b)), argnums=(0, 1))(wi, wo)
-        assert all(bool(jnp.all(jnp.isfinite(g))) for g in g_dirs), params
+    assert_finite_values_and_gradients(m, EDGES[name], wi, wo)
     u = jnp.asarray(m.unconstrain(m.check_params(EDGES[name][0])))
-    for scale in (-50.0, 0.0, 50.0):  # beyond both ends of every transform
-        g = jax.grad(lambda v: jnp.sum(m(m.constrain(v), wi, wo)))(jnp.full_like(u, scale))
-        assert bool(jnp.all(jnp.isfinite(g))), scale
+    assert_finite_transform_gradients(m, u, wi, wo)  # beyond both ends of every transform
 
 
 def _table_of(name, params) -> MerlTable:
@@ -196,15 +198,14 @@ def test_standard_surface_layers_by_albedo_not_by_fresnel():
     m = models.get("standard_surface")
     wi, wo = _pairs(300, seed=4)
     p = {**STANDARD, "metalness": 0.0, "specular_color": [0.0, 0.0, 0.0]}
-    f = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
+    f = np.asarray(evaluate(m, _jnp(p), wi, wo))  # one compiled program, not op by op
     base = np.asarray(STANDARD["base_color"]) / np.pi
     ratio = f / base
     assert np.all(ratio < 1.0) and np.all(ratio > 0.5)
     np.testing.assert_allclose(ratio[:, 0], ratio[:, 2], rtol=1e-12)
     metal = {**p, "metalness": 1.0, "specular_color": [1.0, 1.0, 1.0]}
-    lobe = np.asarray(m(_jnp(metal), jnp.asarray(wi), jnp.asarray(wo)))
-    f_black = np.asarray(m(_jnp({**metal, "base_color": [0.0] * 3}), jnp.asarray(wi),
-                           jnp.asarray(wo)))
+    lobe = np.asarray(evaluate(m, _jnp(metal), wi, wo))
+    f_black = np.asarray(evaluate(m, _jnp({**metal, "base_color": [0.0] * 3}), wi, wo))
     assert np.all(f_black >= 0) and np.all(lobe > f_black)
 
 
