@@ -76,6 +76,23 @@ def test_noise_is_multiplicative_and_seeded():
     assert 0.08 < ratio.std() < 0.12 and abs(ratio.mean() - 1) < 0.01
 
 
+def test_copies_of_one_truth_are_independent_tables():
+    """make_table keeps the last truths' rendered values: a table changed in place
+    changes neither that copy nor the next table, and other params render anew."""
+    from data_synth import render_values
+    from data_synth.synth import Component
+
+    clean, _ = make_table("ggx")
+    clean.rgb[:] = 0.0  # a caller may write into its table
+    again, _ = make_table("ggx")
+    params = {"kd": [0.2, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "alpha": 0.3, "f0": 0.5}
+    other, _ = make_table("ggx", params)
+    expect = render_values([Component("ggx", make_table("ggx")[1]["params"])])
+    np.testing.assert_array_equal(again.rgb.reshape(3, -1), expect)
+    np.testing.assert_array_equal(other.rgb.reshape(3, -1),
+                                  render_values([Component("ggx", params)]))
+
+
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_presets_make_valid_tables(name, tmp_path):
     table, truth = make_preset(name)
