@@ -289,6 +289,20 @@ def _native_kernels_ready() -> None:
                             "program that calls LAPACK may fail", e)
 
 
+def calls_lapack(payload: bytes) -> bool:
+    """Whether a serialised executable calls JAX's CPU LAPACK kernels: it names
+    them (``lapack_dgeqrf_ffi``, ...: a routine's name starts with its precision,
+    s, d, c or z; the payload's debug information also holds the names of the
+    Python functions that traced it). Only such a program needs
+    :func:`_native_kernels_ready` before it runs, which imports SciPy's LAPACK
+    (~0.2 s of every new process that loads a fit; brdffit's own lm solver calls
+    none). A false positive costs that time, nothing else."""
+    return _LAPACK_TARGET.search(payload) is not None
+
+
+_LAPACK_TARGET = re.compile(rb"lapack_[sdcz][a-z]")
+
+
 def _compile(lowered):
     """``lowered`` compiled with :data:`CPU_COMPILER_OPTIONS` on the CPU (without,
     where this XLA refuses one of them), as XLA's default elsewhere."""
@@ -435,10 +449,11 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
         from jax.experimental import serialize_executable
 
         t0 = time.perf_counter()
-        _native_kernels_ready()
         try:
             with open(path, "rb") as f:
                 payload, in_tree, out_tree, out_example = pickle.load(f)
+            if calls_lapack(payload):
+                _native_kernels_ready()
             call = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
             runtime.log.debug("brdffit: loaded compiled %s in %.3f s", name,
                               time.perf_counter() - t0)

@@ -39,7 +39,9 @@ for solver in sys.argv[1:] or ["lm"]:
                    "uncertainty": r.uncertainty}
 from brdffit import executables
 compiled = [e.name for e in executables.events if e.how == "compiled"]
-print(json.dumps({"fits": out, "compiled": compiled} if sys.argv[1:] else out["lm"]))
+lapack = "scipy.linalg.cython_lapack" in sys.modules  # JAX's LAPACK kernels made ready
+print(json.dumps({"fits": out, "compiled": compiled, "lapack": lapack} if sys.argv[1:]
+                 else out["lm"]))
 """
 
 
@@ -83,11 +85,31 @@ def test_solves_that_call_lapack_run_from_their_stored_programs(tmp_path):
     first, _ = _run(tmp_path, *solvers)
     second, log = _run(tmp_path, *solvers)
     assert log.count("loaded compiled brdffit.fitting.problem.solve_batch") >= len(solvers)
+    assert second["lapack"]
     # loaded, not compiled again (a compile lowers a QR, which would hide the crash)
     assert not [n for n in second["compiled"] if n.endswith("solve_batch")], second["compiled"]
     # equal to rounding: the table is fitted exactly, where the last bits of a dogleg
     # solve differed between processes on a loaded machine (the note of issue 25)
     _assert_close(second["fits"], first["fits"])
+
+
+def test_only_a_program_that_calls_lapack_loads_its_kernels(tmp_path):
+    """A loaded program that names JAX's LAPACK kernels gets them made ready first
+    (their QR solves crashed otherwise, above); brdffit's own lm fit names none, and
+    a new process that loads it skips SciPy's LAPACK import (~0.2 s)."""
+    import jax
+    import jax.numpy as jnp
+    from jax.experimental import serialize_executable
+
+    def payload(f):
+        return serialize_executable.serialize(jax.jit(f).lower(jnp.zeros((4, 3))).compile())[0]
+
+    assert executables.calls_lapack(payload(lambda a: jnp.linalg.qr(a)[0].sum()))
+    assert not executables.calls_lapack(payload(lambda a: (a * a).sum()))
+    _run(tmp_path, "lm")
+    second, log = _run(tmp_path, "lm")
+    assert "loaded compiled brdffit.fitting.problem.solve_batch" in log
+    assert not second["lapack"], "a loaded lm fit made JAX's LAPACK kernels ready"
 
 
 def _assert_close(got, want, path=""):
