@@ -26,6 +26,7 @@ from brdffit.batch.report import format_ranking, plot_summary, rank, summary_fig
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
 from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
+from tests.dask_fixtures import free_port
 from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
@@ -265,6 +266,16 @@ def test_each_local_worker_gets_a_share_of_the_cores(workers, cores, shares):
     from brdffit.batch.local_worker import core_share
 
     assert [core_share(i, workers, cores) for i in range(workers)] == shares
+
+
+@pytest.mark.unit
+def test_more_workers_than_cores_get_a_line_saying_so():
+    from brdffit.cli.batch import workers_note
+
+    assert workers_note(2, 2) is None and workers_note(1, 4) is None
+    note = workers_note(3, 2)
+    assert note.startswith("brdffit: 3 workers on 2 cores") and "--workers 2" in note
+    assert "\n" not in note
 
 
 @pytest.mark.unit
@@ -613,19 +624,11 @@ def _sha256(path: str) -> str:
 # -- an existing cluster: scheduler and worker started by hand, as on several machines ----
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path):
     """docs/batch.md, "On a real cluster": `dask scheduler` and `dask worker` run as
     their own processes (as they would on other machines), and `brdffit batch
     --scheduler` submits to them."""
-    port = _free_port()
+    port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = {**os.environ, "PYTHONPATH": REPO}
     procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",

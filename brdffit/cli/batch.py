@@ -49,6 +49,16 @@ def _default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def workers_note(workers: int, cores: int) -> str | None:
+    """A line for stderr when ``--workers`` asks for more local workers than cores:
+    each worker fits on a core of its own where it can have one, so the extra ones
+    only share cores with the others (more memory and start-up, no more fits)."""
+    if workers <= cores:
+        return None
+    return (f"brdffit: {workers} workers on {cores} cores: the extra workers share cores "
+            f"with the others (more memory, no more cores; --workers {cores} uses them all)")
+
+
 def _models(text: str) -> list[str]:
     return [m.strip() for m in text.split(",") if m.strip()]
 
@@ -86,6 +96,9 @@ def _quiet_lost_interrupt(unraisable) -> None:
 
 def run(args) -> int:
     options = options_from_args(args)
+    note = None if args.scheduler else workers_note(args.workers, _default_workers())
+    if note:
+        print(note, file=sys.stderr)
     main_thread = threading.current_thread() is threading.main_thread()
     stop_requested.clear()
     previous = ({sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
