@@ -71,10 +71,11 @@ def _rendered(components: list[Component]) -> np.ndarray:
     """``render_values``, kept for the last few truths: noisy copies of one truth (an
     uncertainty check fits 16 to 50) render it once; ~0.3 s of the ~0.5 s a table
     takes. Read-only: every table is a new array made from it."""
-    try:
-        key = json.dumps([[c.model, {k: np.asarray(v, float).tolist() for k, v in
-                                     sorted(c.params.items())}] for c in components])
-    except (TypeError, ValueError):  # not numbers: render_values says what is wrong
+    try:  # the params as given (the model checks them), arrays as lists
+        key = json.dumps([[c.model, {k: v.tolist() if isinstance(v, np.ndarray) else v
+                                     for k, v in sorted(c.params.items())}]
+                          for c in components])
+    except TypeError:  # not plain JSON: rendered each time, as before
         return render_values(components)
     return _rendered_by_key(key)
 
