@@ -430,8 +430,10 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
     the caller to run on its own thread once it has scored its starts: it would
     otherwise wait there, idle, for the solve compiling on the pool. None when this
     is not the first fit of its kind."""
-    kind = (type(model), model.name, getattr(model, "shared_programs", False), precision,
-            loss, prep.data.weight.shape,
+    # the kind of the programs, not of the model: members of a family fitted on its
+    # programs (ggx and beckmann in auto; also inside MonoKs) make them ready once
+    form = model.compiled_form()
+    kind = (type(form), form.name, precision, loss, prep.data.weight.shape,
             prep.weight is None or prep.weight.size)
     with _ERROR_THREADS_LOCK:
         if kind in _REPORTS_READY:
