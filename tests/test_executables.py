@@ -68,7 +68,7 @@ def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path)
     assert "loaded compiled brdffit.fitting.problem.solve_batch" in log2
     assert second["fits"] == first["fits"]  # to the last bit: the same executable and data
     # brdffit's lm solve calls no LAPACK: loading it skips their kernels' set-up, which
-    # imports SciPy's LAPACK (~0.2 s; executables.calls_lapack)
+    # imports SciPy's LAPACK (0.13-0.18 s; executables.calls_lapack)
     assert not second["lapack"]
 
     # damaged files (a disk error, a killed writer) are compiled again and replaced
