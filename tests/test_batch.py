@@ -26,7 +26,7 @@ from brdffit.batch.report import format_ranking, plot_summary, rank, summary_fig
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
 from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
-from tests.dask_fixtures import free_port
+from tests.api_fixtures import free_port
 from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
