@@ -84,10 +84,10 @@ def test_copies_of_one_truth_are_independent_tables():
 
     clean, _ = make_table("ggx")
     clean.rgb[:] = 0.0  # a caller may write into its table
-    again, _ = make_table("ggx")
+    again, truth = make_table("ggx")
     params = {"kd": [0.2, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "alpha": 0.3, "f0": 0.5}
     other, _ = make_table("ggx", params)
-    expect = render_values([Component("ggx", make_table("ggx")[1]["params"])])
+    expect = render_values([Component("ggx", truth["params"])])
     np.testing.assert_array_equal(again.rgb.reshape(3, -1), expect)
     np.testing.assert_array_equal(other.rgb.reshape(3, -1),
                                   render_values([Component("ggx", params)]))

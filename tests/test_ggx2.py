@@ -67,8 +67,7 @@ def test_ggx_and_beckmann_keep_their_contract():
     p = {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.2, "f0": 0.3}
     # compiled (tests.compiled_models.evaluate), here and below: op by op, every primitive
     # of the model compiles on its own
-    got = np.asarray(evaluate(models.get("ggx"), {k: jnp.asarray(v) for k, v in p.items()},
-                              wi, wo))
+    got = np.asarray(evaluate(models.get("ggx"), p, wi, wo))
     np.testing.assert_allclose(got, _ggx_reference(**p, wi=wi, wo=wo), rtol=1e-9)
 
 
@@ -127,8 +126,7 @@ def test_ggx2_is_the_sum_of_two_ggx_lobes():
     wi, wo = _random_pairs(2000)
     p = {"kd": [0.1, 0.08, 0.05], "ks1": [0.5, 0.4, 0.3], "alpha1": 0.05,
          "ks2": [0.2, 0.3, 0.4], "alpha2": 0.4, "f0": 0.5}
-    got = np.asarray(evaluate(models.get("ggx2"), {k: jnp.asarray(v) for k, v in p.items()},
-                              wi, wo))
+    got = np.asarray(evaluate(models.get("ggx2"), p, wi, wo))
     ref = _ggx_reference(p["kd"], p["ks1"], p["alpha1"], p["f0"], wi, wo) + _ggx_reference(
         0.0, p["ks2"], p["alpha2"], p["f0"], wi, wo
     )
