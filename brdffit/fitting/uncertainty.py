@@ -29,7 +29,8 @@ A parameter is **undetermined** when the data do not fix it:
   parameters named (``ks`` and ``f0`` can do this: the lobe scales with their product);
 - ``no lobe``: it shapes a lobe whose scale (``ks``) is within 2 standard errors
   of 0 in every channel (``alpha`` of a diffuse table, where the fit lets a lobe of
-  ``ks`` ~0.004 chase the noise);
+  ``ks`` ~0.004 chase the noise); a scale held at a bound above 0 (``ks = 1`` under
+  the physical bounds) is a lobe at its limit, not a vanished one;
 - ``loose``: its standard error is more than half its scale (its value, or the
   width of its range for ``f0`` and ``sigma``).
 
@@ -198,9 +199,14 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     scale = _scale(model, theta)
 
     def significant(scale_names) -> bool:
+        # a scale held at a bound above 0 (ks = 1 under the physical bounds) is a lobe
+        # at its limit, not a vanished one: its partners are judged as any others
         for j, name in enumerate(names):
-            if (name.split("[")[0] in scale_names and not at_bound[j]
-                    and np.isfinite(se[j]) and theta[j] > SIGNIFICANT * se[j]):
+            if name.split("[")[0] not in scale_names:
+                continue
+            if at_bound[j] and theta[j] > 0:
+                return True
+            if not at_bound[j] and np.isfinite(se[j]) and theta[j] > SIGNIFICANT * se[j]:
                 return True
         return False
 
