@@ -38,7 +38,9 @@ def _row(name: str) -> tuple[list[np.ndarray], list[str]]:
     images, titles = [np.nan_to_num(measured)], [f"{name}\nmeasured"]
 
     def caption(label, e):
-        c = " ".join(f"{x:+.0%}" for x in e.fidelity["sphere_colour_error"])
+        sc = e.fidelity["sphere_colour"] or {}
+        c = (f"{sc.get('brightness_stops') or 0:+.2f} stops, "
+             f"dE {sc.get('colour_shift') or 0:.1f}")
         return f"{label}\nlog_rmse {e.fidelity['log_rmse_to_table']:.4f}, colour {c}"
 
     e = export(r, "mitsuba", table=table)

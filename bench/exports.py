@@ -319,11 +319,15 @@ def summarise(rows: list[dict]) -> dict:
              "fit_log_rmse_to_table": _stats(x["fit_log_rmse_to_table"] for x in e),
              "log_rmse_to_table": _stats(to_table),
              "to_table_over_fit": _stats(ratio),
-             "colour_error": _stats(max(map(abs, x["sphere_colour_error"])) for x in e
-                                    if x["sphere_colour_error"]),
-             "colour_error_above_10_percent": sum(
-                 max(map(abs, x["sphere_colour_error"])) > 0.10 for x in e
-                 if x["sphere_colour_error"]),
+             "colour_shift": _stats(x["sphere_colour"]["colour_shift"] for x in e
+                                    if x["sphere_colour"]
+                                    and x["sphere_colour"]["colour_shift"] is not None),
+             "colour_shift_above_3": sum(
+                 (x["sphere_colour"]["colour_shift"] or 0.0) > 3.0 for x in e
+                 if x["sphere_colour"]),
+             "brightness_stops": _stats(abs(x["sphere_colour"]["brightness_stops"]) for x in e
+                                        if x["sphere_colour"]
+                                        and x["sphere_colour"]["brightness_stops"] is not None),
              "albedo_max": _stats(max(x["albedo_max"]) for x in e),
              "albedo_above_1": sum(max(x["albedo_max"]) > 1.005 for x in e)}
         indep = [(x["log_rmse_to_table"], x["independent"]) for x in e
@@ -473,8 +477,8 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
     def renderer_rows(keys):
         out = ["| export | file carries | exact | fit's own log_rmse to the table | exported "
                "file's log_rmse to the table | ratio to the fit's | reported vs independent "
-               "evaluation (max rel. diff) | lit-sphere colour error, worst channel | > 10% | "
-               "albedo > 1 |", "|---|---|---|---|---|---|---|---|---|---|"]
+               "evaluation (max rel. diff) | lit-sphere brightness, stops | colour, "
+               "CIEDE2000 | > 3 | albedo > 1 |", "|---|---|---|---|---|---|---|---|---|---|---|"]
         for key in keys:
             s = ex[key]
             ind = (f"{s['reported_vs_independent']['max']:.1e} ({s['independent_n']}/{s['n']})"
@@ -483,8 +487,8 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
                 f"| {key} | {s['target_model']} | {s['exact']}/{s['n']} | "
                 f"{_range(s['fit_log_rmse_to_table'])} | {_range(s['log_rmse_to_table'])} | "
                 f"{_range(s['to_table_over_fit'], '.2f')} | {ind} | "
-                f"{_range(s['colour_error'], '.1%')} | "
-                f"{s['colour_error_above_10_percent']}/{s['n']} | {s['albedo_above_1']}/{s['n']} |")
+                f"{_range(s['brightness_stops'], '.2f')} | {_range(s['colour_shift'], '.1f')} | "
+                f"{s['colour_shift_above_3']}/{s['n']} | {s['albedo_above_1']}/{s['n']} |")
         return out
 
     keys = {t: [k for k in ex if k.split("->")[1].split()[0] == t]
@@ -500,9 +504,9 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
         "written out in numpy, `brdffit.export.validate.gltf_spec_eval`; MaterialX's own "
         "shader code, `validate.materialx_eval`). *Ratio to the fit's*: the exported "
         "file's error over the source fit's own error to the table (1: nothing lost). "
-        "Colour error: `fidelity.sphere_colour_error`, the per-channel error of the "
-        "exported material's mean radiance over the key-light sphere against the "
-        "table's; the worst channel per material.",
+        "Colour: `fidelity.sphere_colour`, the exported material's lit key-light sphere "
+        "against the table's, both read through the table's bins: brightness in stops "
+        "and the colour shift as CIEDE2000 at equal luminance.",
         "",
         "### Mitsuba 3",
         "",
@@ -587,7 +591,7 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
         "log_rmse to the table of the default fits, and of the exported files (under the "
         "renderer's semantics); cost: the bounded fit's relative cost (·: no bound "
         "active); metallic: the gltf_pbr fit's; colour: the exported file's lit-sphere "
-        "colour error, R / G / B.",
+        "brightness (stops) and colour shift (CIEDE2000).",
         "",
         "| material | ggx | rough_conductor | gltf_pbr | standard_surface | cost ggx / "
         "conductor / gltf | ggx -> mitsuba | ggx -> gltf | ggx -> materialx | metallic | "
@@ -603,8 +607,9 @@ def _markdown(rows: list[dict], summary: dict, meta: dict) -> str:
         ex = {(e["source"], e["target"], e["requested"]): e for e in r["exports"]}
         costs = " / ".join(f"{c:+.1%}" if (c := f[m]["bounded"]["relative_cost"]) else "·"
                            for m in BOUNDED)
-        colour = " / ".join(f"{c:+.0%}" for c in
-                            ex["standard_surface", "materialx", None]["sphere_colour_error"])
+        c = ex["standard_surface", "materialx", None]["sphere_colour"] or {}
+        colour = (f"{c.get('brightness_stops') or 0:+.2f} stops, "
+                  f"dE {c.get('colour_shift') or 0:.1f}")
         lines.append(
             f"| {r['material']} | " + " | ".join(f"{f[m]['log_rmse']:.4f}" for m in MODELS)
             + f" | {costs} | "

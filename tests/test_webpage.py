@@ -149,6 +149,10 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         looks = best.locator("td.verdict")
         assert looks.inner_text() == job["result"]["quality"]["verdict"]
         assert looks.get_attribute("title") == job["result"]["quality"]["reason"]
+        # what to try next is shown exactly where the chosen fit does not look good
+        steps = job["result"]["quality"]["next"]
+        assert page.locator("#next-steps").is_visible() == bool(steps)
+        assert page.locator("#next-steps li").count() == len(steps)
 
         visit.wait_image("#plot-spheres")
         visit.wait_image("#plot-slices")

@@ -16,7 +16,7 @@ import os
 from dataclasses import dataclass, field
 
 from brdffit import extras, models
-from brdffit.batch.store import read_attrs, read_index, read_verdicts
+from brdffit.batch.store import read_attrs, read_index, read_looks
 from brdffit.fitting.quality import VERDICTS
 from brdffit.selection import DEFAULT_TOLERANCE, best, choose
 
@@ -31,6 +31,7 @@ class TableRanking:
     message: str
     errors: dict[str, float]  # model -> log_rmse, successful fits only
     failed_models: dict[str, str] = field(default_factory=dict)  # model -> message
+    looks: dict[str, dict] = field(default_factory=dict)  # model -> its quality block
 
     def _rows(self) -> list[dict]:
         """The successful fits as ranking rows, cheapest first (the registry's order)."""
@@ -98,7 +99,9 @@ def rank(path: str | os.PathLike) -> Ranking:
             else:
                 row.failed_models[model] = f.message
         tables.append(row)
-    verdicts = read_verdicts(path)
+    looks = read_looks(path)
+    for t in tables:
+        t.looks = {m: looks[t.name, m] for m in t.errors if (t.name, m) in looks}
     summary = []
     for m in models:
         values = sorted(e for t in tables if math.isfinite(e := t.errors.get(m, math.nan)))
@@ -110,7 +113,7 @@ def rank(path: str | os.PathLike) -> Ranking:
             mean=sum(values) / len(values) if values else math.nan,
             median=_median(values),
             not_converged=not_converged.get(m, 0),
-            looks={v: sum(verdicts.get((t.name, m)) == v for t in tables if m in t.errors)
+            looks={v: sum(t.looks.get(m, {}).get("verdict") == v for t in tables)
                    for v in VERDICTS},
         ))
     return Ranking(attrs, list(models), tables, summary)
@@ -150,6 +153,7 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
         looks = "/".join(str(s.looks.get(v, 0)) for v in VERDICTS)
         lines.append(f"{s.model:<{cols}} {s.fitted:>7} {s.failed:>7} {s.wins:>6} "
                      f"{s.mean:>14.4g} {s.median:>10.4g} {s.not_converged:>10}  {looks}")
+    lines += _next_steps(r)
     if n_failed:
         lines += ["", "failures:"]
         for t in r.failed_tables:
@@ -159,6 +163,27 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
             for m, msg in t.failed_models.items():
                 lines.append(f"  {t.path} [{m}]: {msg}")
     return "\n".join(lines)
+
+
+def _next_steps(r: Ranking) -> list[str]:
+    """For each table whose best fit does not look good: its verdict and the first
+    thing to try (the fit's ``quality.next``)."""
+    lines = []
+    for t in r.tables:
+        look = t.looks.get(t.best) if t.best else None
+        if not look or look.get("verdict") in (None, "good"):
+            continue
+        steps = look.get("next") or []
+        step = steps[0] if steps else None
+        gain = ("" if step is None or step.get("gain_db") is None
+                else f" ({step['gain_db']:+.1f} dB)")
+        lines.append(f"  {t.name} [{t.best}] looks {look['verdict']}: "
+                     + (f"next: {step['try']}{gain}: {step['why']}" if step
+                        else look.get("reason", "")))
+    if lines:
+        lines.insert(0, "")
+        lines.insert(1, "what to try next, where the best fit does not look good:")
+    return lines
 
 
 def plot_summary(r: Ranking, png: str | os.PathLike, source: str = "") -> str:

@@ -465,16 +465,15 @@ def read_results(path: str | os.PathLike) -> dict:
     return out
 
 
-def read_verdicts(path: str | os.PathLike) -> dict[tuple[str, str], str | None]:
-    """(table name, model) -> the fit's ``quality.verdict`` (good, visible, poor; None
-    for a fit stored before results had one), for every fit that ran."""
+def read_looks(path: str | os.PathLike) -> dict[tuple[str, str], dict]:
+    """(table name, model) -> the fit's ``quality`` block (its verdict, reason and
+    ``next``; empty for a fit stored before results had one), for every fit that ran."""
     out = {}
     with _open(os.fspath(path)) as f:
         for name, g in f["tables"].items():
             for model, m in g.items():
                 if "fit_json" in m.attrs:
-                    quality = json.loads(_plain(m.attrs["fit_json"])).get("quality") or {}
-                    out[name, model] = quality.get("verdict")
+                    out[name, model] = json.loads(_plain(m.attrs["fit_json"])).get("quality") or {}
     return out
 
 

@@ -31,7 +31,11 @@ def run(args) -> int:
                         "auto": t.chosen(args.tolerance)[0],
                         "auto_reason": t.chosen(args.tolerance)[1],
                         "log_rmse": t.errors, "message": t.message,
-                        "failed_models": t.failed_models} for t in ranking.tables],
+                        "failed_models": t.failed_models,
+                        # how the best fit looks, and what to try next where it is not good
+                        "looks": {k: (t.looks.get(t.best) or {}).get(k)
+                                  for k in ("verdict", "reason", "next")}}
+                       for t in ranking.tables],
             "models": [vars(s) for s in ranking.summary],
         }, sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")

@@ -111,11 +111,16 @@ def run(args) -> int:
            else f"approximated, log_rmse to the fit {fid['log_rmse_to_fit']:.4g}")
     line = f"{args.target}: {out.source_model} fit as {fid['target_model']} ({how})"
     if fid.get("log_rmse_to_table") is not None:
-        colour = " ".join(f"{c} {e:+.1%}" for c, e in zip("RGB", fid["sphere_colour_error"],
-                                                          strict=True) if e is not None)
+        colour = fid.get("sphere_colour") or {}
         line += (f"; to the table: log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
-                 f"{fid['fit_log_rmse']:.4g}), lit sphere colour {colour}")
+                 f"{fid['fit_log_rmse']:.4g}), lit sphere "
+                 f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
+                 f"{_figure(colour.get('colour_shift'), '.1f')}")
     print(line, file=sys.stderr)
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0
+
+
+def _figure(x, fmt: str) -> str:
+    return "n/a" if x is None else format(x, fmt)

@@ -9,6 +9,7 @@ import threading
 from brdffit import executables, extras, jsonout, runtime
 from brdffit.fitting import options
 from brdffit.fitting.options import FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.fitting.quality import describe
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
@@ -120,8 +121,7 @@ def format_result(r: FitResult) -> str:
                  f"{_g(e.get('cube_root_rmse'))}   rmse_cos {e['rmse_cos']:.4g} 1/sr   "
                  f"rel_peak_error {_g(e.get('rel_peak_error'))}   sphere PSNR "
                  f"{_g(e.get('psnr_db'), '.1f')} dB")
-    if r.quality is not None:
-        lines.append(f"  looks {r.quality['verdict']}: {r.quality['reason']}")
+    lines += describe(r.quality)
     if r.full_table_error is not None:
         lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} (full table)   "
                      f"scene {r.scene['description']}")

@@ -20,8 +20,10 @@ from brdffit.export import gltf, materialx, mitsuba
 from brdffit.fitting.result import FitResult
 from brdffit.io.merl import MerlTable
 
-#: The version of the export schema that :meth:`Export.to_dict` writes.
-SCHEMA = "brdffit.export/1"
+#: The version of the export schema that :meth:`Export.to_dict` writes. 2:
+#: ``fidelity.sphere_colour`` (brightness in stops, CIEDE2000) replaces the per-channel
+#: ``sphere_colour_error``.
+SCHEMA = "brdffit.export/2"
 
 #: target -> its module (TARGET_MODELS, MEDIA_TYPE and the writer).
 TARGETS = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
@@ -40,8 +42,12 @@ class Export:
     ``files``: the same material as the files a user saves (name -> text), e.g. the
     Mitsuba scene XML. ``fidelity``: ``exact``, the ``target_model`` the renderer
     shades with, ``log_rmse_to_fit`` (what the conversion lost; 0 when exact), the
-    fit's own ``fit_log_rmse`` to its table, and the material's largest directional
-    albedo ``albedo_max`` (RGB) at ``albedo_max_theta_deg`` (``brdffit.export.energy``).
+    fit's own ``fit_log_rmse`` to its table, ``sphere_colour``: the exported material's
+    lit sphere against the table's (``brightness_stops``, ``colour_shift`` as CIEDE2000,
+    ``estimate_error``: ``brdffit.fitting.sphere.sphere_colour``'s key light), and the
+    material's largest directional albedo ``albedo_max`` (RGB) at
+    ``albedo_max_theta_deg`` (``brdffit.export.energy``). A fit that does not look good
+    is exported with a warning that says so and what to try.
     """
 
     target: str
@@ -109,7 +115,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     from brdffit.export.conversion import convert
     from brdffit.export.energy import energy_report
     from brdffit.fitting.problem import table_error
-    from brdffit.fitting.sphere import sphere_colour_error
+    from brdffit.fitting.sphere import sphere_colour
 
     if target not in TARGETS:
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
@@ -126,7 +132,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     warnings = list(conv.warnings)
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
-                    log_rmse_to_table=None, sphere_colour_error=None)
+                    log_rmse_to_table=None, sphere_colour=None)
     measured = None
     if shaded_as is None:  # no table to read: nothing could be measured against it
         warnings.append(module.UNMODELLED_NOTE)
@@ -135,11 +141,24 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         warnings += missing
     if measured is not None:
         fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
-        fidelity["sphere_colour_error"] = sphere_colour_error(
-            measured, models.get(shaded_as), conv.params)
+        fidelity["sphere_colour"] = sphere_colour(
+            measured, models.get(shaded_as), conv.params)["key"]
+    warnings += _looks_warning(result)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
     name = _material_name(result)
     material, files, notes = module.write(conv.params, name, conv.target_model)
     return Export(target, result.model, module.MEDIA_TYPE, material, files,
                   {**fidelity, **energy}, conv.params, warnings + notes, result.table)
+
+
+def _looks_warning(result: FitResult) -> list[str]:
+    """A warning where the exported fit itself does not look good beside its table
+    (its ``quality``): an export cannot look better than the fit it carries."""
+    look = result.quality or {}
+    if look.get("verdict") not in ("visible", "poor"):
+        return []
+    steps = look.get("next") or []
+    hint = f"; next: {steps[0]['try']}" if steps else ""
+    return [f"the {result.model} fit looks {look['verdict']} beside its table "
+            f"({look.get('reason', '')}){hint}"]

@@ -442,7 +442,7 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
         sum_squares(jnp.asarray(u, dtype), bounded, prep.data)), 0.0) / 3.0))
     if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
         result = "nonfinite"
-    metrics["psnr_db"], colour_shift = problem.cached(
+    metrics["psnr_db"], colour = problem.cached(
         table, "sphere", lambda: SphereReference(table)).psnr_and_colour(model, params)
     active = outside + [a for a in _at_upper(model, params) if a not in outside]
     active += _binding(after)
@@ -455,6 +455,7 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
         free, params=params, error=metrics, converged=result == "successful", result=result,
         steps=n_steps, time_s=free.time_s + time.perf_counter() - t0, starts=1,
         uncertainty=uncertainty,
-        quality=quality(table, model, params, metrics["psnr_db"], colour_shift),
+        quality=quality(metrics["psnr_db"], colour, model=model, params=params, loss=loss,
+                        converged=result == "successful", physical=bool(active)),
         physical=report(free, metrics, before, after, active, scale))
 

@@ -199,7 +199,7 @@ def fit(
         # Score candidates on every 8th sample: ranking starts needs no more.
         scores = np.asarray(score_starts(m, jnp.asarray(u_candidates, dtype), data, 8))
         scores = np.where(np.isfinite(scores), scores, np.inf)
-        best_starts = u_candidates[np.argsort(scores, kind="stable")[:n_starts]]
+        best_starts = u_candidates[_best_of_each_family(m, scores, n_starts)]
     else:
         best_starts = u_candidates
     if ready_here is not None:
@@ -296,14 +296,15 @@ def fit(
     params = plain_params(constrained(m, np.asarray(u_best)))
     # The image error of the whole sphere (no scene weighting): one figure that
     # compares fits made under different losses.
-    metrics["psnr_db"], colour_shift = cached(
+    metrics["psnr_db"], colour = cached(
         table, "sphere", lambda: SphereReference(table)).psnr_and_colour(m, params)
     uncertainty = None
     if pending is not None and result != "nonfinite":
         uncertainty = pending.result()
     elif pending is not None:  # the metrics say nonfinite: no uncertainty, whatever it was
         pending.exception()
-    look = quality(table, m, params, metrics["psnr_db"], colour_shift)
+    look = quality(metrics["psnr_db"], colour, model=m, params=params, loss=loss,
+                   converged=result == "successful")
     return FitResult(
         model=m.name,
         params=params,
@@ -330,6 +331,22 @@ def fit(
         table=table.source,
         quality=look,
     )
+
+
+def _best_of_each_family(m, scores: np.ndarray, n_starts: int) -> np.ndarray:
+    """Indices of the starts to refine: the ``n_starts`` best-scored, and where the
+    model names a ``start_family``, the best-scored start of each of its values too
+    (one candidate per ``shape_grid`` entry, in its order)."""
+    order = np.argsort(scores, kind="stable")
+    chosen = list(order[:n_starts])
+    family = m.start_family
+    if family is not None and len(m.shape_grid) == len(scores):
+        keys = [shape[family] for shape in m.shape_grid]
+        for value in dict.fromkeys(keys):
+            best = next(int(j) for j in order if keys[j] == value)
+            if best not in chosen and np.isfinite(scores[best]):
+                chosen.append(best)
+    return np.asarray(chosen)
 
 
 def _resolved(parent_fit) -> FitResult | None:

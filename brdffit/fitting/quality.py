@@ -1,75 +1,213 @@
-"""How a fit looks next to its measurement: the ``quality`` block of every result.
+"""How a fit looks next to its measurement, and what to try next: the ``quality``
+block of every result.
 
-    quality = {"render_psnr_db": ..., "colour_shift": [r, g, b], "verdict": ..., "reason": ...}
+    quality = {"render_psnr_db": ..., "brightness_stops": ..., "colour_shift": ...,
+               "estimate_error": {...}, "grazing": {...},
+               "verdict": ..., "reason": ..., "next": [...]}
 
 - ``render_psnr_db``: the PSNR of the fit's tone-mapped sphere renders against the
   table's (``brdffit.fitting.sphere``: key and grazing light, one exposure per
-  light; the result's ``error.psnr_db``);
-- ``colour_shift``: per channel, the relative error of the mean radiance of the
-  key-light sphere (``sphere.sphere_colour_error``; 0.1 = 10% too bright, None for
-  a channel the table leaves black);
-- ``verdict``: ``good``, ``visible`` or ``poor``, and ``reason``: the figure that
-  decided it, in words (the CLI prints both on one line).
+  light; the result's ``error.psnr_db``), the fit read through the table's bins as
+  the table is, so that a fit equal to the table bin for bin is 100 dB;
+- ``brightness_stops``: log2 of the fit's mean luminance over the table's, on the
+  key-light sphere (``sphere.sphere_colour``; +1 = twice as bright);
+- ``colour_shift``: CIEDE2000 between the two mean colours at equal luminance, hue
+  and saturation alone (``brdffit.fitting.colour``; ~1 is at the threshold of
+  seeing it side by side, 10 is another colour);
+- ``estimate_error``: the integral's own error in each of the two (its change from a
+  coarser quadrature); ``grazing``: the same three under the grazing light, the rim;
+- ``verdict``: ``good``, ``visible`` or ``poor``; ``reason``: the figure that decided
+  it, in words (the CLI prints both on one line);
+- ``next``: for a verdict other than good, what to try, best first, each
+  ``{"try": ..., "why": ..., "gain_db": ...}`` (:func:`next_steps`); ``gain_db`` is
+  measured on this table where it was cheap to (``auto`` has every candidate's
+  PSNR), else null. Empty for a good verdict.
 
-The thresholds (:data:`GOOD`, :data:`POOR`) were set by looking at sphere plots
-(``brdffit fit --plots``, its spheres.png) of ggx fits to the 100 real MERL materials under
-every loss (docs/results.md shows examples at each level): at 28 dB and within 10%
-per channel the fit and the measurement are hard to tell apart side by side
-(polyethylene, delrin, teflon); below 20 dB, or half a stop off in a channel, the
-difference is plain at a glance (gold-metallic-paint under the log loss, a
-highlight ~3x too bright; black-soft-plastic, ~1 stop too bright); between, it is
-visible when looking for it (a broader highlight, a tint).
+Thresholds (:data:`GOOD`, :data:`POOR`), set by looking at the key-light spheres of
+ggx fits to the design half of the real MERL materials at each level of each figure
+(``python -m bench.verdict_levels``; docs/img/verdict_levels.png, docs/results.md):
+at 28 dB, within 0.15 stops and CIEDE2000 3 the fit and the measurement are hard to
+tell apart side by side (specular-white-phenolic -0.15 stops, blue-acrylic 1.0,
+red-metallic-paint 2.1); below 20 dB, 0.6 stops (1.5x) off, or beyond CIEDE2000 6
+(special-walnut-224's brown rendered grey, 6.3) the difference is plain at a glance;
+between, it is visible when looking for it (red-fabric's orange turning pink, 3.5; a
+broader highlight at 24 dB).
 """
 
 from __future__ import annotations
 
 import math
 
-from brdffit.fitting.sphere import sphere_colour_error
-
-#: (least PSNR in dB, largest |colour shift|) for each verdict.
-GOOD = (28.0, 0.10)
-POOR = (20.0, 0.50)
+#: (least PSNR in dB, largest |brightness| in stops, largest CIEDE2000) of each verdict.
+GOOD = (28.0, 0.15, 3.0)
+POOR = (20.0, 0.6, 6.0)
 VERDICTS = ("good", "visible", "poor")
 
 
-def verdict(render_psnr_db: float | None, colour_shift) -> tuple[str, str]:
-    """(verdict, reason) of a PSNR (dB) and per-channel shifts (None: unknown)."""
-    shifts = [abs(s) for s in colour_shift if s is not None and math.isfinite(s)]
-    worst = max(shifts, default=0.0)
-    channel = "RGB"[[abs(s) if s is not None else -1 for s in colour_shift].index(worst)] \
-        if shifts else "-"
-    psnr_known = render_psnr_db is not None and math.isfinite(render_psnr_db)
-    if not psnr_known:
+def _finite(x) -> bool:
+    return x is not None and isinstance(x, int | float) and math.isfinite(x)
+
+
+def verdict(render_psnr_db: float | None, brightness_stops: float | None,
+            colour_shift: float | None) -> tuple[str, str]:
+    """(verdict, reason) of a PSNR (dB), a brightness error (stops) and a CIEDE2000
+    colour shift; None for a figure that could not be measured."""
+    if not _finite(render_psnr_db):
         return "poor", "the fit's sphere render could not be compared (no finite PSNR)"
+    if not _finite(brightness_stops):
+        return "poor", ("the fit's sphere is black where the table's is not, or the other "
+                        "way round")
+    stops = abs(brightness_stops)
+    de = colour_shift if _finite(colour_shift) else 0.0
     if render_psnr_db < POOR[0]:
         return "poor", (f"sphere render {render_psnr_db:.1f} dB from the measurement "
                         f"(poor below {POOR[0]:g} dB)")
-    if worst > POOR[1]:
-        return "poor", (f"{channel} channel {_percent(colour_shift, channel)} off in mean "
-                        f"radiance (poor beyond {POOR[1]:.0%})")
-    if render_psnr_db >= GOOD[0] and worst <= GOOD[1]:
-        return "good", (f"sphere render {render_psnr_db:.1f} dB, colour within {worst:.0%} "
-                        f"(good: >= {GOOD[0]:g} dB and within {GOOD[1]:.0%})")
+    if stops > POOR[1]:
+        return "poor", (f"{_stops(brightness_stops)} in brightness (poor beyond "
+                        f"{POOR[1]:g} stops)")
+    if de > POOR[2]:
+        return "poor", f"colour off by CIEDE2000 {de:.1f} (poor beyond {POOR[2]:g})"
+    if render_psnr_db >= GOOD[0] and stops <= GOOD[1] and de <= GOOD[2]:
+        return "good", (f"sphere render {render_psnr_db:.1f} dB, brightness "
+                        f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f} (good: >= "
+                        f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and {GOOD[2]:g})")
     if render_psnr_db < GOOD[0]:
         return "visible", (f"sphere render {render_psnr_db:.1f} dB from the measurement "
                            f"(good from {GOOD[0]:g} dB)")
-    return "visible", (f"{channel} channel {_percent(colour_shift, channel)} off in mean "
-                       f"radiance (good within {GOOD[1]:.0%})")
+    if stops > GOOD[1]:
+        return "visible", (f"{_stops(brightness_stops)} in brightness (good within "
+                           f"{GOOD[1]:g} stops)")
+    return "visible", f"colour off by CIEDE2000 {de:.1f} (good within {GOOD[2]:g})"
 
 
-def _percent(colour_shift, channel: str) -> str:
-    return f"{colour_shift['RGB'.index(channel)]:+.0%}"
+def _stops(s: float) -> str:
+    return f"{s:+.2f} stops"
 
 
-def quality(table, model, params: dict, render_psnr_db: float, colour_shift=None) -> dict:
-    """The quality block of a fit with ``params`` of ``model`` to ``table``;
-    ``colour_shift``: its :func:`sphere_colour_error` where the caller has it
-    (``SphereReference.psnr_and_colour``)."""
-    shift = (sphere_colour_error(table, model, params) if colour_shift is None
-             else colour_shift)
-    shift = [None if s is None or not math.isfinite(s) else float(s) for s in shift]
-    word, reason = verdict(render_psnr_db, shift)
-    psnr = float(render_psnr_db) if render_psnr_db is not None else None
-    return {"render_psnr_db": psnr if psnr is None or math.isfinite(psnr) else None,
-            "colour_shift": shift, "verdict": word, "reason": reason}
+def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: str,
+            converged: bool, physical: bool = False, gains: list | None = None) -> dict:
+    """The quality block of a fit of ``model`` (the object) with ``params``:
+    ``render_psnr_db`` and ``colour`` as ``SphereReference.psnr_and_colour`` gives
+    them; the rest describes the fit, for ``next``: its ``loss``, whether it
+    ``converged``, whether it was bound to ``physical`` limits, and ``gains``
+    measured elsewhere (:func:`next_steps`)."""
+    psnr = float(render_psnr_db) if _finite(render_psnr_db) else None
+    key = colour["key"]
+    word, reason = verdict(psnr, key["brightness_stops"], key["colour_shift"])
+    block = {"render_psnr_db": psnr,
+             "brightness_stops": key["brightness_stops"],
+             "colour_shift": key["colour_shift"],
+             "estimate_error": key["estimate_error"],
+             "grazing": {k: colour["grazing"][k] for k in ("brightness_stops", "colour_shift")},
+             "verdict": word, "reason": reason, "next": []}
+    if word != "good":
+        block["next"] = next_steps(block, model=model, params=params, loss=loss,
+                                   converged=converged, physical=physical, gains=gains)
+    return block
+
+
+#: A lobe this narrow (GGX or Beckmann alpha, in radians of slope) is resolved by
+#: fewer than ~5 of the table's theta_h bins (bin 5 ends at 0.0058 rad): its shape is
+#: beyond what the table measured.
+NARROW_ALPHA = 0.01
+#: A colour that turns by more than this (CIEDE2000) between the key and the grazing
+#: view, and that the fit misses there, is a colour that changes with the angle.
+TURNING_COLOUR = 6.0
+
+
+def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
+               physical: bool = False, gains: list | None = None) -> list[dict]:
+    """What to try after a fit that does not look good, best first.
+
+    ``gains``: ``[(try, why, gain_db), ...]`` measured on this table (``auto`` adds
+    the candidates that rendered closer than its choice: :func:`with_measured_gains`);
+    they come first, largest gain first. Then what the figures point to, each with
+    the reason read off them: a solve that did not converge; a colour that turns
+    with the angle (nothing here fits it: said so, and why); a richer model of this
+    one's kind; the render loss; a lobe narrower than the bins (nothing here fits its
+    shape); the physical bounds. ``gain_db`` is
+    null where it was not measured.
+    """
+    steps: list[dict] = []
+    tried: set[str] = set()
+
+    def add(t: str, why: str) -> None:
+        if t not in tried:
+            tried.add(t)
+            steps.append({"try": t, "why": why, "gain_db": None})
+
+    if not converged:
+        add("more starts and steps (--starts 8 --max-steps 400)",
+            "the solve stopped before its optimality test held: the figures are those of a "
+            "point short of the optimum")
+    graze = look.get("grazing") or {}
+    if (_finite(graze.get("colour_shift")) and graze["colour_shift"] > TURNING_COLOUR
+            and (not _finite(look.get("colour_shift"))
+                 or graze["colour_shift"] > 2 * look["colour_shift"])):
+        add("nothing here: a layered model (thin film, coat over flakes)",
+            f"the colour turns with the angle: at grazing light the fit is CIEDE2000 "
+            f"{graze['colour_shift']:.0f} off against {look.get('colour_shift') or 0:.1f} "
+            "under the key light, and every model here has one colour per lobe")
+    name = model.name.removesuffix("_mono")
+    richer = {"lambert": "ggx", "oren_nayar": "ggx", "blinn_phong": "ggx", "phong": "ggx",
+              "beckmann": "ggx2", "ggx": "ggx2"}
+    why_richer = {
+        "ggx": "a specular lobe with microfacet shadowing and a Fresnel rise",
+        "ggx2": "a second lobe: a sharp coat over a broad haze, as many paints and "
+                "metals have",
+    }
+    if name in richer:
+        add(f"--model {richer[name]}", why_richer[richer[name]])
+    if loss != "render":
+        add("--loss render", "it fits what a picture of the material shows (docs/fitting.md); "
+            "gain not measured on this table")
+    widths = [float(params[k]) for k in ("alpha", "alpha1", "alpha2") if k in params]
+    if widths and min(widths) < NARROW_ALPHA:
+        add("nothing here: the highlight is narrower than the table's bins",
+            f"alpha {min(widths):.3g} is resolved by fewer than ~5 theta_h bins: a measured "
+            "bin there averages a lobe that changes across it, which no model read at the "
+            "bins' centres matches bin for bin; the table holds the peak's energy, not its "
+            "shape (a measurement with finer steps at the peak would)")
+    if physical:
+        add("without --physical", "the physical bounds are active: the unconstrained fit is "
+            "their cost's measure (the result's physical block)")
+    return with_measured_gains({"verdict": look["verdict"], "next": steps}, gains or [])["next"]
+
+
+def with_measured_gains(look: dict | None, gains: list) -> dict | None:
+    """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]``,
+    measured on the same table) first in its ``next``, largest first. A step that was
+    measured replaces the guess of the same ``try``, and one measured without a gain
+    is dropped: ``auto`` does not advise a candidate it saw render no closer. A good
+    verdict keeps an empty ``next``."""
+    if look is None or look.get("verdict") == "good" or not gains:
+        return look
+    measured = [{"try": t, "why": w, "gain_db": round(float(g), 2)}
+                for t, w, g in sorted(gains, key=lambda x: -x[2]) if g > 0]
+    names = {t for t, _, _ in gains}
+    rest = [s for s in look.get("next", []) if s["try"] not in names]
+    return {**look, "next": measured + rest}
+
+
+def describe(look: dict | None, indent: str = "  ") -> list[str]:
+    """The quality block as lines of text (the CLI, the export's and the batch's
+    reports): the verdict with its reason, the figures, then ``next``, numbered."""
+    if not look:
+        return []
+    lines = [f"{indent}looks {look['verdict']}: {look['reason']}"]
+    if "brightness_stops" in look:  # not in results stored before brdffit.fit/2
+        figures = [f"brightness {_maybe(look['brightness_stops'], '+.2f')} stops",
+                   f"colour CIEDE2000 {_maybe(look['colour_shift'], '.1f')} (key light)"]
+        graze = look.get("grazing") or {}
+        if graze:
+            figures.append(f"grazing light {_maybe(graze.get('brightness_stops'), '+.2f')} "
+                           f"stops, {_maybe(graze.get('colour_shift'), '.1f')}")
+        lines.append(f"{indent}  " + "; ".join(figures))
+    for i, step in enumerate(look.get("next") or [], 1):
+        gain = "" if step.get("gain_db") is None else f" ({step['gain_db']:+.1f} dB)"
+        lines.append(f"{indent}  next {i}: {step['try']}{gain}: {step['why']}")
+    return lines
+
+
+def _maybe(x, fmt: str) -> str:
+    return "n/a" if not _finite(x) else format(x, fmt)

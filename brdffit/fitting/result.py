@@ -19,8 +19,13 @@ from brdffit import jsonout
 #: means the optimality test holds (``brdffit.fitting.solver``).
 STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfinite")
 
-#: The version of the result schema that :meth:`FitResult.to_dict` writes.
-SCHEMA = "brdffit.fit/1"
+#: The version of the result schema that :meth:`FitResult.to_dict` writes. 2: the
+#: ``quality`` block's ``colour_shift`` is a CIEDE2000 figure (it was a per-channel
+#: relative error) beside ``brightness_stops``, and the block has ``next``.
+SCHEMA = "brdffit.fit/2"
+#: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
+#: its quality block as it was stored (the per-channel ``colour_shift``).
+READS = (SCHEMA, "brdffit.fit/1")
 
 
 @dataclass(frozen=True)
@@ -49,8 +54,9 @@ class FitResult:
     - ``selection``: on the fit ``model="auto"`` chose, how and why it was chosen
       (``brdffit.selection.Selection.summary``: ranking of every candidate, reason);
     - ``quality``: how the fit looks next to the measurement: sphere-render PSNR,
-      per-channel colour shift, a verdict (good / visible / poor) and its reason
-      (``brdffit.fitting.quality``); None on a result stored before it existed;
+      brightness in stops, colour shift (CIEDE2000), a verdict (good / visible /
+      poor), its reason and what to try next (``brdffit.fitting.quality``); None on a
+      result stored before it existed;
     - ``physical``: on a physically bounded fit (``physical=True``), what the bounds
       cost against the unconstrained fit and which were active
       (``brdffit.fitting.physical``, docs/results.md).
@@ -96,11 +102,13 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict) -> FitResult:
-        """A result from :meth:`to_dict`'s output; refuses another schema version."""
+        """A result from :meth:`to_dict`'s output (any version of :data:`READS`);
+        refuses another schema version."""
         d = dict(d)
         schema = d.pop("schema", SCHEMA)
-        if schema != SCHEMA:
-            raise ValueError(f"result schema {schema!r}; this brdffit reads {SCHEMA!r}")
+        if schema not in READS:
+            raise ValueError(f"result schema {schema!r}; this brdffit reads "
+                             f"{' and '.join(map(repr, READS))}")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -144,6 +152,7 @@ FIELD_DOCS = {
                    "(docs/results.md)",
     "physical": "on a physically bounded fit: the unconstrained and bounded log_rmse, the "
                 "relative cost, the largest albedo before and after, the active constraints",
-    "quality": "how the fit looks next to the measurement: render_psnr_db, colour_shift "
-               "(per channel), verdict (good, visible or poor) and reason",
+    "quality": "how the fit looks next to the measurement: render_psnr_db, "
+               "brightness_stops, colour_shift (CIEDE2000), estimate_error, grazing, verdict "
+               "(good, visible or poor), reason and next (what to try, best first)",
 }

@@ -114,6 +114,11 @@ class AbstractBRDFModel(eqx.Module):
     param_specs: ClassVar[tuple[ParamSpec, ...]]
     #: Shape-parameter values tried when seeding a fit (see brdffit.fitting.starts).
     shape_grid: ClassVar[tuple[dict[str, float], ...]] = ({},)
+    #: A shape parameter of ``shape_grid`` whose values are separate basins of the loss
+    #: (standard_surface's ``metalness``: a metal and a dielectric explain a highlight
+    #: differently), or None. A fit then refines the best-scored start of each of its
+    #: values too, not only the best starts overall (brdffit.fitting.pipeline).
+    start_family: ClassVar[str | None] = None
     #: The registry name of a model this one contains as a special case (ggx2
     #: contains ggx), or None. A fit seeds itself from the parent's optimum
     #: (:meth:`embed_parent`), so it can never end worse than its parent.

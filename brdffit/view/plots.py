@@ -543,10 +543,29 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
                f"rmse_cos        {g('rmse_cos')} 1/sr",
                f"rel_peak_error  {g('rel_peak_error')}",
                f"sphere PSNR     {g('psnr_db', '.1f')} dB",
-               *([f"looks           {result.quality['verdict']}"] if result.quality else []),
+               *_looks_lines(result.quality),
                f"loss {result.loss}, {result.result}, {result.steps} steps, "
                f"{result.samples['used']:,} of {result.samples['usable']:,} bins"]
     return params, metrics
+
+
+def _looks_lines(look: dict | None) -> list[str]:
+    """The verdict, its brightness and colour figures, and the first next step, for the
+    report's metrics column (a result stored before brdffit.fit/2 has the verdict only)."""
+    if not look:
+        return []
+    lines = [f"looks           {look['verdict']}"]
+    stops, shift = look.get("brightness_stops"), look.get("colour_shift")
+    if isinstance(stops, int | float):
+        lines.append(f"brightness      {stops:+.2f} stops")
+    if isinstance(shift, int | float):
+        lines.append(f"colour          CIEDE2000 {shift:.1f}")
+    steps = look.get("next") or []
+    if steps:
+        gain = "" if steps[0].get("gain_db") is None else f" ({steps[0]['gain_db']:+.1f} dB)"
+        text = f"next: {steps[0]['try']}{gain}"
+        lines.append(text if len(text) <= 44 else text[:43] + "…")
+    return lines
 
 
 #: Characters a parameter line of the report's header may take before its values

@@ -350,9 +350,28 @@ function showResults(job) {
     row.addEventListener("click", () => showModel(r.model));
     body.append(row);
   }
+  showNextSteps(best);
   $("export-report").textContent = "";
   $("extra-figure").hidden = true;
   showModel(best ? best.model : null);
+}
+
+// What to try next where the chosen fit does not look good (quality.next), best first.
+function showNextSteps(best) {
+  const q = (best && best.quality) || {};
+  const steps = q.next || [];
+  const box = $("next-steps");
+  box.hidden = steps.length === 0;
+  const list = box.querySelector("ol");
+  list.textContent = "";
+  if (!steps.length) return;
+  $("next-title").textContent = `${best.model} looks ${q.verdict}: ${q.reason}. What to try next:`;
+  for (const s of steps) {
+    const gain = s.gain_db == null ? "" : ` (${s.gain_db > 0 ? "+" : ""}${s.gain_db.toFixed(1)} dB on this table)`;
+    const item = el("li", null);
+    item.append(el("code", s.try), document.createTextNode(`${gain}: ${s.why}`));
+    list.append(item);
+  }
 }
 
 // A physically bounded fit: what the bounds cost against the unconstrained fit.

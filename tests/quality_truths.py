@@ -1,0 +1,129 @@
+"""Noise-free truths of every registry model for the verdict's calibration test
+(tests/test_quality.py): five parameter sets per model: its example, a saturated
+colour, a dark material, a near-mirror lobe (alpha 0.002-0.01, or the model's
+narrowest) and a grazing-heavy lobe (broad, with a strong Fresnel rise). A fit of
+each by its own model must look ``good``."""
+
+from __future__ import annotations
+
+SATURATED = [0.9, 0.55, 0.03]  # a yellow whose blue is a few per cent of the rest
+DARK = [0.012, 0.01, 0.008]
+
+#: model -> [(label, params), ...]
+QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
+    "lambert": [
+        ("example", {"kd": [0.5, 0.35, 0.2]}),
+        ("saturated", {"kd": SATURATED}),
+        ("dark", {"kd": DARK}),
+        ("white", {"kd": [0.95, 0.95, 0.95]}),
+        ("blue", {"kd": [0.02, 0.05, 0.6]}),
+    ],
+    "oren_nayar": [
+        ("example", {"kd": [0.5, 0.35, 0.2], "sigma": 0.5}),
+        ("saturated", {"kd": SATURATED, "sigma": 0.3}),
+        ("dark", {"kd": DARK, "sigma": 0.4}),
+        ("smooth", {"kd": [0.4, 0.4, 0.4], "sigma": 0.05}),
+        ("grazing-heavy", {"kd": [0.6, 0.3, 0.3], "sigma": 1.4}),
+    ],
+    "blinn_phong": [
+        ("example", {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 120.0}),
+        ("saturated", {"kd": SATURATED, "ks": [0.3, 0.3, 0.3], "n": 60.0}),
+        ("dark", {"kd": DARK, "ks": [0.05, 0.05, 0.05], "n": 200.0}),
+        ("near-mirror", {"kd": [0.02, 0.02, 0.02], "ks": [1.0, 1.0, 1.0], "n": 20000.0}),
+        ("grazing-heavy", {"kd": [0.3, 0.2, 0.1], "ks": [0.5, 0.5, 0.5], "n": 3.0}),
+    ],
+    "phong": [
+        ("example", {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 80.0}),
+        ("saturated", {"kd": SATURATED, "ks": [0.3, 0.3, 0.3], "n": 40.0}),
+        ("dark", {"kd": DARK, "ks": [0.05, 0.05, 0.05], "n": 150.0}),
+        ("near-mirror", {"kd": [0.02, 0.02, 0.02], "ks": [1.0, 1.0, 1.0], "n": 20000.0}),
+        ("grazing-heavy", {"kd": [0.3, 0.2, 0.1], "ks": [0.5, 0.5, 0.5], "n": 2.0}),
+    ],
+    "beckmann": [
+        ("example", {"kd": [0.15, 0.1, 0.3], "ks": [0.5, 0.6, 0.7], "alpha": 0.25, "f0": 0.4}),
+        ("saturated", {"kd": SATURATED, "ks": [0.6, 0.6, 0.6], "alpha": 0.2, "f0": 0.05}),
+        ("dark", {"kd": DARK, "ks": [0.1, 0.1, 0.1], "alpha": 0.1, "f0": 0.05}),
+        ("near-mirror", {"kd": [0.01, 0.01, 0.01], "ks": [1, 1, 1], "alpha": 0.004, "f0": 0.95}),
+        ("grazing-heavy", {"kd": [0.2, 0.2, 0.2], "ks": [1, 1, 1], "alpha": 0.6, "f0": 0.03}),
+    ],
+    "beckmann_dielectric": [
+        ("example", {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5}),
+        ("saturated", {"kd": SATURATED, "ks": [6.0] * 3, "alpha": 0.2, "eta": 1.5}),
+        ("dark", {"kd": DARK, "ks": [2.0] * 3, "alpha": 0.1, "eta": 1.4}),
+        ("near-mirror", {"kd": [0.02] * 3, "ks": [10.0] * 3, "alpha": 0.005, "eta": 1.6}),
+        ("grazing-heavy", {"kd": [0.2] * 3, "ks": [10.0] * 3, "alpha": 0.5, "eta": 1.2}),
+    ],
+    "ggx": [
+        ("example", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "f0": 0.6}),
+        ("saturated", {"kd": SATURATED, "ks": [0.6, 0.6, 0.6], "alpha": 0.2, "f0": 0.05}),
+        ("dark", {"kd": DARK, "ks": [0.1, 0.1, 0.1], "alpha": 0.1, "f0": 0.05}),
+        ("near-mirror", {"kd": [0.01, 0.01, 0.01], "ks": [1, 1, 1], "alpha": 0.003, "f0": 0.95}),
+        ("grazing-heavy", {"kd": [0.2, 0.2, 0.2], "ks": [1, 1, 1], "alpha": 0.6, "f0": 0.03}),
+    ],
+    "ggx_dielectric": [
+        ("example", {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5}),
+        ("saturated", {"kd": SATURATED, "ks": [6.0] * 3, "alpha": 0.2, "eta": 1.5}),
+        ("dark", {"kd": DARK, "ks": [2.0] * 3, "alpha": 0.1, "eta": 1.4}),
+        ("near-mirror", {"kd": [0.02] * 3, "ks": [10.0] * 3, "alpha": 0.005, "eta": 1.6}),
+        ("grazing-heavy", {"kd": [0.2] * 3, "ks": [10.0] * 3, "alpha": 0.5, "eta": 1.2}),
+    ],
+    "gltf_pbr": [
+        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4}),
+        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5}),
+        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3}),
+        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06}),
+        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
+    ],
+    "gltf_pbr_ior": [
+        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4,
+                     "ior": 1.5}),
+        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5, "ior": 1.6}),
+        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3,
+                  "ior": 1.45}),
+        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06,
+                         "ior": 1.5}),
+        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9,
+                           "ior": 1.2}),
+    ],
+    "rough_conductor": [
+        ("example", {"eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2], "alpha": 0.2,
+                     "kd": [0.05, 0.04, 0.03], "weight": 0.9}),
+        ("saturated", {"eta": [0.15, 0.5, 1.4], "k": [3.6, 2.5, 1.9], "alpha": 0.3,
+                       "kd": SATURATED, "weight": 0.5}),
+        ("dark", {"eta": [1.5, 1.5, 1.5], "k": [0.5, 0.5, 0.5], "alpha": 0.1,
+                  "kd": [0.01, 0.01, 0.01], "weight": 0.3}),
+        ("near-mirror", {"eta": [1.6, 1.0, 0.8], "k": [3.2, 3.0, 2.8], "alpha": 0.004,
+                         "kd": [0.005, 0.005, 0.005], "weight": 1.0}),
+        ("grazing-heavy", {"eta": [1.2, 1.2, 1.2], "k": [0.2, 0.2, 0.2], "alpha": 0.6,
+                           "kd": [0.3, 0.3, 0.3], "weight": 0.6}),
+    ],
+    "standard_surface": [
+        ("example", {"base_color": [0.8, 0.5, 0.3], "metalness": 0.3,
+                     "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.4,
+                     "specular_IOR": 1.5}),
+        ("saturated", {"base_color": SATURATED, "metalness": 0.0,
+                       "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.5,
+                       "specular_IOR": 1.5}),
+        ("dark", {"base_color": [0.03, 0.025, 0.02], "metalness": 0.0,
+                  "specular_color": [0.5, 0.5, 0.5], "specular_roughness": 0.3,
+                  "specular_IOR": 1.45}),
+        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metalness": 1.0,
+                         "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.06,
+                         "specular_IOR": 1.5}),
+        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metalness": 0.0,
+                           "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.9,
+                           "specular_IOR": 1.2}),
+    ],
+    "ggx2": [
+        ("example", {"kd": [0.1, 0.08, 0.05], "ks1": [0.5] * 3, "alpha1": 0.03,
+                     "ks2": [0.4] * 3, "alpha2": 0.3, "f0": 0.8}),
+        ("saturated", {"kd": SATURATED, "ks1": [0.3] * 3, "alpha1": 0.05,
+                       "ks2": [0.3, 0.2, 0.01], "alpha2": 0.4, "f0": 0.1}),
+        ("dark", {"kd": DARK, "ks1": [0.1] * 3, "alpha1": 0.05, "ks2": [0.05] * 3,
+                  "alpha2": 0.3, "f0": 0.1}),
+        ("near-mirror", {"kd": [0.01] * 3, "ks1": [1.0] * 3, "alpha1": 0.004,
+                         "ks2": [0.2] * 3, "alpha2": 0.1, "f0": 0.9}),
+        ("grazing-heavy", {"kd": [0.2] * 3, "ks1": [0.5] * 3, "alpha1": 0.2,
+                           "ks2": [0.8] * 3, "alpha2": 0.8, "f0": 0.03}),
+    ],
+}
