@@ -41,11 +41,13 @@ import numpy as np
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
 from brdffit.fitting.options import (
+    DEFAULT_LOSS,
     DEFAULT_MAX_STEPS,
     DEFAULT_STARTS,
     DEFAULT_TOLERANCE,
     FIT_KEYWORDS,
 )
+from brdffit.fitting.quality import describe, with_measured_gains
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
 from brdffit.io.merl import MerlTable
@@ -75,6 +77,9 @@ class Selection:
     chosen: str
     reason: str
     ranking: list[dict]
+    #: what the choice ranked by: ``log_rmse`` (the tolerance and budget rules) or,
+    #: under the render loss, ``render_psnr_db`` (:func:`choose_by_look`)
+    rule: str
     tolerance: float
     budget: float | None
     scene: dict | None
@@ -355,8 +360,19 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
             "no candidate could be fitted: "
             + "; ".join(f"{row['model']}: {row.get('message', row.get('result'))}" for row in rows)
         )
-    chosen, reason = choose(ok, tolerance, budget)
-    best = min(ok, key=lambda row: row["log_rmse"])
+    loss = fit_options.get("loss", DEFAULT_LOSS)
+    rule = "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
+    if rule == "render_psnr_db":
+        chosen, reason = choose_by_look(ok)
+        best = max(ok, key=_psnr)
+        tolerance_used = RENDER_TOLERANCE_DB
+    else:
+        chosen, reason = choose(ok, tolerance, budget)
+        best = min(ok, key=lambda row: row["log_rmse"])
+        tolerance_used = tolerance
+        if loss == "render":
+            reason += (" (The budget is a log_rmse figure: given one, it decides even under "
+                       "the render loss.)")
     doubtful = [row for row in ok if (row is chosen or row is best) and not row["converged"]]
     if doubtful:
         reason += " " + "; ".join(
@@ -369,7 +385,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         elif budget is not None and row["log_rmse"] <= budget:
             row["status"] = "under budget"
         else:
-            row["status"] = "within tolerance" if row["excess"] <= tolerance else "too far"
+            row["status"] = "within tolerance" if row["excess"] <= tolerance_used else "too far"
+    reason += _all_poor_warning(ok)
 
     for row in ok:
         spread = row["ks_grey_spread"]
@@ -399,6 +416,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     selection = Selection(
         chosen=chosen["model"],
         reason=reason,
+        rule=rule,
         ranking=rows,
         tolerance=float(tolerance),
         budget=None if budget is None else float(budget),
@@ -408,9 +426,12 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         table=table.source,
         fits=fits,
     )
-    # the chosen fit carries how it was chosen (the one result schema)
-    fits[selection.chosen] = dataclasses.replace(fits[selection.chosen],
-                                                 selection=selection.summary())
+    # the chosen fit carries how it was chosen (the one result schema), and what the
+    # candidates that render closer measured for its next steps
+    chosen_fit = fits[selection.chosen]
+    fits[selection.chosen] = dataclasses.replace(
+        chosen_fit, selection=selection.summary(),
+        quality=with_measured_gains(chosen_fit.quality, _render_gains(chosen, ok)))
     return selection
 
 
@@ -518,6 +539,71 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None) -> tup
         why += ("; as cheap and within tolerance too, but with a higher error: " + ", ".join(
             f"{r['model']} {_fmt(r['log_rmse'])}" for r in same_size))
     return c, prefix + why + "."
+
+
+#: auto's rule under the render loss: the cheapest candidate whose sphere render is
+#: within this many dB of the best-looking candidate's (the loss measures a picture,
+#: so the choice does too; 0.5 dB is below what a viewer tells apart side by side).
+RENDER_TOLERANCE_DB = 0.5
+
+
+def _psnr(row: dict) -> float:
+    p = row.get("psnr_db")
+    return p if isinstance(p, int | float) and math.isfinite(p) else -math.inf
+
+
+def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
+                   ) -> tuple[dict, str]:
+    """The render rule: the cheapest of the fitted rows ``ok`` (cheapest first) whose
+    ``psnr_db`` is within ``tolerance_db`` of the best; among candidates as large, the
+    better-looking. Sets each row's ``excess`` (dB below the best) and ``rank`` (by
+    PSNR). Returns the row and the reason, in words."""
+    best_row = max(ok, key=_psnr)
+    top = _psnr(best_row)
+    for row in ok:
+        row["excess"] = top - _psnr(row) if math.isfinite(top) else 0.0
+    for i, row in enumerate(sorted(ok, key=lambda row: -_psnr(row))):
+        row["rank"] = i + 1
+    within = [row for row in ok if row["excess"] <= tolerance_db]
+    first = within[0]
+    same = [row for row in within if row.get("n_params") == first.get("n_params")]
+    c = max(same, key=_psnr)
+    if c is best_row:
+        why = (f"Chose {c['model']} by its sphere render (the render loss's measure): the "
+               f"best-looking candidate ({_psnr(c):.1f} dB) and no cheaper one within "
+               f"{tolerance_db:g} dB of it")
+    else:
+        why = (f"Chose {c['model']} by its sphere render (the render loss's measure): the "
+               f"cheapest candidate within {tolerance_db:g} dB of the best-looking "
+               f"({best_row['model']}, {_psnr(best_row):.1f} dB): it renders at "
+               f"{_psnr(c):.1f} dB")
+    cheaper = [row for row in ok[: ok.index(c)] if row not in within]
+    if cheaper:
+        why += "; cheaper ones look further off (" + ", ".join(
+            f"{r['model']} {_psnr(r):.1f} dB" for r in cheaper) + ")"
+    return c, why + "."
+
+
+def _all_poor_warning(ok: list[dict]) -> str:
+    """A sentence for the reason when every candidate looks poor (else empty)."""
+    if not ok or any(row.get("verdict") != "poor" for row in ok):
+        return ""
+    top = max(ok, key=_psnr)
+    return (f" Warning: every candidate looks poor beside the measurement (the best render "
+            f"{top['model']}, {_psnr(top):.1f} dB): no model here reproduces this material; "
+            "the chosen fit's quality.next says what to try.")
+
+
+def _render_gains(chosen: dict, ok: list[dict]) -> list[tuple[str, str, float]]:
+    """Every other candidate's render against the chosen one's, as measured gains
+    (negative where it renders further off: ``next`` then does not advise it)."""
+    here = _psnr(chosen)
+    return [(f"--model {row['model']}",
+             f"it renders {_psnr(row):.1f} dB against {here:.1f} dB on this table "
+             f"(auto's ranking); log_rmse {_fmt(row['log_rmse'])}",
+             _psnr(row) - here)
+            for row in ok if row is not chosen and math.isfinite(here)
+            and math.isfinite(_psnr(row))]
 
 
 def _lowest_of_its_size(first: dict, eligible: list[dict]) -> dict:
@@ -630,6 +716,7 @@ def format_selection(sel: Selection) -> str:
     for name, v in chosen["params"].items():
         val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
         lines.append(f"  {name:<6} = {val}")
+    lines += describe(sel.fits[sel.chosen].quality if sel.chosen in sel.fits else None)
     if sel.mono is not None:
         lines.append(f"{sel.mono['model']} params:")
         for name, v in sel.mono["params"].items():

@@ -165,7 +165,8 @@ def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
     # renders at another size when asked: a PSNR of its own, as good a ranking
     small = select(ggx_table, ("ggx", "lambert"), image_size=48, **FAST)
     rows = {r["model"]: r for r in small.ranking}
-    assert rows["ggx"]["psnr_db"] != sel.fits["ggx"].error["psnr_db"]
+    # (the truth's own fit is the table bin for bin: 100 dB at any size)
+    assert rows["lambert"]["psnr_db"] != sel.fits["lambert"].error["psnr_db"]
     assert rows["ggx"]["psnr_db"] > rows["lambert"]["psnr_db"]
 
 
@@ -396,3 +397,49 @@ def test_auto_plots_add_a_ranking_figure(ggx_table, ggx_selection, tmp_path):
     plain = SimpleNamespace(chosen_fit=unselected)
     assert plots.save_report(ggx_table, plain, tmp_path / "one", kinds=("slices",)) == [
         str(tmp_path / "one" / "slices.png")]
+
+
+# -- one ranking per intent: the render loss ranks by the render --------------------------
+
+
+def _rows(*spec):
+    return [{"model": m, "n_params": k, "log_rmse": e, "psnr_db": p, "verdict": v}
+            for m, k, e, p, v in spec]
+
+
+def test_the_render_rule_ranks_by_the_picture():
+    """Under the render loss the choice is the cheapest candidate within 0.5 dB of the
+    best-looking one, whatever the log_rmse says (gold-metallic-paint: phong had the
+    lowest log_rmse of the three, and rendered 3 dB further off)."""
+    from brdffit.selection import RENDER_TOLERANCE_DB, choose_by_look
+
+    rows = _rows(("lambert", 3, 0.047, 15.5, "poor"), ("phong", 7, 0.029, 22.1, "visible"),
+                 ("ggx", 8, 0.054, 25.7, "visible"), ("ggx2", 12, 0.050, 25.6, "visible"))
+    chosen, reason = choose_by_look(rows)
+    assert chosen["model"] == "ggx" and "sphere render" in reason and "25.7 dB" in reason
+    assert [r["rank"] for r in rows] == [4, 3, 1, 2]
+    assert rows[3]["excess"] == pytest.approx(0.1)
+    # a cheaper one within the tolerance wins; among as large ones, the better-looking
+    rows = _rows(("blinn_phong", 7, 0.02, 27.0, "visible"), ("phong", 7, 0.02, 27.2, "visible"),
+                 ("beckmann", 8, 0.04, 27.4, "visible"))
+    chosen, reason = choose_by_look(rows)
+    assert RENDER_TOLERANCE_DB == 0.5 and chosen["model"] == "phong"
+    assert "within 0.5 dB of the best-looking (beckmann, 27.4 dB)" in reason
+
+
+def test_auto_with_the_render_loss_says_which_rule_it_used(ggx_table):
+    sel = select(ggx_table, ("lambert", "ggx"), loss="render", **FAST)
+    assert sel.rule == "render_psnr_db" and "sphere render" in sel.reason
+    assert sel.summary()["rule"] == "render_psnr_db"
+    plain = select(ggx_table, ("lambert", "ggx"), **FAST)
+    assert plain.rule == "log_rmse" and "log_rmse" in plain.reason
+
+
+def test_a_warning_when_every_candidate_looks_poor():
+    from brdffit.selection import _all_poor_warning
+
+    poor = _rows(("lambert", 3, 0.1, 5.0, "poor"), ("ggx", 8, 0.05, 7.2, "poor"))
+    said = _all_poor_warning(poor)
+    assert "every candidate looks poor" in said and "ggx, 7.2 dB" in said
+    assert "quality.next" in said
+    assert _all_poor_warning([*poor, *_rows(("ggx2", 12, 0.04, 21.0, "visible"))]) == ""
