@@ -17,13 +17,20 @@ and each fit is judged by:
   would show it. The table is read by a nearest-bin lookup written here from
   MODELS.md (not brdffit's), the model is evaluated at each pixel's exact
   directions. MSE over the lit, measured pixels of the three lights together.
-- ``colour_shift``: the largest |per-channel relative error| of the mean radiance
-  of the key-light sphere (``brdffit.fitting.sphere.sphere_colour_error``), and
-  ``indep_colour_shift`` the same over the three independent renders (linear).
+- ``colour_shift``: CIEDE2000 between the mean colours (at equal luminance) of the
+  key-light sphere of fit and table (``brdffit.fitting.sphere.sphere_colour``, the
+  verdict's figure), and ``indep_colour_shift`` the same over the three independent
+  renders' mean radiance (linear); ``indep_brightness_stops`` their brightness.
+  A colour *regresses* under a loss when its ``indep_colour_shift`` is more than
+  :data:`COLOUR_REGRESSION` above the log loss's on the same material.
 - ``log_rmse`` (full table), and ``time_ms``: the wall time of ``fit`` (warm: every
   loss is compiled on the first material, untimed).
 
-Writes bench/results/render_loss.{json,md}.
+The MERL set is split in two halves by name (:func:`half`): the render loss is
+designed and tuned on ``--half design`` and reported on ``--half check``, which no
+design decision has looked at (docs/fitting.md).
+
+Writes bench/results/render_loss[_HALF].{json,md}.
 """
 
 from __future__ import annotations
@@ -57,6 +64,18 @@ SIZE = 160
 MID = 0.18
 GAMMA = 2.2
 SCALE = np.array([1.0 / 1500, 1.15 / 1500, 1.66 / 1500])
+#: CIEDE2000 by which a material's independent colour shift may exceed the log loss's
+#: before it counts as a colour regression (about one just-noticeable difference).
+COLOUR_REGRESSION = 1.0
+
+
+def half(names, which: str) -> list[str]:
+    """The design or check half of the material names: sorted by name, the even
+    positions are the design half, the odd ones the check half (``all``: both)."""
+    ordered = sorted(names)
+    if which == "all":
+        return ordered
+    return ordered[0 if which == "design" else 1::2]
 
 
 def cache_dir() -> str:
@@ -157,20 +176,21 @@ def judge(ref: list[np.ndarray], img: list[np.ndarray]) -> dict:
         n += d.size
         mean_ref = mean_ref + r[ok].sum(axis=0)
         mean_img = mean_img + m[ok].sum(axis=0)
+    from brdffit.fitting.colour import brightness_and_colour
+
     mse = se / max(n, 1)
-    shift = np.where(mean_ref > 1e-12, mean_img / np.maximum(mean_ref, 1e-300) - 1, 0.0)
+    stops, delta_e = brightness_and_colour(mean_img, mean_ref)
     return {"indep_psnr_db": float(-10 * np.log10(max(mse, 1e-10))),
-            "indep_colour_shift": float(np.max(np.abs(shift))),
-            "indep_channel_shift": shift.tolist()}
+            "indep_colour_shift": delta_e, "indep_brightness_stops": stops}
 
 
 # -- the run ----------------------------------------------------------------------------
 
 
-def run(names, model_name: str, log=print) -> list[dict]:
+def run(names, model_name: str, log=print, losses=LOSSES) -> list[dict]:
     import brdffit
     from brdffit import fit, models
-    from brdffit.fitting.sphere import sphere_colour_error
+    from brdffit.fitting.sphere import sphere_colour
     from brdffit.io import merl
     from data_synth import nbrdf
 
@@ -178,7 +198,7 @@ def run(names, model_name: str, log=print) -> list[dict]:
     views, holdout = Views(), Views(lights=HOLDOUT_LIGHTS)
     directory = os.path.join(cache_dir(), "nbrdf")
     warm = merl.read(nbrdf.cached_table(names[0], directory))
-    for loss in LOSSES:  # compile (or load) each loss's fit, untimed
+    for loss in losses:  # compile (or load) each loss's fit, untimed
         fit(warm, model_name, loss=loss)
     rows = []
     t_start = time.perf_counter()
@@ -188,16 +208,18 @@ def run(names, model_name: str, log=print) -> list[dict]:
         with open(path, "rb") as f:
             raw = np.frombuffer(f.read()[12:], dtype="<f8").reshape(3, -1)
         ref, ref_b = views.table_radiance(raw), holdout.table_radiance(raw)
-        for loss in LOSSES:
+        for loss in losses:
             t0 = time.perf_counter()
             r = fit(table, model_name, loss=loss)
             dt = time.perf_counter() - t0
-            shift = sphere_colour_error(table, m, r.params)
+            colour = sphere_colour(table, m, r.params)["key"]
             rows.append({
                 "material": name, "loss": loss, "result": r.result,
                 "log_rmse": r.error["log_rmse"], "psnr_db": r.error["psnr_db"],
-                "colour_shift": max(abs(x) for x in shift if x is not None),
-                "channel_shift": shift, "time_ms": dt * 1e3, "steps": r.steps,
+                "colour_shift": colour["colour_shift"],
+                "brightness_stops": colour["brightness_stops"],
+                "verdict": (r.quality or {}).get("verdict"),
+                "time_ms": dt * 1e3, "steps": r.steps,
                 **judge(ref, views.model_radiance(m, r.params)), "params": r.params,
                 "holdout_psnr_db": judge(ref_b, holdout.model_radiance(m, r.params))[
                     "indep_psnr_db"],
@@ -210,7 +232,8 @@ def run(names, model_name: str, log=print) -> list[dict]:
 
 
 def summarise(rows: list[dict]) -> dict:
-    by = {loss: [r for r in rows if r["loss"] == loss] for loss in LOSSES}
+    losses = [loss for loss in LOSSES if any(r["loss"] == loss for r in rows)]
+    by = {loss: [r for r in rows if r["loss"] == loss] for loss in losses}
     base = {r["material"]: r for r in by["log"]}
     out = {}
     for loss, rs in by.items():
@@ -229,15 +252,28 @@ def summarise(rows: list[dict]) -> dict:
             "holdout_vs_log_median_db": statistics.median(vs_log_b),
             "holdout_vs_log_worst_db": min(vs_log_b),
             "holdout_worse_than_log_by_1db": sum(d < -1.0 for d in vs_log_b),
-            "colour_shift_median": statistics.median(r["colour_shift"] for r in rs),
-            "colour_over_10pc": sum(r["colour_shift"] > 0.1 for r in rs),
-            "indep_colour_over_10pc": sum(r["indep_colour_shift"] > 0.1 for r in rs),
+            "colour_shift_median": statistics.median(_de(r["colour_shift"]) for r in rs),
+            "colour_over_3": sum(_de(r["colour_shift"]) > 3.0 for r in rs),
+            "indep_colour_over_3": sum(_de(r["indep_colour_shift"]) > 3.0 for r in rs),
+            "colour_regressions": [
+                r["material"] for r in rs
+                if _de(r["indep_colour_shift"])
+                > _de(base[r["material"]]["indep_colour_shift"]) + COLOUR_REGRESSION],
+            "verdicts": {v: sum(r.get("verdict") == v for r in rs)
+                         for v in ("good", "visible", "poor")},
+            "worse_than_log_by_1db_materials": [
+                r["material"] for d, r in zip(vs_log, rs, strict=True) if d < -1.0],
             "log_rmse_median": statistics.median(r["log_rmse"] for r in rs),
             "psnr_db_median": statistics.median(r["psnr_db"] for r in rs),
             "time_ms_median": statistics.median(r["time_ms"] for r in rs),
             "not_successful": sum(r["result"] != "successful" for r in rs),
         }
     return out
+
+
+def _de(x) -> float:
+    """A CIEDE2000 figure, a black sphere (None) counting as far off."""
+    return 100.0 if x is None else float(x)
 
 
 def write(rows, summary, args, out_dir: str) -> None:
@@ -248,29 +284,39 @@ def write(rows, summary, args, out_dir: str) -> None:
             "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
             "command": " ".join(["python -m bench.render_loss", *sys.argv[1:]]),
             "model": args.model}
-    with open(os.path.join(out_dir, "render_loss.json"), "w") as f:
+    stem = "render_loss" if args.half == "all" else f"render_loss_{args.half}"
+    meta["half"] = args.half
+    with open(os.path.join(out_dir, f"{stem}.json"), "w") as f:
         jsonout.dump({**meta, "summary": summary, "rows": rows}, f, indent=1)
     n = summary["log"]["n"]
+    which = {"all": "", "design": " (the design half: even positions of the sorted names)",
+             "check": " (the check half: odd positions of the sorted names, not used to "
+                      "design or tune)"}[args.half]
     lines = [f"# {args.model} under every loss, judged by an independent sphere render", "",
              f"`{meta['command']}` ({meta['when']}, {meta['machine']}): {n} real MERL "
-             "materials, default fit options but the loss. Independent render: 3 lights "
+             f"materials{which}, default fit options but the loss. Independent render: 3 lights "
              "(key upper right, grazing lower left, rim from behind), one exposure per light, "
              "clip, gamma 2.2, nearest-bin lookups of the table (bench/render_loss.py). "
-             "Colour shift: largest per-channel relative error of the key-light sphere's "
-             "mean radiance (`sphere_colour_error`); 'indep.' the same over the three "
-             "independent renders. Time: wall time of a warm `fit`.", "",
+             "Colour shift: CIEDE2000 of the key-light sphere's mean colour at equal "
+             "luminance (`sphere_colour`, the verdict's); 'indep.' the same over the three "
+             "independent renders; a colour regression: indep. shift more than "
+             f"{COLOUR_REGRESSION:g} above the log loss's. Verdicts: brdffit's quality "
+             "verdict. Time: wall time of a warm `fit`.", "",
              "| loss | indep. PSNR median (dB) | worst (material) | vs log: median, worst "
-             "(material) | >1 dB worse than log | colour shift median | >10% shift | "
-             ">10% shift (indep.) | log_rmse median | brdffit psnr_db median | ms per fit "
-             "(median) | not successful |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(material) | >1 dB worse than log | colour shift median | > 3 | "
+             "> 3 (indep.) | colour regressions | good / visible / poor | log_rmse median | "
+             "brdffit psnr_db median | ms per fit (median) | not successful |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for loss, s in summary.items():
         lines.append(
             f"| {loss} | {s['indep_psnr_median']:.2f} | {s['indep_psnr_worst']:.1f} "
             f"({s['worst_material']}) | {s['vs_log_median_db']:+.2f}, {s['vs_log_worst_db']:+.2f} "
             f"({s['vs_log_worst_material']}) | {s['worse_than_log_by_1db']} | "
-            f"{s['colour_shift_median']:.3f} | {s['colour_over_10pc']} | "
-            f"{s['indep_colour_over_10pc']} | {s['log_rmse_median']:.4f} | "
+            f"{s['colour_shift_median']:.2f} | {s['colour_over_3']} | "
+            f"{s['indep_colour_over_3']} | {len(s['colour_regressions'])} "
+            f"{', '.join(s['colour_regressions'])} | "
+            f"{'/'.join(str(s['verdicts'][v]) for v in ('good', 'visible', 'poor'))} | "
+            f"{s['log_rmse_median']:.4f} | "
             f"{s['psnr_db_median']:.1f} | {s['time_ms_median']:.0f} | {s['not_successful']} |")
     lines += ["", "Held-out lights (key lower left, grazing from the top, rim behind right; "
               "not used to choose the render loss's 4- and 6-light designs; consulted "
@@ -282,7 +328,12 @@ def write(rows, summary, args, out_dir: str) -> None:
                      f"{s['holdout_vs_log_median_db']:+.2f}, {s['holdout_vs_log_worst_db']:+.2f} | "
                      f"{s['holdout_worse_than_log_by_1db']} |")
     lines.append("")
-    with open(os.path.join(out_dir, "render_loss.md"), "w") as f:
+    worse = {loss: s["worse_than_log_by_1db_materials"] for loss, s in summary.items()
+             if s["worse_than_log_by_1db_materials"]}
+    if worse:
+        lines += ["More than 1 dB worse than log (independent render): "
+                  + "; ".join(f"{loss}: {', '.join(ms)}" for loss, ms in worse.items()), ""]
+    with open(os.path.join(out_dir, f"{stem}.md"), "w") as f:
         f.write("\n".join(lines))
     print("\n".join(lines))
 
@@ -293,15 +344,21 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated material names")
     ap.add_argument("--model", default="ggx")
     ap.add_argument("--out", default=RESULTS)
+    ap.add_argument("--half", choices=("all", "design", "check"), default="all",
+                    help="which half of the MERL set (split by name: half())")
+    ap.add_argument("--losses", default=",".join(LOSSES), help="comma-separated losses")
     args = ap.parse_args(argv)
     from data_synth import nbrdf
 
-    names = list(nbrdf.material_names())
+    names = half(nbrdf.material_names(), args.half)
     if args.only:
         names = args.only.split(",")
     elif args.materials:
         names = names[: args.materials]
-    rows = run(names, args.model)
+    losses = tuple(x for x in args.losses.split(",") if x)
+    if "log" not in losses:
+        ap.error("--losses must include log: every figure is against it")
+    rows = run(names, args.model, losses=losses)
     write(rows, summarise(rows), args, args.out)
     return 0
 

@@ -232,7 +232,7 @@ def _numpy_render_loss(table, index, weight, params, model):
     """The render loss of docs/fitting.md written out in numpy, from the table's values:
     per channel the exposure 0.35 / weighted median of f cos_i over the bins, the tone
     curve of the exposed f cos_i, the weighted squared difference; plus, per channel,
-    0.01 log^2 of the ratio of the weighted means of f cos_i (fit over table)."""
+    ENERGY_WEIGHT (0.05) log^2 of the ratio of the weighted means of f cos_i (fit over table)."""
     from brdffit.io.grid import bin_grid
 
     g = bin_grid()
@@ -258,7 +258,7 @@ def _numpy_render_loss(table, index, weight, params, model):
 
     d = curve(e * fit) - curve(e * meas)
     ratio = (fit @ weight) / (meas @ weight)
-    return float(np.sum(weight * d * d) + 0.01 * np.sum(np.log(ratio) ** 2))
+    return float(np.sum(weight * d * d) + 0.05 * np.sum(np.log(ratio) ** 2))
 
 
 def test_render_loss_value_is_the_numpy_definition(noisy_ggx):
