@@ -367,7 +367,7 @@ function showNextSteps(best) {
   if (!steps.length) return;
   $("next-title").textContent = `${best.model} looks ${q.verdict}: ${q.reason}. What to try next:`;
   for (const s of steps) {
-    const gain = s.gain_db == null ? "" : ` (${s.gain_db > 0 ? "+" : ""}${s.gain_db.toFixed(1)} dB on this table)`;
+    const gain = s.gain_db == null ? "" : ` (${s.gain_db > 0 ? "+" : ""}${s.gain_db.toFixed(1)} dB)`;
     const item = el("li", null);
     item.append(el("code", s.try), document.createTextNode(`${gain}: ${s.why}`));
     list.append(item);
