@@ -52,6 +52,10 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     inputs = {i.get("name"): i.get("value") for i in node.findall("input")}
     assert inputs == {"base_color": "0.8, 0.35, 0.1", "metallic": "0.4", "roughness": "0.45"}
     assert root.find("surfacematerial/input").get("nodename") == node.get("name")
+    # a look puts the material on whatever geometry a viewer loads
+    assign = root.find("look/materialassign")
+    assert assign.get("material") == root.find("surfacematerial").get("name")
+    assert assign.get("geom") == "/*"
     # glTF's parameters, but MaterialX's own shading graph: not exact, and said
     assert not x.fidelity["exact"] and any("directional albedo" in w for w in x.warnings)
 
@@ -80,13 +84,57 @@ def test_an_ior_fit_writes_khr_materials_ior():
     r = result("gltf_pbr_ior", {**GLTF, "ior": 1.9})
     g = export(r, "gltf")
     assert g.fidelity["exact"] and g.fidelity["target_model"] == "gltf_pbr_ior"
-    assert g.material["extensionsUsed"] == ["KHR_materials_ior"]
+    assert g.material["extensionsUsed"] == ["KHR_lights_punctual", "KHR_materials_ior"]
     assert g.material["materials"][0]["extensions"] == {"KHR_materials_ior": {"ior": 1.9}}
     assert any("KHR_materials_ior" in w for w in g.warnings)  # viewers without it: 0.04
     x = ET.fromstring(export(r, "materialx", target_model="gltf_pbr_ior").material)
     assert x.find("gltf_pbr/input[@name='ior']").get("value") == "1.9"
-    # a core fit writes no extension at all
-    assert "extensionsUsed" not in export(result("gltf_pbr", GLTF), "gltf").material
+    # a core fit's material uses no extension (the preview's light is one)
+    core = export(result("gltf_pbr", GLTF), "gltf").material
+    assert core["extensionsUsed"] == ["KHR_lights_punctual"]
+    assert "extensions" not in core["materials"][0]
+
+
+def test_the_gltf_file_is_a_scene_that_shows_the_material():
+    """A viewer opens the file and sees the material: a sphere using it, a camera
+    looking at it, a light from the sphere plots' key light; the material keeps its
+    name. The .glb is the same document with its buffer in the binary chunk."""
+    import base64
+    import struct
+
+    from brdffit.export import gltf
+
+    doc = export(result("gltf_pbr", GLTF), "gltf").material
+    (scene,) = doc["scenes"]
+    nodes = [doc["nodes"][i] for i in scene["nodes"]]
+    (mesh_node,) = [n for n in nodes if "mesh" in n]
+    (primitive,) = doc["meshes"][mesh_node["mesh"]]["primitives"]
+    assert doc["materials"][primitive["material"]]["name"] == "gold_gltf_pbr"
+    positions = doc["accessors"][primitive["attributes"]["POSITION"]]
+    assert positions["min"] == pytest.approx([-1, -1, -1], abs=1e-6)
+    assert positions["max"] == pytest.approx([1, 1, 1], abs=1e-6)
+    (camera_node,) = [n for n in nodes if "camera" in n]
+    assert camera_node["translation"][2] > 1  # in front of the sphere, looking along -z
+    (light_node,) = [n for n in nodes if "extensions" in n]
+    light = doc["extensions"]["KHR_lights_punctual"]["lights"][
+        light_node["extensions"]["KHR_lights_punctual"]["light"]]
+    assert light["type"] == "directional" and light["intensity"] == pytest.approx(np.pi)
+    x, y, z, w = light_node["rotation"]  # the light's -z turned to shine from upper left
+    shine = -np.array([2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)])
+    assert shine == pytest.approx(-np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(
+        gltf.PREVIEW_LIGHT_FROM), abs=1e-6)
+    blob = base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1])
+    assert len(blob) == doc["buffers"][0]["byteLength"]
+
+    glb = gltf.to_glb(doc)
+    magic, version, length = struct.unpack_from("<4sII", glb)
+    assert (magic, version, length) == (b"glTF", 2, len(glb))
+    n_json, kind = struct.unpack_from("<I4s", glb, 12)
+    head = json.loads(glb[20:20 + n_json])
+    assert kind == b"JSON" and "uri" not in head["buffers"][0]
+    assert head["materials"] == doc["materials"] and "uri" in doc["buffers"][0]  # unchanged
+    n_bin, kind = struct.unpack_from("<I4s", glb, 20 + n_json)
+    assert kind == b"BIN\0" and glb[28 + n_json:28 + n_json + len(blob)] == blob
 
 
 def test_conductor_fit_exports_exactly_to_mitsuba():

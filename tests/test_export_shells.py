@@ -62,6 +62,27 @@ def test_cli_writes_the_files_and_reports_fidelity(fit_json, tmp_path):
     assert out.fidelity["log_rmse_to_fit"] > 0
 
 
+def test_cli_json_with_out_writes_the_files_and_glb_writes_a_binary_gltf(fit_json, tmp_path):
+    """--json --out DIR writes the files too (it wrote none, silently); --glb writes one
+    binary glTF instead of the .gltf."""
+    from brdffit.export import gltf
+
+    both = tmp_path / "both"
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(both), "--json")
+    assert r.returncode == 0, r.stderr
+    out = Export.from_dict(json.loads(r.stdout))  # stdout is the JSON alone
+    (written,) = both.iterdir()
+    assert json.loads(written.read_text()) == out.material and f"wrote {written}" in r.stderr
+    binary = tmp_path / "glb"
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(binary), "--glb")
+    assert r.returncode == 0, r.stderr
+    (glb,) = binary.iterdir()
+    assert glb.name == "ggx_gltf_pbr.glb" and glb.read_bytes() == gltf.to_glb(out.material)
+    r = run("brdffit.cli", "export", str(fit_json), "--to", "mitsuba", "--glb", "--out",
+            str(binary))
+    assert r.returncode == 2 and "needs --to gltf and --out DIR" in r.stderr
+
+
 def test_cli_errors_are_one_line(fit_json, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")

@@ -39,7 +39,10 @@ def add_arguments(p) -> None:
     p.add_argument("--out", "-o", metavar="DIR",
                    help="write the material's files into DIR (created if missing)")
     p.add_argument("--json", action="store_true",
-                   help="print the whole export (material, warnings, fidelity) as JSON")
+                   help="print the whole export (material, warnings, fidelity) as JSON "
+                        "(with --out, the files are written too)")
+    p.add_argument("--glb", action="store_true",
+                   help="with --to gltf --out DIR: one binary .glb instead of the .gltf")
     store = p.add_argument_group("a batch results file (docs/batch.md)")
     store.add_argument("--table", help="the table: its name in the file (brdffit batch-report "
                                        "shows it), its path, or its file name")
@@ -93,17 +96,26 @@ def _export(args):
 
 
 def run(args) -> int:
+    if args.glb and (args.target != "gltf" or not args.out):
+        raise BrdffitError("--glb writes a binary glTF file: it needs --to gltf and --out DIR")
     out = _export(args)
-    if args.json:
-        print(out.to_json(indent=2))
-        return 0
+    written = []
     if args.out:
+        from brdffit.io.atomic import write_bytes
+
         folder = Path(args.out)
         folder.mkdir(parents=True, exist_ok=True)
-        for name, text in out.files.items():
-            (folder / name).write_text(text)
-            print(folder / name)
-    else:
+        for name, data in out.file_bytes(glb=args.glb).items():
+            write_bytes(folder / name, data)
+            written.append(folder / name)
+    if args.json:  # stdout is the JSON alone; the files' names go to stderr
+        print(out.to_json(indent=2))
+        for path in written:
+            print(f"wrote {path}", file=sys.stderr)
+        return 0
+    for path in written:
+        print(path)
+    if not args.out:
         for text in out.files.values():
             sys.stdout.write(text if text.endswith("\n") else text + "\n")
     fid = out.fidelity

@@ -63,6 +63,16 @@ class Export:
     def to_dict(self) -> dict:
         return {"schema": SCHEMA, **asdict(self)}
 
+    def file_bytes(self, glb: bool = False) -> dict[str, bytes]:
+        """The files to save, as bytes; ``glb``: a glTF export's document as one binary
+        ``.glb`` instead of its ``.gltf`` (``brdffit.export.gltf.to_glb``)."""
+        if glb and self.target != "gltf":
+            raise ExportError(f"a binary .glb is a glTF file; a {self.target} export has none")
+        if not glb:
+            return {name: text.encode() for name, text in self.files.items()}
+        stem = next(iter(self.files)).removesuffix(".gltf")
+        return {f"{stem}.glb": gltf.to_glb(self.material)}
+
     def to_json(self, **kw) -> str:
         return jsonout.dumps(self.to_dict(), **kw)
 

@@ -106,6 +106,12 @@ def document(params: dict, name: str, model: str | None = None) -> str:
         f'  <surfacematerial name={quoteattr("M_" + ident)} type="material">',
         f'    <input name="surfaceshader" type="surfaceshader" nodename={shader}/>',
         "  </surfacematerial>",
+        # a look that puts the material on every geometry: a viewer that applies looks
+        # (MaterialXView, Houdini, Maya's LookdevX) shows it on whatever it loads
+        f'  <look name={quoteattr("L_" + ident)}>',
+        f'    <materialassign name={quoteattr("MA_" + ident)} '
+        f'material={quoteattr("M_" + ident)} geom="/*"/>',
+        "  </look>",
         "</materialx>",
         "",
     ])

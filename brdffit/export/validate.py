@@ -1,6 +1,6 @@
 """Checks of an export with the renderers' own tools: Mitsuba 3, MaterialX, the Khronos
-glTF validator. Needs the ``export-check`` extra (and Node.js for glTF); fitting and
-exporting never do.
+glTF validator, three.js. Needs the ``export-check`` extra (and Node.js for glTF;
+playwright and Chromium for three.js); fitting and exporting never do.
 
 - :func:`mitsuba_eval` evaluates an exported Mitsuba material with Mitsuba itself
   (``BSDF.eval`` returns f_r cos_o; divided here, so it compares with a model's f_r);
@@ -15,15 +15,20 @@ exporting never do.
   model (no renderer here evaluates glTF's BRDF, so the spec is the reference);
 - :func:`materialx_eval` evaluates a MaterialX document as MaterialX shades it: the
   GLSL its own generator writes (:func:`materialx_glsl`), run on a headless OpenGL 4
-  context (moderngl on EGL; Mesa's llvmpipe where there is no GPU), divided by cos_i.
+  context (moderngl on EGL; Mesa's llvmpipe where there is no GPU), divided by cos_i;
+- :func:`threejs_render`: a glTF document (JSON or .glb) as three.js's GLTFLoader and
+  WebGLRenderer show it, in headless Chromium (WebGL2 on SwiftShader), linear radiance.
 """
 
 from __future__ import annotations
 
+import base64
 import importlib
 import json
 import shutil
 import subprocess
+import urllib.parse
+from pathlib import Path
 
 import numpy as np
 
@@ -337,3 +342,161 @@ def materialx_eval(text: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     finally:
         ctx.release()
     return out / np.clip(wi[:, 2:3], 1e-8, 1.0)
+
+
+# -- three.js: a glTF document as a web viewer shows it --------------------------------
+
+#: Chromium without a GPU: WebGL2 on SwiftShader (software Vulkan) through ANGLE.
+#: Upstream Chromium no longer falls back to SwiftShader for WebGL by itself, hence
+#: ``--enable-unsafe-swiftshader`` (Debian's 156 still does, and playwright passes that
+#: flag too: said here so as not to depend on either); the rest keep the browser off
+#: the network.
+THREEJS_CHROMIUM_ARGS = (
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+)
+
+#: The page's origin: never resolved, every request to it is answered by playwright
+#: (``page.route``), so nothing listens on any port and nothing leaves the machine.
+_THREEJS_ORIGIN = "http://brdffit-threejs.invalid"
+_THREEJS_TIMEOUT_S = 120
+
+#: The page renders on load and leaves ``window.result``: ``{pixels}`` (the float
+#: RGBA render target, bottom row first, base64) or ``{error}``. A classic script with
+#: dynamic imports, so that a module that fails to load is an error it catches.
+_THREEJS_PAGE = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><link rel="icon" href="data:,">
+<script type="importmap">
+{"imports": {"three": "/three/build/three.module.js", "three/addons/": "/three/examples/jsm/"}}
+</script>
+<script>
+async function render(size) {
+  const THREE = await import('three');
+  const {GLTFLoader} = await import('three/addons/loaders/GLTFLoader.js');
+  const context = document.createElement('canvas').getContext('webgl2');
+  if (context === null) throw new Error('this browser has no WebGL2');
+  const renderer = new THREE.WebGLRenderer({canvas: context.canvas, context,
+                                            antialias: false, preserveDrawingBuffer: true});
+  // float colour buffers: the radiance as the shader writes it, unclamped
+  if (!renderer.extensions.has('EXT_color_buffer_float'))
+    throw new Error('this WebGL2 cannot render to float targets (EXT_color_buffer_float)');
+  renderer.toneMapping = THREE.NoToneMapping;
+  renderer.setClearColor(0x000000, 0);
+  // a render target's colour space is linear: no sRGB encoding on output
+  const target = new THREE.WebGLRenderTarget(size, size, {type: THREE.FloatType});
+
+  const data = await (await fetch('/document')).arrayBuffer();
+  const gltf = await new GLTFLoader().parseAsync(data, '');
+  const scene = new THREE.Scene();
+  scene.background = null;
+  if (gltf.scene !== undefined) scene.add(gltf.scene);  // a document may have no scene
+
+  let camera = gltf.cameras[0];
+  if (camera === undefined) {
+    camera = new THREE.PerspectiveCamera(50, 1, 0.1, 100);
+    camera.position.set(0, 0, 3);
+    camera.lookAt(0, 0, 0);
+  } else if (camera.isPerspectiveCamera) {
+    camera.aspect = 1;
+    camera.updateProjectionMatrix();
+  }
+  let lit = false;
+  scene.traverse(o => { lit = lit || o.isLight === true; });
+  if (!lit) {
+    // irradiance pi on a surface facing it, as brdffit's own renders
+    const light = new THREE.DirectionalLight(0xffffff, Math.PI);
+    light.position.set(-0.5, 0.5, 0.7071);  // shining towards its target, the origin
+    scene.add(light);
+  }
+
+  renderer.setRenderTarget(target);
+  renderer.render(scene, camera);
+  const pixels = new Float32Array(size * size * 4);
+  renderer.readRenderTargetPixels(target, 0, 0, size, size, pixels);
+  const bytes = new Uint8Array(pixels.buffer);
+  let text = '';
+  for (let i = 0; i < bytes.length; i += 0x8000)
+    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+  return btoa(text);
+}
+render(%(size)d).then(pixels => { window.result = {pixels}; },
+                      e => { window.result = {error: String(e && e.stack || e)}; });
+</script></head><body></body></html>
+"""
+
+
+def threejs_render(document: dict | bytes, threejs: str, size: int = 256,
+                   chromium: str | None = None) -> np.ndarray:
+    """The image (size, size, 4: linear RGBA, float32, rows top to bottom) three.js
+    renders of a glTF 2.0 ``document``: a JSON document (its buffers embedded as data:
+    URIs) or the bytes of a .glb. ``threejs``: the installed npm package ``three``'s
+    folder (``.../node_modules/three``); ``chromium``: the browser (default
+    ``/usr/bin/chromium``), run headless by playwright with WebGL2 on SwiftShader.
+
+    three.js's ``GLTFLoader`` loads the document; ``WebGLRenderer`` (no antialiasing,
+    no tone mapping) draws it into a float render target, read back as it is: linear
+    radiance, unclamped, not sRGB encoded. The camera is the document's first one
+    (aspect 1), else a perspective one (fov 50 degrees) at (0, 0, 3) looking at the
+    origin; the lights are the document's (KHR_lights_punctual), else one directional
+    light of intensity pi from (-0.5, 0.5, 0.7071). The background is (0, 0, 0, 0).
+
+    Raises BrdffitError with the page's message when the page fails (no WebGL2 or no
+    float render targets, a loader error, an exception) or logs an error (three.js
+    reports a shader that fails to compile, or a target it cannot read, only so).
+    Served by playwright's request interception; the browser makes no other request.
+    """
+    from brdffit import jsonout
+
+    try:
+        from playwright.sync_api import Error as PlaywrightError
+        from playwright.sync_api import sync_playwright
+    except ModuleNotFoundError:  # playwright is in the test extra, not export-check
+        raise MissingExtraError("brdffit.export.validate.threejs_render", "test",
+                                ("playwright",)) from None
+
+    root = Path(threejs).resolve()
+    if not (root / "build" / "three.module.js").is_file():
+        raise BrdffitError(f"{threejs} is not the npm package three (no build/three.module.js)")
+    data = document if isinstance(document, bytes) else jsonout.dumps(document).encode()
+    page_html = _THREEJS_PAGE % {"size": size}
+
+    def serve(route):
+        url = urllib.parse.urlsplit(route.request.url)
+        if f"{url.scheme}://{url.netloc}" != _THREEJS_ORIGIN:
+            route.abort()  # the document's external resources included: it must embed them
+        elif url.path == "/":
+            route.fulfill(body=page_html, content_type="text/html")
+        elif url.path == "/document":
+            route.fulfill(body=data, content_type="application/octet-stream")
+        else:
+            file = (root / url.path.removeprefix("/three/")).resolve()
+            if url.path.startswith("/three/") and file.is_relative_to(root) and file.is_file():
+                route.fulfill(path=file, content_type="text/javascript")
+            else:
+                route.fulfill(status=404)
+
+    problems = []
+    timeout_ms = _THREEJS_TIMEOUT_S * 1000
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium or "/usr/bin/chromium",
+                                        args=list(THREEJS_CHROMIUM_ARGS), timeout=timeout_ms)
+            try:
+                page = browser.new_page()
+                page.on("pageerror", lambda e: problems.append(str(e)))
+                page.on("console",
+                        lambda m: problems.append(m.text) if m.type == "error" else None)
+                page.route("**/*", serve)
+                page.goto(_THREEJS_ORIGIN + "/", timeout=timeout_ms)
+                page.wait_for_function("() => window.result !== undefined", timeout=timeout_ms)
+                result = page.evaluate("() => window.result")
+            finally:
+                browser.close()
+    except PlaywrightError as e:  # no browser, or a page that timed out
+        raise BrdffitError(f"three.js render failed: {e}") from None
+    if "error" in result or problems:
+        raise BrdffitError("three.js render failed: "
+                           + "\n".join([result.get("error", "")] + problems).strip())
+    pixels = np.frombuffer(base64.b64decode(result["pixels"]), np.float32)
+    return pixels.reshape(size, size, 4)[::-1].copy()  # WebGL's rows run bottom-up

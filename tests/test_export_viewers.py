@@ -1,0 +1,113 @@
+"""glTF documents as a web viewer shows them: three.js (``GLTFLoader``, ``WebGLRenderer``)
+in headless Chromium, through ``brdffit.export.validate.threejs_render``.
+
+three.js is the npm package ``three``, pinned, installed on first use into ``.tools/``
+(gitignored) as the glTF validator of tests/test_export_tools.py; Chromium is Debian's
+(CI installs it). brdffit's own glTF export must show its material there, as .gltf
+and as .glb alike; a bare material (what the export was before issue 42) shows
+nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdffit.export import export, gltf
+from brdffit.export import validate as check
+from brdffit.fitting.result import FitResult
+
+pytestmark = pytest.mark.system
+
+ROOT = Path(__file__).resolve().parent.parent
+THREEJS = ROOT / ".tools" / "threejs"
+THREEJS_VERSION = "0.187.0"
+CHROMIUM = "/usr/bin/chromium"
+SIZE = 128
+
+#: A red dielectric, as a gltf_pbr fit holds it.
+PARAMS = {"base_color": [0.8, 0.2, 0.1], "metallic": 0.0, "roughness": 0.5}
+
+
+@pytest.fixture(scope="module")
+def threejs() -> str:
+    package = THREEJS / "node_modules" / "three"
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"Chromium is not installed at {CHROMIUM}: three.js renders in it "
+                    "(Debian: apt-get install chromium)")
+    installed = package / "package.json"
+    if not installed.exists() or json.loads(installed.read_text())["version"] != THREEJS_VERSION:
+        if shutil.which("npm") is None or shutil.which("node") is None:
+            pytest.fail("npm/node not installed: three.js cannot be installed")
+        THREEJS.mkdir(parents=True, exist_ok=True)
+        subprocess.run(["npm", "install", "--prefix", str(THREEJS), "--no-audit", "--no-fund",
+                        f"three@{THREEJS_VERSION}"], check=True, capture_output=True, timeout=300)
+    return str(package)
+
+
+def _exported() -> dict:
+    """The glTF document ``brdffit export`` writes for a gltf_pbr fit of PARAMS."""
+    fit = FitResult("gltf_pbr", PARAMS, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {},
+                    table="red.binary")
+    return export(fit, "gltf").material
+
+
+@pytest.fixture(scope="module")
+def sphere_image(threejs):
+    return check.threejs_render(_exported(), threejs, size=SIZE)
+
+
+def test_threejs_shows_the_exported_material_on_its_sphere(sphere_image):
+    """The file's own camera, sphere and light: the middle of the frame is the lit,
+    red material; the corners are background; the light comes from the upper left."""
+    image = sphere_image
+    assert image.shape == (SIZE, SIZE, 4)
+    middle = image[SIZE // 2 - 4:SIZE // 2 + 4, SIZE // 2 - 4:SIZE // 2 + 4]
+    assert np.all(middle[..., :3] > 0) and np.all(middle[..., 3] == 1)
+    for corner in (image[:8, :8], image[:8, -8:], image[-8:, :8], image[-8:, -8:]):
+        assert np.all(corner == 0)  # the background, alpha included
+    lit = image[..., :3].sum(-1) > 0
+    r, g, b = image[lit, :3].mean(0)
+    assert r > g > b
+    # the sphere fills ~80% of the frame's height (gltf.CAMERA_YFOV)
+    rows = np.flatnonzero(image[:, SIZE // 2, 3] > 0)
+    assert 0.7 < (rows[-1] - rows[0] + 1) / SIZE < 0.9
+    quarter, three_quarters = SIZE // 4 + 8, 3 * SIZE // 4 - 8
+    assert image[quarter, quarter, 0] > image[three_quarters, three_quarters, 0]
+
+
+def test_the_light_is_the_sphere_plots_key_light(sphere_image):
+    """Linear radiance, irradiance pi: the middle faces the camera, lit at 45 degrees
+    (cos 0.707). Its red is the gltf_pbr model's f * pi * cos within what three.js's
+    own shading changes (its multi-scattering term, height-correlated V, a roughness
+    floor: issue 42 measures them per viewer)."""
+    import jax.numpy as jnp
+
+    from brdffit import models, runtime
+
+    light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
+    with runtime.float64():
+        f = np.asarray(models.get("gltf_pbr")({k: jnp.asarray(v) for k, v in PARAMS.items()},
+                                              jnp.asarray(light[None]),
+                                              jnp.asarray([[0.0, 0.0, 1.0]])))[0]
+    expected = f * np.pi * light[2]
+    got = sphere_image[SIZE // 2 - 1:SIZE // 2 + 1, SIZE // 2 - 1:SIZE // 2 + 1, :3]
+    np.testing.assert_allclose(got.mean((0, 1)), expected, rtol=0.15)
+
+
+def test_threejs_shows_the_glb_as_the_gltf(threejs, sphere_image):
+    image = check.threejs_render(gltf.to_glb(_exported()), threejs, size=SIZE)
+    np.testing.assert_allclose(image, sphere_image, atol=1e-6)
+
+
+def test_a_bare_material_shows_nothing(threejs):
+    """Why the export carries a sphere: the material alone (the export before issue
+    42) opens as an empty scene."""
+    bare = {"asset": {"version": "2.0"}, "materials": _exported()["materials"]}
+    image = check.threejs_render(bare, threejs, size=SIZE)
+    assert image.shape == (SIZE, SIZE, 4) and np.all(image == 0)
