@@ -85,6 +85,13 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9,
                            "ior": 1.2}),
     ],
+    "gltf_threejs": [
+        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4}),
+        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5}),
+        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3}),
+        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06}),
+        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
+    ],
     "rough_conductor": [
         ("example", {"eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2], "alpha": 0.2,
                      "kd": [0.05, 0.04, 0.03], "weight": 0.9}),

@@ -34,6 +34,8 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     energy = {k: g.fidelity.pop(k) for k in ("albedo_max", "albedo_max_theta_deg")}
     to_table = g.fidelity.pop("log_rmse_to_table")
     colour = g.fidelity.pop("sphere_colour")
+    viewers = g.fidelity.pop("viewers")
+    assert viewers["spec"]["log_rmse_to_table"] == to_table
     assert g.fidelity == {"exact": True, "target_model": "gltf_pbr", "log_rmse_to_fit": 0.0,
                           "fit_log_rmse": 0.02, "renderer_model": "gltf_pbr"}
     # both spheres read the table's bins: the exact export is the table's colour
@@ -274,3 +276,33 @@ def test_an_export_of_a_fit_that_does_not_look_good_says_so():
                       "the measurement); next: --model ggx2"]
     good = result("ggx", GGX, quality={**look, "verdict": "good", "next": []})
     assert not [w for w in export(good, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
+
+
+def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
+    """fidelity.viewers: the file's factors under the spec's definition and under
+    three.js's shading (gltf_threejs), each against the table; viewer="threejs" fits
+    the factors for three.js on the measured table itself."""
+    r = result("gltf_pbr", GLTF)
+    measured = fit_as_table(result("ggx", {**GGX, "ks": [0.9, 0.6, 0.6]}))
+    e = export(r, "gltf", table=measured)
+    spec, three = e.fidelity["viewers"]["spec"], e.fidelity["viewers"]["threejs"]
+    assert spec["model"] == "gltf_pbr" and three["model"] == "gltf_threejs"
+    assert spec["log_rmse_to_table"] == e.fidelity["log_rmse_to_table"]
+    assert three["log_rmse_to_table"] == pytest.approx(
+        table_error(measured, "gltf_threejs", e.target_params)["log_rmse"], rel=1e-12)
+    assert set(three["sphere_colour"]) == {"brightness_stops", "colour_shift", "estimate_error"}
+    for_three = export(r, "gltf", table=measured, viewer="threejs")
+    assert for_three.fidelity["target_model"] == "gltf_threejs"
+    assert not for_three.fidelity["exact"]
+    assert any(w.startswith("refitted: gltf_threejs") for w in for_three.warnings)
+    # the refit is three.js's optimum: no worse there than the spec's file
+    assert (for_three.fidelity["viewers"]["threejs"]["log_rmse_to_table"]
+            <= three["log_rmse_to_table"] * 1.001)
+    assert set(for_three.material["materials"][0]["pbrMetallicRoughness"]) == {
+        "baseColorFactor", "metallicFactor", "roughnessFactor"}
+    ior = export(result("gltf_pbr_ior", {**GLTF, "ior": 1.6}), "gltf", table=measured)
+    assert ior.fidelity["viewers"]["threejs"] is None  # three.js's model here has no ior
+    with pytest.raises(ExportError, match="viewer 'threejs'"):
+        export(r, "mitsuba", table=measured, viewer="threejs")
+    with pytest.raises(ExportError, match="carries gltf_threejs"):
+        export(r, "gltf", table=measured, viewer="threejs", target_model="gltf_pbr")

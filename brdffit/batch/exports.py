@@ -13,14 +13,15 @@ from brdffit.fitting.result import FitResult
 
 
 def export_from_store(store: str, table: str, target: str, model: str | None = None, *,
-                      table_file=None, target_model: str | None = None) -> Export:
+                      table_file=None, target_model: str | None = None,
+                      viewer: str = "spec") -> Export:
     """The ``model`` fit (None: the best) of ``table`` in the batch results file
     ``store`` (``brdffit batch``) as a material of ``target``: ``brdffit.export.export``
     of :func:`brdffit.batch.store.read_fit`'s result. ``table`` is the table's name in
     the file, its path or its file name; an unknown one is an error that lists what the
-    file holds. ``table_file``, ``target_model``: as ``export``'s ``table`` and
-    ``target_model``."""
+    file holds. ``table_file``, ``target_model``, ``viewer``: as ``export``'s ``table``,
+    ``target_model`` and ``viewer``."""
     if target not in TARGETS:  # before the file is opened
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
     return export(FitResult.from_dict(read_fit(store, table, model)), target, table=table_file,
-                  target_model=target_model)
+                  target_model=target_model, viewer=viewer)

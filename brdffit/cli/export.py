@@ -41,6 +41,9 @@ def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true",
                    help="print the whole export (material, warnings, fidelity) as JSON "
                         "(with --out, the files are written too)")
+    p.add_argument("--viewer", choices=("spec", "threejs"), default="spec",
+                   help="with --to gltf: fit the factors for the spec's definition (default) "
+                        "or for the way three.js shades them")
     p.add_argument("--glb", action="store_true",
                    help="with --to gltf --out DIR: one binary .glb instead of the .gltf")
     store = p.add_argument_group("a batch results file (docs/batch.md)")
@@ -79,7 +82,7 @@ def _export(args):
             raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
                                "--model choose a fit of a batch results file (brdffit batch)")
         return export(_read_result(args.result), args.target, table=args.measured,
-                      target_model=args.target_model)
+                      target_model=args.target_model, viewer=args.viewer)
     if args.table is None:
         from brdffit.batch.store import read_attrs, read_index
 
@@ -92,7 +95,8 @@ def _export(args):
     from brdffit.batch.exports import export_from_store
 
     return export_from_store(args.result, args.table, args.target, args.model,
-                             table_file=args.measured, target_model=args.target_model)
+                             table_file=args.measured, target_model=args.target_model,
+                             viewer=args.viewer)
 
 
 def run(args) -> int:
@@ -129,6 +133,13 @@ def run(args) -> int:
                  f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
                  f"{_figure(colour.get('colour_shift'), '.1f')}")
     print(line, file=sys.stderr)
+    for viewer, v in (fid.get("viewers") or {}).items():
+        if v is not None:
+            colour = v["sphere_colour"] or {}
+            print(f"  in {viewer} ({v['model']}): log_rmse to the table "
+                  f"{v['log_rmse_to_table']:.4g}, lit sphere "
+                  f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
+                  f"{_figure(colour.get('colour_shift'), '.1f')}", file=sys.stderr)
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -113,13 +113,16 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[st
 
 
 def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,
-           target_model: str | None = None) -> Export:
+           target_model: str | None = None, viewer: str = "spec") -> Export:
     """``result`` as a material of ``target`` (one of ``TARGETS``).
 
     ``target_model``: which of the target's models the file carries (default the
     target's first, e.g. MaterialX's ``standard_surface``). ``table``: the measured
     table, for ``fidelity.log_rmse_to_table`` and the sphere's colour error (default:
-    the fit's own table file, where it is still there).
+    the fit's own table file, where it is still there). ``viewer`` (glTF): ``"spec"``
+    (the spec's definition, default) or ``"threejs"``: the factors fitted for the way
+    three.js shades them (target model ``gltf_threejs``). A glTF export's fidelity
+    has ``viewers``: the file under each viewer's shading.
     """
     from brdffit import models
     from brdffit.export.conversion import convert
@@ -132,27 +135,37 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = TARGETS[target]
+    target_model = _viewer_model(target, viewer, target_model)
     if target_model is not None and target_model not in module.SHADED_AS:
         raise ExportError(f"{target} carries {', '.join(module.SHADED_AS)}, not {target_model!r}")
-    conv = convert(result, (target_model,) if target_model else module.TARGET_MODELS)
+    models_wanted = (target_model,) if target_model else module.TARGET_MODELS
+    warnings: list[str] = []
+    measured = None
+    carried = result.model if result.model in models_wanted else models_wanted[0]
+    if module.SHADED_AS[carried] is not None:  # else nothing can be measured against it
+        measured, missing = _measured_table(result, table)
+        warnings += missing
+    # an export for a viewer is that viewer's optimum on the measured table, where the
+    # fit is not already of the viewer's model
+    for_viewer = viewer != "spec" and measured is not None
+    conv = convert(result, models_wanted, measured=measured if for_viewer else None)
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)
     shaded_as = module.SHADED_AS[conv.target_model]
-    warnings = list(conv.warnings)
+    warnings = list(conv.warnings) + warnings
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
                     log_rmse_to_table=None, sphere_colour=None)
-    measured = None
     if shaded_as is None:  # no table to read: nothing could be measured against it
         warnings.append(module.UNMODELLED_NOTE)
-    else:
-        measured, missing = _measured_table(result, table)
-        warnings += missing
+        measured = None
     if measured is not None:
         fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
         fidelity["sphere_colour"] = sphere_colour(
             measured, models.get(shaded_as), conv.params)["key"]
+    if target == "gltf" and measured is not None:
+        fidelity["viewers"] = _viewer_fidelity(measured, conv.params)
     warnings += _looks_warning(result)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
@@ -172,3 +185,37 @@ def _looks_warning(result: FitResult) -> list[str]:
     hint = f"; next: {steps[0]['try']}" if steps else ""
     return [f"the {result.model} fit looks {look['verdict']} beside its table "
             f"({look.get('reason', '')}){hint}"]
+
+
+def _viewer_model(target: str, viewer: str, target_model: str | None) -> str | None:
+    """The target model an export for ``viewer`` carries (None: the target's default)."""
+    if viewer == "spec":
+        return target_model
+    if target != "gltf" or viewer not in gltf.VIEWERS:
+        raise ExportError(f"viewer {viewer!r}: the glTF export is made for "
+                          f"{', '.join(gltf.VIEWERS)}; other targets have their renderer's own")
+    wanted = gltf.VIEWERS[viewer]
+    if target_model not in (None, wanted):
+        raise ExportError(f"viewer {viewer!r} carries {wanted}, not {target_model!r}")
+    return wanted
+
+
+def _viewer_fidelity(measured, params: dict) -> dict:
+    """The glTF file's factors under each viewer's shading, against the measured table:
+    ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a viewer whose
+    model cannot shade the file (three.js's ``gltf_threejs`` has no
+    ``KHR_materials_ior``) is null."""
+    from brdffit import models
+    from brdffit.fitting.problem import table_error
+    from brdffit.fitting.sphere import sphere_colour
+
+    out = {}
+    for viewer, name in gltf.VIEWERS.items():
+        model = models.get(name)
+        if {s.name for s in model.param_specs} != set(params):
+            out[viewer] = None
+            continue
+        out[viewer] = {"model": name,
+                       "log_rmse_to_table": table_error(measured, name, params)["log_rmse"],
+                       "sphere_colour": sphere_colour(measured, model, params)["key"]}
+    return out

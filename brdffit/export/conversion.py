@@ -87,11 +87,28 @@ _CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha"}
 
 
 def convert(result: FitResult, target_models: tuple[str, ...], *,
-            samples: int = CONVERSION_SAMPLES, seed: int = 0) -> Conversion:
+            samples: int = CONVERSION_SAMPLES, seed: int = 0,
+            measured: MerlTable | None = None) -> Conversion:
     """``result`` as parameters of one of ``target_models``, the models the renderer
     shades exactly: a copy when the fit is one of them, else a refit of the first
-    (see the module docstring)."""
+    (see the module docstring). ``measured``: refit the first to this measured table
+    instead, with the fit's loss (an export for one viewer's shading: the optimum of
+    what that viewer shows, not the nearest point to another model's fit); the fit's
+    own model is then refitted too."""
     from brdffit.fitting.pipeline import fit
+    from brdffit.fitting.problem import table_error
+
+    if measured is not None:
+        target_model = target_models[0]
+        refit = fit(measured, target_model, samples=samples, seed=seed, loss=result.loss)
+        to_fit = table_error(fit_as_table(result), target_model, refit.params)["log_rmse"]
+        warnings = [f"refitted: {target_model} (the viewer's shading) fitted to the measured "
+                    f"table with the {result.loss} loss; its log_rmse to the {result.model} "
+                    f"fit {to_fit:.4g}"]
+        if not refit.converged:
+            warnings.append(f"the viewer's {target_model} fit ended {refit.result}")
+        return Conversion(target_model, refit.params, False, float(to_fit),
+                          warnings + bound_warnings(target_model, refit.params))
 
     warnings = []
     if not result.converged:

@@ -34,10 +34,16 @@ import struct
 import numpy as np
 
 #: The models this target shades exactly; other fits are refitted as the first.
-TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior")
-#: target model -> the model that evaluates the file as the spec defines it (the same:
-#: gltf_pbr is the spec's definition, tests/test_target_models.py)
+#: ``gltf_threejs`` carries the same factors, fitted for three.js's shading
+#: (``viewer="threejs"``).
+TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs")
+#: target model -> the model that evaluates the file as it is meant to be shaded: the
+#: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
+#: viewer -> the model that shades a file as that viewer does (``fidelity.viewers``),
+#: and the target model of an export made for it (``export(..., viewer=)``). three.js's
+#: is checked against three.js itself (tests/test_export_viewers.py).
+VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs"}
 MEDIA_TYPE = "model/gltf+json"
 IOR_EXTENSION = "KHR_materials_ior"
 IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the dielectric "

@@ -16,6 +16,7 @@ from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_pbr import GltfPBR
+from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 from brdffit.models.oren_nayar import OrenNayar
@@ -28,7 +29,7 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
-    GltfPBR(), GltfPBR(ior=True), RoughConductor(), StandardSurface(),
+    GltfPBR(), GltfPBR(ior=True), GltfThreejs(), RoughConductor(), StandardSurface(),
     GGX2(),
 )
 
