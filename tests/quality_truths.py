@@ -9,6 +9,23 @@ from __future__ import annotations
 SATURATED = [0.9, 0.55, 0.03]  # a yellow whose blue is a few per cent of the rest
 DARK = [0.012, 0.01, 0.008]
 
+#: A dielectric-Fresnel lobe's (beckmann_dielectric, ggx_dielectric) five sets.
+DIELECTRIC_LOBE = [
+    ("example", {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5}),
+    ("saturated", {"kd": SATURATED, "ks": [6.0] * 3, "alpha": 0.2, "eta": 1.5}),
+    ("dark", {"kd": DARK, "ks": [2.0] * 3, "alpha": 0.1, "eta": 1.4}),
+    ("near-mirror", {"kd": [0.02] * 3, "ks": [10.0] * 3, "alpha": 0.005, "eta": 1.6}),
+    ("grazing-heavy", {"kd": [0.2] * 3, "ks": [10.0] * 3, "alpha": 0.5, "eta": 1.2}),
+]
+#: The glTF factors' five sets (gltf_pbr, gltf_threejs; gltf_pbr_ior adds an ior).
+GLTF = [
+    ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4}),
+    ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5}),
+    ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3}),
+    ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06}),
+    ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
+]
+
 #: model -> [(label, params), ...]
 QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
     "lambert": [
@@ -46,13 +63,7 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("near-mirror", {"kd": [0.01, 0.01, 0.01], "ks": [1, 1, 1], "alpha": 0.004, "f0": 0.95}),
         ("grazing-heavy", {"kd": [0.2, 0.2, 0.2], "ks": [1, 1, 1], "alpha": 0.6, "f0": 0.03}),
     ],
-    "beckmann_dielectric": [
-        ("example", {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5}),
-        ("saturated", {"kd": SATURATED, "ks": [6.0] * 3, "alpha": 0.2, "eta": 1.5}),
-        ("dark", {"kd": DARK, "ks": [2.0] * 3, "alpha": 0.1, "eta": 1.4}),
-        ("near-mirror", {"kd": [0.02] * 3, "ks": [10.0] * 3, "alpha": 0.005, "eta": 1.6}),
-        ("grazing-heavy", {"kd": [0.2] * 3, "ks": [10.0] * 3, "alpha": 0.5, "eta": 1.2}),
-    ],
+    "beckmann_dielectric": DIELECTRIC_LOBE,
     "ggx": [
         ("example", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6], "alpha": 0.15, "f0": 0.6}),
         ("saturated", {"kd": SATURATED, "ks": [0.6, 0.6, 0.6], "alpha": 0.2, "f0": 0.05}),
@@ -60,38 +71,11 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("near-mirror", {"kd": [0.01, 0.01, 0.01], "ks": [1, 1, 1], "alpha": 0.003, "f0": 0.95}),
         ("grazing-heavy", {"kd": [0.2, 0.2, 0.2], "ks": [1, 1, 1], "alpha": 0.6, "f0": 0.03}),
     ],
-    "ggx_dielectric": [
-        ("example", {"kd": [0.2, 0.1, 0.05], "ks": [8.0] * 3, "alpha": 0.15, "eta": 1.5}),
-        ("saturated", {"kd": SATURATED, "ks": [6.0] * 3, "alpha": 0.2, "eta": 1.5}),
-        ("dark", {"kd": DARK, "ks": [2.0] * 3, "alpha": 0.1, "eta": 1.4}),
-        ("near-mirror", {"kd": [0.02] * 3, "ks": [10.0] * 3, "alpha": 0.005, "eta": 1.6}),
-        ("grazing-heavy", {"kd": [0.2] * 3, "ks": [10.0] * 3, "alpha": 0.5, "eta": 1.2}),
-    ],
-    "gltf_pbr": [
-        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4}),
-        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5}),
-        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3}),
-        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06}),
-        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
-    ],
-    "gltf_pbr_ior": [
-        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4,
-                     "ior": 1.5}),
-        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5, "ior": 1.6}),
-        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3,
-                  "ior": 1.45}),
-        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06,
-                         "ior": 1.5}),
-        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9,
-                           "ior": 1.2}),
-    ],
-    "gltf_threejs": [
-        ("example", {"base_color": [0.8, 0.5, 0.3], "metallic": 0.3, "roughness": 0.4}),
-        ("saturated", {"base_color": SATURATED, "metallic": 0.0, "roughness": 0.5}),
-        ("dark", {"base_color": [0.03, 0.025, 0.02], "metallic": 0.0, "roughness": 0.3}),
-        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metallic": 1.0, "roughness": 0.06}),
-        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
-    ],
+    "ggx_dielectric": DIELECTRIC_LOBE,
+    "gltf_pbr": GLTF,
+    "gltf_pbr_ior": [(label, {**p, "ior": ior}) for (label, p), ior in
+                     zip(GLTF, (1.5, 1.6, 1.45, 1.5, 1.2), strict=True)],
+    "gltf_threejs": GLTF,
     "rough_conductor": [
         ("example", {"eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2], "alpha": 0.2,
                      "kd": [0.05, 0.04, 0.03], "weight": 0.9}),
