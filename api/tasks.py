@@ -78,7 +78,7 @@ def render_plot(table_path: str, source: str, result: dict, kind: str,
 
 
 def export_fit(result: dict, target: str, table_path: str | None = None,
-               target_model: str | None = None) -> Outcome:
+               target_model: str | None = None, viewer: str = "spec") -> Outcome:
     """A finished fit as a renderer's material (``brdffit.export.export``): an
     :class:`Outcome` whose value is the export's dict; a fit that cannot be exported
     so is a failure that is not ``internal``."""
@@ -88,7 +88,7 @@ def export_fit(result: dict, target: str, table_path: str | None = None,
 
     try:
         out = export(FitResult.from_dict(result), target, table=table_path,
-                     target_model=target_model)
+                     target_model=target_model, viewer=viewer)
         return Outcome.success(jsonout.strict(out.to_dict()))
     except Exception as e:  # noqa: BLE001 - an ExportError is the request's, else a bug
         return Outcome.failure(e)

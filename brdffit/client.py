@@ -296,11 +296,13 @@ class Client:
                              params=params).content
 
     def export(self, job: JobRef, target: str, model: str | None = None,
-               target_model: str | None = None) -> Export:
+               target_model: str | None = None, viewer: str = "spec") -> Export:
         """A finished fit as a renderer's material: ``mitsuba``, ``gltf`` or
         ``materialx`` (``brdffit.export``; its files in ``Export.files``), as
-        ``target_model`` (one of the renderer's models; default its first)."""
-        params = {k: v for k, v in (("model", model), ("target_model", target_model)) if v}
+        ``target_model`` (one of the renderer's models; default its first); ``viewer``
+        (glTF): ``spec`` or ``threejs``, whose shading the factors are fitted for."""
+        params = {k: v for k, v in (("model", model), ("target_model", target_model),
+                                    ("viewer", None if viewer == "spec" else viewer)) if v}
         params = params or None
         return Export.from_dict(self._request(
             "GET", f"/v1/fits/{_job_id(job)}/exports/{target}", params=params).json())

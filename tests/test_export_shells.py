@@ -90,7 +90,9 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(bad), "--to", "gltf"], "not JSON"),
         ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
         ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
-         "gltf carries gltf_pbr, gltf_pbr_ior, not 'ggx'"),
+         "gltf carries gltf_pbr, gltf_pbr_ior, gltf_threejs, not 'ggx'"),
+        ([str(fit_json), "--to", "mitsuba", "--viewer", "threejs"],
+         "viewer 'threejs': the glTF export is made for spec, threejs"),
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
          "No such file"),
         ([str(tmp_path / "missing.json"), "--to", "gltf"], "No such file"),
@@ -178,6 +180,11 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
                                                       "estimate_error"}
         best = c.export(job, "gltf")  # default: the best fit of the job
         assert best.source_model == c.result(job).model
+        assert set(best.fidelity["viewers"]) == {"spec", "threejs"}
+        # fitted for three.js's shading, on the job's table, as the library does it
+        for_three = c.export(job, "gltf", viewer="threejs")
+        assert for_three.fidelity["target_model"] == "gltf_threejs"
+        assert for_three == export(c.result(job), "gltf", table=ggx_file, viewer="threejs")
         with pytest.raises(ApiError) as e:
             c.export(job, "gltf", model="lambert")
         assert e.value.status_code == 404 and "has no 'lambert' fit" in e.value.detail

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 from enum import Enum
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, status
 from pydantic import BaseModel, ConfigDict, Field
@@ -70,13 +70,16 @@ async def get_export(
         description="which of the renderer's models the file carries: "
                     + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
                     + " (default: the first)")] = None,
+    viewer: Annotated[Literal["spec", "threejs"], Query(
+        description="glTF: fit the factors for the spec's definition (default) or for the "
+                    "way three.js shades them")] = "spec",
 ) -> ExportOut:
     job, result = await finished_fit(store, job_id, model, "exports")
     # the job's table, for the export's error to the measurement (a deleted one: said)
     path = store.table_path(job.table_id)
     try:
         outcome = await runner.run(tasks.export_fit, result, target.value,
-                                   str(path) if path.exists() else None, target_model)
+                                   str(path) if path.exists() else None, target_model, viewer)
     except WorkerLost as e:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                             headers={"Retry-After": "5"}) from None
