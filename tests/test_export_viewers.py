@@ -137,22 +137,6 @@ def test_the_multiple_scattering_table_is_threejs_own(threejs):
     assert np.median(np.abs(ess_table() / theirs - 1)) < 0.002
 
 
-def _pixels(size: int):
-    """Per pixel of the exported file's camera: the sphere's normal, the view
-    direction (world space) and whether the pixel sees the sphere."""
-    t = np.tan(gltf.CAMERA_YFOV / 2)
-    c = (np.arange(size) + 0.5) / size * 2 - 1
-    x, y = np.meshgrid(c * t, -c * t)
-    ray = np.stack([x, y, -np.ones_like(x)], -1)
-    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
-    eye = np.array([0.0, 0.0, gltf.CAMERA_DISTANCE])
-    b = ray @ eye
-    disc = b * b - (eye @ eye - 1.0)
-    point = eye + (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None] * ray
-    normal = point / np.linalg.norm(point, axis=-1, keepdims=True)
-    return normal, -ray, disc > 0
-
-
 @pytest.mark.parametrize("params", [
     {"base_color": [0.8, 0.2, 0.1], "metallic": 0.0, "roughness": 0.5},
     {"base_color": [0.95, 0.75, 0.35], "metallic": 1.0, "roughness": 0.3},
@@ -175,18 +159,16 @@ def test_gltf_threejs_is_what_threejs_shows(threejs, params):
     fit = FitResult("gltf_threejs", params, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
     doc = export(fit, "gltf").material
     image = check.threejs_render(doc, threejs, size=size)[..., :3]
-    normal, view, hit = _pixels(size)
+    normal, view, hit, step = check.gltf_preview_pixels(size)
     light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
     frames = _tangent_frames(normal)
     wi = (frames @ light).reshape(-1, 3)
     wo = np.einsum("...ij,...j->...i", frames, view).reshape(-1, 3)
-    # three.js adds the normal's change to the next pixel to the roughness
-    step = np.maximum(np.abs(np.diff(normal, axis=1, append=normal[:, -1:])),
-                      np.abs(np.diff(normal, axis=0, append=normal[-1:])))
     with runtime.float64():
         p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
+        # three.js adds the normal's change to the next pixel to the roughness
         shaded = {**p, "roughness": jnp.minimum(jnp.maximum(p["roughness"], 0.045)
-                                                + jnp.asarray(step.max(-1).ravel()), 1.0)}
+                                                + jnp.asarray(step.ravel()), 1.0)}
         frame = shading_frame(jnp.asarray(wi), jnp.asarray(wo))
         ours = np.asarray(models.get("gltf_threejs").eval_frame(shaded, frame))
         spec = np.asarray(models.get("gltf_pbr").eval_frame(p, frame))

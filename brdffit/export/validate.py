@@ -500,3 +500,27 @@ def threejs_render(document: dict | bytes, threejs: str, size: int = 256,
                            + "\n".join([result.get("error", "")] + problems).strip())
     pixels = np.frombuffer(base64.b64decode(result["pixels"]), np.float32)
     return pixels.reshape(size, size, 4)[::-1].copy()  # WebGL's rows run bottom-up
+
+
+def gltf_preview_pixels(size: int):
+    """What each pixel of a ``size`` x ``size`` render of an exported glTF file sees
+    through the file's own camera (``brdffit.export.gltf``): the unit sphere's normal,
+    the direction to the camera (world space, each (size, size, 3)), whether the pixel
+    sees the sphere, and three.js's screen-space roughness term there (the normal's
+    change to the next pixel, ``geometryRoughness``). For comparing a viewer's render
+    with a model of its shading pixel by pixel."""
+    from brdffit.export import gltf
+
+    t = np.tan(gltf.CAMERA_YFOV / 2)
+    c = (np.arange(size) + 0.5) / size * 2 - 1
+    x, y = np.meshgrid(c * t, -c * t)
+    ray = np.stack([x, y, -np.ones_like(x)], -1)
+    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+    eye = np.array([0.0, 0.0, gltf.CAMERA_DISTANCE])
+    b = ray @ eye
+    disc = b * b - (eye @ eye - 1.0)
+    point = eye + (-b - np.sqrt(np.maximum(disc, 0.0)))[..., None] * ray
+    normal = point / np.linalg.norm(point, axis=-1, keepdims=True)
+    step = np.maximum(np.abs(np.diff(normal, axis=1, append=normal[:, -1:])),
+                      np.abs(np.diff(normal, axis=0, append=normal[-1:])))
+    return normal, -ray, disc > 0, step.max(-1)
