@@ -142,8 +142,14 @@ def test_the_gltf_file_is_a_scene_that_shows_the_material():
 def test_conductor_fit_exports_exactly_to_mitsuba():
     r = result("rough_conductor", CONDUCTOR)
     e = export(r, "mitsuba", table=fit_as_table(r))
-    assert e.fidelity["exact"] and e.warnings == []
+    from brdffit.export import mitsuba
+
+    assert e.fidelity["exact"] and e.warnings == [mitsuba.VARIANTS_NOTE]
     m = e.material
+    # both variant families' dictionaries are in the export (the JSON), each named
+    assert e.variants["rgb"] == m and e.variants["spectral"]["type"] == "blendbsdf"
+    assert "scalar_spectral" in e.variants["for"]["spectral"]
+    assert e.variants["spectral"]["bsdf_0"]["eta"]["type"] == "regular"
     assert m["type"] == "blendbsdf" and m["weight"] == 0.2
     assert m["bsdf_0"] == {"type": "roughconductor", "distribution": "ggx", "alpha": 0.15,
                            "eta": {"type": "srgb", "color": [0.2, 0.9, 1.4], "unbounded": True},
@@ -157,7 +163,7 @@ def test_conductor_fit_exports_exactly_to_mitsuba():
     # a colour no reflectance spectrum has: no spectral file, and a note that says why
     red = export(result("rough_conductor", {**CONDUCTOR, "eta": [1.0] * 3, "k": [10.0, 0.0, 0.0]}),
                  "mitsuba")
-    assert list(red.files) == ["gold_rough_conductor.xml"]
+    assert list(red.files) == ["gold_rough_conductor.xml"] and red.variants["spectral"] is None
     assert any(w.startswith("spectral: ") and "scalar_spectral" in w for w in red.warnings)
     scene = ET.fromstring(e.files["gold_rough_conductor.xml"])
     bsdf = scene.find("bsdf")

@@ -31,7 +31,7 @@ ExportTarget = Enum("ExportTarget", {t: t for t in TARGETS}, type=str)  # type: 
 
 
 class ExportOut(BaseModel):
-    """``brdffit.export.Export.to_dict()`` (docs/exports.md, schema ``brdffit.export/1``)."""
+    """``brdffit.export.Export.to_dict()`` (docs/exports.md, schema ``brdffit.export/2``)."""
 
     model_config = ConfigDict(populate_by_name=True)
 
@@ -44,10 +44,12 @@ class ExportOut(BaseModel):
     files: dict[str, str] = Field(description="file name -> text, ready to save")
     fidelity: dict = Field(description="exact, target_model, renderer_model, log_rmse_to_fit, "
                                        "fit_log_rmse, log_rmse_to_table, sphere_colour, "
-                                       "albedo_max, albedo_max_theta_deg")
+                                       "viewers (glTF), albedo_max, albedo_max_theta_deg")
     target_params: dict = Field(description="the target model's parameters")
     warnings: list[str] = Field(description="every clamp and approximation")
     table: str | None = None
+    variants: dict | None = Field(None, description="Mitsuba: the rgb and spectral variants' "
+                                                    "dictionaries and which variants each is for")
 
 
 @router.get(

@@ -59,6 +59,10 @@ class Export:
     target_params: dict
     warnings: list[str] = field(default_factory=list)
     table: str | None = None
+    #: Mitsuba: each variant family's dictionary, ``{"rgb": ..., "spectral": ...}``
+    #: (``material`` is the RGB one; the spectral one None where no spectrum holds the
+    #: colour, a warning says why), with ``for`` naming the variants; None elsewhere.
+    variants: dict | None = None
 
     def to_dict(self) -> dict:
         return {"schema": SCHEMA, **asdict(self)}
@@ -170,9 +174,17 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
     name = _material_name(result)
-    material, files, notes = module.write(conv.params, name, conv.target_model)
+    variants = None
+    if target == "mitsuba":  # both variant families' dictionaries, in the JSON too
+        made = mitsuba.variants(conv.params)
+        material, files, notes = mitsuba.write(conv.params, name, conv.target_model, made)
+        variants = {"rgb": made[0], "spectral": made[1] if isinstance(made[1], dict) else None,
+                    "for": dict(mitsuba.VARIANTS)}
+        notes.append(mitsuba.VARIANTS_NOTE)
+    else:
+        material, files, notes = module.write(conv.params, name, conv.target_model)
     return Export(target, result.model, module.MEDIA_TYPE, material, files,
-                  {**fidelity, **energy}, conv.params, warnings + notes, result.table)
+                  {**fidelity, **energy}, conv.params, warnings + notes, result.table, variants)
 
 
 def _looks_warning(result: FitResult) -> list[str]:

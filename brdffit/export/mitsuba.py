@@ -201,16 +201,38 @@ def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
     return '<scene version="3.0.0">\n' + "\n".join(lines) + "\n</scene>\n"
 
 
-def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, str], list[str]]:
+#: Which of Mitsuba's variants each of an export's dictionaries is for
+#: (``Export.variants``; ``material`` is the RGB one).
+VARIANTS = {"rgb": "scalar_rgb, llvm_ad_rgb, cuda_ad_rgb (and their _mono, _polarized kin)",
+            "spectral": "scalar_spectral, llvm_ad_spectral, cuda_ad_spectral (and their "
+                        "_polarized kin)"}
+VARIANTS_NOTE = ("material is the load_dict dictionary for Mitsuba's RGB variants; in a "
+                 "spectral variant use variants['spectral'] (or NAME_spectral.xml): the RGB "
+                 "one there is 10-25% off in colour")
+
+
+def write(params: dict, name: str, target_model: str,
+          made: tuple[dict, dict | str] | None = None) -> tuple[dict, dict[str, str], list[str]]:
     """The material (the load_dict dictionary, for RGB variants), its files and the
     notes on them: ``NAME.xml`` for Mitsuba's RGB variants and ``NAME_spectral.xml``
     for its spectral ones (eta, k as fitted spectra), or a note where no spectrum
-    reproduces the RGB colour within SPECTRAL_TOLERANCE."""
-    material = load_dict(params)
+    reproduces the RGB colour within SPECTRAL_TOLERANCE. ``made``: :func:`variants`
+    of ``params`` where the caller has them (the spectra's fit is not repeated)."""
+    material, spectral = variants(params) if made is None else made
     files = {f"{name}.xml": scene_xml(material, name)}
     notes = []
-    try:
-        files[f"{name}_spectral.xml"] = scene_xml(load_dict(params, spectral=True), name)
-    except SpectralExportError as e:
-        notes.append(f"spectral: {e}")
+    if isinstance(spectral, dict):
+        files[f"{name}_spectral.xml"] = scene_xml(spectral, name)
+    else:
+        notes.append(f"spectral: {spectral}")
     return material, files, notes
+
+
+def variants(params: dict) -> tuple[dict, dict | str]:
+    """The RGB variants' dictionary and the spectral variants' one, or in its place
+    why there is none (no spectrum reproduces the RGB colour within
+    SPECTRAL_TOLERANCE)."""
+    try:
+        return load_dict(params), load_dict(params, spectral=True)
+    except SpectralExportError as e:
+        return load_dict(params), str(e)
