@@ -203,7 +203,9 @@ def test_every_clamp_is_a_warning():
     e = export(bright, "gltf")
     clamps = [w for w in e.warnings if w.startswith("clamp:")]
     pinned = [c for c, v in zip("RGB", e.target_params["base_color"], strict=True) if v >= 0.9999]
-    assert pinned and all(any(f"base_color[{c}]" in w for w in clamps) for c in pinned)
+    (line,) = [w for w in clamps if w.startswith("clamp: base_color = ")]  # one per parameter
+    assert pinned and all(f" {c} 1" in line for c in pinned) and "upper bound 1" in line
+    assert "next: fit gltf_pbr to the table itself" in line
     # at the lower roughness bound
     sharp = export(result("gltf_pbr", {**GLTF, "roughness": float(np.sqrt(1e-3))}), "gltf")
     assert any("roughness" in w and "lower bound" in w for w in sharp.warnings)

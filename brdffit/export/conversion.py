@@ -63,22 +63,34 @@ def fit_as_table(result: FitResult) -> MerlTable:
 
 
 def bound_warnings(target_model: str, params: dict) -> list[str]:
-    """One line per parameter value at the bound of the target's range: there the
-    renderer's range (not the data) decided the value."""
+    """One line per parameter with a value at the bound of the target's range (its
+    channels named together): there the renderer's range, not the data, decided the
+    value. Each says what to do next."""
     out = []
     for spec in models.get(target_model).param_specs:
         v = np.atleast_1d(np.asarray(params[spec.name], float))
         hi = spec.upper if spec.upper is not None else np.inf
         span = (hi - spec.lower) if np.isfinite(hi) else max(1.0, abs(spec.lower))
+        low, high = [], []
         for c, x in zip("RGB" if spec.rgb else " ", v, strict=True):
-            name = spec.name + (f"[{c}]" if spec.rgb else "")
+            shown = f"{c} {x:.6g}" if spec.rgb else f"{x:.6g}"
             if x <= spec.lower + _AT_BOUND * span and spec.lower > 0:
-                out.append(f"clamp: {name} = {x:.6g} is at the lower bound {spec.lower:g} "
-                           f"of {target_model}")
+                low.append(shown)
             elif np.isfinite(hi) and x >= hi - _AT_BOUND * span and spec.name in _CLAMP_UPPER:
-                out.append(f"clamp: {name} = {x:.6g} is at the upper bound {hi:g} of "
-                           f"{target_model}: the fit would want more")
+                high.append(shown)
+        if low:
+            out.append(f"clamp: {spec.name} = {', '.join(low)} is at the lower bound "
+                       f"{spec.lower:g} of {target_model}; next: {_clamp_next(target_model)}")
+        if high:
+            out.append(f"clamp: {spec.name} = {', '.join(high)} is at the upper bound {hi:g} "
+                       f"of {target_model}: the fit would want more; next: "
+                       f"{_clamp_next(target_model)}")
     return out
+
+
+def _clamp_next(target_model: str) -> str:
+    return (f"fit {target_model} to the table itself (brdffit fit TABLE --model "
+            f"{target_model}): its error is what the renderer's range costs")
 
 
 #: Parameters whose upper bound is a physical limit the data can push against (a
