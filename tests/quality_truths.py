@@ -76,6 +76,8 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
     "gltf_pbr_ior": [(label, {**p, "ior": ior}) for (label, p), ior in
                      zip(GLTF, (1.5, 1.6, 1.45, 1.5, 1.2), strict=True)],
     "gltf_threejs": GLTF,
+    "gltf_pbr_dielectric": [(label, {k: v for k, v in p.items() if k != "metallic"})
+                            for label, p in GLTF],
     "rough_conductor": [
         ("example", {"eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2], "alpha": 0.2,
                      "kd": [0.05, 0.04, 0.03], "weight": 0.9}),

@@ -314,3 +314,30 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
         export(r, "mitsuba", table=measured, viewer="threejs")
     with pytest.raises(ExportError, match="carries gltf_threejs"):
         export(r, "gltf", table=measured, viewer="threejs", target_model="gltf_pbr")
+
+
+def test_a_glTF_refit_that_comes_out_a_metal_mixture_is_weighed_against_a_dielectric():
+    """A plastic refitted as '95% metal' is exported as a dielectric where one does as
+    well or the table has a diffuse body (no metal has one), the mixture's error
+    beside it; a metal stays a metal, the dielectric's error said."""
+    from brdffit.export.conversion import Conversion, dielectric_or_mixture
+
+    fit = result("ggx", GGX)
+    plastic = fit_as_table(result("gltf_pbr", {"base_color": [0.6, 0.3, 0.2], "metallic": 0.0,
+                                               "roughness": 0.5}))
+    mixture = Conversion("gltf_pbr", {"base_color": [0.6, 0.3, 0.2], "metallic": 0.9,
+                                      "roughness": 0.5}, False, 0.01)
+    conv, report = dielectric_or_mixture(fit, mixture, plastic)
+    assert report["chosen"] == "dielectric" and conv.params["metallic"] == 0.0
+    assert report["dielectric_log_rmse"] < 1e-4 < report["mixture_log_rmse"]
+    assert any(w.startswith("class: exported as a dielectric") for w in conv.warnings)
+    gold = {"base_color": [0.95, 0.7, 0.3], "metallic": 1.0, "roughness": 0.3}
+    metal = fit_as_table(result("gltf_pbr", gold))
+    kept, report = dielectric_or_mixture(fit, Conversion("gltf_pbr", {**gold, "metallic": 0.97},
+                                                         False, 0.01), metal)
+    assert report["chosen"] == "metal mixture" and kept.params["metallic"] == 0.97
+    assert report["diffuse_body"] < 0.1 < report["dielectric_log_rmse"] / report[
+        "mixture_log_rmse"]
+    assert any(w.startswith("class: kept the metal mixture") for w in kept.warnings)
+    exact = Conversion("gltf_pbr", gold, True, 0.0)  # a gltf_pbr fit is copied as it is
+    assert dielectric_or_mixture(fit, exact, metal) == (exact, None)

@@ -129,7 +129,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     has ``viewers``: the file under each viewer's shading.
     """
     from brdffit import models
-    from brdffit.export.conversion import convert
+    from brdffit.export.conversion import convert, dielectric_or_mixture
     from brdffit.export.energy import energy_report
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
@@ -153,6 +153,10 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     # fit is not already of the viewer's model
     for_viewer = viewer != "spec" and measured is not None
     conv = convert(result, models_wanted, measured=measured if for_viewer else None)
+    material_class = None
+    if target == "gltf" and viewer == "spec" and target_model is None:
+        # a plastic or a fabric is exported as a dielectric where one does as well
+        conv, material_class = dielectric_or_mixture(result, conv, measured)
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)
@@ -161,6 +165,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
                     log_rmse_to_table=None, sphere_colour=None)
+    if material_class is not None:
+        fidelity["material_class"] = material_class
     if shaded_as is None:  # no table to read: nothing could be measured against it
         warnings.append(module.UNMODELLED_NOTE)
         measured = None

@@ -142,3 +142,67 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
         warnings.append(f"the conversion's {target_model} fit ended {refit.result}")
     return Conversion(target_model, refit.params, False, float(refit.error["log_rmse"]),
                       warnings + bound_warnings(target_model, refit.params))
+
+
+#: A glTF metal mixture above this metallic is weighed against a dielectric.
+MIXTURE_METALLIC = 0.05
+#: The dielectric is exported where its error to the table is at most this times the
+#: metal mixture's (issue 42: a plastic or a fabric exported as 95% metal looks
+#: plausible to nobody, and costs a renderer's user the material's class).
+DIELECTRIC_TOLERANCE = 1.1
+#: ... or where the table has a diffuse body at least this bright (the mean of its
+#: diffuse estimate, ``brdffit.fitting.starts``): metals have none. On the real
+#: materials: plastics, paints and fabrics 0.17-0.28; metallic paints and metals
+#: 0.001-0.03.
+DIFFUSE_BODY = 0.1
+
+
+def dielectric_or_mixture(result: FitResult, conv: Conversion,
+                          measured: MerlTable | None) -> tuple[Conversion, dict | None]:
+    """For a glTF refit that came out a metallic mixture (``gltf_pbr`` with metallic
+    above :data:`MIXTURE_METALLIC`; an exact ``gltf_pbr`` fit is copied as it is): the
+    same factors refitted as a dielectric
+    (``gltf_pbr_dielectric``: metallic 0) to the measured table (else to the fit).
+    The dielectric is exported where the evidence says dielectric: its log_rmse there
+    is within :data:`DIELECTRIC_TOLERANCE` of the mixture's, or the table has a
+    diffuse body (:data:`DIFFUSE_BODY`), which no metal has; the other's error is
+    reported beside it, and a warning says where the dielectric costs more than the
+    tolerance. Returns the conversion to export and the class report
+    (``fidelity.material_class``; None where there was no mixture to weigh)."""
+    from brdffit.fitting.pipeline import fit
+    from brdffit.fitting.problem import table_error
+    from brdffit.fitting.sampling import usable_bins
+    from brdffit.fitting.starts import table_hints
+
+    if (conv.exact or conv.target_model != "gltf_pbr"
+            or float(conv.params["metallic"]) <= MIXTURE_METALLIC):
+        return conv, None  # a gltf_pbr fit is the user's own choice of class: copied
+    reference = measured if measured is not None else fit_as_table(result)
+    against = "the measured table" if measured is not None else f"the {result.model} fit"
+    body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
+    refit = fit(reference, "gltf_pbr_dielectric", loss=result.loss)
+    dielectric = {**refit.params, "metallic": 0.0}
+    err_d = float(table_error(reference, "gltf_pbr", dielectric)["log_rmse"])
+    err_m = float(table_error(reference, "gltf_pbr", conv.params)["log_rmse"])
+    metallic = float(conv.params["metallic"])
+    report = {"metallic_of_mixture": metallic, "against": against, "diffuse_body": body,
+              "dielectric_log_rmse": err_d, "mixture_log_rmse": err_m}
+    close = err_d <= DIELECTRIC_TOLERANCE * err_m
+    if not close and body < DIFFUSE_BODY:
+        conv.warnings.append(
+            f"class: kept the metal mixture (metallic {metallic:.3g}): as a dielectric its "
+            f"log_rmse to {against} would be {err_d:.4g} against {err_m:.4g}, more than "
+            f"{DIELECTRIC_TOLERANCE:g}x, and its diffuse body ({body:.3g}) is a metal's")
+        return conv, {**report, "chosen": "metal mixture"}
+    to_fit = float(table_error(fit_as_table(result), "gltf_pbr", dielectric)["log_rmse"])
+    warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
+    why = (f"within {DIELECTRIC_TOLERANCE:g}x" if close else
+           f"{err_d / err_m:.2f}x, more than {DIELECTRIC_TOLERANCE:g}x: chosen for its diffuse "
+           f"body ({body:.3g}), which no metal has; the mixture is the closer fit")
+    warnings.append(
+        f"class: exported as a dielectric (metallic 0), refitted to {against}: log_rmse "
+        f"{err_d:.4g} against {err_m:.4g} for the metal mixture (metallic {metallic:.3g}), "
+        f"{why}")
+    return (Conversion("gltf_pbr", dielectric, False, to_fit,
+                       warnings + bound_warnings("gltf_pbr", dielectric)),
+            {**report, "chosen": "dielectric"})

@@ -30,6 +30,10 @@ reflectance of the default glTF index of refraction 1.5 (``((1.5 - 1)/(1.5 + 1))
 | metallic   | [0, 1]             | ``metallicFactor``                             |
 | roughness  | [0.0316, 1] (log)  | ``roughnessFactor``; lower bound: alpha = 1e-3 |
 | ior        | [1, 3]             | ``KHR_materials_ior.ior`` (``gltf_pbr_ior`` only) |
+
+``gltf_pbr_dielectric`` (``GltfPBR(dielectric=True)``): metallic held at 0, the
+other two parameters as above: a dielectric, the glTF export's alternative to a
+metal mixture (``brdffit.export.gltf``).
 """
 
 from __future__ import annotations
@@ -62,22 +66,30 @@ DEFAULT_IOR = 1.5
 class GltfPBR(AbstractBRDFModel):
     #: True: ``gltf_pbr_ior``, the dielectric's index a parameter (KHR_materials_ior).
     ior: bool = eqx.field(static=True, default=False)
+    #: True: ``gltf_pbr_dielectric``, metallic held at 0 (not a parameter): the glTF
+    #: export's dielectric alternative to a metal mixture (brdffit.export.gltf).
+    dielectric: bool = eqx.field(static=True, default=False)
 
     @property
     def name(self) -> str:
-        return "gltf_pbr_ior" if self.ior else "gltf_pbr"
+        return ("gltf_pbr_dielectric" if self.dielectric
+                else "gltf_pbr_ior" if self.ior else "gltf_pbr")
 
     @property
     def param_specs(self) -> tuple[ParamSpec, ...]:
+        if self.dielectric:
+            return (BASE_COLOR, ROUGHNESS)
         return (BASE_COLOR, METALLIC, ROUGHNESS) + ((IOR,) if self.ior else ())
 
     @property
     def shape_grid(self) -> tuple[dict[str, float], ...]:
         extra = {"ior": DEFAULT_IOR} if self.ior else {}
+        metallic = (None,) if self.dielectric else (0.0, 0.5, 1.0)
         return tuple(
-            {"roughness": min(math.sqrt(a), 1.0), "metallic": m, **extra}
+            {"roughness": min(math.sqrt(a), 1.0), **({} if m is None else {"metallic": m}),
+             **extra}
             for a in ALPHA_GRID
-            for m in (0.0, 0.5, 1.0)
+            for m in metallic
         )
 
     @property
@@ -122,7 +134,8 @@ class GltfPBR(AbstractBRDFModel):
             rough * rough, frame.cos_h, frame.sin2_h,
             frame.cos_i, frame.sin2_i, frame.cos_o, frame.sin2_o,
         )
-        return params["base_color"][expand], params["metallic"], dg[None], \
+        metallic = 0.0 if self.dielectric else params["metallic"]
+        return params["base_color"][expand], metallic, dg[None], \
             ((1.0 - frame.cos_d) ** 5)[None]
 
     def eval_frame(self, params: Params, frame: Frame):
@@ -140,7 +153,7 @@ class GltfPBR(AbstractBRDFModel):
         metal = 0.9 * peak / max(float(np.max(peak)), 1e-12)
         starts = []
         for shape in self.shape_grid:
-            m = shape["metallic"]
+            m = shape.get("metallic", 0.0)
             base = np.clip((1 - m) * kd + m * metal, 0.02, 0.98)
             starts.append(self.unconstrain({"base_color": base, **shape}))
         return np.stack(starts)

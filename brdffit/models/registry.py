@@ -29,7 +29,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
-    GltfPBR(), GltfPBR(ior=True), GltfThreejs(), RoughConductor(), StandardSurface(),
+    GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), RoughConductor(),
+    StandardSurface(),
     GGX2(),
 )
 
