@@ -58,13 +58,13 @@ def render_pair(table, model, params):
     size = 160
     ref, lit = sphere.render_table(table, key, size)
     wi, _, lit_px = sphere.sphere_directions(size, key)
-    wi_b, wo_b = sphere._pixel_bin_dirs(size, tuple(float(c) for c in key))
+    wi_b, wo_b = sphere.pixel_bin_dirs(size, tuple(float(c) for c in key))
     p = {k: np.asarray(v, float) for k, v in params.items()}
     f = np.asarray(sphere.evaluate(model, p, wi_b, wo_b), np.float64)
     fit = np.zeros_like(ref)
     fit[lit_px] = sphere.radiance(f, wi[lit_px])
     ok = lit & np.all(np.isfinite(ref), axis=-1)
-    exposure = sphere._exposure(ref[ok] @ sphere.LUMINANCE)
+    exposure = sphere.table_exposure(ref[ok] @ sphere.LUMINANCE)
     background = ~sphere.sphere_disc(size, key)[2]  # off the sphere; its dark side stays black
     images = []
     for img in (np.nan_to_num(ref), fit):

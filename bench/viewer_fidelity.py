@@ -44,7 +44,7 @@ def measure(name: str, size: int) -> dict:
 
     from brdffit import fit, models, runtime
     from brdffit.export import export, gltf, validate
-    from brdffit.fitting.sphere import _tangent_frames
+    from brdffit.fitting.sphere import tangent_frames
     from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins
     from brdffit.models.frame import shading_frame
     from data_synth import nbrdf
@@ -55,7 +55,7 @@ def measure(name: str, size: int) -> dict:
     image = validate.threejs_render(e.material, THREEJS, size=size)[..., :3].reshape(-1, 3)
     normal, view, hit, step = validate.gltf_preview_pixels(size)
     light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
-    frames = _tangent_frames(normal)
+    frames = tangent_frames(normal)
     wi = (frames @ light).reshape(-1, 3)
     wo = np.einsum("...ij,...j->...i", frames, view).reshape(-1, 3)
     bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi, wo)), SHAPE)

@@ -152,7 +152,7 @@ def test_gltf_threejs_is_what_threejs_shows(threejs, params):
     import jax.numpy as jnp
 
     from brdffit import models, runtime
-    from brdffit.fitting.sphere import _tangent_frames
+    from brdffit.fitting.sphere import tangent_frames
     from brdffit.models.frame import shading_frame
 
     size = 256
@@ -161,7 +161,7 @@ def test_gltf_threejs_is_what_threejs_shows(threejs, params):
     image = check.threejs_render(doc, threejs, size=size)[..., :3]
     normal, view, hit, step = check.gltf_preview_pixels(size)
     light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
-    frames = _tangent_frames(normal)
+    frames = tangent_frames(normal)
     wi = (frames @ light).reshape(-1, 3)
     wo = np.einsum("...ij,...j->...i", frames, view).reshape(-1, 3)
     with runtime.float64():

@@ -91,7 +91,7 @@ def test_the_colour_integral_converges_and_reports_its_own_error():
     key = sphere.LIGHTS[0][1]
     ref, lit = sphere.render_table(table, key, 512)
     wi, _, lit_px = sphere.sphere_directions(512, key)
-    wi_b, wo_b = sphere._pixel_bin_dirs(512, tuple(key))
+    wi_b, wo_b = sphere.pixel_bin_dirs(512, tuple(key))
     f = np.asarray(sphere.evaluate(ggx, {k: np.asarray(v, float) for k, v in other.items()},
                                    wi_b, wo_b))
     ok = np.all(np.isfinite(ref[lit_px]), axis=-1)

@@ -81,7 +81,7 @@ def sphere_disc(size: int, light: np.ndarray):
     x, y = np.meshgrid(s, -s)
     inside = x * x + y * y < 1.0
     n = np.stack([x, y, np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, 1.0))], axis=-1)
-    frame = _tangent_frames(n)  # rows: local x, y, z axes
+    frame = tangent_frames(n)  # rows: local x, y, z axes
     wi = frame @ (light / np.linalg.norm(light))
     wo = frame @ np.array([0.0, 0.0, 1.0])
     return wi, wo, inside
@@ -149,12 +149,13 @@ def evaluate(model, params, wi, wo):
 
 
 @functools.lru_cache(maxsize=16)
-def _pixel_bin_dirs(size: int, light: tuple[float, ...]):
+def pixel_bin_dirs(size: int, light: tuple[float, ...]):
     """Where the model is evaluated for each lit pixel (in ``lit``'s order) when it is
     compared with the table: the centre of the pixel's MERL bin, as a table of the fit
     holds it, so that fit and table are read through the same nearest-bin lookup (a
     near-mirror highlight a few pixels wide is then the same few bins in both). A bin
-    whose centre is below the horizon (the sphere's rim) keeps the pixel's own pair."""
+    whose centre is below the horizon (the sphere's rim) keeps the pixel's own pair.
+    ``light``: camera-space direction as a tuple (the cache's key)."""
     wi, wo, lit = _sphere_directions(size, light)
     return _bin_dirs(_sphere_bins(size, light), wi[lit], wo[lit])
 
@@ -248,7 +249,7 @@ def _bin_weights(light: np.ndarray, per_bin: int, per_degree: int, n_flat: int):
     cos_i, cos_o = n @ lgt, n @ view
     lit = (cos_i > 0) & (cos_o > 0)
     dw = (cos_i * cos_o * np.sin(t).ravel() * np.repeat(w_theta, k) * (2 * np.pi / k))[lit]
-    frame = _tangent_frames(n[lit])
+    frame = tangent_frames(n[lit])
     wi, wo = frame @ lgt, frame @ view
     bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi, wo)), SHAPE)
     weight = np.bincount(bins, weights=dw, minlength=n_flat)
@@ -257,7 +258,7 @@ def _bin_weights(light: np.ndarray, per_bin: int, per_degree: int, n_flat: int):
     return weight, *sums
 
 
-def _tangent_frames(n: np.ndarray) -> np.ndarray:
+def tangent_frames(n: np.ndarray) -> np.ndarray:
     """Rows: a local x, y and z (= n) axis per normal; any tangent will do (the tables
     are isotropic, only angles to the normal matter)."""
     up = np.where(np.abs(n[..., 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
@@ -321,7 +322,7 @@ def sphere_colour(table: MerlTable, model: AbstractBRDFModel, params: dict) -> d
     return ref.compare(ref.split(np.asarray(evaluate(model, p, wi, wo), np.float64)))
 
 
-def _exposure(luminance: np.ndarray) -> float:
+def table_exposure(luminance: np.ndarray) -> float:
     """The exposure that puts the typical lit luminance at 0.35 (Reinhard: 0.26, a
     mid-tone): the median, or the render loss's ``MEAN_FLOOR`` of the mean where that
     is larger. A near-mirror (chrome) is black at most pixels, and its median says
@@ -338,7 +339,7 @@ class SphereReference:
     """A table's renders, made once, to score any number of models against.
 
     ``psnr(model, params)`` is the image error of the module docstring, with the model
-    read through the table's bins (:func:`_pixel_bin_dirs`); ``psnr_and_colour`` adds
+    read through the table's bins (:func:`pixel_bin_dirs`); ``psnr_and_colour`` adds
     :func:`sphere_colour` from the same evaluation of the model.
     """
 
@@ -349,7 +350,7 @@ class SphereReference:
         for light in self.lights:
             rad, lit = render_table(table, light, size)
             ok = lit & np.all(np.isfinite(rad), axis=-1)
-            exposure = _exposure(rad[ok] @ LUMINANCE)
+            exposure = table_exposure(rad[ok] @ LUMINANCE)
             self.images.append(tonemap(np.nan_to_num(rad), exposure))
             self.masks.append(ok)
             self.exposures.append(exposure)
@@ -374,7 +375,7 @@ class SphereReference:
                                                 self.exposures, strict=True):
                 key = tuple(float(c) for c in np.ravel(light))
                 wi, _, lit = _sphere_directions(self.size, key)
-                wi_bin, wo_bin = _pixel_bin_dirs(self.size, key)
+                wi_bin, wo_bin = pixel_bin_dirs(self.size, key)
                 parts.append((wi_bin, wo_bin, wi[lit][:, 2], ref[lit],
                               ok[lit].astype(np.float64), np.full(int(lit.sum()), exposure)))
             self._scored = tuple(np.concatenate(a) for a in zip(*parts))
