@@ -150,11 +150,14 @@ MIXTURE_METALLIC = 0.05
 #: metal mixture's (issue 42: a plastic or a fabric exported as 95% metal looks
 #: plausible to nobody, and costs a renderer's user the material's class).
 DIELECTRIC_TOLERANCE = 1.1
-#: ... or where the table has a diffuse body at least this bright (the mean of its
-#: diffuse estimate, ``brdffit.fitting.starts``): metals have none. On the real
-#: materials: plastics, paints and fabrics 0.17-0.28; metallic paints and metals
-#: 0.001-0.03.
+#: ... or within DIELECTRIC_WITH_BODY where the table has a diffuse body at least this
+#: bright (the mean of its diffuse estimate, ``brdffit.fitting.starts``): metals have
+#: none. On the real materials: plastics, paints and fabrics 0.17-0.28; metallic
+#: paints and metals 0.001-0.03. Beyond it the mixture's fit is kept: its Fresnel
+#: says metal more plainly than the body says dielectric (a bright, coloured, f0 0.6
+#: lobe over a diffuse base: 3x the dielectric's error).
 DIFFUSE_BODY = 0.1
+DIELECTRIC_WITH_BODY = 1.5
 
 
 def dielectric_or_mixture(result: FitResult, conv: Conversion,
@@ -164,8 +167,9 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     same factors refitted as a dielectric
     (``gltf_pbr_dielectric``: metallic 0) to the measured table (else to the fit).
     The dielectric is exported where the evidence says dielectric: its log_rmse there
-    is within :data:`DIELECTRIC_TOLERANCE` of the mixture's, or the table has a
-    diffuse body (:data:`DIFFUSE_BODY`), which no metal has; the other's error is
+    is within :data:`DIELECTRIC_TOLERANCE` of the mixture's, or within
+    :data:`DIELECTRIC_WITH_BODY` where the table has a diffuse body
+    (:data:`DIFFUSE_BODY`), which no metal has; the other's error is
     reported beside it, and a warning says where the dielectric costs more than the
     tolerance. Returns the conversion to export and the class report
     (``fidelity.material_class``; None where there was no mixture to weigh)."""
@@ -188,11 +192,14 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     report = {"metallic_of_mixture": metallic, "against": against, "diffuse_body": body,
               "dielectric_log_rmse": err_d, "mixture_log_rmse": err_m}
     close = err_d <= DIELECTRIC_TOLERANCE * err_m
-    if not close and body < DIFFUSE_BODY:
+    bodied = body >= DIFFUSE_BODY and err_d <= DIELECTRIC_WITH_BODY * err_m
+    if not (close or bodied):
+        why = (f"its diffuse body ({body:.3g}) is a metal's" if body < DIFFUSE_BODY else
+               f"more than {DIELECTRIC_WITH_BODY:g}x even with a diffuse body ({body:.3g})")
         conv.warnings.append(
             f"class: kept the metal mixture (metallic {metallic:.3g}): as a dielectric its "
             f"log_rmse to {against} would be {err_d:.4g} against {err_m:.4g}, more than "
-            f"{DIELECTRIC_TOLERANCE:g}x, and its diffuse body ({body:.3g}) is a metal's")
+            f"{DIELECTRIC_TOLERANCE:g}x, and {why}")
         return conv, {**report, "chosen": "metal mixture"}
     to_fit = float(table_error(fit_as_table(result), "gltf_pbr", dielectric)["log_rmse"])
     warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
