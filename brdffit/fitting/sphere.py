@@ -278,6 +278,9 @@ class _TableColour:
 
     def __init__(self, table: MerlTable):
         self.integrals = [sphere_integral(light) for _, light in LIGHTS]
+        # where a model is evaluated for every integral at once (split again by split)
+        self.wi = np.concatenate([s.wi for s in self.integrals])
+        self.wo = np.concatenate([s.wo for s in self.integrals])
         self.measured, self.sums = [], []
         flat, mask = table.rgb.reshape(3, -1), table.mask.reshape(-1)
         for s in self.integrals:
@@ -318,8 +321,7 @@ def sphere_colour(table: MerlTable, model: AbstractBRDFModel, params: dict) -> d
     where the table's sphere is black but the fit's is not, or the other way round."""
     ref = _TableColour(table)
     p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-    wi, wo = (np.concatenate([getattr(s, a) for s in ref.integrals]) for a in ("wi", "wo"))
-    return ref.compare(ref.split(np.asarray(evaluate(model, p, wi, wo), np.float64)))
+    return ref.compare(ref.split(np.asarray(evaluate(model, p, ref.wi, ref.wo), np.float64)))
 
 
 def table_exposure(luminance: np.ndarray) -> float:
@@ -376,15 +378,13 @@ class SphereReference:
                 key = tuple(float(c) for c in np.ravel(light))
                 wi, _, lit = _sphere_directions(self.size, key)
                 wi_bin, wo_bin = pixel_bin_dirs(self.size, key)
-                parts.append((wi_bin, wo_bin, wi[lit][:, 2], ref[lit],
+                parts.append((wi_bin, wo_bin, wi[lit], ref[lit],
                               ok[lit].astype(np.float64), np.full(int(lit.sum()), exposure)))
             self._scored = tuple(np.concatenate(a) for a in zip(*parts))
-        integrals = self._colour.integrals
-        wi_c = np.concatenate([s.wi for s in integrals])
-        wo_c = np.concatenate([s.wo for s in integrals])
         n = 3 * int(self._scored[4].sum())
         p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-        se, finite, f_c = _sphere_measures(model, p, *self._scored, wi_c, wo_c)
+        se, finite, f_c = _sphere_measures(model, p, *self._scored, self._colour.wi,
+                                           self._colour.wo)
         colour = self._colour.compare(self._colour.split(np.asarray(f_c, np.float64)))
         if n == 0 or not bool(finite):
             return float("nan"), colour
@@ -394,17 +394,16 @@ class SphereReference:
 
 
 @executables.jit
-def _sphere_measures(model, params, wi, wo, cos_i, ref, scored, exposure, wi_c, wo_c):
+def _sphere_measures(model, params, wi, wo, wi_pixel, ref, scored, exposure, wi_c, wo_c):
     """Sum of squared differences between the model's tone-mapped render and ``ref``
     over the ``scored`` pixels (weight 1; 0 elsewhere), the model evaluated at
-    ``(wi, wo)`` (each pixel's bin) and lit by ``cos_i`` (the pixel's own); whether
+    ``(wi, wo)`` (each pixel's bin) and lit from ``wi_pixel`` (the pixel's own); whether
     every scored one is finite; and the model's values at ``(wi_c, wo_c)`` (the colour
     integrals' bins): one compiled call, the model evaluated once over both sets of
     directions."""
     n = wi.shape[0]
     f = model(params, jnp.concatenate([wi, wi_c]), jnp.concatenate([wo, wo_c]))
-    rad = f[:n] * np.pi * jnp.clip(cos_i, 0.0, None)[:, None]
-    mapped = tonemap(rad, exposure[:, None], jnp)
+    mapped = tonemap(radiance(f[:n], wi_pixel, jnp), exposure[:, None], jnp)
     d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
     return jnp.sum(d * d), jnp.all(jnp.isfinite(d)), f[n:]
 
