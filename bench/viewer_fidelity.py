@@ -44,8 +44,7 @@ def measure(name: str, size: int) -> dict:
 
     from brdffit import fit, models, runtime
     from brdffit.export import export, gltf, validate
-    from brdffit.fitting.sphere import tangent_frames
-    from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins
+    from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins, tangent_frames
     from brdffit.models.frame import shading_frame
     from data_synth import nbrdf
 

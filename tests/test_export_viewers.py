@@ -152,7 +152,7 @@ def test_gltf_threejs_is_what_threejs_shows(threejs, params):
     import jax.numpy as jnp
 
     from brdffit import models, runtime
-    from brdffit.fitting.sphere import tangent_frames
+    from brdffit.io.angles import tangent_frames
     from brdffit.models.frame import shading_frame
 
     size = 256

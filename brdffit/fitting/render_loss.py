@@ -31,7 +31,7 @@ import functools
 
 import numpy as np
 
-from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins
+from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins, tangent_frames
 from brdffit.io.grid import bin_grid
 
 #: (label, direction in camera space: x right, y up, z towards the viewer). Not
@@ -71,11 +71,7 @@ def sphere_views(size: int, light: np.ndarray):
     inside = x * x + y * y < 1.0
     n = np.stack([x[inside], y[inside], np.sqrt(np.clip(1.0 - x[inside] ** 2 - y[inside] ** 2,
                                                         0.0, 1.0))], axis=-1)
-    up = np.where(np.abs(n[:, 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-    t = np.cross(up, n)
-    t /= np.linalg.norm(t, axis=-1, keepdims=True)
-    b = np.cross(n, t)
-    frame = np.stack([t, b, n], axis=-2)
+    frame = tangent_frames(n)
     wi = frame @ (light / np.linalg.norm(light))
     wo = frame @ np.array([0.0, 0.0, 1.0])
     lit = (wi[:, 2] > 0) & (wo[:, 2] > 0)

@@ -41,7 +41,13 @@ import numpy as np
 from brdffit import executables, runtime
 from brdffit.fitting.colour import brightness_and_colour
 from brdffit.fitting.render_loss import MEAN_FLOOR
-from brdffit.io.angles import N_THETA_H, SHAPE, dirs_to_half_diff, half_diff_to_bins
+from brdffit.io.angles import (
+    N_THETA_H,
+    SHAPE,
+    dirs_to_half_diff,
+    half_diff_to_bins,
+    tangent_frames,
+)
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
 from brdffit.models import AbstractBRDFModel
@@ -256,15 +262,6 @@ def _bin_weights(light: np.ndarray, per_bin: int, per_degree: int, n_flat: int):
     sums = [np.stack([np.bincount(bins, weights=dw * d[:, j], minlength=n_flat)
                       for j in range(3)], axis=-1) for d in (wi, wo)]
     return weight, *sums
-
-
-def tangent_frames(n: np.ndarray) -> np.ndarray:
-    """Rows: a local x, y and z (= n) axis per normal; any tangent will do (the tables
-    are isotropic, only angles to the normal matter)."""
-    up = np.where(np.abs(n[..., 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
-    t = np.cross(up, n)
-    t /= np.linalg.norm(t, axis=-1, keepdims=True)
-    return np.stack([t, np.cross(n, t), n], axis=-2)
 
 
 #: The lights of the colour figures: the key light (the verdict's) and the grazing one

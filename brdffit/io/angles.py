@@ -81,3 +81,13 @@ def bin_centres(i_th, i_td, i_pd):
 def flat_index(i_th, i_td, i_pd):
     """Index inside one channel: phi_d fastest (docs/models.md)."""
     return np.asarray(i_pd) + N_PHI_D * np.asarray(i_td) + N_PHI_D * N_THETA_D * np.asarray(i_th)
+
+
+def tangent_frames(n: np.ndarray) -> np.ndarray:
+    """Rows: a local x, y and z (= n) axis per unit normal ``n`` (..., 3); any tangent
+    will do (the tables are isotropic, only angles to the normal matter). ``frame @ d``
+    is a world direction ``d`` in the local shading frame."""
+    up = np.where(np.abs(n[..., 1:2]) < 0.99, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    t = np.cross(up, n)
+    t /= np.linalg.norm(t, axis=-1, keepdims=True)
+    return np.stack([t, np.cross(n, t), n], axis=-2)
