@@ -175,7 +175,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         fidelity["sphere_colour"] = sphere_colour(
             measured, models.get(shaded_as), conv.params)["key"]
     if target == "gltf" and measured is not None:
-        fidelity["viewers"] = _viewer_fidelity(measured, conv.params)
+        fidelity["viewers"] = _viewer_fidelity(measured, conv.params, shaded_as, fidelity)
     warnings += _looks_warning(result)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
@@ -218,11 +218,12 @@ def _viewer_model(target: str, viewer: str, target_model: str | None) -> str | N
     return wanted
 
 
-def _viewer_fidelity(measured, params: dict) -> dict:
+def _viewer_fidelity(measured, params: dict, shaded_as: str, fidelity: dict) -> dict:
     """The glTF file's factors under each viewer's shading, against the measured table:
     ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a viewer whose
     model cannot shade the file (three.js's ``gltf_threejs`` has no
-    ``KHR_materials_ior``) is null."""
+    ``KHR_materials_ior``) is null. The viewer whose model is ``shaded_as`` takes the
+    export's own figures (``fidelity``), measured already."""
     from brdffit import models
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
@@ -232,8 +233,11 @@ def _viewer_fidelity(measured, params: dict) -> dict:
         model = models.get(name)
         if {s.name for s in model.param_specs} != set(params):
             out[viewer] = None
-            continue
-        out[viewer] = {"model": name,
-                       "log_rmse_to_table": table_error(measured, name, params)["log_rmse"],
-                       "sphere_colour": sphere_colour(measured, model, params)["key"]}
+        elif name == shaded_as:
+            out[viewer] = {"model": name, "log_rmse_to_table": fidelity["log_rmse_to_table"],
+                           "sphere_colour": fidelity["sphere_colour"]}
+        else:
+            out[viewer] = {"model": name,
+                           "log_rmse_to_table": table_error(measured, name, params)["log_rmse"],
+                           "sphere_colour": sphere_colour(measured, model, params)["key"]}
     return out

@@ -181,7 +181,8 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     if (conv.exact or conv.target_model != "gltf_pbr"
             or float(conv.params["metallic"]) <= MIXTURE_METALLIC):
         return conv, None  # a gltf_pbr fit is the user's own choice of class: copied
-    reference = measured if measured is not None else fit_as_table(result)
+    fit_table = fit_as_table(result)
+    reference = measured if measured is not None else fit_table
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
     refit = fit(reference, "gltf_pbr_dielectric", loss=result.loss)
@@ -201,7 +202,8 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
             f"log_rmse to {against} would be {err_d:.4g} against {err_m:.4g}, more than "
             f"{DIELECTRIC_TOLERANCE:g}x, and {why}")
         return conv, {**report, "chosen": "metal mixture"}
-    to_fit = float(table_error(fit_as_table(result), "gltf_pbr", dielectric)["log_rmse"])
+    to_fit = (err_d if measured is None
+              else float(table_error(fit_table, "gltf_pbr", dielectric)["log_rmse"]))
     warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
     why = (f"within {DIELECTRIC_TOLERANCE:g}x" if close else
            f"{err_d / err_m:.2f}x, more than {DIELECTRIC_TOLERANCE:g}x: chosen for its diffuse "
