@@ -40,37 +40,23 @@ THREEJS = os.path.join(ROOT, ".tools", "threejs", "node_modules", "three")
 
 
 def measure(name: str, size: int) -> dict:
-    import jax.numpy as jnp
-
-    from brdffit import fit, models, runtime
-    from brdffit.export import export, gltf, validate
-    from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins, tangent_frames
-    from brdffit.models.frame import shading_frame
+    from brdffit import fit
+    from brdffit.export import export, validate
+    from brdffit.io.angles import SHAPE, dirs_to_half_diff, half_diff_to_bins
     from data_synth import nbrdf
 
     table = nbrdf.make_table(name)
     r = fit(table, "gltf_pbr")
     e = export(r, "gltf", table=table)
     image = validate.threejs_render(e.material, THREEJS, size=size)[..., :3].reshape(-1, 3)
-    normal, view, hit, step = validate.gltf_preview_pixels(size)
-    light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
-    frames = tangent_frames(normal)
-    wi = (frames @ light).reshape(-1, 3)
-    wo = np.einsum("...ij,...j->...i", frames, view).reshape(-1, 3)
+    wi, wo, hit, _ = validate.gltf_preview_pairs(size)
     bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi, wo)), SHAPE)
     measured = table.mask.reshape(-1)[bins]
-    inner = hit.ravel() & (wi[:, 2] > 0.05) & (wo[:, 2] > 0.1) & measured
-    cos_i = np.clip(wi[:, 2:3], 0.0, None)
-    truth = table.rgb.reshape(3, -1)[:, bins].T * np.pi * cos_i
-    with runtime.float64():
-        p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in e.target_params.items()}
-        frame = shading_frame(jnp.asarray(wi), jnp.asarray(wo))
-        shaded = {**p, "roughness": jnp.minimum(jnp.maximum(p["roughness"], 0.045)
-                                                + jnp.asarray(step.ravel()), 1.0)}
-        three_model = np.asarray(models.get("gltf_threejs").eval_frame(shaded, frame))
-        spec = np.asarray(models.get("gltf_pbr").eval_frame(p, frame))
-    shown = {"three.js": image, "gltf_threejs": three_model * np.pi * cos_i,
-             "gltf_pbr": spec * np.pi * cos_i}
+    inner = hit & (wi[:, 2] > 0.05) & (wo[:, 2] > 0.1) & measured
+    truth = table.rgb.reshape(3, -1)[:, bins].T * np.pi * np.clip(wi[:, 2:3], 0.0, None)
+    shown = {"three.js": image,
+             **{m: validate.preview_radiance(m, e.target_params, size)
+                for m in ("gltf_threejs", "gltf_pbr")}}
 
     def error(rad):
         d = np.log1p(rad[inner] / np.pi) - np.log1p(truth[inner] / np.pi)

@@ -502,14 +502,15 @@ def threejs_render(document: dict | bytes, threejs: str, size: int = 256,
     return pixels.reshape(size, size, 4)[::-1].copy()  # WebGL's rows run bottom-up
 
 
-def gltf_preview_pixels(size: int):
+def gltf_preview_pairs(size: int):
     """What each pixel of a ``size`` x ``size`` render of an exported glTF file sees
-    through the file's own camera (``brdffit.export.gltf``): the unit sphere's normal,
-    the direction to the camera (world space, each (size, size, 3)), whether the pixel
-    sees the sphere, and three.js's screen-space roughness term there (the normal's
-    change to the next pixel, ``geometryRoughness``). For comparing a viewer's render
-    with a model of its shading pixel by pixel."""
+    through the file's own camera and light (``brdffit.export.gltf``), flat, row by row
+    from the top: the (wi, wo) pair in the unit sphere's local frame (each (n, 3)),
+    whether the pixel sees the sphere, and three.js's screen-space roughness term there
+    (the normal's change to the next pixel, ``geometryRoughness``). For comparing a
+    viewer's render with a model of its shading pixel by pixel."""
     from brdffit.export import gltf
+    from brdffit.io.angles import tangent_frames
 
     t = np.tan(gltf.CAMERA_YFOV / 2)
     c = (np.arange(size) + 0.5) / size * 2 - 1
@@ -523,4 +524,29 @@ def gltf_preview_pixels(size: int):
     normal = point / np.linalg.norm(point, axis=-1, keepdims=True)
     step = np.maximum(np.abs(np.diff(normal, axis=1, append=normal[:, -1:])),
                       np.abs(np.diff(normal, axis=0, append=normal[-1:])))
-    return normal, -ray, disc > 0, step.max(-1)
+    light = np.array(gltf.PREVIEW_LIGHT_FROM) / np.linalg.norm(gltf.PREVIEW_LIGHT_FROM)
+    frames = tangent_frames(normal)
+    wi = (frames @ light).reshape(-1, 3)
+    wo = np.einsum("...ij,...j->...i", frames, -ray).reshape(-1, 3)
+    return wi, wo, (disc > 0).ravel(), step.max(-1).ravel()
+
+
+def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
+    """Each pixel's radiance (n, 3, row by row from the top) of an exported glTF
+    file's preview scene, as ``model_name`` shades the file's ``params``: what a
+    viewer of that shading renders (:func:`gltf_preview_pairs`; ``gltf_threejs`` with
+    three.js's per-pixel roughness term, ``screen_roughness``)."""
+    import jax.numpy as jnp
+
+    from brdffit import models, runtime
+    from brdffit.models.frame import shading_frame
+    from brdffit.models.gltf_threejs import screen_roughness
+
+    wi, wo, _, step = gltf_preview_pairs(size)
+    with runtime.float64():
+        p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
+        if model_name == "gltf_threejs":
+            p["roughness"] = screen_roughness(p["roughness"], jnp.asarray(step))
+        f = np.asarray(models.get(model_name).eval_frame(
+            p, shading_frame(jnp.asarray(wi), jnp.asarray(wo))))
+    return f * np.pi * np.clip(wi[:, 2:3], 0.0, None)

@@ -101,6 +101,13 @@ def lut_bilinear(table, r, mu):
     return top * (1 - fy) + bottom * fy
 
 
+def screen_roughness(roughness, geometry_roughness):
+    """The roughness three.js shades a pixel with (``lights_physical_fragment``): the
+    factor at least :data:`MIN_ROUGHNESS`, plus the normal's change to the next pixel
+    (``geometryRoughness``), at most 1; the model itself takes the factor alone."""
+    return jnp.minimum(jnp.maximum(roughness, MIN_ROUGHNESS) + geometry_roughness, 1.0)
+
+
 class GltfThreejs(GltfPBR):
     """``gltf_pbr``'s parameters as three.js shades them (module docstring)."""
 
