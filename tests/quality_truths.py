@@ -26,6 +26,25 @@ GLTF = [
     ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metallic": 0.0, "roughness": 0.9}),
 ]
 
+#: standard_surface's five sets (standard_surface_dielectric takes its dielectric ones).
+STANDARD_SURFACE = [
+    ("example", {"base_color": [0.8, 0.5, 0.3], "metalness": 0.3,
+                 "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.4,
+                 "specular_IOR": 1.5}),
+    ("saturated", {"base_color": SATURATED, "metalness": 0.0,
+                   "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.5,
+                   "specular_IOR": 1.5}),
+    ("dark", {"base_color": [0.03, 0.025, 0.02], "metalness": 0.0,
+              "specular_color": [0.5, 0.5, 0.5], "specular_roughness": 0.3,
+              "specular_IOR": 1.45}),
+    ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metalness": 1.0,
+                     "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.06,
+                     "specular_IOR": 1.5}),
+    ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metalness": 0.0,
+                       "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.9,
+                       "specular_IOR": 1.2}),
+]
+
 #: model -> [(label, params), ...]
 QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
     "lambert": [
@@ -90,22 +109,24 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("grazing-heavy", {"eta": [1.2, 1.2, 1.2], "k": [0.2, 0.2, 0.2], "alpha": 0.6,
                            "kd": [0.3, 0.3, 0.3], "weight": 0.6}),
     ],
-    "standard_surface": [
-        ("example", {"base_color": [0.8, 0.5, 0.3], "metalness": 0.3,
-                     "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.4,
-                     "specular_IOR": 1.5}),
-        ("saturated", {"base_color": SATURATED, "metalness": 0.0,
-                       "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.5,
-                       "specular_IOR": 1.5}),
-        ("dark", {"base_color": [0.03, 0.025, 0.02], "metalness": 0.0,
-                  "specular_color": [0.5, 0.5, 0.5], "specular_roughness": 0.3,
-                  "specular_IOR": 1.45}),
-        ("near-mirror", {"base_color": [0.95, 0.93, 0.9], "metalness": 1.0,
-                         "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.06,
-                         "specular_IOR": 1.5}),
-        ("grazing-heavy", {"base_color": [0.3, 0.3, 0.3], "metalness": 0.0,
-                           "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.9,
-                           "specular_IOR": 1.2}),
+    "standard_surface": STANDARD_SURFACE,
+    "standard_surface_dielectric": [
+        (label, {k: v for k, v in p.items() if k != "metalness"})
+        for label, p in (
+            ("example", {"base_color": [0.8, 0.5, 0.3], "specular_color": [1.0, 1.0, 1.0],
+                         "specular_roughness": 0.4, "specular_IOR": 1.5}),
+            *[(label, p) for label, p in STANDARD_SURFACE[1:3]],
+            ("near-mirror", {"base_color": [0.05, 0.05, 0.05], "specular_color": [1.0] * 3,
+                             "specular_roughness": 0.06, "specular_IOR": 1.6}),
+            STANDARD_SURFACE[4],
+        )
+    ],
+    "rough_plastic": [
+        ("example", {"kd": [0.5, 0.2, 0.1], "alpha": 0.2, "eta": 1.5, "ks": [1.0] * 3}),
+        ("saturated", {"kd": SATURATED, "alpha": 0.3, "eta": 1.49, "ks": [1.0] * 3}),
+        ("dark", {"kd": DARK, "alpha": 0.1, "eta": 1.4, "ks": [0.8] * 3}),
+        ("near-mirror", {"kd": [0.02] * 3, "alpha": 0.004, "eta": 1.6, "ks": [1.0] * 3}),
+        ("grazing-heavy", {"kd": [0.2] * 3, "alpha": 0.6, "eta": 2.2, "ks": [1.0] * 3}),
     ],
     "ggx2": [
         ("example", {"kd": [0.1, 0.08, 0.05], "ks1": [0.5] * 3, "alpha1": 0.03,

@@ -341,3 +341,32 @@ def test_a_glTF_refit_that_comes_out_a_metal_mixture_is_weighed_against_a_dielec
     assert any(w.startswith("class: kept the metal mixture") for w in kept.warnings)
     exact = Conversion("gltf_pbr", gold, True, 0.0)  # a gltf_pbr fit is copied as it is
     assert dielectric_or_mixture(fit, exact, metal) == (exact, None)
+
+
+@pytest.mark.parametrize("mixture_model, mixture, dielectric, is_dielectric", [
+    ("rough_conductor", {"eta": [0.2, 0.4, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.25,
+                         "kd": [0.3, 0.3, 0.3], "weight": 0.1},
+     "rough_plastic", lambda p: "k" not in p),
+    ("standard_surface", {"base_color": [0.95, 0.75, 0.3], "metalness": 0.9,
+                          "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.4,
+                          "specular_IOR": 1.5},
+     "standard_surface", lambda p: p["metalness"] == 0.0),
+])
+def test_mitsuba_and_materialx_weigh_a_metal_mixture_too(mixture_model, mixture, dielectric,
+                                                         is_dielectric):
+    """Mitsuba's conductor blend against its roughplastic, MaterialX's metalness against
+    metalness 0: a plastic's table goes out a dielectric, a metal's stays a metal."""
+    from brdffit.export.conversion import Conversion, dielectric_or_mixture
+
+    fit = result("ggx", GGX)
+    plastic = fit_as_table(result("rough_plastic", {"kd": [0.6, 0.3, 0.2], "alpha": 0.3,
+                                                    "eta": 1.5, "ks": [1.0] * 3}))
+    conv, report = dielectric_or_mixture(fit, Conversion(mixture_model, mixture, False, 0.01),
+                                         plastic)
+    assert report["chosen"] == "dielectric" and report["dielectric_model"] == dielectric
+    assert conv.target_model == dielectric and is_dielectric(conv.params)
+    metal = fit_as_table(result(mixture_model, mixture))
+    kept, report = dielectric_or_mixture(fit, Conversion(mixture_model, mixture, False, 0.01),
+                                         metal)
+    assert report["chosen"] == "metal mixture", report
+    assert kept.target_model == mixture_model and not is_dielectric(kept.params)

@@ -67,6 +67,59 @@ def test_mitsuba_loads_and_evaluates_a_conductor_fit_exactly(material):
     assert np.all(np.abs(theirs[~big]) < 1e-6 * ours.max())
 
 
+@pytest.mark.parametrize("params", [
+    {"kd": [0.7, 0.3, 0.1], "alpha": 0.05, "eta": 1.5, "ks": [1.0, 1.0, 1.0]},
+    {"kd": [0.2, 0.5, 0.9], "alpha": 0.8, "eta": 2.2, "ks": [0.6, 0.5, 0.4]},
+    {"kd": [1.0, 1.0, 1.0], "alpha": 0.002, "eta": 1.05, "ks": [0.1, 0.1, 0.1]},
+])
+def test_rough_plastic_is_mitsubas_roughplastic(params):
+    """brdffit's rough_plastic against Mitsuba's own roughplastic BSDF.eval: its
+    transmittance table and internal reflectance computed by Mitsuba's quadratures."""
+    material = mitsuba_load_dict(params)
+    assert material["type"] == "roughplastic"
+    wi, wo = _pairs(3000, seed=2)
+    ours = _brdffit("rough_plastic", params, wi, wo)
+    theirs = check.mitsuba_eval(material, wi, wo)
+    big = ours > 1e-6 * ours.max()
+    np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
+
+
+def mitsuba_load_dict(params):
+    from brdffit.export import mitsuba
+
+    return mitsuba.load_dict(params)
+
+
+#: issue 42: plastics and a fabric are dielectrics in every renderer; a metallic paint
+#: stays a metal
+DIELECTRICS = ("red-plastic", "pink-felt", "white-acrylic")
+CLASS_OF = {"gltf": lambda p: p["metallic"] == 0.0, "materialx": lambda p: p["metalness"] == 0.0,
+            "mitsuba": lambda p: "k" not in p}
+
+
+@pytest.mark.parametrize("material", DIELECTRICS)
+def test_plastics_and_fabrics_export_as_dielectrics_to_every_target(material):
+    """(A metal staying a metal in every target: tests/test_export.py, on tables made
+    from a metal.)"""
+    table = nbrdf.make_table(material)
+    r = real_fit(material, "ggx")
+    for target, dielectric in CLASS_OF.items():
+        e = export(r, target, table=table)
+        chosen = e.fidelity.get("material_class")
+        if chosen is None:  # the refit came out a dielectric (metal fraction <= 0.05)
+            assert e.target_params.get("metallic", e.target_params.get("metalness", 0)) <= 0.05
+            continue
+        assert chosen["chosen"] == "dielectric" and dielectric(e.target_params), (target, chosen)
+        ratio = chosen["dielectric_log_rmse"] / chosen["mixture_log_rmse"]
+        said = [w for w in e.warnings if w.startswith("class: exported as a dielectric")]
+        assert len(said) == 1 and f"{chosen['mixture_log_rmse']:.4g}" in said[0]
+        assert ("within 1.1x" in said[0]) == (ratio <= 1.1), said
+        assert e.fidelity["log_rmse_to_table"] == pytest.approx(chosen["dielectric_log_rmse"])
+        if target == "mitsuba":  # the file Mitsuba loads is the roughplastic reported
+            assert e.material["type"] == "roughplastic"
+            check.mitsuba().load_string(e.files[next(iter(e.files))])
+
+
 @pytest.mark.parametrize("source", [("red-plastic", "ggx"), ("pink-felt", "gltf_pbr")])
 def test_reported_fidelity_is_the_one_measured_in_mitsuba(source):
     r = real_fit(*source)

@@ -31,7 +31,9 @@ pytestmark = pytest.mark.unit
 GLTF = {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}
 CONDUCTOR = {"eta": [0.2, 0.9, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.15,
              "kd": [0.3, 0.2, 0.1], "weight": 0.2}
-CASES = {"gltf_pbr": GLTF, "gltf_pbr_ior": {**GLTF, "ior": 1.9}, "rough_conductor": CONDUCTOR}
+PLASTIC = {"kd": [0.6, 0.25, 0.1], "alpha": 0.2, "eta": 1.5, "ks": [1.0, 0.9, 0.8]}
+CASES = {"gltf_pbr": GLTF, "gltf_pbr_ior": {**GLTF, "ior": 1.9}, "rough_conductor": CONDUCTOR,
+         "rough_plastic": PLASTIC}
 
 
 def _pairs(n, seed=0):
@@ -115,6 +117,11 @@ def test_reciprocity(name):
                          "weight": 0.0}, 1.0),
     ("rough_conductor", {"eta": [0.05] * 3, "k": [15.0] * 3, "alpha": 0.3, "kd": [1.0] * 3,
                          "weight": 0.5}, 1.0),
+    # Mitsuba's roughplastic at its brightest: a white base under a smooth and a rough
+    # interface (its internal reflectance is a 64-cosine mean, close to but not exactly
+    # the integral: within 0.5%)
+    ("rough_plastic", {"kd": [1.0] * 3, "alpha": 0.01, "eta": 1.5, "ks": [1.0] * 3}, 1.0),
+    ("rough_plastic", {"kd": [1.0] * 3, "alpha": 0.8, "eta": 2.5, "ks": [1.0] * 3}, 1.0),
 ])
 def test_energy_conservation_at_the_bounds(name, params, bound):
     model = models.get(name)
@@ -140,6 +147,13 @@ EDGES = {
     "rough_conductor": [{"eta": e, "k": k, "alpha": a, "kd": 0.5, "weight": w}
                         for e in (0.02, 1.0, 10.0) for k in (0.0, 15.0)
                         for a in (1e-3, 2.0) for w in (0.0, 1.0)],
+    "rough_plastic": [{"kd": d, "alpha": a, "eta": e, "ks": k}
+                      for d in (0.0, 1.0) for a in (1e-3, 2.0) for e in (1.001, 3.0)
+                      for k in (0.0, 1.0)],
+    "standard_surface_dielectric": [{"base_color": b, "specular_color": c,
+                                     "specular_roughness": r, "specular_IOR": i}
+                                    for b in (0.0, 1.0) for c in (0.0, 1.0)
+                                    for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 3.0)],
     "standard_surface": [{"base_color": b, "metalness": m, "specular_color": c,
                           "specular_roughness": r, "specular_IOR": i}
                          for b in (0.0, 1.0) for m in (0.0, 1.0) for c in (0.0, 1.0)
@@ -208,10 +222,46 @@ def test_standard_surface_layers_by_albedo_not_by_fresnel():
     assert np.all(f_black >= 0) and np.all(lobe > f_black)
 
 
+def test_rough_plastic_fit_recovers_its_parameters():
+    r = fit(_table_of("rough_plastic", PLASTIC), "rough_plastic", samples=4096)
+    assert r.log_rmse < 1e-4, r
+    assert r.params["alpha"] == pytest.approx(PLASTIC["alpha"], rel=1e-2)
+    np.testing.assert_allclose(r.params["kd"], PLASTIC["kd"], rtol=2e-2)
+
+
+def test_rough_plastic_transmittance_and_internal_reflectance_limits():
+    """The interface's tables (Mitsuba's quadratures, brdffit.models.rough_plastic):
+    at eta -> 1 a smooth interface vanishes (T = 1, nothing reflected inside); at normal
+    incidence on a smooth interface T is 1 - F0; the internal reflectance of a smooth
+    eta 1.5 interface is the known hemispherical 0.596 (1 - (1 - 0.0918) / eta^2), of
+    which Mitsuba's mean over 64 cosines from 0 to 1 is 63/64."""
+    from brdffit.models.rough_plastic import internal_reflectance, transmittance_table
+
+    # cos >= 0.2, away from grazing's F = 1; smooth, for a rough interface also masks the
+    # refracted light (Mitsuba's G1(wt, m): T 0.73 at cos 0.2 for alpha 0.3 and eta 1.001)
+    t = np.asarray(transmittance_table(1e-3, 1.001))
+    assert np.all(np.abs(t[13:] - 1.0) < 2e-4)
+    assert np.all(np.asarray(transmittance_table(0.3, 1.001))[13:] < t[13:])
+    smooth = np.asarray(transmittance_table(1e-3, 1.5))
+    assert smooth[-1] == pytest.approx(1.0 - 0.04, abs=1e-4)
+    assert float(internal_reflectance(1e-3, 1.001)) < 5e-3
+    assert float(internal_reflectance(1e-3, 1.5)) == pytest.approx(0.596 * 63 / 64, abs=3e-3)
+
+
+def test_standard_surface_dielectric_is_standard_surface_at_metalness_0():
+    wi, wo = _pairs(500)
+    p = {k: v for k, v in STANDARD.items() if k != "metalness"}
+    ours = models.get("standard_surface_dielectric")(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))
+    core = models.get("standard_surface")(_jnp({**p, "metalness": 0.0}), jnp.asarray(wi),
+                                          jnp.asarray(wo))
+    np.testing.assert_allclose(np.asarray(ours), np.asarray(core), rtol=1e-12)
+
+
 def test_auto_candidates_leave_the_target_models_out():
     from brdffit.selection import DEFAULT_CANDIDATES
 
-    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor", "standard_surface"}
+    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor", "rough_plastic",
+               "standard_surface", "standard_surface_dielectric"}
     assert not targets & set(DEFAULT_CANDIDATES)
     assert targets <= set(models.names())
 
@@ -224,3 +274,26 @@ def test_gltf_pbr_ior_contains_gltf_pbr():
     ours = m(_jnp(m.embed_parent(GLTF)), jnp.asarray(wi), jnp.asarray(wo))
     core = models.get("gltf_pbr")(_jnp(GLTF), jnp.asarray(wi), jnp.asarray(wo))
     np.testing.assert_allclose(np.asarray(ours), np.asarray(core), rtol=1e-12)
+
+
+def test_rough_plastic_interface_derivatives_are_autodiffs():
+    """interface_terms' own JVP (two directions, then combined) is the derivative that
+    autodiff of the quadratures gives."""
+    import jax
+
+    from brdffit.models.rough_plastic import (
+        interface_terms,
+        internal_reflectance,
+        transmittance_table,
+    )
+
+    def direct(a, e):
+        return transmittance_table(a, e), internal_reflectance(a, e)
+
+    for point, tangent in (((0.2, 1.5), (1.0, 0.0)), ((0.6, 2.1), (0.3, -0.7))):
+        primals = tuple(jnp.asarray(x) for x in point)
+        tangents = tuple(jnp.asarray(x) for x in tangent)
+        ours = jax.jvp(interface_terms, primals, tangents)
+        theirs = jax.jvp(direct, primals, tangents)
+        for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs), strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-14)

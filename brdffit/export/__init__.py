@@ -154,8 +154,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     for_viewer = viewer != "spec" and measured is not None
     conv = convert(result, models_wanted, measured=measured if for_viewer else None)
     material_class = None
-    if target == "gltf" and viewer == "spec" and target_model is None:
-        # a plastic or a fabric is exported as a dielectric where one does as well
+    if viewer == "spec" and target_model is None:
+        # a plastic or a fabric is exported as a dielectric where the evidence says so
         conv, material_class = dielectric_or_mixture(result, conv, measured)
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this

@@ -12,6 +12,7 @@ fit *is* the fidelity lost. That number is reported with every approximate expor
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -144,7 +145,32 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
                       warnings + bound_warnings(target_model, refit.params))
 
 
-#: A glTF metal mixture above this metallic is weighed against a dielectric.
+@dataclass(frozen=True)
+class ClassAlternative:
+    """How a target's metal mixture is weighed against a dielectric: the dielectric
+    model fitted in its place, the mixture's metal fraction, and the dielectric's
+    parameters as the exported model's (``export_model``)."""
+
+    mixture_model: str
+    dielectric_model: str
+    export_model: str
+    metal_fraction: Callable[[dict], float]
+    as_export: Callable[[dict], dict]
+
+
+#: target model of a refit -> its dielectric alternative: glTF metallic 0, MaterialX
+#: metalness 0, and for Mitsuba its roughplastic in place of the roughconductor blend.
+CLASS_ALTERNATIVES = {
+    "gltf_pbr": ClassAlternative("gltf_pbr", "gltf_pbr_dielectric", "gltf_pbr",
+                                 lambda p: float(p["metallic"]),
+                                 lambda p: {**p, "metallic": 0.0}),
+    "standard_surface": ClassAlternative("standard_surface", "standard_surface_dielectric",
+                                         "standard_surface", lambda p: float(p["metalness"]),
+                                         lambda p: {**p, "metalness": 0.0}),
+    "rough_conductor": ClassAlternative("rough_conductor", "rough_plastic", "rough_plastic",
+                                        lambda p: 1.0 - float(p["weight"]), dict),
+}
+#: A metal mixture whose metal fraction is above this is weighed against a dielectric.
 MIXTURE_METALLIC = 0.05
 #: The dielectric is exported where its error to the table is at most this times the
 #: metal mixture's (issue 42: a plastic or a fabric exported as 95% metal looks
@@ -152,20 +178,23 @@ MIXTURE_METALLIC = 0.05
 DIELECTRIC_TOLERANCE = 1.1
 #: ... or within DIELECTRIC_WITH_BODY where the table has a diffuse body at least this
 #: bright (the mean of its diffuse estimate, ``brdffit.fitting.starts``): metals have
-#: none. On the real materials: plastics, paints and fabrics 0.17-0.28; metallic
+#: none. On the real materials: plastics, paints and fabrics 0.11-0.28; metallic
 #: paints and metals 0.001-0.03. Beyond it the mixture's fit is kept: its Fresnel
 #: says metal more plainly than the body says dielectric (a bright, coloured, f0 0.6
-#: lobe over a diffuse base: 3x the dielectric's error).
+#: lobe over a diffuse base: 3x the dielectric's error). A felt's sheen costs a
+#: dielectric 1.2-1.6x (pink-felt: glTF 1.23x, Mitsuba's roughplastic 1.54x, whose
+#: diffuse reflectance reaches its bound 1), which the warning says.
 DIFFUSE_BODY = 0.1
-DIELECTRIC_WITH_BODY = 1.5
+DIELECTRIC_WITH_BODY = 2.0
 
 
 def dielectric_or_mixture(result: FitResult, conv: Conversion,
                           measured: MerlTable | None) -> tuple[Conversion, dict | None]:
-    """For a glTF refit that came out a metallic mixture (``gltf_pbr`` with metallic
-    above :data:`MIXTURE_METALLIC`; an exact ``gltf_pbr`` fit is copied as it is): the
-    same factors refitted as a dielectric
-    (``gltf_pbr_dielectric``: metallic 0) to the measured table (else to the fit).
+    """For a refit that came out a metal mixture (glTF's ``gltf_pbr`` with metallic,
+    MaterialX's ``standard_surface`` with metalness, Mitsuba's ``rough_conductor`` blend
+    with a conductor weight above :data:`MIXTURE_METALLIC`; an exact fit of one is
+    copied as it is): the dielectric alternative (:data:`CLASS_ALTERNATIVES`) refitted
+    to the measured table (else to the fit).
     The dielectric is exported where the evidence says dielectric: its log_rmse there
     is within :data:`DIELECTRIC_TOLERANCE` of the mixture's, or within
     :data:`DIELECTRIC_WITH_BODY` where the table has a diffuse body
@@ -178,19 +207,20 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     from brdffit.fitting.sampling import usable_bins
     from brdffit.fitting.starts import table_hints
 
-    if (conv.exact or conv.target_model != "gltf_pbr"
-            or float(conv.params["metallic"]) <= MIXTURE_METALLIC):
-        return conv, None  # a gltf_pbr fit is the user's own choice of class: copied
+    alt = CLASS_ALTERNATIVES.get(conv.target_model)
+    if conv.exact or alt is None or alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
+        return conv, None  # a fit of the target's model is the user's own choice of class
     fit_table = fit_as_table(result)
     reference = measured if measured is not None else fit_table
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
-    refit = fit(reference, "gltf_pbr_dielectric", loss=result.loss)
-    dielectric = {**refit.params, "metallic": 0.0}
-    err_d = float(table_error(reference, "gltf_pbr", dielectric)["log_rmse"])
-    err_m = float(table_error(reference, "gltf_pbr", conv.params)["log_rmse"])
-    metallic = float(conv.params["metallic"])
+    refit = fit(reference, alt.dielectric_model, loss=result.loss)
+    dielectric = alt.as_export(refit.params)
+    err_d = float(table_error(reference, alt.export_model, dielectric)["log_rmse"])
+    err_m = float(table_error(reference, alt.mixture_model, conv.params)["log_rmse"])
+    metallic = alt.metal_fraction(conv.params)
     report = {"metallic_of_mixture": metallic, "against": against, "diffuse_body": body,
+              "dielectric_model": alt.export_model,
               "dielectric_log_rmse": err_d, "mixture_log_rmse": err_m}
     close = err_d <= DIELECTRIC_TOLERANCE * err_m
     bodied = body >= DIFFUSE_BODY and err_d <= DIELECTRIC_WITH_BODY * err_m
@@ -198,20 +228,20 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
         why = (f"its diffuse body ({body:.3g}) is a metal's" if body < DIFFUSE_BODY else
                f"more than {DIELECTRIC_WITH_BODY:g}x even with a diffuse body ({body:.3g})")
         conv.warnings.append(
-            f"class: kept the metal mixture (metallic {metallic:.3g}): as a dielectric its "
-            f"log_rmse to {against} would be {err_d:.4g} against {err_m:.4g}, more than "
-            f"{DIELECTRIC_TOLERANCE:g}x, and {why}")
+            f"class: kept the metal mixture (metal fraction {metallic:.3g}): as a dielectric "
+            f"({alt.export_model}) its log_rmse to {against} would be {err_d:.4g} against "
+            f"{err_m:.4g}, more than {DIELECTRIC_TOLERANCE:g}x, and {why}")
         return conv, {**report, "chosen": "metal mixture"}
     to_fit = (err_d if measured is None
-              else float(table_error(fit_table, "gltf_pbr", dielectric)["log_rmse"]))
+              else float(table_error(fit_table, alt.export_model, dielectric)["log_rmse"]))
     warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
     why = (f"within {DIELECTRIC_TOLERANCE:g}x" if close else
            f"{err_d / err_m:.2f}x, more than {DIELECTRIC_TOLERANCE:g}x: chosen for its diffuse "
            f"body ({body:.3g}), which no metal has; the mixture is the closer fit")
     warnings.append(
-        f"class: exported as a dielectric (metallic 0), refitted to {against}: log_rmse "
-        f"{err_d:.4g} against {err_m:.4g} for the metal mixture (metallic {metallic:.3g}), "
-        f"{why}")
-    return (Conversion("gltf_pbr", dielectric, False, to_fit,
-                       warnings + bound_warnings("gltf_pbr", dielectric)),
+        f"class: exported as a dielectric ({alt.export_model}), refitted to {against}: "
+        f"log_rmse {err_d:.4g} against {err_m:.4g} for the metal mixture (metal fraction "
+        f"{metallic:.3g}), {why}")
+    return (Conversion(alt.export_model, dielectric, False, to_fit,
+                       warnings + bound_warnings(alt.export_model, dielectric)),
             {**report, "chosen": "dielectric"})

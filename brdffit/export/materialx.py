@@ -32,11 +32,13 @@ from xml.sax.saxutils import quoteattr
 
 #: the models a fit is copied to by default (any other fit is refitted as the first);
 #: ``export(..., target_model=)`` chooses among every key of SHADED_AS
-TARGET_MODELS = ("standard_surface",)
+TARGET_MODELS = ("standard_surface", "standard_surface_dielectric")
 #: target model -> the model that evaluates the file as MaterialX shades it: its
 #: generated GLSL agrees with standard_surface to 1e-5 (validate.materialx_eval); its
 #: shading of the gltf_pbr node is not modelled (None)
-SHADED_AS = {"standard_surface": "standard_surface", "gltf_pbr": None, "gltf_pbr_ior": None}
+SHADED_AS = {"standard_surface": "standard_surface",
+             "standard_surface_dielectric": "standard_surface_dielectric",
+             "gltf_pbr": None, "gltf_pbr_ior": None}
 UNMODELLED_NOTE = ("fidelity: MaterialX's own shading of its gltf_pbr node is not modelled, "
                    "so log_rmse_to_table is not measured; the default standard_surface is")
 MEDIA_TYPE = "application/mtlx+xml"
@@ -59,7 +61,7 @@ def shading_notes(model: str) -> list[str]:
     """The export warnings a MaterialX document of ``model`` parameters needs: the
     ``gltf_pbr`` node's :data:`SHADING_NOTE`; none for ``standard_surface``, whose
     model is MaterialX's own shading."""
-    return [] if model == "standard_surface" else [SHADING_NOTE]
+    return [] if model.startswith("standard_surface") else [SHADING_NOTE]
 
 
 def _identifier(name: str) -> str:
@@ -81,12 +83,16 @@ def document(params: dict, name: str, model: str | None = None) -> str:
     :data:`SHADED_AS`): a ``standard_surface`` node for ``standard_surface``, a
     ``gltf_pbr`` node for ``gltf_pbr`` and ``gltf_pbr_ior``, and its ``surfacematerial``.
     ``model=None``: the model whose parameters ``params`` holds (``metalness``:
-    standard_surface; ``ior``: gltf_pbr_ior; else gltf_pbr)."""
+    standard_surface; ``specular_IOR`` alone: standard_surface_dielectric, written as
+    the node at metalness 0; ``ior``: gltf_pbr_ior; else gltf_pbr)."""
     if model is None:
         model = ("standard_surface" if "metalness" in params
+                 else "standard_surface_dielectric" if "specular_IOR" in params
                  else "gltf_pbr_ior" if "ior" in params else "gltf_pbr")
     if model not in SHADED_AS:
         raise ValueError(f"MaterialX writes {', '.join(SHADED_AS)} parameters, not {model!r}")
+    if model == "standard_surface_dielectric":  # its node at metalness 0
+        model, params = "standard_surface", {**params, "metalness": 0.0}
     ident = _identifier(name)
     shader = quoteattr("SR_" + ident)
     if model == "standard_surface":

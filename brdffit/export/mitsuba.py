@@ -1,16 +1,25 @@
 """Mitsuba 3 export: a ``mi.load_dict`` dictionary and the same material as scene XML.
 
-Target model ``rough_conductor`` (docs/models.md), which is Mitsuba's own plugins:
+Target models (docs/models.md), Mitsuba's own plugins:
+
+- ``rough_conductor``, the default: a metal, or a blend of one with a diffuse base::
 
     {"type": "blendbsdf", "weight": weight,
      "bsdf_0": {"type": "roughconductor", "distribution": "ggx", "alpha": alpha,
                 "eta": <eta>, "k": <k>},
      "bsdf_1": {"type": "diffuse", "reflectance": <kd RGB>}}
 
-``blendbsdf`` evaluates ``(1 - weight) bsdf_0 + weight bsdf_1``; with ``weight = 0``
-the export is the ``roughconductor`` alone. ``kd`` is a reflectance in [0, 1], the
-model's bound, so every variant takes it as it is (a spectral one upsamples it as a
-reflectance, which keeps its sRGB colour).
+  ``blendbsdf`` evaluates ``(1 - weight) bsdf_0 + weight bsdf_1``; with ``weight = 0``
+  the export is the ``roughconductor`` alone.
+- ``rough_plastic``: a dielectric, for plastics, paints and fabrics (a refit that comes
+  out a conductor blend is weighed against it: ``conversion.dielectric_or_mixture``)::
+
+    {"type": "roughplastic", "distribution": "ggx", "alpha": alpha, "int_ior": eta,
+     "ext_ior": 1.0, "diffuse_reflectance": <kd RGB>, "specular_reflectance": <ks RGB>}
+
+``kd`` and ``ks`` are reflectances in [0, 1], the models' bounds, so every variant
+takes them as they are (a spectral one upsamples them as reflectances, which keeps
+their sRGB colour).
 
 ``eta`` and ``k`` are not reflectances, and their meaning depends on the variant:
 
@@ -40,10 +49,12 @@ import numpy as np
 from brdffit.errors import BrdffitError
 from brdffit.export import spectral_ior
 
-TARGET_MODELS = ("rough_conductor",)
+#: the models a fit is copied to (any other fit is refitted as the first)
+TARGET_MODELS = ("rough_conductor", "rough_plastic")
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
-#: agrees with rough_conductor to 2.1e-5 relative (docs/exports.md)
-SHADED_AS = {"rough_conductor": "rough_conductor"}
+#: agrees with rough_conductor to 2.1e-5 relative and with rough_plastic to 4e-6
+#: (docs/exports.md, tests/test_export_tools.py)
+SHADED_AS = {m: m for m in TARGET_MODELS}
 MEDIA_TYPE = "application/json"
 
 #: Largest relative error (floored at F = 0.01, over cos_d in [0, 1] and the channels)
@@ -78,7 +89,7 @@ def _spectral_ior(eta, k) -> tuple[float | dict, float | dict]:
     fitted = spectral_ior.fit_spectra(eta, k)
     if not fitted.error <= SPECTRAL_TOLERANCE:
         raise SpectralExportError(
-            f"rough_conductor eta={eta.tolist()}, k={k.tolist()}: in Mitsuba's spectral "
+            f"eta={eta.tolist()}, k={k.tolist()}: in Mitsuba's spectral "
             f"variants (scalar_spectral, llvm_ad_spectral, ...) no eta, k spectra found give "
             f"its RGB Fresnel colour: the closest is {100 * fitted.error:.1f}% off "
             f"(tolerance {100 * SPECTRAL_TOLERANCE:g}%); render it in an RGB variant "
@@ -87,10 +98,12 @@ def _spectral_ior(eta, k) -> tuple[float | dict, float | dict]:
 
 
 def load_dict(params: dict, spectral: bool = False) -> dict:
-    """The Mitsuba 3 BSDF dictionary of ``rough_conductor`` parameters, for Mitsuba's
-    RGB variants, or with ``spectral=True`` for its spectral ones (module docstring).
-    Raises :class:`SpectralExportError` where a spectral form would not be the same
-    material."""
+    """The Mitsuba 3 BSDF dictionary of ``rough_conductor`` or ``rough_plastic``
+    parameters (told apart by ``k``), for Mitsuba's RGB variants, or with
+    ``spectral=True`` for its spectral ones (module docstring). Raises
+    :class:`SpectralExportError` where a spectral form would not be the same material."""
+    if "k" not in params:
+        return _plastic(params, spectral)
     if spectral:
         eta, k = _spectral_ior(params["eta"], params["k"])
     else:
@@ -109,28 +122,44 @@ def load_dict(params: dict, spectral: bool = False) -> dict:
         "type": "blendbsdf",
         "weight": weight,
         "bsdf_0": conductor,
-        "bsdf_1": {"type": "diffuse", "reflectance": (_spectral_kd(params["kd"]) if spectral
-                                                      else _rgb(params["kd"], False))},
+        "bsdf_1": {"type": "diffuse", "reflectance": _reflectance(params["kd"], "kd", spectral)},
     }
 
 
-def _spectral_kd(kd) -> dict | float:
-    """``kd`` for a spectral variant: a number where the channels are equal (0: no
-    reflection, in every variant), else a ``regular`` reflectance spectrum fitted to
-    its colour (``spectral_ior.fit_reflectance``). Mitsuba's own upsampling of an
-    ``rgb`` reflectance is right to the eye but not in relative terms where the colour
-    is dark and saturated: blue-metallic-paint's conductor fit, kd = [1.2e-8, 7.8e-9,
-    2e-11] at blend weight 0.79, rendered 6% too red in scalar_spectral, its ggx
-    export (kd = [0, 0, 0.002]) 8% too blue."""
-    kd = np.asarray(kd, float)
-    if np.all(kd == kd[0]):
-        return float(kd[0])
-    values = spectral_ior.fit_reflectance(kd)
-    if not spectral_ior.reflectance_error(values, kd) <= SPECTRAL_TOLERANCE:
+def _plastic(params: dict, spectral: bool) -> dict:
+    """``roughplastic`` of ``rough_plastic`` parameters: ``ext_ior`` 1 (Mitsuba's
+    default is air's 1.000277), so that ``int_ior`` is the model's relative ``eta``."""
+    return {
+        "type": "roughplastic",
+        "distribution": "ggx",
+        "alpha": float(params["alpha"]),
+        "int_ior": float(params["eta"]),
+        "ext_ior": 1.0,
+        "diffuse_reflectance": _reflectance(params["kd"], "kd", spectral),
+        "specular_reflectance": _reflectance(params["ks"], "ks", spectral),
+    }
+
+
+def _reflectance(value, name: str, spectral: bool) -> dict | float:
+    """A reflectance in [0, 1] (``kd``, ``ks``): an ``rgb`` for RGB variants; for a
+    spectral variant a number where the channels are equal (0: no reflection, in every
+    variant), else a ``regular`` reflectance spectrum fitted to its colour
+    (``spectral_ior.fit_reflectance``). Mitsuba's own upsampling of an ``rgb``
+    reflectance is right to the eye but not in relative terms where the colour is dark
+    and saturated: blue-metallic-paint's conductor fit, kd = [1.2e-8, 7.8e-9, 2e-11] at
+    blend weight 0.79, rendered 6% too red in scalar_spectral, its ggx export
+    (kd = [0, 0, 0.002]) 8% too blue."""
+    if not spectral:
+        return _rgb(value, False)
+    value = np.asarray(value, float)
+    if np.all(value == value[0]):
+        return float(value[0])
+    values = spectral_ior.fit_reflectance(value)
+    if not spectral_ior.reflectance_error(values, value) <= SPECTRAL_TOLERANCE:
         raise SpectralExportError(
-            f"rough_conductor kd={kd.tolist()}: no reflectance spectrum found gives this "
-            "diffuse colour in Mitsuba's spectral variants (scalar_spectral, ...); render it "
-            "in an RGB variant (scalar_rgb, llvm_ad_rgb) with load_dict(params)")
+            f"{name}={value.tolist()}: no reflectance spectrum found gives this colour in "
+            "Mitsuba's spectral variants (scalar_spectral, ...); render it in an RGB "
+            "variant (scalar_rgb, llvm_ad_rgb) with load_dict(params)")
     return _spectrum(values)
 
 
@@ -148,7 +177,7 @@ def load_dict_for_variant(params: dict, variant: str | None = None) -> dict:
     if "_mono" in variant:
         raise SpectralExportError(
             f"Mitsuba variant {variant!r} renders one luminance channel; brdffit's "
-            f"rough_conductor export is an RGB material (use an _rgb or _spectral variant)")
+            f"Mitsuba export is an RGB material (use an _rgb or _spectral variant)")
     if "_spectral" in variant:
         return load_dict(params, spectral=True)
     if variant.endswith("_rgb"):

@@ -22,6 +22,7 @@ from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 from brdffit.models.oren_nayar import OrenNayar
 from brdffit.models.phong import Phong
 from brdffit.models.rough_conductor import RoughConductor
+from brdffit.models.rough_plastic import RoughPlastic
 from brdffit.models.standard_surface import StandardSurface
 
 #: The built-in models, cheapest to richest (``auto`` tries them in this order).
@@ -30,7 +31,7 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), RoughConductor(),
-    StandardSurface(),
+    RoughPlastic(), StandardSurface(), StandardSurface(dielectric=True),
     GGX2(),
 )
 

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -72,6 +73,11 @@ SPECULAR_ROUGHNESS = ParamSpec("specular_roughness", "specular_roughness (alpha 
 #: where those fits stopped, cost them 3-8% and 60-85% of their log_rmse, 2026-11-26).
 SPECULAR_IOR = ParamSpec("specular_IOR", "specular_IOR: index of refraction of the dielectric",
                          1.0, 50.0, scale="log")
+#: standard_surface_dielectric's index: at most a dense glass's or a gem's. An index of
+#: 15 has a metal's reflectance (f0 0.77): a "dielectric" that is a metal in all but
+#: name, which is what the class check (brdffit.export.conversion) must not export.
+DIELECTRIC_IOR = ParamSpec("specular_IOR", "specular_IOR: index of refraction of the dielectric",
+                           1.0, 3.0)
 
 #: The ``standard_surface`` inputs the model holds at a value instead of fitting them
 #: (MaterialX's defaults; the export writes them); every other input not fitted is off.
@@ -135,16 +141,37 @@ def ggx_dv(alpha, frame: Frame):
 
 
 class StandardSurface(AbstractBRDFModel):
-    name = "standard_surface"
-    param_specs = (BASE_COLOR, METALNESS, SPECULAR_COLOR, SPECULAR_ROUGHNESS, SPECULAR_IOR)
-    # the best-scored start alone ended in a metal's basin on a dark dielectric and
-    # in a dielectric's on a near-mirror metal (tests/quality_truths.py)
-    start_family = "metalness"
-    shape_grid = tuple(
-        {"specular_roughness": min(math.sqrt(a), 1.0), "metalness": m, "specular_IOR": ior}
-        for a in ALPHA_GRID
-        for m, ior in ((0.0, 1.5), (0.0, 4.0), (0.0, 15.0), (0.5, 1.5), (1.0, 1.5))
-    )
+    #: True: ``standard_surface_dielectric``, metalness held at 0 (not a parameter): the
+    #: MaterialX export's dielectric alternative to a metal mixture
+    #: (brdffit.export.conversion.dielectric_or_mixture).
+    dielectric: bool = eqx.field(static=True, default=False)
+
+    @property
+    def name(self) -> str:
+        return "standard_surface_dielectric" if self.dielectric else "standard_surface"
+
+    @property
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        if self.dielectric:
+            return (BASE_COLOR, SPECULAR_COLOR, SPECULAR_ROUGHNESS, DIELECTRIC_IOR)
+        return (BASE_COLOR, METALNESS, SPECULAR_COLOR, SPECULAR_ROUGHNESS, SPECULAR_IOR)
+
+    @property
+    def start_family(self) -> str | None:
+        # the best-scored start alone ended in a metal's basin on a dark dielectric and
+        # in a dielectric's on a near-mirror metal (tests/quality_truths.py)
+        return None if self.dielectric else "metalness"
+
+    @property
+    def shape_grid(self) -> tuple[dict[str, float], ...]:
+        rows = ((0.0, 1.5), (0.0, 2.5)) if self.dielectric else (
+            (0.0, 1.5), (0.0, 4.0), (0.0, 15.0), (0.5, 1.5), (1.0, 1.5))
+        return tuple(
+            {"specular_roughness": min(math.sqrt(a), 1.0), "specular_IOR": ior,
+             **({} if self.dielectric else {"metalness": m})}
+            for a in ALPHA_GRID
+            for m, ior in rows
+        )
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
@@ -177,7 +204,7 @@ class StandardSurface(AbstractBRDFModel):
         f_c = jnp.maximum(conductor_fresnel(n, k, cd[None]), 0.0)
         metal = dv[None] * f_c * (1.0 + f_c * ms_gain[None])
 
-        m = params["metalness"]
+        m = 0.0 if self.dielectric else params["metalness"]
         return m * metal + (1.0 - m) * (spec + throughput[None] * diffuse)
 
     def eval_frame(self, params: Params, frame: Frame):
@@ -202,7 +229,7 @@ class StandardSurface(AbstractBRDFModel):
         excess = np.maximum(f_peak - kd / np.pi, 1e-3 * np.maximum(f_peak, 1e-6))
         starts = []
         for shape in self.shape_grid:
-            m, ior = shape["metalness"], shape["specular_IOR"]
+            m, ior = shape.get("metalness", 0.0), shape["specular_IOR"]
             lobe = max(float(ggx_dv(specular_alpha(shape["specular_roughness"]), frame)), 1e-12)
             reflectivity = np.clip(excess / lobe, 0.02, 0.98)
             f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
