@@ -17,7 +17,9 @@ playwright and Chromium for three.js); fitting and exporting never do.
   GLSL its own generator writes (:func:`materialx_glsl`), run on a headless OpenGL 4
   context (moderngl on EGL; Mesa's llvmpipe where there is no GPU), divided by cos_i;
 - :func:`threejs_render`: a glTF document (JSON or .glb) as three.js's GLTFLoader and
-  WebGLRenderer show it, in headless Chromium (WebGL2 on SwiftShader), linear radiance.
+  WebGLRenderer show it, in headless Chromium (WebGL2 on SwiftShader), linear radiance;
+- :func:`blender_import`: what Blender's own glTF importer makes of a file, and its
+  Cycles render of the file's camera and lights.
 """
 
 from __future__ import annotations
@@ -550,3 +552,91 @@ def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
         f = np.asarray(models.get(model_name).eval_frame(
             p, shading_frame(jnp.asarray(wi), jnp.asarray(wo))))
     return f * np.pi * np.clip(wi[:, 2:3], 0.0, None)
+
+
+#: What Blender's glTF importer made of a file, and its Cycles render (run inside
+#: Blender: ``blender --background --factory-startup --python-expr``).
+_BLENDER_SCRIPT = r"""
+import array, json, sys, bpy
+try:  # Debian 12's Blender 3.4 importer still says np.bool, which its numpy 1.24 removed
+    import numpy
+    if not hasattr(numpy, "bool"):
+        numpy.bool = bool
+except ImportError:
+    pass
+args = json.loads(sys.argv[sys.argv.index("--") + 1])
+bpy.ops.wm.read_factory_settings(use_empty=True)
+# COMPAT: a directional light's intensity is the sun's strength, the irradiance it
+# gives (SPEC, the default, divides lux by 683 lm/W: a physically dim scene)
+bpy.ops.import_scene.gltf(filepath=args["path"], convert_lighting_mode="COMPAT")
+out = {"objects": [], "materials": {}}
+for ob in bpy.context.scene.objects:
+    out["objects"].append({"name": ob.name, "type": ob.type,
+                           "materials": [s.material.name for s in ob.material_slots
+                                         if s.material is not None]})
+for mat in bpy.data.materials:
+    inputs = {}
+    node = next((n for n in (mat.node_tree.nodes if mat.use_nodes else [])
+                 if n.type == "BSDF_PRINCIPLED"), None)
+    if node is not None:
+        for name in ("Base Color", "Metallic", "Roughness", "Specular", "IOR"):
+            value = node.inputs[name].default_value
+            inputs[name] = list(value) if hasattr(value, "__len__") else float(value)
+    out["materials"][mat.name] = {"principled": inputs}
+scene = bpy.context.scene
+if scene.camera is None:  # the importer makes the file's camera, not the scene's
+    scene.camera = next((ob for ob in scene.objects if ob.type == "CAMERA"), None)
+if args["size"] and scene.camera is not None:
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = args["samples"]
+    scene.cycles.use_denoising = False  # Debian's build has no OpenImageDenoise
+    scene.render.resolution_x = scene.render.resolution_y = args["size"]
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = args["image"]
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(args["image"])
+    pixels = array.array("f", bytes(4 * len(image.pixels)))
+    image.pixels.foreach_get(pixels)
+    with open(args["image"] + ".f32", "wb") as f:  # Blender's Python has no numpy
+        pixels.tofile(f)
+print("BRDFFIT-BLENDER " + json.dumps(out))
+"""
+
+
+def blender_import(path: str | Path, size: int = 0, samples: int = 16,
+                   blender: str = "blender", timeout_s: float = 300) -> dict:
+    """What Blender's own glTF importer makes of the file at ``path`` (.gltf or .glb):
+    ``{"objects": [{"name", "type", "materials"}], "materials": {name: {"principled":
+    {input: value}}}}`` (the Principled BSDF's Base Color, Metallic, Roughness,
+    Specular and IOR as the importer set them), and with ``size`` > 0 ``"image"``: the
+    file's own camera and lights rendered by Cycles on the CPU (size x size, linear
+    RGBA, rows top to bottom; ``samples`` per pixel). ``blender``: the executable
+    (Debian's package ``blender``). Raises BrdffitError where Blender is missing or
+    the import fails."""
+    import tempfile
+
+    exe = shutil.which(blender)
+    if exe is None:
+        raise BrdffitError(f"Blender ({blender}) is not installed (Debian: apt-get install "
+                           "blender)")
+    with tempfile.TemporaryDirectory() as tmp:
+        image = str(Path(tmp) / "render.exr")
+        args = json.dumps({"path": str(Path(path).resolve()), "size": size,
+                           "samples": samples, "image": image})
+        run = subprocess.run([exe, "--background", "--factory-startup", "--python-expr",
+                              _BLENDER_SCRIPT, "--", args], capture_output=True, text=True,
+                             timeout=timeout_s)
+        line = next((s for s in run.stdout.splitlines() if s.startswith("BRDFFIT-BLENDER ")),
+                    None)
+        if run.returncode != 0 or line is None:
+            raise BrdffitError("Blender's glTF import failed: "
+                               + (run.stdout + run.stderr)[-2000:].strip())
+        out = json.loads(line.removeprefix("BRDFFIT-BLENDER "))
+        if size:  # Blender's rows run bottom-up
+            pixels = np.fromfile(image + ".f32", np.float32).reshape(size, size, 4)
+            out["image"] = pixels[::-1].copy()
+    return out
