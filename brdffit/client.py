@@ -300,7 +300,8 @@ class Client:
         """A finished fit as a renderer's material: ``mitsuba``, ``gltf`` or
         ``materialx`` (``brdffit.export``; its files in ``Export.files``), as
         ``target_model`` (one of the renderer's models; default its first); ``viewer``
-        (glTF): ``spec`` or ``threejs``, whose shading the factors are fitted for."""
+        (glTF): ``spec``, ``threejs`` or ``blender``, whose shading the factors are
+        fitted for."""
         params = {k: v for k, v in (("model", model), ("target_model", target_model),
                                     ("viewer", None if viewer == "spec" else viewer)) if v}
         params = params or None

@@ -95,6 +95,7 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
     "gltf_pbr_ior": [(label, {**p, "ior": ior}) for (label, p), ior in
                      zip(GLTF, (1.5, 1.6, 1.45, 1.5, 1.2), strict=True)],
     "gltf_threejs": GLTF,
+    "gltf_blender": GLTF,
     "gltf_pbr_dielectric": [(label, {k: v for k, v in p.items() if k != "metallic"})
                             for label, p in GLTF],
     "rough_conductor": [

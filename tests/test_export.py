@@ -308,8 +308,20 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
             <= three["log_rmse_to_table"] * 1.001)
     assert set(for_three.material["materials"][0]["pbrMetallicRoughness"]) == {
         "baseColorFactor", "metallicFactor", "roughnessFactor"}
+    blender = e.fidelity["viewers"]["blender"]
+    assert blender["model"] == "gltf_blender" and "ignores" not in blender
+    assert blender["log_rmse_to_table"] == pytest.approx(
+        table_error(measured, "gltf_blender", e.target_params)["log_rmse"], rel=1e-12)
+    for_blender = export(r, "gltf", table=measured, viewer="blender")
+    assert for_blender.fidelity["target_model"] == "gltf_blender"
+    assert (for_blender.fidelity["viewers"]["blender"]["log_rmse_to_table"]
+            <= blender["log_rmse_to_table"] * 1.001)
     ior = export(result("gltf_pbr_ior", {**GLTF, "ior": 1.6}), "gltf", table=measured)
     assert ior.fidelity["viewers"]["threejs"] is None  # three.js's model here has no ior
+    # Blender's importer ignores KHR_materials_ior: it shades the factors at ior 1.5
+    assert ior.fidelity["viewers"]["blender"]["ignores"] == ["ior"]
+    assert ior.fidelity["viewers"]["blender"]["log_rmse_to_table"] == pytest.approx(
+        table_error(measured, "gltf_blender", GLTF)["log_rmse"], rel=1e-12)
     with pytest.raises(ExportError, match="viewer 'threejs'"):
         export(r, "mitsuba", table=measured, viewer="threejs")
     with pytest.raises(ExportError, match="carries gltf_threejs"):

@@ -90,7 +90,7 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(bad), "--to", "gltf"], "not JSON"),
         ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
         ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
-         "gltf carries gltf_pbr, gltf_pbr_ior, gltf_threejs, not 'ggx'"),
+         "gltf carries gltf_pbr, gltf_pbr_ior, gltf_threejs, gltf_blender, not 'ggx'"),
         ([str(fit_json), "--to", "mitsuba", "--viewer", "threejs"],
          "viewer 'threejs': the glTF export is made for spec, threejs"),
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
@@ -180,7 +180,7 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
                                                       "estimate_error"}
         best = c.export(job, "gltf")  # default: the best fit of the job
         assert best.source_model == c.result(job).model
-        assert set(best.fidelity["viewers"]) == {"spec", "threejs"}
+        assert set(best.fidelity["viewers"]) == {"spec", "threejs", "blender"}
         # fitted for three.js's shading, on the job's table, as the library does it
         for_three = c.export(job, "gltf", viewer="threejs")
         assert for_three.fidelity["target_model"] == "gltf_threejs"

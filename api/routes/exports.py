@@ -72,9 +72,9 @@ async def get_export(
         description="which of the renderer's models the file carries: "
                     + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
                     + " (default: the first)")] = None,
-    viewer: Annotated[Literal["spec", "threejs"], Query(
+    viewer: Annotated[Literal["spec", "threejs", "blender"], Query(
         description="glTF: fit the factors for the spec's definition (default) or for the "
-                    "way three.js shades them")] = "spec",
+                    "way three.js or Blender (Cycles) shades them")] = "spec",
 ) -> ExportOut:
     job, result = await finished_fit(store, job_id, model, "exports")
     # the job's table, for the export's error to the measurement (a deleted one: said)

@@ -41,9 +41,9 @@ def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true",
                    help="print the whole export (material, warnings, fidelity) as JSON "
                         "(with --out, the files are written too)")
-    p.add_argument("--viewer", choices=("spec", "threejs"), default="spec",
+    p.add_argument("--viewer", choices=("spec", "threejs", "blender"), default="spec",
                    help="with --to gltf: fit the factors for the spec's definition (default) "
-                        "or for the way three.js shades them")
+                        "or for the way three.js or Blender (Cycles) shades them")
     p.add_argument("--glb", action="store_true",
                    help="with --to gltf --out DIR: one binary .glb instead of the .gltf")
     store = p.add_argument_group("a batch results file (docs/batch.md)")

@@ -124,8 +124,9 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     target's first, e.g. MaterialX's ``standard_surface``). ``table``: the measured
     table, for ``fidelity.log_rmse_to_table`` and the sphere's colour error (default:
     the fit's own table file, where it is still there). ``viewer`` (glTF): ``"spec"``
-    (the spec's definition, default) or ``"threejs"``: the factors fitted for the way
-    three.js shades them (target model ``gltf_threejs``). A glTF export's fidelity
+    (the spec's definition, default), ``"threejs"`` or ``"blender"``: the factors fitted
+    for the way three.js or Blender's Cycles shades them (target model ``gltf_threejs``,
+    ``gltf_blender``). A glTF export's fidelity
     has ``viewers``: the file under each viewer's shading.
     """
     from brdffit import models
@@ -220,10 +221,13 @@ def _viewer_model(target: str, viewer: str, target_model: str | None) -> str | N
 
 def _viewer_fidelity(measured, params: dict, shaded_as: str, fidelity: dict) -> dict:
     """The glTF file's factors under each viewer's shading, against the measured table:
-    ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a viewer whose
-    model cannot shade the file (three.js's ``gltf_threejs`` has no
-    ``KHR_materials_ior``) is null. The viewer whose model is ``shaded_as`` takes the
-    export's own figures (``fidelity``), measured already."""
+    ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a viewer that reads
+    some factors of the file and not others shades the ones it reads (Blender ignores
+    ``KHR_materials_ior``: ``gltf.VIEWER_IGNORES``, said in ``"ignores"``); a viewer
+    whose model cannot shade the file (three.js's ``gltf_threejs`` has no
+    ``KHR_materials_ior``; three.js shades it with a physical material) is null. The
+    viewer whose model is ``shaded_as`` takes the export's own figures (``fidelity``),
+    measured already."""
     from brdffit import models
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
@@ -231,13 +235,17 @@ def _viewer_fidelity(measured, params: dict, shaded_as: str, fidelity: dict) -> 
     out = {}
     for viewer, name in gltf.VIEWERS.items():
         model = models.get(name)
-        if {s.name for s in model.param_specs} != set(params):
+        ignored = [k for k in gltf.VIEWER_IGNORES.get(viewer, ()) if k in params]
+        seen = {k: v for k, v in params.items() if k not in ignored}
+        if {s.name for s in model.param_specs} != set(seen):
             out[viewer] = None
         elif name == shaded_as:
             out[viewer] = {"model": name, "log_rmse_to_table": fidelity["log_rmse_to_table"],
                            "sphere_colour": fidelity["sphere_colour"]}
         else:
             out[viewer] = {"model": name,
-                           "log_rmse_to_table": table_error(measured, name, params)["log_rmse"],
-                           "sphere_colour": sphere_colour(measured, model, params)["key"]}
+                           "log_rmse_to_table": table_error(measured, name, seen)["log_rmse"],
+                           "sphere_colour": sphere_colour(measured, model, seen)["key"]}
+        if out[viewer] is not None and ignored:
+            out[viewer]["ignores"] = ignored
     return out

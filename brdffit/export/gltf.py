@@ -34,16 +34,20 @@ import struct
 import numpy as np
 
 #: The models this target shades exactly; other fits are refitted as the first.
-#: ``gltf_threejs`` carries the same factors, fitted for three.js's shading
-#: (``viewer="threejs"``).
-TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs")
+#: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
+#: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
+TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
 #: viewer -> the model that shades a file as that viewer does (``fidelity.viewers``),
 #: and the target model of an export made for it (``export(..., viewer=)``). three.js's
-#: is checked against three.js itself (tests/test_export_viewers.py).
-VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs"}
+#: is checked against three.js itself (tests/test_export_viewers.py), Blender's against
+#: its Cycles render (tests/test_export_blender.py).
+VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs", "blender": "gltf_blender"}
+#: viewer -> the factors its importer ignores: Blender 3.4's shades a KHR_materials_ior
+#: file at its Specular 0.5, an index of 1.5.
+VIEWER_IGNORES = {"blender": ("ior",)}
 MEDIA_TYPE = "model/gltf+json"
 IOR_EXTENSION = "KHR_materials_ior"
 IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the dielectric "

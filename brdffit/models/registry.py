@@ -15,6 +15,7 @@ from brdffit.models.blinn_phong import BlinnPhong
 from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
+from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_pbr import GltfPBR
 from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
@@ -30,7 +31,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Lambert(), OrenNayar(), BlinnPhong(), Phong(),
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
-    GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), RoughConductor(),
+    GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), GltfBlender(),
+    RoughConductor(),
     RoughPlastic(), StandardSurface(), StandardSurface(dielectric=True),
     GGX2(),
 )
