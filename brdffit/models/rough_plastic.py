@@ -75,10 +75,16 @@ ALPHA_FLOOR = 1e-4
 @functools.cache
 def _square_rule(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gauss-Legendre nodes on the unit square (u1, u2) and their weights, as
-    Mitsuba's ``(node + 1) / 2`` and ``w_x w_y / 4``."""
+    Mitsuba's ``(node + 1) / 2`` and ``w_x w_y / 4``, folded in half: the node
+    ``u1 -> 1 - u1`` maps to the normal mirrored across the plane of incidence
+    (the concentric disk's x turns sign, y stays), where both integrands take the
+    same value (wi has no y), so the half with u1 < 1/2 counts twice (n is even).
+    The sum is Mitsuba's to rounding, at half the cost."""
     x, w = np.polynomial.legendre.leggauss(n)
-    u1, u2 = np.meshgrid(0.5 * (x + 1.0), 0.5 * (x + 1.0))
-    return u1.ravel(), u2.ravel(), np.outer(w, w).ravel() * 0.25
+    u1, u2 = np.meshgrid(0.5 * (x + 1.0), 0.5 * (x + 1.0), indexing="ij")
+    weight = np.outer(w, w) * 0.25
+    half = n // 2
+    return u1[:half].ravel(), u2[:half].ravel(), 2.0 * weight[:half].ravel()
 
 
 def _table_cosines() -> np.ndarray:
