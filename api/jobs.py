@@ -163,6 +163,7 @@ class JobQueue:
         try:
             outcome = await self.runner.run(
                 tasks.fit_models, path, table.name, job.models, job.options,
+                (table.summary or {}).get("input"),
                 progress=progress, limit_s=limit, cancel=cancel,
             )
         except Cancelled as e:

@@ -36,11 +36,13 @@ def _read(table_path: str, source: str):
     return dataclasses.replace(table, source=source)
 
 
-def fit_models(table_path: str, source: str, models: list[str], options: dict) -> Outcome:
+def fit_models(table_path: str, source: str, models: list[str], options: dict,
+               measured_input: dict | None = None) -> Outcome:
     """The fits a job asks for (``brdffit.request.run``): an :class:`Outcome` whose
     value is the list of every fit made (``FitResult`` dicts; for ``auto`` every
     candidate's, the chosen one carrying its ``selection``), its notes the models
-    that could not be fitted beside ones that could."""
+    that could not be fitted beside ones that could. ``measured_input``: the table
+    was binned from uploaded samples (its summary's ``input``); every fit carries it."""
     from brdffit.jsonout import strict
     from brdffit.request import FitRequest, run
 
@@ -54,7 +56,7 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict) -
                 what = "candidates, model auto" if request.auto else "models"
                 report(f"fitting {model} ({i + 1} of {n} {what})", i / n)
 
-        fitted = run(table, request, progress=progress)
+        fitted = run(table, request, progress=progress, measured_input=measured_input)
         report("storing the results", 1.0)
         # Strict before it is stored and served: a metric a fit could not measure is null.
         return Outcome.success([strict(r.to_dict()) for r in fitted.fits.values()],

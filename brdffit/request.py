@@ -23,6 +23,7 @@ give the same report through every door.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -178,13 +179,24 @@ class FitReport:
 
 
 def run(table: MerlTable, request: FitRequest, *, progress: ModelProgress | None = None,
-        threads: int | None = None) -> FitReport:
+        threads: int | None = None, measured_input: dict | None = None) -> FitReport:
     """Make the fits ``request`` asks for on ``table``; see the module docstring.
 
     Raises :class:`~brdffit.errors.FitInputError` when no model could be fitted;
     a model that could not be fitted beside others that could is in ``failed``.
     ``threads``: auto's candidates fitted at once (``brdffit.selection.select``).
+    ``measured_input``: where ``table`` was binned from samples, what that did
+    (``brdffit.io.readers.read_table``): every fit carries it (``FitResult.input``).
     """
+    report = _run(table, request, progress, threads)
+    if measured_input is None:
+        return report
+    fits = {name: dataclasses.replace(r, input=measured_input) for name, r in report.fits.items()}
+    return dataclasses.replace(report, fits=fits)
+
+
+def _run(table: MerlTable, request: FitRequest, progress: ModelProgress | None,
+         threads: int | None) -> FitReport:
     options = request.options
     if request.auto:
         sel = select(table, request.candidates, scene=request.scene, mono_ks=request.mono_ks,

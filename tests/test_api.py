@@ -564,3 +564,25 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     assert store.list_jobs(limit=10).total == 0  # nothing queued by a refusal
     job = fits.create(store, settings, "a" * 64, ["ggx", "lambert", "ggx"], {"samples": 4096})
     assert job.models == ["ggx", "lambert"] and job.status == "queued"
+
+
+def test_a_sample_upload_is_binned_and_its_fits_carry_the_input(server, tmp_path):
+    """An ASTM file uploads as the MERL table it bins into (docs/measurements.md): the
+    table's summary and every fit of it say what the binning did; a malformed sample
+    file is a 422 naming it and the row."""
+    from brdffit.client import ApiError, Client
+    from tests.table_files import BAD_CSV, SAMPLED, write_astm
+
+    c = Client(server.url)
+    info = c.upload_table(write_astm(tmp_path / "lab.astm", "ggx", SAMPLED, n=5000))
+    assert info.name == "lab.astm" and info.summary["input"]["format"] == "astm"
+    assert info.summary["measured_bins"] == info.summary["input"]["binning"]["bins"]
+    job = c.wait(c.fit(info.id, "ggx", **FAST))
+    assert job.status == "done", job
+    assert c.result(job).input == info.summary["input"]
+    bad = tmp_path / "bad.csv"
+    bad.write_text(BAD_CSV)
+    with pytest.raises(ApiError) as e:
+        c.upload(bad)
+    assert e.value.status_code == 422
+    assert "bad.csv: theta_o is below the horizon" in e.value.detail

@@ -1,4 +1,5 @@
-"""``/v1/tables``: upload a MERL table, read its summary.
+"""``/v1/tables``: upload a measured table (MERL, or samples: ASTM, CSV, HDF5), read its
+summary.
 
 An upload is streamed to a temporary file in the data dir while it is hashed and
 counted (a 35 MB table never sits whole in the server's memory, and a body over
@@ -53,6 +54,10 @@ class TableSummary(BaseModel):
     min: list[float] = Field(description="smallest measured value per channel")
     median: list[float]
     max: list[float]
+    input: dict | None = Field(
+        default=None, description="an upload of samples (ASTM E1392, CSV/TSV, HDF5): their "
+                                  "format and count and what binning them onto the MERL "
+                                  "grid did (docs/measurements.md); null for a MERL table")
 
 
 class TableOut(BaseModel):

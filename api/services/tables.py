@@ -8,25 +8,29 @@ import tempfile
 from pathlib import Path
 
 from api.store import Store, TableRecord
-from brdffit.errors import MerlFormatError
-from brdffit.io import merl
+from brdffit.io import merl, readers
 
 
 def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
                        name: str) -> tuple[TableRecord, bool]:
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
-    before. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for a file
-    that is no MERL table."""
+    before. A file of samples (ASTM, CSV, HDF5; ``brdffit.io.readers``, chosen by
+    ``name``'s suffix or the content) is stored as the MERL table it bins into, its
+    summary's ``input`` saying what the binning did; the id stays the upload's sha256.
+    Raises ``MerlFormatError`` naming ``name`` (not the temp file) for a file no reader
+    takes."""
     record = store.get_table(digest)
     if record is not None:  # known bytes: already validated
         tmp.unlink(missing_ok=True)
         return record, False
-    try:
-        table = merl.read(tmp)
-    except MerlFormatError as e:  # name the upload, not the temp file
-        raise MerlFormatError(name, e.problem) from None
-    return store.add_table(digest, tmp, size, name, table.summary())
+    table, measured_input = readers.read_table(tmp, name=name)  # errors name the upload
+    summary = table.summary()
+    if measured_input is not None:
+        tmp.write_bytes(merl.to_bytes(table))  # the jobs read the stored table as MERL
+        size = tmp.stat().st_size
+        summary["input"] = measured_input
+    return store.add_table(digest, tmp, size, name, summary)
 
 
 def nbrdf():

@@ -23,7 +23,7 @@ from datetime import UTC, datetime
 from brdffit import __version__
 from brdffit.errors import BrdffitError, MerlFormatError
 from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
-from brdffit.io import merl
+from brdffit.io import merl, readers
 
 
 @dataclass
@@ -39,6 +39,8 @@ class TableReadRecord:
     read_s: float = 0.0
     worker: str = ""
     finished_at: str = ""
+    #: samples binned onto the MERL grid (brdffit.io.readers.read_table); None for a table
+    input: dict | None = None
 
 
 @dataclass
@@ -105,9 +107,14 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableReadRecord]:
     record.sha256 = h.hexdigest()
     try:
         if data is None:
-            merl.read(path)  # raises, naming the problem
-            raise MerlFormatError(path, "changed size while being read")
-        table = merl.from_bytes(data, source=path)
+            # samples in another layout (ASTM, CSV, HDF5: binned onto the MERL grid),
+            # or a MERL file of the wrong size, which the reader names the problem of
+            table, measured_input = readers.read_table(path)
+            if measured_input is None:
+                raise MerlFormatError(path, "changed size while being read")
+            record.input = measured_input
+        else:
+            table = merl.from_bytes(data, source=path)
     except Exception as e:  # noqa: BLE001 - any failure is this table's, recorded
         record.message = _describe(e)
         table = None
@@ -135,7 +142,7 @@ def fit_records(table: merl.MerlTable, record: TableReadRecord, models: list[str
 
     def records(request: FitRequest) -> list[FitRecord]:
         try:
-            report = run(table, request)
+            report = run(table, request, measured_input=record.input)
         except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
             return [one(m, failure=_describe(e)) for m in request.fitted_models]
         return [one(m, fit=report.fits[m].to_dict()) if m in report.fits

@@ -13,7 +13,7 @@ from brdffit.fitting.quality import describe
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
-from brdffit.io import merl
+from brdffit.io import readers
 from brdffit.request import FitReport, FitRequest
 from brdffit.request import run as fit_request
 from brdffit.selection import DEFAULT_CANDIDATES, format_selection
@@ -71,7 +71,9 @@ def options_from_args(args) -> FitOptions:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("table", help="path to a MERL .binary file")
+    p.add_argument("table", help="the measured file: a MERL .binary table, or samples as "
+                   "ASTM E1392 (.astm), CSV/TSV with a header, or HDF5 "
+                   "(docs/measurements.md; samples are binned onto the MERL grid)")
     add_option_arguments(p, ["model"])
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_fit_options(p)
@@ -158,11 +160,14 @@ def run(args) -> int:
     request = request_from_args(args)  # refused before the table is read
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
-    table = merl.read(args.table)
+    table, measured_input = readers.read_table(args.table)
+    if measured_input is not None:  # said before the fit: binning is an approximation
+        print(f"brdffit: {measured_input['note']}", file=sys.stderr)
     # for this fit only: a caller of main() in its own process keeps its own hook
     previous, executables.on_compile = executables.on_compile, _say_compiling_once()
     try:
-        report = fit_request(table, request, progress=print_progress if request.auto else None)
+        report = fit_request(table, request, progress=print_progress if request.auto else None,
+                             measured_input=measured_input)
     finally:
         executables.on_compile = previous
     text = (format_selection(report.selection) if report.selection is not None

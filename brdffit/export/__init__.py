@@ -99,16 +99,16 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[st
     """The measured table the fidelity is judged against: ``table`` (a MerlTable or a
     path), else the file the fit was read from where it is still there; None, with a
     warning that says so, where neither is at hand."""
-    from brdffit.io import merl
+    from brdffit.io import readers
 
     if isinstance(table, MerlTable):
         return table, []
     if table is not None:
-        return merl.read(table), []
+        return readers.read_table(table)[0], []
     source = result.table
     if source and os.path.isfile(source):
-        try:
-            return merl.read(source), []
+        try:  # the fit's own file, in whichever layout it was read
+            return readers.read_table(source)[0], []
         except BrdffitError as e:
             return None, [f"fidelity: log_rmse_to_table not measured: {e}"]
     return None, [f"fidelity: log_rmse_to_table not measured: the fitted table "

@@ -21,11 +21,14 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 
 #: The version of the result schema that :meth:`FitResult.to_dict` writes. 2: the
 #: ``quality`` block's ``colour_shift`` is a CIEDE2000 figure (it was a per-channel
-#: relative error) beside ``brightness_stops``, and the block has ``next``.
-SCHEMA = "brdffit.fit/2"
+#: relative error) beside ``brightness_stops``, and the block has ``next``. 3: the
+#: key ``input`` (a fit of samples: what binning them did), which a reader of version
+#: 2 refuses as unknown.
+SCHEMA = "brdffit.fit/3"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
-#: its quality block as it was stored (the per-channel ``colour_shift``).
-READS = (SCHEMA, "brdffit.fit/1")
+#: its quality block as it was stored (the per-channel ``colour_shift``); one of
+#: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
+READS = (SCHEMA, "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,10 @@ class FitResult:
       result stored before it existed;
     - ``physical``: on a physically bounded fit (``physical=True``), what the bounds
       cost against the unconstrained fit and which were active
-      (``brdffit.fitting.physical``, docs/results.md).
+      (``brdffit.fitting.physical``, docs/results.md);
+    - ``input``: on a fit of samples (a gonioreflectometer's list, not a MERL table),
+      their format and count and what binning them onto the MERL grid did
+      (``brdffit.io.readers.input_summary``).
     """
 
     model: str
@@ -81,6 +87,7 @@ class FitResult:
     uncertainty: dict | None = None
     physical: dict | None = None
     quality: dict | None = None
+    input: dict | None = None
 
     @classmethod
     def described(cls) -> dict[str, str]:
@@ -155,4 +162,6 @@ FIELD_DOCS = {
     "quality": "how the fit looks next to the measurement: render_psnr_db, "
                "brightness_stops, colour_shift (CIEDE2000), estimate_error, grazing, verdict "
                "(good, visible or poor), reason and next (what to try, best first)",
+    "input": "on a fit of samples (ASTM, CSV, HDF5): their format, count and what binning "
+             "them onto the MERL grid moved, or null for a MERL table",
 }

@@ -1,0 +1,218 @@
+"""Measured BRDF samples in any layout: direction pairs and their values.
+
+A gonioreflectometer or a camera rig measures a list of (light, view) direction pairs
+and a reflectance for each, sparse, noisy and often in-plane; a MERL table is one
+dense, binned layout of the same thing. :class:`Measurements` holds the list:
+
+- ``wi``, ``wo`` (n, 3): unit directions in the surface's local frame (normal +z), the
+  light and the view, both on or above the horizon;
+- ``rgb`` (n, 3): the BRDF f_r (1/sr), linear RGB; a one-channel measurement is grey
+  (its three channels equal, ``provenance["channels"] == 1``);
+- ``sigma`` (n, 3) or None: each value's standard deviation (1/sr);
+- ``source`` and ``provenance``: where the samples came from, in which format, which
+  columns and units, and what the reader did to them.
+
+Every reader (:mod:`brdffit.io.readers`) builds one through :meth:`Measurements.from_angles`,
+which refuses what no fit can use, in one line naming the file and the first bad row:
+non-finite angles or values, angles out of range or below the horizon, negative
+values, no rows.
+
+:meth:`Measurements.to_table` bins the samples onto the MERL grid (the mean of the
+samples in each bin, weighted by 1 / sigma^2 where sigma is given; every other bin
+unmeasured), so that every fit, plot, export and shell of brdffit takes them; what the
+binning moved is reported (:class:`Binning`: how far each sample sat from its bin's
+centre, how much samples that share a bin disagree).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brdffit.errors import MerlFormatError
+from brdffit.io.angles import (
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+    SHAPE,
+    bin_centres,
+    dirs_to_half_diff,
+    flat_index,
+    half_diff_to_bins,
+)
+
+#: Largest BRDF value (1/sr) a sample may hold: the MERL reader's bound (1e12).
+MAX_VALUE = 1e12
+#: Directions this far below the horizon (radians) are refused, not clamped: a
+#: gonioreflectometer's 90.000 deg in a file reads as 1.5707963 (a little over pi / 2).
+HORIZON_SLACK = 1e-6
+
+
+class MeasurementsError(MerlFormatError):
+    """Samples that no fit can use: the message names the source and the first bad row.
+    A kind of MerlFormatError (a measured file that cannot be read as a table), so
+    every shell that reports a bad table (exit 2, the service's 4xx, a batch's skipped
+    file) reports these the same way."""
+
+
+def _first_rows(bad: np.ndarray, rows: np.ndarray | None) -> str:
+    """'N rows (first: row K)' of a boolean mask, K the file's own row number."""
+    idx = np.flatnonzero(bad)
+    first = int(idx[0]) if rows is None else int(rows[idx[0]])
+    return f"{idx.size} row{'s' if idx.size != 1 else ''} (first: row {first + 1})"
+
+
+def direction(theta, phi) -> np.ndarray:
+    """Unit vectors (..., 3) of polar angle ``theta`` from the normal and azimuth ``phi``."""
+    theta, phi = np.asarray(theta, float), np.asarray(phi, float)
+    s = np.sin(theta)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """BRDF samples at arbitrary direction pairs (module docstring)."""
+
+    wi: np.ndarray
+    wo: np.ndarray
+    rgb: np.ndarray
+    sigma: np.ndarray | None = None
+    source: str = "<memory>"
+    provenance: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.rgb.shape[0])
+
+    @classmethod
+    def from_angles(cls, theta_i, phi_i, theta_o, phi_o, values, sigma=None, *,
+                    source: str = "<memory>", provenance: dict | None = None,
+                    rows: np.ndarray | None = None) -> Measurements:
+        """Samples from polar angles (radians; light ``_i``, view ``_o``) and values
+        (n,) or (n, 3); ``sigma`` likewise. ``rows``: each sample's row number in its
+        file (0-based), for the messages. Raises :class:`MeasurementsError` on what no
+        fit can use (module docstring)."""
+        angles = [np.asarray(a, float).ravel() for a in (theta_i, phi_i, theta_o, phi_o)]
+        values = np.asarray(values, float)
+        if values.size == 0:
+            raise MeasurementsError(source, "no data: the file holds no sample rows")
+        one_channel = values.ndim == 1
+        values = values.reshape(values.shape[0], -1) if values.ndim else values.reshape(1, 1)
+        n = values.shape[0]
+        if any(a.size != n for a in angles) or values.shape[1] not in (1, 3):
+            raise MeasurementsError(source, f"{n} values but angles of "
+                                            f"{[a.size for a in angles]} rows")
+        for name, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), angles, strict=True):
+            if not np.all(np.isfinite(a)):
+                raise MeasurementsError(source, f"{name} is not finite in "
+                                                f"{_first_rows(~np.isfinite(a), rows)}")
+        for name, a in (("theta_i", angles[0]), ("theta_o", angles[2])):
+            below = a > np.pi / 2 + HORIZON_SLACK
+            if below.any():
+                raise MeasurementsError(
+                    source, f"{name} is below the horizon (more than 90 degrees from the "
+                            f"normal) in {_first_rows(below, rows)}: a reflectance sample "
+                            "has both directions above the surface")
+            negative = a < 0
+            if negative.any():
+                raise MeasurementsError(
+                    source, f"{name} is negative in {_first_rows(negative, rows)}: polar "
+                            "angles are measured from the normal, 0 to 90 degrees (an "
+                            "in-plane file's signed angle is theta = |angle|, with phi "
+                            "turned by 180 degrees on the negative side)")
+        if not np.all(np.isfinite(values)):
+            raise MeasurementsError(source, "a value is not finite in "
+                                            f"{_first_rows(~np.all(np.isfinite(values), 1), rows)}")
+        if np.any(values < 0):
+            raise MeasurementsError(
+                source, f"a value is negative in {_first_rows(np.any(values < 0, 1), rows)}: "
+                        "a BRDF is >= 0 (a background subtraction below zero is noise; "
+                        "clip it to 0 knowingly before fitting)")
+        if np.any(values > MAX_VALUE):
+            raise MeasurementsError(
+                source, f"a value is above {MAX_VALUE:g} 1/sr in "
+                        f"{_first_rows(np.any(values > MAX_VALUE, 1), rows)}: another unit, "
+                        "or a corrupt value")
+        rgb = np.repeat(values, 3, axis=1) if values.shape[1] == 1 else values
+        if sigma is not None:
+            sigma = np.asarray(sigma, float).reshape(n, -1)
+            sigma = np.repeat(sigma, 3, axis=1) if sigma.shape[1] == 1 else sigma
+            bad = ~np.all(np.isfinite(sigma) & (sigma >= 0), axis=1)
+            if bad.any():
+                raise MeasurementsError(source, "sigma is negative or not finite in "
+                                                f"{_first_rows(bad, rows)}")
+        theta_i, phi_i, theta_o, phi_o = (np.minimum(a, np.pi / 2) if k % 2 == 0 else a
+                                          for k, a in enumerate(angles))
+        info = {"channels": 1 if one_channel or values.shape[1] == 1 else 3,
+                **(provenance or {})}
+        return cls(direction(theta_i, phi_i), direction(theta_o, phi_o), rgb, sigma, source,
+                   info)
+
+    def to_table(self):
+        """The samples binned onto the MERL grid: ``(MerlTable, Binning)`` (module
+        docstring). Bins no sample falls in are unmeasured."""
+        from brdffit.io.merl import MerlTable
+
+        theta_h, theta_d, phi_d = dirs_to_half_diff(self.wi, self.wo)
+        bins = half_diff_to_bins(theta_h, theta_d, phi_d)
+        flat = flat_index(*bins)
+        n_bins = N_THETA_H * N_THETA_D * N_PHI_D
+        if self.sigma is None:
+            w = np.ones_like(self.rgb)
+        else:  # 1 / sigma^2; a sigma of 0 is the most certain in its bin
+            floor = max(float(np.min(self.sigma[self.sigma > 0], initial=1.0)) * 1e-3, 1e-30)
+            w = 1.0 / np.maximum(self.sigma, floor) ** 2
+        total = np.stack([np.bincount(flat, w[:, c] * self.rgb[:, c], n_bins) for c in range(3)])
+        weight = np.stack([np.bincount(flat, w[:, c], n_bins) for c in range(3)])
+        count = np.bincount(flat, minlength=n_bins)
+        measured = count > 0
+        mean = np.where(measured, total / np.where(weight > 0, weight, 1.0), 0.0)
+        # how much the samples that share a bin disagree (relative to their mean)
+        spread = np.abs(self.rgb.T - mean[:, flat]) / np.maximum(mean[:, flat], 1e-12)
+        shared = count[flat] > 1
+        c_th, c_td, c_pd = bin_centres(*bins)
+        folded = np.where(phi_d < 0, phi_d + np.pi, phi_d)
+        offset = np.degrees(np.stack([np.abs(theta_h - c_th), np.abs(theta_d - c_td),
+                                      np.abs(folded - c_pd)]))
+        binning = Binning(
+            samples=self.n, bins=int(measured.sum()),
+            most_in_a_bin=int(count.max()),
+            offset_deg={k: {"median": float(np.median(o)), "max": float(o.max())}
+                        for k, o in zip(("theta_h", "theta_d", "phi_d"), offset, strict=True)},
+            spread_in_bins=(None if not shared.any() else
+                            {"median": float(np.median(spread[:, shared])),
+                             "max": float(spread[:, shared].max())}))
+        table = MerlTable.from_values(mean.reshape(3, *SHAPE), measured.reshape(SHAPE),
+                                      source=self.source)
+        return table, binning
+
+
+@dataclass(frozen=True)
+class Binning:
+    """What binning samples onto the MERL grid did: ``samples`` into ``bins`` (at most
+    ``most_in_a_bin`` in one), each sample moved to its bin's centre by
+    ``offset_deg`` (median, max per angle: theta_h's bins are 0.02-2 degrees wide, the
+    others 1 degree), and ``spread_in_bins``: the relative disagreement of samples
+    that share a bin (None where none do)."""
+
+    samples: int
+    bins: int
+    most_in_a_bin: int
+    offset_deg: dict
+    spread_in_bins: dict | None
+
+    def summary(self) -> dict:
+        return {"samples": self.samples, "bins": self.bins, "most_in_a_bin": self.most_in_a_bin,
+                "offset_deg": self.offset_deg, "spread_in_bins": self.spread_in_bins}
+
+    def describe(self) -> str:
+        """One line for a person: how the samples became a table."""
+        th = self.offset_deg["theta_h"]
+        spread = ("" if self.spread_in_bins is None else
+                  f"; samples sharing a bin differ by {100 * self.spread_in_bins['median']:.2g}% "
+                  f"(median)")
+        return (f"binned {self.samples} samples into {self.bins} MERL bins (at most "
+                f"{self.most_in_a_bin} in one); each moved to its bin's centre by at most "
+                f"{max(o['max'] for o in self.offset_deg.values()):.2g} deg (theta_h median "
+                f"{th['median']:.2g} deg){spread}")

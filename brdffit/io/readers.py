@@ -1,0 +1,338 @@
+"""Readers of measured BRDF files, registered by suffix and recognised by content.
+
+``read_measured(path)`` returns a :class:`~brdffit.io.merl.MerlTable` for a MERL
+``.binary`` file (its own fast paths) and :class:`~brdffit.io.measurements.Measurements`
+for every sample layout; ``read_table(path)`` gives a table either way (samples binned
+onto the MERL grid, with what the binning did). The layouts (docs/measurements.md):
+
+- **MERL** ``.binary`` (:mod:`brdffit.io.merl`).
+- **ASTM E1392**, as Cornell's gonioreflectometer files and ALTA's reader have them
+  (``.astm``): header lines ``KEY value`` (``NUM_POINTS n``, ``VARS`` naming the
+  columns, e.g. ``theta_i,phi_i,theta_s,phi_s,R,G,B``), then one comma-separated row
+  per sample; angles in radians.
+- **CSV / TSV** (``.csv``, ``.tsv``, ``.txt``): a header row naming the columns;
+  ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o`` (``theta_r``/``theta_s``/``theta_v`` and
+  their ``phi`` read as ``_o``), each with its unit, ``theta_i_deg`` or
+  ``theta_i_rad``, or one line ``# angles: degrees`` (or radians) before the header;
+  the values ``r, g, b`` or one channel ``value`` (also ``brdf``, ``y``); optional
+  ``sigma_r, sigma_g, sigma_b`` or ``sigma``. Lines starting with ``#`` are comments.
+- **HDF5** (``.h5``, ``.hdf5``): datasets ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
+  (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file),
+  ``rgb`` (n, 3) or ``value`` (n,), optional ``sigma`` (n, 3) or (n,).
+
+A file that is not what its suffix says, or whose content no reader recognises, gets
+one line naming the file and what was expected.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import os
+import re
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from brdffit.errors import MerlFormatError
+from brdffit.io import merl
+from brdffit.io.measurements import Measurements, MeasurementsError
+
+#: HDF5's file signature (its first eight bytes).
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: Column name -> the canonical name (light ``_i``, view ``_o``).
+ANGLE_ALIASES = {
+    "theta_i": "theta_i", "phi_i": "phi_i", "theta_in": "theta_i", "phi_in": "phi_i",
+    "theta_l": "theta_i", "phi_l": "phi_i",
+    "theta_o": "theta_o", "phi_o": "phi_o", "theta_out": "theta_o", "phi_out": "phi_o",
+    "theta_r": "theta_o", "phi_r": "phi_o", "theta_s": "theta_o", "phi_s": "phi_o",
+    "theta_v": "theta_o", "phi_v": "phi_o",
+}
+CHANNELS = ("r", "g", "b")
+ONE_CHANNEL = ("value", "brdf", "y")
+ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
+
+
+def _unit_scale(unit: str, source: str) -> float:
+    unit = unit.strip().lower()
+    if unit in ("deg", "degree", "degrees"):
+        return np.pi / 180.0
+    if unit in ("rad", "radian", "radians"):
+        return 1.0
+    raise MeasurementsError(source, f"unknown angle unit {unit!r}: degrees or radians")
+
+
+def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
+    """Which column holds what: ``{"theta_i": (index, scale), ..., "values": [idx...],
+    "sigma": [idx...] or None}``; refuses duplicated, missing or unit-less columns."""
+    seen: dict[str, int] = {}
+    for k, raw in enumerate(names):
+        name = raw.strip().lower()
+        if not name:
+            raise MeasurementsError(source, f"column {k + 1} of the header has no name")
+        if name in seen:
+            raise MeasurementsError(source, f"column {raw.strip()!r} appears twice in the header")
+        seen[name] = k
+    out: dict = {}
+    for name, k in seen.items():
+        m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?", name)
+        if m is None or f"{m[1]}_{m[2]}" not in ANGLE_ALIASES:
+            continue
+        canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
+        if canonical in out:
+            raise MeasurementsError(source, f"two columns give {canonical} "
+                                            f"({names[out[canonical][0]].strip()!r} and "
+                                            f"{names[k].strip()!r})")
+        unit = m[3] or default_unit
+        if unit is None:
+            raise MeasurementsError(
+                source, f"column {names[k].strip()!r} has no unit: name it {canonical}_deg or "
+                        f"{canonical}_rad, or put '# angles: degrees' (or radians) before "
+                        "the header")
+        out[canonical] = (k, _unit_scale(unit, source))
+    missing = [a for a in ANGLES if a not in out]
+    if missing:
+        raise MeasurementsError(source, f"no column for {', '.join(missing)} (the header has "
+                                        f"{', '.join(n.strip() for n in names)})")
+    rgb = [seen.get(c) for c in CHANNELS]
+    one = [seen[c] for c in ONE_CHANNEL if c in seen]
+    if all(k is not None for k in rgb):
+        out["values"] = rgb
+        sig = [seen.get(f"sigma_{c}") for c in CHANNELS]
+        out["sigma"] = sig if all(k is not None for k in sig) else (
+            [seen["sigma"]] if "sigma" in seen else None)
+    elif len(one) == 1:
+        out["values"] = one
+        out["sigma"] = [seen["sigma"]] if "sigma" in seen else None
+    else:
+        some = [c for c, k in zip(CHANNELS, rgb, strict=True) if k is not None]
+        raise MeasurementsError(
+            source, "no value columns: r, g, b (RGB) or one of value, brdf, y (one channel)"
+                    + (f"; only {', '.join(some)} of r, g, b" if some else "")
+                    + ("" if len(one) < 2 else "; more than one single-channel column"))
+    return out
+
+
+def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
+               provenance: dict) -> Measurements:
+    angles = [rows[:, cols[a][0]] * cols[a][1] for a in ANGLES]
+    values = rows[:, cols["values"]]
+    sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
+    return Measurements.from_angles(*angles, values[:, 0] if values.shape[1] == 1 else values,
+                                    sigma, source=source, provenance=provenance,
+                                    rows=row_numbers)
+
+
+def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
+             source: str) -> tuple[np.ndarray, np.ndarray]:
+    """The data lines as floats (rows, width), and their line numbers (0-based)."""
+    out = np.empty((len(lines), width))
+    for j, (number, line) in enumerate(lines):
+        cells = line.split(delimiter) if delimiter else line.split()
+        if len(cells) != width:
+            raise MeasurementsError(source, f"row {number + 1} has {len(cells)} values, the "
+                                            f"header names {width} columns")
+        try:
+            out[j] = [float(c) for c in cells]
+        except ValueError:
+            raise MeasurementsError(source, f"row {number + 1} is not all numbers: "
+                                            f"{line.strip()[:80]!r}") from None
+    return out, np.array([n for n, _ in lines])
+
+
+def _text(path: Path) -> str:
+    data = path.read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
+                                           "text (ASTM, CSV) or HDF5") from None
+
+
+def read_astm(path: str | os.PathLike) -> Measurements:
+    """An ASTM E1392 file as Cornell's and ALTA's (module docstring)."""
+    path = Path(path)
+    source = str(path)
+    header: dict[str, str] = {}
+    data: list[tuple[int, str]] = []
+    for number, line in enumerate(_text(path).splitlines()):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        if data or re.match(r"^[-+.\d]", stripped):
+            data.append((number, stripped))
+            continue
+        key, _, value = stripped.partition(" ")
+        header[key.upper()] = value.strip()
+    if "VARS" not in header:
+        raise MeasurementsError(source, "no VARS line: an ASTM E1392 file names its columns "
+                                        "(VARS theta_i,phi_i,theta_s,phi_s,R,G,B)")
+    names = [n for n in re.split(r"[,\s]+", header["VARS"]) if n]
+    cols = _columns(names, source, default_unit="radians")
+    rows, numbers = _numbers(data, ",", len(names), source)
+    if "NUM_POINTS" in header:
+        try:
+            promised = int(header["NUM_POINTS"])
+        except ValueError:
+            raise MeasurementsError(source, f"NUM_POINTS {header['NUM_POINTS']!r} is not "
+                                            "a count") from None
+        if promised != len(rows):
+            raise MeasurementsError(source, f"NUM_POINTS says {promised} rows, the file has "
+                                            f"{len(rows)} (truncated?)")
+    return _from_rows(rows, numbers, cols, source,
+                      {"format": "astm", "columns": names, "angle_unit": "radians",
+                       "header": header})
+
+
+def read_csv(path: str | os.PathLike) -> Measurements:
+    """A CSV or TSV file with a header row (module docstring)."""
+    path = Path(path)
+    source = str(path)
+    text = _text(path)
+    unit = None
+    lines = []
+    for number, line in enumerate(text.splitlines()):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            m = re.fullmatch(r"#\s*angles\s*[:=]\s*(\w+)", stripped, re.IGNORECASE)
+            if m:
+                unit = m[1]
+            continue
+        lines.append((number, stripped))
+    if not lines:
+        raise MeasurementsError(source, "no header and no data: the file is empty")
+    try:
+        dialect = csv.Sniffer().sniff(lines[0][1], delimiters=",;\t ")
+        delimiter = dialect.delimiter
+    except csv.Error:
+        delimiter = ","
+    names = next(csv.reader(io.StringIO(lines[0][1]), delimiter=delimiter))
+    if delimiter == " ":
+        names = [n for n in names if n]
+    cols = _columns(names, source, default_unit=unit)
+    rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
+                             source)
+    if unit is not None:
+        _unit_scale(unit, source)
+    return _from_rows(rows, numbers, cols, source,
+                      {"format": "csv", "columns": [n.strip() for n in names],
+                       "angle_unit": unit or "per column"})
+
+
+def read_hdf5(path: str | os.PathLike) -> Measurements:
+    """An HDF5 file of sample datasets (module docstring)."""
+    import h5py
+
+    source = str(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise MeasurementsError(source, f"not a readable HDF5 file ({e})") from None
+    with f:
+        missing = [a for a in ANGLES if a not in f]
+        if missing:
+            raise MeasurementsError(source, f"no dataset {', '.join(missing)} (the file has "
+                                            f"{', '.join(f.keys()) or 'none'})")
+        angles = []
+        for name in ANGLES:
+            unit = f[name].attrs.get("units", f.attrs.get("units"))
+            if unit is None:
+                raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
+                                                "(degrees or radians), nor has the file")
+            unit = unit.decode() if isinstance(unit, bytes) else str(unit)
+            angles.append(np.asarray(f[name], float).ravel() * _unit_scale(unit, source))
+        if "rgb" in f:
+            values = np.asarray(f["rgb"], float)
+            if values.ndim != 2 or values.shape[1] != 3:
+                raise MeasurementsError(source, f"dataset rgb has shape {values.shape}, "
+                                                "not (n, 3)")
+        elif "value" in f:
+            values = np.asarray(f["value"], float).ravel()
+        else:
+            raise MeasurementsError(source, "no values: a dataset rgb (n, 3) or value (n,)")
+        sigma = np.asarray(f["sigma"], float) if "sigma" in f else None
+    return Measurements.from_angles(*angles, values, sigma, source=source,
+                                    provenance={"format": "hdf5"})
+
+
+#: suffix -> reader; a MERL table is read as a table.
+READERS: dict[str, Callable] = {
+    ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
+    ".txt": read_csv, ".h5": read_hdf5, ".hdf5": read_hdf5,
+}
+
+
+def _by_content(path: Path) -> Callable:
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if head.startswith(HDF5_SIGNATURE):
+        return read_hdf5
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return merl.read  # binary: the MERL reader says what is wrong with it
+    keys = {line.split(" ", 1)[0].upper() for line in text.splitlines() if line.strip()}
+    return read_astm if {"VARS", "NUM_POINTS"} & keys else read_csv
+
+
+def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
+    """The reader of ``path``: by its suffix (``name``'s, where given), else by its
+    first bytes."""
+    path = Path(path)
+    reader = READERS.get(Path(name or path).suffix.lower())
+    if reader is None:
+        reader = _by_content(path)
+    elif reader is merl.read:
+        with open(path, "rb") as f:  # a sample list named .binary: read as what it is
+            head = f.read(8)
+        if head.startswith(HDF5_SIGNATURE):
+            return read_hdf5
+    return reader
+
+
+def read_measured(path: str | os.PathLike,
+                  name: str | None = None) -> merl.MerlTable | Measurements:
+    """A measured file in any layout (module docstring); ``name`` as in
+    :func:`read_table`. Raises MerlFormatError (MeasurementsError is one) with one
+    line on what is wrong."""
+    path = Path(path)
+    if path.is_dir():
+        raise MerlFormatError(name or str(path), "is a directory, not a measured table")
+    if not path.exists():  # as the MERL reader says it
+        raise MerlFormatError(name or str(path), "cannot read: No such file or directory")
+    reader = reader_for(path, name)
+    try:
+        got = reader(path)
+    except MerlFormatError as e:
+        if name is None:
+            raise
+        raise type(e)(name, e.problem) from None
+    if name is not None:
+        got = dataclasses.replace(got, source=name)
+    return got
+
+
+def read_table(path: str | os.PathLike, name: str | None = None):
+    """A measured file as a MERL table: ``(table, input)``; ``input`` is None for a
+    MERL file, else :func:`input_summary` of its samples. ``name``: what the file is
+    called where ``path`` is a temporary copy (its suffix chooses the reader, and the
+    messages and the table name it)."""
+    got = read_measured(path, name)
+    if isinstance(got, merl.MerlTable):
+        return got, None
+    table, binning = got.to_table()
+    return table, input_summary(got, binning)
+
+
+def input_summary(samples: Measurements, binning) -> dict:
+    """What a fit of binned samples reports of its input (``FitResult.input``): the
+    format, the sample count, the channels and the binning (``Binning.summary``), and
+    the line that says it."""
+    return {"format": samples.provenance.get("format"), "samples": samples.n,
+            "channels": samples.provenance.get("channels", 3),
+            "sigma": samples.sigma is not None, "binning": binning.summary(),
+            "note": binning.describe()}

@@ -1,0 +1,56 @@
+"""Sample files through the CLI and the batch (issue 39, first part): ``brdffit fit``
+in its own process and ``run_batch`` take an ASTM or CSV file as they take a MERL
+table, bin it, and report what the binning did in each fit's ``input``; a malformed
+file is one line and exit 2 (the CLI), a failed table (the batch). The service's
+upload: tests/test_api.py."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.cli_helpers import run
+from tests.table_files import BAD_CSV, SAMPLED, write_astm
+
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def astm_file(tmp_path_factory):
+    return write_astm(tmp_path_factory.mktemp("astm") / "lab.astm", "ggx", SAMPLED)
+
+
+def test_cli_fits_a_sample_file_and_says_what_binning_did(astm_file, tmp_path):
+    r = run("brdffit.cli", "fit", str(astm_file), "--model", "ggx", "--samples", "4096",
+            "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["schema"] == "brdffit.fit/3"
+    assert out["input"]["format"] == "astm" and out["input"]["samples"] == 20_000
+    assert out["input"]["note"] in r.stderr  # said before the fit, on stderr
+    assert out["params"]["alpha"] == pytest.approx(SAMPLED["alpha"], rel=0.05)
+    bad = tmp_path / "bad.csv"
+    bad.write_text(BAD_CSV)
+    r = run("brdffit.cli", "fit", str(bad), "--model", "ggx")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "theta_o is below the horizon" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_a_batch_fits_sample_files_beside_merl_tables(astm_file, tmp_path):
+    from brdffit.batch.job import FitOptions, run_batch
+    from brdffit.batch.store import read_results
+    from tests.table_files import write_tables
+
+    write_tables(tmp_path, {"ggx": ("ggx", {"kd": [0.1] * 3, "ks": [0.5] * 3, "alpha": 0.1,
+                                            "f0": 0.5})})
+    bad = tmp_path / "bad.csv"
+    bad.write_text(BAD_CSV)
+    out = tmp_path / "r.h5"
+    run_batch([str(astm_file), str(tmp_path / "ggx.binary"), str(bad)], ["ggx"], out,
+              options=FitOptions(samples=2048, starts=1), workers=0, progress=False)
+    tables = {t["name"]: t for t in read_results(out)["tables"]}
+    lab = tables["lab.astm"]["fits"]["ggx"]["fit"]
+    assert lab["input"]["format"] == "astm" and lab["input"]["samples"] == 20_000
+    assert tables["ggx"]["fits"]["ggx"]["fit"]["input"] is None
+    assert "below the horizon" in json.dumps(tables["bad.csv"])
