@@ -57,6 +57,7 @@ def _stored(cache: Path) -> list[Path]:
     return sorted((cache / "executables").glob("*/*.xla"))
 
 
+@pytest.mark.system  # two processes, the first compiling into an empty cache, ~20 s
 def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path):
     cache = tmp_path / "cache"
     first, log1 = _run(cache)
@@ -80,6 +81,7 @@ def test_a_second_process_runs_the_stored_fit_and_gets_the_same_result(tmp_path)
     assert all(f.stat().st_size > 100 for f in _stored(cache))
 
 
+@pytest.mark.system  # processes compiling into an empty cache, ~20 s
 def test_solves_that_call_lapack_run_from_their_stored_programs(tmp_path):
     # optimistix's Levenberg-Marquardt and dogleg solve with QR (LAPACK): their
     # stored programs crashed the next process (a segmentation fault on first run)

@@ -139,6 +139,7 @@ def test_the_gltf_file_is_a_scene_that_shows_the_material():
     assert kind == b"BIN\0" and glb[28 + n_json:28 + n_json + len(blob)] == blob
 
 
+@pytest.mark.slow
 def test_conductor_fit_exports_exactly_to_mitsuba():
     r = result("rough_conductor", CONDUCTOR)
     e = export(r, "mitsuba", table=fit_as_table(r))
@@ -174,6 +175,7 @@ def test_conductor_fit_exports_exactly_to_mitsuba():
     assert pure.material["type"] == "roughconductor"
 
 
+@pytest.mark.slow
 def test_other_fits_are_refitted_and_their_loss_is_the_measured_one():
     r = result("ggx", GGX)
     e = export(r, "gltf")
@@ -286,6 +288,7 @@ def test_an_export_of_a_fit_that_does_not_look_good_says_so():
     assert not [w for w in export(good, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
 
 
+@pytest.mark.slow
 def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     """fidelity.viewers: the file's factors under the spec's definition and under
     three.js's shading (gltf_threejs), each against the table; viewer="threejs" fits
@@ -364,6 +367,7 @@ def test_a_glTF_refit_that_comes_out_a_metal_mixture_is_weighed_against_a_dielec
                           "specular_IOR": 1.5},
      "standard_surface", lambda p: p["metalness"] == 0.0),
 ])
+@pytest.mark.slow
 def test_mitsuba_and_materialx_weigh_a_metal_mixture_too(mixture_model, mixture, dielectric,
                                                          is_dielectric):
     """Mitsuba's conductor blend against its roughplastic, MaterialX's metalness against

@@ -49,6 +49,7 @@ def _stored(out, name: str, model: str) -> FitResult:
     return FitResult.from_dict(table["fits"][model]["fit"])
 
 
+@pytest.mark.slow
 def test_a_stored_fit_exports_as_the_fit_itself(store):
     root, out = store
     want = export(_stored(out, "gold", "ggx"), "gltf")

@@ -133,6 +133,7 @@ def test_ggx2_is_the_sum_of_two_ggx_lobes():
     np.testing.assert_allclose(got, ref, rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_ggx2_derivatives_match_plain_autodiff():
     """ggx2's custom JVP (lobe Jacobian formed once) is exact: same derivatives in the
     parameters and in the directions as differentiating the formula directly."""

@@ -99,6 +99,7 @@ def test_stratified_sample_is_unbiased_and_fixed_size():
     assert everything.n_used == np.count_nonzero(w)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ggx", "ggx2", "oren_nayar"])
 def test_blocked_normal_equations_equal_one_pass(name, noisy_ggx):
     """Every bin (1.46M samples) is summed in blocks; the sums are the same."""

@@ -77,6 +77,7 @@ def test_a_physical_material_is_fitted_as_it_is():
     assert p["albedo_max_before"] == p["albedo_max_after"]
 
 
+@pytest.mark.slow
 def test_an_unphysical_fit_is_bounded_and_says_what_it_cost():
     # ks = 1.6 and a bright kd: the unconstrained fit reflects more than it receives
     table, _ = make_table("ggx", {"kd": [0.8, 0.7, 0.3], "ks": [1.6, 1.4, 1.0], "alpha": 0.3,
@@ -96,6 +97,7 @@ def test_an_unphysical_fit_is_bounded_and_says_what_it_cost():
     assert r.uncertainty is not None
 
 
+@pytest.mark.slow
 def test_gltf_pbr_is_held_to_albedo_one_at_grazing():
     # glTF's formula reflects more than 1 towards grazing for a bright smooth dielectric
     # (docs/exports.md): the bounded fit gives up diffuse colour to conserve energy
@@ -110,6 +112,7 @@ def test_gltf_pbr_is_held_to_albedo_one_at_grazing():
     assert 0 < p["relative_cost"] and r.converged, r.result
 
 
+@pytest.mark.slow
 def test_the_clamp_scales_the_linear_reflectances_to_albedo_one():
     ggx = {"kd": [0.9, 0.5, 0.2], "ks": [1.0, 0.9, 0.3], "alpha": 0.1, "f0": 0.5}
     m = models.get("ggx")

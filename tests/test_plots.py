@@ -56,6 +56,7 @@ def test_unknown_kind_is_refused(ggx):
         plots.render("histogram", *ggx)
 
 
+@pytest.mark.slow
 def test_sparse_table_and_null_metrics_still_plot(ggx):
     """Half the bins unmeasured shows as grey, a result with a null (NaN) metric
     still gets a title: the service stores non-finite metrics as null."""
@@ -125,6 +126,7 @@ def test_spheres_share_one_exposure_so_dark_and_bright_tables_look_different():
     assert bright > 2.5 * dark, (dark, bright)
 
 
+@pytest.mark.slow
 def test_exposure_brightens_table_and_fit_alike_before_the_tone_curve():
     t = table("lambert")
     r = fit(t, "lambert", **FAST)

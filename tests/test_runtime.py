@@ -56,6 +56,7 @@ def _env(**changes) -> dict:
     return env
 
 
+@pytest.mark.system  # a fresh process with an empty cache: a real compile, ~10 s
 def test_fit_leaves_x64_off_and_writes_the_cache_on_first_use(tmp_path):
     cache = tmp_path / "cache"
     out = _probe(_env(BRDFFIT_CACHE_DIR=str(cache)))
@@ -69,6 +70,7 @@ def test_fit_leaves_x64_off_and_writes_the_cache_on_first_use(tmp_path):
     assert out["converged"] and out["alpha"] == pytest.approx(0.05, rel=1e-6)
 
 
+@pytest.mark.system  # fresh processes that compile into empty caches, ~16 s
 def test_cache_off_and_xdg_location(tmp_path):
     # where the cache goes does not depend on the model: lambert compiles fastest
     off = _probe(_env(BRDFFIT_CACHE_DIR="", HOME=str(tmp_path / "home")), "lambert")

@@ -381,6 +381,7 @@ def _auto_job_answers_model_auto_with_its_choice(results: list[dict]) -> None:
         assert e.value.status_code == 404 and e.value.detail.endswith(f"it has {fitted}")
 
 
+@pytest.mark.slow
 def test_auto_plots_add_a_ranking_figure(ggx_table, ggx_selection, tmp_path):
     """``brdffit fit --model auto --plots`` draws the chosen fit and the ranking of
     every candidate (``ranking.png``), from the chosen fit's own ``selection``."""

@@ -37,6 +37,7 @@ def _sharper_first(params: dict, se: dict) -> tuple[dict, dict]:
     return params, se
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["ggx", "ggx2"])
 def test_standard_errors_match_the_spread_of_fits_to_noisy_copies(model):
     """16 copies here (bench/uncertainty_check.py runs 50): every reported error is
