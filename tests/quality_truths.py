@@ -122,6 +122,18 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
             STANDARD_SURFACE[4],
         )
     ],
+    "principled": [
+        ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
+                     "sheen": 0.3, "sheen_tint": 0.5}),
+        ("saturated", {"base_color": SATURATED, "roughness": 0.55, "specular": 0.5,
+                       "sheen": 0.0, "sheen_tint": 0.0}),
+        ("dark", {"base_color": DARK, "roughness": 0.3, "specular": 0.3, "sheen": 0.1,
+                  "sheen_tint": 0.0}),
+        ("near-mirror", {"base_color": [0.02] * 3, "roughness": 0.06, "specular": 0.8,
+                         "sheen": 0.0, "sheen_tint": 0.0}),
+        ("grazing-heavy", {"base_color": [0.2] * 3, "roughness": 0.9, "specular": 0.5,
+                           "sheen": 1.0, "sheen_tint": 0.3}),
+    ],
     "rough_plastic": [
         ("example", {"kd": [0.5, 0.2, 0.1], "alpha": 0.2, "eta": 1.5, "ks": [1.0] * 3}),
         ("saturated", {"kd": SATURATED, "alpha": 0.3, "eta": 1.49, "ks": [1.0] * 3}),

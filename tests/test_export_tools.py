@@ -84,6 +84,26 @@ def test_rough_plastic_is_mitsubas_roughplastic(params):
     np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
 
 
+@pytest.mark.parametrize("params", [
+    {"base_color": [0.7, 0.3, 0.1], "roughness": 0.4, "specular": 0.5, "sheen": 0.5,
+     "sheen_tint": 0.6},
+    {"base_color": [0.1, 0.4, 0.9], "roughness": 0.1, "specular": 0.9, "sheen": 0.0,
+     "sheen_tint": 0.0},
+    {"base_color": [0.9, 0.9, 0.9], "roughness": 1.0, "specular": 0.05, "sheen": 1.0,
+     "sheen_tint": 0.0},
+])
+def test_principled_is_mitsubas_principled(params):
+    """brdffit's principled against Mitsuba's principled BSDF.eval (a dielectric with
+    Burley's diffuse and a sheen)."""
+    material = mitsuba_load_dict(params)
+    assert material["type"] == "principled"
+    wi, wo = _pairs(3000, seed=3)
+    ours = _brdffit("principled", params, wi, wo)
+    theirs = check.mitsuba_eval(material, wi, wo)
+    big = ours > 1e-6 * ours.max()
+    np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
+
+
 def mitsuba_load_dict(params):
     from brdffit.export import mitsuba
 
@@ -115,15 +135,16 @@ def test_plastics_and_fabrics_export_as_dielectrics_to_every_target(material):
         assert len(said) == 1 and f"{chosen['mixture_log_rmse']:.4g}" in said[0]
         assert ("within 1.1x" in said[0]) == (ratio <= 1.1), said
         assert e.fidelity["log_rmse_to_table"] == pytest.approx(chosen["dielectric_log_rmse"])
-        if target == "mitsuba":  # the file Mitsuba loads is the roughplastic reported
-            assert e.material["type"] == "roughplastic"
+        if target == "mitsuba":  # the file Mitsuba loads is the dielectric reported
+            assert e.material["type"] == {"rough_plastic": "roughplastic",
+                                          "principled": "principled"}[chosen["dielectric_model"]]
             check.mitsuba().load_string(e.files[next(iter(e.files))])
 
 
 @pytest.mark.parametrize("source", [("red-plastic", "ggx"), ("pink-felt", "gltf_pbr")])
 def test_reported_fidelity_is_the_one_measured_in_mitsuba(source):
     r = real_fit(*source)
-    e = export(r, "mitsuba")
+    e = export(r, "mitsuba", target_model="rough_conductor")  # a refit, its class not weighed
     assert not e.fidelity["exact"]
     measured = check.mitsuba_log_rmse(e.material, fit_as_table(r).rgb)
     assert measured == pytest.approx(e.fidelity["log_rmse_to_fit"], rel=0.01)
@@ -148,7 +169,8 @@ def test_mitsuba_sphere_render_matches_brdffits_render():
 def test_materialx_validates_the_exports():
     for source in (("pink-felt", "gltf_pbr"), ("red-plastic", "ggx"),
                    ("red-plastic", "gltf_pbr_ior")):
-        ok, message = check.materialx_validate(export(real_fit(*source), "materialx").material)
+        ok, message = check.materialx_validate(
+            export(real_fit(*source), "materialx", target_model="standard_surface").material)
         assert ok, message
     ok, message = check.materialx_validate(
         '<?xml version="1.0"?><materialx version="1.39">'

@@ -32,8 +32,10 @@ GLTF = {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}
 CONDUCTOR = {"eta": [0.2, 0.9, 1.4], "k": [3.9, 2.4, 1.6], "alpha": 0.15,
              "kd": [0.3, 0.2, 0.1], "weight": 0.2}
 PLASTIC = {"kd": [0.6, 0.25, 0.1], "alpha": 0.2, "eta": 1.5, "ks": [1.0, 0.9, 0.8]}
+PRINCIPLED = {"base_color": [0.6, 0.25, 0.1], "roughness": 0.5, "specular": 0.5, "sheen": 0.4,
+              "sheen_tint": 0.5}
 CASES = {"gltf_pbr": GLTF, "gltf_pbr_ior": {**GLTF, "ior": 1.9}, "rough_conductor": CONDUCTOR,
-         "rough_plastic": PLASTIC}
+         "rough_plastic": PLASTIC, "principled": PRINCIPLED}
 
 
 def _pairs(n, seed=0):
@@ -151,6 +153,10 @@ EDGES = {
     # and eta, with kd and ks at their ends in turn
     "rough_plastic": [{"kd": d, "alpha": a, "eta": e, "ks": 1.0 - d}
                       for d in (0.0, 1.0) for a in (1e-3, 2.0) for e in (1.001, 3.0)],
+    "principled": [{"base_color": b, "roughness": r, "specular": s, "sheen": 1.0 - b,
+                    "sheen_tint": t}
+                   for b in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0) for s in (1e-3, 1.0)
+                   for t in (0.0, 1.0)],
     "standard_surface_dielectric": [{"base_color": b, "specular_color": c,
                                      "specular_roughness": r, "specular_IOR": i}
                                     for b in (0.0, 1.0) for c in (0.0, 1.0)
@@ -261,7 +267,7 @@ def test_standard_surface_dielectric_is_standard_surface_at_metalness_0():
 def test_auto_candidates_leave_the_target_models_out():
     from brdffit.selection import DEFAULT_CANDIDATES
 
-    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor", "rough_plastic",
+    targets = {"gltf_pbr", "gltf_pbr_ior", "rough_conductor", "rough_plastic", "principled",
                "standard_surface", "standard_surface_dielectric"}
     assert not targets & set(DEFAULT_CANDIDATES)
     assert targets <= set(models.names())

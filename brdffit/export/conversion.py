@@ -146,29 +146,41 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
 
 
 @dataclass(frozen=True)
-class ClassAlternative:
-    """How a target's metal mixture is weighed against a dielectric: the dielectric
-    model fitted in its place, the mixture's metal fraction, and the dielectric's
+class Dielectric:
+    """One dielectric a metal mixture is weighed against: the model fitted, and its
     parameters as the exported model's (``export_model``)."""
 
-    mixture_model: str
-    dielectric_model: str
+    model: str
     export_model: str
+    as_export: Callable[[dict], dict] = dict
+
+
+@dataclass(frozen=True)
+class ClassAlternative:
+    """How a target's metal mixture is weighed against its dielectrics (the best of
+    them, by their error to the table): the mixture's metal fraction."""
+
+    mixture_model: str
+    dielectrics: tuple[Dielectric, ...]
     metal_fraction: Callable[[dict], float]
-    as_export: Callable[[dict], dict]
 
 
-#: target model of a refit -> its dielectric alternative: glTF metallic 0, MaterialX
-#: metalness 0, and for Mitsuba its roughplastic in place of the roughconductor blend.
+#: target model of a refit -> its dielectric alternatives: glTF metallic 0, MaterialX
+#: metalness 0, and for Mitsuba its roughplastic or its principled (a sheen: fabrics)
+#: in place of the roughconductor blend.
 CLASS_ALTERNATIVES = {
-    "gltf_pbr": ClassAlternative("gltf_pbr", "gltf_pbr_dielectric", "gltf_pbr",
-                                 lambda p: float(p["metallic"]),
-                                 lambda p: {**p, "metallic": 0.0}),
-    "standard_surface": ClassAlternative("standard_surface", "standard_surface_dielectric",
-                                         "standard_surface", lambda p: float(p["metalness"]),
-                                         lambda p: {**p, "metalness": 0.0}),
-    "rough_conductor": ClassAlternative("rough_conductor", "rough_plastic", "rough_plastic",
-                                        lambda p: 1.0 - float(p["weight"]), dict),
+    "gltf_pbr": ClassAlternative(
+        "gltf_pbr", (Dielectric("gltf_pbr_dielectric", "gltf_pbr",
+                                lambda p: {**p, "metallic": 0.0}),),
+        lambda p: float(p["metallic"])),
+    "standard_surface": ClassAlternative(
+        "standard_surface", (Dielectric("standard_surface_dielectric", "standard_surface",
+                                        lambda p: {**p, "metalness": 0.0}),),
+        lambda p: float(p["metalness"])),
+    "rough_conductor": ClassAlternative(
+        "rough_conductor", (Dielectric("rough_plastic", "rough_plastic"),
+                            Dielectric("principled", "principled")),
+        lambda p: 1.0 - float(p["weight"])),
 }
 #: A metal mixture whose metal fraction is above this is weighed against a dielectric.
 MIXTURE_METALLIC = 0.05
@@ -181,11 +193,11 @@ DIELECTRIC_TOLERANCE = 1.1
 #: none. On the real materials: plastics, paints and fabrics 0.11-0.28; metallic
 #: paints and metals 0.001-0.03. Beyond it the mixture's fit is kept: its Fresnel
 #: says metal more plainly than the body says dielectric (a bright, coloured, f0 0.6
-#: lobe over a diffuse base: 3x the dielectric's error). A felt's sheen costs a
-#: dielectric 1.2-1.6x (pink-felt: glTF 1.23x, Mitsuba's roughplastic 1.54x, whose
-#: diffuse reflectance reaches its bound 1), which the warning says.
+#: lobe over a diffuse base: 3x the dielectric's error). A felt's sheen costs glTF's
+#: dielectric 1.23x (pink-felt), which the warning says; Mitsuba's principled has a
+#: sheen (0.84x the conductor blend's error there).
 DIFFUSE_BODY = 0.1
-DIELECTRIC_WITH_BODY = 2.0
+DIELECTRIC_WITH_BODY = 1.5
 
 
 def dielectric_or_mixture(result: FitResult, conv: Conversion,
@@ -214,13 +226,17 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     reference = measured if measured is not None else fit_table
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
-    refit = fit(reference, alt.dielectric_model, loss=result.loss)
-    dielectric = alt.as_export(refit.params)
-    err_d = float(table_error(reference, alt.export_model, dielectric)["log_rmse"])
+    tried = []
+    for d in alt.dielectrics:
+        params = d.as_export(fit(reference, d.model, loss=result.loss).params)
+        tried.append((float(table_error(reference, d.export_model, params)["log_rmse"]),
+                      d.export_model, params))
+    err_d, export_model, dielectric = min(tried, key=lambda t: t[0])
     err_m = float(table_error(reference, alt.mixture_model, conv.params)["log_rmse"])
     metallic = alt.metal_fraction(conv.params)
     report = {"metallic_of_mixture": metallic, "against": against, "diffuse_body": body,
-              "dielectric_model": alt.export_model,
+              "dielectric_model": export_model,
+              "dielectrics": {m: e for e, m, _ in tried},
               "dielectric_log_rmse": err_d, "mixture_log_rmse": err_m}
     close = err_d <= DIELECTRIC_TOLERANCE * err_m
     bodied = body >= DIFFUSE_BODY and err_d <= DIELECTRIC_WITH_BODY * err_m
@@ -229,19 +245,19 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
                f"more than {DIELECTRIC_WITH_BODY:g}x even with a diffuse body ({body:.3g})")
         conv.warnings.append(
             f"class: kept the metal mixture (metal fraction {metallic:.3g}): as a dielectric "
-            f"({alt.export_model}) its log_rmse to {against} would be {err_d:.4g} against "
+            f"({export_model}) its log_rmse to {against} would be {err_d:.4g} against "
             f"{err_m:.4g}, more than {DIELECTRIC_TOLERANCE:g}x, and {why}")
         return conv, {**report, "chosen": "metal mixture"}
     to_fit = (err_d if measured is None
-              else float(table_error(fit_table, alt.export_model, dielectric)["log_rmse"]))
+              else float(table_error(fit_table, export_model, dielectric)["log_rmse"]))
     warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
     why = (f"within {DIELECTRIC_TOLERANCE:g}x" if close else
            f"{err_d / err_m:.2f}x, more than {DIELECTRIC_TOLERANCE:g}x: chosen for its diffuse "
            f"body ({body:.3g}), which no metal has; the mixture is the closer fit")
     warnings.append(
-        f"class: exported as a dielectric ({alt.export_model}), refitted to {against}: "
+        f"class: exported as a dielectric ({export_model}), refitted to {against}: "
         f"log_rmse {err_d:.4g} against {err_m:.4g} for the metal mixture (metal fraction "
         f"{metallic:.3g}), {why}")
-    return (Conversion(alt.export_model, dielectric, False, to_fit,
-                       warnings + bound_warnings(alt.export_model, dielectric)),
+    return (Conversion(export_model, dielectric, False, to_fit,
+                       warnings + bound_warnings(export_model, dielectric)),
             {**report, "chosen": "dielectric"})

@@ -12,10 +12,16 @@ Target models (docs/models.md), Mitsuba's own plugins:
   ``blendbsdf`` evaluates ``(1 - weight) bsdf_0 + weight bsdf_1``; with ``weight = 0``
   the export is the ``roughconductor`` alone.
 - ``rough_plastic``: a dielectric, for plastics, paints and fabrics (a refit that comes
-  out a conductor blend is weighed against it: ``conversion.dielectric_or_mixture``)::
+  out a conductor blend is weighed against it and ``principled``:
+  ``conversion.dielectric_or_mixture``)::
 
     {"type": "roughplastic", "distribution": "ggx", "alpha": alpha, "int_ior": eta,
      "ext_ior": 1.0, "diffuse_reflectance": <kd RGB>, "specular_reflectance": <ks RGB>}
+
+- ``principled``: a dielectric with Burley's diffuse and a sheen, for fabrics::
+
+    {"type": "principled", "base_color": <RGB>, "roughness": r, "specular": s,
+     "sheen": sheen, "sheen_tint": tint}
 
 ``kd`` and ``ks`` are reflectances in [0, 1], the models' bounds, so every variant
 takes them as they are (a spectral one upsamples them as reflectances, which keeps
@@ -50,10 +56,10 @@ from brdffit.errors import BrdffitError
 from brdffit.export import spectral_ior
 
 #: the models a fit is copied to (any other fit is refitted as the first)
-TARGET_MODELS = ("rough_conductor", "rough_plastic")
+TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled")
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
-#: agrees with rough_conductor to 2.1e-5 relative and with rough_plastic to 4e-6
-#: (docs/exports.md, tests/test_export_tools.py)
+#: agrees with rough_conductor to 2.1e-5 relative, with rough_plastic to 4e-6 and with
+#: principled to float32 rounding (docs/exports.md, tests/test_export_tools.py)
 SHADED_AS = {m: m for m in TARGET_MODELS}
 MEDIA_TYPE = "application/json"
 
@@ -98,10 +104,12 @@ def _spectral_ior(eta, k) -> tuple[float | dict, float | dict]:
 
 
 def load_dict(params: dict, spectral: bool = False) -> dict:
-    """The Mitsuba 3 BSDF dictionary of ``rough_conductor`` or ``rough_plastic``
-    parameters (told apart by ``k``), for Mitsuba's RGB variants, or with
-    ``spectral=True`` for its spectral ones (module docstring). Raises
+    """The Mitsuba 3 BSDF dictionary of ``rough_conductor``, ``rough_plastic`` or
+    ``principled`` parameters (told apart by ``k`` and ``sheen``), for Mitsuba's RGB
+    variants, or with ``spectral=True`` for its spectral ones (module docstring). Raises
     :class:`SpectralExportError` where a spectral form would not be the same material."""
+    if "sheen" in params:
+        return _principled(params, spectral)
     if "k" not in params:
         return _plastic(params, spectral)
     if spectral:
@@ -137,6 +145,19 @@ def _plastic(params: dict, spectral: bool) -> dict:
         "ext_ior": 1.0,
         "diffuse_reflectance": _reflectance(params["kd"], "kd", spectral),
         "specular_reflectance": _reflectance(params["ks"], "ks", spectral),
+    }
+
+
+def _principled(params: dict, spectral: bool) -> dict:
+    """``principled`` of ``principled`` parameters: metallic, spec_trans, spec_tint,
+    clearcoat, flatness and anisotropic left at their default 0."""
+    return {
+        "type": "principled",
+        "base_color": _reflectance(params["base_color"], "base_color", spectral),
+        "roughness": float(params["roughness"]),
+        "specular": float(params["specular"]),
+        "sheen": float(params["sheen"]),
+        "sheen_tint": float(params["sheen_tint"]),
     }
 
 

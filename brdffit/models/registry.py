@@ -22,6 +22,7 @@ from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 from brdffit.models.oren_nayar import OrenNayar
 from brdffit.models.phong import Phong
+from brdffit.models.principled import Principled
 from brdffit.models.rough_conductor import RoughConductor
 from brdffit.models.rough_plastic import RoughPlastic
 from brdffit.models.standard_surface import StandardSurface
@@ -33,7 +34,7 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), GltfBlender(),
     RoughConductor(),
-    RoughPlastic(), StandardSurface(), StandardSurface(dielectric=True),
+    RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     GGX2(),
 )
 
