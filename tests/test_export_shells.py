@@ -136,7 +136,7 @@ def test_cli_exports_a_fit_of_a_batch_results_file(batch_store, tmp_path):
 
     # by file name, the best fit by default, into files
     r = run("brdffit.cli", "export", str(batch_store), "--table", "pink-felt.binary", "--to",
-            "gltf", "--out", str(tmp_path))
+            "gltf", "--target-model", "gltf_pbr", "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     best = min(stored["pink-felt"].values(), key=lambda f: f["fit"]["error"]["log_rmse"])
     (written,) = tmp_path.iterdir()
