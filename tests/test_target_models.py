@@ -151,8 +151,8 @@ EDGES = {
                         for a in (1e-3, 2.0) for w in (0.0, 1.0)],
     # each set evaluates the interface's ~0.5M quadrature points: the corners of alpha
     # and eta, with kd and ks at their ends in turn
-    "rough_plastic": [{"kd": d, "alpha": a, "eta": e, "ks": 1.0 - d}
-                      for d in (0.0, 1.0) for a in (1e-3, 2.0) for e in (1.001, 3.0)],
+    "rough_plastic": [{"kd": float(a > 1.0), "alpha": a, "eta": e, "ks": float(a < 1.0)}
+                      for a in (1e-3, 2.0) for e in (1.001, 3.0)],
     "principled": [{"base_color": b, "roughness": r, "specular": s, "sheen": 1.0 - b,
                     "sheen_tint": t}
                    for b in (0.0, 1.0) for r in (math.sqrt(1e-3), 1.0) for s in (1e-3, 1.0)
