@@ -67,47 +67,37 @@ def test_mitsuba_loads_and_evaluates_a_conductor_fit_exactly(material):
     assert np.all(np.abs(theirs[~big]) < 1e-6 * ours.max())
 
 
-@pytest.mark.parametrize("params", [
-    {"kd": [0.7, 0.3, 0.1], "alpha": 0.05, "eta": 1.5, "ks": [1.0, 1.0, 1.0]},
-    {"kd": [0.2, 0.5, 0.9], "alpha": 0.8, "eta": 2.2, "ks": [0.6, 0.5, 0.4]},
-    {"kd": [1.0, 1.0, 1.0], "alpha": 0.002, "eta": 1.05, "ks": [0.1, 0.1, 0.1]},
-])
-def test_rough_plastic_is_mitsubas_roughplastic(params):
-    """brdffit's rough_plastic against Mitsuba's own roughplastic BSDF.eval: its
-    transmittance table and internal reflectance computed by Mitsuba's quadratures."""
-    material = mitsuba_load_dict(params)
-    assert material["type"] == "roughplastic"
-    wi, wo = _pairs(3000, seed=2)
-    ours = _brdffit("rough_plastic", params, wi, wo)
-    theirs = check.mitsuba_eval(material, wi, wo)
-    big = ours > 1e-6 * ours.max()
-    np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
+#: (model, Mitsuba plugin, parameters): the dielectrics the class check exports
+DIELECTRIC_PLUGINS = [
+    ("rough_plastic", "roughplastic",
+     {"kd": [0.7, 0.3, 0.1], "alpha": 0.05, "eta": 1.5, "ks": [1.0, 1.0, 1.0]}),
+    ("rough_plastic", "roughplastic",
+     {"kd": [0.2, 0.5, 0.9], "alpha": 0.8, "eta": 2.2, "ks": [0.6, 0.5, 0.4]}),
+    ("rough_plastic", "roughplastic",
+     {"kd": [1.0, 1.0, 1.0], "alpha": 0.002, "eta": 1.05, "ks": [0.1, 0.1, 0.1]}),
+    ("principled", "principled", {"base_color": [0.7, 0.3, 0.1], "roughness": 0.4,
+                                  "specular": 0.5, "sheen": 0.5, "sheen_tint": 0.6}),
+    ("principled", "principled", {"base_color": [0.1, 0.4, 0.9], "roughness": 0.1,
+                                  "specular": 0.9, "sheen": 0.0, "sheen_tint": 0.0}),
+    ("principled", "principled", {"base_color": [0.9, 0.9, 0.9], "roughness": 1.0,
+                                  "specular": 0.05, "sheen": 1.0, "sheen_tint": 0.0}),
+]
 
 
-@pytest.mark.parametrize("params", [
-    {"base_color": [0.7, 0.3, 0.1], "roughness": 0.4, "specular": 0.5, "sheen": 0.5,
-     "sheen_tint": 0.6},
-    {"base_color": [0.1, 0.4, 0.9], "roughness": 0.1, "specular": 0.9, "sheen": 0.0,
-     "sheen_tint": 0.0},
-    {"base_color": [0.9, 0.9, 0.9], "roughness": 1.0, "specular": 0.05, "sheen": 1.0,
-     "sheen_tint": 0.0},
-])
-def test_principled_is_mitsubas_principled(params):
-    """brdffit's principled against Mitsuba's principled BSDF.eval (a dielectric with
-    Burley's diffuse and a sheen)."""
-    material = mitsuba_load_dict(params)
-    assert material["type"] == "principled"
-    wi, wo = _pairs(3000, seed=3)
-    ours = _brdffit("principled", params, wi, wo)
-    theirs = check.mitsuba_eval(material, wi, wo)
-    big = ours > 1e-6 * ours.max()
-    np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
-
-
-def mitsuba_load_dict(params):
+@pytest.mark.parametrize("model, plugin, params", DIELECTRIC_PLUGINS)
+def test_mitsubas_dielectrics_are_its_own(model, plugin, params):
+    """brdffit's rough_plastic and principled against Mitsuba's roughplastic (its
+    transmittance table and internal reflectance by Mitsuba's quadratures) and
+    principled (Burley's diffuse and a sheen), BSDF.eval at random pairs."""
     from brdffit.export import mitsuba
 
-    return mitsuba.load_dict(params)
+    material = mitsuba.load_dict(params)
+    assert material["type"] == plugin
+    wi, wo = _pairs(3000, seed=2)
+    ours = _brdffit(model, params, wi, wo)
+    theirs = check.mitsuba_eval(material, wi, wo)
+    big = ours > 1e-6 * ours.max()
+    np.testing.assert_allclose(theirs[big], ours[big], rtol=2e-5)
 
 
 #: issue 42: plastics and a fabric are dielectrics in every renderer; a metallic paint
