@@ -255,6 +255,7 @@ def test_bad_requests_are_clear_errors():
         export(result("gltf_pbr", {**GLTF, "roughness": 3.0}), "gltf")
 
 
+@pytest.mark.slow
 def test_fidelity_to_the_measured_table_and_the_colour_a_sphere_shows():
     """A refit's error to the measured table is the exported material's own, under the
     renderer's semantics; a table not at hand is said, never guessed."""
@@ -275,6 +276,7 @@ def test_fidelity_to_the_measured_table_and_the_colour_a_sphere_shows():
                in w for w in absent.warnings)
 
 
+@pytest.mark.slow
 def test_an_export_of_a_fit_that_does_not_look_good_says_so():
     """An export cannot look better than the fit it carries: a poor or visible verdict
     is a warning, with the fit's first next step."""

@@ -94,6 +94,7 @@ def test_float32_agrees_with_float64(synth_tables):
     assert_params_close(b.params, a.params, rel=0.01)
 
 
+@pytest.mark.slow
 def test_all_samples_and_subsample_agree(synth_tables):
     a = fit(synth_tables["beckmann"], "beckmann", samples=None, starts=1)
     assert a.samples["used"] == a.samples["usable"]

@@ -229,6 +229,7 @@ def test_standard_surface_layers_by_albedo_not_by_fresnel():
     assert np.all(f_black >= 0) and np.all(lobe > f_black)
 
 
+@pytest.mark.slow
 def test_rough_plastic_fit_recovers_its_parameters():
     r = fit(_table_of("rough_plastic", PLASTIC), "rough_plastic", samples=4096)
     assert r.log_rmse < 1e-4, r
