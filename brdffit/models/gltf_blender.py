@@ -37,7 +37,7 @@ from .base import Params
 from .frame import Frame
 from .gltf_pbr import DIELECTRIC_F0, GltfPBR
 from .microfacet import dielectric_fresnel
-from .renderer_terms import separable_ggx_dg
+from .renderer_terms import burley_diffuse, separable_ggx_dg
 
 #: The index Cycles derives from the Principled BSDF's Specular 0.5 (the importer's):
 #: 2 / (1 - sqrt(0.08 Specular)) - 1.
@@ -58,10 +58,7 @@ class GltfBlender(GltfPBR):
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         base, m, r = params["base_color"][expand], params["metallic"], params["roughness"]
-        fl = (1.0 - frame.cos_i) ** 5
-        fv = (1.0 - frame.cos_o) ** 5
-        rr = 2.0 * r * frame.cos_d * frame.cos_d
-        burley = (1.0 - 0.5 * fv) * (1.0 - 0.5 * fl) + rr * (fl + fv + fl * fv * (rr - 1.0))
+        burley = burley_diffuse(r, frame.cos_i, frame.cos_o, frame.cos_d)
         diffuse = (1.0 - m) * base / jnp.pi * burley[None]
         cspec0 = DIELECTRIC_F0 * (1.0 - m) + base * m
         fh = ((dielectric_fresnel(SPECULAR_IOR, frame.cos_d) - DIELECTRIC_F0)

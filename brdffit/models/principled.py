@@ -39,7 +39,7 @@ import numpy as np
 from .base import AbstractBRDFModel, Params, ParamSpec
 from .frame import Frame
 from .microfacet import ALPHA_GRID, dielectric_fresnel
-from .renderer_terms import separable_ggx_dg
+from .renderer_terms import burley_diffuse, schlick_weight, separable_ggx_dg
 
 BASE_COLOR = ParamSpec("base_color", "base colour (diffuse and sheen tint), RGB", 0.0, 1.0,
                        rgb=True)
@@ -72,14 +72,11 @@ class Principled(AbstractBRDFModel):
         spec = dielectric_fresnel(specular_eta(params["specular"]), frame.cos_d) * separable_ggx_dg(
             alpha, frame.cos_h, frame.sin2_h, frame.cos_i, frame.sin2_i, frame.cos_o,
             frame.sin2_o)
-        fi = jnp.clip(1.0 - frame.cos_i, 0.0, 1.0) ** 5
-        fo = jnp.clip(1.0 - frame.cos_o, 0.0, 1.0) ** 5
-        rr = 2.0 * r * frame.cos_d * frame.cos_d
-        burley = (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + rr * (fo + fi + fo * fi * (rr - 1.0))
+        burley = burley_diffuse(r, frame.cos_i, frame.cos_o, frame.cos_d)
         lum = sum(w * params["base_color"][c] for c, w in enumerate(LUMINANCE))
         tint = jnp.where(lum > 0.0, params["base_color"] / jnp.where(lum > 0.0, lum, 1.0), 1.0)
         c_sheen = (1.0 + params["sheen_tint"] * (tint - 1.0))[expand]
-        sheen = params["sheen"] * jnp.clip(1.0 - frame.cos_d, 0.0, 1.0) ** 5
+        sheen = params["sheen"] * schlick_weight(frame.cos_d)
         return spec[None] + base / jnp.pi * burley[None] + sheen[None] * c_sheen
 
     def eval_frame(self, params: Params, frame: Frame):

@@ -77,3 +77,19 @@ def conductor_fresnel(eta, k, cos_d) -> Float[Array, ...]:
     rp = rs * safe_div((s2 - c * a) ** 2 + c * c * excess,
                        (s2 + c * a) ** 2 + c * c * excess, 1e-30)
     return 0.5 * (rs + rp)
+
+
+def schlick_weight(cos) -> Float[Array, ...]:
+    """Schlick's ``(1 - cos)^5``, the cosine clamped to [0, 1] (Cycles' and Mitsuba's
+    ``schlick_fresnel`` / ``schlick_weight``)."""
+    return jnp.clip(1.0 - cos, 0.0, 1.0) ** 5
+
+
+def burley_diffuse(roughness, cos_i, cos_o, cos_d) -> Float[Array, ...]:
+    """Burley's diffuse with its retro-reflection, pi f / base_color: ``(1 - Fi/2)(1 -
+    Fo/2) + Rr (Fi + Fo + Fi Fo (Rr - 1))``, ``Rr = 2 roughness cos_d^2``: the
+    principled BRDF's diffuse as Blender's Cycles (Principled BSDF v1) and Mitsuba's
+    ``principled`` both evaluate it."""
+    fi, fo = schlick_weight(cos_i), schlick_weight(cos_o)
+    rr = 2.0 * roughness * cos_d * cos_d
+    return (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + rr * (fi + fo + fi * fo * (rr - 1.0))
