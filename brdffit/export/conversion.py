@@ -222,8 +222,7 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     alt = CLASS_ALTERNATIVES.get(conv.target_model)
     if conv.exact or alt is None or alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
         return conv, None  # a fit of the target's model is the user's own choice of class
-    fit_table = fit_as_table(result)
-    reference = measured if measured is not None else fit_table
+    reference = measured if measured is not None else fit_as_table(result)
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
     tried = []
@@ -249,7 +248,7 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
             f"{err_m:.4g}, more than {DIELECTRIC_TOLERANCE:g}x, and {why}")
         return conv, {**report, "chosen": "metal mixture"}
     to_fit = (err_d if measured is None
-              else float(table_error(fit_table, export_model, dielectric)["log_rmse"]))
+              else float(table_error(fit_as_table(result), export_model, dielectric)["log_rmse"]))
     warnings = [w for w in conv.warnings if not w.startswith(("approximated:", "clamp:"))]
     why = (f"within {DIELECTRIC_TOLERANCE:g}x" if close else
            f"{err_d / err_m:.2f}x, more than {DIELECTRIC_TOLERANCE:g}x: chosen for its diffuse "

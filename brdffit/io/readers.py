@@ -205,6 +205,8 @@ def read_csv(path: str | os.PathLike) -> Measurements:
         lines.append((number, stripped))
     if not lines:
         raise MeasurementsError(source, "no header and no data: the file is empty")
+    if unit is not None:  # refused before any row is read, even where every column has its own
+        _unit_scale(unit, source)
     try:
         dialect = csv.Sniffer().sniff(lines[0][1], delimiters=",;\t ")
         delimiter = dialect.delimiter
@@ -216,8 +218,6 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     cols = _columns(names, source, default_unit=unit)
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
                              source)
-    if unit is not None:
-        _unit_scale(unit, source)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column"})
