@@ -65,7 +65,7 @@ def _salvage(old: Path, table: str) -> tuple[list[dict], str | None]:
 
 def rebuild(data_dir: Path) -> int:
     from brdffit.errors import MerlFormatError
-    from brdffit.io import merl
+    from brdffit.io import readers
 
     path = _database(data_dir)
     aside = None
@@ -106,13 +106,13 @@ def rebuild(data_dir: Path) -> int:
     for file in sorted(store.tables_dir.glob("*.binary")):
         if file.stem in known:
             continue
-        try:
-            table = merl.read(file)
+        try:  # a MERL table, or a stored sample list (HDF5, by its content)
+            summary = readers.table_summary(readers.read_measured(file))
         except (MerlFormatError, OSError) as e:
             print(f"  {file}: not registered ({e})")
             continue
         store.register_table(file.stem, file.stat().st_size,
-                             f"recovered-{file.stem[:12]}.binary", table.summary())
+                             f"recovered-{file.stem[:12]}.binary", summary)
         recovered += 1
     print(f"tables registered again from their files: {recovered}")
     print(f"{path}: rebuilt; running jobs among the kept ones are settled at the next start")

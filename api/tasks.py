@@ -29,11 +29,24 @@ def report(stage: str, fraction: float) -> None:
 
 
 def _read(table_path: str, source: str):
-    from brdffit.io import merl
+    """The stored table or sample list (``api.services.tables``), named as the
+    uploader named it: the name shows in results and plot titles."""
+    from brdffit.io import readers
 
-    table = merl.read(table_path)
-    # Name it as the uploader did: the name shows in results and plot titles.
-    return dataclasses.replace(table, source=source)
+    # by content: a stored sample list is HDF5 whatever its stored name says
+    return dataclasses.replace(readers.read_measured(table_path), source=source)
+
+
+def _read_table(table_path: str, source: str):
+    """:func:`_read`, a sample list as the table it bins into (what a plot draws)."""
+    from brdffit.io.merl import MerlTable
+
+    got = _read(table_path, source)
+    if isinstance(got, MerlTable):
+        return got
+    from brdffit.fitting.samples import binned
+
+    return binned(got)[0]
 
 
 def fit_models(table_path: str, source: str, models: list[str], options: dict,
@@ -73,7 +86,7 @@ def render_plot(table_path: str, source: str, result: dict, kind: str,
     from brdffit.view import plots
 
     try:
-        return Outcome.success(plots.render(kind, _read(table_path, source), result,
+        return Outcome.success(plots.render(kind, _read_table(table_path, source), result,
                                             exposure_ev))
     except Exception as e:  # noqa: BLE001 - a stored table gone bad, or a plotting bug
         return Outcome.failure(e)

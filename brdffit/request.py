@@ -32,6 +32,7 @@ from brdffit.errors import FitInputError
 from brdffit.fitting.options import AUTO, DEFAULT_TOLERANCE, FitOptions
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene
+from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
 from brdffit.selection import DEFAULT_CANDIDATES, Selection, best, select
 
@@ -178,24 +179,29 @@ class FitReport:
                 "results": [r.to_dict() for r in self.fits.values()]}
 
 
-def run(table: MerlTable, request: FitRequest, *, progress: ModelProgress | None = None,
-        threads: int | None = None, measured_input: dict | None = None) -> FitReport:
+def run(table: MerlTable | Measurements, request: FitRequest, *,
+        progress: ModelProgress | None = None, threads: int | None = None,
+        measured_input: dict | None = None) -> FitReport:
     """Make the fits ``request`` asks for on ``table``; see the module docstring.
 
     Raises :class:`~brdffit.errors.FitInputError` when no model could be fitted;
     a model that could not be fitted beside others that could is in ``failed``.
     ``threads``: auto's candidates fitted at once (``brdffit.selection.select``).
-    ``measured_input``: where ``table`` was binned from samples, what that did
-    (``brdffit.io.readers.read_table``): every fit carries it (``FitResult.input``).
+    ``table`` may be a sample list (``brdffit.io.measurements.Measurements``): every
+    fit is then made at its own directions (``brdffit.fitting.samples``) and carries
+    its ``input``. ``measured_input``: where ``table`` was binned from samples, what
+    that did (``brdffit.io.readers.read_table``): every fit carries it
+    (``FitResult.input``; a sample fit's own keys win).
     """
     report = _run(table, request, progress, threads)
     if measured_input is None:
         return report
-    fits = {name: dataclasses.replace(r, input=measured_input) for name, r in report.fits.items()}
+    fits = {name: dataclasses.replace(r, input={**measured_input, **(r.input or {})})
+            for name, r in report.fits.items()}
     return dataclasses.replace(report, fits=fits)
 
 
-def _run(table: MerlTable, request: FitRequest, progress: ModelProgress | None,
+def _run(table: MerlTable | Measurements, request: FitRequest, progress: ModelProgress | None,
          threads: int | None) -> FitReport:
     options = request.options
     if request.auto:

@@ -329,11 +329,16 @@ def _ready_eval_costs(ordered) -> None:
 
 
 def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference) -> None:
-    err = r.error["log_rmse"]
-    full = r.full_table_error["log_rmse"] if scene is not None else err
+    # A sample list's fits are ranked on their held-out error: on sparse samples the
+    # in-sample one flatters the richer model (brdffit.fitting.samples).
+    held = r.error.get("held_out_log_rmse")
+    err = r.error["log_rmse"] if held is None else held
+    full = r.full_table_error["log_rmse"] if scene is not None else r.error["log_rmse"]
     row.update(
         params=r.params,
         log_rmse=err,
+        log_rmse_basis="in_sample" if held is None else "held_out",
+        log_rmse_se=r.error.get("held_out_log_rmse_se"),
         full_log_rmse=full,
         psnr_db=(r.error["psnr_db"] if reference is None
                  else reference.psnr(m, r.params)),
@@ -367,9 +372,21 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         best = max(ok, key=_psnr)
         tolerance_used = RENDER_TOLERANCE_DB
     else:
-        chosen, reason = choose(ok, tolerance, budget)
         best = min(ok, key=lambda row: row["log_rmse"])
+        se = best.get("log_rmse_se")
         tolerance_used = tolerance
+        if se is not None and math.isfinite(se):
+            # held-out errors of a sample list: a log_rmse within one standard error of
+            # the best one's is noise (the one-standard-error rule), which the rule's
+            # excess in quadrature puts at sqrt((best + se)^2 - best^2)
+            one_se = math.sqrt(max((best["log_rmse"] + se) ** 2 - best["log_rmse"] ** 2, 0.0))
+            tolerance_used = max(tolerance, one_se)
+        chosen, reason = choose(ok, tolerance_used, budget)
+        if tolerance_used != tolerance:
+            reason += (f" (The tolerance is one standard error, {_fmt(se)}, of "
+                       f"{best['model']}'s held-out log_rmse, {_fmt(tolerance_used)} in "
+                       f"quadrature, above the {_fmt(tolerance)} asked: these samples tell "
+                       "no smaller difference from noise.)")
         if loss == "render":
             reason += (" (The budget is a log_rmse figure: given one, it decides even under "
                        "the render loss.)")
@@ -693,7 +710,8 @@ def format_selection(sel: Selection) -> str:
     """The ranking as a text table, then the reason (what ``brdffit fit --model auto``
     prints)."""
     scene = sel.scene is not None
-    head = (f"{'model':<14}{'k':>3} {'log_rmse':>10} "
+    held = any(r.get("log_rmse_basis") == "held_out" for r in sel.ranking)
+    head = (f"{'model':<14}{'k':>3} {'held-out' if held else 'log_rmse':>10} "
             + (f"{'full':>10} " if scene else "")
             + f"{'excess':>9} {'PSNR dB':>8} {'looks':>8} {'ns/eval':>8} {'BIC':>12}  status")
     lines = [f"{sel.table}: model selection ({sel.time_s:.1f} s)", head]
@@ -710,6 +728,11 @@ def format_selection(sel: Selection) -> str:
             + f"  {r['status']}" + ("" if r["converged"] else " (not converged)")
         )
     lines.append("")
+    if held:
+        from brdffit.fitting.samples import FOLDS
+
+        lines.append(f"Ranked on the {FOLDS}-fold held-out log_rmse of the samples "
+                     "(docs/measurements.md).")
     lines.append(sel.reason)
     chosen = sel.row
     lines.append(f"{sel.chosen} params:")

@@ -52,14 +52,66 @@ def nbrdf_main(argv: list[str]) -> int:
     return 0
 
 
+def samples_main(argv: list[str]) -> int:
+    """``python -m data_synth samples OUT``: a sparse sample list, any layout by suffix."""
+    import json
+
+    from brdffit.errors import BrdffitError
+    from brdffit.io.writers import WRITERS, write_samples
+    from data_synth import sparse
+
+    ap = argparse.ArgumentParser(
+        prog="python -m data_synth samples",
+        description="Write a sparse list of BRDF samples, as a gonioreflectometer measures "
+        f"them, in the layout OUT's suffix names ({', '.join(WRITERS)}), and OUT.json with "
+        "the truth.")
+    ap.add_argument("out", help="output path: .csv, .tsv, .astm, .h5")
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--model", choices=models.names(), default="ggx")
+    src.add_argument("--material", help="a shipped real material (python -m data_synth "
+                                        "nbrdf --list)")
+    ap.add_argument("--param", action="append", type=_parse_param, default=[],
+                    metavar="NAME=V[,V,V]", help="model parameter (repeatable)")
+    ap.add_argument("--layout", choices=sparse.LAYOUTS, default="cornell")
+    ap.add_argument("-n", type=int, default=2000, help="samples (default 2000)")
+    ap.add_argument("--noise", type=float, default=0.0, help="multiplicative noise std")
+    ap.add_argument("--sigma", action="store_true",
+                    help="record noise * value as each sample's sigma (not in .astm)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    try:
+        if args.material:
+            meas = sparse.sample_material(args.material, args.layout, args.n, noise=args.noise,
+                                          sigma=args.sigma, seed=args.seed)
+            truth = {"material": args.material}
+        else:
+            meas, params = sparse.sample_model(args.model, dict(args.param), args.layout,
+                                               args.n, noise=args.noise, sigma=args.sigma,
+                                               seed=args.seed)
+            truth = {"model": args.model, "params": params}
+        write_samples(meas, args.out)
+        sidecar = f"{args.out}.json"
+        with open(sidecar, "w") as f:
+            json.dump({**truth, "layout": args.layout, "n": meas.n, "noise": args.noise,
+                       "seed": args.seed}, f, indent=1)
+    except (ValueError, OSError, BrdffitError) as e:
+        print(f"data_synth: error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.out} ({meas.n:,} samples, {args.layout}) and {sidecar}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["nbrdf"]:
         return nbrdf_main(argv[1:])
+    if argv[:1] == ["samples"]:
+        return samples_main(argv[1:])
     ap = argparse.ArgumentParser(
         prog="python -m data_synth",
         description="Write a synthetic MERL .binary table (and OUT.json with the true params). "
-        "`python -m data_synth nbrdf NAME -o OUT` writes a real material instead.",
+        "`python -m data_synth nbrdf NAME -o OUT` writes a real material instead; "
+        "`python -m data_synth samples OUT.csv` a sparse sample list.",
     )
     ap.add_argument("out", help="output .binary path")
     src = ap.add_mutually_exclusive_group()

@@ -566,10 +566,11 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     assert job.models == ["ggx", "lambert"] and job.status == "queued"
 
 
-def test_a_sample_upload_is_binned_and_its_fits_carry_the_input(server, tmp_path):
-    """An ASTM file uploads as the MERL table it bins into (docs/measurements.md): the
-    table's summary and every fit of it say what the binning did; a malformed sample
-    file is a 422 naming it and the row."""
+def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
+    """An ASTM file uploads as a sample list (docs/measurements.md): the table's summary
+    says what binning it (for the plots) did, its fits are made at the samples' own
+    directions with a held-out error, and a plot of one draws; a malformed sample file
+    is a 422 naming it and the row."""
     from brdffit.client import ApiError, Client
     from tests.table_files import BAD_CSV, SAMPLED, write_astm
 
@@ -579,7 +580,13 @@ def test_a_sample_upload_is_binned_and_its_fits_carry_the_input(server, tmp_path
     assert info.summary["measured_bins"] == info.summary["input"]["binning"]["bins"]
     job = c.wait(c.fit(info.id, "ggx", **FAST))
     assert job.status == "done", job
-    assert c.result(job).input == info.summary["input"]
+    r = c.result(job)
+    assert r.input["fitted_at"] == "samples" and r.input["samples"] == 5000
+    # the stored list is the upload's to the last bit or two (angles -> directions)
+    assert r.input["binning"]["bins"] == info.summary["input"]["binning"]["bins"]
+    assert "held_out_log_rmse" in r.error and r.quality["basis"] == "held_out"
+    assert r.params["alpha"] == pytest.approx(SAMPLED["alpha"], rel=0.02)
+    assert c.plot(job, "polar")[:8] == b"\x89PNG\r\n\x1a\n"
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
     with pytest.raises(ApiError) as e:

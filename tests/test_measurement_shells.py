@@ -1,8 +1,8 @@
-"""Sample files through the CLI and the batch (issue 39, first part): ``brdffit fit``
-in its own process and ``run_batch`` take an ASTM or CSV file as they take a MERL
-table, bin it, and report what the binning did in each fit's ``input``; a malformed
-file is one line and exit 2 (the CLI), a failed table (the batch). The service's
-upload: tests/test_api.py."""
+"""Sample files through the CLI and the batch (issue 39): ``brdffit fit`` in its own
+process and ``run_batch`` take an ASTM or CSV file as they take a MERL table, fit it
+at its samples' own directions, and report it in each fit's ``input`` (coverage,
+held-out folds); a malformed file is one line and exit 2 (the CLI), a failed table
+(the batch). The service's upload: tests/test_api.py."""
 
 from __future__ import annotations
 
@@ -21,14 +21,16 @@ def astm_file(tmp_path_factory):
     return write_astm(tmp_path_factory.mktemp("astm") / "lab.astm", "ggx", SAMPLED)
 
 
-def test_cli_fits_a_sample_file_and_says_what_binning_did(astm_file, tmp_path):
+def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
     r = run("brdffit.cli", "fit", str(astm_file), "--model", "ggx", "--samples", "4096",
             "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    assert out["schema"] == "brdffit.fit/3"
+    assert out["schema"] == "brdffit.fit/4"
     assert out["input"]["format"] == "astm" and out["input"]["samples"] == 20_000
-    assert out["input"]["note"] in r.stderr  # said before the fit, on stderr
+    assert out["input"]["fitted_at"] == "samples" and out["input"]["used"] == 4096
+    assert "fitted at their own directions" in r.stderr  # said before the fit
+    assert out["error"]["held_out_log_rmse"] >= 0 and out["quality"]["basis"] == "held_out"
     assert out["params"]["alpha"] == pytest.approx(SAMPLED["alpha"], rel=0.05)
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
@@ -52,5 +54,6 @@ def test_a_batch_fits_sample_files_beside_merl_tables(astm_file, tmp_path):
     tables = {t["name"]: t for t in read_results(out)["tables"]}
     lab = tables["lab.astm"]["fits"]["ggx"]["fit"]
     assert lab["input"]["format"] == "astm" and lab["input"]["samples"] == 20_000
+    assert lab["input"]["fitted_at"] == "samples" and "held_out_log_rmse" in lab["error"]
     assert tables["ggx"]["fits"]["ggx"]["fit"]["input"] is None
     assert "below the horizon" in json.dumps(tables["bad.csv"])

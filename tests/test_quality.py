@@ -39,7 +39,7 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
     r = fitting.fit(table, "ggx", samples=2048)
     q = r.quality
     assert set(q) == {"render_psnr_db", "brightness_stops", "colour_shift", "estimate_error",
-                      "grazing", "verdict", "reason", "next"}
+                      "grazing", "basis", "verdict", "reason", "next"}
     assert q["render_psnr_db"] == r.error["psnr_db"] and q["verdict"] == "good"
     assert abs(q["brightness_stops"]) < 0.03 and q["colour_shift"] < 0.5 and q["next"] == []
     assert FitResult.from_dict(r.to_dict()).quality == q

@@ -9,6 +9,8 @@ from pathlib import Path
 
 from api.store import Store, TableRecord
 from brdffit.io import merl, readers
+from brdffit.io.measurements import Measurements
+from brdffit.io.writers import write_hdf5
 
 
 def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
@@ -16,21 +18,22 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
     before. A file of samples (ASTM, CSV, HDF5; ``brdffit.io.readers``, chosen by
-    ``name``'s suffix or the content) is stored as the MERL table it bins into, its
-    summary's ``input`` saying what the binning did; the id stays the upload's sha256.
-    Raises ``MerlFormatError`` naming ``name`` (not the temp file) for a file no reader
-    takes."""
+    ``name``'s suffix or the content) is stored as brdffit's HDF5 sample list (read
+    back by its content whatever the stored file is called), which the jobs fit at its
+    own directions; its summary is the summary of the table it bins into (what the
+    plots draw), with ``input`` saying what the binning did. The id stays the
+    upload's sha256. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for
+    a file no reader takes."""
     record = store.get_table(digest)
     if record is not None:  # known bytes: already validated
         tmp.unlink(missing_ok=True)
         return record, False
-    table, measured_input = readers.read_table(tmp, name=name)  # errors name the upload
-    summary = table.summary()
-    if measured_input is not None:
-        tmp.write_bytes(merl.to_bytes(table))  # the jobs read the stored table as MERL
+    measured = readers.read_measured(tmp, name=name)  # errors name the upload
+    if isinstance(measured, Measurements):
+        write_hdf5(measured, tmp)  # one layout for the jobs to read, sigma and all
         size = tmp.stat().st_size
-        summary["input"] = measured_input
-    return store.add_table(digest, tmp, size, name, summary)
+    return store.add_table(digest, tmp, size, name, readers.table_summary(measured))
+
 
 
 def nbrdf():

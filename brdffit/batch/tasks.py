@@ -24,6 +24,7 @@ from brdffit import __version__
 from brdffit.errors import BrdffitError, MerlFormatError
 from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
 from brdffit.io import merl, readers
+from brdffit.io.measurements import Measurements
 
 
 @dataclass
@@ -39,7 +40,9 @@ class TableReadRecord:
     read_s: float = 0.0
     worker: str = ""
     finished_at: str = ""
-    #: samples binned onto the MERL grid (brdffit.io.readers.read_table); None for a table
+    #: a sample list's summary (brdffit.io.readers.input_summary; its fits carry
+    #: their own, fuller ``input``); None for a table. ``measured_bins`` counts its
+    #: samples.
     input: dict | None = None
 
 
@@ -78,7 +81,7 @@ def _describe(e: BaseException) -> str:
     return f"{type(e).__name__}: {e}"
 
 
-def read_table(path: str) -> tuple[merl.MerlTable | None, TableReadRecord]:
+def read_table(path: str) -> tuple[merl.MerlTable | Measurements | None, TableReadRecord]:
     """Read and hash ``path`` from one read of its bytes.
 
     Hashing the very bytes that are parsed means the recorded sha256 is the
@@ -107,12 +110,13 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableReadRecord]:
     record.sha256 = h.hexdigest()
     try:
         if data is None:
-            # samples in another layout (ASTM, CSV, HDF5: binned onto the MERL grid),
-            # or a MERL file of the wrong size, which the reader names the problem of
-            table, measured_input = readers.read_table(path)
-            if measured_input is None:
+            # samples in another layout (ASTM, CSV, HDF5: fitted at their own
+            # directions), or a MERL file of the wrong size, which the reader names
+            # the problem of
+            table = readers.read_measured(path)
+            if isinstance(table, merl.MerlTable):
                 raise MerlFormatError(path, "changed size while being read")
-            record.input = measured_input
+            record.input = readers.input_summary(table)
         else:
             table = merl.from_bytes(data, source=path)
     except Exception as e:  # noqa: BLE001 - any failure is this table's, recorded
@@ -120,13 +124,14 @@ def read_table(path: str) -> tuple[merl.MerlTable | None, TableReadRecord]:
         table = None
     else:
         record.status = "ok"
-        record.measured_bins = table.n_measured
+        record.measured_bins = (table.n_measured if isinstance(table, merl.MerlTable)
+                                else table.n)
     record.read_s = time.perf_counter() - t0
     record.finished_at = now()
     return table, record
 
 
-def fit_records(table: merl.MerlTable, record: TableReadRecord, models: list[str],
+def fit_records(table: merl.MerlTable | Measurements, record: TableReadRecord, models: list[str],
                 options: FitOptions, auto: bool = False) -> list[FitRecord]:
     """Fit ``models`` to a table that was read (``brdffit.request.run``), one record
     per model; a failure is recorded, not raised. ``auto``: ``models`` are auto's

@@ -14,6 +14,7 @@ from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
 from brdffit.io import readers
+from brdffit.io.measurements import Measurements
 from brdffit.request import FitReport, FitRequest
 from brdffit.request import run as fit_request
 from brdffit.selection import DEFAULT_CANDIDATES, format_selection
@@ -118,22 +119,55 @@ def format_result(r: FitResult) -> str:
     for entry, others in u.get("strongly_correlated", {}).items():
         lines.append(f"    {entry} correlates (|r| > 0.95) with {', '.join(others)}")
     e = r.error
-    on = "scene" if r.scene is not None else "full table"
+    on_samples = (r.input or {}).get("fitted_at") == "samples"
+    whole = "every sample" if on_samples else "full table"
+    on = "scene" if r.scene is not None else whole
+    held = (r.quality or {}).get("basis") == "held_out"
     lines.append(f"  error ({on}): log_rmse {e['log_rmse']:.4g}   cube_root_rmse "
                  f"{_g(e.get('cube_root_rmse'))}   rmse_cos {e['rmse_cos']:.4g} 1/sr   "
-                 f"rel_peak_error {_g(e.get('rel_peak_error'))}   sphere PSNR "
-                 f"{_g(e.get('psnr_db'), '.1f')} dB")
+                 f"rel_peak_error {_g(e.get('rel_peak_error'))}   "
+                 f"{'held-out' if held else 'sphere'} PSNR {_g(e.get('psnr_db'), '.1f')} dB")
+    if "held_out_log_rmse" in e:
+        lines.append(f"  held-out error ({r.input['held_out']['folds']}-fold): log_rmse "
+                     f"{e['held_out_log_rmse']:.4g}   cube_root_rmse "
+                     f"{_g(e.get('held_out_cube_root_rmse'))}   rmse_cos "
+                     f"{_g(e.get('held_out_rmse_cos'))} 1/sr")
     lines += describe(r.quality)
     if r.full_table_error is not None:
-        lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} (full table)   "
+        lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} ({whole})   "
                      f"scene {r.scene['description']}")
     s = r.samples
     d = s["dropped"]
-    lines.append(
-        f"  bins: {s['used']:,} fitted of {s['usable']:,} usable; dropped {d['unmeasured']:,} "
-        f"unmeasured, {d['nonfinite']:,} non-finite, {d['below_horizon']:,} below the horizon"
-    )
+    if on_samples:
+        lines += describe_coverage(r.input)
+        lines.append(f"  samples: {s['used']:,} fitted of {s['usable']:,} usable; dropped "
+                     f"{d['below_horizon']:,} on the horizon")
+    else:
+        lines.append(
+            f"  bins: {s['used']:,} fitted of {s['usable']:,} usable; dropped "
+            f"{d['unmeasured']:,} unmeasured, {d['nonfinite']:,} non-finite, "
+            f"{d['below_horizon']:,} below the horizon")
     return "\n".join(lines)
+
+
+def describe_coverage(measured_input: dict) -> list[str]:
+    """Where a sample fit's samples lie, and what they leave undetermined, for a person."""
+    c = measured_input.get("coverage")
+    if not c:
+        return []
+    regions = c["regions"]
+    peak = {True: "seen", False: "NOT seen (no sample within half its height)",
+            None: "no lobe fitted"}[c["peak_seen"]]
+    lines = [f"  coverage: {regions['held']} of {regions['of']} (theta_h, theta_d) regions of "
+             f"{regions['deg']} deg; theta_i {c['theta_i_deg'][0]:.0f}-{c['theta_i_deg'][1]:.0f} "
+             f"deg, theta_o {c['theta_o_deg'][0]:.0f}-{c['theta_o_deg'][1]:.0f} deg"
+             f"{', in-plane' if c['in_plane'] else ''}; specular peak {peak}"]
+    loose = {k: v for k, v in (measured_input.get("identifiability") or {}).items()
+             if v != "determined"}
+    if loose:
+        lines.append("  not determined by these samples: "
+                     + "; ".join(f"{k} ({why})" for k, why in loose.items()))
+    return lines
 
 
 def _g(x, fmt: str = ".4g") -> str:
@@ -160,14 +194,19 @@ def run(args) -> int:
     request = request_from_args(args)  # refused before the table is read
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
-    table, measured_input = readers.read_table(args.table)
-    if measured_input is not None:  # said before the fit: binning is an approximation
-        print(f"brdffit: {measured_input['note']}", file=sys.stderr)
+    measured = readers.read_measured(args.table)
+    table = measured
+    if isinstance(measured, Measurements):  # said before the fit: what it will see
+        from brdffit.fitting.samples import binned
+
+        print(f"brdffit: {measured.n} samples ({measured.provenance.get('format')}): fitted "
+              "at their own directions, with a held-out error", file=sys.stderr)
+        table = binned(measured)[0]  # what the plots draw: the samples in their bins
     # for this fit only: a caller of main() in its own process keeps its own hook
     previous, executables.on_compile = executables.on_compile, _say_compiling_once()
     try:
-        report = fit_request(table, request, progress=print_progress if request.auto else None,
-                             measured_input=measured_input)
+        report = fit_request(measured, request,
+                             progress=print_progress if request.auto else None)
     finally:
         executables.on_compile = previous
     text = (format_selection(report.selection) if report.selection is not None

@@ -66,12 +66,14 @@ from brdffit.fitting.sphere import SphereReference
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io import merl
+from brdffit.io.angles import N_BINS
+from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
 
 
 @runtime.in_float64
 def fit(
-    table: MerlTable,
+    table: MerlTable | Measurements,
     model: str | models.AbstractBRDFModel = DEFAULT_MODEL,
     *,
     loss: str = DEFAULT_LOSS,
@@ -89,7 +91,10 @@ def fit(
     """Fit ``model`` to ``table``; see the module docstring for the pipeline.
 
     Args:
-        table: the measured table (``brdffit.io.merl.read``).
+        table: the measured table (``brdffit.io.merl.read``), or a sample list
+            (``brdffit.io.measurements.Measurements``), fitted at its own
+            directions (``brdffit.fitting.samples``: its weights, held-out error,
+            coverage and verdict).
         model: a registry name (``brdffit.models.REGISTRY``) or a model instance.
         loss: what the solver minimises (``brdffit.fitting.options.LOSSES``): ``"log"``
             (default), ``"cube_root"``, ``"linear_cos"`` or ``"render"``
@@ -134,15 +139,20 @@ def fit(
         raise FitInputError(f"starts must be a positive integer, got {starts!r}")
     if not isinstance(max_steps, int) or max_steps < 1:
         raise FitInputError(f"max_steps must be a positive integer, got {max_steps!r}")
+    on_samples = isinstance(table, Measurements)
     if bin_weight is not None:
         bin_weight = np.asarray(bin_weight, dtype=np.float64).ravel()
-        if bin_weight.size != table.mask.size or not np.all(np.isfinite(bin_weight)):
+        if bin_weight.size != N_BINS or not np.all(np.isfinite(bin_weight)):
             raise FitInputError("bin_weight needs one finite value per MERL bin")
         if np.any(bin_weight < 0):
             raise FitInputError("bin_weight must be >= 0")
     if physical is not False:
         if physical is not True:
             raise FitInputError(f"physical must be true or false, got {physical!r}")
+        if on_samples:
+            raise FitInputError(
+                f"{table.source}: the physical bounds are not available for a sample list "
+                "yet (their albedo check reads a table): fit it without them")
         # A bounded step over the free fit (brdffit.fitting.physical); a nested fit
         # seeds from its parent's *unconstrained* optimum.
         parent_fit = _resolved(parent_fit)
@@ -155,18 +165,24 @@ def fit(
                      precision=precision, max_steps=max_steps, seed=seed,
                      bin_weight=bin_weight)
 
-    prep = prepare(table, bin_weight, samples, seed, precision, loss)
+    if on_samples:
+        from brdffit.fitting import samples as sample_fit
+
+        prep = sample_fit.prepare_samples(table, bin_weight, samples, seed, precision, loss)
+    else:
+        prep = prepare(table, bin_weight, samples, seed, precision, loss)
     counts, n_usable, weight, sample_set, data = (
         prep.counts, prep.n_usable, prep.weight, prep.sample_set, prep.data)
+    what = "samples" if on_samples else "bins"
     if n_usable < m.n_params * 4:
         raise FitInputError(
-            f"{table.source}: only {n_usable} usable bins (measured, finite, above the "
+            f"{table.source}: only {n_usable} usable {what} (measured, finite, above the "
             f"horizon{', weighted by the scene' if bin_weight is not None else ''}); "
             f"{m.name} needs at least {m.n_params * 4}"
         )
     if prep.brightest < merl.MIN_PEAK:
         raise FitInputError(
-            f"{table.source}: every usable bin is below {merl.MIN_PEAK:g} 1/sr"
+            f"{table.source}: every usable {what[:-1]} is below {merl.MIN_PEAK:g} 1/sr"
             f"{' under the scene' if bin_weight is not None else ''}: nothing to fit"
         )
     dtype = DTYPES[precision]
@@ -176,7 +192,8 @@ def fit(
     # Every bin (samples=None): the fit on the default subsample, with its starts and
     # its nested parent, lands next to the optimum at ~1/70 of the cost per step;
     # every bin then only polishes it (a few steps instead of dozens, per start).
-    polish = samples is None and init is None and n_usable > 4 * DEFAULT_SAMPLES
+    polish = (samples is None and init is None and n_usable > 4 * DEFAULT_SAMPLES
+              and not on_samples)
     if init is not None:
         u_candidates = m.unconstrain(m.check_params(init))[None]
     elif polish:
@@ -186,10 +203,12 @@ def fit(
         # want it back, and from deep in the tail capped steps would only crawl.
         u_candidates = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
     else:
-        u_candidates = start_vectors(m, table, counts.usable, prep.hints)
+        u_candidates = start_vectors(m, table if prep.start_table is None else prep.start_table,
+                                     counts.usable, prep.hints)
     steps_as_data = solver == "lm" and max_steps <= STEP_CAP
     n_starts = min(starts, len(u_candidates))
-    ready_here = ready_report_once(table, m, u_candidates[0], prep, loss, precision, solver)
+    ready_here = (None if on_samples else
+                  ready_report_once(table, m, u_candidates[0], prep, loss, precision, solver))
     if ready_here is not None and steps_as_data:
         # the solve's program depends on the number of starts, not on which: in a new
         # process it compiles here, beside the scoring below
@@ -286,7 +305,10 @@ def fit(
     pending = (report_pool().submit(runtime.in_float64(parameter_uncertainty), m, u_best, data,
                                     terms)
                if result != "nonfinite" else None)
-    metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
+    if on_samples:
+        metrics = sample_fit.sample_metrics(m, u_best, sample_fit.every_sample(table, weight))
+    else:
+        metrics = full_table_metrics(table, m, u_best, weight, peak=prep.peak)
     # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
     metrics[f"sample_{LOSS_METRIC[loss]}"] = (
         float(np.sqrt(max(losses[i], 0.0) / 3.0)) if finite.any() else float("nan")
@@ -294,17 +316,40 @@ def fit(
     if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
         result = "nonfinite"  # an error that cannot be measured is no success
     params = plain_params(constrained(m, np.asarray(u_best)))
-    # The image error of the whole sphere (no scene weighting): one figure that
-    # compares fits made under different losses.
-    metrics["psnr_db"], colour = cached(
-        table, "sphere", lambda: SphereReference(table)).psnr_and_colour(m, params)
+    basis, measured_input = "sphere", None
+    if on_samples:
+        held = None
+        if result != "nonfinite":
+            def refit(fold_data):  # one start from the optimum, in this fit's solve
+                u0 = np.asarray(u_best, np.float64)[None]
+                if steps_as_data:
+                    out = solve_batch(m, solver, jnp.asarray(_padded(u0, bucket), dtype),
+                                      fold_data, jnp.asarray(max_steps), n_live=jnp.asarray(1))
+                else:
+                    out = solve_batch(m, solver, jnp.asarray(u0, dtype), fold_data, max_steps)
+                return np.asarray(out[0])[0], np.asarray(out[1])[0]
+
+            held = sample_fit.held_out(m, table, u_best, prep, refit, seed=seed)
+        if held is not None:
+            metrics.update({f"held_out_{k}": v for k, v in held.metrics.items()})
+        metrics["psnr_db"], colour, basis = sample_fit.look(table, prep, held, m, params)
+        measured_input = sample_fit.fitted_input(table, prep, m, params, held)
+    else:
+        # The image error of the whole sphere (no scene weighting): one figure that
+        # compares fits made under different losses.
+        metrics["psnr_db"], colour = cached(
+            table, "sphere", lambda: SphereReference(table)).psnr_and_colour(m, params)
     uncertainty = None
     if pending is not None and result != "nonfinite":
         uncertainty = pending.result()
     elif pending is not None:  # the metrics say nonfinite: no uncertainty, whatever it was
         pending.exception()
+    if measured_input is not None:
+        measured_input["identifiability"] = sample_fit.identifiability(uncertainty)
     look = quality(metrics["psnr_db"], colour, model=m, params=params, loss=loss,
-                   converged=result == "successful")
+                   converged=result == "successful", basis=basis)
+    if measured_input is not None:
+        look = sample_fit.unseen_peak(look, measured_input)
     return FitResult(
         model=m.name,
         params=params,
@@ -330,6 +375,7 @@ def fit(
         uncertainty=uncertainty,
         table=table.source,
         quality=look,
+        input=measured_input,
     )
 
 

@@ -230,8 +230,16 @@ def _device_frames(dtype_name: str) -> Frame:
 
 
 def _make_loss_data(table, index, weight, dtype, frame: Frame, loss: str) -> LossData:
-    values = table.rgb.reshape(3, -1)[:, index]
-    x = values * np.maximum(bin_grid().cos_i[index], 0.0)
+    return loss_data(table.rgb.reshape(3, -1)[:, index], bin_grid().cos_i[index], weight,
+                     dtype, frame, loss)
+
+
+def loss_data(values: np.ndarray, cos_i: np.ndarray, weight, dtype, frame: Frame,
+              loss: str) -> LossData:
+    """Measured ``values`` (3, s) at directions with incidence cosines ``cos_i`` and
+    shading ``frame``, weighted by ``weight`` (s,), as the targets of ``loss``: a
+    table's bins and a sample list's own directions alike."""
+    x = values * np.maximum(cos_i, 0.0)
     exposure = energy = None
     if loss == "render":
         w = np.asarray(weight)
@@ -473,7 +481,17 @@ def report_pool():
         return pool
 
 
-def _full_error_sums(model, u, rgb, weight, frame, peak):
+def metrics_from_sums(total, rel_peak) -> dict[str, float]:
+    log_rmse, cube_root_rmse, rmse_cos = np.sqrt(np.asarray(total, np.float64) / 3.0)
+    return {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
+            "rmse_cos": float(rmse_cos), "rel_peak_error": float(rel_peak)}
+
+
+def error_sums(model, u, rgb, weight, frame, peak):
+    """The sums behind every error metric of ``u`` over ``rgb`` (3, n) measured at
+    ``frame``, weighted by ``weight``, and the relative error at index ``peak``: one
+    implementation for a table's bins and a sample list's directions
+    (:func:`metrics_from_sums`)."""
     n = weight.shape[-1]
     parts = _error_parts(n)
     if parts == 1:
@@ -510,10 +528,7 @@ def full_table_metrics(
     for dt in (dtype, jnp.float64):
         frame = _device_frames(jnp.dtype(dt).name)
         ut, w = jnp.asarray(u, dt), jnp.asarray(weight)
-        total, rel_peak = _full_error_sums(model, ut, rgb, w, frame, peak)
-        log_rmse, cube_root_rmse, rmse_cos = np.sqrt(np.asarray(total, np.float64) / 3.0)
-        metrics = {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
-                   "rmse_cos": float(rmse_cos), "rel_peak_error": float(rel_peak)}
+        metrics = metrics_from_sums(*error_sums(model, ut, rgb, w, frame, peak))
         if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
             break
     return metrics
@@ -556,6 +571,8 @@ class Prepared(NamedTuple):
     peak: int
     brightest: float  # the largest usable value (1/sr)
     hints: TableHints | None  # what the starts read from the table
+    # the table the starts read (a sample list's binned table; None: the table itself)
+    start_table: MerlTable | None = None
 
 
 #: Solid-angle weights and subsamples by usable-bin mask: tables measured on the same

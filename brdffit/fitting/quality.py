@@ -48,19 +48,27 @@ def _finite(x) -> bool:
     return x is not None and isinstance(x, int | float) and math.isfinite(x)
 
 
+#: What the PSNR of each ``basis`` compares, in the verdict's reason.
+FIGURES = {"sphere": "sphere render",
+           "held_out": "held-out samples' render"}
+
+
 def verdict(render_psnr_db: float | None, brightness_stops: float | None,
-            colour_shift: float | None) -> tuple[str, str]:
+            colour_shift: float | None, basis: str = "sphere") -> tuple[str, str]:
     """(verdict, reason) of a PSNR (dB), a brightness error (stops) and a CIEDE2000
-    colour shift; None for a figure that could not be measured."""
+    colour shift; None for a figure that could not be measured. ``basis``: what they
+    were measured on (:data:`FIGURES`): a sphere rendered from the table, or a sample
+    list's held-out predictions (``brdffit.fitting.samples``), with the same thresholds."""
+    figure = FIGURES[basis]
     if not _finite(render_psnr_db):
-        return "poor", "the fit's sphere render could not be compared (no finite PSNR)"
+        return "poor", f"the fit's {figure} could not be compared (no finite PSNR)"
     if not _finite(brightness_stops):
-        return "poor", ("the fit's sphere is black where the table's is not, or the other "
-                        "way round")
+        return "poor", (f"the fit's {figure} is black where the measurement's is not, or "
+                        "the other way round")
     stops = abs(brightness_stops)
     de = colour_shift if _finite(colour_shift) else 0.0
     if render_psnr_db < POOR[0]:
-        return "poor", (f"sphere render {render_psnr_db:.1f} dB from the measurement "
+        return "poor", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                         f"(poor below {POOR[0]:g} dB)")
     if stops > POOR[1]:
         return "poor", (f"{_stops(brightness_stops)} in brightness (poor beyond "
@@ -68,11 +76,11 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
     if de > POOR[2]:
         return "poor", f"colour off by CIEDE2000 {de:.1f} (poor beyond {POOR[2]:g})"
     if render_psnr_db >= GOOD[0] and stops <= GOOD[1] and de <= GOOD[2]:
-        return "good", (f"sphere render {render_psnr_db:.1f} dB, brightness "
+        return "good", (f"{figure} {render_psnr_db:.1f} dB, brightness "
                         f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f} (good: >= "
                         f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and {GOOD[2]:g})")
     if render_psnr_db < GOOD[0]:
-        return "visible", (f"sphere render {render_psnr_db:.1f} dB from the measurement "
+        return "visible", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                            f"(good from {GOOD[0]:g} dB)")
     if stops > GOOD[1]:
         return "visible", (f"{_stops(brightness_stops)} in brightness (good within "
@@ -85,20 +93,25 @@ def _stops(s: float) -> str:
 
 
 def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: str,
-            converged: bool, physical: bool = False, gains: list | None = None) -> dict:
+            converged: bool, physical: bool = False, gains: list | None = None,
+            basis: str = "sphere") -> dict:
     """The quality block of a fit of ``model`` (the object) with ``params``:
     ``render_psnr_db`` and ``colour`` as ``SphereReference.psnr_and_colour`` gives
-    them; the rest describes the fit, for ``next``: its ``loss``, whether it
+    them (``colour["grazing"]`` None where there is no grazing view: held-out
+    samples); the rest describes the fit, for ``next``: its ``loss``, whether it
     ``converged``, whether it was bound to ``physical`` limits, and ``gains``
-    measured elsewhere (:func:`next_steps`)."""
+    measured elsewhere (:func:`next_steps`). ``basis``: :func:`verdict`'s."""
     psnr = float(render_psnr_db) if _finite(render_psnr_db) else None
     key = colour["key"]
-    word, reason = verdict(psnr, key["brightness_stops"], key["colour_shift"])
+    word, reason = verdict(psnr, key["brightness_stops"], key["colour_shift"], basis)
+    graze = colour.get("grazing")
     block = {"render_psnr_db": psnr,
              "brightness_stops": key["brightness_stops"],
              "colour_shift": key["colour_shift"],
              "estimate_error": key["estimate_error"],
-             "grazing": {k: colour["grazing"][k] for k in ("brightness_stops", "colour_shift")},
+             "grazing": None if graze is None else {
+                 k: graze[k] for k in ("brightness_stops", "colour_shift")},
+             "basis": basis,
              "verdict": word, "reason": reason, "next": []}
     if word != "good":
         block["next"] = next_steps(block, model=model, params=params, loss=loss,

@@ -24,11 +24,11 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: relative error) beside ``brightness_stops``, and the block has ``next``. 3: the
 #: key ``input`` (a fit of samples: what binning them did), which a reader of version
 #: 2 refuses as unknown.
-SCHEMA = "brdffit.fit/3"
+SCHEMA = "brdffit.fit/4"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/2", "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)

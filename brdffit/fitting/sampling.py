@@ -105,7 +105,7 @@ def stratified_sample(weight: np.ndarray, samples: int | None, seed: int = 0) ->
         return SampleSet(index, w / w.sum(), int(candidates.size))
 
     row_count = np.bincount(candidates // (N_THETA_D * N_PHI_D), minlength=N_THETA_H)
-    quota = _row_quota(row_count, samples)
+    quota = row_quota(row_count, samples)
     # Systematic sampling inside each row: the k-th of a row's q picks sits at
     # position floor((k + offset) n / q) among its n candidates (sorted, so rows are
     # contiguous), i.e. q bins spread evenly over the row's (theta_d, phi_d)
@@ -124,7 +124,7 @@ def stratified_sample(weight: np.ndarray, samples: int | None, seed: int = 0) ->
     return SampleSet(padded_index, padded_w / padded_w.sum(), int(index.size))
 
 
-def _row_quota(row_count: np.ndarray, samples: int) -> np.ndarray:
+def row_quota(row_count: np.ndarray, samples: int) -> np.ndarray:
     """Equal share of ``samples`` per non-empty row; a row with fewer bins than its
     share takes them all and the rest goes to the others."""
     quota = np.zeros_like(row_count)

@@ -47,6 +47,7 @@ from brdffit import runtime
 from brdffit.errors import FitInputError
 from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
 from brdffit.io.grid import bin_grid
+from brdffit.io.merl import MerlTable
 
 #: Named scenes: keyword arguments of :class:`Scene`.
 PRESETS: dict[str, dict] = {
@@ -388,5 +389,10 @@ def fit_in_scene(table, model, scene: Scene | None, **fit_options):
     if scene is None:
         return fit(table, model, **fit_options)
     result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
-    return dataclasses.replace(result, scene=scene.to_dict(),
-                               full_table_error=full_table_error(table, model, result.params))
+    if isinstance(table, MerlTable):
+        whole = full_table_error(table, model, result.params)
+    else:  # a sample list: every sample, without the scene's weights
+        from brdffit.fitting.samples import sample_error
+
+        whole = sample_error(table, model, result.params)
+    return dataclasses.replace(result, scene=scene.to_dict(), full_table_error=whole)

@@ -112,7 +112,7 @@ def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
     :meth:`MerlTable.lookup` at every lit pixel, through the pixels' bins, which are
     the same for every table."""
     wi, wo, lit = sphere_directions(size, light)
-    bins = _sphere_bins(size, tuple(float(c) for c in np.ravel(light)))
+    bins = sphere_bins(size, tuple(float(c) for c in np.ravel(light)))
     values = table.rgb.reshape(3, -1)[:, bins]
     img = np.zeros((size, size, 3))
     img[lit] = np.where(table.mask.reshape(-1)[bins], values, np.nan).T
@@ -120,7 +120,7 @@ def render_table(table: MerlTable, light: np.ndarray, size: int = 128):
 
 
 @functools.lru_cache(maxsize=16)
-def _sphere_bins(size: int, light: tuple[float, ...]) -> np.ndarray:
+def sphere_bins(size: int, light: tuple[float, ...]) -> np.ndarray:
     """Flat MERL bin of each lit pixel (in ``lit``'s order), as ``lookup`` finds it."""
     wi, wo, lit = _sphere_directions(size, light)
     bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi[lit], wo[lit])), SHAPE)
@@ -163,7 +163,7 @@ def pixel_bin_dirs(size: int, light: tuple[float, ...]):
     whose centre is below the horizon (the sphere's rim) keeps the pixel's own pair.
     ``light``: camera-space direction as a tuple (the cache's key)."""
     wi, wo, lit = _sphere_directions(size, light)
-    return _bin_dirs(_sphere_bins(size, light), wi[lit], wo[lit])
+    return _bin_dirs(sphere_bins(size, light), wi[lit], wo[lit])
 
 
 def _bin_dirs(bins: np.ndarray, wi: np.ndarray, wo: np.ndarray):

@@ -12,6 +12,8 @@ import numpy as np
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
 SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
+#: Bins in a table: a scene's or any per-bin weight has one value per bin.
+N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
 
 def _rotate_z(v, angle, xp):

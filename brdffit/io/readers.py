@@ -328,11 +328,23 @@ def read_table(path: str | os.PathLike, name: str | None = None):
     return table, input_summary(got, binning)
 
 
-def input_summary(samples: Measurements, binning) -> dict:
-    """What a fit of binned samples reports of its input (``FitResult.input``): the
-    format, the sample count, the channels and the binning (``Binning.summary``), and
-    the line that says it."""
-    return {"format": samples.provenance.get("format"), "samples": samples.n,
-            "channels": samples.provenance.get("channels", 3),
-            "sigma": samples.sigma is not None, "binning": binning.summary(),
-            "note": binning.describe()}
+def input_summary(samples: Measurements, binning=None) -> dict:
+    """What a fit of samples reports of its input (``FitResult.input``): the format,
+    the sample count, the channels, whether they have sigma, and where they were
+    binned, the binning (``Binning.summary``) and the line that says it."""
+    out = {"format": samples.provenance.get("format"), "samples": samples.n,
+           "channels": samples.provenance.get("channels", 3),
+           "sigma": samples.sigma is not None}
+    if binning is not None:
+        out.update(binning=binning.summary(), note=binning.describe())
+    return out
+
+
+def table_summary(measured: merl.MerlTable | Measurements) -> dict:
+    """What a store keeps of a measured file: a table's ``summary()``; a sample list's
+    is that of the table it bins into (what the plots draw), with ``input`` saying what
+    the binning did."""
+    if isinstance(measured, merl.MerlTable):
+        return measured.summary()
+    table, binning = measured.to_table()
+    return {**table.summary(), "input": input_summary(measured, binning)}

@@ -538,15 +538,26 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
         x = e.get(key)
         return "n/a" if x is None or not np.isfinite(x) else format(x, fmt)
 
+    held = "held_out_log_rmse" in e
+    basis = (result.quality or {}).get("basis", "sphere")
     metrics = [f"log_rmse        {g('log_rmse')}",
+               *([f"  held out      {g('held_out_log_rmse')} ± {g('held_out_log_rmse_se', '.2g')}"]
+                 if held else []),
                f"cube_root_rmse  {g('cube_root_rmse')}",
                f"rmse_cos        {g('rmse_cos')} 1/sr",
                f"rel_peak_error  {g('rel_peak_error')}",
-               f"sphere PSNR     {g('psnr_db', '.1f')} dB",
+               f"{'held-out' if basis == 'held_out' else 'sphere'} PSNR"
+               f"{' ' if basis == 'held_out' else '   '}{g('psnr_db', '.1f')} dB",
                *_looks_lines(result.quality),
                f"loss {result.loss}, {result.result}, {result.steps} steps, "
-               f"{result.samples['used']:,} of {result.samples['usable']:,} bins"]
+               f"{result.samples['used']:,} of {result.samples['usable']:,} "
+               f"{'samples' if _on_samples(result) else 'bins'}"]
     return params, metrics
+
+
+def _on_samples(result: FitResult) -> bool:
+    """A fit of a sample list at its own directions (``brdffit.fitting.samples``)."""
+    return (result.input or {}).get("fitted_at") == "samples"
 
 
 def _looks_lines(look: dict | None) -> list[str]:
@@ -591,7 +602,8 @@ def _draw_summary(fig, result: FitResult) -> None:
     params, metrics = summary_lines(result)
     ax_p, ax_m, ax_c = fig.subplots(1, 3, width_ratios=[1.7, 1.0, 0.9])
     for ax, title, lines in ((ax_p, "parameters ± standard error   (? = undetermined)", params),
-                             (ax_m, "errors (full table)", metrics)):
+                             (ax_m, "errors (every sample)" if _on_samples(result)
+                              else "errors (full table)", metrics)):
         ax.set_axis_off()
         ax.set_title(title, fontsize=11, loc="left")
         ax.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", family="monospace",

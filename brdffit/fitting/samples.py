@@ -1,0 +1,505 @@
+"""Fitting a sample list where it was measured: ``fit(measurements, "ggx")``.
+
+A gonioreflectometer's list (``brdffit.io.measurements.Measurements``) is fitted at
+its own direction pairs: no sample is moved to a MERL bin's centre (binning moved them
+by up to ~1 degree, the whole width of a near-mirror lobe). The solve is the table
+fit's own (``brdffit.fitting.pipeline``, ``brdffit.fitting.problem``): only the
+samples it sees, their weights and the report differ.
+
+- **Weights.** Every sample weighs the same; with ``sigma``, each weighs 1 / the
+  variance of its log loss target, log1p(f cos_i), propagated from sigma
+  (``(sigma cos_i / (1 + f cos_i))^2``, the mean over channels), at most
+  :data:`MAX_WEIGHT_RATIO` times the median weight (a sigma of 0 would otherwise be
+  the whole fit). A scene (``bin_weight``) multiplies the samples in its bins. The
+  weights are the log loss's for every loss.
+- **Subsample.** At most ``samples`` samples (16384 by default), an equal quota per
+  theta_h row of the MERL grid as for a table (``brdffit.fitting.sampling``); a list
+  up to that size is fitted whole.
+- **Starts.** Read from the samples binned onto the grid (``Measurements.to_table``):
+  the diffuse floor and the peak the starts need are the same measurements.
+- **Error.** Every metric on every usable sample (:func:`sample_metrics`), and beside
+  it a k-fold **held-out** error (:func:`held_out`): the solver's samples in
+  :data:`FOLDS` random folds, each fold predicted by a fit (from the optimum, on the
+  same compiled solve) to the others. On sparse data the in-sample error flatters
+  a richer model; the held-out one does not, and ``auto`` ranks sample fits by it.
+- **Quality.** A sphere can be rendered from samples only where they cover its
+  pixels' bins (:data:`SPHERE_COVERAGE`; a sphere reads ~20,000 distinct bins, so
+  almost never). Otherwise the verdict is ``brdffit.fitting.quality``'s, with the
+  same thresholds, of the same tone-mapped radiance (irradiance pi from wi, the
+  exposure from the measurement's median luminance) on the held-out predictions
+  (:func:`held_out_look`).
+- **Coverage** (:func:`coverage`): which (theta_h, theta_d) regions hold samples,
+  the angles' ranges, whether the list is in-plane, and whether any sample sees the
+  fitted specular peak.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit import executables, runtime
+from brdffit.fitting.colour import brightness_and_colour
+from brdffit.fitting.problem import (
+    DTYPES,
+    Prepared,
+    cached,
+    error_sums,
+    loss_data,
+    metrics_from_sums,
+)
+from brdffit.fitting.sampling import BinCounts, SampleSet, bucket_size, row_quota
+from brdffit.fitting.sphere import (
+    LIGHTS,
+    LUMINANCE,
+    PSNR_CAP_DB,
+    SphereReference,
+    radiance,
+    sphere_bins,
+    table_exposure,
+    tonemap,
+)
+from brdffit.fitting.starts import table_hints
+from brdffit.io.angles import (
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+    dirs_to_half_diff,
+    flat_index,
+    half_diff_to_bins,
+)
+from brdffit.io.grid import bin_grid
+from brdffit.io.measurements import Measurements
+from brdffit.models.frame import Frame, shading_frame
+
+#: How many folds the held-out error has.
+FOLDS = 5
+#: A sample's weight is at most this many times the median weight.
+MAX_WEIGHT_RATIO = 100.0
+#: The share of a sphere's lit pixels (both lights) whose bins must hold a sample
+#: before the quality verdict is read off the sphere rather than held-out samples.
+SPHERE_COVERAGE = 0.9
+#: Degrees per side of the coverage's (theta_h, theta_d) regions.
+REGION_DEG = 15
+#: A sample "sees" the fitted specular peak where the fit there is at least this
+#: share of the fit at the mirror direction of the same light.
+PEAK_SHARE = 0.5
+
+
+class SampleArrays(NamedTuple):
+    """Every usable sample of a list, padded to a bucket, on the device: what the
+    error and the held-out folds evaluate."""
+
+    rgb: jax.Array  # (3, s) the measured values
+    frame: Frame
+    weight: jax.Array  # (s,) sums to 1 over the usable samples; 0 on the padding
+    peak: jax.Array  # index of the brightest usable sample (f cos_i)
+    index: np.ndarray  # each slot's sample (0 on padding)
+
+
+def sample_bins(meas: Measurements) -> np.ndarray:
+    """The flat MERL bin of each sample."""
+    def make():
+        return flat_index(*half_diff_to_bins(*dirs_to_half_diff(meas.wi, meas.wo)))
+    return cached(meas, "bins", make)
+
+
+def binned(meas: Measurements):
+    """``meas.to_table()``, once per sample list."""
+    return cached(meas, "binned", meas.to_table)
+
+
+def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> np.ndarray:
+    """The weight of each sample (module docstring), not normalised; 0 where the
+    sample is unusable (a direction on the horizon) or the scene leaves its bin out."""
+    cos_i, cos_o = meas.wi[:, 2], meas.wo[:, 2]
+    w = np.ones(meas.n)
+    if meas.sigma is not None:
+        x = meas.rgb * np.maximum(cos_i, 0.0)[:, None]
+        var = np.mean((meas.sigma * np.maximum(cos_i, 0.0)[:, None] / (1.0 + x)) ** 2, axis=1)
+        typical = float(np.median(var))
+        if typical > 0:
+            w = 1.0 / np.maximum(var, typical / MAX_WEIGHT_RATIO)
+    w = np.where((cos_i > 0) & (cos_o > 0), w, 0.0)
+    if bin_weight is not None:
+        w = w * bin_weight[sample_bins(meas)]
+    return w
+
+
+def _frame(wi: np.ndarray, wo: np.ndarray, dtype) -> Frame:
+    name = jnp.dtype(dtype).name
+    return Frame(*(jnp.asarray(a, dtype) for a in shading_frame(wi.astype(name),
+                                                                 wo.astype(name), np)))
+
+
+def _padded(a: np.ndarray, size: int) -> np.ndarray:
+    out = np.zeros((size, *a.shape[1:]), a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+def _subsample(bins: np.ndarray, weight: np.ndarray, samples: int | None, seed: int):
+    """(index, weight) of the samples the solver sees: every usable one, or at most
+    ``samples`` with an equal quota per theta_h row, each weighted by its row's
+    inverse sampling fraction (as ``brdffit.fitting.sampling.stratified_sample``)."""
+    usable = np.flatnonzero(weight > 0)
+    if samples is None or usable.size <= samples:
+        return usable, weight[usable]
+    rows = bins[usable] // (N_THETA_D * N_PHI_D)
+    count = np.bincount(rows, minlength=N_THETA_H)
+    quota = row_quota(count, samples)
+    rng = np.random.default_rng(seed)
+    chosen, w = [], []
+    for r in np.flatnonzero(quota):
+        members = usable[rows == r]
+        pick = rng.choice(members, size=int(quota[r]), replace=False)
+        chosen.append(pick)
+        w.append(weight[pick] * count[r] / quota[r])
+    index = np.concatenate(chosen)
+    order = np.argsort(index)
+    return index[order], np.concatenate(w)[order]
+
+
+def prepare_samples(meas: Measurements, bin_weight, samples, seed: int, precision: str,
+                    loss: str) -> Prepared:
+    """``brdffit.fitting.problem.prepare`` of a sample list: the solver's samples at
+    their own directions, and the binned table the starts read (``start_table``;
+    ``counts.usable`` is over its bins). ``n_usable`` counts samples."""
+    weight_key = None if bin_weight is None else hashlib.sha1(bin_weight.tobytes()).hexdigest()
+
+    def make() -> Prepared:
+        table, _ = binned(meas)
+        weight = sample_weights(meas, bin_weight)
+        n_usable = int(np.count_nonzero(weight > 0))
+        on_horizon = int(np.count_nonzero((meas.wi[:, 2] <= 0) | (meas.wo[:, 2] <= 0)))
+        grid = bin_grid()
+        usable_bins = table.mask.ravel() & grid.above_horizon
+        if bin_weight is not None:
+            usable_bins &= bin_weight > 0
+        counts = BinCounts(usable=usable_bins, measured=meas.n, unmeasured=0, nonfinite=0,
+                           below_horizon=on_horizon)
+        brightest = float(meas.rgb[weight > 0].max(initial=0.0))
+        if n_usable == 0 or not usable_bins.any():
+            return Prepared(counts, n_usable, None, None, None, -1, brightest, None, table)
+        index, w = _subsample(sample_bins(meas), weight, samples, seed)
+        size = bucket_size(index.size)
+        w_pad = _padded(w / w.sum(), size)
+        idx_pad = _padded(index, size)
+        dtype = DTYPES[precision]
+        data = loss_data(meas.rgb[idx_pad].T, meas.wi[idx_pad, 2], w_pad, dtype,
+                         _frame(meas.wi[idx_pad], meas.wo[idx_pad], dtype), loss)
+        sample_set = SampleSet(idx_pad, w_pad, int(index.size))
+        return Prepared(counts, n_usable, weight, sample_set, data, -1, brightest,
+                        table_hints(table, usable_bins), table)
+
+    return cached(meas, ("prepared", samples, seed, precision, loss, weight_key), make)
+
+
+def _arrays(meas: Measurements, index: np.ndarray, weight: np.ndarray) -> SampleArrays:
+    """The samples ``index`` with ``weight`` (normalised here), padded, in float64."""
+    size = bucket_size(index.size)
+    idx = _padded(index, size)
+    w = _padded(weight / weight.sum(), size)
+    bright = (meas.rgb[index] * np.maximum(meas.wi[index, 2:3], 0.0)).sum(axis=1)
+    return SampleArrays(rgb=jnp.asarray(meas.rgb[idx].T, jnp.float64),
+                        frame=_frame(meas.wi[idx], meas.wo[idx], jnp.float64),
+                        weight=jnp.asarray(w, jnp.float64),
+                        peak=jnp.asarray(int(np.argmax(bright))), index=idx)
+
+
+def every_sample(meas: Measurements, weight: np.ndarray) -> SampleArrays:
+    """Every sample with weight > 0 (``sample_weights``), kept per list and weights."""
+    key = ("every", hashlib.sha1(weight.tobytes()).hexdigest())
+    index = np.flatnonzero(weight > 0)
+    return cached(meas, key, lambda: _arrays(meas, index, weight[index]))
+
+
+@runtime.in_float64
+def sample_metrics(model, u, arrays: SampleArrays) -> dict[str, float]:
+    """Every error metric of unconstrained ``u`` over ``arrays`` (one implementation
+    with the table's: ``brdffit.fitting.problem.error_sums``)."""
+    return metrics_from_sums(*error_sums(model, jnp.asarray(u, jnp.float64), arrays.rgb,
+                                         arrays.weight, arrays.frame, arrays.peak))
+
+
+@executables.jit
+def _values(model, u, frame):
+    """The model's values (3, s) at ``frame`` for unconstrained ``u``."""
+    return model.eval_channels(model.constrain(u), frame)
+
+
+class HeldOut(NamedTuple):
+    """The k-fold held-out error: ``metrics`` (log_rmse, cube_root_rmse, rmse_cos over
+    every solver sample, each predicted by the fit that did not see it, and
+    log_rmse_se, log_rmse's standard error), the
+    predictions themselves (3, s) at the solver's samples, and per fold how its
+    solve ended."""
+
+    metrics: dict
+    predicted: np.ndarray
+    results: list[str]
+
+
+def fold_of(n_used: int, folds: int, seed: int) -> np.ndarray:
+    """Each solver sample's fold: a seeded random split into ``folds`` near-equal parts."""
+    return np.random.default_rng(seed + 1).permutation(n_used) % folds
+
+
+@runtime.in_float64
+def held_out(model, meas: Measurements, u_best: np.ndarray, prep: Prepared, refit,
+             folds: int = FOLDS, seed: int = 0) -> HeldOut | None:
+    """The k-fold held-out error of a fit whose optimum is ``u_best`` (module
+    docstring). ``refit(data) -> (u, result)`` solves from ``u_best`` on ``data`` (the
+    solver's data with other weights: the same compiled solve). None where there are
+    fewer than 2 samples per parameter in a fold's training set."""
+    from brdffit.fitting.result import STATUS_NAMES
+
+    data, n_used = prep.data, prep.sample_set.n_used
+    if n_used < folds or (n_used * (folds - 1)) // folds < 2 * model.n_params:
+        return None
+    weight = np.asarray(prep.sample_set.weight, np.float64)
+    fold = np.full(weight.size, -1)
+    fold[:n_used] = fold_of(n_used, folds, seed)
+    frame64 = Frame(*(jnp.asarray(a, jnp.float64) for a in data.frame))
+    rgb = jnp.asarray(meas.rgb[prep.sample_set.index].T, jnp.float64)
+    predicted = np.zeros((3, weight.size))
+    total = np.zeros(3)
+    results = []
+    for f in range(folds):
+        train = np.where(fold == f, 0.0, weight)
+        dtype = data.weight.dtype
+        u, code = refit(_with_weight(data, jnp.asarray(train / train.sum(), dtype)))
+        u = np.asarray(u, np.float64)
+        if not np.all(np.isfinite(u)):
+            u = np.asarray(u_best, np.float64)
+        results.append(STATUS_NAMES[int(code)])
+        test = np.where(fold == f, weight, 0.0)
+        sums, _ = error_sums(model, jnp.asarray(u), rgb, jnp.asarray(test), frame64,
+                             jnp.asarray(0))
+        total += np.asarray(sums, np.float64)
+        pred = np.asarray(_values(model, jnp.asarray(u), frame64), np.float64)
+        predicted[:, fold == f] = pred[:, fold == f]
+    metrics = metrics_from_sums(total / weight[:n_used].sum(), 0.0)
+    del metrics["rel_peak_error"]  # the peak of a fold is no peak
+    metrics["log_rmse_se"] = _log_rmse_se(meas, prep, predicted[:, :n_used])
+    return HeldOut(metrics, predicted[:, :n_used], results)
+
+
+def _log_rmse_se(meas: Measurements, prep: Prepared, predicted: np.ndarray) -> float:
+    """The standard error of the held-out log_rmse, from the spread of the samples'
+    own squared errors (weighted; the delta method: se(rmse) = se(mse) / 2 rmse). Two
+    candidates whose held-out errors differ by less are not told apart by these
+    samples (``brdffit.selection``'s one-standard-error rule)."""
+    n = predicted.shape[1]
+    idx = prep.sample_set.index[:n]
+    w = np.asarray(prep.sample_set.weight[:n], np.float64)
+    w = w / w.sum()
+    cos_i = np.maximum(meas.wi[idx, 2], 0.0)[:, None]
+    d = (np.log1p(np.maximum(predicted.T, 0.0) * cos_i) - np.log1p(meas.rgb[idx] * cos_i))
+    e = np.mean(d * d, axis=1)
+    mse = float(w @ e)
+    se_mse = float(np.sqrt(np.sum(w * w * (e - mse) ** 2)))
+    return se_mse / (2.0 * np.sqrt(mse)) if mse > 0 else 0.0
+
+
+def _with_weight(data, weight):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda d: d.weight, data, weight)
+
+
+def sphere_coverage(meas: Measurements) -> float:
+    """The share of a 128-pixel sphere's lit pixels, under both of the verdict's
+    lights, whose MERL bin holds a sample."""
+    table, _ = binned(meas)
+    mask = table.mask.ravel()
+    seen = [mask[sphere_bins(128, tuple(float(c) for c in light))] for _, light in LIGHTS]
+    return float(np.concatenate(seen).mean())
+
+
+def sphere_look(meas: Measurements, model, params: dict) -> tuple[float, dict]:
+    """``SphereReference.psnr_and_colour`` of the binned table (where it covers the
+    sphere: :func:`sphere_coverage`)."""
+    table, _ = binned(meas)
+    return cached(meas, "sphere", lambda: SphereReference(table)).psnr_and_colour(model, params)
+
+
+def held_out_look(meas: Measurements, prep: Prepared, held: HeldOut) -> tuple[float, dict]:
+    """(PSNR in dB, colour) of the held-out predictions against the measurement, in the
+    form ``SphereReference.psnr_and_colour`` gives them (``grazing`` None): the sphere's
+    tone-mapped radiance, at the solver's samples instead of a sphere's pixels."""
+    n = prep.sample_set.n_used
+    idx, w = prep.sample_set.index[:n], np.asarray(prep.sample_set.weight[:n], np.float64)
+    wi = meas.wi[idx]
+    measured = radiance(meas.rgb[idx], wi)
+    predicted = radiance(np.maximum(held.predicted.T, 0.0), wi)
+    exposure = table_exposure((measured @ LUMINANCE)[w > 0])
+    d = tonemap(predicted, exposure) - tonemap(measured, exposure)
+    mse = float(np.sum(w[:, None] * d * d) / (3.0 * w.sum()))
+    psnr = (float("nan") if not np.isfinite(mse) else PSNR_CAP_DB
+            if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse)))
+    stops, shift = brightness_and_colour(w @ predicted, w @ measured)
+    return psnr, {"key": {"brightness_stops": stops, "colour_shift": shift,
+                          "estimate_error": None}, "grazing": None}
+
+
+@executables.jit
+def _at(model, params, wi, wo):
+    return model(params, wi, wo)
+
+
+@functools.cache
+def _reachable_regions() -> np.ndarray:
+    """The (theta_h, theta_d) regions that hold a MERL bin above the horizon."""
+    g = bin_grid()
+    cells = _regions(g.theta_h[g.above_horizon], g.theta_d[g.above_horizon])
+    out = np.zeros(_region_shape(), bool)
+    out[cells] = True
+    return out
+
+
+def _region_shape() -> tuple[int, int]:
+    return (90 // REGION_DEG, 90 // REGION_DEG)
+
+
+def _regions(theta_h, theta_d):
+    top = 90 // REGION_DEG - 1
+    return (np.minimum(np.degrees(theta_h) // REGION_DEG, top).astype(int),
+            np.minimum(np.degrees(theta_d) // REGION_DEG, top).astype(int))
+
+
+@runtime.in_float64
+def coverage(meas: Measurements, prep: Prepared, model, params: dict) -> dict:
+    """Where the usable samples lie (module docstring), and whether any sees the
+    fitted specular peak: ``peak_seen`` is None for a fit without a lobe (no ``kd``
+    beside a lobe to set aside, or a lobe of zero height)."""
+    use = prep.weight > 0
+    wi, wo = meas.wi[use], meas.wo[use]
+    theta_h, theta_d, _ = dirs_to_half_diff(wi, wo)
+    held = np.zeros(_region_shape(), bool)
+    held[_regions(theta_h, theta_d)] = True
+    reachable = _reachable_regions()
+    sin_i = np.hypot(wi[:, 0], wi[:, 1])
+    sin_o = np.hypot(wo[:, 0], wo[:, 1])
+    off_plane = np.abs(wi[:, 0] * wo[:, 1] - wi[:, 1] * wo[:, 0])
+    in_plane = bool(np.all(off_plane <= 0.02 * sin_i * sin_o + 1e-9))
+    out = {
+        "samples": int(use.sum()),
+        "regions": {"deg": REGION_DEG, "held": int((held & reachable).sum()),
+                    "of": int(reachable.sum()),
+                    "theta_h_by_theta_d": held.astype(int).tolist()},
+        "theta_i_deg": [float(np.degrees(np.arccos(np.clip(wi[:, 2].max(), -1, 1)))),
+                        float(np.degrees(np.arccos(np.clip(wi[:, 2].min(), -1, 1))))],
+        "theta_o_deg": [float(np.degrees(np.arccos(np.clip(wo[:, 2].max(), -1, 1)))),
+                        float(np.degrees(np.arccos(np.clip(wo[:, 2].min(), -1, 1))))],
+        "min_theta_h_deg": float(np.degrees(theta_h.min())),
+        "in_plane": in_plane,
+        "sphere": sphere_coverage(meas),
+        "peak_seen": _peak_seen(model, params, wi, wo),
+    }
+    return out
+
+
+def _peak_seen(model, params: dict, wi: np.ndarray, wo: np.ndarray) -> bool | None:
+    """Whether a sample sees the fitted lobe at :data:`PEAK_SHARE` of its height at the
+    mirror direction of the same light (module docstring)."""
+    if "kd" not in params:
+        return None
+    lobe = {k: np.asarray(v, np.float64) for k, v in params.items()}
+    lobe["kd"] = np.zeros_like(lobe["kd"])
+    mirror = wi * np.array([-1.0, -1.0, 1.0])
+    both = np.asarray(_at(model, lobe, jnp.asarray(np.concatenate([wi, wi])),
+                          jnp.asarray(np.concatenate([wo, mirror]))), np.float64)
+    lum = both @ LUMINANCE  # (2 n,): the pairs' f, as one brightness
+    at, top = lum[: wi.shape[0]], lum[wi.shape[0]:]
+    if not np.all(np.isfinite(lum)) or float(top.max(initial=0.0)) <= 0:
+        return None
+    return bool(np.any(at >= PEAK_SHARE * np.maximum(top, 1e-300)))
+
+
+def look(meas: Measurements, prep: Prepared, held: HeldOut | None, model,
+         params: dict) -> tuple[float, dict, str]:
+    """(PSNR, colour, basis) behind a sample fit's quality block: the binned sphere
+    where the samples cover it, else the held-out predictions; with neither (too few
+    samples for folds), no PSNR (the verdict then says it could not compare)."""
+    if sphere_coverage(meas) >= SPHERE_COVERAGE:
+        return (*sphere_look(meas, model, params), "sphere")
+    if held is not None:
+        return (*held_out_look(meas, prep, held), "held_out")
+    none = {"brightness_stops": None, "colour_shift": None, "estimate_error": None}
+    return float("nan"), {"key": none, "grazing": None}, "held_out"
+
+
+def identifiability(uncertainty: dict | None) -> dict | None:
+    """Per parameter, ``"determined"`` or why the samples do not determine it (the
+    uncertainty's own reasons, ``brdffit.fitting.uncertainty``: no lobe, no effect,
+    trades off with another, loose)."""
+    if uncertainty is None:
+        return None
+    why = uncertainty["why"]
+    out = {}
+    for entry in uncertainty["entries"]:
+        name = entry.split("[")[0]
+        if entry in why:
+            out.setdefault(name, why[entry])
+        else:
+            out.setdefault(name, "determined")
+    return out
+
+
+def fitted_input(meas: Measurements, prep: Prepared, model, params: dict,
+                 held: HeldOut | None) -> dict:
+    """``FitResult.input`` of a sample fit: the readers' summary of the list
+    (``brdffit.io.readers.input_summary``), how it was fitted, the held-out folds, and
+    the coverage (identifiability is added once the uncertainty is in)."""
+    from brdffit.io.readers import input_summary
+
+    _, binning = binned(meas)
+    n_used = prep.sample_set.n_used
+    folds = "" if held is None else f"; a {FOLDS}-fold held-out error beside the in-sample one"
+    return {
+        **input_summary(meas, binning),
+        "fitted_at": "samples",
+        "used": n_used,
+        "held_out": None if held is None else {"folds": FOLDS, "results": held.results},
+        "coverage": coverage(meas, prep, model, params),
+        "note": (f"fitted at the {meas.n} samples' own directions "
+                 f"({n_used} seen by the solver){folds}"),
+    }
+
+
+@runtime.in_float64
+def sample_error(meas: Measurements, model, params: dict) -> dict[str, float]:
+    """Every error metric of ``params`` on every usable sample, without a scene: a
+    scene fit's ``full_table_error``."""
+    from brdffit import models
+
+    m = models.get(model)
+    u = m.unconstrain(m.check_params(params))
+    return sample_metrics(m, u, every_sample(meas, sample_weights(meas)))
+
+
+def unseen_peak(look: dict, measured_input: dict) -> dict:
+    """``look`` (a quality block) at most ``visible`` where no sample sees the fitted
+    specular peak: held-out samples that all lie off the highlight cannot say how the
+    highlight looks (its height and width are the model's extrapolation), so they
+    cannot call it good. Where the sphere itself was rendered, or the peak was seen,
+    ``look`` as it is."""
+    coverage = measured_input.get("coverage") or {}
+    if look.get("basis") != "held_out" or coverage.get("peak_seen") is not False:
+        return look
+    step = {"try": "samples near the mirror direction",
+            "why": f"no sample lies within half the fitted highlight's height (the nearest "
+                   f"is {coverage['min_theta_h_deg']:.1f} deg from a mirror configuration): "
+                   "its height and width are extrapolated from its tails",
+            "gain_db": None}
+    if look["verdict"] == "good":
+        return {**look, "verdict": "visible",
+                "reason": "the highlight is not measured: " + step["why"],
+                "next": [step]}
+    return {**look, "next": [step, *look["next"]]}
