@@ -208,3 +208,48 @@ def test_a_fit_of_samples_recovers_their_material(tmp_path):
                  measured_input=measured_input)
     assert report.chosen_fit.input == measured_input
     assert report.chosen_fit.to_dict()["input"]["format"] == "csv"
+
+
+def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
+    """Spectral columns named by wavelength (CSV) or a spectral dataset (HDF5) become
+    linear sRGB under D65: a flat spectrum stays grey at its level, a long-wavelength
+    one is red; the provenance and the fit's input say how. Spectra short of
+    420-680 nm, or beside RGB columns, are refused in one line."""
+    import h5py
+
+    from brdffit.io import spectra
+
+    lam = np.arange(400, 701, 20)
+    flat = np.full(lam.size, 0.3)
+    red = np.where(lam > 600, 0.8, 0.05)
+    head = "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg," + ",".join(f"{x}nm" for x in lam)
+    path = tmp_path / "spectral.csv"
+    path.write_text(head + "\n" + "\n".join(
+        "30,0,40,180," + ",".join(f"{v:g}" for v in spec) for spec in (flat, red)) + "\n")
+    m = read_measured(path)
+    np.testing.assert_allclose(m.rgb[0], [0.3, 0.3, 0.3], rtol=1e-9)
+    assert m.rgb[1, 0] > 10 * m.rgb[1, 1] and m.rgb[1, 0] > 10 * m.rgb[1, 2]
+    assert m.provenance["spectral"]["illuminant"] == "D65"
+    assert m.provenance["spectral"]["wavelengths_nm"] == [400.0, 700.0, lam.size]
+    from brdffit.io.readers import input_summary
+
+    assert input_summary(m)["spectral"]["observer"] == "CIE 1931 2 deg"
+    h5 = tmp_path / "spectral.h5"
+    with h5py.File(h5, "w") as f:
+        for name, v in (("theta_i", [30.0, 30.0]), ("phi_i", [0.0, 0.0]),
+                        ("theta_o", [40.0, 40.0]), ("phi_o", [180.0, 180.0])):
+            f.create_dataset(name, data=v).attrs["units"] = "degrees"
+        f.create_dataset("spectral", data=np.stack([flat, red]))
+        f.create_dataset("wavelengths", data=lam.astype(float))
+    np.testing.assert_allclose(read_measured(h5).rgb, m.rgb, rtol=1e-12)
+    short = tmp_path / "short.csv"
+    short.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,450nm,550nm,650nm\n"
+                     "30,0,40,180,1,1,1\n")
+    with pytest.raises(MerlFormatError, match="span 450-650 nm; projecting to RGB needs"):
+        read_measured(short)
+    both = tmp_path / "both.csv"
+    both.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,450nm\n"
+                    "30,0,40,180,1,1,1,1\n")
+    with pytest.raises(MerlFormatError, match="keep one kind"):
+        read_measured(both)
+    assert spectra.wavelength_of("theta_i_deg") is None

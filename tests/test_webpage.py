@@ -278,6 +278,28 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         assert job["status"] == "done" and job["models"] == ["ggx"]
         assert job["options"]["loss"] == "cube_root" and job["options"]["physical"] is True
         assert job["result"]["physical"]["unconstrained_log_rmse"] > 0
+
+        # A sample list (an ASTM file) is fitted at its own directions: the page says
+        # where its samples are and shows them on the error map instead of the slices.
+        from tests.table_files import SAMPLED, write_astm
+
+        astm = write_astm(tmp_path / "lab.astm", "ggx", SAMPLED, n=3000)
+        page.set_input_files("#upload-file", str(astm))
+        page.click("#upload-button")
+        page.wait_for_function("document.querySelector('#table-current').innerText"
+                               ".includes('lab.astm')", timeout=STEP_MS)
+        assert "3,000 samples, astm: fitted at their own directions" in page.locator(
+            "#table-current").inner_text()
+        page.uncheck("#physical-input")  # refused for a sample list, in one line
+        page.click("#fit-button")
+        page.wait_for_function("document.querySelector('#samples-note').innerText"
+                               ".includes('fitted at their own directions')",
+                               timeout=FIT_TIMEOUT_MS)
+        note = page.locator("#samples-note").inner_text()
+        assert "3000 samples (astm)" in note and "held-out log_rmse" in note
+        visit.wait_image("#plot-slices")
+        assert "/plots/error_map.png" in page.get_attribute("#plot-slices", "data-shown")
+        visit.shot("token-samples")
         assert visit.outside == []
         assert visit.console_errors == []
         visit.close()

@@ -3,7 +3,7 @@ the RGB triples mean in its RGB variants.
 
 An RGB variant evaluates the conductor Fresnel per channel, F(eta_c, k_c, cos_d). A
 spectral variant evaluates it per wavelength and its film projects the result onto
-sRGB (:mod:`brdffit.export.srgb_response`): channel c sees
+sRGB (:mod:`brdffit.io.srgb_response`): channel c sees
 ``int w_c F(eta(lambda), k(lambda), cos_d) d lambda``. The Fresnel is not linear in
 eta, k, and w_c overlap and go negative, so no upsampling of the triples themselves
 keeps the colour; :func:`fit_spectra` instead fits eta, k at :data:`NODES` wavelengths
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit import runtime
-from brdffit.export import srgb_response
+from brdffit.io import srgb_response
 
 #: Node wavelengths (nm) of the fitted spectra: Mitsuba's range, every 15.2 nm.
 NODES = np.linspace(360.0, 830.0, 32)

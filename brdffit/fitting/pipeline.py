@@ -349,7 +349,7 @@ def fit(
     look = quality(metrics["psnr_db"], colour, model=m, params=params, loss=loss,
                    converged=result == "successful", basis=basis)
     if measured_input is not None:
-        look = sample_fit.unseen_peak(look, measured_input)
+        look = sample_fit.within_samples(look, measured_input)
     return FitResult(
         model=m.name,
         params=params,

@@ -321,16 +321,28 @@ def sphere_colour(table: MerlTable, model: AbstractBRDFModel, params: dict) -> d
     return ref.compare(ref.split(np.asarray(evaluate(model, p, ref.wi, ref.wo), np.float64)))
 
 
-def table_exposure(luminance: np.ndarray) -> float:
+def table_exposure(luminance: np.ndarray, weight: np.ndarray | None = None) -> float:
     """The exposure that puts the typical lit luminance at 0.35 (Reinhard: 0.26, a
     mid-tone): the median, or the render loss's ``MEAN_FLOOR`` of the mean where that
     is larger. A near-mirror (chrome) is black at most pixels, and its median says
     nothing of what a viewer adapts to: without the floor, chrome-steel was exposed
     ~50x brighter than its highlight's energy warrants, and every fit scored 3 dB on
-    the faint halo alone."""
+    the faint halo alone. ``weight``: how many pixels each value stands for (a sample
+    list's held-out verdict, ``brdffit.fitting.samples``); the median and mean are then
+    weighted."""
+    if weight is not None:
+        keep = weight > 0
+        luminance, weight = luminance[keep], weight[keep]
     if luminance.size == 0:
         return 1.0 / 0.35
-    typical = max(float(np.median(luminance)), MEAN_FLOOR * float(np.mean(luminance)))
+    if weight is None:
+        median, mean = float(np.median(luminance)), float(np.mean(luminance))
+    else:
+        order = np.argsort(luminance, kind="stable")
+        cum = np.cumsum(weight[order])
+        median = float(luminance[order][np.searchsorted(cum, 0.5 * cum[-1])])
+        mean = float(weight @ luminance / weight.sum())
+    typical = max(median, MEAN_FLOOR * mean)
     return 0.35 / max(typical, 1e-6)
 
 

@@ -14,11 +14,14 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o`` (``theta_r``/``theta_s``/``theta_v`` and
   their ``phi`` read as ``_o``), each with its unit, ``theta_i_deg`` or
   ``theta_i_rad``, or one line ``# angles: degrees`` (or radians) before the header;
-  the values ``r, g, b`` or one channel ``value`` (also ``brdf``, ``y``); optional
-  ``sigma_r, sigma_g, sigma_b`` or ``sigma``. Lines starting with ``#`` are comments.
+  the values ``r, g, b`` or one channel ``value`` (also ``brdf``, ``y``), or spectral
+  columns named by their wavelength (``450nm``; projected to RGB under D65,
+  :mod:`brdffit.io.spectra`); optional ``sigma_r, sigma_g, sigma_b`` or ``sigma``.
+  Lines starting with ``#`` are comments.
 - **HDF5** (``.h5``, ``.hdf5``): datasets ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
   (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file),
-  ``rgb`` (n, 3) or ``value`` (n,), optional ``sigma`` (n, 3) or (n,).
+  ``rgb`` (n, 3), ``value`` (n,) or ``spectral`` (n, k) with ``wavelengths`` (k,, nm),
+  optional ``sigma`` (n, 3) or (n,).
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
 one line naming the file and what was expected.
@@ -29,6 +32,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+import json
 import os
 import re
 from collections.abc import Callable
@@ -37,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.errors import MerlFormatError
-from brdffit.io import merl
+from brdffit.io import merl, spectra
 from brdffit.io.measurements import Measurements, MeasurementsError
 
 #: HDF5's file signature (its first eight bytes).
@@ -98,7 +102,19 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                                         f"{', '.join(n.strip() for n in names)})")
     rgb = [seen.get(c) for c in CHANNELS]
     one = [seen[c] for c in ONE_CHANNEL if c in seen]
-    if all(k is not None for k in rgb):
+    spectral = sorted((lam, k) for name, k in seen.items()
+                      if (lam := spectra.wavelength_of(name)) is not None)
+    if spectral and (all(k is not None for k in rgb) or one):
+        raise MeasurementsError(source, "both RGB (or one-channel) and spectral value "
+                                        "columns: keep one kind")
+    if spectral:
+        if any(n.startswith("sigma") for n in seen):
+            raise MeasurementsError(source, "sigma of spectral samples is not read yet: drop "
+                                            "the sigma columns (or project to RGB with them)")
+        out["values"] = [k for _, k in spectral]
+        out["wavelengths"] = [lam for lam, _ in spectral]
+        out["sigma"] = None
+    elif all(k is not None for k in rgb):
         out["values"] = rgb
         sig = [seen.get(f"sigma_{c}") for c in CHANNELS]
         out["sigma"] = sig if all(k is not None for k in sig) else (
@@ -109,7 +125,8 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     else:
         some = [c for c, k in zip(CHANNELS, rgb, strict=True) if k is not None]
         raise MeasurementsError(
-            source, "no value columns: r, g, b (RGB) or one of value, brdf, y (one channel)"
+            source, "no value columns: r, g, b (RGB), one of value, brdf, y (one channel), "
+                    "or spectral ones named by wavelength (450nm, ...)"
                     + (f"; only {', '.join(some)} of r, g, b" if some else "")
                     + ("" if len(one) < 2 else "; more than one single-channel column"))
     return out
@@ -119,10 +136,25 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
                provenance: dict) -> Measurements:
     angles = [rows[:, cols[a][0]] * cols[a][1] for a in ANGLES]
     values = rows[:, cols["values"]]
+    if "wavelengths" in cols:
+        values, provenance["spectral"] = _projected(values, cols["wavelengths"], source,
+                                                    row_numbers)
     sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
     return Measurements.from_angles(*angles, values[:, 0] if values.shape[1] == 1 else values,
                                     sigma, source=source, provenance=provenance,
                                     rows=row_numbers)
+
+
+def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
+    """Spectra (n, k) checked as any value is, then projected to RGB
+    (:mod:`brdffit.io.spectra`)."""
+    bad = ~np.all(np.isfinite(values), axis=1) | np.any(values < 0, axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        row = first if row_numbers is None else int(row_numbers[first])
+        raise MeasurementsError(source, f"a spectral value is negative or not finite in "
+                                        f"{int(bad.sum())} rows (first: row {row + 1})")
+    return spectra.to_rgb(values, wavelengths, source)
 
 
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
@@ -245,6 +277,13 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                                 "(degrees or radians), nor has the file")
             unit = unit.decode() if isinstance(unit, bytes) else str(unit)
             angles.append(np.asarray(f[name], float).ravel() * _unit_scale(unit, source))
+        provenance: dict = {"format": "hdf5"}
+        stored = f.attrs.get("provenance")
+        if stored is not None:  # a list brdffit wrote (brdffit.io.writers): what it was
+            try:
+                provenance = {**json.loads(stored), "stored_as": "hdf5"}
+            except (TypeError, ValueError):
+                pass  # not ours after all: an HDF5 file like any other
         if "rgb" in f:
             values = np.asarray(f["rgb"], float)
             if values.ndim != 2 or values.shape[1] != 3:
@@ -252,11 +291,20 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                                 "not (n, 3)")
         elif "value" in f:
             values = np.asarray(f["value"], float).ravel()
+        elif "spectral" in f:
+            if "wavelengths" not in f:
+                raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
+                                                "(nm)")
+            if "sigma" in f:
+                raise MeasurementsError(source, "sigma of spectral samples is not read yet")
+            values, provenance["spectral"] = _projected(
+                np.asarray(f["spectral"], float), np.asarray(f["wavelengths"], float), source)
         else:
-            raise MeasurementsError(source, "no values: a dataset rgb (n, 3) or value (n,)")
+            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
+                                            "spectral (n, k) with wavelengths (k,)")
         sigma = np.asarray(f["sigma"], float) if "sigma" in f else None
     return Measurements.from_angles(*angles, values, sigma, source=source,
-                                    provenance={"format": "hdf5"})
+                                    provenance=provenance)
 
 
 #: suffix -> reader; a MERL table is read as a table.
@@ -335,6 +383,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
     out = {"format": samples.provenance.get("format"), "samples": samples.n,
            "channels": samples.provenance.get("channels", 3),
            "sigma": samples.sigma is not None}
+    if "spectral" in samples.provenance:  # projected to RGB: which light, which observer
+        out["spectral"] = samples.provenance["spectral"]
     if binning is not None:
         out.update(binning=binning.summary(), note=binning.describe())
     return out

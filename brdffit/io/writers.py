@@ -5,12 +5,14 @@ Cornell's files have it: radians, ``VARS theta_i,phi_i,theta_s,phi_s,R,G,B``), `
 or ``.tsv`` (a header naming each column with its unit, degrees), ``.h5``/``.hdf5``
 (datasets in radians, their ``units`` attribute set). Values keep 9 significant
 digits in text (a float's 17 would triple the file for nothing a measurement holds);
-HDF5 keeps them exactly. Sigma is written where the list has it (ASTM has no column
+HDF5 keeps them exactly, and the list's provenance (read back, with ``stored_as``).
+Sigma is written where the list has it (ASTM has no column
 for it: refused rather than dropped).
 """
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -73,6 +75,9 @@ def write_hdf5(meas: Measurements, path: str | os.PathLike) -> Path:
         if meas.sigma is not None:
             f.create_dataset("sigma", data=meas.sigma)
         f.attrs["source"] = str(meas.source)
+        # what the list was before it was stored here (its format, columns, spectral
+        # projection): read back by brdffit.io.readers.read_hdf5
+        f.attrs["provenance"] = json.dumps(meas.provenance)
     return path
 
 

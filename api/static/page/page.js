@@ -169,14 +169,20 @@ function chooseTable(table) {
   const s = table.summary || {};
   const p = $("table-current");
   p.textContent = "";
-  p.append("Table: ", el("strong", table.name), ` (${count(s.measured_bins)} measured bins, `
-    + `${count(s.unmeasured_bins)} unmeasured, ${count(s.nonfinite_bins)} non-finite) `,
-  el("span", table.id.slice(0, 12), { class: "ids", title: table.id }));
+  const what = s.input
+    // a sample list (docs/measurements.md): fitted at its own directions, not binned
+    ? ` (${count(s.input.samples)} samples, ${s.input.format}${s.input.sigma ? ", with sigma" : ""}`
+      + `${s.input.spectral ? `, spectral under ${s.input.spectral.illuminant}` : ""}: `
+      + `fitted at their own directions; ${count(s.measured_bins)} MERL bins hold one) `
+    : ` (${count(s.measured_bins)} measured bins, ${count(s.unmeasured_bins)} unmeasured, `
+      + `${count(s.nonfinite_bins)} non-finite) `;
+  p.append("Table: ", el("strong", table.name), what,
+    el("span", table.id.slice(0, 12), { class: "ids", title: table.id }));
 }
 
 async function uploadTable() {
   const file = $("upload-file").files[0];
-  if (!file) throw new Error("choose a .binary file first");
+  if (!file) throw new Error("choose a measured file first (MERL .binary, ASTM, CSV, HDF5)");
   clearMessage();
   say(`Uploading ${file.name} (${fmt(file.size / 1e6, 3)} MB)…`, "info");
   const table = await api("POST", `/v1/tables?name=${encodeURIComponent(file.name)}`,
@@ -351,9 +357,33 @@ function showResults(job) {
     body.append(row);
   }
   showNextSteps(best);
+  showSamplesNote(best);
   $("export-report").textContent = "";
   $("extra-figure").hidden = true;
   showModel(best ? best.model : null);
+}
+
+// A sample list fitted at its own directions: where its samples are, and its held-out
+// error (input.coverage; docs/measurements.md). Hidden for a MERL table.
+function onSamples(r) {
+  return Boolean(r && r.input && r.input.fitted_at === "samples");
+}
+
+function showSamplesNote(best) {
+  const note = $("samples-note");
+  note.hidden = !onSamples(best);
+  if (note.hidden) return;
+  const c = best.input.coverage;
+  const peak = { true: "seen", false: "NOT seen: no sample within half its height" }[c.peak_seen]
+    || "no lobe fitted";
+  const held = best.error.held_out_log_rmse;
+  note.textContent = `${best.input.samples} samples (${best.input.format}), fitted at their own `
+    + `directions; held-out log_rmse ${fmt(held)} (${best.input.held_out ? best.input.held_out.folds : 0}-fold) `
+    + `beside ${fmt(best.error.log_rmse)} in-sample. Coverage: ${c.regions.held} of `
+    + `${c.regions.of} (theta_h, theta_d) regions; light ${c.theta_i_deg[0].toFixed(0)}-`
+    + `${c.theta_i_deg[1].toFixed(0)} deg, view ${c.theta_o_deg[0].toFixed(0)}-`
+    + `${c.theta_o_deg[1].toFixed(0)} deg${c.in_plane ? ", in-plane" : ""}; specular peak ${peak}. `
+    + "The error map below shows where the samples lie.";
 }
 
 // What to try next where the chosen fit does not look good (quality.next), best first.
@@ -393,7 +423,12 @@ function showModel(model) {
   for (const url of state.blobs) URL.revokeObjectURL(url);
   state.blobs = [];
   loadPlot("spheres", $("plot-spheres"));
-  loadPlot("slices", $("plot-slices"));
+  // a sample list's slices hold few samples: where they lie, and the error there, says more
+  const samples = onSamples((state.job.results || []).find((r) => r.model === model));
+  $("slices-caption").textContent = samples
+    ? "error map: where the samples lie over (theta_h, theta_d), and the fit's error there"
+    : "slices: measured (dots) and fitted (lines) f_r against theta_h";
+  loadPlot(samples ? "error_map" : "slices", $("plot-slices"));
   $("extra-figure").hidden = true;
 }
 

@@ -12,7 +12,7 @@ channel c as
 M the XYZ-to-linear-sRGB matrix, each w_c normalised to integrate to 1 over
 [360, 830] nm (Mitsuba's range; a white reflector stays white: the raw integrals
 differ by 2e-4). The table is Mitsuba 3.6.4's own ``cie1931_xyz``, ``cie_d65`` and
-``xyz_to_srgb`` sampled every 5 nm (``python -m brdffit.export.srgb_response``
+``xyz_to_srgb`` sampled every 5 nm (``python -m brdffit.io.srgb_response``
 prints it again, with Mitsuba installed); linear between samples it projects spectra
 as the 0.25 nm sampling does to 4e-5. w_R is negative from 462 to 552 nm (that lobe
 a third the size of its positive one), w_G below 468 nm and above 609 nm, w_B above

@@ -1,0 +1,72 @@
+"""Spectral samples projected to linear sRGB, with the illuminant stated.
+
+A spectral gonioreflectometer measures f_r(lambda) at a set of wavelengths. Every model
+here is RGB, so each sample's spectrum becomes the linear sRGB (Rec. 709 primaries)
+reflectance a renderer would make of it under white light:
+
+    R_c = int w_c(lambda) f(lambda) d lambda,   w_c = [M xyz(lambda)]_c D65(lambda),
+
+the CIE 1931 2-degree observer under D65, each w_c normalised so that a flat spectrum
+of 1 is (1, 1, 1) (:mod:`brdffit.io.srgb_response`, Mitsuba's own tables: an export to
+Mitsuba's spectral variants turns the RGB back into the same light). The measured
+spectrum is linear between its wavelengths and held at its end values beyond them;
+the wavelengths must span at least :data:`MIN_SPAN` (where the responses hold ~99% of
+their weight), else the projection would be mostly the hold, and it is refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from brdffit.io import srgb_response
+from brdffit.io.measurements import MeasurementsError
+
+#: The range (nm) a spectrum's wavelengths must cover to be projected.
+MIN_SPAN = (420.0, 680.0)
+#: The integration grid (nm): Mitsuba's range, every nm.
+GRID = np.arange(360.0, 831.0, 1.0)
+#: What every projected sample list's provenance says of it.
+PROJECTION = {"illuminant": "D65", "observer": "CIE 1931 2 deg",
+              "rgb": "linear sRGB (Rec. 709 primaries)",
+              "beyond_range": "held at the end values"}
+
+
+def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, dict]:
+    """``values`` (n, k) at ``wavelengths`` (k,) in nm as linear sRGB (n, 3), and the
+    provenance entry that says how. Raises :class:`MeasurementsError` for wavelengths
+    that are not increasing, finite and spanning :data:`MIN_SPAN`."""
+    lam = np.asarray(wavelengths, float).ravel()
+    values = np.asarray(values, float)
+    if values.ndim != 2 or values.shape[1] != lam.size:
+        raise MeasurementsError(source, f"{lam.size} wavelengths but spectra of shape "
+                                        f"{values.shape}")
+    if lam.size < 2 or not np.all(np.isfinite(lam)) or np.any(np.diff(lam) <= 0):
+        raise MeasurementsError(source, "the wavelengths must be finite and increasing, at "
+                                        f"least two (got {lam.tolist()[:8]})")
+    if lam[0] > MIN_SPAN[0] or lam[-1] < MIN_SPAN[1]:
+        raise MeasurementsError(
+            source, f"the spectra span {lam[0]:g}-{lam[-1]:g} nm; projecting to RGB needs "
+                    f"at least {MIN_SPAN[0]:g}-{MIN_SPAN[1]:g} nm (where the eye's response "
+                    "is), else the colour would be mostly a guess")
+    weights = srgb_response.responses(GRID)  # (grid, 3), each column integrates to 1
+    dl = np.gradient(GRID)
+    dl[0] *= 0.5
+    dl[-1] *= 0.5
+    # each wavelength's share of each channel: linear interpolation is linear in the
+    # values, so the projection is one (k, 3) matrix
+    basis = np.stack([np.interp(GRID, lam, np.eye(lam.size)[j]) for j in range(lam.size)])
+    matrix = basis @ (weights * dl[:, None])  # (k, 3)
+    info = {"wavelengths_nm": [float(lam[0]), float(lam[-1]), int(lam.size)], **PROJECTION}
+    return values @ matrix, info
+
+
+def wavelength_of(name: str) -> float | None:
+    """The wavelength (nm) a CSV column names (``450nm``, ``f_450nm``, ``nm450``,
+    ``450``-free names are not spectral), or None."""
+    import re
+
+    m = re.fullmatch(r"(?:f_?|r_?|brdf_?)?(\d+(?:\.\d+)?)\s*nm|nm_?(\d+(?:\.\d+)?)",
+                     name.strip().lower())
+    if m is None:
+        return None
+    return float(m[1] or m[2])
