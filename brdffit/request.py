@@ -76,6 +76,10 @@ class FitRequest:
         object.__setattr__(self, "candidates", tuple(self.candidates))
         if not isinstance(self.options, FitOptions):
             raise FitInputError(f"options must be FitOptions, got {type(self.options).__name__}")
+        if self.options.model != self.models[0]:
+            # ``models`` says what is fitted; ``options.model`` follows it, so that the
+            # two never disagree (a batch built requests whose options named another)
+            object.__setattr__(self, "options", self.options.replace(model=self.models[0]))
         if self.auto:
             if not self.candidates:
                 raise FitInputError("auto needs at least one candidate model")

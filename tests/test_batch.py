@@ -570,10 +570,19 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
 # -- arguments, exit codes ---------------------------------------------------------------------
 
 
-def test_find_tables(table_dir):
+def test_find_tables(table_dir, tmp_path):
     every = find_tables([str(table_dir)])
     assert [os.path.basename(p) for p in every] == sorted(
         f"{n}.binary" for n in [*TRUTHS, *BAD])  # sidecars (.json) are not tables
+    # a lab's mixed folder: sample lists by suffix beside tables; notes and the
+    # batch's own results file are not taken
+    mixed = tmp_path / "lab"
+    (mixed / "deep").mkdir(parents=True)
+    for name in ("a.binary", "deep/b.astm", "c.csv", "d.h5", "notes.txt", "results.h5"):
+        (mixed / name).write_bytes(b"x")
+    got = find_tables([str(mixed)], exclude=[mixed / "results.h5"])
+    assert sorted(os.path.relpath(p, mixed) for p in got) == [
+        "a.binary", "c.csv", "d.h5", "deep/b.astm"]
     assert find_tables([str(table_dir / "a_*.binary"), str(table_dir / "a_ggx.binary")]) == [
         str(table_dir / "a_ggx.binary")]
     with pytest.raises(BatchInputError, match="no such file"):

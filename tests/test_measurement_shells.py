@@ -48,10 +48,14 @@ def test_a_batch_fits_sample_files_beside_merl_tables(astm_file, tmp_path):
                                             "f0": 0.5})})
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
+    (tmp_path / "lab.astm").write_bytes(astm_file.read_bytes())
     out = tmp_path / "r.h5"
-    run_batch([str(astm_file), str(tmp_path / "ggx.binary"), str(bad)], ["ggx"], out,
+    # the lab's folder as it is: a table, a sample list, a bad list, and the results
+    # file the batch writes there (not taken as an input)
+    run_batch([str(tmp_path)], ["ggx"], out,
               options=FitOptions(samples=2048, starts=1), workers=0, progress=False)
     tables = {t["name"]: t for t in read_results(out)["tables"]}
+    assert sorted(tables) == ["bad.csv", "ggx", "lab.astm"]
     lab = tables["lab.astm"]["fits"]["ggx"]["fit"]
     assert lab["input"]["format"] == "astm" and lab["input"]["samples"] == 20_000
     assert lab["input"]["fitted_at"] == "samples" and "held_out_log_rmse" in lab["error"]

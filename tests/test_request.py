@@ -168,3 +168,14 @@ def test_an_outcome_is_plain_data_and_tells_input_from_bug():
     import pickle
 
     assert pickle.loads(pickle.dumps(bug)) == bug
+
+
+def test_the_options_model_follows_the_requests_models():
+    """``models`` says what is fitted; ``options.model`` never disagrees with it (a
+    batch built requests whose options named the default model)."""
+    from brdffit.fitting.options import FitOptions
+    from brdffit.request import FitRequest
+
+    r = FitRequest(models=("beckmann",), options=FitOptions())
+    assert r.options.model == "beckmann" and r.to_dict()["models"] == ["beckmann"]
+    assert FitRequest(models=("auto",), options=FitOptions(model="ggx")).options.model == "auto"

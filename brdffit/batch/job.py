@@ -52,6 +52,9 @@ __all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "FitOptions", "find_
            "run_batch"]
 
 TABLE_SUFFIX = ".binary"
+#: What a directory given to a batch yields: MERL tables and sample lists by suffix
+#: (brdffit.io.readers; ``.txt``, which notes share, only when named).
+DIR_SUFFIXES = (TABLE_SUFFIX, ".astm", ".csv", ".tsv", ".h5", ".hdf5")
 
 
 #: Set by the shell's SIGINT/SIGTERM handler (``brdffit batch``) with the
@@ -95,28 +98,34 @@ class _Task:
     done_models: tuple[str, ...]
 
 
-def find_tables(inputs: Iterable[str]) -> list[str]:
+def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]:
     """Absolute paths of the tables that ``inputs`` name, in order, without repeats.
 
     A file is taken whatever its name (a bad one fails as a table, later); a
-    directory gives every ``*.binary`` below it; a pattern (``*``, ``?``, ``[``)
-    is expanded like a shell glob, ``**`` included. An input that names nothing
-    is an error: it is far more often a typo than an intent.
+    directory gives every measured file below it by its suffix (:data:`DIR_SUFFIXES`:
+    MERL tables and sample lists, a lab's mixed folder); a pattern (``*``, ``?``,
+    ``[``) is expanded like a shell glob, ``**`` included. An input that names nothing
+    is an error: it is far more often a typo than an intent. ``exclude``: paths never
+    taken (the batch's own results file, an HDF5 file in the folder it fits).
     """
     found: dict[str, None] = {}
+    skip = {os.path.abspath(os.fspath(p)) for p in exclude}
 
     def add_dir(d: str) -> int:
-        files = sorted(glob.glob(os.path.join(glob.escape(d), "**", "*" + TABLE_SUFFIX),
-                                 recursive=True))
+        files = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
+            os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
+        n = 0
         for f in files:
-            if os.path.isfile(f):
+            if os.path.isfile(f) and os.path.abspath(f) not in skip:
                 found.setdefault(os.path.abspath(f))
-        return len(files)
+                n += 1
+        return n
 
     for text in inputs:
         if os.path.isdir(text):
             if not add_dir(text):
-                raise BatchInputError(f"{text}: directory holds no *{TABLE_SUFFIX} file")
+                raise BatchInputError(f"{text}: directory holds no measured file "
+                                      f"({', '.join('*' + s for s in DIR_SUFFIXES)})")
         elif os.path.lexists(text):
             found.setdefault(os.path.abspath(text))
         elif glob.has_magic(text):
@@ -361,7 +370,7 @@ def run_batch(
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
     if scheduler or workers:
         require_dask()  # before the results file is created
-    paths = find_tables(inputs)
+    paths = find_tables(inputs, exclude=[out])
     summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths))
     attrs = {
         "models": list(model_names),

@@ -19,7 +19,8 @@ def add_arguments(p) -> None:
     p.description = ("Fit every table of INPUTS with every model into an HDF5 file. Run it "
                      "again with the same arguments to resume: finished fits are skipped.")
     p.add_argument("inputs", nargs="+", metavar="INPUT",
-                   help="table files, directories (every *.binary below) or glob patterns")
+                   help="table or sample files, directories (every *.binary, *.astm, "
+                        "*.csv, *.tsv, *.h5 below) or glob patterns")
     p.add_argument("--models", required=True, type=_models,
                    help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
                         "for the selection's candidates (batch-report shows the choice)")
