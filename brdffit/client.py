@@ -193,9 +193,9 @@ class Client:
 
         ``model`` and every option left out take the server's defaults, which are
         the library's (the client declares none of its own). ``model="auto"``
-        chooses the model (``brdffit.selection``; options ``tolerance`` and
-        ``budget``); ``scene`` (a scene JSON object, see docs/selection.md)
-        restricts the directions that count, for any model."""
+        chooses the model (``brdffit.selection``; options ``tolerance``,
+        ``budget``, ``candidates`` and ``mono_ks``); ``scene`` (a scene JSON object,
+        see docs/selection.md) restricts the directions that count, for any model."""
         body = {"table_id": table_id, "options": options}
         if model is not None:
             body["model"] = model

@@ -127,12 +127,13 @@ class FitRequest:
 
     @classmethod
     def from_flat(cls, models, options: dict) -> FitRequest:
-        """A request from ``models`` and one flat dict of option names with ``scene``
-        and ``candidates`` among them: how the service stores a job."""
+        """A request from ``models`` and one flat dict of option names with ``scene``,
+        ``candidates`` and ``mono_ks`` among them: how the service stores a job."""
         options = dict(options)
         scene, candidates = options.pop("scene", None), options.pop("candidates", None)
+        mono_ks = options.pop("mono_ks", False)
         return cls.from_dict({"models": models, "options": options, "scene": scene,
-                              "candidates": candidates})
+                              "candidates": candidates, "mono_ks": mono_ks})
 
     def to_dict(self) -> dict:
         options = self.options.to_dict()
@@ -237,7 +238,12 @@ def _run(table: MerlTable | Measurements, request: FitRequest, progress: ModelPr
             row.update(status="failed", message=str(e))
         else:
             fits[name] = r
-            row.update(status="fitted", log_rmse=r.error["log_rmse"], converged=r.converged,
+            # a sample list's fits compare held out, as auto's do (brdffit.selection)
+            held = r.error.get("held_out_log_rmse")
+            row.update(status="fitted",
+                       log_rmse=r.error["log_rmse"] if held is None else held,
+                       log_rmse_basis="in_sample" if held is None else "held_out",
+                       converged=r.converged,
                        result=r.result, fit_time_s=r.time_s,
                        verdict=(r.quality or {}).get("verdict"))
         rows.append(row)

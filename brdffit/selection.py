@@ -657,7 +657,8 @@ def best(rows: list[dict]) -> tuple[dict, str]:
         return b, f"{b['model']}: the only model fitted (log_rmse {_fmt(b['log_rmse'])})."
     others = ", ".join(f"{row['model']} {_fmt(row['log_rmse'])}" for row in finite
                        if row is not b)
-    return b, f"Best {b['model']}: the lowest log_rmse ({_fmt(b['log_rmse'])}; {others})."
+    held = " held-out" if b.get("log_rmse_basis") == "held_out" else ""
+    return b, f"Best {b['model']}: the lowest{held} log_rmse ({_fmt(b['log_rmse'])}; {others})."
 
 
 def chosen_result(results: list[dict]) -> dict:

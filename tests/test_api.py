@@ -323,6 +323,16 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     assert http.get(f"/v1/fits/{done['id']}/plots/report.png").status_code == 200
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "auto", "options": {
         **FAST, "candidates": ["lambert", "no_such_model"]}}), 422, "no_such_model")
+    # mono_ks, as `brdffit fit --mono-ks` and select(mono_ks=True) have it; refused, not
+    # ignored, with a fixed model
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "auto", "options": {
+        **FAST, "candidates": ["ggx"], "mono_ks": True}})
+    assert r.status_code == 202, r.text
+    done = wait_status(http, r.json()["id"], ("done", "failed"))
+    assert done["status"] == "done", done
+    assert {x["model"] for x in done["results"]} == {"ggx", "ggx_mono"}
+    assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "ggx", "options": {
+        **FAST, "mono_ks": True}}), 422, "mono_ks True choose among auto's candidates")
 
     def libraries(pid=None):
         return {part for f in server.mapped_files(pid) if ".so" in f for part in Path(f).parts

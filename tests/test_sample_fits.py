@@ -167,3 +167,18 @@ def test_data_synth_writes_sample_files(tmp_path):
     truth = json.loads((tmp_path / "lab.csv.json").read_text())
     assert truth["model"] == "ggx" and truth["layout"] == "uniform"
     assert main(["samples", str(tmp_path / "x.astm"), "--noise", "0.1", "--sigma"]) == 2
+
+
+def test_the_cli_fits_a_list_of_models_and_ranks_samples_held_out(tmp_path, capsys):
+    """``brdffit fit FILE --model a,b``: every model fitted, one line each, the best by
+    the held-out error for a sample list, then the best in full."""
+    from brdffit.cli import main
+
+    meas, _ = sample_model("ggx", None, "uniform", 800, noise=0.02, seed=6)
+    path = write_samples(meas, tmp_path / "lab.csv")
+    assert main(["fit", str(path), "--model", "lambert,ggx"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].split()[2] == "held-out"
+    assert "Best ggx: the lowest held-out log_rmse" in out
+    assert "lab.csv: ggx fit" in out and "held-out error (5-fold)" in out
+    assert main(["fit", str(path), "--model", "ggx,nope"]) == 2

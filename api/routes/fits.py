@@ -89,6 +89,10 @@ class FitOptions(_ContractOptions):
         None, max_length=32, description="model 'auto': the models to choose among "
         "(default: GET /v1/models' auto candidates, cheapest first)")
 
+    mono_ks: StrictBool = Field(
+        False, description="model 'auto': also fit the chosen model with a grey ks "
+        "(<model>_mono) when its fitted specular colour is grey (docs/selection.md)")
+
     @field_validator("candidates")
     @classmethod
     def _known_candidates(cls, v: list[str] | None) -> list[str] | None:
@@ -118,7 +122,7 @@ class FitOptions(_ContractOptions):
     def _valid_for_the_library(self) -> FitOptions:
         # Pydantic has checked the bounds it was given; the library has the last word.
         try:
-            options.FitOptions(**self.model_dump(exclude={"scene", "candidates"}))
+            options.FitOptions(**self.model_dump(exclude={"scene", "candidates", "mono_ks"}))
         except FitInputError as e:
             raise ValueError(str(e)) from None
         return self

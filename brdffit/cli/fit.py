@@ -74,8 +74,12 @@ def options_from_args(args) -> FitOptions:
 def add_arguments(p) -> None:
     p.add_argument("table", help="the measured file: a MERL .binary table, or samples as "
                    "ASTM E1392 (.astm), CSV/TSV with a header, or HDF5 "
-                   "(docs/measurements.md; samples are binned onto the MERL grid)")
-    add_option_arguments(p, ["model"])
+                   "(docs/measurements.md; samples are fitted at their own directions)")
+    default_model, _ = options.spec("model")
+    p.add_argument("--model", default=default_model,
+                   help="model name (see `brdffit models`), a comma-separated list of them "
+                   "(each is fitted, the best log_rmse is the result), or 'auto' to choose "
+                   f"one (docs/selection.md) (default {default_model})")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
@@ -185,8 +189,11 @@ def request_from_args(args) -> FitRequest:
     raises ``FitInputError`` (or ``SceneError``) for what the library refuses."""
     scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
-    opts = options_from_args(args)
-    return FitRequest(models=(opts.model,), options=opts, scene=scene,
+    # --model takes a list too (ggx,beckmann): each is fitted, the best is the result
+    names = tuple(n.strip() for n in str(args.model).split(",") if n.strip()) or ("",)
+    opts = FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)
+                         and n != "model"}, model=names[0])
+    return FitRequest(models=names, options=opts, scene=scene,
                       candidates=tuple(args.candidates), mono_ks=args.mono_ks)
 
 
@@ -210,8 +217,23 @@ def run(args) -> int:
     finally:
         executables.on_compile = previous
     text = (format_selection(report.selection) if report.selection is not None
-            else format_result(report.chosen_fit))
+            else format_result(report.chosen_fit) if len(report.ranking) == 1
+            else format_models(report))
     return write_report(args, table, report, text)
+
+
+def format_models(report: FitReport) -> str:
+    """``--model a,b,...``: one line per model, the reason for the best, then the best
+    fit in full (:func:`format_result`)."""
+    held = any(row.get("log_rmse_basis") == "held_out" for row in report.ranking)
+    lines = [f"{'model':<14}{'k':>3} {'held-out' if held else 'log_rmse':>10} {'looks':>8}  solve"]
+    for row in report.ranking:
+        if row["status"] == "failed":
+            lines.append(f"{row['model']:<14}{row['n_params']:>3}  failed: {row['message']}")
+            continue
+        lines.append(f"{row['model']:<14}{row['n_params']:>3} {row['log_rmse']:>10.4g} "
+                     f"{row.get('verdict') or '-':>8}  {row['result']}")
+    return "\n".join([*lines, report.reason, "", format_result(report.chosen_fit)])
 
 
 def _say_compiling_once():
