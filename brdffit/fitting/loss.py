@@ -262,34 +262,6 @@ def sum_squares(u, model: AbstractBRDFModel, data: LossData):
     return jnp.sum(r * r)
 
 
-def error_metrics(u, model: AbstractBRDFModel, data: LossData) -> dict[str, Array]:
-    """Every metric of parameters ``u`` on ``data`` (usually the full table), whatever
-    loss ``data`` was made for.
-
-    - ``log_rmse``, ``cube_root_rmse``: see the module docstring (``g`` of each loss).
-    - ``rmse_cos``: the same weighting on (f_model - f_meas) cos_i, linear space (1/sr).
-    - ``rel_peak_error``: relative error of the fitted value at the bin with the
-      largest measured compressed value (how well the highlight is matched).
-    """
-    f = model.eval_channels(model.constrain(u), data.frame)
-    fit_cos = jnp.maximum(f, 0.0) * jnp.maximum(data.frame.cos_i, 0.0)
-    meas_cos = _uncompress(data.target, data.loss, data.exposure, data.selector)
-
-    def rmse(d):
-        return jnp.sqrt(jnp.sum(data.weight * d * d) / 3.0)
-
-    lin = fit_cos - meas_cos
-    peak = jnp.argmax(jnp.where(data.weight > 0, jnp.sum(data.target, axis=0), -jnp.inf))
-    rel_peak = jnp.max(jnp.abs(lin[:, peak]) / jnp.maximum(meas_cos[:, peak], 1e-12))
-    return {
-        "log_rmse": rmse(compress_values(fit_cos, "log") - compress_values(meas_cos, "log")),
-        "cube_root_rmse": rmse(compress_values(fit_cos, "cube_root")
-                               - compress_values(meas_cos, "cube_root")),
-        "rmse_cos": rmse(lin),
-        "rel_peak_error": rel_peak,
-    }
-
-
 def _uncompress(target, loss: str, exposure=None, selector=None):
     if loss == SELECTED:
         return jax.lax.switch(selector, [lambda t, n=n: _uncompress(t, n) for n in SELECTABLE],

@@ -482,6 +482,8 @@ def report_pool():
 
 
 def metrics_from_sums(total, rel_peak) -> dict[str, float]:
+    """The metrics of :func:`error_sums`' weighted sums of squares (over R, G, B: the
+    root of a third of each) and the relative error at the peak."""
     log_rmse, cube_root_rmse, rmse_cos = np.sqrt(np.asarray(total, np.float64) / 3.0)
     return {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
             "rmse_cos": float(rmse_cos), "rel_peak_error": float(rel_peak)}
@@ -513,8 +515,9 @@ def full_table_metrics(
     dtype=FULL_TABLE_DTYPE,
     peak: int | None = None,
 ) -> dict[str, float]:
-    """``brdffit.fitting.loss.error_metrics`` of unconstrained params ``u`` over every bin of
-    ``table`` with weight > 0.
+    """The error metrics (docs/results.md: log_rmse, cube_root_rmse, rmse_cos,
+    rel_peak_error; :func:`error_sums`, the one implementation) of unconstrained
+    params ``u`` over every bin of ``table`` with weight > 0.
 
     Evaluated in ``dtype`` (float32 by default, for speed). Table values are bounded
     (``brdffit.io.merl.MAX_VALUE``, 1e12 1/sr), so float32 holds every measured term; a
@@ -541,7 +544,7 @@ def table_error(
     params: dict,
     bin_weight: np.ndarray | None = None,
 ) -> dict[str, float]:
-    """Error metrics (``brdffit.fitting.loss.error_metrics``) of ``params`` on every usable
+    """Error metrics (:func:`full_table_metrics`) of ``params`` on every usable
     bin of ``table``, optionally under a scene's ``bin_weight``."""
     m = models.get(model)
     u = m.unconstrain(m.check_params(params))
