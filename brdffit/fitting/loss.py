@@ -1,4 +1,4 @@
-"""The fitting losses and the error metrics, one definition for both.
+"""The fitting losses, and the compressions that the error metrics share with them.
 
 Residual of bin b, channel c, for a loss with compression ``g``:
 
@@ -32,7 +32,9 @@ loss (``cube_root_rmse`` and ``rmse_cos`` the same under the other two):
 
     log_rmse = sqrt( sum_b w_b sum_c (...)^2 / (3 sum_b w_b) )
 
-evaluated over **all** usable bins of the table (not just the fit's subsample).
+evaluated over **all** usable bins of the table (not just the fit's subsample), or
+every usable sample of a sample list, by ``brdffit.fitting.problem.error_sums`` (the one
+implementation of the metrics).
 
 Arrays are channel-major, (3, S), like the MERL file: XLA vectorises along the
 long bin axis, which makes the loss ~3x cheaper than bin-major (S, 3) arrays.

@@ -1,4 +1,4 @@
-"""Fit an analytic model to a MERL table: ``fit(table, "ggx") -> FitResult``.
+"""Fit an analytic model to a MERL table or a sample list: ``fit(table, "ggx") -> FitResult``.
 
 The pipeline, and where each decision is documented:
 
@@ -15,7 +15,10 @@ The pipeline, and where each decision is documented:
 
 The problem each step works on (the prepared table, the compiled solve, the
 full-table metrics) is ``brdffit.fitting.problem``'s; a physically bounded fit is a
-bounded step over this free fit (``brdffit.fitting.physical``).
+bounded step over this free fit (``brdffit.fitting.physical``). A sample list
+(``brdffit.io.measurements.Measurements``) runs the same steps at its own directions:
+its weights, subsample, held-out folds, coverage and verdict are
+``brdffit.fitting.samples``'.
 """
 
 from __future__ import annotations
