@@ -123,6 +123,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         visit.shot("uploaded")
 
         page.fill("#samples-input", "2048")
+        page.fill("#tolerance-input", "0.01")  # auto's rule, as brdffit fit --tolerance
         assert page.is_checked("#mode-auto")
         page.click("#fit-button")
         page.wait_for_function("document.querySelector('#job-stage').innerText"
@@ -131,7 +132,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
         job_id = http.get("/v1/fits").json()["items"][0]["id"]
         job = http.get(f"/v1/fits/{job_id}").json()
-        assert job["status"] == "done"
+        assert job["status"] == "done" and job["options"]["tolerance"] == 0.01
         chosen = job["result"]["model"]
 
         # The results table: one row per candidate, the chosen one marked, its
@@ -291,6 +292,13 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         assert "3,000 samples, astm: fitted at their own directions" in page.locator(
             "#table-current").inner_text()
         page.uncheck("#physical-input")  # refused for a sample list, in one line
+        # auto's grey-ks rule with a fixed model: the service's 422, on the page
+        page.check("#mono-input")
+        page.click("#fit-button")
+        page.wait_for_function("document.querySelector('#message').className === 'error'",
+                               timeout=STEP_MS)
+        assert "422" in visit.message() and "mono_ks" in visit.message()
+        page.uncheck("#mono-input")
         page.click("#fit-button")
         page.wait_for_function("document.querySelector('#samples-note').innerText"
                                ".includes('fitted at their own directions')",

@@ -56,4 +56,5 @@ def choices() -> dict:
     default_loss, loss = options.spec("loss")
     return {"losses": list(loss.choices), "default_loss": default_loss,
             "scene_presets": list(PRESETS), "auto": options.AUTO,
-            "defaults": {name: options.spec(name)[0] for name in ("samples", "starts")}}
+            "defaults": {name: options.spec(name)[0]
+                         for name in ("samples", "starts", "tolerance")}}

@@ -225,9 +225,12 @@ function fitRequest() {
   if ($("physical-input").checked) options.physical = true;
   const scene = $("scene-select").value;
   if (scene) options.scene = { preset: scene };
-  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")]]) {
+  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")],
+                              ["tolerance", $("tolerance-input")]]) {
     if (input.value !== "") options[key] = Number(input.value);
   }
+  // auto's rule: with a fixed model the service refuses it (422, shown), not ignores it
+  if ($("mono-input").checked) options.mono_ks = true;
   return { table_id: state.table.id, model, options };
 }
 
@@ -614,6 +617,7 @@ async function loadChoices() {
   for (const name of choices.scene_presets) scene.append(el("option", name, { value: name }));
   $("samples-input").placeholder = String(choices.defaults.samples);
   $("starts-input").placeholder = String(choices.defaults.starts);
+  $("tolerance-input").placeholder = String(choices.defaults.tolerance);
   const boxes = $("model-boxes");
   boxes.textContent = "";
   for (const m of models) {
