@@ -182,3 +182,55 @@ def test_the_cli_fits_a_list_of_models_and_ranks_samples_held_out(tmp_path, caps
     assert "Best ggx: the lowest held-out log_rmse" in out
     assert "lab.csv: ggx fit" in out and "held-out error (5-fold)" in out
     assert main(["fit", str(path), "--model", "ggx,nope"]) == 2
+
+
+def test_edge_lists_horizon_samples_a_backscatter_rig_and_a_loose_channel():
+    """Samples on the horizon are dropped and counted (with sigma they had outweighed
+    the rest: f cos is ~0 there under any model); a backscatter list, whose samples lie
+    where no sphere pixel does, still gets a verdict from its samples as they are; one
+    channel not determined makes its parameter not determined."""
+    from brdffit.fitting.samples import identifiability
+    from brdffit.io.measurements import direction
+
+    meas, _ = sample_model("ggx", None, "uniform", 600, noise=0.02, sigma=True, seed=7)
+    on_edge = Measurements.from_angles(
+        np.full(60, np.pi / 2), np.zeros(60), np.full(60, 0.5), np.zeros(60),
+        np.full((60, 3), 0.01), np.full((60, 3), 0.0002))
+    both = Measurements(np.concatenate([meas.wi, on_edge.wi]),
+                        np.concatenate([meas.wo, on_edge.wo]),
+                        np.concatenate([meas.rgb, on_edge.rgb]),
+                        np.concatenate([meas.sigma, on_edge.sigma]), source="edge")
+    alone, with_edge = fit(meas, "ggx"), fit(both, "ggx")
+    assert with_edge.samples["dropped"]["below_horizon"] == 60
+    assert with_edge.error["log_rmse"] == pytest.approx(alone.error["log_rmse"], rel=1e-6)
+
+    rng = np.random.default_rng(3)  # the view within ~5 degrees of the light
+    ti, pi_ = np.arccos(rng.uniform(0.2, 1.0, 800)), rng.uniform(0, 2 * np.pi, 800)
+    to, po = ti + rng.uniform(-0.05, 0.05, 800), pi_ + rng.uniform(-0.05, 0.05, 800)
+    import jax.numpy as jnp
+
+    from brdffit import models
+
+    m = models.get("ggx")
+    p = {k: jnp.asarray(v) for k, v in m.check_params(NARROW).items()}
+    f = np.asarray(m(p, jnp.asarray(direction(ti, pi_)), jnp.asarray(direction(np.abs(to), po))))
+    back = Measurements.from_angles(ti, pi_, np.abs(to), po, f, source="backscatter")
+    r = fit(back, "ggx")
+    assert r.input["coverage"]["sphere_cells"] < 0.05
+    # judged on its samples as they are (exact data: 100 dB), and no better than
+    # visible: no sample sees the highlight's peak
+    assert r.quality["render_psnr_db"] == 100.0 and r.quality["verdict"] == "visible"
+    assert "taken as they are" in r.quality["reason"]
+    assert "the highlight is not measured" in r.quality["reason"]
+
+    u = {"entries": ["kd[0]", "kd[1]", "kd[2]", "alpha"], "why": {"kd[2]": "loose: x"}}
+    assert identifiability(u) == {"kd": "loose: x", "alpha": "determined"}
+
+
+def test_a_spectrum_outside_srgb_is_clipped_and_counted():
+    from brdffit.io import spectra
+
+    lam = np.arange(400, 701, 10.0)
+    band = np.where((lam >= 480) & (lam <= 520), 1.0, 0.0)[None]
+    rgb, info = spectra.to_rgb(band, lam, "x")
+    assert np.all(rgb >= 0) and rgb[0, 1] > 0 and info["outside_srgb"] == 1

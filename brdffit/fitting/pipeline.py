@@ -335,6 +335,8 @@ def fit(
             held = sample_fit.held_out(m, table, u_best, prep, refit, seed=seed)
         if held is not None:
             metrics.update({f"held_out_{k}": v for k, v in held.metrics.items()})
+            if not all(np.isfinite(v) for v in held.metrics.values()):
+                result = "nonfinite"  # an error that cannot be measured is no success
         metrics["psnr_db"], colour, basis = sample_fit.look(table, prep, held, m, params)
         measured_input = sample_fit.fitted_input(table, prep, m, params, held)
     else:

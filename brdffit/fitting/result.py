@@ -23,7 +23,9 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: ``quality`` block's ``colour_shift`` is a CIEDE2000 figure (it was a per-channel
 #: relative error) beside ``brightness_stops``, and the block has ``next``. 3: the
 #: key ``input`` (a fit of samples: what binning them did), which a reader of version
-#: 2 refuses as unknown.
+#: 2 refuses as unknown. 4: a sample list fitted at its own directions: ``error``'s
+#: ``held_out_*``, ``quality.basis``, and ``input``'s ``fitted_at``, ``used``,
+#: ``held_out``, ``coverage``, ``identifiability``, ``spectral``.
 SCHEMA = "brdffit.fit/4"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of

@@ -86,6 +86,10 @@ MAX_WEIGHT_RATIO = 100.0
 #: The share of a sphere's lit pixels (both lights) whose bins must hold a sample
 #: before the quality verdict is read off the sphere rather than held-out samples.
 SPHERE_COVERAGE = 0.9
+#: The least share of a sphere's pixels (by their (theta_h, theta_d) cell) that held-out
+#: samples must reach for the verdict to weight them as the sphere would; below it
+#: they are taken as they are.
+MIN_SPHERE_SHARE = 0.05
 #: Degrees per side of the coverage's (theta_h, theta_d) regions.
 REGION_DEG = 15
 #: A sample "sees" the fitted specular peak where the fit there is at least this
@@ -116,18 +120,34 @@ def binned(meas: Measurements):
     return cached(meas, "binned", meas.to_table)
 
 
+#: A direction this close to the horizon (cosine) carries no reflectance a fit can use:
+#: f cos is ~0 under every model, so it would only pull every metric down.
+HORIZON_COS = 1e-6
+
+
+def on_the_surface(meas: Measurements) -> np.ndarray:
+    """Samples whose light and view both stand above the horizon (:data:`HORIZON_COS`);
+    a file's 90.000 degrees is read as 90 (``Measurements.from_angles``) and dropped here."""
+    return (meas.wi[:, 2] > HORIZON_COS) & (meas.wo[:, 2] > HORIZON_COS)
+
+
 def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> np.ndarray:
     """The weight of each sample (module docstring), not normalised; 0 where the
     sample is unusable (a direction on the horizon) or the scene leaves its bin out."""
-    cos_i, cos_o = meas.wi[:, 2], meas.wo[:, 2]
+    usable = on_the_surface(meas)
     w = np.ones(meas.n)
     if meas.sigma is not None:
-        x = meas.rgb * np.maximum(cos_i, 0.0)[:, None]
-        var = np.mean((meas.sigma * np.maximum(cos_i, 0.0)[:, None] / (1.0 + x)) ** 2, axis=1)
-        typical = float(np.median(var))
+        cos_i = meas.wi[:, 2][:, None]
+        sigma = meas.sigma
+        positive = sigma[usable & np.all(sigma > 0, axis=1)]
+        # a sigma of 0 is the most certain, not infinitely so: floored as binning does
+        floor = float(np.min(positive, initial=1.0)) * 1e-3 if positive.size else 1e-30
+        x = meas.rgb * cos_i
+        var = np.mean((np.maximum(sigma, floor) * cos_i / (1.0 + x)) ** 2, axis=1)
+        typical = float(np.median(var[usable])) if usable.any() else 0.0
         if typical > 0:
             w = 1.0 / np.maximum(var, typical / MAX_WEIGHT_RATIO)
-    w = np.where((cos_i > 0) & (cos_o > 0), w, 0.0)
+    w = np.where(usable, w, 0.0)
     if bin_weight is not None:
         w = w * bin_weight[sample_bins(meas)]
     return w
@@ -178,7 +198,7 @@ def prepare_samples(meas: Measurements, bin_weight, samples, seed: int, precisio
         table, _ = binned(meas)
         weight = sample_weights(meas, bin_weight)
         n_usable = int(np.count_nonzero(weight > 0))
-        on_horizon = int(np.count_nonzero((meas.wi[:, 2] <= 0) | (meas.wo[:, 2] <= 0)))
+        on_horizon = int(np.count_nonzero(~on_the_surface(meas)))
         grid = bin_grid()
         usable_bins = table.mask.ravel() & grid.above_horizon
         if bin_weight is not None:
@@ -245,6 +265,7 @@ class HeldOut(NamedTuple):
     metrics: dict
     predicted: np.ndarray
     results: list[str]
+    fold_ok: np.ndarray  # per solver sample: its fold's refit was finite
 
 
 def fold_of(n_used: int, folds: int, seed: int) -> np.ndarray:
@@ -272,34 +293,45 @@ def held_out(model, meas: Measurements, u_best: np.ndarray, prep: Prepared, refi
     predicted = np.zeros((3, weight.size))
     total = np.zeros(3)
     results = []
+    ok = np.zeros(weight.size, bool)
     for f in range(folds):
         train = np.where(fold == f, 0.0, weight)
         dtype = data.weight.dtype
         u, code = refit(_with_weight(data, jnp.asarray(train / train.sum(), dtype)))
         u = np.asarray(u, np.float64)
         if not np.all(np.isfinite(u)):
-            u = np.asarray(u_best, np.float64)
+            # no prediction from a fit that saw these samples: the fold is left out,
+            # and its result says so
+            results.append("nonfinite")
+            continue
         results.append(STATUS_NAMES[int(code)])
         test = np.where(fold == f, weight, 0.0)
         sums, _ = error_sums(model, jnp.asarray(u), rgb, jnp.asarray(test), frame64,
                              jnp.asarray(0))
-        total += np.asarray(sums, np.float64)
         pred = np.asarray(_values(model, jnp.asarray(u), frame64), np.float64)
+        if not (np.all(np.isfinite(np.asarray(sums))) and np.all(np.isfinite(pred[:, fold == f]))):
+            results[-1] = "nonfinite"
+            continue
+        total += np.asarray(sums, np.float64)
         predicted[:, fold == f] = pred[:, fold == f]
-    metrics = metrics_from_sums(total / weight[:n_used].sum(), 0.0)
+        ok |= fold == f
+    if not ok.any():
+        return None
+    metrics = metrics_from_sums(total / weight[ok].sum(), 0.0)
     del metrics["rel_peak_error"]  # the peak of a fold is no peak
-    metrics["log_rmse_se"] = _log_rmse_se(meas, prep, predicted[:, :n_used])
-    return HeldOut(metrics, predicted[:, :n_used], results)
+    metrics["log_rmse_se"] = _log_rmse_se(meas, prep, predicted[:, :n_used], ok[:n_used])
+    return HeldOut(metrics, predicted[:, :n_used], results, ok[:n_used])
 
 
-def _log_rmse_se(meas: Measurements, prep: Prepared, predicted: np.ndarray) -> float:
+def _log_rmse_se(meas: Measurements, prep: Prepared, predicted: np.ndarray,
+                 ok: np.ndarray) -> float:
     """The standard error of the held-out log_rmse, from the spread of the samples'
     own squared errors (weighted; the delta method: se(rmse) = se(mse) / 2 rmse). Two
     candidates whose held-out errors differ by less are not told apart by these
     samples (``brdffit.selection``'s one-standard-error rule)."""
     n = predicted.shape[1]
     idx = prep.sample_set.index[:n]
-    w = np.asarray(prep.sample_set.weight[:n], np.float64)
+    w = np.where(ok, np.asarray(prep.sample_set.weight[:n], np.float64), 0.0)
     w = w / w.sum()
     cos_i = np.maximum(meas.wi[idx, 2], 0.0)[:, None]
     d = (np.log1p(np.maximum(predicted.T, 0.0) * cos_i) - np.log1p(meas.rgb[idx] * cos_i))
@@ -348,8 +380,16 @@ def held_out_look(meas: Measurements, prep: Prepared, held: HeldOut) -> tuple[fl
     idx, w = prep.sample_set.index[:n], np.asarray(prep.sample_set.weight[:n], np.float64)
     wi = meas.wi[idx]
     # each sample stands for the sphere pixels of its (theta_h, theta_d) cell: a PSNR of
-    # the sphere the verdict is made for, where the samples reach
-    w = w * sphere_density_ratio(wi, meas.wo[idx], w)[0]
+    # the sphere the verdict is made for, where the samples reach; where they reach
+    # (almost) none of its cells (a backscatter list), the samples stand as they are,
+    # and the reason says how little of the sphere they saw (within_samples)
+    ratio, share = sphere_density_ratio(wi, meas.wo[idx], w)
+    if share >= MIN_SPHERE_SHARE:
+        w = w * ratio
+    keep = held.fold_ok[:n]  # a fold whose refit failed predicts nothing
+    if not np.any(keep & (w > 0)):  # the sphere's cells held only failed folds' samples
+        w = np.asarray(prep.sample_set.weight[:n], np.float64)
+    w = np.where(keep, w, 0.0)
     measured = radiance(meas.rgb[idx], wi)
     predicted = radiance(np.maximum(held.predicted.T, 0.0), wi)
     exposure = table_exposure(measured @ LUMINANCE, w)
@@ -456,11 +496,12 @@ def coverage(meas: Measurements, prep: Prepared, model, params: dict) -> dict:
 
 def _peak_seen(model, params: dict, wi: np.ndarray, wo: np.ndarray) -> bool | None:
     """Whether a sample sees the fitted lobe at :data:`PEAK_SHARE` of its height at the
-    mirror direction of the same light (module docstring)."""
-    if "kd" not in params:
-        return None
+    mirror direction of the same light (module docstring): the lobe alone where the
+    model's diffuse is its ``kd``; the whole model otherwise (a renderer's model, whose
+    diffuse has no parameter of its own: a strong diffuse there reads as seen sooner)."""
     lobe = {k: np.asarray(v, np.float64) for k, v in params.items()}
-    lobe["kd"] = np.zeros_like(lobe["kd"])
+    if "kd" in lobe:
+        lobe["kd"] = np.zeros_like(lobe["kd"])
     mirror = wi * np.array([-1.0, -1.0, 1.0])
     both = np.asarray(_at(model, lobe, jnp.asarray(np.concatenate([wi, wi])),
                           jnp.asarray(np.concatenate([wo, mirror]))), np.float64)
@@ -491,11 +532,11 @@ def identifiability(uncertainty: dict | None) -> dict | None:
     if uncertainty is None:
         return None
     why = uncertainty["why"]
-    out = {}
-    for entry in uncertainty["entries"]:
+    out: dict = {}
+    for entry in uncertainty["entries"]:  # kd[0], kd[1], kd[2], alpha, ...
         name = entry.split("[")[0]
-        if entry in why:
-            out.setdefault(name, why[entry])
+        if entry in why and out.get(name, "determined") == "determined":
+            out[name] = why[entry]  # one channel not determined: the parameter is not
         else:
             out.setdefault(name, "determined")
     return out
@@ -557,10 +598,12 @@ def within_samples(look: dict, measured_input: dict) -> dict:
                        "the grazing look is extrapolated")
     if coverage["sphere_cells"] < SPHERE_COVERAGE:
         caveats.append(f"their half and difference angles reach "
-                       f"{100 * coverage['sphere_cells']:.0f}% of a sphere's pixels")
-    if caveats:
-        look = {**look, "reason": look["reason"] + "; judged where the samples are ("
-                + "; ".join(caveats) + ")"}
+                       f"{100 * coverage['sphere_cells']:.0f}% of a sphere's pixels"
+                       + ("" if coverage["sphere_cells"] >= MIN_SPHERE_SHARE else
+                          ": taken as they are, not as a sphere sees them"))
+    where = "" if not caveats else ("; judged where the samples are ("
+                                     + "; ".join(caveats) + ")")
+    look = {**look, "reason": look["reason"] + where}
     if coverage.get("peak_seen") is not False:
         return look
     step = {"try": "samples near the mirror direction",
@@ -570,6 +613,6 @@ def within_samples(look: dict, measured_input: dict) -> dict:
             "gain_db": None}
     if look["verdict"] == "good":
         return {**look, "verdict": "visible",
-                "reason": "the highlight is not measured: " + step["why"],
+                "reason": "the highlight is not measured: " + step["why"] + where,
                 "next": [step]}
     return {**look, "next": [step, *look["next"]]}

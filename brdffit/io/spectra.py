@@ -11,7 +11,9 @@ of 1 is (1, 1, 1) (:mod:`brdffit.io.srgb_response`, Mitsuba's own tables: an exp
 Mitsuba's spectral variants turns the RGB back into the same light). The measured
 spectrum is linear between its wavelengths and held at its end values beyond them;
 the wavelengths must span at least :data:`MIN_SPAN` (where the responses hold ~99% of
-their weight), else the projection would be mostly the hold, and it is refused.
+their weight), else the projection would be mostly the hold, and it is refused. A
+spectrum outside sRGB's gamut (a channel below 0: the responses have negative lobes)
+is clipped to 0 there, and ``outside_srgb`` counts them.
 """
 
 from __future__ import annotations
@@ -56,8 +58,13 @@ def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, di
     # values, so the projection is one (k, 3) matrix
     basis = np.stack([np.interp(GRID, lam, np.eye(lam.size)[j]) for j in range(lam.size)])
     matrix = basis @ (weights * dl[:, None])  # (k, 3)
-    info = {"wavelengths_nm": [float(lam[0]), float(lam[-1]), int(lam.size)], **PROJECTION}
-    return values @ matrix, info
+    rgb = values @ matrix
+    # a saturated spectrum (a narrow band near 500 nm) lies outside sRGB's gamut: a
+    # channel below 0, which no reflectance is; clipped there, and counted
+    outside = np.any(rgb < 0, axis=1)
+    info = {"wavelengths_nm": [float(lam[0]), float(lam[-1]), int(lam.size)], **PROJECTION,
+            "outside_srgb": int(outside.sum())}
+    return np.maximum(rgb, 0.0), info
 
 
 def wavelength_of(name: str) -> float | None:
