@@ -113,8 +113,12 @@ def test_plastics_and_fabrics_export_as_dielectrics_to_every_target(material):
     from a metal.)"""
     table = nbrdf.make_table(material)
     r = real_fit(material, "ggx")
-    # white-acrylic's glTF and MaterialX refits come out dielectrics by themselves
-    targets = ("mitsuba",) if material == "white-acrylic" else tuple(CLASS_OF)
+    # white-acrylic's glTF and MaterialX refits come out dielectrics by themselves;
+    # pink-felt (the diffuse-body rule, one rule for every target: conversion.
+    # CLASS_ALTERNATIVES) is checked on glTF alone, red-plastic on all three (the full
+    # suite's time: each target's class check refits its dielectrics, ~8 s)
+    targets = {"white-acrylic": ("mitsuba",), "pink-felt": ("gltf",)}.get(
+        material, tuple(CLASS_OF))
     for target in targets:
         dielectric = CLASS_OF[target]
         e = export(r, target, table=table)
