@@ -237,20 +237,22 @@ def fit(
 
     bucket = start_bucket(len(best_starts))  # the starts the first solve's program holds
 
-    def solve(u_batch: np.ndarray, take_steps: bool = True) -> list[np.ndarray | None]:
+    def solve(u_batch: np.ndarray, take_steps: bool = True,
+              on=data) -> list[np.ndarray | None]:
         """values, codes, steps, losses, and the uncertainty's (bread, meat) or None,
         of a solve from each start of ``u_batch``; without ``take_steps`` (the lm
-        solver only), the losses of the starts themselves."""
+        solver only), the losses of the starts themselves. ``on``: the data (a sample
+        list's held-out folds reweight it: the same program)."""
         k = len(u_batch)
         if not steps_as_data:
-            *out, terms = solve_batch(m, solver, jnp.asarray(u_batch, dtype), data, max_steps)
+            *out, terms = solve_batch(m, solver, jnp.asarray(u_batch, dtype), on, max_steps)
         else:
             # Every solve of this fit (a nested model's retries from its parent, the
             # parent's own loss) runs in the program of its first: one compile in a
             # new process, where a retry of one start compiled a second solve. The
             # padding takes no step; it costs one evaluation of the loss per slot.
             padded = _padded(u_batch, max(bucket, start_bucket(k)))
-            *out, terms = solve_batch(m, solver, jnp.asarray(padded, dtype), data,
+            *out, terms = solve_batch(m, solver, jnp.asarray(padded, dtype), on,
                                       jnp.asarray(max_steps),
                                       n_live=jnp.asarray(k if take_steps else 0))
         bread, meat = (None, None) if terms is None else terms
@@ -324,13 +326,8 @@ def fit(
         held = None
         if result != "nonfinite":
             def refit(fold_data):  # one start from the optimum, in this fit's solve
-                u0 = np.asarray(u_best, np.float64)[None]
-                if steps_as_data:
-                    out = solve_batch(m, solver, jnp.asarray(_padded(u0, bucket), dtype),
-                                      fold_data, jnp.asarray(max_steps), n_live=jnp.asarray(1))
-                else:
-                    out = solve_batch(m, solver, jnp.asarray(u0, dtype), fold_data, max_steps)
-                return np.asarray(out[0])[0], np.asarray(out[1])[0]
+                values, codes, *_ = solve(np.asarray(u_best, np.float64)[None], on=fold_data)
+                return values[0], codes[0]
 
             held = sample_fit.held_out(m, table, u_best, prep, refit, seed=seed)
         if held is not None:

@@ -274,9 +274,15 @@ def _sample_frame(index: np.ndarray, dtype) -> Frame:
     a fit's samples need neither the whole grid's frame nor a compiled program
     (in a new process, ~0.3 s before the first fit could start compiling)."""
     g = bin_grid()
-    # in the solve's own precision, as its frame was when it came from the grid's
+    return frame_of(g.wi[index], g.wo[index], dtype)
+
+
+def frame_of(wi: np.ndarray, wo: np.ndarray, dtype) -> Frame:
+    """The shading frame of direction pairs (a table's bins, a sample list's samples),
+    made in numpy in the solve's own precision (as its frame was when it came from the
+    grid's), then put on the device."""
     name = jnp.dtype(dtype).name
-    frame = shading_frame(g.wi[index].astype(name), g.wo[index].astype(name), np)
+    frame = shading_frame(wi.astype(name), wo.astype(name), np)
     return Frame(*(jnp.asarray(a, dtype) for a in frame))
 
 

@@ -52,6 +52,7 @@ from brdffit.fitting.problem import (
     Prepared,
     cached,
     error_sums,
+    frame_of,
     loss_data,
     metrics_from_sums,
 )
@@ -59,8 +60,8 @@ from brdffit.fitting.sampling import BinCounts, SampleSet, bucket_size, row_quot
 from brdffit.fitting.sphere import (
     LIGHTS,
     LUMINANCE,
-    PSNR_CAP_DB,
     SphereReference,
+    psnr_of,
     radiance,
     sphere_bins,
     table_exposure,
@@ -77,7 +78,7 @@ from brdffit.io.angles import (
 )
 from brdffit.io.grid import bin_grid
 from brdffit.io.measurements import Measurements
-from brdffit.models.frame import Frame, shading_frame
+from brdffit.models.frame import Frame
 
 #: How many folds the held-out error has.
 FOLDS = 5
@@ -153,12 +154,6 @@ def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> 
     return w
 
 
-def _frame(wi: np.ndarray, wo: np.ndarray, dtype) -> Frame:
-    name = jnp.dtype(dtype).name
-    return Frame(*(jnp.asarray(a, dtype) for a in shading_frame(wi.astype(name),
-                                                                 wo.astype(name), np)))
-
-
 def _padded(a: np.ndarray, size: int) -> np.ndarray:
     out = np.zeros((size, *a.shape[1:]), a.dtype)
     out[: a.shape[0]] = a
@@ -214,7 +209,7 @@ def prepare_samples(meas: Measurements, bin_weight, samples, seed: int, precisio
         idx_pad = _padded(index, size)
         dtype = DTYPES[precision]
         data = loss_data(meas.rgb[idx_pad].T, meas.wi[idx_pad, 2], w_pad, dtype,
-                         _frame(meas.wi[idx_pad], meas.wo[idx_pad], dtype), loss)
+                         frame_of(meas.wi[idx_pad], meas.wo[idx_pad], dtype), loss)
         sample_set = SampleSet(idx_pad, w_pad, int(index.size))
         return Prepared(counts, n_usable, weight, sample_set, data, -1, brightest,
                         table_hints(table, usable_bins), table)
@@ -229,7 +224,7 @@ def _arrays(meas: Measurements, index: np.ndarray, weight: np.ndarray) -> Sample
     w = _padded(weight / weight.sum(), size)
     bright = (meas.rgb[index] * np.maximum(meas.wi[index, 2:3], 0.0)).sum(axis=1)
     return SampleArrays(rgb=jnp.asarray(meas.rgb[idx].T, jnp.float64),
-                        frame=_frame(meas.wi[idx], meas.wo[idx], jnp.float64),
+                        frame=frame_of(meas.wi[idx], meas.wo[idx], jnp.float64),
                         weight=jnp.asarray(w, jnp.float64),
                         peak=jnp.asarray(int(np.argmax(bright))), index=idx)
 
@@ -395,8 +390,7 @@ def held_out_look(meas: Measurements, prep: Prepared, held: HeldOut) -> tuple[fl
     exposure = table_exposure(measured @ LUMINANCE, w)
     d = tonemap(predicted, exposure) - tonemap(measured, exposure)
     mse = float(np.sum(w[:, None] * d * d) / (3.0 * w.sum()))
-    psnr = (float("nan") if not np.isfinite(mse) else PSNR_CAP_DB
-            if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse)))
+    psnr = psnr_of(mse)
     stops, shift = brightness_and_colour(w @ predicted, w @ measured)
     return psnr, {"key": {"brightness_stops": stops, "colour_shift": shift,
                           "estimate_error": None}, "grazing": None}

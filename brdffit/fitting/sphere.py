@@ -99,6 +99,14 @@ def radiance(f: np.ndarray, wi: np.ndarray, xp=np) -> np.ndarray:
     return f * np.pi * xp.clip(wi[..., 2:3], 0.0, None)
 
 
+def psnr_of(mse: float) -> float:
+    """PSNR (dB) of a mean squared error of tone-mapped values in [0, 1), capped at
+    :data:`PSNR_CAP_DB` (identical images); NaN where the error is not finite."""
+    if not np.isfinite(mse):
+        return float("nan")
+    return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+
+
 def tonemap(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
     """Reinhard, then the sRGB curve: highlights compress, nothing clips; in [0, 1)
     (``xp``: numpy, or ``jax.numpy`` inside a compiled function)."""
@@ -398,7 +406,7 @@ class SphereReference:
         if n == 0 or not bool(finite):
             return float("nan"), colour
         mse = float(se) / n
-        psnr = PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+        psnr = psnr_of(mse)
         return psnr, colour
 
 
