@@ -2,17 +2,20 @@
 
 ``export(result, "mitsuba") -> Export``: the material in the renderer's own format,
 the warnings of every clamp and approximation, and the fidelity the conversion kept.
-Each target has a module with its mapping and formulas; the conversion of a fit to
-the target's own model (exact, or refitted with its loss measured) is
-:mod:`brdffit.export.conversion`. CLI (``brdffit export``), service
-(``GET /v1/fits/{job_id}/exports/{target}``) and client call this function;
-``brdffit.batch.exports.export_from_store`` exports a fit of a batch results file.
+Each target (:data:`TARGETS`, an :class:`ExportTarget` each) has a module with its
+mapping and formulas; the conversion of a fit to the target's own model (exact, or
+refitted with its loss measured) is :mod:`brdffit.export.conversion`. CLI (``brdffit
+export``), service (``GET /v1/fits/{job_id}/exports/{target}``) and client call this
+function; ``brdffit.batch.exports.export_from_store`` exports a fit of a batch results
+file.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
+from types import MappingProxyType, ModuleType
 
 from brdffit import jsonout
 from brdffit.errors import BrdffitError
@@ -25,12 +28,67 @@ from brdffit.io.merl import MerlTable
 #: ``sphere_colour_error``.
 SCHEMA = "brdffit.export/2"
 
-#: target -> its module (TARGET_MODELS, MEDIA_TYPE and the writer).
-TARGETS = {"mitsuba": mitsuba, "gltf": gltf, "materialx": materialx}
-
 
 class ExportError(BrdffitError, ValueError):
     """An export that cannot be made: unknown target, or a fit with nothing to export."""
+
+
+# one object per target: compared and hashed by identity (its viewers are a dict)
+@dataclass(frozen=True, eq=False)
+class ExportTarget:
+    """One renderer a fit can be exported to: its module (``TARGET_MODELS``,
+    ``SHADED_AS``, ``MEDIA_TYPE``, ``write``; ``UNMODELLED_NOTE`` where a model it
+    carries is shaded as nothing brdffit models) and what its exports have besides
+    the material."""
+
+    name: str
+    label: str  # as its users write it, in messages
+    module: ModuleType
+    #: viewer -> the target model that the export for it carries
+    #: (``export(..., viewer=)``; the module's ``VIEWER_IGNORES``: what each viewer
+    #: does not read), each judged in ``fidelity.viewers``; empty: the renderer's own
+    #: shading only
+    viewers: Mapping[str, str] = field(default_factory=dict)
+    #: its document can be saved as one binary ``.glb`` (the module's ``to_glb``)
+    glb: bool = False
+    #: each variant family's dictionary (``Export.variants``; the module's ``variants``,
+    #: ``VARIANTS`` and ``VARIANTS_NOTE``, and a ``write`` that takes them)
+    variants: bool = False
+
+    @property
+    def media_type(self) -> str:
+        return self.module.MEDIA_TYPE
+
+    @property
+    def target_models(self) -> tuple[str, ...]:
+        """The models the target carries, its default first."""
+        return self.module.TARGET_MODELS
+
+    @property
+    def shaded_as(self) -> dict[str, str | None]:
+        """Target model -> the brdffit model the renderer shades it as (None: not modelled)."""
+        return self.module.SHADED_AS
+
+    #: the target modules' own spelling, which the shells read from :data:`TARGETS`
+    SHADED_AS = shaded_as
+
+
+#: Every export target by name (``brdffit export --to``, the service's
+#: ``/exports/{target}``).
+TARGETS: Mapping[str, ExportTarget] = MappingProxyType({t.name: t for t in (
+    ExportTarget("mitsuba", "Mitsuba", mitsuba, variants=True),
+    ExportTarget("gltf", "glTF", gltf, viewers=gltf.VIEWERS, glb=True),
+    ExportTarget("materialx", "MaterialX", materialx),
+)})
+
+
+def get_target(name: str) -> ExportTarget:
+    """The export target ``name``; :class:`ExportError` naming the choices for any other."""
+    try:
+        return TARGETS[name]
+    except KeyError:
+        raise ExportError(f"unknown export target {name!r}; choose one of {', '.join(TARGETS)}") \
+            from None
 
 
 @dataclass
@@ -70,12 +128,13 @@ class Export:
     def file_bytes(self, glb: bool = False) -> dict[str, bytes]:
         """The files to save, as bytes; ``glb``: a glTF export's document as one binary
         ``.glb`` instead of its ``.gltf`` (``brdffit.export.gltf.to_glb``)."""
-        if glb and self.target != "gltf":
-            raise ExportError(f"a binary .glb is a glTF file; a {self.target} export has none")
         if not glb:
             return {name: text.encode() for name, text in self.files.items()}
+        target = get_target(self.target)
+        if not target.glb:
+            raise ExportError(f"a binary .glb is a glTF file; a {self.target} export has none")
         stem = next(iter(self.files)).removesuffix(".gltf")
-        return {f"{stem}.glb": gltf.to_glb(self.material)}
+        return {f"{stem}.glb": target.module.to_glb(self.material)}
 
     def to_json(self, **kw) -> str:
         return jsonout.dumps(self.to_dict(), **kw)
@@ -135,19 +194,18 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
 
-    if target not in TARGETS:
-        raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
+    spec = get_target(target)
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
-    module = TARGETS[target]
-    target_model = _viewer_model(target, viewer, target_model)
-    if target_model is not None and target_model not in module.SHADED_AS:
-        raise ExportError(f"{target} carries {', '.join(module.SHADED_AS)}, not {target_model!r}")
-    models_wanted = (target_model,) if target_model else module.TARGET_MODELS
+    module = spec.module
+    target_model = _viewer_model(spec, viewer, target_model)
+    if target_model is not None and target_model not in spec.shaded_as:
+        raise ExportError(f"{target} carries {', '.join(spec.shaded_as)}, not {target_model!r}")
+    models_wanted = (target_model,) if target_model else spec.target_models
     warnings: list[str] = []
     measured = None
     carried = result.model if result.model in models_wanted else models_wanted[0]
-    if module.SHADED_AS[carried] is not None:  # else nothing can be measured against it
+    if spec.shaded_as[carried] is not None:  # else nothing can be measured against it
         measured, missing = _measured_table(result, table)
         warnings += missing
     # an export for a viewer is that viewer's optimum on the measured table, where the
@@ -161,7 +219,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)
-    shaded_as = module.SHADED_AS[conv.target_model]
+    shaded_as = spec.shaded_as[conv.target_model]
     warnings = list(conv.warnings) + warnings
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
@@ -175,22 +233,23 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
         fidelity["sphere_colour"] = sphere_colour(
             measured, models.get(shaded_as), conv.params)["key"]
-    if target == "gltf" and measured is not None:
-        fidelity["viewers"] = _viewer_fidelity(measured, conv.params, shaded_as, fidelity)
+    if spec.viewers and measured is not None:
+        fidelity["viewers"] = _viewer_fidelity(spec, measured, conv.params, shaded_as,
+                                               fidelity)
     warnings += _looks_warning(result)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
     name = _material_name(result)
     variants = None
-    if target == "mitsuba":  # both variant families' dictionaries, in the JSON too
-        made = mitsuba.variants(conv.params)
-        material, files, notes = mitsuba.write(conv.params, name, conv.target_model, made)
+    if spec.variants:  # both variant families' dictionaries, in the JSON too
+        made = module.variants(conv.params)
+        material, files, notes = module.write(conv.params, name, conv.target_model, made)
         variants = {"rgb": made[0], "spectral": made[1] if isinstance(made[1], dict) else None,
-                    "for": dict(mitsuba.VARIANTS)}
-        notes.append(mitsuba.VARIANTS_NOTE)
+                    "for": dict(module.VARIANTS)}
+        notes.append(module.VARIANTS_NOTE)
     else:
         material, files, notes = module.write(conv.params, name, conv.target_model)
-    return Export(target, result.model, module.MEDIA_TYPE, material, files,
+    return Export(target, result.model, spec.media_type, material, files,
                   {**fidelity, **energy}, conv.params, warnings + notes, result.table, variants)
 
 
@@ -206,36 +265,39 @@ def _looks_warning(result: FitResult) -> list[str]:
             f"({look.get('reason', '')}){hint}"]
 
 
-def _viewer_model(target: str, viewer: str, target_model: str | None) -> str | None:
+def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None) -> str | None:
     """The target model an export for ``viewer`` carries (None: the target's default)."""
     if viewer == "spec":
         return target_model
-    if target != "gltf" or viewer not in gltf.VIEWERS:
-        raise ExportError(f"viewer {viewer!r}: the glTF export is made for "
-                          f"{', '.join(gltf.VIEWERS)}; other targets have their renderer's own")
-    wanted = gltf.VIEWERS[viewer]
+    if viewer not in target.viewers:
+        made_for = [f"the {t.label} export is made for {', '.join(t.viewers)}"
+                    for t in TARGETS.values() if t.viewers]
+        raise ExportError(f"viewer {viewer!r}: {'; '.join(made_for)}; other targets have "
+                          "their renderer's own")
+    wanted = target.viewers[viewer]
     if target_model not in (None, wanted):
         raise ExportError(f"viewer {viewer!r} carries {wanted}, not {target_model!r}")
     return wanted
 
 
-def _viewer_fidelity(measured, params: dict, shaded_as: str, fidelity: dict) -> dict:
-    """The glTF file's factors under each viewer's shading, against the measured table:
-    ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a viewer that reads
-    some factors of the file and not others shades the ones it reads (Blender ignores
-    ``KHR_materials_ior``: ``gltf.VIEWER_IGNORES``, said in ``"ignores"``); a viewer
-    whose model cannot shade the file (three.js's ``gltf_threejs`` has no
-    ``KHR_materials_ior``; three.js shades it with a physical material) is null. The
-    viewer whose model is ``shaded_as`` takes the export's own figures (``fidelity``),
-    measured already."""
+def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,
+                     fidelity: dict) -> dict:
+    """The glTF file's factors under each of ``target``'s viewers' shading, against the
+    measured table: ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a
+    viewer that reads some factors of the file and not others shades the ones it reads
+    (Blender ignores ``KHR_materials_ior``: ``gltf.VIEWER_IGNORES``, said in
+    ``"ignores"``); a viewer whose model cannot shade the file (three.js's
+    ``gltf_threejs`` has no ``KHR_materials_ior``; three.js shades it with a physical
+    material) is null. The viewer whose model is ``shaded_as`` takes the export's own
+    figures (``fidelity``), measured already."""
     from brdffit import models
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
 
     out = {}
-    for viewer, name in gltf.VIEWERS.items():
+    for viewer, name in target.viewers.items():
         model = models.get(name)
-        ignored = [k for k in gltf.VIEWER_IGNORES.get(viewer, ()) if k in params]
+        ignored = [k for k in target.module.VIEWER_IGNORES.get(viewer, ()) if k in params]
         seen = {k: v for k, v in params.items() if k not in ignored}
         if {s.name for s in model.param_specs} != set(seen):
             out[viewer] = None

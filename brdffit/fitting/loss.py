@@ -4,7 +4,7 @@ Residual of bin b, channel c, for a loss with compression ``g``:
 
     r_cb = sqrt(w_b) * ( g(f_model_c(b) cos_i(b)) - g(f_meas_c(b) cos_i(b)) )
 
-The loss is a choice (:data:`LOSSES`, docs/fitting.md says when to use which):
+The loss is a choice (:data:`LOSS_REGISTRY`, docs/fitting.md says when to use which):
 
 - ``"log"`` (default): ``g(x) = log(1 + x)``, after Löw et al. 2012 and Ngan et
   al. 2005, who fit in a log space so that the peak does not swamp the rest;
@@ -42,6 +42,9 @@ long bin axis, which makes the loss ~3x cheaper than bin-major (S, 3) arrays.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import MappingProxyType, ModuleType
 from typing import NamedTuple
 
 import equinox as eqx
@@ -50,19 +53,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
+from brdffit.errors import FitInputError
 from brdffit.fitting.options import DEFAULT_LOSS, LOSSES
 from brdffit.models import AbstractBRDFModel
 from brdffit.models.base import ParamSpec
 from brdffit.models.frame import Frame
 
 # LOSSES and DEFAULT_LOSS, the names, are declared with the other options
-# (``brdffit.fitting.options``); each loss is implemented here.
-#: The full-table metric that each loss is the (weighted) mean square of: every
-#: result reports all three, whatever was optimised. The render loss has no
-#: full-table metric (it is defined on its views): results report
-#: ``sample_render_rmse``, on the solver's subsample, and the sphere ``psnr_db``.
-LOSS_METRIC = {"log": "log_rmse", "cube_root": "cube_root_rmse", "linear_cos": "rmse_cos",
-               "render": "render_rmse"}
+# (``brdffit.fitting.options``, which imports no JAX); each loss is a :class:`Loss`
+# of :data:`LOSS_REGISTRY`, below.
 #: Offset inside the cube root (1/sr, times cos_i): finite slope at 0, far below
 #: any measured value (``merl.MIN_PEAK`` is 1e-5 for the brightest bin).
 CUBE_ROOT_OFFSET = 1e-6
@@ -100,17 +99,106 @@ def tone_inverse(t, xp=jnp):
     return v / (1.0 - v)
 
 
-def _cbrt(x):
+def _cbrt(x, xp=jnp):
     # exp(log(x)/3) for x > 0: XLA's CPU cbrt is ~20x slower over a full table, and
     # this agrees with it to 1e-6 relative in float32
-    return jnp.exp(jnp.log(x) * (1.0 / 3.0))
+    return xp.exp(xp.log(x) * (1.0 / 3.0))
 
 
-#: The losses whose compression is one elementwise function with no data of its
-#: own: a fit's compiled programs serve all of them, the choice being data
-#: (``LossData.selector``, :data:`SELECTED`), so another of them costs a fit, not
-#: a compile. ``render`` carries exposures and an energy term: its own programs.
-SELECTABLE = ("log", "cube_root", "linear_cos")
+@dataclass(frozen=True)
+class Loss:
+    """One loss a fit can minimise: its compression ``g`` of ``x = f cos_i >= 0`` (the
+    module docstring), ``g'`` for the closed-form Jacobian, ``g``'s inverse, the
+    metric that reports it, and whether it brings data of its own."""
+
+    name: str
+    #: the metric that the loss is the (weighted) mean square of
+    #: (``brdffit.fitting.problem.metrics_from_sums``); ``full_table``: reported by
+    #: every fit, whatever it optimised, over every usable bin. The render loss is
+    #: defined on its views: results report ``sample_render_rmse`` on the solver's
+    #: subsample, and the sphere's ``psnr_db``.
+    metric: str
+    #: ``g(x, xp)``, ``xp`` the array module (numpy for targets made in numpy); the
+    #: caller clamps ``x`` at 0, so that the hot path holds no second clamp
+    compress: Callable
+    #: ``g'(x)``
+    slope: Callable
+    #: ``g^-1(t, exposure)``: the ``f cos_i`` whose compression is ``t``
+    uncompress: Callable
+    full_table: bool = True
+    #: the loss compares rendered views (``brdffit.fitting.render_loss``): each
+    #: channel's exposure multiplies ``x`` before ``g`` and an energy term holds each
+    #: channel's mean (:func:`energy_residuals`), data per table made from its values
+    #: in numpy; the solver's bins are the views' unless a scene says otherwise
+    rendered: bool = False
+    #: the array module that compresses a table's measured targets. numpy for the
+    #: log loss: the same targets, to the last bit, as before the loss was a choice
+    #: (JAX's log1p differs in the last place on some values). The cube root's in
+    #: JAX, as the fit compresses its own values, and as they have been made since
+    #: it was added.
+    target_xp: ModuleType = jnp
+
+    @property
+    def selectable(self) -> bool:
+        """One elementwise compression with no data of its own: a fit's compiled
+        programs serve every such loss, the choice being data
+        (``LossData.selector``, :data:`SELECTED`), so another of them costs a fit,
+        not a compile."""
+        return not self.rendered
+
+
+def _cube_root_slope(x):
+    c = _cbrt(x + CUBE_ROOT_OFFSET)
+    return 1.0 / (3.0 * c * c)
+
+
+def _render_uncompress(t, exposure):
+    return tone_inverse(t) / exposure
+
+
+#: Every loss by name, in the order of ``options.LOSSES`` (tests/test_registries.py
+#: checks they agree). A selectable loss's place among :data:`SELECTABLE` is its
+#: ``LossData.selector``.
+LOSS_REGISTRY = MappingProxyType({loss.name: loss for loss in (
+    Loss("log", "log_rmse",
+         compress=lambda x, xp=jnp: xp.log1p(x),
+         slope=lambda x: 1.0 / (1.0 + x),
+         uncompress=lambda t, exposure=None: jnp.expm1(t),
+         target_xp=np),
+    Loss("cube_root", "cube_root_rmse",
+         compress=lambda x, xp=jnp: _cbrt(x + CUBE_ROOT_OFFSET, xp),
+         slope=_cube_root_slope,
+         uncompress=lambda t, exposure=None: jnp.maximum(t**3 - CUBE_ROOT_OFFSET, 0.0)),
+    Loss("linear_cos", "rmse_cos",
+         compress=lambda x, xp=jnp: x,
+         slope=jnp.ones_like,
+         uncompress=lambda t, exposure=None: t),
+    # x already times the channel's exposure (:func:`exposed`)
+    Loss("render", "render_rmse",
+         compress=lambda x, xp=jnp: tone(x, xp),
+         slope=tone_slope,
+         uncompress=_render_uncompress,
+         full_table=False, rendered=True, target_xp=np),
+)})
+
+
+def get_loss(name: str) -> Loss:
+    """The loss ``name`` of :data:`LOSS_REGISTRY`; :class:`FitInputError` naming the
+    choices for any other name."""
+    try:
+        return LOSS_REGISTRY[name]
+    except KeyError:
+        raise FitInputError(f"unknown loss {name!r}; choose one of {', '.join(LOSSES)}") from None
+
+
+#: loss -> the metric that reports it: every result reports those of the
+#: ``full_table`` losses, whatever was optimised.
+LOSS_METRIC = {name: loss.metric for name, loss in LOSS_REGISTRY.items()}
+#: The losses of every fit's full-table metrics, in the order of their sums
+#: (``brdffit.fitting.problem.error_sums``).
+FULL_TABLE_LOSSES = tuple(name for name, loss in LOSS_REGISTRY.items() if loss.full_table)
+#: The :attr:`Loss.selectable` losses: ``LossData.selector`` indexes them.
+SELECTABLE = tuple(name for name, loss in LOSS_REGISTRY.items() if loss.selectable)
 #: ``LossData.loss`` of data whose loss is one of :data:`SELECTABLE`, chosen by its
 #: ``selector`` at run time (``lax.switch``: only the chosen branch runs).
 SELECTED = "selected"
@@ -121,34 +209,15 @@ def compress_values(x, loss: str, selector=None):
     (``compress`` does), so that the hot path holds no second clamp. ``loss`` may be
     :data:`SELECTED`, the loss then being ``SELECTABLE[selector]``."""
     if loss == SELECTED:
-        return jax.lax.switch(selector, [lambda v, n=n: compress_values(v, n)
-                                         for n in SELECTABLE], x)
-    if loss == "log":
-        return jnp.log1p(x)
-    if loss == "cube_root":
-        return _cbrt(x + CUBE_ROOT_OFFSET)
-    if loss == "linear_cos":
-        return x
-    if loss == "render":  # x already times the channel's exposure (see ``exposed``)
-        return tone(x)
-    raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
+        return jax.lax.switch(selector, [LOSS_REGISTRY[n].compress for n in SELECTABLE], x)
+    return get_loss(loss).compress(x)
 
 
 def compress_slope(x, loss: str, selector=None):
     """``g'(x)``, for the closed-form Jacobian of :func:`normal_equations` (``x >= 0``)."""
     if loss == SELECTED:
-        return jax.lax.switch(selector, [lambda v, n=n: compress_slope(v, n)
-                                         for n in SELECTABLE], x)
-    if loss == "log":
-        return 1.0 / (1.0 + x)
-    if loss == "cube_root":
-        c = _cbrt(x + CUBE_ROOT_OFFSET)
-        return 1.0 / (3.0 * c * c)
-    if loss == "linear_cos":
-        return jnp.ones_like(x)
-    if loss == "render":
-        return tone_slope(x)
-    raise ValueError(f"unknown loss {loss!r}; choose one of {', '.join(LOSSES)}")
+        return jax.lax.switch(selector, [LOSS_REGISTRY[n].slope for n in SELECTABLE], x)
+    return get_loss(loss).slope(x)
 
 
 def compress_with_slope(x, loss: str, selector=None):
@@ -262,19 +331,6 @@ def _energy_sums(u, model, data):
 def sum_squares(u, model: AbstractBRDFModel, data: LossData):
     r = residuals(u, (model, data))
     return jnp.sum(r * r)
-
-
-def _uncompress(target, loss: str, exposure=None, selector=None):
-    if loss == SELECTED:
-        return jax.lax.switch(selector, [lambda t, n=n: _uncompress(t, n) for n in SELECTABLE],
-                              target)
-    if loss == "render":
-        return tone_inverse(target) / exposure
-    if loss == "log":
-        return jnp.expm1(target)
-    if loss == "cube_root":
-        return jnp.maximum(target**3 - CUBE_ROOT_OFFSET, 0.0)
-    return target
 
 
 #: Samples per block of the normal equations (see :func:`normal_equations`).

@@ -6,9 +6,10 @@ and ``brdffit.fitting.physical`` its bounded step):
 - the table's usable bins, their weights and the solver's stratified subsample,
   as device arrays in the loss's form (:func:`prepare`, :class:`Prepared`), kept per
   table (:func:`cached`);
-- the solvers by name (:func:`solver_for`) and one batched, compiled solve
-  (:func:`solve_batch`): the starts one after the other (``lax.map``), failures as
-  values (``throw=False``), "successful" only where the optimality test holds;
+- the solvers by name (:data:`SOLVER_REGISTRY`, :func:`solver_for`) and one batched,
+  compiled solve (:func:`solve_batch`): the starts one after the other (``lax.map``),
+  failures as values (``throw=False``), "successful" only where the optimality test
+  holds;
 - the error metrics of a solution on every usable bin of the table
   (:func:`full_table_metrics`, :func:`table_error`), and the parameters as plain
   values (:func:`constrained`, :func:`plain_params`).
@@ -28,6 +29,9 @@ import hashlib
 import os
 import threading
 import weakref
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import MappingProxyType
 from typing import NamedTuple
 
 import jax
@@ -35,21 +39,25 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdffit import executables, models, runtime
+from brdffit.errors import FitInputError
 from brdffit.fitting import render_loss
 from brdffit.fitting.loss import (
+    FULL_TABLE_LOSSES,
+    LOSS_METRIC,
+    LOSS_REGISTRY,
     SELECTABLE,
     SELECTED,
     LossData,
     block_count,
     compress_values,
+    get_loss,
     normal_equations,
     normal_equations_with_meat,
     residuals,
     sum_over_blocks,
     sum_squares,
-    tone,
 )
-from brdffit.fitting.options import DEFAULT_LOSS, PRECISIONS
+from brdffit.fitting.options import DEFAULT_LOSS, DEFAULT_SOLVER, PRECISIONS, SOLVERS
 from brdffit.fitting.sampling import (
     bin_weights,
     padded,
@@ -76,25 +84,78 @@ STEP_CAP = 10_000
 LIVE_U = 8.0
 
 
+def _normal_levenberg_marquardt(rtol, atol, gtol):
+    from brdffit.fitting.solver import NormalLevenbergMarquardt
+
+    return NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol)
+
+
+def _optimistix(name: str):
+    def make(rtol, atol, gtol):  # optimistix's own test their steps, not the gradient
+        import optimistix as optx
+
+        return getattr(optx, name)(rtol=rtol, atol=atol)
+    return make
+
+
+@dataclass(frozen=True)
+class Solver:
+    """One solver a fit can use: how to build it, and what its solve can do beyond
+    optimistix's ``least_squares`` contract."""
+
+    name: str
+    #: ``make(rtol, atol, gtol)``: the optimistix solver (imported then, not with
+    #: brdffit: a process that runs its fits from compiled executables never needs it)
+    make: Callable
+    #: the step limit is an option of the solve (``step_limit``), so it and the
+    #: number of live starts can be data: one compiled solve for every ``max_steps``
+    #: up to :data:`STEP_CAP` and every start count up to a bucket
+    steps_as_data: bool = False
+    #: its final state carries the loss and the optimality test at the point it
+    #: returns, and the sandwich covariance's terms (``normal_equations_with_meat``):
+    #: no copy of the normal equations, and no uncertainty program, of their own
+    carries_terms: bool = False
+
+
+#: Every solver by name, in the order of ``options.SOLVERS``
+#: (tests/test_registries.py checks they agree).
+SOLVER_REGISTRY = MappingProxyType({solver.name: solver for solver in (
+    # brdffit's normal-equations Levenberg-Marquardt (brdffit.fitting.solver)
+    Solver("lm", _normal_levenberg_marquardt, steps_as_data=True, carries_terms=True),
+    Solver("optx-lm", _optimistix("LevenbergMarquardt")),
+    Solver("dogleg", _optimistix("Dogleg")),
+    Solver("bfgs", _optimistix("BFGS")),
+)})
+
+
+def get_solver(name: str) -> Solver:
+    """The solver ``name`` of :data:`SOLVER_REGISTRY`; :class:`FitInputError` naming
+    the choices for any other name."""
+    try:
+        return SOLVER_REGISTRY[name]
+    except KeyError:
+        raise FitInputError(f"unknown solver {name!r}; choose one of {', '.join(SOLVERS)}") \
+            from None
+
+
+def takes_steps_as_data(solver: str, max_steps: int) -> bool:
+    """Whether a fit with ``solver`` passes its step limit to :func:`solve_batch` as
+    data (an array): the solver supports it, and ``max_steps`` is within the one
+    compiled limit (:data:`STEP_CAP`; a larger one is a static argument of its own)."""
+    return get_solver(solver).steps_as_data and max_steps <= STEP_CAP
+
+
 @functools.cache
 def solver_for(name: str, precision: str):
     """The solver ``name`` for ``precision``, built once. optimistix is imported
     here, when a fit is first traced, not with brdffit: a process that runs its
     fits from compiled executables (``brdffit.executables``) never needs it."""
-    import optimistix as optx
-
     from brdffit.fitting import solver as solvers
 
     # float32 cannot resolve relative changes much below 1e-6: looser tolerances
     # there stop the solver at its attainable accuracy instead of at max_steps.
     rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
-    gtol = solvers.gtol_for(DTYPES[precision])
-    return {
-        "lm": lambda: solvers.NormalLevenbergMarquardt(rtol=rtol, atol=atol, gtol=gtol),
-        "optx-lm": lambda: optx.LevenbergMarquardt(rtol=rtol, atol=atol),
-        "dogleg": lambda: optx.Dogleg(rtol=rtol, atol=atol),
-        "bfgs": lambda: optx.BFGS(rtol=rtol, atol=atol),
-    }[name]()
+    return get_solver(name).make(rtol, atol, solvers.gtol_for(DTYPES[precision]))
 
 
 # -- compiled pieces -----------------------------------------------------------
@@ -153,11 +214,12 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
     solver = solver_for(solver_name, jnp.dtype(data.target.dtype).name)
     # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
     floor = solvers.loss_floor(data.target, data.weight)
-    lm = isinstance(solver, solvers.NormalLevenbergMarquardt)
-    options = {"normal_equations": normal_equations_with_meat if lm else normal_equations,
+    spec = get_solver(solver_name)
+    options = {"normal_equations": (normal_equations_with_meat if spec.carries_terms
+                                    else normal_equations),
                "bound_side": _bound_side, "loss_floor": floor}
     limits = None
-    if lm and isinstance(max_steps, jax.Array):
+    if spec.steps_as_data and isinstance(max_steps, jax.Array):
         # the step limit is data (fit passes an array): one solve for every max_steps,
         # and every start count up to the batch's length
         live = jnp.arange(u_batch.shape[0]) < (u_batch.shape[0] if n_live is None else n_live)
@@ -176,7 +238,7 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
         )
         # Whatever the solver and however it stopped, "successful" means the
         # optimality test holds at the point it returns (brdffit.fitting.solver).
-        if lm:
+        if spec.carries_terms:
             # Its final state holds that test, made at that point with the same
             # tolerances and floor: no third copy of the normal equations (after
             # its init's and its step's) to compile into the program.
@@ -240,19 +302,19 @@ def loss_data(values: np.ndarray, cos_i: np.ndarray, weight, dtype, frame: Frame
     shading ``frame``, weighted by ``weight`` (s,), as the targets of ``loss``: a
     table's bins and a sample list's own directions alike."""
     x = values * np.maximum(cos_i, 0.0)
+    spec = get_loss(loss)
     exposure = energy = None
-    if loss == "render":
+    if spec.rendered:
         w = np.asarray(weight)
         exposure = render_loss.exposures(np.maximum(x, 0.0), w)
-        target = tone(np.maximum(x, 0.0) * exposure, np)
+        target = spec.compress(np.maximum(x, 0.0) * exposure, spec.target_xp)
         energy = (np.maximum(x, 0.0) @ w / max(float(w.sum()), 1e-300))[:, None]
     else:
-        # numpy's log1p for the default: the same targets, to the last bit, as before
-        # the loss was a choice (JAX's log1p differs in the last place on some values)
-        target = np.log1p(x) if loss == "log" else compress_values(x, loss)
+        # in the loss's own array module: the log loss's targets in numpy, as they
+        # were to the last bit before the loss was a choice (Loss.target_xp)
+        target = spec.compress(x, spec.target_xp)
     # the losses of SELECTABLE share one compiled fit: the loss travels as data
-    selector = (jnp.asarray(SELECTABLE.index(loss), jnp.int32) if loss in SELECTABLE
-                else None)
+    selector = jnp.asarray(SELECTABLE.index(loss), jnp.int32) if spec.selectable else None
     return LossData(
         frame=frame, target=jnp.asarray(target, dtype), weight=jnp.asarray(weight, dtype),
         loss=loss if selector is None else SELECTED,
@@ -299,7 +361,7 @@ def full_table_data(
     """Every bin of the table (a fixed shape), weighted by ``weight`` (flat; 0 below
     the horizon and on unmeasured bins), as a :class:`LossData` for ``loss``."""
     frame = _device_frames(jnp.dtype(dtype).name)
-    if loss == "render":  # the exposures need the table's values in numpy anyway
+    if get_loss(loss).rendered:  # the exposures need the table's values in numpy anyway
         return _make_loss_data(table, np.arange(weight.size), weight, dtype, frame, loss)
     rgb = jnp.asarray(table.rgb.reshape(3, -1), dtype)
     return LossData(
@@ -379,11 +441,12 @@ def _full_errors(model, u, rgb, weight, frame, peak, part, parts: int):
         fit_cos = _fit_cos(model, u, block["frame"])
         meas_cos = block["rgb"].astype(u.dtype) * jnp.maximum(block["frame"].cos_i, 0.0)
         w = block["weight"].astype(u.dtype)
-        d_log = jnp.log1p(fit_cos) - jnp.log1p(meas_cos)
-        d_cube = compress_values(fit_cos, "cube_root") - compress_values(meas_cos, "cube_root")
-        lin = fit_cos - meas_cos
-        return jnp.stack([jnp.sum(w * d_log * d_log), jnp.sum(w * d_cube * d_cube),
-                          jnp.sum(w * lin * lin)])
+        sums = []
+        for name in FULL_TABLE_LOSSES:
+            g = LOSS_REGISTRY[name].compress
+            d = g(fit_cos) - g(meas_cos)
+            sums.append(jnp.sum(w * d * d))
+        return jnp.stack(sums)
 
     arrays = {"frame": frame, "weight": weight, "rgb": rgb}
     total = sum_over_blocks(sums, arrays, weight.shape[-1], part, parts)
@@ -429,7 +492,7 @@ _REPORTS_READY: set = set()
 
 
 def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str,
-                      solver: str = "lm"):
+                      solver: str = DEFAULT_SOLVER):
     """The first fit of its kind in a process: make the programs of its report (the
     full-table error, the parameters, the sphere, the uncertainty) ready by running
     them on a start vector, while the scoring and the solve compile (or load). They
@@ -466,7 +529,8 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
 
     report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
         table, model, u0, prep.weight, peak=prep.peak))
-    if solver != "lm" or precision != "float64":
+    # a solve that carries the uncertainty's terms makes them; only float64 ones are used
+    if not (get_solver(solver).carries_terms and precision == "float64"):
         report_pool().submit(runtime.in_float64(ready),
                              lambda u0: parameter_uncertainty(model, u0, prep.data))
     return functools.partial(runtime.in_float64(ready), sphere)
@@ -489,10 +553,12 @@ def report_pool():
 
 def metrics_from_sums(total, rel_peak) -> dict[str, float]:
     """The metrics of :func:`error_sums`' weighted sums of squares (over R, G, B: the
-    root of a third of each) and the relative error at the peak."""
-    log_rmse, cube_root_rmse, rmse_cos = np.sqrt(np.asarray(total, np.float64) / 3.0)
-    return {"log_rmse": float(log_rmse), "cube_root_rmse": float(cube_root_rmse),
-            "rmse_cos": float(rmse_cos), "rel_peak_error": float(rel_peak)}
+    root of a third of each; one per loss of ``FULL_TABLE_LOSSES``: log_rmse,
+    cube_root_rmse, rmse_cos) and the relative error at the peak."""
+    rmse = np.sqrt(np.asarray(total, np.float64) / 3.0)
+    return {**{LOSS_METRIC[name]: float(r) for name, r in zip(FULL_TABLE_LOSSES, rmse,
+                                                                strict=True)},
+            "rel_peak_error": float(rel_peak)}
 
 
 def error_sums(model, u, rgb, weight, frame, peak):
@@ -627,7 +693,7 @@ def prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
             return Prepared(counts, n_usable, None, None, None, -1, brightest, None)
         weight, sample_set = _weights_and_samples(counts.usable, bin_weight, weight_key,
                                                   samples, seed)
-        if loss == "render" and bin_weight is None:
+        if get_loss(loss).rendered and bin_weight is None:
             # the solver sees the bins of the render loss's views, weighted by how
             # many pixels see them; the error is still judged on every usable bin
             views = render_loss.view_bin_weight()
