@@ -218,7 +218,7 @@ def test_start_counts_share_the_compiled_solve_of_their_bucket(synth_tables, mon
     taking no step, and give what an unpadded batch of 3 gives; 4 starts then compile
     nothing."""
     from brdffit import executables
-    from brdffit.fitting import pipeline, problem
+    from brdffit.fitting import problem, solve
 
     assert [problem.start_bucket(n) for n in (1, 2, 3, 4, 5, 9)] == [1, 2, 4, 4, 8, 16]
     table = synth_tables["ggx"]
@@ -227,7 +227,7 @@ def test_start_counts_share_the_compiled_solve_of_their_bucket(synth_tables, mon
     before = len(executables.events)
     fit(table, "ggx", starts=4, samples=2048)
     assert [e.name for e in executables.events[before:]] == []
-    monkeypatch.setattr(pipeline, "start_bucket", lambda n: n)  # no padding
+    monkeypatch.setattr(solve, "start_bucket", lambda n: n)  # no padding
     exact = fit(table, "ggx", starts=3, samples=2048)
     assert (exact.result, exact.steps) == (padded.result, padded.steps)
     for name, value in exact.params.items():

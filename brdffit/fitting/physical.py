@@ -51,16 +51,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from brdffit import runtime
 from brdffit.fitting import problem
 from brdffit.fitting import solver as solvers
+from brdffit.fitting.assemble import Later, assemble
+from brdffit.fitting.inputs import TableInput
 from brdffit.fitting.loss import (
     DEFAULT_LOSS,
-    LOSS_METRIC,
-    normal_equations,
-    residuals,
     sum_squares,
 )
 from brdffit.fitting.options import (
@@ -70,9 +68,9 @@ from brdffit.fitting.options import (
     DEFAULT_SOLVER,
 )
 from brdffit.fitting.problem import plain_params
-from brdffit.fitting.quality import quality
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
+from brdffit.fitting.solve import Solve
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.models.base import AbstractBRDFModel, Params, ParamSpec
 from brdffit.models.frame import Frame, shading_frame
@@ -214,52 +212,36 @@ def _barrier(u, model, grid, mu):
     return jnp.where(inside, t * jnp.sqrt(mu * ratio), jnp.inf)
 
 
-def _residuals(u, args):
-    model, data, grid, mu = args
-    return jnp.concatenate([residuals(u, (model, data)).reshape(-1),
-                            _barrier(u, model, grid, mu)])
+class AlbedoBarrier(eqx.Module):
+    """The energy bound as a term of the fit's objective
+    (``brdffit.fitting.problem.ObjectiveTerm``): ``mu sum_k b(s_k)`` over the coarse
+    albedo's incidences and channels. The fit's own solve (``problem.solve_batch``)
+    adds it to the data's sum of squares: its residuals for the solvers that read
+    residuals, its normal equations for those that read them."""
 
+    grid: AlbedoGrid
+    mu: jax.Array
 
-def _normal_equations(u, args):
-    """The fit's own normal equations plus the barrier's, in the generalised
-    Gauss-Newton form: for ``sum_k mu b(s_k)``, gradient ``mu b'(s_k) grad s_k`` and
-    curvature ``mu b''(s_k) grad s_k grad s_k^T``, exact in ``s``. (The plain
-    Gauss-Newton of ``sqrt(mu b)`` underestimates that curvature by a factor ~2 log(1/(1 - s))
-    near the limit: its steps overshoot there, are refused, and the fit crawls.)"""
-    model, data, grid, mu = args
-    loss, jtj, jtr = normal_equations(u, (model, data))
-    ds, s = jax.jacfwd(lambda v: (_albedo_ratio(v, model, grid),) * 2, has_aux=True)(u)
-    inside = s < 1.0
-    t = jnp.where(inside, s, 0.5)
-    b = jnp.where(inside, -jnp.log1p(-t) - t, jnp.inf)  # outside: refused by the solver
-    slope = t / (1.0 - t)  # b'
-    curvature = 1.0 / ((1.0 - t) * (1.0 - t))  # b''
-    # sum r^2 = loss, J^T r = gradient / 2, J^T J = curvature / 2 (the solver's convention)
-    return (loss + mu * jnp.sum(b), jtj + 0.5 * mu * (ds.T * curvature) @ ds,
-            jtr + 0.5 * mu * ds.T @ slope)
+    def residuals(self, u, model):
+        return _barrier(u, model, self.grid, self.mu)
 
-
-def _bound_side(u, args):
-    return args[0].bound_side(u)
-
-
-@eqx.filter_jit
-def _solve_bounded(model, solver, u_batch, data, grid, mu, max_steps):
-    floor = solvers.loss_floor(data.target, data.weight)
-    options = {"normal_equations": _normal_equations, "bound_side": _bound_side,
-               "loss_floor": floor}
-    args = (model, data, grid, mu)
-
-    def one(u0):
-        sol = optx.least_squares(_residuals, solver, u0, args=args, options=options,
-                                 max_steps=solvers.loop_steps(solver, max_steps), throw=False)
-        loss, jtj, jtr = _normal_equations(sol.value, args)
-        optimal = solvers.is_optimal(loss, jtj, jtr, model.bound_side(sol.value),
-                                     solvers.gtol_for(loss.dtype), floor)
-        return (sol.value, solvers.status(sol.result, optimal), sol.stats["num_steps"], loss,
-                sum_squares(sol.value, model, data))
-
-    return jax.lax.map(one, u_batch)
+    def normal_equations(self, u, model):
+        """The barrier's share of the normal equations, in the generalised Gauss-Newton
+        form: for ``sum_k mu b(s_k)``, gradient ``mu b'(s_k) grad s_k`` and curvature
+        ``mu b''(s_k) grad s_k grad s_k^T``, exact in ``s``. (The plain Gauss-Newton of
+        ``sqrt(mu b)`` underestimates that curvature by a factor ~2 log(1/(1 - s)) near
+        the limit: its steps overshoot there, are refused, and the fit crawls.)"""
+        ds, s = jax.jacfwd(lambda v: (_albedo_ratio(v, model, self.grid),) * 2,
+                           has_aux=True)(u)
+        inside = s < 1.0
+        t = jnp.where(inside, s, 0.5)
+        b = jnp.where(inside, -jnp.log1p(-t) - t, jnp.inf)  # outside: refused by the solver
+        slope = t / (1.0 - t)  # b'
+        curvature = 1.0 / ((1.0 - t) * (1.0 - t))  # b''
+        # sum r^2 = loss, J^T r = gradient / 2, J^T J = curvature / 2 (the solver's
+        # convention)
+        return (self.mu * jnp.sum(b), 0.5 * self.mu * (ds.T * curvature) @ ds,
+                0.5 * self.mu * ds.T @ slope)
 
 
 # -- ranges, the exact check and the clamp ----------------------------------------------
@@ -393,7 +375,6 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
     reports both). ``model``: the model instance, where ``free.model`` is not a
     registry name."""
     from brdffit import models
-    from brdffit.fitting.sphere import SphereReference
 
     t0 = time.perf_counter()
     model = models.get(free.model) if model is None else model
@@ -425,37 +406,31 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
     u, result, n_steps = u_start, "nonfinite", 0
     for weight in BARRIERS:  # each solve starts from the previous one's optimum
         mu = jnp.asarray(weight * max(start_loss, 1e-30), dtype)
-        values, codes, steps, totals, _ = (np.asarray(a) for a in _solve_bounded(
-            bounded, problem.solver_for(solver, precision), jnp.asarray(u[None], dtype),
-            prep.data, grid, mu, max_steps))
-        if not (np.all(np.isfinite(values[0])) and np.isfinite(totals[0])):
+        solve = Solve(bounded, solver, precision, prep.data, max_steps,
+                      term=AlbedoBarrier(grid, mu))
+        out = solve(np.asarray(u)[None])
+        if not (np.all(np.isfinite(out.values[0])) and np.isfinite(out.losses[0])):
             break  # diverged: keep the last finite point (at worst the start)
-        u, result = values[0].astype(np.float64), solvers.STATUS_NAMES[int(codes[0])]
-        n_steps += int(steps[0])
+        u, result = out.values[0].astype(np.float64), solvers.STATUS_NAMES[int(out.codes[0])]
+        n_steps += int(out.steps[0])
     params = plain_params(problem.constrained(bounded, np.asarray(u)))
     params, scale, after = energy_clamp(model, params)
     if scale < 1.0:
         u = bounded.unconstrain(params)
-    metrics = problem.full_table_metrics(table, model, model.unconstrain(params),
-                                          prep.weight, peak=prep.peak)
-    metrics["sample_" + LOSS_METRIC[loss]] = float(np.sqrt(max(float(
-        sum_squares(jnp.asarray(u, dtype), bounded, prep.data)), 0.0) / 3.0))
-    if result == "successful" and not all(np.isfinite(v) for v in metrics.values()):
-        result = "nonfinite"
-    metrics["psnr_db"], colour = problem.cached(
-        table, "sphere", lambda: SphereReference(table)).psnr_and_colour(model, params)
     active = outside + [a for a in _at_upper(model, params) if a not in outside]
     active += _binding(after)
     if scale < 1.0:
         names = sorted({s.name for s in model.param_specs} & set(LINEAR_REFLECTANCES))
         active.append(f"clamp: {', '.join(names)} scaled by {scale:.6g} (exact energy check)")
-    uncertainty = (parameter_uncertainty(bounded, u, prep.data)
-                   if result != "nonfinite" else None)
+    bounded_fit = assemble(
+        TableInput(table), model, model.unconstrain(params), params, prep, result=result,
+        steps=n_steps, starts=1,
+        # the data's own loss on the solver's samples, without the barrier
+        sample_loss=float(sum_squares(jnp.asarray(u, dtype), bounded, prep.data)),
+        loss=loss, solver=solver, precision=precision, t0=t0,
+        uncertainty=Later(lambda: parameter_uncertainty(bounded, u, prep.data)),
+        physical=bool(active))
     return dataclasses.replace(
-        free, params=params, error=metrics, converged=result == "successful", result=result,
-        steps=n_steps, time_s=free.time_s + time.perf_counter() - t0, starts=1,
-        uncertainty=uncertainty,
-        quality=quality(metrics["psnr_db"], colour, model=model, params=params, loss=loss,
-                        converged=result == "successful", physical=bool(active)),
-        physical=report(free, metrics, before, after, active, scale))
+        bounded_fit, time_s=free.time_s + time.perf_counter() - t0,
+        physical=report(free, bounded_fit.error, before, after, active, scale))
 

@@ -32,7 +32,7 @@ import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -183,8 +183,7 @@ def constrained(model, u) -> dict:
 
 
 def _bound_side(u, args):
-    model, _ = args
-    return model.bound_side(u)
+    return args[0].bound_side(u)  # (model, data) or (model, data, term)
 
 
 def start_bucket(n: int) -> int:
@@ -195,18 +194,53 @@ def start_bucket(n: int) -> int:
     return 1 << max(n - 1, 0).bit_length()
 
 
+class ObjectiveTerm(Protocol):
+    """A term added to a fit's sum of squares (the physical bound's barrier,
+    ``brdffit.fitting.physical.AlbedoBarrier``): its residuals, for the solvers that
+    read residuals, and its share of the normal equations, for those that read them.
+    An equinox module, so that its arrays are the solve's data."""
+
+    def residuals(self, u, model): ...
+
+    def normal_equations(self, u, model) -> tuple: ...
+
+
+def _objective_residuals(u, args):
+    model, data, term = args
+    r = residuals(u, (model, data))
+    if term is None:
+        return r
+    return jnp.concatenate([r.reshape(-1), term.residuals(u, model)])
+
+
+def _objective_normal_equations(u, args):
+    model, data, term = args
+    if term is None:
+        return normal_equations(u, (model, data))
+    loss, jtj, jtr = normal_equations(u, (model, data))
+    add_loss, add_jtj, add_jtr = term.normal_equations(u, model)
+    return loss + add_loss, jtj + add_jtj, jtr + add_jtr
+
+
+def _objective_normal_equations_with_meat(u, args):
+    model, data, _ = args  # with a term, the solve carries no uncertainty terms
+    return normal_equations_with_meat(u, (model, data))
+
+
 @executables.jit
-def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
+def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None, term=None):
     """Solve from each start of ``u_batch``: (values, status, steps, loss, terms) per
     start; with ``max_steps`` an array (the lm solver), only the first ``n_live``
     (data) take steps: the rest pad the batch to :func:`start_bucket` and stop where
-    they start.
+    they start. ``term``: an :class:`ObjectiveTerm` added to the data's sum of
+    squares (the physical bound's barrier; ``loss`` then includes it), or None.
 
     ``terms`` are the sandwich covariance's (bread, meat) at each solution, in the
     unconstrained parameters (``brdffit.fitting.uncertainty``): the lm solver
     carries them from its own normal equations, so a fit's uncertainty compiles no
     program of its own (~1.3 s of a new process's first GGX fit on 2 cores); None
-    for the other solvers, whose fits have it computed afterwards."""
+    for the other solvers, whose fits have it computed afterwards, and with a
+    ``term`` (the uncertainty is the data's alone)."""
     import optimistix as optx
 
     from brdffit.fitting import solver as solvers
@@ -215,8 +249,9 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
     # the loss of an exact fit, on this table's own scale (a dim table is no exact fit)
     floor = solvers.loss_floor(data.target, data.weight)
     spec = get_solver(solver_name)
-    options = {"normal_equations": (normal_equations_with_meat if spec.carries_terms
-                                    else normal_equations),
+    carries_terms = spec.carries_terms and term is None
+    options = {"normal_equations": (_objective_normal_equations_with_meat if carries_terms
+                                    else _objective_normal_equations),
                "bound_side": _bound_side, "loss_floor": floor}
     limits = None
     if spec.steps_as_data and isinstance(max_steps, jax.Array):
@@ -225,27 +260,28 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None):
         live = jnp.arange(u_batch.shape[0]) < (u_batch.shape[0] if n_live is None else n_live)
         limits = jnp.where(live, max_steps, 0)
         max_steps = STEP_CAP
+    args = (model, data, term)
 
     def one(u0, limit):
         sol = optx.least_squares(
-            residuals,
+            _objective_residuals,
             solver,
             u0,
-            args=(model, data),
+            args=args,
             options=options if limit is None else {**options, "step_limit": limit},
             max_steps=solvers.loop_steps(solver, max_steps),
             throw=False,
         )
         # Whatever the solver and however it stopped, "successful" means the
         # optimality test holds at the point it returns (brdffit.fitting.solver).
-        if spec.carries_terms:
+        if carries_terms:
             # Its final state holds that test, made at that point with the same
             # tolerances and floor: no third copy of the normal equations (after
             # its init's and its step's) to compile into the program.
             loss, optimal = sol.stats["loss"], sol.stats["stop"] == solvers.OPTIMAL
             terms = (sol.stats["jtj"], sol.stats["meat"])
         else:
-            loss, jtj, jtr = normal_equations(sol.value, (model, data))
+            loss, jtj, jtr = _objective_normal_equations(sol.value, args)
             optimal = solvers.is_optimal(
                 loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
             )

@@ -1,0 +1,98 @@
+"""A solution made a result: ``assemble(...) -> FitResult``, for every kind of fit.
+
+The free fit (``brdffit.fitting.pipeline``) and the physically bounded one
+(``brdffit.fitting.physical``) end here alike: the errors the input measures
+(``brdffit.fitting.inputs``: a table's full-table error and sphere, a sample list's
+every-sample and held-out errors), the optimised loss on the solver's own samples,
+the uncertainty, and the quality verdict, into one ``FitResult``. "successful" is
+kept only where every error could be measured: an error that cannot be measured is
+no success.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from brdffit.fitting.inputs import Refit, SampleInput, TableInput
+from brdffit.fitting.loss import LOSS_METRIC
+from brdffit.fitting.problem import Prepared
+from brdffit.fitting.quality import quality
+from brdffit.fitting.result import FitResult
+
+
+class Later:
+    """An uncertainty to compute only if the result stands (``result()``), as a
+    ``concurrent.futures.Future`` running it on another thread is awaited."""
+
+    def __init__(self, fn: Callable[[], dict | None]):
+        self._fn = fn
+
+    def result(self) -> dict | None:
+        return self._fn()
+
+    def exception(self) -> None:
+        return None
+
+
+def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dict,
+             prep: Prepared, *, result: str, steps: int, starts: int, sample_loss: float,
+             loss: str, solver: str, precision: str, t0: float, uncertainty,
+             refit: Refit | None = None, seed: int = 0, physical: bool = False) -> FitResult:
+    """The :class:`FitResult` of ``model`` at ``u`` (unconstrained; ``params`` the same
+    point as the model's parameters) fitted to ``source`` prepared as ``prep``.
+
+    ``result``, ``steps`` and ``starts``: the solve's status name, steps and starts
+    refined; ``sample_loss``: the optimised loss's sum of squares on the solver's
+    samples (NaN where it diverged); ``uncertainty``: a pending computation of it
+    (a ``Future`` or :class:`Later`) or None; ``refit``: the fit's own solve from a
+    start on other data, for a sample list's held-out folds (None where the solve
+    diverged); ``physical``: a bound is active (the verdict says so); ``t0``: the
+    fit's start (``time.perf_counter``).
+    """
+    measured = source.measure(
+        model, u, params, prep, None if result == "nonfinite" else refit, seed,
+        # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
+        {f"sample_{LOSS_METRIC[loss]}": float(np.sqrt(max(sample_loss, 0.0) / 3.0))
+         if np.isfinite(sample_loss) else float("nan")})
+    if result == "successful" and not measured.measurable:
+        result = "nonfinite"  # an error that cannot be measured is no success
+    found = None
+    if uncertainty is not None and result != "nonfinite":
+        found = uncertainty.result()
+    elif uncertainty is not None:  # the metrics say nonfinite: none, whatever it was
+        uncertainty.exception()
+    metrics = measured.metrics
+    look = quality(metrics["psnr_db"], measured.colour, model=model, params=params, loss=loss,
+                   converged=result == "successful", physical=physical, basis=measured.basis)
+    look, fitted_input = source.judged(look, measured, found)
+    counts = prep.counts
+    return FitResult(
+        model=model.name,
+        params=params,
+        error=metrics,
+        converged=result == "successful",
+        result=result,
+        steps=int(steps),
+        time_s=time.perf_counter() - t0,
+        samples={
+            "used": prep.sample_set.n_used,
+            "usable": prep.n_usable,
+            "measured": counts.measured,
+            "dropped": {
+                "unmeasured": counts.unmeasured,
+                "nonfinite": counts.nonfinite,
+                "below_horizon": counts.below_horizon,
+            },
+        },
+        solver=solver,
+        precision=precision,
+        loss=loss,
+        starts=starts,
+        uncertainty=found,
+        table=source.source,
+        quality=look,
+        input=fitted_input,
+    )

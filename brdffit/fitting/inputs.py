@@ -1,0 +1,184 @@
+"""What a fit does differently for a MERL table and for a sample list, in one place.
+
+``brdffit.fitting.pipeline`` runs the same stages on both kinds of measured input:
+prepare, choose starts, solve, refit from a parent, assemble. Where they differ it
+asks the input (:func:`fit_input`), never ``isinstance``:
+
+- :class:`TableInput`: the table's bins (``brdffit.fitting.problem.prepare``), its
+  full-table error, the rendered sphere's PSNR and colour, and programs made ready
+  ahead in a new process; a fit of every bin is polished from the default one;
+- :class:`SampleInput`: the samples at their own directions
+  (``brdffit.fitting.samples``): its weights and subsample, the error over every
+  sample, the k-fold held-out error, the coverage and identifiability, and the
+  verdict from held-out samples where no sphere can be rendered.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from brdffit.errors import FitInputError
+from brdffit.fitting.problem import (
+    Prepared,
+    cached,
+    full_table_metrics,
+    prepare,
+    ready_report_once,
+)
+from brdffit.fitting.sampling import DEFAULT_SAMPLES
+from brdffit.fitting.sphere import SphereReference
+from brdffit.io import merl
+from brdffit.io.measurements import Measurements
+from brdffit.io.merl import MerlTable
+
+#: ``refit(fold_data) -> (u, code)``: the fit's own solve, one start from its optimum,
+#: on other data of the same shape (a held-out fold).
+Refit = Callable[[object], tuple[np.ndarray, int]]
+
+
+class Measured(NamedTuple):
+    """What an input says of a fit's solution beyond its parameters."""
+
+    metrics: dict[str, float]  # error metrics (docs/results.md), psnr_db among them
+    colour: dict  # the sphere's colour block (brdffit.fitting.sphere.sphere_colour)
+    basis: str  # what the verdict judged: "sphere" or "held_out"
+    input: dict | None  # FitResult.input: a sample list's summary, coverage, folds
+    measurable: bool  # every error could be measured (a NaN is no success)
+
+
+class TableInput:
+    """A MERL table (``brdffit.io.merl.MerlTable``): the grid's fast paths."""
+
+    what = "bins"
+
+    def __init__(self, table: MerlTable):
+        self.table = table
+
+    @property
+    def source(self) -> str:
+        return self.table.source
+
+    def prepare(self, bin_weight, samples, seed: int, precision: str, loss: str) -> Prepared:
+        return prepare(self.table, bin_weight, samples, seed, precision, loss)
+
+    def start_table(self, prep: Prepared) -> MerlTable:
+        return self.table
+
+    def polishes(self, samples, init, prep: Prepared) -> bool:
+        """Every bin (``samples=None``): the fit on the default subsample, with its
+        starts and its nested parent, lands next to the optimum at ~1/70 of the cost
+        per step; every bin then only polishes it (a few steps instead of dozens)."""
+        return samples is None and init is None and prep.n_usable > 4 * DEFAULT_SAMPLES
+
+    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str):
+        return ready_report_once(self.table, model, u, prep, loss, precision, solver)
+
+    def refuse_bound(self) -> None:
+        """A table can be fitted under the physical bounds."""
+
+    def measure(self, model, u_best, params: dict, prep: Prepared, refit: Refit | None,
+                seed: int, solver_metrics: dict) -> Measured:
+        """The full-table error (``solver_metrics``, the solver's own, beside it), and
+        the image error of the whole sphere (no scene weighting: one figure that
+        compares fits made under different losses)."""
+        metrics = full_table_metrics(self.table, model, u_best, prep.weight, peak=prep.peak)
+        metrics.update(solver_metrics)
+        measurable = all(np.isfinite(v) for v in metrics.values())
+        metrics["psnr_db"], colour = cached(
+            self.table, "sphere", lambda: SphereReference(self.table)).psnr_and_colour(
+                model, params)
+        return Measured(metrics, colour, "sphere", None, measurable)
+
+    def judged(self, look: dict, measured: Measured, uncertainty: dict | None) -> tuple[dict,
+                                                                                       None]:
+        return look, None
+
+
+class SampleInput:
+    """A sample list (``brdffit.io.measurements.Measurements``), fitted at its own
+    directions (``brdffit.fitting.samples``)."""
+
+    what = "samples"
+
+    def __init__(self, meas: Measurements):
+        from brdffit.fitting import samples
+
+        self.meas, self._samples = meas, samples
+
+    @property
+    def source(self) -> str:
+        return self.meas.source
+
+    def prepare(self, bin_weight, samples, seed: int, precision: str, loss: str) -> Prepared:
+        return self._samples.prepare_samples(self.meas, bin_weight, samples, seed, precision,
+                                             loss)
+
+    def start_table(self, prep: Prepared) -> MerlTable:
+        return prep.start_table  # the samples binned: the floor and the peak they hold
+
+    def polishes(self, samples, init, prep: Prepared) -> bool:
+        return False  # a list up to `samples` is fitted whole
+
+    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str):
+        return None
+
+    def refuse_bound(self) -> None:
+        raise FitInputError(
+            f"{self.source}: the physical bounds are not available for a sample list "
+            "yet (their albedo check reads a table): fit it without them")
+
+    def measure(self, model, u_best, params: dict, prep: Prepared, refit: Refit | None,
+                seed: int, solver_metrics: dict) -> Measured:
+        """Every metric over every sample (``solver_metrics`` beside them), the k-fold
+        held-out error (each fold refitted by ``refit``; none where the solve diverged
+        or the error cannot be measured), and the look from the sphere where the
+        samples cover it, else from the held-out predictions."""
+        s = self._samples
+        metrics = s.sample_metrics(model, u_best, s.every_sample(self.meas, prep.weight))
+        metrics.update(solver_metrics)
+        measurable = all(np.isfinite(v) for v in metrics.values())
+        held = None
+        if refit is not None and measurable:
+            held = s.held_out(model, self.meas, u_best, prep, refit, seed=seed)
+        if held is not None:
+            metrics.update({f"held_out_{k}": v for k, v in held.metrics.items()})
+            measurable &= all(np.isfinite(v) for v in held.metrics.values())
+        metrics["psnr_db"], colour, basis = s.look(self.meas, prep, held, model, params)
+        return Measured(metrics, colour, basis,
+                        s.fitted_input(self.meas, prep, model, params, held), measurable)
+
+    def judged(self, look: dict, measured: Measured, uncertainty: dict | None) -> tuple[dict,
+                                                                                       dict]:
+        """The verdict as held-out samples can stand behind it, and the input's report
+        with each parameter's identifiability."""
+        fitted = {**measured.input,
+                  "identifiability": self._samples.identifiability(uncertainty)}
+        return self._samples.within_samples(look, fitted), fitted
+
+
+def fit_input(table) -> TableInput | SampleInput:
+    """The input kind of what ``brdffit.fit`` was given; anything else is refused."""
+    if isinstance(table, MerlTable):
+        return TableInput(table)
+    if isinstance(table, Measurements):
+        return SampleInput(table)
+    raise FitInputError(f"fit takes a MerlTable (brdffit.io.merl.read) or Measurements "
+                        f"(brdffit.io.readers.read_measured), got {type(table).__name__}")
+
+
+def check_enough(source: TableInput | SampleInput, prep: Prepared, model,
+                 scene: bool) -> None:
+    """Refuse, with the reason, an input with too little to fit ``model``."""
+    what = source.what
+    if prep.n_usable < model.n_params * 4:
+        raise FitInputError(
+            f"{source.source}: only {prep.n_usable} usable {what} (measured, finite, above "
+            f"the horizon{', weighted by the scene' if scene else ''}); "
+            f"{model.name} needs at least {model.n_params * 4}")
+    if prep.brightest < merl.MIN_PEAK:
+        raise FitInputError(
+            f"{source.source}: every usable {what[:-1]} is below {merl.MIN_PEAK:g} 1/sr"
+            f"{' under the scene' if scene else ''}: nothing to fit")

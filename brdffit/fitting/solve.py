@@ -1,0 +1,131 @@
+"""One fit's solve: :class:`Solve`, from any number of starts, in one compiled program.
+
+Every solve a fit makes goes through here: its best starts, a nested model's
+retries from its parent's optimum, the parent's own loss at that point, a sample
+list's held-out refits (other data of the same shape), and the physically bounded
+solve (the same program with the bound's barrier as an objective term,
+``brdffit.fitting.physical.AlbedoBarrier``). The compiled solve itself is
+``brdffit.fitting.problem.solve_batch``; this module keeps one fit's calls to it on
+one program: with the lm solver the starts are padded to the first call's bucket
+(:func:`~brdffit.fitting.problem.start_bucket`; the padding takes no step), so a new
+process compiles one solve per fit where a retry of one start compiled a second.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from brdffit.fitting.problem import (
+    DTYPES,
+    score_starts,
+    solve_batch,
+    start_bucket,
+    takes_steps_as_data,
+)
+from brdffit.fitting.result import STATUS_NAMES
+
+
+class Outcome(NamedTuple):
+    """What a solve from each of ``starts`` gave: per start its solution ``values``,
+    status ``codes`` (``STATUS_NAMES``), ``steps`` and ``losses``, and the sandwich
+    covariance's ``bread`` and ``meat`` where the solver carries them (else None)."""
+
+    starts: np.ndarray
+    values: np.ndarray
+    codes: np.ndarray
+    steps: np.ndarray
+    losses: np.ndarray
+    bread: np.ndarray | None
+    meat: np.ndarray | None
+
+    def plus(self, other: Outcome) -> Outcome:
+        """Both outcomes' starts, this one's first."""
+        return Outcome(*(None if a is None else np.concatenate([a, b])
+                         for a, b in zip(self, other, strict=True)))
+
+    @property
+    def converged(self) -> bool:
+        return bool(np.any(self.codes == STATUS_NAMES.index("successful")))
+
+    def lowest_loss(self) -> float:
+        return float(np.min(np.where(np.isfinite(self.losses), self.losses, np.inf)))
+
+    def best(self) -> Best:
+        """The start whose solution is finite with the lowest loss; where every start
+        diverged, the first start itself, as ``"nonfinite"``."""
+        values = self.values.astype(np.float64)
+        losses = self.losses.astype(np.float64)
+        finite = np.all(np.isfinite(values), axis=1) & np.isfinite(losses)
+        if not finite.any():
+            return Best(0, np.asarray(self.starts[0], np.float64), "nonfinite",
+                        int(self.steps[0]), float("nan"), None)
+        i = int(np.argmin(np.where(finite, losses, np.inf)))
+        terms = None if self.bread is None else (self.bread[i], self.meat[i])
+        return Best(i, values[i], STATUS_NAMES[int(self.codes[i])], int(self.steps[i]),
+                    float(losses[i]), terms)
+
+
+class Best(NamedTuple):
+    """The chosen start's solution (unconstrained ``u``), its status name, steps and
+    loss, and its uncertainty terms (bread, meat) where the solve carried them."""
+
+    index: int
+    u: np.ndarray
+    result: str
+    steps: int
+    loss: float
+    terms: tuple | None
+
+
+class Solve:
+    """The solve of one fit: ``model`` by ``solver`` at ``precision`` on ``data``,
+    at most ``max_steps`` per start; ``term``: an objective term (``problem.ObjectiveTerm``)
+    added to the data's sum of squares, or None. ``bucket``: the starts its first
+    program holds (later calls with fewer starts run in it)."""
+
+    def __init__(self, model, solver: str, precision: str, data, max_steps: int,
+                 bucket: int = 1, term=None):
+        self.model, self.solver, self.data, self.term = model, solver, data, term
+        self.dtype = DTYPES[precision]
+        self.max_steps = max_steps
+        self.steps_as_data = takes_steps_as_data(solver, max_steps)
+        self.bucket = start_bucket(bucket)
+
+    def __call__(self, starts: np.ndarray, *, take_steps: bool = True, on=None) -> Outcome:
+        """Solve from each of ``starts`` (unconstrained, (k, p)); without ``take_steps``
+        (the lm solver only), the losses of the starts themselves. ``on``: other data of
+        the same shape (a sample list's held-out folds reweight it: the same program)."""
+        data = self.data if on is None else on
+        k = len(starts)
+        term = {} if self.term is None else {"term": self.term}
+        if not self.steps_as_data:
+            *out, terms = solve_batch(self.model, self.solver, jnp.asarray(starts, self.dtype),
+                                      data, self.max_steps, **term)
+        else:
+            padded = padded_starts(starts, max(self.bucket, start_bucket(k)))
+            *out, terms = solve_batch(self.model, self.solver, jnp.asarray(padded, self.dtype),
+                                      data, jnp.asarray(self.max_steps),
+                                      n_live=jnp.asarray(k if take_steps else 0), **term)
+        bread, meat = (None, None) if terms is None else terms
+        values, codes, steps, losses, bread, meat = (
+            None if a is None else np.asarray(a)[:k] for a in (*out, bread, meat))
+        return Outcome(np.asarray(starts), values, codes, steps, losses, bread, meat)
+
+    def loss_at(self, u: np.ndarray) -> float:
+        """The objective at ``u`` itself (no step): from the solve's own normal
+        equations where it can take no steps, else the scoring program's."""
+        if self.steps_as_data:
+            return float(self(u[None], take_steps=False).losses[0])
+        return float(score_starts(self.model, jnp.asarray(u[None], self.dtype), self.data)[0])
+
+
+def padded_starts(starts: np.ndarray, size: int | None = None) -> np.ndarray:
+    """``starts`` padded to ``size`` starts, by default their
+    :func:`~brdffit.fitting.problem.start_bucket` (one compiled solve per bucket; the
+    padding takes no step)."""
+    k = len(starts)
+    size = start_bucket(k) if size is None else size
+    return np.concatenate([starts, np.repeat(starts[:1], size - k, 0)])
