@@ -162,7 +162,7 @@ class JobQueue:
         settle: tuple[Callable, tuple, str]
         try:
             outcome = await self.runner.run(
-                tasks.fit_models, path, table.name, job.models, job.options,
+                tasks.fit_models, path, table.name, job.request,
                 (table.summary or {}).get("input"),
                 progress=progress, limit_s=limit, cancel=cancel,
             )

@@ -54,7 +54,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     id          TEXT NOT NULL UNIQUE,
     table_id    TEXT NOT NULL REFERENCES tables(id),
     models      TEXT NOT NULL,             -- JSON list of model names
-    options     TEXT NOT NULL,             -- JSON object, fit() keywords
+    options     TEXT NOT NULL,             -- JSON object: the request, FitRequest.to_dict()
+                                           -- (rows before brdffit.request/1: flat options)
     status      TEXT NOT NULL
                 CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled')),
     reason      TEXT,                      -- why it failed
@@ -104,7 +105,7 @@ class JobRecord:
     id: str
     table_id: str
     models: list[str]
-    options: dict
+    request: dict  # brdffit.request.FitRequest.to_dict()
     status: str
     reason: str | None
     note: str | None
@@ -131,10 +132,21 @@ def _table(row: sqlite3.Row) -> TableRecord:
                        row["created_at"])
 
 
+def _request(models: list[str], stored: dict) -> dict:
+    """A job's request as ``FitRequest.to_dict()`` has it; a job stored before that
+    form held ``models`` and flat options, rearranged here as they are read."""
+    if "schema" in stored or "models" in stored:  # flat options never held `models`
+        return stored
+    from brdffit.request import legacy_request
+
+    return legacy_request(models, stored)
+
+
 def _job(row: sqlite3.Row) -> JobRecord:
     return JobRecord(
         id=row["id"], table_id=row["table_id"], models=json.loads(row["models"]),
-        options=json.loads(row["options"]), status=row["status"], reason=row["reason"],
+        request=_request(json.loads(row["models"]), json.loads(row["options"])),
+        status=row["status"], reason=row["reason"],
         note=row["note"], results=json.loads(row["results"]) if row["results"] else None,
         attempts=row["attempts"], created_at=row["created_at"], started_at=row["started_at"],
         finished_at=row["finished_at"], stage=row["stage"], fraction=row["fraction"],
@@ -285,13 +297,16 @@ class Store:
 
     # -- jobs -----------------------------------------------------------------------
 
-    def create_job(self, table_id: str, models: list[str], options: dict) -> JobRecord:
+    def create_job(self, table_id: str, request: dict) -> JobRecord:
+        """A queued job of ``request`` (``FitRequest.to_dict()``) on the table ``table_id``;
+        its ``models`` are kept beside it, for listings filtered by model."""
         job_id = uuid.uuid4().hex
+        models = list(request["models"])
         with self._connect() as con:
             con.execute(
                 "INSERT INTO jobs (id, table_id, models, options, status, created_at) "
                 "VALUES (?, ?, ?, ?, 'queued', ?)",
-                (job_id, table_id, jsonout.dumps(models), jsonout.dumps(options), time.time()),
+                (job_id, table_id, jsonout.dumps(models), jsonout.dumps(request), time.time()),
             )
             row = con.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return _job(row)

@@ -49,7 +49,7 @@ def _read_table(table_path: str, source: str):
     return binned(got)[0]
 
 
-def fit_models(table_path: str, source: str, models: list[str], options: dict,
+def fit_models(table_path: str, source: str, request: dict,
                measured_input: dict | None = None) -> Outcome:
     """The fits a job asks for (``brdffit.request.run``): an :class:`Outcome` whose
     value is the list of every fit made (``FitResult`` dicts; for ``auto`` every
@@ -60,7 +60,7 @@ def fit_models(table_path: str, source: str, models: list[str], options: dict,
     from brdffit.request import FitRequest, run
 
     try:
-        request = FitRequest.from_flat(models, options)
+        request = FitRequest.from_dict(request)
         report("reading the table", 0.0)
         table = _read(table_path, source)
 

@@ -27,7 +27,9 @@ import time
 from datetime import UTC, datetime
 
 from brdffit import __version__, jsonout
-from brdffit.batch.job import FitOptions, run_batch
+from brdffit.batch.job import run_batch
+from brdffit.fitting.options import FitOptions
+from brdffit.request import FitRequest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RESULTS = os.path.join(HERE, "results")
@@ -81,7 +83,8 @@ def measure(paths: list[str], models: list[str], options: FitOptions, workers: i
     load_before = os.getloadavg()
     cpu0 = _cpu_s()
     t0 = time.monotonic()
-    summary = run_batch(paths, models, out, options=options, workers=workers, progress=False,
+    summary = run_batch(paths, FitRequest(models=tuple(models), options=options), out,
+                        workers=workers, progress=False,
                         on_result=lambda t, fits: finished.append(
                             (time.monotonic(), t.worker, len(fits))))
     wall = time.monotonic() - t0

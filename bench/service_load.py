@@ -206,7 +206,8 @@ def run(args) -> dict:
                 sampler.start()
                 requests = [
                     [{"table_id": tables[(c * args.jobs + j) % len(tables)]["id"],
-                      "model": args.model, "options": options} for j in range(args.jobs)]
+                      **FitRequest.of(args.model, **options).to_dict()}
+                     for j in range(args.jobs)]
                     for c in range(args.clients)]
                 jobs: list[dict] = []
                 statuses: list[int] = []
@@ -227,7 +228,7 @@ def run(args) -> dict:
             stop_server(proc)
 
     bins = max(t["summary"]["measured_bins"] for t in tables)
-    bound = estimate(FitRequest.from_flat([args.model], options), bins)
+    bound = estimate(FitRequest.of(args.model, **options), bins)
     accepted = sum(s == 202 for s in statuses)
     by_status: dict[str, int] = {}
     for job in jobs:

@@ -28,7 +28,9 @@ from datetime import datetime
 
 from brdffit import extras
 from brdffit.export import Export  # plain data, as FitResult
+from brdffit.fitting.options import DEFAULT_MODEL
 from brdffit.fitting.result import FitResult  # plain data: a client process imports no JAX
+from brdffit.request import FitRequest  # checked here as the server checks it; no JAX
 
 try:
     import httpx
@@ -90,7 +92,7 @@ class FitJob:
     status: str  # queued, running, done, failed, cancelled
     table_id: str
     models: list[str]
-    options: dict
+    request: FitRequest  # as it was posted
     attempts: int
     reason: str | None
     note: str | None
@@ -114,7 +116,8 @@ class FitJob:
     def from_json(cls, d: dict) -> FitJob:
         return cls(
             id=d["id"], status=d["status"], table_id=d["table_id"], models=d["models"],
-            options=d["options"], attempts=d["attempts"], reason=d.get("reason"),
+            request=FitRequest.from_dict(d["request"]), attempts=d["attempts"],
+            reason=d.get("reason"),
             note=d.get("note"),
             result=FitResult.from_dict(d["result"]) if d.get("result") else None,
             results=[FitResult.from_dict(r) for r in d.get("results") or []],
@@ -187,18 +190,24 @@ class Client:
     def table(self, table_id: str) -> TableInfo:
         return TableInfo.from_json(self._request("GET", f"/v1/tables/{table_id}").json())
 
-    def fit(self, table_id: str, model: str | list[str] | None = None, **options) -> FitJob:
-        """Queue a fit; ``options`` are ``brdffit.fitting.options.FitOptions``' (solver,
-        samples, precision, starts, max_steps, seed). Returns at once: see :meth:`wait`.
+    def fit(self, table_id: str, model: str | list[str] | FitRequest | None = None,
+            **keywords) -> FitJob:
+        """Queue a fit; returns at once: see :meth:`wait`.
 
-        ``model`` and every option left out take the server's defaults, which are
-        the library's (the client declares none of its own). ``model="auto"``
-        chooses the model (``brdffit.selection``; options ``tolerance``,
-        ``budget``, ``candidates`` and ``mono_ks``); ``scene`` (a scene JSON object,
-        see docs/selection.md) restricts the directions that count, for any model."""
-        body = {"table_id": table_id, "options": options}
-        if model is not None:
-            body["model"] = model
+        ``model``: a name, a list of names, ``"auto"`` (the cheapest good enough is
+        chosen, ``brdffit.selection``), or a whole :class:`~brdffit.request.FitRequest`.
+        ``keywords`` are ``FitRequest.of``'s: the fit's options (``samples``,
+        ``starts``, ``loss``, ``physical``, ...), ``scene`` (a ``Scene`` or a scene's
+        JSON object, docs/selection.md) and, with auto, the rule's (``tolerance``,
+        ``budget``, ``candidates``, ``mono_ks``). The request is checked here, by the
+        library the server runs, and sent in its one form (``FitRequest.to_dict()``)."""
+        if isinstance(model, FitRequest):
+            if keywords:
+                raise TypeError("give a FitRequest or keywords, not both")
+            request = model
+        else:
+            request = FitRequest.of(DEFAULT_MODEL if model is None else model, **keywords)
+        body = {"table_id": table_id, **request.to_dict()}
         return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
 
     def job(self, job: JobRef) -> FitJob:

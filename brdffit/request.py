@@ -1,19 +1,21 @@
 """What a fit request means, decided once: :class:`FitRequest`, :func:`run`, :class:`FitReport`.
 
-Every shell (``brdffit fit``, the service's worker task, the batch's worker task,
-the service's cost estimate) turns what it was given (flags, a JSON body, batch
-arguments) into one :class:`FitRequest` and hands it to :func:`run`; none of them
-interprets an option again. The request holds:
+Every shell (``brdffit fit``, ``brdffit batch``, the service's route and worker, the
+service's cost estimate, the client) turns what it was given (flags, a JSON body,
+Python values) into one :class:`FitRequest` and hands it to :func:`run` (the batch:
+``run_batch(inputs, request)``); none of them interprets an option again. Its one
+serialised form is :meth:`FitRequest.to_dict` (schema ``brdffit.request/1``): the
+service's request body is generated from it, and a job and a batch store it. The
+request holds:
 
-- ``models``: registry names, fitted each in turn, or ``("auto",)``: the
-  selection's candidates are fitted and the cheapest good enough is chosen
-  (``brdffit.selection``);
-- ``options``: a :class:`~brdffit.fitting.options.FitOptions`, the one source of
-  defaults and limits (its ``model`` field is what ``models`` came from);
+- ``models``: registry names, fitted each in turn, or ``("auto",)``: the rule's
+  candidates are fitted and the cheapest good enough is chosen (``brdffit.selection``);
+- ``options``: a :class:`~brdffit.fitting.options.FitOptions`, the one source of fit
+  defaults and limits (the keywords of ``brdffit.fit``);
 - ``scene``: the directions a scene uses, or None;
-- the selection rule (``options.tolerance``, ``options.budget``, ``candidates``,
-  ``mono_ks``), meaningful with ``auto`` only: with a fixed model it is refused,
-  not silently ignored.
+- ``rule``: how auto chooses (:class:`~brdffit.fitting.options.SelectionRule`:
+  tolerance, budget, candidates, mono_ks), present exactly when ``models`` is auto:
+  with a fixed model a rule is refused, not silently ignored.
 
 :func:`run` returns a :class:`FitReport`: every fit made, and the chosen one by the
 one rule there is (``brdffit.selection.choose`` for ``auto``, ``brdffit.selection.best``
@@ -29,15 +31,18 @@ from dataclasses import dataclass, field
 
 from brdffit import models as registry
 from brdffit.errors import FitInputError
-from brdffit.fitting.options import AUTO, DEFAULT_TOLERANCE, FitOptions
+from brdffit.fitting.options import AUTO, DEFAULT_MODEL, FitOptions, SelectionRule, names
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene
 from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
-from brdffit.selection import DEFAULT_CANDIDATES, Selection, best, select
+from brdffit.selection import Selection, best, select
 
 #: The version of :meth:`FitReport.to_dict`'s schema.
 REPORT_SCHEMA = "brdffit.report/1"
+#: The version of :meth:`FitRequest.to_dict`'s schema: the wire and storage form.
+REQUEST_SCHEMA = "brdffit.request/1"
+_REQUEST_KEYS = ("schema", "models", "options", "scene", "rule")
 
 #: ``progress(i, n, model, row)``: before model ``i`` of ``n`` is fitted (``row`` None)
 #: and after (its ranking row: ``status`` ``"fitted"`` or ``"failed"``).
@@ -46,14 +51,17 @@ ModelProgress = Callable[[int, int, str, dict | None], None]
 
 def _names(models) -> tuple[str, ...]:
     if isinstance(models, str):
-        models = [models]
+        models = models.split(",")  # "ggx,beckmann", as a command line gives them
+    if not isinstance(models, list | tuple) or not all(isinstance(m, str) for m in models):
+        raise FitInputError(f"models must be a model name or a list of them, got {models!r}")
     names = tuple(dict.fromkeys(m.strip() for m in models if m.strip()))  # twice is once
     if not names:
         raise FitInputError("give at least one model, or auto")
     if AUTO in names:
         if len(names) > 1:
             raise FitInputError(f"auto chooses among its candidates; it cannot be listed "
-                                f"beside other models ({', '.join(names)})")
+                                f"beside other models ({', '.join(names)}): add them to "
+                                "the rule's candidates instead")
         return names
     for name in names:
         registry.check_name(name)
@@ -65,82 +73,93 @@ class FitRequest:
     """One fit request, checked on construction: a request that exists is one
     :func:`run` accepts (the table may still have too little to fit)."""
 
-    models: tuple[str, ...]
+    models: tuple[str, ...] = (DEFAULT_MODEL,)
     options: FitOptions = field(default_factory=FitOptions)
     scene: Scene | None = None
-    candidates: tuple[str, ...] = DEFAULT_CANDIDATES
-    mono_ks: bool = False
+    #: how auto chooses; None with fixed models. ``FitRequest(("auto",))`` takes the
+    #: default rule.
+    rule: SelectionRule | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "models", _names(self.models))
-        object.__setattr__(self, "candidates", tuple(self.candidates))
         if not isinstance(self.options, FitOptions):
             raise FitInputError(f"options must be FitOptions, got {type(self.options).__name__}")
-        if self.options.model != self.models[0]:
-            # ``models`` says what is fitted; ``options.model`` follows it, so that the
-            # two never disagree (a batch built requests whose options named another)
-            object.__setattr__(self, "options", self.options.replace(model=self.models[0]))
+        if self.scene is not None and not isinstance(self.scene, Scene):
+            raise FitInputError(f"scene must be a Scene, got {type(self.scene).__name__}")
+        if self.rule is not None and not isinstance(self.rule, SelectionRule):
+            raise FitInputError(f"rule must be a SelectionRule, got {type(self.rule).__name__}")
         if self.auto:
-            if not self.candidates:
-                raise FitInputError("auto needs at least one candidate model")
-            for name in self.candidates:
-                registry.check_name(name)
+            if self.rule is None:
+                object.__setattr__(self, "rule", SelectionRule())
             return
-        # The selection rule only chooses among auto's candidates: with a fixed model it
-        # would be silently ignored, so it is refused, naming what to do instead.
-        ignored = [f"{name} {value!r}" for name, value, default in (
-            ("tolerance", self.options.tolerance, DEFAULT_TOLERANCE),
-            ("budget", self.options.budget, None),
-            ("candidates", list(self.candidates), list(DEFAULT_CANDIDATES)),
-            ("mono_ks", self.mono_ks, False)) if value != default]
-        if ignored:
+        if self.rule is not None:
+            # The rule only chooses among auto's candidates: with a fixed model it
+            # would be silently ignored, so it is refused, naming what to do instead.
+            given = [f"{k} {v!r}" for k, v in self.rule.to_dict().items()
+                     if v != SelectionRule().to_dict()[k]] or ["a selection rule"]
             raise FitInputError(
-                f"{', '.join(ignored)} choose among auto's candidates; with model "
+                f"{', '.join(given)} choose among auto's candidates; with model "
                 f"{', '.join(self.models)} they would be ignored: drop them, or fit model auto")
 
     @classmethod
-    def of(cls, model="ggx", *, scene: Scene | None = None, candidates=None,
-           mono_ks: bool = False, **options) -> FitRequest:
-        """A request from Python values: ``FitRequest.of("auto", samples=4096)``.
-        ``model`` is a name, ``"auto"`` or a list of names; ``options`` are
-        :class:`FitOptions` fields."""
-        names = _names(model)
-        first = names[0]
-        return cls(models=names, options=FitOptions.from_dict({**options, "model": first}),
-                   scene=scene,
-                   candidates=DEFAULT_CANDIDATES if candidates is None else tuple(candidates),
-                   mono_ks=mono_ks)
+    def of(cls, model=DEFAULT_MODEL, *, scene: Scene | dict | None = None,
+           **keywords) -> FitRequest:
+        """A request from Python values: ``FitRequest.of("auto", samples=4096,
+        tolerance=0.01)``. ``model`` is a name, ``"auto"`` or a list of names;
+        ``keywords`` are :class:`FitOptions` fields and, for auto,
+        :class:`SelectionRule` fields (a rule field with another model is refused)."""
+        rule_names = set(names(SelectionRule))
+        rule = {k: v for k, v in keywords.items() if k in rule_names}
+        fit_options = {k: v for k, v in keywords.items() if k not in rule_names}
+        return cls(models=_names(model), options=FitOptions.from_dict(fit_options),
+                   scene=Scene.from_dict(scene) if isinstance(scene, dict) else scene,
+                   rule=SelectionRule.from_dict(rule) if rule else None)
 
     @classmethod
     def from_dict(cls, d: dict) -> FitRequest:
-        """A request from its JSON form (:meth:`to_dict`; the service stores it so):
-        ``{"models": [...], "options": {...}, "scene": {...} | null, "candidates":
-        [...], "mono_ks": bool}``; missing keys take their defaults."""
-        unknown = sorted(set(d) - {"models", "options", "scene", "candidates", "mono_ks"})
+        """A request from its one serialised form (:meth:`to_dict`): ``{"schema":
+        "brdffit.request/1", "models": [...] | "name", "options": {...}, "scene":
+        {...} | null, "rule": {...} | null}``; missing keys take their defaults."""
+        if not isinstance(d, dict):
+            raise FitInputError(f"a fit request is a JSON object, got {type(d).__name__}")
+        unknown = sorted(set(d) - set(_REQUEST_KEYS))
         if unknown:
-            raise FitInputError(f"unknown request keys {unknown}")
-        scene = d.get("scene")
-        return cls.of(d.get("models", FitOptions().model),
-                      scene=None if scene is None else Scene.from_dict(scene),
-                      candidates=d.get("candidates"), mono_ks=bool(d.get("mono_ks", False)),
-                      **{k: v for k, v in d.get("options", {}).items() if k != "model"})
-
-    @classmethod
-    def from_flat(cls, models, options: dict) -> FitRequest:
-        """A request from ``models`` and one flat dict of option names with ``scene``,
-        ``candidates`` and ``mono_ks`` among them: how the service stores a job."""
-        options = dict(options)
-        scene, candidates = options.pop("scene", None), options.pop("candidates", None)
-        mono_ks = options.pop("mono_ks", False)
-        return cls.from_dict({"models": models, "options": options, "scene": scene,
-                              "candidates": candidates, "mono_ks": mono_ks})
+            raise FitInputError(f"unknown request keys {unknown}; a request has "
+                                f"{', '.join(_REQUEST_KEYS)}")
+        schema = d.get("schema", REQUEST_SCHEMA)
+        if schema != REQUEST_SCHEMA:
+            raise FitInputError(f"request schema {schema!r}; this brdffit reads "
+                                f"{REQUEST_SCHEMA!r}")
+        for key in ("options", "scene", "rule"):
+            if d.get(key) is not None and not isinstance(d[key], dict):
+                raise FitInputError(f"{key} must be a JSON object or null, got {d[key]!r}")
+        scene, rule = d.get("scene"), d.get("rule")
+        return cls(models=_names(d.get("models", DEFAULT_MODEL)),
+                   options=FitOptions.from_dict(d.get("options") or {}),
+                   scene=None if scene is None else Scene.from_dict(scene),
+                   rule=None if rule is None else SelectionRule.from_dict(rule))
 
     def to_dict(self) -> dict:
-        options = self.options.to_dict()
-        del options["model"]  # `models` says what is fitted
-        return {"models": list(self.models), "options": options,
-                "scene": None if self.scene is None else self.scene.to_dict(),
-                "candidates": list(self.candidates), "mono_ks": self.mono_ks}
+        """The request's one serialised form (strict JSON): what the service's body is,
+        what a job and a batch store."""
+        return {"schema": REQUEST_SCHEMA, "models": list(self.models),
+                "options": self.options.to_dict(),
+                "scene": None if self.scene is None else self.scene.to_spec(),
+                "rule": None if self.rule is None else self.rule.to_dict()}
+
+    def fit_key(self) -> str:
+        """What makes two fits of one model equal: the fit options and the scene
+        (``FitOptions.key_of``): a batch resumes a fit whose key, table and model match."""
+        return FitOptions.key_of(self.fit_record())
+
+    def fit_record(self) -> dict:
+        """The fit keywords and the scene's identity (``Scene.key``), as a batch records
+        them beside each fit."""
+        scene = {} if self.scene is None else {"scene": self.scene.key()}
+        return {**self.options.fit_keywords(), **scene}
+
+    def replace(self, **changes) -> FitRequest:
+        return dataclasses.replace(self, **changes)
 
     @property
     def auto(self) -> bool:
@@ -148,8 +167,33 @@ class FitRequest:
 
     @property
     def fitted_models(self) -> tuple[str, ...]:
-        """The models :func:`run` fits: the candidates for ``auto``."""
-        return self.candidates if self.auto else self.models
+        """The models :func:`run` fits: the rule's candidates for ``auto``."""
+        return self.rule.candidates if self.auto else self.models
+
+
+def legacy_request(models, flat: dict) -> dict:
+    """A :meth:`FitRequest.to_dict`-shaped dict from the form before it (``models``
+    and one flat dict of options holding ``scene``, ``candidates``, ``mono_ks``,
+    ``tolerance`` and ``budget`` beside the fit's; a ``model`` key in it ignored,
+    ``models`` says what is fitted): how the service stored jobs and took bodies
+    before ``brdffit.request/1``. Only rearranged; :meth:`FitRequest.from_dict`
+    checks it."""
+    if isinstance(models, str):
+        models = [models]
+    if not isinstance(flat, dict):  # not the earlier form either: left for the checks
+        return {"schema": REQUEST_SCHEMA, "models": models, "options": flat}
+    flat = dict(flat)
+    flat.pop("model", None)
+    rule = {k: flat.pop(k) for k in names(SelectionRule) if k in flat}
+    scene = flat.pop("scene", None)
+    auto = isinstance(models, list | tuple) and list(models) == [AUTO]
+    # the old form sent the rule's defaults with any model; only auto has a rule now
+    if not auto:
+        rule = {k: v for k, v in rule.items() if v not in (None, False)
+                and not (k == "tolerance" and v == SelectionRule().tolerance)}
+    return {"schema": REQUEST_SCHEMA,
+            "models": list(models) if isinstance(models, list | tuple) else models,
+            "options": flat, "scene": scene, "rule": rule if auto or rule else None}
 
 
 @dataclass(frozen=True)
@@ -210,9 +254,8 @@ def _run(table: MerlTable | Measurements, request: FitRequest, progress: ModelPr
          threads: int | None) -> FitReport:
     options = request.options
     if request.auto:
-        sel = select(table, request.candidates, scene=request.scene, mono_ks=request.mono_ks,
-                     progress=progress, threads=threads, **options.selection_keywords(),
-                     **options.fit_keywords())
+        sel = select(table, scene=request.scene, progress=progress, threads=threads,
+                     **request.rule.selection_keywords(), **options.fit_keywords())
         failed = {row["model"]: row.get("message", row.get("result", ""))
                   for row in sel.ranking if row["status"] == "failed"}
         return FitReport(request=request, fits=dict(sel.fits), failed=failed,

@@ -18,6 +18,7 @@ import pytest
 
 from api.store import Store
 from brdffit.io import merl
+from brdffit.request import FitRequest
 from tests.api_fixtures import FAST, Server, header, table, table_bytes, wait_status
 
 pytestmark = pytest.mark.system
@@ -49,6 +50,9 @@ def table_id(http):
     assert r.status_code in (200, 201), r.text
     return r.json()["id"]
 
+
+#: A stored job's request (``FitRequest.to_dict()``'s form).
+LAMBERT = {"schema": "brdffit.request/1", "models": ["lambert"], "options": {}}
 
 def assert_error(r: httpx.Response, status: int, *words: str) -> None:
     assert r.status_code == status, (r.status_code, r.text)
@@ -267,9 +271,10 @@ def test_malformed_fit_bodies_are_422(http):
     r = http.post("/v1/fits", content=b"{not json", headers={"Content-Type": "application/json"})
     assert_error(r, 422, "json")
     assert r.json()["detail"].startswith("body: not valid JSON at character 1: Expecting")
-    r = http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, "model": []})
-    assert_error(r, 422)
-    assert r.json()["detail"] == "model: give at least one model"  # no "Value error, "
+    for body in ({"models": []}, {"model": []}):  # the request's form, and the earlier one
+        r = http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, **body})
+        assert_error(r, 422)
+        assert r.json()["detail"] == "body: give at least one model, or auto"  # no "Value error"
     assert_error(http.post("/v1/fits", json=[1, 2, 3]), 422)
     assert_error(http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, "colour": "red"}), 422,
                  "colour")
@@ -430,8 +435,8 @@ def test_recovery_fails_a_job_out_of_attempts(tmp_path):
     tmp = tmp_path / "t.binary"
     merl.write(tmp, table("lambert"))
     store.add_table("a" * 64, tmp, 1, "t.binary", {})
-    running = store.create_job("a" * 64, ["lambert"], {})
-    queued = store.create_job("a" * 64, ["lambert"], {})
+    running = store.create_job("a" * 64, LAMBERT)
+    queued = store.create_job("a" * 64, LAMBERT)
     assert store.claim_next().id == running.id
     requeued, failed = Store(tmp_path).recover(max_attempts=1)  # "the next server"
     assert (requeued, failed) == ([], [running.id])
@@ -447,7 +452,7 @@ def test_clean_shutdown_requeues_without_spending_an_attempt(tmp_path):
     tmp = tmp_path / "t.binary"
     merl.write(tmp, table("lambert"))
     store.add_table("b" * 64, tmp, 1, "t.binary", {})
-    job = store.create_job("b" * 64, ["lambert"], {})
+    job = store.create_job("b" * 64, LAMBERT)
     store.claim_next()
     assert store.release_running() == 1
     again = store.get_job(job.id)
@@ -524,7 +529,7 @@ def test_worker_tasks_return_failures_as_values(tmp_path):
     from api import tasks
 
     missing = str(tmp_path / "gone.binary")
-    out = tasks.fit_models(missing, "gone.binary", ["lambert"], FAST)
+    out = tasks.fit_models(missing, "gone.binary", FitRequest.of("lambert", **FAST).to_dict())
     assert not out.ok and "cannot read" in out.reason and not out.internal
     out = tasks.render_plot(missing, "gone.binary", {}, "slices")
     assert not out.ok and "cannot read" in out.reason and out.error_type == "MerlFormatError"
@@ -563,17 +568,22 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     store.add_table("a" * 64, tmp, 1, "t.binary", {"measured_bins": 1_000_000})
     settings = Settings(data_dir=tmp_path, max_job_estimate_s=60.0)
     with pytest.raises(fits.TableNotFound, match="upload it with POST /v1/tables"):
-        fits.create(store, settings, "b" * 64, "ggx", {})
+        fits.create(store, settings, "b" * 64, {"models": "ggx"})
     with pytest.raises(FitInputError, match="tolerance 0.02 choose among auto's candidates"):
-        fits.create(store, settings, "a" * 64, "ggx", {"tolerance": 0.02})
+        fits.create(store, settings, "a" * 64, {"models": "ggx", "rule": {"tolerance": 0.02}})
     with pytest.raises(fits.OverLimits) as over:
-        fits.create(store, settings, "a" * 64, "auto", {"samples": 200_000, "starts": 8})
+        fits.create(store, settings, "a" * 64, {"models": "auto", "options": {
+            "samples": 200_000, "starts": 8}})
     why = str(over.value)
     assert "BRDFFIT_MAX_JOB_ESTIMATE_S" in why and "the auto candidates lambert" in why
     assert why.endswith("Ask for fewer samples or starts.") and "max_steps)" not in why
     assert store.list_jobs(limit=10).total == 0  # nothing queued by a refusal
-    job = fits.create(store, settings, "a" * 64, ["ggx", "lambert", "ggx"], {"samples": 4096})
+    job = fits.create(store, settings, "a" * 64, {"models": ["ggx", "lambert", "ggx"],
+                                                  "options": {"samples": 4096}})
     assert job.models == ["ggx", "lambert"] and job.status == "queued"
+    # stored in the library's one form, and read back as it
+    assert FitRequest.from_dict(store.get_job(job.id).request) == FitRequest.of(
+        ["ggx", "lambert"], samples=4096)
 
 
 def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):

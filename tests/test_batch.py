@@ -21,11 +21,13 @@ import pytest
 
 from brdffit import models
 from brdffit.batch.cluster import SCHEDULER_ENV, DaskRunner, local_cluster_options
-from brdffit.batch.job import BatchInputError, FitOptions, find_tables, run_batch
+from brdffit.batch.job import BatchInputError, find_tables, run_batch
 from brdffit.batch.report import format_ranking, plot_summary, rank, summary_figure
 from brdffit.batch.store import BatchFileError, BatchStore, read_results
 from brdffit.batch.tasks import TableReadRecord
 from brdffit.cli import main as cli_main
+from brdffit.fitting.options import FitOptions
+from brdffit.request import FitRequest
 from tests.api_fixtures import free_port
 from tests.table_files import write_tables
 
@@ -71,7 +73,7 @@ def cluster():
 def cluster_batch(table_dir, cluster, tmp_path_factory):
     """One batch of every table x 3 models on the LocalCluster, uninterrupted."""
     out = tmp_path_factory.mktemp("out") / "results.h5"
-    summary = run_batch([str(table_dir)], MODELS, out, options=OPTIONS,
+    summary = run_batch([str(table_dir)], FitRequest(tuple(MODELS), OPTIONS), out,
                         scheduler=cluster.scheduler_address, progress=False, timeout_s=600)
     return out, summary
 
@@ -148,7 +150,7 @@ def test_cluster_batch_records_every_table_and_model(cluster_batch, table_dir):
 def test_rerun_skips_everything_finished(cluster_batch, table_dir, cluster):
     out, _ = cluster_batch
     before = _tables(out)
-    summary = run_batch([str(table_dir)], MODELS, out, options=OPTIONS,
+    summary = run_batch([str(table_dir)], FitRequest(tuple(MODELS), OPTIONS), out,
                         scheduler=cluster.scheduler_address, progress=False, timeout_s=300)
     assert summary.skipped == 3 and summary.fits == 0
     assert len(summary.failed_tables) == 3  # bad tables are tried again: they may be fixed
@@ -202,12 +204,13 @@ def test_dask_runner_runs_a_call_on_the_cluster(cluster, table_dir):
         assert runner.submit_call(os.path.getsize, str(table_dir / "e_text.binary")).result(
             timeout=60) == (table_dir / "e_text.binary").stat().st_size
         path = str(table_dir / "c_lambert.binary")
-        out = runner.submit_call(tasks.fit_models, path, "c.binary", ["lambert"],
-                                 {"samples": 4096, "starts": 1}).result(timeout=300)
+        out = runner.submit_call(tasks.fit_models, path, "c.binary",
+                                 FitRequest.of("lambert", samples=4096, starts=1).to_dict()
+                                 ).result(timeout=300)
         assert out.ok and _close(out.value[0]["params"]["kd"], TRUTHS["c_lambert"][1]["kd"],
                                  0.02)
         bad = runner.submit_call(tasks.fit_models, str(table_dir / "d_truncated.binary"),
-                                 "d.binary", ["lambert"], {}).result(timeout=300)
+                                 "d.binary", {"models": ["lambert"]}).result(timeout=300)
         assert not bad.ok and "truncated" in bad.reason and not bad.internal
     assert DaskRunner.from_env({}) is None
     runner = DaskRunner.from_env({SCHEDULER_ENV: cluster.scheduler_address})
@@ -510,21 +513,33 @@ def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
 
     d, opts = _two_lambert_tables(tmp_path)
     out = tmp_path / "r.h5"
-    first = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+    first = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                      progress=False)
     assert first.ok and first.fits == 2
     merl.write(d / "m1.binary", make_table("lambert", {"kd": [0.1, 0.1, 0.1]})[0])
-    second = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+    second = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                      progress=False)
     assert second.skipped == 1 and second.fits == 1
     t = _tables(out)["m1"]
     assert t["sha256"] == _sha256(str(d / "m1.binary"))
     assert _close(t["fits"]["lambert"]["params"]["kd"], [0.1, 0.1, 0.1], 0.02)
     # other options are another fit; --refit makes them again regardless
-    third = run_batch([str(d)], ["lambert"], out, options=FitOptions(samples=2048, starts=1),
+    third = run_batch([str(d)], FitRequest.of("lambert", samples=2048, starts=1), out,
                       workers=0, progress=False)
     assert third.fits == 2
-    fourth = run_batch([str(d)], ["lambert"], out, options=FitOptions(samples=2048, starts=1),
+    fourth = run_batch([str(d)], FitRequest.of("lambert", samples=2048, starts=1), out,
                        workers=0, progress=False, refit=True)
     assert fourth.fits == 2 and fourth.skipped == 0
+    # a scene weights other directions: another fit, which a rerun then resumes
+    from brdffit.fitting.scene import Scene
+
+    in_scene = FitRequest.of("lambert", samples=2048, starts=1,
+                             scene=Scene.preset("camera-normal"))
+    fifth = run_batch([str(d)], in_scene, out, workers=0, progress=False)
+    assert fifth.fits == 2 and fifth.skipped == 0
+    sixth = run_batch([str(d)], in_scene, out, workers=0, progress=False)
+    assert sixth.fits == 0 and sixth.skipped == 2
+    assert json.loads(read_results(out)["attrs"]["request"])["scene"]["name"] == "camera-normal"
 
 
 def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
@@ -553,7 +568,8 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
     job.stop_requested.set()
     try:
         with pytest.raises(KeyboardInterrupt):
-            run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+            run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                      progress=False)
         assert drop_one() == ""
     finally:
         job.stop_requested.clear()
@@ -561,7 +577,8 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
     # fits the other table only
     kept = _tables(out)
     assert sum(len(t["fits"]) for t in kept.values()) == 1
-    again = run_batch([str(d)], ["lambert"], out, options=opts, workers=0, progress=False)
+    again = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                      progress=False)
     assert again.ok and again.fits == 1 and again.skipped == 1
     # without a stop asked for, an unraisable KeyboardInterrupt is reported as usual
     assert "KeyboardInterrupt" in drop_one()

@@ -13,9 +13,9 @@ from brdffit.batch.exports import export_from_store
 from brdffit.batch.job import run_batch
 from brdffit.batch.store import BatchFileError, read_fit, read_results
 from brdffit.export import ExportError, export
-from brdffit.fitting.options import FitOptions
 from brdffit.fitting.result import FitResult
 from brdffit.io.grid import bin_grid
+from brdffit.request import FitRequest
 from brdffit.selection import TIE
 from data_synth import make_table
 
@@ -39,8 +39,8 @@ def store(tmp_path_factory):
         (root / rel).parent.mkdir(exist_ok=True)
         merl.write(root / rel, table)
     out = root / "results.h5"
-    run_batch([str(root / rel) for rel in tables], ["ggx", "lambert"], out,
-              options=FitOptions(samples=1024), workers=0, progress=False)
+    run_batch([str(root / rel) for rel in tables], FitRequest.of(["ggx", "lambert"], samples=1024),
+              out, workers=0, progress=False)
     return root, out
 
 

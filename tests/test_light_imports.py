@@ -57,8 +57,10 @@ def test_the_service_front_imports_no_jax_nor_matplotlib():
         "from brdffit.request import FitRequest\n"
         "from brdffit.selection import chosen_result\n"
         "scene = {'preset': 'camera-normal'}\n"
-        "FitRequest.from_flat('auto', {'samples': 4096, 'scene': scene})\n"
-        "FitRequest.from_flat(['ggx', 'ggx_mono'], {'loss': 'render'})\n"
+        "FitRequest.of('auto', samples=4096, scene=scene, tolerance=0.01).to_dict()\n"
+        "FitRequest.from_dict({'models': ['ggx', 'ggx_mono'], 'options': {'loss': 'render'}})\n"
+        "from api.routes.fits import FitJobRequest\n"
+        "FitJobRequest(table_id='0' * 64, models='auto', scene=scene)\n"
         "r = {'model': 'ggx_mono', 'error': {'log_rmse': 0.1}}\n"
         "assert chosen_result([{'model': 'ggx', 'error': {'log_rmse': 0.1}}, r]) is r\n")
 

@@ -10,6 +10,7 @@ import pytest
 from brdffit import models
 from brdffit.fitting import loss, pipeline, sampling
 from brdffit.fitting import problem as fitting
+from brdffit.request import FitRequest
 from data_synth import make_table
 from tests.compiled_models import evaluate
 from tests.truths import TRUTH
@@ -212,11 +213,9 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     import sys
 
     from api import tasks
-    from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
-    from brdffit.fitting.options import FitOptions
     from brdffit.io import merl
     from brdffit.selection import chosen_result as best_result
 
@@ -230,13 +229,13 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     cli = json.loads(r.stdout)
     assert cli["loss"] == "cube_root" and "sample_cube_root_rmse" in cli["error"]
 
-    out = tasks.fit_models(str(path), "t.binary", ["ggx"],
-                           RequestOptions(loss="linear_cos", samples=2048).model_dump())
+    out = tasks.fit_models(str(path), "t.binary", FitRequest.of("ggx", loss="linear_cos",
+                                                                samples=2048).to_dict())
     served = FitResultOut.model_validate(best_result(out.value))
     assert served.loss == "linear_cos" and "sample_rmse_cos" in served.error
 
-    run_batch([str(path)], ["ggx"], tmp_path / "r.h5",
-              options=FitOptions(loss="cube_root", samples=2048), workers=0, progress=False)
+    run_batch([str(path)], FitRequest.of("ggx", loss="cube_root", samples=2048),
+              tmp_path / "r.h5", workers=0, progress=False)
     stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]["ggx"]["fit"]
     assert stored["loss"] == "cube_root" and stored["uncertainty"]["std_error"]["alpha"] > 0
     for name, v in cli["params"].items():  # the same fit from the CLI and the batch
@@ -397,11 +396,9 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     import sys
 
     from api import tasks
-    from api.routes.fits import FitOptions as RequestOptions
     from api.routes.fits import FitResultOut
     from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
-    from brdffit.fitting.options import FitOptions
     from brdffit.io import merl
     from brdffit.selection import chosen_result as best_result
 
@@ -414,12 +411,12 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     assert r.returncode == 0, r.stderr
     cli = json.loads(r.stdout)
     assert cli["loss"] == "render" and "sample_render_rmse" in cli["error"]
-    out = tasks.fit_models(str(path), "t.binary", ["ggx"],
-                           RequestOptions(loss="render", samples=2048).model_dump())
+    out = tasks.fit_models(str(path), "t.binary", FitRequest.of("ggx", loss="render",
+                                                                samples=2048).to_dict())
     served = FitResultOut.model_validate(best_result(out.value))
     assert served.loss == "render"
-    run_batch([str(path)], ["ggx"], tmp_path / "r.h5",
-              options=FitOptions(loss="render", samples=2048), workers=0, progress=False)
+    run_batch([str(path)], FitRequest.of("ggx", loss="render", samples=2048),
+              tmp_path / "r.h5", workers=0, progress=False)
     stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]["ggx"]["fit"]
     assert stored["loss"] == "render"
     for name, v in cli["params"].items():

@@ -40,8 +40,9 @@ def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
 
 
 def test_a_batch_fits_sample_files_beside_merl_tables(astm_file, tmp_path):
-    from brdffit.batch.job import FitOptions, run_batch
+    from brdffit.batch.job import run_batch
     from brdffit.batch.store import read_results
+    from brdffit.request import FitRequest
     from tests.table_files import write_tables
 
     write_tables(tmp_path, {"ggx": ("ggx", {"kd": [0.1] * 3, "ks": [0.5] * 3, "alpha": 0.1,
@@ -52,8 +53,8 @@ def test_a_batch_fits_sample_files_beside_merl_tables(astm_file, tmp_path):
     out = tmp_path / "r.h5"
     # the lab's folder as it is: a table, a sample list, a bad list, and the results
     # file the batch writes there (not taken as an input)
-    run_batch([str(tmp_path)], ["ggx"], out,
-              options=FitOptions(samples=2048, starts=1), workers=0, progress=False)
+    run_batch([str(tmp_path)], FitRequest.of("ggx", samples=2048, starts=1), out,
+              workers=0, progress=False)
     tables = {t["name"]: t for t in read_results(out)["tables"]}
     assert sorted(tables) == ["bad.csv", "ggx", "lab.astm"]
     lab = tables["lab.astm"]["fits"]["ggx"]["fit"]

@@ -204,7 +204,7 @@ def test_a_fit_of_samples_recovers_their_material(tmp_path):
     assert r.params["alpha"] == pytest.approx(0.12, rel=0.03)
     np.testing.assert_allclose(r.params["kd"], truth["kd"], rtol=0.03, atol=2e-3)
     np.testing.assert_allclose(r.params["ks"], truth["ks"], rtol=0.05)
-    report = run(table, FitRequest.from_flat(["ggx"], {"samples": 4096}),
+    report = run(table, FitRequest.of("ggx", samples=4096),
                  measured_input=measured_input)
     assert report.chosen_fit.input == measured_input
     assert report.chosen_fit.to_dict()["input"]["format"] == "csv"

@@ -18,9 +18,10 @@ from pydantic import ValidationError
 from brdffit import FitInputError, FitResult, fit
 from brdffit.cli import build_parser
 from brdffit.fitting import options
-from brdffit.fitting.options import AUTO, FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.fitting.options import DEFAULT_MODEL, FIT_KEYWORDS, FitOptions, SelectionRule
 from brdffit.io import merl
 from brdffit.models import UnknownModelError
+from brdffit.request import FitRequest
 from tests.cli_helpers import run
 
 pytestmark = pytest.mark.contract
@@ -39,44 +40,89 @@ def test_fit_signature_and_select_take_the_contract_defaults():
     fit_sig = inspect.signature(fit).parameters
     select_sig = inspect.signature(select).parameters
     want = _library_defaults()
-    for name in (*FIT_KEYWORDS, "model"):
+    for name in FIT_KEYWORDS:
         assert fit_sig[name].default == want[name], name
-    for name in SELECTION_KEYWORDS:
-        assert select_sig[name].default == want[name], name
+    assert fit_sig["model"].default == DEFAULT_MODEL
+    rule = SelectionRule()
+    for name in ("tolerance", "budget", "mono_ks"):
+        assert select_sig[name].default == getattr(rule, name), name
+    assert tuple(select_sig["candidates"].default) == rule.candidates
 
 
 def test_cli_fit_has_every_option_with_the_contract_default():
+    from brdffit.cli.fit import request_from_args
+
     want = _library_defaults()
     args = build_parser().parse_args(["fit", "t.binary"])
     assert {n: getattr(args, n, "MISSING") for n in want} == want
+    assert request_from_args(args) == FitRequest.of(DEFAULT_MODEL)
+    # the rule's flags, unset, are no rule: the default one for auto
+    args = build_parser().parse_args(["fit", "t.binary", "--model", "auto"])
+    assert request_from_args(args).rule == SelectionRule()
+    args = build_parser().parse_args(["fit", "t.binary", "--model", "auto", "--tolerance",
+                                      "0.02", "--candidates", "lambert,ggx", "--mono-ks"])
+    assert request_from_args(args).rule == SelectionRule(tolerance=0.02, mono_ks=True,
+                                                         candidates=("lambert", "ggx"))
 
 
 def test_cli_batch_has_every_fit_option_with_the_contract_default():
     want = FitOptions().fit_keywords()
     args = build_parser().parse_args(["batch", "d", "--models", "ggx", "--out", "o.h5"])
     assert {n: getattr(args, n, "MISSING") for n in want} == want
-    report = build_parser().parse_args(["batch-report", "r.h5"])
-    assert report.tolerance == FitOptions().tolerance
+    from brdffit.cli.fit import request_from_args
+
+    assert request_from_args(args, args.models) == FitRequest.of("ggx")
+    # the batch takes what `fit` takes: a scene and auto's rule
+    args = build_parser().parse_args(["batch", "d", "--models", "auto", "--out", "o.h5",
+                                      "--candidates", "lambert,ggx",
+                                      "--scene-preset", "camera-normal"])
+    request = request_from_args(args, args.models)
+    assert request.rule.candidates == ("lambert", "ggx") and request.scene is not None
 
 
-def test_api_request_schema_has_every_option_with_the_contract_default_and_range():
-    from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitRequest
+@pytest.mark.parametrize("of", [FitOptions, SelectionRule])
+def test_api_request_schema_has_every_option_with_the_contract_default_and_range(of):
+    from api.routes import fits as route
 
-    want = _library_defaults()
-    got = RequestOptions().model_dump()
-    assert FitRequest.model_fields["model"].default == want.pop("model")
-    assert {n: got.get(n, "MISSING") for n in want} == want
-    schema = RequestOptions.model_json_schema()["properties"]
+    body = route.FitJobRequest(table_id="0" * 64)
+    assert body.models == DEFAULT_MODEL and body.rule is None and body.scene is None
+    model = route.FitOptions if of is FitOptions else route.SelectionRule
+    want = of().to_dict()
+    got = model().model_dump()
     for name in want:
-        _, opt = options.spec(name)
+        _, opt = options.spec(name, of)
+        # a list of names is null in the body for the library's default
+        assert got[name] == (None if opt.kind is tuple else want[name]), name
+    schema = model.model_json_schema()["properties"]
+    for name in want:
+        _, opt = options.spec(name, of)
         prop = schema[name]
         bounded = next(p for p in prop.get("anyOf", [prop]) if p.get("type") != "null")
         assert bounded.get("minimum") == opt.least, name
         assert bounded.get("exclusiveMinimum") == opt.above, name
         assert bounded.get("maximum") == opt.most, name
         assert set(bounded.get("enum", ())) == set(opt.choices or ()), name
-        assert ("anyOf" in prop) == (opt.none is not None), name
+        assert ("anyOf" in prop) == (opt.none is not None or opt.kind is tuple), name
+
+
+def test_the_api_body_is_the_library_s_request():
+    """POST /v1/fits takes ``FitRequest.to_dict()`` and a table id; the form before it
+    (``model`` and flat options) is rearranged into it, not refused."""
+    from api.routes.fits import FitJobRequest
+
+    request = FitRequest.of("auto", samples=4096, tolerance=0.01,
+                            scene={"preset": "camera-normal"})
+    body = FitJobRequest(table_id="0" * 64, **request.to_dict())
+    assert body.request_dict() == request.to_dict()
+    old = FitJobRequest.model_validate({"table_id": "0" * 64, "model": "auto", "options": {
+        "samples": 4096, "tolerance": 0.01, "scene": {"preset": "camera-normal"}}})
+    assert FitRequest.from_dict(old.request_dict()) == request
+    for bad, words in [({"models": "ggx", "rule": {"tolerance": 0.01}}, "would be ignored"),
+                       ({"models": ["auto", "ggx"]}, "cannot be listed"),
+                       ({"models": "auto", "rule": {"candidates": ["nope"]}}, "unknown model"),
+                       ({"model": "ggx", "models": "ggx"}, "not both")]:
+        with pytest.raises(ValidationError, match=words):
+            FitJobRequest.model_validate({"table_id": "0" * 64, **bad})
 
 
 def test_every_shell_offers_the_render_loss():
@@ -99,13 +145,15 @@ def test_batch_options_are_the_library_options():
     from brdffit.batch import job as batch
     from brdffit.batch import tasks as batch_tasks
 
-    assert batch.FitOptions is FitOptions and batch_tasks.FitOptions is FitOptions
-    assert inspect.signature(batch.run_batch).parameters["options"].default is None
+    assert batch_tasks.FitOptions is FitOptions
+    # a batch runs one FitRequest, as `brdffit fit` does
+    assert list(inspect.signature(batch.run_batch).parameters)[:3] == ["inputs", "request", "out"]
+    assert batch.request_of(["ggx", "lambert"]) == FitRequest.of(["ggx", "lambert"])
 
 
-def _edges(name: str):
+def _edges(name: str, of=FitOptions):
     """(valid, invalid) values at the ends of an option's range."""
-    _, opt = options.spec(name)
+    _, opt = options.spec(name, of)
     if opt.choices is not None:
         return list(opt.choices), ["no-such-" + name]
     if opt.kind is bool:
@@ -124,33 +172,42 @@ def _edges(name: str):
     return valid, invalid
 
 
-@pytest.mark.parametrize("name", [n for n in options.names() if n != "model"])
-def test_api_and_library_accept_and_refuse_the_same_values(name):
-    from api.routes.fits import FitOptions as RequestOptions
+@pytest.mark.parametrize(("of", "name"), [
+    *((FitOptions, n) for n in options.names()),
+    *((SelectionRule, n) for n in options.names(SelectionRule) if n != "candidates")])
+def test_api_and_library_accept_and_refuse_the_same_values(of, name):
+    from api.routes import fits as route
 
-    valid, invalid = _edges(name)
+    body = route.FitOptions if of is FitOptions else route.SelectionRule
+    valid, invalid = _edges(name, of)
     for v in valid:
-        FitOptions(**{name: v})
-        RequestOptions(**{name: v})
+        of(**{name: v})
+        body(**{name: v})
     for v in invalid:
         with pytest.raises(FitInputError):
-            FitOptions(**{name: v})
+            of(**{name: v})
         with pytest.raises(ValidationError):
-            RequestOptions(**{name: v})
+            body(**{name: v})
 
 
 def test_options_refuse_bad_values_with_a_message():
     for bad, words in [({"starts": 0}, "starts must be an integer in 1 .. 32"),
                        ({"samples": 10}, "samples must be"), ({"seed": True}, "seed"),
-                       ({"tolerance": math.nan}, "tolerance"), ({"solver": "newton"}, "newton"),
-                       ({"budget": 0}, "budget")]:
+                       ({"solver": "newton"}, "newton")]:
         with pytest.raises(FitInputError, match=words):
             FitOptions(**bad)
-    with pytest.raises(UnknownModelError, match="unknown model 'nope'.*, or auto"):
-        FitOptions(model="nope")
+    for bad, words in [({"tolerance": math.nan}, "tolerance"), ({"budget": 0}, "budget"),
+                       ({"candidates": []}, "candidates must be a list"),
+                       ({"candidates": "ggx"}, "candidates must be a list")]:
+        with pytest.raises(FitInputError, match=words):
+            SelectionRule(**bad)
+    with pytest.raises(UnknownModelError, match="unknown model 'nope'"):
+        SelectionRule(candidates=("nope",))
     with pytest.raises(FitInputError, match="unknown fit options"):
         FitOptions.from_dict({"stars": 2})
-    assert FitOptions(model=AUTO, samples=None, budget=0.1).model == AUTO
+    with pytest.raises(FitInputError, match="unknown selection rule keys"):
+        SelectionRule.from_dict({"model": "ggx"})
+    assert SelectionRule(candidates=("ggx", "lambert", "ggx")).candidates == ("ggx", "lambert")
 
 
 def test_cli_refuses_what_the_options_refuse(tmp_path):
@@ -167,7 +224,7 @@ def test_key_format_is_the_one_results_files_hold():
     # The literal string earlier results files hold for these options: a change of
     # format would make every finished fit look unfinished on resume.
     o = FitOptions(solver="lm", samples=4096, precision="float32", starts=2, max_steps=100,
-                   seed=7, model="lambert", tolerance=0.01, budget=0.1)
+                   seed=7)
     assert o.key() == ('{"max_steps":100,"precision":"float32","samples":4096,"seed":7,'
                        '"solver":"lm","starts":2}')
     assert FitOptions(samples=None).key() == FitOptions.key_of(
@@ -222,7 +279,7 @@ def _same_fit(a: dict, b: dict) -> None:
     assert json.loads(json.dumps(a)) == json.loads(json.dumps(b))
 
 
-@pytest.mark.parametrize("model, physical", [("lambert", False), (AUTO, False),
+@pytest.mark.parametrize("model, physical", [("lambert", False), ("auto", False),
                                              ("lambert", True)])
 def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright_table,
                                                               tmp_path, model, physical):
@@ -230,8 +287,7 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     the batch store all give the result schema with the same keys and values; a
     physically bounded fit (``--physical``) too."""
     from api import tasks
-    from api.routes.fits import FitOptions as RequestOptions
-    from api.routes.fits import FitResultOut
+    from api.routes.fits import FitJobRequest, FitResultOut
     from brdffit.batch.job import run_batch
     from brdffit.batch.report import rank
     from brdffit.batch.store import read_fit, read_results
@@ -243,9 +299,9 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
     path = str(bright_table if physical else noisy_table)
     fast = {**FAST, "physical": physical}
     candidates = ["lambert", "oren_nayar"]
-    if model == AUTO:
+    if model == "auto":
         library = run_request(merl.read(path), FitRequest.of(
-            AUTO, candidates=candidates, **fast)).chosen_fit.to_dict()
+            "auto", candidates=candidates, **fast)).chosen_fit.to_dict()
         assert library["selection"]["chosen"] == library["model"]
         # the front door is select's choice, nothing added
         _same_fit(select(merl.read(path), candidates, **fast).to_dict(), library)
@@ -257,29 +313,31 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
         assert library["physical"]["active"][0] == "range: kd[R] <= 1"
     FitResult.from_dict(library)  # reads back
 
-    cli_args = ["--candidates", ",".join(candidates)] if model == AUTO else []
+    cli_args = ["--candidates", ",".join(candidates)] if model == "auto" else []
     cli_args += ["--physical"] if physical else []
     r = run("brdffit.cli", "fit", path, "--model", model, "--json", "--samples", "2048",
             "--seed", "3", *cli_args)
     assert r.returncode == 0, r.stderr
     _same_fit(json.loads(r.stdout), library)
 
-    request = {**fast, "candidates": candidates} if model == AUTO else fast
-    out = tasks.fit_models(path, "noisy.binary", [model], RequestOptions(**request).model_dump())
+    request = (FitRequest.of("auto", candidates=candidates, **fast) if model == "auto"
+               else FitRequest.of(model, **fast))
+    # what the service's worker is handed: the body as the route validated it
+    body = FitJobRequest(table_id="0" * 64, **request.to_dict()).request_dict()
+    out = tasks.fit_models(path, "noisy.binary", body)
     assert out.ok, out
     served = FitResultOut.model_validate(best_result(out.value)).model_dump(by_alias=True)
     renamed = {**library, "table": "noisy.binary"}  # named as the uploader named it
-    if model == AUTO:
+    if model == "auto":
         renamed["selection"] = {**library["selection"], "table": "noisy.binary"}
     _same_fit(served, renamed)
     assert set(FitResultOut.model_fields) | {"schema"} - {"schema_"} >= set(library)
 
-    run_batch([path], [model], tmp_path / "r.h5", options=FitOptions(**fast), workers=0,
-              progress=False, candidates=candidates)
+    run_batch([path], request, tmp_path / "r.h5", workers=0, progress=False)
     stored = read_results(tmp_path / "r.h5")["tables"][0]["fits"]
     # a batch stores every candidate, the chosen one carrying auto's ranking and reason
     _same_fit(stored[library["model"]]["fit"], {**library, "table": path})
-    if model == AUTO:
+    if model == "auto":
         assert set(stored) == set(candidates)
         (ranked,) = rank(tmp_path / "r.h5").tables
         assert ranked.chosen()[0] == library["selection"]["chosen"]

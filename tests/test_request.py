@@ -13,10 +13,10 @@ import json
 import pytest
 
 from brdffit.errors import FitInputError, MerlFormatError
-from brdffit.fitting.options import FitOptions
+from brdffit.fitting.options import FitOptions, SelectionRule
 from brdffit.models import UnknownModelError
 from brdffit.outcome import Outcome
-from brdffit.request import REPORT_SCHEMA, FitRequest, run
+from brdffit.request import REPORT_SCHEMA, REQUEST_SCHEMA, FitRequest, legacy_request, run
 from brdffit.selection import DEFAULT_CANDIDATES, best, chosen_result
 from data_synth import make_table
 
@@ -63,16 +63,32 @@ def test_a_selection_rule_with_a_fixed_model_is_refused_not_ignored(rule):
 def test_a_request_round_trips_through_json():
     r = FitRequest.of("auto", candidates=["lambert", "ggx"], budget=0.01, samples=4096,
                       scene=None)
-    d = json.loads(json.dumps(r.to_dict()))
-    assert FitRequest.from_dict(d) == r
-    assert "model" not in d["options"]  # `models` says what is fitted
-    flat = {**d["options"], "candidates": d["candidates"], "scene": None}
-    assert FitRequest.from_flat(["auto"], flat) == r
+    d = json.loads(json.dumps(r.to_dict(), allow_nan=False))
+    assert FitRequest.from_dict(d) == r and d["schema"] == REQUEST_SCHEMA
+    assert set(d) == {"schema", "models", "options", "scene", "rule"}
+    assert "model" not in d["options"] and "tolerance" not in d["options"]
+    assert d["rule"] == {"tolerance": 0.005, "budget": 0.01, "candidates": ["lambert", "ggx"],
+                         "mono_ks": False}
+    # the form the service stored and took before: models and one flat dict
+    flat = {**d["options"], "candidates": ["lambert", "ggx"], "budget": 0.01, "scene": None,
+            "model": "auto"}
+    assert FitRequest.from_dict(legacy_request(["auto"], flat)) == r
+    # the old form sent the rule's defaults with every model: not a rule of a fixed model
+    old = {"samples": 4096, "tolerance": 0.005, "budget": None, "candidates": None,
+           "mono_ks": False, "scene": None}
+    assert FitRequest.from_dict(legacy_request(["ggx"], old)).rule is None
+    with pytest.raises(FitInputError, match="would be ignored"):
+        FitRequest.from_dict(legacy_request(["ggx"], {**old, "tolerance": 0.02}))
     with pytest.raises(FitInputError, match="unknown request keys"):
         FitRequest.from_dict({**d, "colour": "red"})
     with pytest.raises(FitInputError, match="unknown fit options"):
         FitRequest.from_dict({**d, "options": {"smaples": 3}})
     assert FitRequest(models=("ggx",)).options == FitOptions()
+    with pytest.raises(FitInputError, match="request schema"):
+        FitRequest.from_dict({**d, "schema": "brdffit.request/9"})
+    with pytest.raises(FitInputError, match="rule must be a JSON object"):
+        FitRequest.from_dict({**d, "rule": 0.01})
+    assert FitRequest.from_dict({"models": "auto"}).rule == SelectionRule()  # the default rule
 
 
 # -- one rule for "best" ---------------------------------------------------------------------
@@ -170,12 +186,18 @@ def test_an_outcome_is_plain_data_and_tells_input_from_bug():
     assert pickle.loads(pickle.dumps(bug)) == bug
 
 
-def test_the_options_model_follows_the_requests_models():
-    """``models`` says what is fitted; ``options.model`` never disagrees with it (a
-    batch built requests whose options named the default model)."""
-    from brdffit.fitting.options import FitOptions
-    from brdffit.request import FitRequest
+def test_the_rule_belongs_to_auto_and_the_scene_to_the_fit_key():
+    """A rule is a request's only with auto; the scene changes what is fitted, so a batch
+    resumes a fit only under the same scene."""
+    from brdffit.fitting.scene import Scene
 
     r = FitRequest(models=("beckmann",), options=FitOptions())
-    assert r.options.model == "beckmann" and r.to_dict()["models"] == ["beckmann"]
-    assert FitRequest(models=("auto",), options=FitOptions(model="ggx")).options.model == "auto"
+    assert r.rule is None and r.to_dict()["models"] == ["beckmann"]
+    assert FitRequest(models=("auto",)).rule == SelectionRule()
+    with pytest.raises(FitInputError, match="would be ignored"):
+        FitRequest(models=("ggx",), rule=SelectionRule())
+    scene = Scene.preset("camera-normal")
+    assert FitRequest.of("ggx").fit_key() == FitOptions().key()  # earlier files still resume
+    assert FitRequest.of("ggx", scene=scene).fit_key() != FitRequest.of("ggx").fit_key()
+    assert FitRequest.of("ggx", scene=scene).fit_key() == FitOptions.key_of(
+        FitRequest.of("ggx", scene=scene).fit_record())

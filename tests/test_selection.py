@@ -239,26 +239,28 @@ def test_candidates_fitted_side_by_side_are_the_fits_made_one_at_a_time(ggx_sele
 def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_path,
                                                                  monkeypatch):
     from api import tasks
-    from api.routes.fits import FitOptions, FitRequest
+    from api.routes.fits import FitJobRequest
     from brdffit.client import FitJob
     from brdffit.io import merl
+    from brdffit.request import FitRequest
     from brdffit.selection import chosen_result as best_result
 
-    assert FitRequest(table_id="0" * 64, model="auto").model == "auto"
-    for bad in (["auto"], ["ggx", "auto"]):
-        with pytest.raises(ValueError):
-            FitRequest(table_id="0" * 64, model=bad)
+    assert FitJobRequest(table_id="0" * 64, models="auto").request_dict()["rule"] is None
+    assert FitRequest.from_dict(FitJobRequest(table_id="0" * 64, models=["auto"])
+                                .request_dict()).auto
+    with pytest.raises(ValueError, match="cannot be listed"):
+        FitJobRequest(table_id="0" * 64, models=["ggx", "auto"])
     with pytest.raises(ValueError, match="pairs_file"):
-        FitOptions(scene={"pairs_file": "/etc/passwd"})
+        FitJobRequest(table_id="0" * 64, scene={"pairs_file": "/etc/passwd"})
     with pytest.raises(ValueError, match="unknown scene preset"):
-        FitOptions(scene={"preset": "sunset"})
+        FitJobRequest(table_id="0" * 64, scene={"preset": "sunset"})
 
     path = tmp_path / "ggx.binary"
     merl.write(path, ggx_table)
-    options = FitOptions(samples=8192, starts=1, tolerance=0.005).model_dump()
+    request = FitRequest.of("auto", samples=8192, starts=1, tolerance=0.005).to_dict()
     reports = []
     monkeypatch.setattr(tasks, "_reporter", lambda stage, f: reports.append((stage, f)))
-    out = tasks.fit_models(str(path), "ggx.binary", ["auto"], options)
+    out = tasks.fit_models(str(path), "ggx.binary", request)
     assert out.ok, out
     # the job's progress moves candidate by candidate, not from 0 straight to done
     fractions = [f for stage, f in reports if " candidates, model auto" in stage]
@@ -272,28 +274,31 @@ def test_service_auto_job_returns_the_chosen_fit_with_its_reason(ggx_table, tmp_
     assert len(selection["ranking"]) == len(DEFAULT_CANDIDATES)
     json.dumps(out.value, allow_nan=False)
     job = FitJob.from_json({"id": "1" * 32, "status": "done", "table_id": "0" * 64,
-                            "models": ["auto"], "options": options, "attempts": 1,
+                            "models": ["auto"], "request": request, "attempts": 1,
                             "result": chosen, "results": out.value})
     assert job.selection["chosen"] == "ggx"
     _auto_job_answers_model_auto_with_its_choice(out.value)
     # A scene goes to single-model jobs too: the full-table error comes beside.
-    options = FitOptions(samples=8192, starts=1, scene={"preset": "camera-normal"}).model_dump()
-    out = tasks.fit_models(str(path), "ggx.binary", ["lambert"], options)
+    request = FitRequest.of("lambert", samples=8192, starts=1, scene={"preset": "camera-normal"})
+    out = tasks.fit_models(str(path), "ggx.binary", request.to_dict())
     assert out.ok and out.value[0]["full_table_error"] is not None
 
 
 def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_path, capsys):
     from brdffit import cli
-    from brdffit.batch.job import FitOptions, parse_models, run_batch
+    from brdffit.batch.job import BatchInputError, request_of, run_batch
     from brdffit.batch.report import format_ranking, rank
     from brdffit.io import merl
+    from brdffit.request import FitRequest
 
-    assert parse_models(["auto"]) == list(DEFAULT_CANDIDATES)
-    assert parse_models(["ggx", "auto"])[0] == "ggx"  # no model twice
+    assert request_of(["auto"]).fitted_models == DEFAULT_CANDIDATES
+    with pytest.raises(BatchInputError, match="add them to the rule's candidates"):
+        request_of(["ggx", "auto"])
     merl.write(tmp_path / "g.binary", ggx_table)
     out = tmp_path / "r.h5"
-    summary = run_batch([str(tmp_path / "g.binary")], ["auto"], out, workers=0, progress=False,
-                        options=FitOptions(samples=8192, starts=1))
+    summary = run_batch([str(tmp_path / "g.binary")], FitRequest.of("auto", samples=8192,
+                                                                   starts=1),
+                        out, workers=0, progress=False)
     assert summary.ok and summary.fits == len(DEFAULT_CANDIDATES)
     table = rank(out).tables[0]
     chosen, reason = table.chosen()

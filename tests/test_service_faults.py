@@ -141,7 +141,7 @@ def _stored_job(data: Path) -> tuple[str, str]:
     table_id = "c" * 64
     store.add_table(table_id, tmp, tmp.stat().st_size, "mine.binary",
                     table("lambert").summary())
-    job = store.create_job(table_id, ["lambert"], {})
+    job = store.create_job(table_id, {"models": ["lambert"], "options": {}})
     store.claim_next()
     store.finish(job.id, [{"model": "lambert"}])
     return table_id, job.id
@@ -225,7 +225,7 @@ def test_a_version_0_database_is_migrated_keeping_its_jobs(tmp_path):
     store = Store(tmp_path)
     assert store.get_job("j").status == "queued"
     assert store.cancel_queued("j") and store.get_job("j").status == "cancelled"
-    assert store.create_job("t", ["lambert"], {}).status == "queued"
+    assert store.create_job("t", {"models": ["lambert"], "options": {}}).status == "queued"
 
 
 # -- bounds ------------------------------------------------------------------------------

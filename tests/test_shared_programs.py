@@ -126,8 +126,8 @@ def test_a_request_for_several_members_fits_them_on_shared_programs(monkeypatch)
 
     monkeypatch.setattr(scene_module, "fit_in_scene", spy)
     table, _ = make_table("phong", {"kd": [0.2, 0.15, 0.1], "ks": [0.4, 0.3, 0.2], "n": 80.0})
-    report = request_module.run(table, request_module.FitRequest.from_flat(
-        ["phong", "blinn_phong", "lambert"], {"samples": 1024}))
+    report = request_module.run(table, request_module.FitRequest.of(
+        ["phong", "blinn_phong", "lambert"], samples=1024))
     assert [m.name for m in fitted] == ["phong", "blinn_phong", "lambert"]
     assert [getattr(m, "shared_programs", None) for m in fitted] == [True, True, None]
     assert sorted(report.fits) == ["blinn_phong", "lambert", "phong"]

@@ -132,7 +132,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
         job_id = http.get("/v1/fits").json()["items"][0]["id"]
         job = http.get(f"/v1/fits/{job_id}").json()
-        assert job["status"] == "done" and job["options"]["tolerance"] == 0.01
+        assert job["status"] == "done" and job["request"]["rule"]["tolerance"] == 0.01
         chosen = job["result"]["model"]
 
         # The results table: one row per candidate, the chosen one marked, its
@@ -277,7 +277,8 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         missing = httpx.post(server.url + "/v1/materials/no-such-paint", headers=headers)
         assert missing.status_code == 404 and "GET /v1/materials" in missing.json()["detail"]
         assert job["status"] == "done" and job["models"] == ["ggx"]
-        assert job["options"]["loss"] == "cube_root" and job["options"]["physical"] is True
+        options = job["request"]["options"]
+        assert options["loss"] == "cube_root" and options["physical"] is True
         assert job["result"]["physical"]["unconstrained_log_rmse"] > 0
 
         # A sample list (an ASTM file) is fitted at its own directions: the page says

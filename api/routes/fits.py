@@ -37,8 +37,10 @@ from api.store import STATUSES, JobRecord, Store
 from brdffit import models
 from brdffit.errors import FitInputError
 from brdffit.fitting import options
+from brdffit.fitting.options import names
 from brdffit.fitting.result import SCHEMA, FitResult
-from brdffit.fitting.scene import Scene, SceneError
+from brdffit.fitting.scene import SceneError
+from brdffit.request import REQUEST_SCHEMA, FitRequest, legacy_request
 from brdffit.selection import chosen_result
 from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, exposure_refused
 
@@ -55,107 +57,115 @@ FitModel = Annotated[str | None, Query(max_length=64,
 PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[misc]
 
 
-def _contract_field(name: str):
-    """``(annotation, Field)`` of one ``brdffit.fitting.options.FitOptions`` field: the
-    request schema's type, default, bounds and description are the library's."""
-    default, opt = options.spec(name)
+def _contract_field(name: str, of: type = options.FitOptions):
+    """``(annotation, Field)`` of one field of ``brdffit.fitting.options.FitOptions`` (or
+    ``SelectionRule``): the request schema's type, default, bounds and description are
+    the library's."""
+    default, opt = options.spec(name, of)
     annotation = (Literal[opt.choices] if opt.choices is not None
-                  else StrictBool if opt.kind is bool else opt.kind)  # "yes" is no bool
-    if opt.none is not None:
+                  else StrictBool if opt.kind is bool  # "yes" is no bool
+                  else list[str] if opt.kind is tuple else opt.kind)
+    if opt.none is not None or opt.kind is tuple:
         annotation = annotation | None
-    description = opt.doc + (f"; null for {opt.none}" if opt.none is not None else "")
+    if opt.kind is tuple:  # a list of names: null (or absent) for the library's default
+        default, description = None, opt.doc + "; null for the default"
+    else:
+        description = opt.doc + (f"; null for {opt.none}" if opt.none is not None else "")
     return annotation, Field(default, ge=opt.least, gt=opt.above, le=opt.most,
-                             description=description)
+                             description=description,
+                             **({"max_length": 32} if opt.kind is tuple else {}))
 
 
-# The model is the request's own field (one name, a list, or 'auto'); every
-# other option is FitOptions'.
-_ContractOptions = create_model(
-    "_ContractOptions", __config__=ConfigDict(extra="forbid"),
-    **{name: _contract_field(name) for name in options.names() if name != "model"},
+# The request body is brdffit.request.FitRequest.to_dict() (docs/service.md) and a
+# table id: each part generated from the library's own declarations, so that the
+# service cannot drift from the library (and the library has the last word, below).
+FitOptions = create_model(
+    "FitOptions", __config__=ConfigDict(extra="forbid"),
+    __doc__="``brdffit.fitting.options.FitOptions``: the fit's options, with the library's "
+            "names, defaults and ranges (as `brdffit fit`'s flags)",
+    **{name: _contract_field(name) for name in options.names()},
+)
+SelectionRule = create_model(
+    "SelectionRule", __config__=ConfigDict(extra="forbid"),
+    __doc__="``brdffit.fitting.options.SelectionRule``: how model 'auto' chooses "
+            "(docs/selection.md); only with model 'auto'",
+    **{name: _contract_field(name, options.SelectionRule)
+       for name in options.names(options.SelectionRule)},
 )
 
 
-class FitOptions(_ContractOptions):
-    """``brdffit.fitting.options.FitOptions`` but the model (same names, defaults and ranges
-    as ``brdffit fit``), and a scene."""
+class RequestBody(BaseModel):
+    """``brdffit.request.FitRequest.to_dict()``: the one form of a fit request."""
 
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    schema_: Literal[REQUEST_SCHEMA] = Field(  # type: ignore[valid-type]
+        REQUEST_SCHEMA, alias="schema", description="the request schema's version")
+    models: str | list[str] = Field(
+        options.DEFAULT_MODEL,
+        description="a model name (GET /v1/models) or a list of them: each is fitted, the "
+        "best (lowest log_rmse) is the job's `result`; or 'auto': the rule's candidates are "
+        "fitted and the cheapest good enough is the `result`, its `selection` says why")
+    options: FitOptions = FitOptions()
     scene: dict | None = Field(
         None, description="only the directions a scene uses count (docs/selection.md): "
-        "preset, max_theta_i, max_theta_o, pairs, lights, views, spread, name",
-    )
+        "preset, max_theta_i, max_theta_o, pairs, lights, views, spread, name")
+    rule: SelectionRule | None = Field(
+        None, description="model 'auto' only: tolerance, budget, candidates, mono_ks "
+        "(null: the default rule)")
 
-    candidates: list[str] | None = Field(
-        None, max_length=32, description="model 'auto': the models to choose among "
-        "(default: GET /v1/models' auto candidates, cheapest first)")
-
-    mono_ks: StrictBool = Field(
-        False, description="model 'auto': also fit the chosen model with a grey ks "
-        "(<model>_mono) when its fitted specular colour is grey (docs/selection.md)")
-
-    @field_validator("candidates")
+    @field_validator("models")
     @classmethod
-    def _known_candidates(cls, v: list[str] | None) -> list[str] | None:
-        if v is not None:
-            if not v:
-                raise ValueError("candidates: give at least one model, or leave it out")
-            for name in v:
-                try:
-                    models.check_name(name)
-                except models.UnknownModelError as e:
-                    raise ValueError(f"candidates: {e}") from None
+    def _at_most_every_model(cls, v: str | list[str]) -> str | list[str]:
+        if isinstance(v, list) and len(v) > len(models.names()):
+            raise ValueError(f"at most {len(models.names())} models per job")
         return v
 
     @field_validator("scene")
     @classmethod
-    def _valid_scene(cls, v: dict | None) -> dict | None:
-        if v is not None:
-            if "pairs_file" in v:  # a path on the server: not the client's to name
-                raise ValueError("scene: pairs_file is not accepted here; send pairs")
-            try:
-                Scene.from_dict(v).bin_weight()
-            except SceneError as e:
-                raise ValueError(str(e)) from None
+    def _no_server_paths(cls, v: dict | None) -> dict | None:
+        if v is not None and "pairs_file" in v:  # a path on the server: not the client's
+            raise ValueError("scene: pairs_file is not accepted here; send pairs")
         return v
 
+    def request_dict(self) -> dict:
+        """The body as ``FitRequest.to_dict()`` has it (what the job stores)."""
+        return self.model_dump(by_alias=True, exclude={"table_id"})
+
     @model_validator(mode="after")
-    def _valid_for_the_library(self) -> FitOptions:
-        # Pydantic has checked the bounds it was given; the library has the last word.
+    def _valid_for_the_library(self) -> RequestBody:
+        # Pydantic has checked the shapes and bounds it was given; the library has the
+        # last word (model names, auto beside others, a rule with a fixed model, scenes).
         try:
-            options.FitOptions(**self.model_dump(exclude={"scene", "candidates", "mono_ks"}))
-        except FitInputError as e:
+            request = FitRequest.from_dict(self.request_dict())
+            if request.scene is not None:
+                request.scene.bin_weight()  # a scene that names no direction, say
+        except (FitInputError, SceneError, models.UnknownModelError) as e:
             raise ValueError(str(e)) from None
         return self
 
 
-class FitRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class FitJobRequest(RequestBody):
+    """``POST /v1/fits``: a table and the request (``brdffit.request.FitRequest.to_dict()``
+    with ``table_id``). The form before ``brdffit.request/1`` (``model`` and one flat
+    ``options`` holding scene, candidates, mono_ks, tolerance, budget) is still read,
+    rearranged (``brdffit.request.legacy_request``)."""
 
     table_id: str = Field(pattern=r"^[0-9a-f]{64}$", description="from POST /v1/tables")
-    model: str | list[str] = Field(
-        options.spec("model")[0],
-        description="a model name (GET /v1/models) or a list of them: each is fitted, "
-        "the best (lowest log_rmse) is the job's `result`; or 'auto': the candidates are "
-        "fitted and the cheapest good enough is the `result`, its `selection` says why",
-    )
-    options: FitOptions = FitOptions()
 
-    @field_validator("model")
+    @model_validator(mode="before")
     @classmethod
-    def _known_models(cls, v: str | list[str]) -> str | list[str]:
-        if v == options.AUTO:
-            return v
-        names = [v] if isinstance(v, str) else v
-        if not names:
-            raise ValueError("give at least one model")
-        if len(names) > len(models.names()):
-            raise ValueError(f"at most {len(models.names())} models per job")
-        for name in names:
-            try:
-                models.check_name(name)
-            except models.UnknownModelError as e:  # pydantic reports ValueErrors as 422
-                raise ValueError(str(e)) from None
-        return v
+    def _from_the_earlier_form(cls, data):
+        legacy_keys = set(names(options.SelectionRule)) | {"scene"}
+        if isinstance(data, dict) and ("model" in data or (
+                isinstance(data.get("options"), dict) and legacy_keys & set(data["options"]))):
+            if "models" in data or "rule" in data:
+                raise ValueError("give `models` (and `rule`), or the earlier `model` with "
+                                 "flat options, not both")
+            data = {"table_id": data.get("table_id"),
+                    **legacy_request(data.get("model", options.DEFAULT_MODEL),
+                                     data.get("options", {}))}
+        return data
 
 
 def _result_field(f: dataclasses.Field, hints: dict):
@@ -193,7 +203,8 @@ class JobOut(BaseModel):
     status: Literal["queued", "running", "done", "failed", "cancelled"]
     table_id: str
     models: list[str]
-    options: FitOptions
+    request: RequestBody = Field(description="the job's request, as it was posted "
+                                 "(brdffit.request.FitRequest.to_dict())")
     attempts: int = Field(description="runs started so far (a server restart may re-run a job)")
     reason: str | None = Field(None, description="why the job failed or was cancelled")
     progress: Progress | None = Field(None, description="while running: stage and fraction")
@@ -212,7 +223,7 @@ def _time(t: float | None) -> datetime | None:
 def _out(job: JobRecord) -> JobOut:
     return JobOut(
         id=job.id, status=job.status, table_id=job.table_id, models=job.models,
-        options=FitOptions(**job.options), attempts=job.attempts, reason=job.reason,
+        request=RequestBody.model_validate(job.request), attempts=job.attempts, reason=job.reason,
         note=job.note, created_at=_time(job.created_at), started_at=_time(job.started_at),
         finished_at=_time(job.finished_at),
         progress=(Progress(stage=job.stage, fraction=job.fraction or 0.0)
@@ -259,10 +270,10 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
         404: {"model": ErrorMessage, "description": "no such table"},
     },
 )
-def create_fit(body: FitRequest, response: Response, store: StoreDep, queue: QueueDep,
+def create_fit(body: FitJobRequest, response: Response, store: StoreDep, queue: QueueDep,
                settings: SettingsDep) -> JobOut:
     try:
-        job = fits.create(store, settings, body.table_id, body.model, body.options.model_dump())
+        job = fits.create(store, settings, body.table_id, body.request_dict())
     except fits.TableNotFound as e:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(e)) from None
     except (fits.OverLimits, FitInputError) as e:

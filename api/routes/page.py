@@ -56,5 +56,6 @@ def choices() -> dict:
     default_loss, loss = options.spec("loss")
     return {"losses": list(loss.choices), "default_loss": default_loss,
             "scene_presets": list(PRESETS), "auto": options.AUTO,
-            "defaults": {name: options.spec(name)[0]
-                         for name in ("samples", "starts", "tolerance")}}
+            "defaults": {"samples": options.spec("samples")[0],
+                         "starts": options.spec("starts")[0],
+                         "tolerance": options.spec("tolerance", options.SelectionRule)[0]}}

@@ -39,16 +39,16 @@ def over_limits(cost: Estimate, settings: Settings) -> str | None:
             f"for {cost.detail}. Ask for fewer samples or starts.")
 
 
-def create(store: Store, settings: Settings, table_id: str, models: str | list[str],
-           options: dict) -> JobRecord:
-    """Queue a fit job: the request checked by the library, its cost against the
-    limits, then stored. Raises ``TableNotFound``, ``FitInputError``, ``OverLimits``."""
+def create(store: Store, settings: Settings, table_id: str, request: dict) -> JobRecord:
+    """Queue a fit job of ``request`` (``FitRequest.to_dict()``'s form): checked by the
+    library, its cost against the limits, then stored in the library's own form.
+    Raises ``TableNotFound``, ``FitInputError``, ``OverLimits``."""
     table = store.get_table(table_id)
     if table is None:
         raise TableNotFound(f"no table {table_id}; upload it with POST /v1/tables")
-    request = FitRequest.from_flat(models, options)
+    request = FitRequest.from_dict(request)
     cost = estimate(request, table.summary["measured_bins"])
     if (why := over_limits(cost, settings)) is not None:
         # Refused before anything is queued or allocated: say by how much, and why.
         raise OverLimits(why)
-    return store.create_job(table_id, list(request.models), options)
+    return store.create_job(table_id, request.to_dict())

@@ -111,7 +111,7 @@ class DaskRunner:
     """Calls on a Dask cluster, for a job runner that is not a batch (the REST service).
 
         runner = DaskRunner.from_env()         # None when BRDFFIT_DASK_SCHEDULER is unset
-        fut = runner.submit_call(api.tasks.fit_models, path, name, models, options)
+        fut = runner.submit_call(api.tasks.fit_models, path, name, request)
 
     It returns a ``concurrent.futures.Future`` (``asyncio.wrap_future`` makes it
     awaitable); the service's tasks return an ``Outcome`` rather than raise. A worker

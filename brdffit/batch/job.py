@@ -1,10 +1,10 @@
-"""Fit many tables x many models into one HDF5 file: ``run_batch(inputs, models, out)``.
+"""Fit one request to many tables into one HDF5 file: ``run_batch(inputs, request, out)``.
 
 The shape of a batch:
 
 1. inputs (files, directories, glob patterns) become a sorted list of table
    paths (:func:`find_tables`);
-2. tables already fitted with the same content (sha256), model and options are
+2. tables already fitted with the same content (sha256), model, options and scene are
    skipped (resume: :class:`brdffit.batch.store.BatchStore`);
 3. one work item per table and model left goes to Dask workers, local processes
    by default or an existing cluster (``scheduler="tcp://HOST:PORT"``); a worker
@@ -31,24 +31,28 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
-from brdffit import models
+from brdffit import jsonout
 from brdffit.batch.cluster import DaskRunner, connect, require_dask
 from brdffit.batch.progress import ProgressLine
 from brdffit.batch.store import BatchStore
 from brdffit.batch.tasks import (
-    FitOptions,
     FitRecord,
     TableReadRecord,
     fit_read_table,
     fit_table,
     now,
     read_table,
+    work_items,
     worker_name,
 )
-from brdffit.errors import BrdffitError
+from brdffit.errors import BrdffitError, FitInputError
 
-__all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "FitOptions", "find_tables",
+if TYPE_CHECKING:
+    from brdffit.request import FitRequest
+
+__all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "find_tables", "request_of",
            "run_batch"]
 
 TABLE_SUFFIX = ".binary"
@@ -144,44 +148,18 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     return list(found)
 
 
-def parse_models(names: Iterable[str], candidates: Iterable[str] | None = None) -> list[str]:
-    """Registry names, deduplicated in order; an unknown name is an input error.
-    ``auto`` stands for the selection's ``candidates`` (default
-    ``brdffit.selection.DEFAULT_CANDIDATES``): each is fitted and stored like any
-    model, and ``batch-report`` shows the choice."""
-    from brdffit.selection import DEFAULT_CANDIDATES
+def request_of(request) -> FitRequest:
+    """A batch's :class:`~brdffit.request.FitRequest`: ``request`` itself, or model
+    names (a list, or ``"ggx,lambert"``; ``"auto"`` for the selection's candidates)
+    with the library's default options. An unknown name is an input error."""
+    from brdffit.request import FitRequest
 
-    candidates = DEFAULT_CANDIDATES if candidates is None else tuple(candidates)
-    out: dict[str, None] = {}
-    for name in names:
-        name = name.strip()
-        if not name:
-            continue
-        if name == "auto":
-            for c in candidates:
-                try:
-                    out.setdefault(models.check_name(c))
-                except models.UnknownModelError as e:
-                    raise BatchInputError(f"candidates: {e}") from None
-            continue
-        try:
-            out.setdefault(models.check_name(name))
-        except models.UnknownModelError as e:
-            raise BatchInputError(str(e)) from None
-    if not out:
-        raise BatchInputError("no models to fit")
-    return list(out)
-
-
-def auto_candidates(names: Iterable[str], candidates: Iterable[str] | None = None
-                    ) -> tuple[str, ...]:
-    """auto's candidates (``candidates``, default the selection's) where ``names`` ask
-    for ``auto``, else ``()``."""
-    from brdffit.selection import DEFAULT_CANDIDATES
-
-    if not any(n.strip() == "auto" for n in names):
-        return ()
-    return DEFAULT_CANDIDATES if candidates is None else tuple(candidates)
+    if isinstance(request, FitRequest):
+        return request
+    try:
+        return FitRequest.of(list(request) if not isinstance(request, str) else request)
+    except FitInputError as e:
+        raise BatchInputError(str(e)) from None
 
 
 def file_sha256(path: str) -> str | None:
@@ -195,7 +173,7 @@ def file_sha256(path: str) -> str | None:
     return h.hexdigest()
 
 
-def _plan(paths: list[str], model_names: list[str], options: FitOptions, store: BatchStore,
+def _plan(paths: list[str], model_names: list[str], key: str, store: BatchStore,
           refit: bool) -> tuple[list[_Task], int]:
     """Tasks for the tables with fits left to make, and how many tables are complete."""
     # Only tables a previous run read need hashing here; new ones are hashed by
@@ -206,7 +184,7 @@ def _plan(paths: list[str], model_names: list[str], options: FitOptions, store: 
     tasks, skipped = [], 0
     for p in paths:
         sha = current.get(p)
-        done = store.done_models(p, sha, options) if sha else set()
+        done = store.done_models(p, sha, key) if sha else set()
         if done >= set(model_names):
             skipped += 1
         else:
@@ -221,39 +199,30 @@ def _models_left(task: _Task, sha256: str | None, model_names: list[str]) -> lis
     return [m for m in model_names if m not in done]
 
 
-def _work_items(models: list[str], auto: tuple[str, ...]) -> list[list[str]]:
-    """The fits a table still needs, as work items: auto's candidates (when any is
-    left) as one item, fitted together as ``brdffit fit --model auto`` fits them (each
-    seeded from the one it contains; all again: a seed may be among the done ones),
-    then each other model on its own."""
-    group = list(auto) if set(auto) & set(models) else []
-    return ([group] if group else []) + [[m] for m in models if m not in auto]
-
-
-def _run_in_process(tasks: list[_Task], model_names: list[str], options: dict,
-                    auto: tuple[str, ...] = ()) -> Iterator[dict]:
+def _run_in_process(tasks: list[_Task], request: FitRequest) -> Iterator[dict]:
     """One table after another in this process, the next one read (and hashed: ~60
     ms for 35 MB) in a thread while this one is fitted: file reading and hashing
     release the GIL. Each fit is yielded, and so journaled, as it ends: an
     interrupted run keeps the finished models of the table it was fitting."""
+    wire = request.to_dict()
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="brdffit-read") as pool:
         ahead = pool.submit(read_table, tasks[0].path) if tasks else None
         for i, t in enumerate(tasks):
             read = ahead.result()
             ahead = pool.submit(read_table, tasks[i + 1].path) if i + 1 < len(tasks) else None
-            todo = _models_left(t, read[1].sha256, model_names) if read[0] is not None else []
+            todo = (_models_left(t, read[1].sha256, list(request.fitted_models))
+                    if read[0] is not None else [])
             if not todo:  # unreadable: one record, no fits
-                yield {**fit_read_table(read, [], options), "table_done": True}
-            items = _work_items(todo, auto)
+                yield {**fit_read_table(read, wire, []), "table_done": True}
+            items = work_items(request, todo)
             for j, item in enumerate(items):
-                yield {**fit_read_table(read, item, options, auto=auto if item == list(auto)
-                                        else ()), "table_done": j == len(items) - 1}
+                yield {**fit_read_table(read, wire, item), "table_done": j == len(items) - 1}
 
 
-def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: dict,
-                 timeout_s: float | None, auto: tuple[str, ...] = ()) -> Iterator[dict]:
+def _run_on_dask(client, tasks: list[_Task], request: FitRequest,
+                 timeout_s: float | None) -> Iterator[dict]:
     """One Dask task per (table, model) (auto's candidates: one task for them all,
-    :func:`_work_items`), each result yielded as it arrives.
+    :func:`~brdffit.batch.tasks.work_items`), each result yielded as it arrives.
 
     Per model rather than per table, so that an interrupted batch loses at most
     the fits in flight (the finished models of a table are journaled), and a
@@ -270,18 +239,19 @@ def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: di
     tables_read: dict[str, dict] = {}  # table path -> a worker's record of reading it
 
     grouped: set[str] = set()  # tables whose auto candidates went out as one task
+    wire, model_names = request.to_dict(), list(request.fitted_models)
+    options = request.fit_record()
 
     def submit(t: _Task, item: list[str]):
-        group = auto if item == list(auto) else ()
-        if group:
+        if request.auto:
             grouped.add(t.path)
-        fut = client.submit(fit_table, t.path, item, options, None, (), group, pure=False)
+        fut = client.submit(fit_table, t.path, wire, item, None, (), pure=False)
         futures[fut] = (t, item)
         left[t.path] = left.get(t.path, 0) + 1
         return fut
 
     for t in tasks:
-        for item in _work_items(_models_left(t, t.expected_sha256, model_names), auto):
+        for item in work_items(request, _models_left(t, t.expected_sha256, model_names)):
             submit(t, item)
     pending = as_completed(list(futures), loop=client.loop, timeout=timeout_s)
     try:
@@ -312,8 +282,9 @@ def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: di
                 if sha != t.expected_sha256:
                     # The file changed since the plan hashed it: the fits it counted
                     # as done describe other content, so they are made again.
-                    redo = [m for m in t.done_models if m not in auto or t.path not in grouped]
-                    for again in _work_items(redo, auto):
+                    redo = [m for m in t.done_models
+                            if not request.auto or t.path not in grouped]
+                    for again in work_items(request, redo):
                         pending.add(submit(t, again))
             left[t.path] -= 1
             yield {**result, "table_done": left[t.path] == 0}
@@ -325,10 +296,9 @@ def _run_on_dask(client, tasks: list[_Task], model_names: list[str], options: di
 
 def run_batch(
     inputs: Iterable[str],
-    model_names: Iterable[str],
+    request: FitRequest | Iterable[str] | str,
     out: str | os.PathLike,
     *,
-    options: FitOptions | None = None,
     workers: int = 1,
     scheduler: str | None = None,
     refit: bool = False,
@@ -336,15 +306,18 @@ def run_batch(
     checkpoint_s: float = 10.0,
     on_result: Callable[[TableReadRecord, list[FitRecord]], None] | None = None,
     timeout_s: float | None = None,
-    candidates: Iterable[str] | None = None,
 ) -> BatchSummary:
-    """Fit every table of ``inputs`` with every model of ``model_names`` into ``out``.
+    """Fit ``request`` to every table of ``inputs``, every model's fit into ``out``.
 
     Args:
         inputs: table files, directories, glob patterns (:func:`find_tables`).
-        model_names: registry names.
+        request: a :class:`~brdffit.request.FitRequest`, as ``brdffit fit`` runs one:
+            each of its models is fitted and stored, or for auto each candidate
+            (fitted together, as ``brdffit fit --model auto`` fits them;
+            ``batch-report`` shows the choice). Its options and scene apply to every
+            fit; a finished fit is resumed where its table, model, options and scene
+            match. Model names alone are a request with the default options.
         out: the HDF5 results file; created, or resumed when it exists.
-        options: ``fit`` options for every fit (:class:`FitOptions`).
         workers: local Dask worker processes; 0 fits in this process.
         scheduler: ``tcp://HOST:PORT`` of an existing Dask cluster (``workers`` ignored).
         refit: fit again even what the file already holds.
@@ -356,16 +329,10 @@ def run_batch(
             table's record with one fit (or none, for a table that failed).
         timeout_s: give up (``TimeoutError``) when a Dask batch has not finished
             after this long; what finished is kept. None waits for ever.
-        candidates: the models ``auto`` in ``model_names`` chooses among (default
-            ``brdffit.selection.DEFAULT_CANDIDATES``), fitted as ``brdffit fit --model
-            auto`` fits them; ``batch-report`` shows the choice.
     """
     t0 = time.monotonic()
-    model_names = list(model_names)
-    # auto's candidates are fitted together, as `brdffit fit --model auto` fits them
-    auto = auto_candidates(model_names, candidates)
-    model_names = parse_models(model_names, candidates)
-    options = options or FitOptions()  # validated when it was built
+    request = request_of(request)
+    model_names = list(request.fitted_models)
     if not scheduler and (not isinstance(workers, int) or workers < 0):
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
     if scheduler or workers:
@@ -374,7 +341,8 @@ def run_batch(
     summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths))
     attrs = {
         "models": list(model_names),
-        "options": options.key(),
+        "options": request.fit_key(),
+        "request": jsonout.dumps(request.to_dict(), sort_keys=True),
         "engine": scheduler or ("in-process" if workers == 0 else f"local:{workers}"),
     }
 
@@ -382,7 +350,7 @@ def run_batch(
         summary.recovered = store.recovered
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
-        tasks, summary.skipped = _plan(paths, model_names, options, store, refit)
+        tasks, summary.skipped = _plan(paths, model_names, request.fit_key(), store, refit)
         bar = progress if isinstance(progress, ProgressLine) else ProgressLine(
             len(tasks), skipped=summary.skipped, enabled=bool(progress))
         bar.draw(force=True)
@@ -423,13 +391,12 @@ def run_batch(
 
         try:
             if tasks and workers == 0 and not scheduler:
-                take(_run_in_process(tasks, model_names, options.fit_keywords(), auto))
+                take(_run_in_process(tasks, request))
             elif tasks:
                 # closing(): on an interrupt the generator cancels its futures while
                 # the client is still connected, not whenever it is collected.
                 with connect(workers, scheduler) as client, contextlib.closing(
-                        _run_on_dask(client, tasks, model_names, options.fit_keywords(),
-                                     timeout_s, auto)) as results:
+                        _run_on_dask(client, tasks, request, timeout_s)) as results:
                     take(results)
         finally:
             bar.finish()

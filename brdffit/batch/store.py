@@ -203,12 +203,12 @@ class BatchStore:
         t = self._tables.get(path)
         return t.sha256 if t and t.status == "ok" else None
 
-    def done_models(self, path: str, sha256: str, options: FitOptions) -> set[str]:
-        """Models with a successful fit of this exact content under these options."""
+    def done_models(self, path: str, sha256: str, key: str) -> set[str]:
+        """Models with a successful fit of this exact content under the fit key ``key``
+        (``FitRequest.fit_key()``: the options and the scene)."""
         t = self._tables.get(path)
         if t is None or t.sha256 != sha256:
             return set()
-        key = options.key()
         return {m for m, f in t.fits.items()
                 if f.sha256 == sha256 and f.options == key and f.status == "ok"}
 

@@ -19,10 +19,14 @@ import socket
 import time
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING
 
 from brdffit import __version__
 from brdffit.errors import BrdffitError, MerlFormatError
 from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
+
+if TYPE_CHECKING:
+    from brdffit.request import FitRequest
 from brdffit.io import merl, readers
 from brdffit.io.measurements import Measurements
 
@@ -131,62 +135,71 @@ def read_table(path: str) -> tuple[merl.MerlTable | Measurements | None, TableRe
     return table, record
 
 
-def fit_records(table: merl.MerlTable | Measurements, record: TableReadRecord, models: list[str],
-                options: FitOptions, auto: bool = False) -> list[FitRecord]:
-    """Fit ``models`` to a table that was read (``brdffit.request.run``), one record
-    per model; a failure is recorded, not raised. ``auto``: ``models`` are auto's
-    candidates, fitted and ranked as ``brdffit fit --model auto`` fits them (each
-    seeded from the model it contains, refitted when it did not converge), the
-    chosen one carrying its ``selection``."""
-    from brdffit.request import FitRequest, run
+def fit_records(table: merl.MerlTable | Measurements, record: TableReadRecord,
+                request: FitRequest) -> list[FitRecord]:
+    """Fit ``request`` to a table that was read (``brdffit.request.run``): one record
+    per model it fits (for auto, each candidate, fitted and ranked as ``brdffit fit
+    --model auto`` fits them, the chosen one carrying its ``selection``); a failure is
+    recorded, not raised."""
+    from brdffit.request import run
 
     def one(model: str, fit: dict | None = None, failure: str = "") -> FitRecord:
         return FitRecord(path=record.path, model=model, sha256=record.sha256 or "",
-                         options=options.fit_keywords(), status="failed" if fit is None else "ok",
+                         options=request.fit_record(),
+                         status="failed" if fit is None else "ok",
                          message=failure, fit=fit, worker=record.worker, finished_at=now())
 
-    def records(request: FitRequest) -> list[FitRecord]:
-        try:
-            report = run(table, request, measured_input=record.input)
-        except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
-            return [one(m, failure=_describe(e)) for m in request.fitted_models]
-        return [one(m, fit=report.fits[m].to_dict()) if m in report.fits
-                else one(m, failure=report.failed.get(m, "not fitted"))
-                for m in request.fitted_models]
-
-    if auto:
-        return records(FitRequest(models=("auto",), options=options.replace(model="auto"),
-                                  candidates=tuple(models)))
-    return [r for m in models for r in records(FitRequest(models=(m,), options=options))]
+    try:
+        report = run(table, request, measured_input=record.input)
+    except Exception as e:  # noqa: BLE001 - a batch records every fit's failure
+        return [one(m, failure=_describe(e)) for m in request.fitted_models]
+    return [one(m, fit=report.fits[m].to_dict()) if m in report.fits
+            else one(m, failure=report.failed.get(m, "not fitted"))
+            for m in request.fitted_models]
 
 
-def fit_table(path: str, models: list[str], options: dict, expected_sha256: str | None = None,
-              done_models: tuple[str, ...] = (), auto: tuple[str, ...] = ()) -> dict:
-    """Read ``path`` and fit every model of ``models`` not already done.
+def work_items(request: FitRequest, models: list[str]) -> list[list[str]]:
+    """The fits of ``request`` that a table still needs (``models``, those left), as
+    work items: auto's candidates (when any is left) as one item, fitted together as
+    ``brdffit fit --model auto`` fits them (each seeded from the one it contains; all
+    again: a seed may be among the done ones); else each model on its own, so that
+    an interrupted batch keeps every model it finished."""
+    if request.auto:
+        group = list(request.fitted_models)
+        return [group] if set(group) & set(models) else []
+    return [[m] for m in models]
+
+
+def fit_table(path: str, request: dict, item: list[str], expected_sha256: str | None = None,
+              done_models: tuple[str, ...] = ()) -> dict:
+    """Read ``path`` and make the work item ``item`` (:func:`work_items`) of
+    ``request`` (``FitRequest.to_dict()``: what a worker is sent).
 
     ``done_models`` are the models the client already holds finished fits for,
     valid only for the content ``expected_sha256``: if the file changed since
-    the client hashed it, every model is fitted again. ``auto``: auto's
-    candidates among ``models``, fitted together as ``model="auto"`` fits them
-    (all again when any is missing: each is seeded from another's fit).
+    the client hashed it, every model is fitted again.
 
     Returns ``{"table": TableReadRecord dict, "fits": [FitRecord dict, ...]}``.
     """
-    return fit_read_table(read_table(path), models, options, expected_sha256, done_models,
-                          auto)
+    return fit_read_table(read_table(path), request, item, expected_sha256, done_models)
 
 
-def fit_read_table(read: tuple[merl.MerlTable | None, TableReadRecord], models: list[str],
-                   options: dict, expected_sha256: str | None = None,
-                   done_models: tuple[str, ...] = (), auto: tuple[str, ...] = ()) -> dict:
+def fit_read_table(read: tuple[merl.MerlTable | None, TableReadRecord], request: dict,
+                   item: list[str], expected_sha256: str | None = None,
+                   done_models: tuple[str, ...] = ()) -> dict:
     """:func:`fit_table` for a table :func:`read_table` already read."""
-    opts = FitOptions.from_dict(options)
+    from brdffit.request import FitRequest
+
+    req = FitRequest.from_dict(request)
     table, record = read
     fits = []
     if table is not None:
         done = set(done_models) if record.sha256 == expected_sha256 else set()
-        if auto and not set(auto) <= done:
-            fits += fit_records(table, record, list(auto), opts, auto=True)
-            done |= set(auto)
-        fits += fit_records(table, record, [m for m in models if m not in done], opts)
+        if req.auto:
+            if set(item) - done:
+                fits += fit_records(table, record, req)
+        else:
+            for m in item:
+                if m not in done:
+                    fits += fit_records(table, record, req.replace(models=(m,)))
     return {"table": asdict(record), "fits": [asdict(f) for f in fits]}

@@ -10,7 +10,7 @@ import threading
 from brdffit.batch.job import run_batch, stop_requested
 from brdffit.batch.progress import format_duration
 from brdffit.cli import EXIT_INTERRUPTED
-from brdffit.cli.fit import add_fit_options, options_from_args
+from brdffit.cli.fit import add_fit_options, add_request_arguments, request_from_args
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
 
@@ -23,10 +23,8 @@ def add_arguments(p) -> None:
                         "*.csv, *.tsv, *.h5 below) or glob patterns")
     p.add_argument("--models", required=True, type=_models,
                    help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
-                        "for the selection's candidates (batch-report shows the choice)")
-    p.add_argument("--candidates", type=_models, default=None,
-                   help="with --models auto: the models to choose among (default "
-                        "the selection's, as brdffit fit --model auto)")
+                        "for the selection's candidates (batch-report shows the choice; "
+                        "--candidates names them)")
     p.add_argument("--out", required=True, help="results file (.h5), created or resumed")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=_default_workers(),
@@ -35,6 +33,7 @@ def add_arguments(p) -> None:
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on this existing Dask cluster instead of local workers")
     add_fit_options(p)
+    add_request_arguments(p, "--models")
     p.add_argument("--refit", action="store_true",
                    help="fit again what the file already holds (e.g. after a model changed)")
     p.add_argument("--checkpoint", type=float, default=10.0, metavar="SECONDS",
@@ -96,7 +95,7 @@ def _quiet_lost_interrupt(unraisable) -> None:
 
 
 def run(args) -> int:
-    options = options_from_args(args)
+    request = request_from_args(args, models=args.models)  # refused before any file
     note = None if args.scheduler else workers_note(args.workers, _default_workers())
     if note:
         print(note, file=sys.stderr)
@@ -106,10 +105,9 @@ def run(args) -> int:
                 if main_thread else None)
     previous_hook, sys.unraisablehook = sys.unraisablehook, _quiet_lost_interrupt
     try:
-        s = run_batch(args.inputs, args.models, args.out, options=options,
+        s = run_batch(args.inputs, request, args.out,
                       workers=args.workers, scheduler=args.scheduler, refit=args.refit,
-                      progress=not args.quiet, checkpoint_s=args.checkpoint,
-                      candidates=args.candidates)
+                      progress=not args.quiet, checkpoint_s=args.checkpoint)
     except KeyboardInterrupt:
         # One line: run_batch has cancelled the batch's tasks and checkpointed.
         print(f"brdffit: interrupted; the finished fits are in {args.out}, run the same "

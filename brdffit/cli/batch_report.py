@@ -6,8 +6,8 @@ import sys
 
 from brdffit import extras, jsonout
 from brdffit.batch.report import format_ranking, plot_summary, rank
-from brdffit.cli.fit import add_option_arguments
-from brdffit.fitting.options import FitOptions
+from brdffit.cli.fit import add_option_arguments, rule_from_args
+from brdffit.fitting.options import SelectionRule
 
 
 def add_arguments(p) -> None:
@@ -15,11 +15,12 @@ def add_arguments(p) -> None:
     p.add_argument("--png", help="summary figure (default: RESULTS without .h5 + .summary.png)")
     p.add_argument("--no-png", action="store_true", help="print only")
     p.add_argument("--json", action="store_true", help="print the ranking as JSON")
-    add_option_arguments(p, ["tolerance"])  # the 'auto' column, as `fit --model auto`
+    # the 'auto' column, as `fit --model auto` chooses
+    add_option_arguments(p, ["tolerance"], of=SelectionRule)
 
 
 def run(args) -> int:
-    FitOptions(tolerance=args.tolerance)  # the range every shell checks
+    args.tolerance = (rule_from_args(args) or SelectionRule()).tolerance  # checked as anywhere
     if not args.no_png:
         extras.require("plots", "brdffit batch-report's figure", hint="--no-png prints only")
     ranking = rank(args.results)

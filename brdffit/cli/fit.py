@@ -8,7 +8,7 @@ import threading
 
 from brdffit import executables, extras, jsonout, runtime
 from brdffit.fitting import options
-from brdffit.fitting.options import FIT_KEYWORDS, SELECTION_KEYWORDS, FitOptions
+from brdffit.fitting.options import FIT_KEYWORDS, FitOptions, SelectionRule
 from brdffit.fitting.quality import describe
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
@@ -17,31 +17,42 @@ from brdffit.io import readers
 from brdffit.io.measurements import Measurements
 from brdffit.request import FitReport, FitRequest
 from brdffit.request import run as fit_request
-from brdffit.selection import DEFAULT_CANDIDATES, format_selection
+from brdffit.selection import format_selection
 
 
-def add_option_arguments(p, names) -> None:
-    """A ``--flag`` for each of ``brdffit.fitting.options.FitOptions``' fields ``names``.
+def add_option_arguments(p, names, of: type = FitOptions) -> None:
+    """A ``--flag`` for each of the fields ``names`` of
+    ``brdffit.fitting.options.FitOptions`` (or ``SelectionRule``).
 
     Type, choices, default and help come from the field, so the command line
     cannot drift from the library; ranges are checked where every shell checks
-    them, when the :class:`FitOptions` is built (:func:`options_from_args`).
+    them, when the :class:`FitOptions` is built (:func:`options_from_args`). A
+    rule's flags are left out of the parsed arguments unless given: a rule is
+    only part of a request that asks for one (:func:`request_from_args`).
     """
+    rule = of is SelectionRule
     for name in names:
-        default, opt = options.spec(name)
+        default, opt = options.spec(name, of)
+        flag = f"--{name.replace('_', '-')}"
+        unset = {"default": argparse.SUPPRESS} if rule else {"default": default}
         if opt.kind is bool:  # a flag: --physical turns it on
-            p.add_argument(f"--{name.replace('_', '-')}", action="store_true", default=default,
+            p.add_argument(flag, action="store_true", **unset,
                            help=f"{opt.doc} (default off)".replace("%", "%%"))
+            continue
+        if opt.kind is tuple:  # names, comma-separated
+            p.add_argument(flag, type=lambda t: [c.strip() for c in t.split(",") if c.strip()],
+                           **unset, help=f"{opt.doc}, comma-separated (default "
+                           f"{','.join(default)})".replace("%", "%%"))
             continue
         shown = opt.cli_none if default is None and opt.cli_none else default
         valid = "" if opt.choices else opt.describe_range(opt.cli_none or "absent") + "; "
         help_text = f"{opt.doc} ({valid}default {'none' if shown is None else shown})"
-        kw = {"default": default, "help": help_text.replace("%", "%%")}
+        kw = {**unset, "help": help_text.replace("%", "%%")}
         if opt.choices is not None:
             kw["choices"] = opt.choices
         else:
             kw["type"] = _value_parser(name, opt)
-        p.add_argument(f"--{name.replace('_', '-')}", **kw)
+        p.add_argument(flag, **kw)
 
 
 def _value_parser(name: str, opt: options.Option):
@@ -71,11 +82,17 @@ def options_from_args(args) -> FitOptions:
     return FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)})
 
 
+def rule_from_args(args) -> SelectionRule | None:
+    """The :class:`SelectionRule` of the rule's flags given (None where none was)."""
+    given = {n: getattr(args, n) for n in options.names(SelectionRule) if hasattr(args, n)}
+    return SelectionRule.from_dict(given) if given else None
+
+
 def add_arguments(p) -> None:
     p.add_argument("table", help="the measured file: a MERL .binary table, or samples as "
                    "ASTM E1392 (.astm), CSV/TSV with a header, or HDF5 "
                    "(docs/measurements.md; samples are fitted at their own directions)")
-    default_model, _ = options.spec("model")
+    default_model = options.DEFAULT_MODEL
     p.add_argument("--model", default=default_model,
                    help="model name (see `brdffit models`), a comma-separated list of them "
                    "(each is fitted, the best log_rmse is the result), or 'auto' to choose "
@@ -84,13 +101,14 @@ def add_arguments(p) -> None:
     add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
-    auto = p.add_argument_group("--model auto (docs/selection.md)")
-    add_option_arguments(auto, SELECTION_KEYWORDS)
-    auto.add_argument("--candidates", type=lambda t: [c for c in t.split(",") if c],
-                      default=list(DEFAULT_CANDIDATES),
-                      help=f"comma-separated models (default {','.join(DEFAULT_CANDIDATES)})")
-    auto.add_argument("--mono-ks", action="store_true",
-                      help="refit the chosen model with a grey ks when its ks is grey")
+    add_request_arguments(p, "--model")
+
+
+def add_request_arguments(p, model_flag: str) -> None:
+    """The selection rule's and the scene's flags, which ``fit`` and ``batch`` share
+    (the fit options are :func:`add_fit_options`')."""
+    auto = p.add_argument_group(f"{model_flag} auto: the selection rule (docs/selection.md)")
+    add_option_arguments(auto, options.names(SelectionRule), of=SelectionRule)
     scene = p.add_argument_group("scene: only the directions a scene uses count")
     scene.add_argument("--scene", metavar="FILE", help="scene description: .json, .npy, .csv")
     scene.add_argument("--scene-preset", choices=list(SCENE_PRESETS))
@@ -184,17 +202,15 @@ def _with_error(x: float, se: float | None, at_bound: bool) -> str:
     return f"{x:.5g}" if se is None else f"{x:.5g} ± {se:.2g}"
 
 
-def request_from_args(args) -> FitRequest:
-    """The :class:`~brdffit.request.FitRequest` of parsed ``brdffit fit`` arguments;
-    raises ``FitInputError`` (or ``SceneError``) for what the library refuses."""
+def request_from_args(args, models=None) -> FitRequest:
+    """The :class:`~brdffit.request.FitRequest` of parsed ``brdffit fit`` (or ``batch``,
+    whose ``models`` are given) arguments; raises ``FitInputError`` (or ``SceneError``)
+    for what the library refuses."""
     scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
     # --model takes a list too (ggx,beckmann): each is fitted, the best is the result
-    names = tuple(n.strip() for n in str(args.model).split(",") if n.strip()) or ("",)
-    opts = FitOptions(**{n: getattr(args, n) for n in options.names() if hasattr(args, n)
-                         and n != "model"}, model=names[0])
-    return FitRequest(models=names, options=opts, scene=scene,
-                      candidates=tuple(args.candidates), mono_ks=args.mono_ks)
+    return FitRequest(models=str(args.model) if models is None else models,
+                      options=options_from_args(args), scene=scene, rule=rule_from_args(args))
 
 
 def run(args) -> int:

@@ -33,10 +33,12 @@ from brdffit.models.catalogue import AUTO as AUTO  # the registry owns the name
 #: Selection tolerance in ``log_rmse``, in quadrature: 0.005 is ~0.5 % RMS at the
 #: highlight, below the repeatability of a MERL measurement (docs/selection.md).
 DEFAULT_TOLERANCE = 0.005
-#: The fields that are keywords of ``brdffit.fit``, in its order; the others
-#: (``model``, the selection rule) say what to fit and how to choose.
+#: The fields of :class:`FitOptions`: the keywords of ``brdffit.fit``, in its order.
+#: What to fit (``FitRequest.models``) and how auto chooses (:class:`SelectionRule`)
+#: are the request's.
 FIT_KEYWORDS = ("loss", "solver", "samples", "precision", "starts", "max_steps", "seed",
                 "physical")
+#: The fields of :class:`SelectionRule` that are numbers (a command line's flags).
 SELECTION_KEYWORDS = ("tolerance", "budget")
 N_BINS = N_THETA_H * N_THETA_D * N_PHI_D
 
@@ -80,6 +82,11 @@ class Option:
         if value is None:
             if self.none is None:
                 raise FitInputError(f"{name} must be given, got None")
+            return
+        if self.kind is tuple:  # a list of names: each is checked by its owner
+            if (isinstance(value, str | bytes) or not hasattr(value, "__iter__")
+                    or not all(isinstance(v, str) for v in value) or not len(value)):
+                raise FitInputError(f"{name} must be {self.describe_range()}, got {value!r}")
             return
         if self.choices is not None:
             if value not in self.choices:
@@ -130,22 +137,26 @@ def _number(x: float) -> str:
 
 
 def _option(default, **spec):
+    if isinstance(default, list | dict):
+        raise TypeError("a mutable default would be shared")
     return dataclasses.field(default=default, metadata={"option": Option(**spec)})
+
+
+def _check_fields(obj) -> None:
+    for f in dataclasses.fields(obj):
+        f.metadata["option"].check(f.name, getattr(obj, f.name))
 
 
 @dataclass(frozen=True)
 class FitOptions:
     """Everything a caller chooses about a fit, with its default and valid range.
 
-    ``FitOptions()`` are the library's defaults; ``fit(table, o.model,
-    **o.fit_keywords())`` runs them (``select`` for ``model="auto"``, with
-    ``o.tolerance`` and ``o.budget``). Invalid values raise
+    ``FitOptions()`` are the library's defaults; ``fit(table, model,
+    **o.fit_keywords())`` runs them (``brdffit.request.FitRequest`` holds them with
+    the models and, for auto, the :class:`SelectionRule`). Invalid values raise
     :class:`~brdffit.errors.FitInputError` here, before any table is read.
     """
 
-    model: str = _option(
-        DEFAULT_MODEL, kind=str, words="a model name, or auto",
-        doc="model name (see `brdffit models`), or 'auto' to choose one (docs/selection.md)")
     loss: str = _option(
         DEFAULT_LOSS, kind=str, choices=LOSSES,
         doc="what the solver minimises: log (log1p(f cos), default), cube_root, linear_cos "
@@ -175,18 +186,8 @@ class FitOptions:
         False, kind=bool,
         doc="physically bounded fit: directional albedo <= 1 at every incidence and "
             "reflectances <= 1; the result's `physical` reports the cost (docs/fitting.md)")
-    tolerance: float = _option(
-        DEFAULT_TOLERANCE, kind=float, least=0, most=10,
-        doc="model 'auto': the cheapest model within this log_rmse of the best (in "
-            "quadrature) is chosen")
-    budget: float | None = _option(
-        None, kind=float, above=0, most=10, none="no budget",
-        doc="model 'auto': the cheapest model with log_rmse under this budget is chosen")
-
     def __post_init__(self):
-        for f in dataclasses.fields(self):
-            f.metadata["option"].check(f.name, getattr(self, f.name))
-        models.check_name(self.model, allow_auto=True)
+        _check_fields(self)
 
     # -- what the shells and the library take -------------------------------------
 
@@ -194,17 +195,13 @@ class FitOptions:
         """The keyword arguments of ``brdffit.fit`` (and ``select``'s ``**fit_options``)."""
         return {name: getattr(self, name) for name in FIT_KEYWORDS}
 
-    def selection_keywords(self) -> dict:
-        """``tolerance`` and ``budget``, for ``brdffit.select``."""
-        return {name: getattr(self, name) for name in SELECTION_KEYWORDS}
-
     def key(self) -> str:
         """Canonical JSON of :meth:`fit_keywords`: equal fits, equal key.
 
         A batch stores it beside each fit's table hash and model, and skips a fit
         on resume when all three match; the model and the selection rule are
         not part of it (a batch records the model separately, and the rule only
-        reads finished fits).
+        reads finished fits). A scene is (``FitRequest.fit_key``): it changes the fit.
         """
         return self.key_of(self.fit_keywords())
 
@@ -212,13 +209,16 @@ class FitOptions:
     def key_of(fit_keywords: dict) -> str:
         """:meth:`key` of fit keywords as a results file stored them, not checked
         again: a file written under other ranges must still resume. A keyword the
-        file lacks (written before the option existed) takes today's default."""
+        file lacks (written before the option existed) takes today's default; a
+        ``scene`` among them (a scene's dict) is part of the key."""
         defaults = {f.name: f.default for f in dataclasses.fields(FitOptions)}
         d = {name: fit_keywords.get(name, defaults[name]) for name in FIT_KEYWORDS}
         for name in ("loss", "physical"):
             if d[name] == defaults[name]:
                 # keys written before the option existed stay the same: resume skips them
                 del d[name]
+        if fit_keywords.get("scene") is not None:  # absent before batches took scenes
+            d["scene"] = fit_keywords["scene"]
         return jsonout.dumps(d, sort_keys=True, separators=(",", ":"))
 
     def to_dict(self) -> dict:
@@ -236,17 +236,74 @@ class FitOptions:
         return dataclasses.replace(self, **changes)
 
 
-def names() -> tuple[str, ...]:
-    """Every option, in declaration order."""
-    return tuple(f.name for f in dataclasses.fields(FitOptions))
+
+@dataclass(frozen=True)
+class SelectionRule:
+    """How ``auto`` chooses among its candidates (docs/selection.md): part of a
+    request that fits ``auto`` (``brdffit.request.FitRequest.rule``), and of no
+    other. ``SelectionRule()`` is the library's default rule."""
+
+    tolerance: float = _option(
+        DEFAULT_TOLERANCE, kind=float, least=0, most=10,
+        doc="the cheapest model within this log_rmse of the best (in quadrature) is chosen")
+    budget: float | None = _option(
+        None, kind=float, above=0, most=10, none="no budget",
+        doc="the cheapest model with log_rmse under this budget is chosen")
+    candidates: tuple[str, ...] = _option(
+        models.catalogue.auto_candidates(), kind=tuple, words="a list of model names",
+        doc="the models to choose among, fitted cheapest first (default: `brdffit models`' "
+            "auto candidates)")
+    mono_ks: bool = _option(
+        False, kind=bool,
+        doc="also fit the chosen model with a grey ks (<model>_mono) when its fitted "
+            "specular colour is grey")
+
+    def __post_init__(self):
+        _check_fields(self)
+        names = tuple(dict.fromkeys(self.candidates))  # twice is once
+        for name in names:
+            models.check_name(name)
+        object.__setattr__(self, "candidates", names)
+
+    def selection_keywords(self) -> dict:
+        """The keyword arguments of ``brdffit.select`` but the table and the fit's."""
+        return {"candidates": self.candidates, "tolerance": self.tolerance,
+                "budget": self.budget, "mono_ks": self.mono_ks}
+
+    def to_dict(self) -> dict:
+        return {**dataclasses.asdict(self), "candidates": list(self.candidates)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SelectionRule:
+        """A rule from a dict of field names (a subset; the rest default)."""
+        unknown = sorted(set(d) - set(names(cls)))
+        if unknown:
+            raise FitInputError(f"unknown selection rule keys {unknown}; known: "
+                                f"{', '.join(names(cls))}")
+        d = dict(d)
+        if d.get("candidates") is None:
+            d.pop("candidates", None)
+        return cls(**d)
+
+    def replace(self, **changes) -> SelectionRule:
+        return dataclasses.replace(self, **changes)
 
 
-def spec(name: str) -> tuple[object, Option]:
-    """``(default, Option)`` of the option ``name``."""
-    f = next((f for f in dataclasses.fields(FitOptions) if f.name == name), None)
+def names(of: type = None) -> tuple[str, ...]:
+    """Every option of ``of`` (:class:`FitOptions` by default, or
+    :class:`SelectionRule`), in declaration order."""
+    return tuple(f.name for f in dataclasses.fields(FitOptions if of is None else of))
+
+
+def spec(name: str, of: type = None) -> tuple[object, Option]:
+    """``(default, Option)`` of the option ``name`` of ``of`` (:class:`FitOptions` by
+    default, or :class:`SelectionRule`)."""
+    f = next((f for f in dataclasses.fields(FitOptions if of is None else of)
+              if f.name == name), None)
     if f is None:
         raise KeyError(name)
-    return f.default, f.metadata["option"]
+    default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+    return default, f.metadata["option"]
 
 
 # -- the docs' option table --------------------------------------------------------------
@@ -257,26 +314,30 @@ _DOC_END = "<!-- end of fit options -->"
 
 def markdown_table(style: str = "python") -> str:
     """The options as a Markdown table; ``style`` ``"python"`` (keyword, ``None``),
-    ``"cli"`` (``--flag``) or ``"json"`` (key, ``null``) names them as each shell does;
-    the service's ``options`` object (``"json"``) holds all but the model, which is the
-    request's own field."""
+    ``"cli"`` (``--flag``) or ``"json"`` (key, ``null``) names them as each shell does
+    (the request's ``options`` object, in JSON); ``rule_python``, ``rule_cli`` and
+    ``rule_json`` are the :class:`SelectionRule`'s (the request's ``rule``)."""
+    of = SelectionRule if style.startswith("rule_") else FitOptions
+    style = style.removeprefix("rule_")
     rows = ["| option | default | valid values | meaning |", "|---|---|---|---|"]
-    for name in names():
-        if style == "json" and name == "model":
-            continue
-        default, opt = spec(name)
+    for name in names(of):
+        default, opt = spec(name, of)
         if style == "cli":
             label = f"`--{name.replace('_', '-')}`"
             none_word = f"`{opt.cli_none}`" if opt.cli_none else "absent"
         else:
             label, none_word = f"`{name}`", "`null`" if style == "json" else "`None`"
-        if default is None:
+        if opt.kind is tuple:
+            shown = "`brdffit models`' auto candidates"
+        elif default is None:
             shown = none_word if style != "cli" or opt.cli_none else "absent"
         elif opt.kind is bool:
             shown = {"cli": "off", "json": f"`{str(default).lower()}`"}.get(style, f"`{default}`")
         else:
             shown = f'`"{default}"`' if isinstance(default, str) else f"`{default}`"
         valid = opt.describe_range(none_word)
+        if opt.kind is tuple and style == "cli":
+            valid = "comma-separated model names"
         if opt.kind is bool:
             valid = {"cli": "a flag: present is on", "json": "`true` or `false`"}.get(
                 style, "`True` or `False`")
@@ -310,7 +371,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         prog="python -m brdffit.fitting.options",
         description="Print the fit options as a Markdown table, or rewrite the docs' tables.")
-    ap.add_argument("--style", choices=("python", "cli", "json"), default="python")
+    ap.add_argument("--style", default="python",
+                    choices=("python", "cli", "json", "rule_python", "rule_cli", "rule_json"))
     ap.add_argument("--docs", nargs="+", metavar="FILE.md",
                     help="rewrite the generated tables in these files")
     args = ap.parse_args(argv)

@@ -221,6 +221,32 @@ class Scene:
         return (f"{self.name}: {what}; {self.n_bins:,} bins, "
                 f"{100 * self.solid_angle_fraction:.2g}% of the solid angle")
 
+    def to_spec(self) -> dict:
+        """The scene as :meth:`from_dict` reads it (the pairs listed, as kept): what a
+        request stores, so that the same scene comes back from it."""
+        spec = {"name": self.name, "max_theta_i": self.max_theta_i,
+                "max_theta_o": self.max_theta_o, "spread": self.spread}
+        if self.pairs is not None:
+            spec["pairs"] = np.asarray(self.pairs, np.float64).tolist()
+        return spec
+
+    def key(self) -> str:
+        """A short identity of what the scene weights (its name and a hash of
+        :meth:`to_spec`): a batch resumes a fit only under the same scene."""
+        import hashlib
+
+        from brdffit import jsonout
+
+        text = jsonout.dumps(self.to_spec(), sort_keys=True, separators=(",", ":"))
+        return f"{self.name}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+
+    def __eq__(self, other) -> bool:
+        if not isinstance(other, Scene):
+            return NotImplemented
+        return self.key() == other.key()
+
+    __hash__ = None  # mutable arrays inside: equal by value, not hashable
+
     def to_dict(self) -> dict:
         """Plain JSON summary (the pairs themselves are counted, not listed)."""
         return {

@@ -214,24 +214,28 @@ async function deleteTable(table, withFits) {
 
 // -- fitting -----------------------------------------------------------------------
 
+// The body is the library's request (brdffit.request.FitRequest.to_dict()) and a table.
 function fitRequest() {
   if (!state.table) throw new Error("choose a table first (upload, material, or Use in the list)");
-  let model = "auto";
+  let models = "auto";
   if ($("mode-list").checked) {
-    model = [...document.querySelectorAll("#model-boxes input:checked")].map((b) => b.value);
-    if (!model.length) throw new Error("tick at least one model, or choose auto");
+    models = [...document.querySelectorAll("#model-boxes input:checked")].map((b) => b.value);
+    if (!models.length) throw new Error("tick at least one model, or choose auto");
   }
   const options = { loss: $("loss-select").value };
   if ($("physical-input").checked) options.physical = true;
-  const scene = $("scene-select").value;
-  if (scene) options.scene = { preset: scene };
-  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")],
-                              ["tolerance", $("tolerance-input")]]) {
+  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")]]) {
     if (input.value !== "") options[key] = Number(input.value);
   }
+  const preset = $("scene-select").value;
+  const scene = preset ? { preset } : null;
   // auto's rule: with a fixed model the service refuses it (422, shown), not ignores it
-  if ($("mono-input").checked) options.mono_ks = true;
-  return { table_id: state.table.id, model, options };
+  const rule = {};
+  if ($("tolerance-input").value !== "") rule.tolerance = Number($("tolerance-input").value);
+  if ($("mono-input").checked) rule.mono_ks = true;
+  const body = { table_id: state.table.id, models, options, scene };
+  if (models === "auto" || Object.keys(rule).length) body.rule = rule;
+  return body;
 }
 
 async function startFit() {
