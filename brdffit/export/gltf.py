@@ -7,7 +7,9 @@ Appendix B, so the mapping is a copy:
     pbrMetallicRoughness.metallicFactor  = metallic
     pbrMetallicRoughness.roughnessFactor = roughness          (the spec's alpha = roughness^2)
 
-A ``gltf_pbr_ior`` fit also writes the extension ``KHR_materials_ior``
+A ``gltf_clearcoat`` fit also writes ``KHR_materials_clearcoat`` (``clearcoatFactor``,
+``clearcoatRoughnessFactor``: the model is the extension's definition, so the mapping is
+a copy too). A ``gltf_pbr_ior`` fit also writes the extension ``KHR_materials_ior``
 (``{"ior": ior}``, listed in ``extensionsUsed``), which carries the dielectric's
 reflectance ``((ior - 1)/(ior + 1))^2``; a ``gltf_pbr`` fit is the spec's default
 (ior 1.5, f0 = 0.04, white specular), which ``KHR_materials_ior`` and
@@ -36,7 +38,7 @@ import numpy as np
 #: The models this target shades exactly; other fits are refitted as the first.
 #: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
-TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender")
+TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -52,10 +54,20 @@ MEDIA_TYPE = "model/gltf+json"
 IOR_EXTENSION = "KHR_materials_ior"
 IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the dielectric "
             "with ior 1.5 (f0 0.04) instead")
+CLEARCOAT_EXTENSION = "KHR_materials_clearcoat"
+CLEARCOAT_NOTE = ("uses KHR_materials_clearcoat: a viewer without the extension shades the "
+                  "base without its coat")
+
+
+def _extensions(params: dict) -> list[str]:
+    """The material extensions ``params`` need, in the order they are written."""
+    return ([IOR_EXTENSION] if "ior" in params else []) + (
+        [CLEARCOAT_EXTENSION] if "clearcoat" in params else [])
 
 
 def material(params: dict, name: str) -> dict:
-    """The glTF material object of ``gltf_pbr`` (or ``gltf_pbr_ior``) parameters."""
+    """The glTF material object of ``gltf_pbr`` (``gltf_pbr_ior``, ``gltf_clearcoat``)
+    parameters."""
     out = {
         "name": name,
         "pbrMetallicRoughness": {
@@ -64,8 +76,15 @@ def material(params: dict, name: str) -> dict:
             "roughnessFactor": float(params["roughness"]),
         },
     }
+    extensions = {}
     if "ior" in params:
-        out["extensions"] = {IOR_EXTENSION: {"ior": float(params["ior"])}}
+        extensions[IOR_EXTENSION] = {"ior": float(params["ior"])}
+    if "clearcoat" in params:  # gltf_clearcoat: the coat's two factors, copied
+        extensions[CLEARCOAT_EXTENSION] = {
+            "clearcoatFactor": float(params["clearcoat"]),
+            "clearcoatRoughnessFactor": float(params["clearcoat_roughness"])}
+    if extensions:
+        out["extensions"] = extensions
     return out
 
 
@@ -87,7 +106,7 @@ SEGMENTS, RINGS = 64, 32
 def document(params: dict, name: str) -> dict:
     """A glTF 2.0 JSON document: the one material on the preview scene (module
     docstring), every buffer embedded as a ``data:`` URI."""
-    used = [LIGHTS_EXTENSION] + ([IOR_EXTENSION] if "ior" in params else [])
+    used = [LIGHTS_EXTENSION, *_extensions(params)]
     blob, accessors, views = _sphere_buffers()
     return {
         "asset": {"version": "2.0", "generator": "brdffit"},
@@ -177,5 +196,6 @@ def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, s
     from brdffit import jsonout
 
     doc = document(params, name)
-    notes = [IOR_NOTE] if "ior" in params else []
+    notes = [{IOR_EXTENSION: IOR_NOTE, CLEARCOAT_EXTENSION: CLEARCOAT_NOTE}[e]
+             for e in _extensions(params)]
     return doc, {f"{name}.gltf": jsonout.dumps(doc, indent=1)}, notes

@@ -56,7 +56,7 @@ from brdffit.errors import BrdffitError
 from brdffit.export import spectral_ior
 
 #: the models a fit is copied to (any other fit is refitted as the first)
-TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled")
+TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat")
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
 #: agrees with rough_conductor to 2.1e-5 relative, with rough_plastic to 4e-6 and with
 #: principled to float32 rounding (docs/exports.md, tests/test_export_tools.py)
@@ -149,9 +149,10 @@ def _plastic(params: dict, spectral: bool) -> dict:
 
 
 def _principled(params: dict, spectral: bool) -> dict:
-    """``principled`` of ``principled`` parameters: metallic, spec_trans, spec_tint,
-    clearcoat, flatness and anisotropic left at their default 0."""
-    return {
+    """``principled`` of ``principled`` (or ``principled_clearcoat``) parameters:
+    metallic, spec_trans, spec_tint, flatness, anisotropic and (but for
+    ``principled_clearcoat``) clearcoat left at their default 0."""
+    out = {
         "type": "principled",
         "base_color": _reflectance(params["base_color"], "base_color", spectral),
         "roughness": float(params["roughness"]),
@@ -159,6 +160,10 @@ def _principled(params: dict, spectral: bool) -> dict:
         "sheen": float(params["sheen"]),
         "sheen_tint": float(params["sheen_tint"]),
     }
+    if "clearcoat" in params:
+        out.update(clearcoat=float(params["clearcoat"]),
+                   clearcoat_gloss=float(params["clearcoat_gloss"]))
+    return out
 
 
 def _reflectance(value, name: str, spectral: bool) -> dict | float:

@@ -167,8 +167,9 @@ def materialx_validate(text: str) -> tuple[bool, str]:
 
 
 def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = False):
-    """f_r (n, 3) of a glTF material (``base_color``, ``metallic``, ``roughness`` and
-    optionally KHR_materials_ior's ``ior``) at direction pairs ``wi``, ``wo`` (n, 3)
+    """f_r (n, 3) of a glTF material (``base_color``, ``metallic``, ``roughness``,
+    optionally KHR_materials_ior's ``ior`` and KHR_materials_clearcoat's ``clearcoat``
+    and ``clearcoat_roughness``) at direction pairs ``wi``, ``wo`` (n, 3)
     strictly above the horizon: glTF 2.0 Appendix B, term by term as the spec writes it
     (its V = G / (4 N.L N.V), G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2))): its
     definition, ``mix(dielectric_brdf, metal_brdf, metallic)`` with
@@ -196,11 +197,28 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
 
     if pseudocode:
         fresnel = schlick(dielectric_f0 * (1 - m) + base * m)
-        return (1 - fresnel) * base * (1 - m) / np.pi + fresnel * specular_brdf
-    fr = schlick(dielectric_f0)
-    dielectric_brdf = diffuse_brdf * (1 - fr) + specular_brdf * fr  # mix(base, layer, fr)
-    metal_brdf = specular_brdf * schlick(base)
-    return dielectric_brdf * (1 - m) + metal_brdf * m
+        material = (1 - fresnel) * base * (1 - m) / np.pi + fresnel * specular_brdf
+    else:
+        fr = schlick(dielectric_f0)
+        dielectric_brdf = diffuse_brdf * (1 - fr) + specular_brdf * fr  # mix(base, layer, fr)
+        metal_brdf = specular_brdf * schlick(base)
+        material = dielectric_brdf * (1 - m) + metal_brdf * m
+    if not p.get("clearcoat"):
+        return material
+    # KHR_materials_clearcoat, "Implementation": the coat's normal is the surface's
+    #   clearcoat_fresnel = 0.04 + (1 - 0.04) * (1 - abs(VdotNc))^5
+    #   clearcoat_brdf = D(a_c) * G(a_c) / (4 * abs(VdotNc) * abs(LdotNc)), a_c = r_c^2
+    #   coated_material = mix(material, clearcoat_brdf, clearcoat * clearcoat_fresnel)
+    ac = p["clearcoat_roughness"] ** 2
+    dc = ac**2 / (np.pi * (nh**2 * (ac**2 - 1) + 1) ** 2)
+
+    def g1c(x):
+        return 2 * x / (x + np.sqrt(ac**2 + (1 - ac**2) * x**2))
+
+    clearcoat_brdf = dc * g1c(np.abs(nl)) * g1c(np.abs(nv)) / (4 * np.abs(nv) * np.abs(nl))
+    clearcoat_fresnel = 0.04 + (1 - 0.04) * (1 - np.abs(nv)) ** 5
+    weight = p["clearcoat"] * clearcoat_fresnel
+    return material * (1 - weight) + clearcoat_brdf * weight
 
 
 _GLTF_SCRIPT = """

@@ -15,6 +15,19 @@ defaults), for a direct light (``Principled::eval``, ``principledhelpers.h``):
     f        = spec + diffuse + sheen
 
 ``lum`` is Mitsuba's luminance of an RGB colour (0.212671 R + 0.715160 G + 0.072169 B).
+
+``principled_clearcoat`` (``Principled(clearcoat=True)``) adds Mitsuba's clearcoat lobe,
+Burley's second specular lobe, as ``Principled::eval`` writes it (a layer that adds
+to the rest rather than mixing with it, as Disney's):
+
+    clearcoat_term = 0.25 clearcoat Fcc(cos_d) Dcc(cos_h) G1(wi) G1(wo)
+    Fcc  = 0.04 + (1 - 0.04) (1 - cos_d)^5                  (calc_schlick, its eta > 1)
+    Dcc  = (a^2 - 1) / (pi log(a^2) (1 + (a^2 - 1) cos_h^2)),  a = lerp(0.1, 0.001, gloss)
+    G1(w) = 2 / (1 + sqrt(1 + 0.25^2 tan^2 w))              (GTR1, separable Smith GGX 0.25)
+
+There is no ``1 / (4 cos_i cos_o)`` in Mitsuba's term (Disney's has it inside its G);
+the model is Mitsuba's, checked against its ``BSDF.eval``. At clearcoat 0 it is
+``principled`` exactly: a fit starts from that fit with the coat off (``parent``).
 A fabric's light at grazing angles is the sheen's, which Mitsuba's ``roughplastic`` has
 not: pink-felt's roughplastic reached its diffuse bound at 1.54x the conductor blend's
 error, its principled is 0.84x (log_rmse 0.0086 against 0.0103; measured 2026-11-28).
@@ -27,17 +40,21 @@ error, its principled is 0.84x (log_rmse 0.0086 against 0.0103; measured 2026-11
 | specular   | [0.001, 1]        | ``specular``: reflectance at normal incidence / 0.08 |
 | sheen      | [0, 1]            | ``sheen``                                          |
 | sheen_tint | [0, 1]            | ``sheen_tint``                                     |
+| clearcoat  | [0, 1]            | ``clearcoat`` (``principled_clearcoat`` only)      |
+| clearcoat_gloss | [0, 1]       | ``clearcoat_gloss``: GTR1 roughness 0.1 (0) .. 0.001 (1) |
 """
 
 from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .base import AbstractBRDFModel, Params, ParamSpec
 from .frame import Frame
+from .guarded import safe_div, safe_sqrt
 from .microfacet import ALPHA_GRID, dielectric_fresnel
 from .renderer_terms import burley_diffuse, schlick_weight, separable_ggx_dg
 
@@ -48,6 +65,13 @@ ROUGHNESS = ParamSpec("roughness", "roughness (alpha = roughness^2)", math.sqrt(
 SPECULAR = ParamSpec("specular", "specular: reflectance at normal incidence / 0.08", 1e-3, 1.0)
 SHEEN = ParamSpec("sheen", "weight of the sheen lobe", 0.0, 1.0)
 SHEEN_TINT = ParamSpec("sheen_tint", "how much the sheen takes the base colour", 0.0, 1.0)
+CLEARCOAT = ParamSpec("clearcoat", "weight of the clearcoat lobe", 0.0, 1.0)
+CLEARCOAT_GLOSS = ParamSpec("clearcoat_gloss", "clearcoat_gloss: GTR1 roughness 0.1 .. 0.001",
+                            0.0, 1.0)
+#: The clear coat's gloss values a fit starts from (GTR1 roughness 0.07, 0.04, 0.01).
+GLOSS_STARTS = (0.3, 0.6, 0.9)
+#: Mitsuba's fixed roughness of the clearcoat's shadowing-masking.
+CLEARCOAT_G_ALPHA = 0.25
 #: Mitsuba's luminance weights of linear sRGB (``mitsuba::luminance``).
 LUMINANCE = (0.212671, 0.715160, 0.072169)
 
@@ -58,12 +82,36 @@ def specular_eta(specular):
 
 
 class Principled(AbstractBRDFModel):
-    name = "principled"
-    param_specs = (BASE_COLOR, ROUGHNESS, SPECULAR, SHEEN, SHEEN_TINT)
-    shape_grid = tuple(
-        {"roughness": min(math.sqrt(a), 1.0), "specular": 0.5, "sheen": s, "sheen_tint": 0.5}
-        for a in ALPHA_GRID for s in (0.0, 0.5)
-    )
+    #: True: ``principled_clearcoat``, Mitsuba's clearcoat lobe over the rest.
+    clearcoat: bool = eqx.field(static=True, default=False)
+
+    @property
+    def name(self) -> str:
+        return "principled_clearcoat" if self.clearcoat else "principled"
+
+    @property
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        coat = (CLEARCOAT, CLEARCOAT_GLOSS) if self.clearcoat else ()
+        return (BASE_COLOR, ROUGHNESS, SPECULAR, SHEEN, SHEEN_TINT, *coat)
+
+    @property
+    def shape_grid(self) -> tuple[dict[str, float], ...]:
+        base = tuple({"roughness": min(math.sqrt(a), 1.0), "specular": 0.5, "sheen": s,
+                      "sheen_tint": 0.5} for a in ALPHA_GRID for s in (0.0, 0.5))
+        if not self.clearcoat:
+            return base
+        # a coat over a base broader than it
+        return tuple({**shape, "clearcoat": 0.5, "clearcoat_gloss": g}
+                     for shape in base if shape["roughness"] >= 0.2 for g in GLOSS_STARTS)
+
+    @property
+    def parent(self) -> str | None:
+        return "principled" if self.clearcoat else None
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        if not self.clearcoat:
+            return super().embed_parent(parent_params)
+        return {**parent_params, "clearcoat": 0.0, "clearcoat_gloss": 0.6}
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
@@ -77,14 +125,34 @@ class Principled(AbstractBRDFModel):
         tint = jnp.where(lum > 0.0, params["base_color"] / jnp.where(lum > 0.0, lum, 1.0), 1.0)
         c_sheen = (1.0 + params["sheen_tint"] * (tint - 1.0))[expand]
         sheen = params["sheen"] * schlick_weight(frame.cos_d)
-        return spec[None] + base / jnp.pi * burley[None] + sheen[None] * c_sheen
+        f = spec[None] + base / jnp.pi * burley[None] + sheen[None] * c_sheen
+        if not self.clearcoat:
+            return f
+        return f + _clearcoat_term(params["clearcoat"], params["clearcoat_gloss"], frame)[None]
 
     def eval_frame(self, params: Params, frame: Frame):
         return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
 
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """Unconstrained starts, one per (roughness, sheen) on ``shape_grid``, the base
-        colour the diffuse estimate."""
+        """Unconstrained starts, one per (roughness, sheen[, clearcoat gloss]) on
+        ``shape_grid``, the base colour the diffuse estimate."""
         base = np.clip(kd, 0.02, 0.98)
         return np.stack([self.unconstrain({**shape, "base_color": base})
                          for shape in self.shape_grid])
+
+
+def _clearcoat_term(clearcoat, gloss, frame: Frame):
+    """Mitsuba's clearcoat lobe (module docstring), f_r (1/sr), shared by R, G, B."""
+    a = 0.1 + (0.001 - 0.1) * gloss  # dr::lerp(0.1, 0.001, gloss)
+    a2 = a * a
+    d = (a2 - 1.0) / (jnp.pi * jnp.log(a2) * (1.0 + (a2 - 1.0) * frame.cos_h * frame.cos_h))
+    fresnel = 0.04 + (1.0 - 0.04) * schlick_weight(frame.cos_d)
+    return 0.25 * clearcoat * fresnel * d * _smith_g1(frame.cos_i, frame.sin2_i) * _smith_g1(
+        frame.cos_o, frame.sin2_o)
+
+
+def _smith_g1(cos, sin2):
+    """Mitsuba's ``smith_ggx1`` at roughness 0.25: ``2 / (1 + sqrt(1 + a^2 tan^2))``, as
+    ``2 cos / (cos + sqrt(cos^2 + a^2 sin^2))``: no cosine in a denominator, 0 at grazing."""
+    a2 = CLEARCOAT_G_ALPHA * CLEARCOAT_G_ALPHA
+    return safe_div(2.0 * cos, cos + safe_sqrt(cos * cos + a2 * sin2), 1e-30)

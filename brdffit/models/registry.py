@@ -16,6 +16,7 @@ from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
+from brdffit.models.gltf_clearcoat import GltfClearcoat
 from brdffit.models.gltf_pbr import GltfPBR
 from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
@@ -33,8 +34,11 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), GltfBlender(),
+    # layered: a coat over the glTF base (KHR_materials_clearcoat)
+    GltfClearcoat(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
+    Principled(clearcoat=True),
     GGX2(),
 )
 

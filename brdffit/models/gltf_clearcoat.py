@@ -1,0 +1,98 @@
+"""glTF 2.0 metallic-roughness with a clear coat (``KHR_materials_clearcoat``), as the
+extension's text defines it.
+
+``gltf_clearcoat``: the core material (``gltf_pbr``, Appendix B) under a clear,
+colourless coat of index 1.5. The extension's layering (its "Implementation" section,
+with the coat's normal the surface's):
+
+    fc        = 0.04 + (1 - 0.04) (1 - |V.N|)^5          (the coat's Fresnel, of the VIEW)
+    coat_brdf = D(a_c) G(a_c) / (4 |V.N| |L.N|),  a_c = clearcoatRoughness^2
+    f         = mix(material, coat_brdf, clearcoat * fc)
+              = (1 - clearcoat fc) material + clearcoat fc coat_brdf
+
+``coat_brdf`` is Appendix B's specular term without its Fresnel (white GGX, separable
+Smith: ``brdffit.models.renderer_terms.separable_ggx_dg``, the lobe ``gltf_pbr``
+shades with). The Fresnel weight reads the view's angle to the normal, not the half
+vector's, so the model is not reciprocal: it is the extension's, and a fit of it
+exported to glTF (``brdffit.export.gltf``, five factors copied) is the material the
+extension defines.
+
+| name                | range              | meaning                                       |
+|---------------------|--------------------|-----------------------------------------------|
+| base_color          | [0, 1], RGB        | ``baseColorFactor`` (linear RGB)              |
+| metallic            | [0, 1]             | ``metallicFactor``                            |
+| roughness           | [0.0316, 1] (log)  | ``roughnessFactor``                           |
+| clearcoat           | [0, 1]             | ``clearcoatFactor``: the coat's weight        |
+| clearcoat_roughness | [0.0316, 1] (log)  | ``clearcoatRoughnessFactor`` (alpha = r^2)    |
+
+At ``clearcoat = 0`` the material is ``gltf_pbr``'s exactly: a fit starts from the
+``gltf_pbr`` fit with the coat off (``parent``), so it never ends worse than it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from .base import AbstractBRDFModel, Params, ParamSpec
+from .frame import Frame
+from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS, GltfPBR
+from .renderer_terms import separable_ggx_dg
+
+CLEARCOAT = ParamSpec("clearcoat", "clearcoatFactor: the clear coat's weight", 0.0, 1.0)
+CLEARCOAT_ROUGHNESS = ParamSpec(
+    "clearcoat_roughness", "clearcoatRoughnessFactor (the coat's alpha = its square)",
+    math.sqrt(1e-3), 1.0, scale="log")
+
+#: The coat's roughness values a fit starts from: a coat is sharper than the base
+#: (alpha 0.002 .. 0.04), or it would be one lobe twice.
+COAT_ROUGHNESS_STARTS = (0.045, 0.1, 0.2)
+
+_BASE = GltfPBR()
+
+
+class GltfClearcoat(AbstractBRDFModel):
+    name = "gltf_clearcoat"
+    param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, CLEARCOAT, CLEARCOAT_ROUGHNESS)
+    parent = "gltf_pbr"
+
+    @property
+    def shape_grid(self) -> tuple[dict[str, float], ...]:
+        return tuple({**shape, "clearcoat": 0.5, "clearcoat_roughness": r}
+                     for shape in _BASE.shape_grid
+                     if shape["roughness"] >= 0.2  # a base broader than the coat
+                     for r in COAT_ROUGHNESS_STARTS)
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        """The ``gltf_pbr`` fit with the coat off (clearcoat 0) and sharp, ready to grow."""
+        return {**parent_params, "clearcoat": 0.0, "clearcoat_roughness": 0.1}
+
+    def eval_channels(self, params: Params, frame: Frame):
+        base = _BASE.eval_channels(params, frame)
+        cr = params["clearcoat_roughness"]
+        coat = separable_ggx_dg(cr * cr, frame.cos_h, frame.sin2_h, frame.cos_i,
+                                frame.sin2_i, frame.cos_o, frame.sin2_o)
+        view = jnp.clip(1.0 - jnp.abs(frame.cos_o), 0.0, 1.0)
+        weight = params["clearcoat"] * (DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * view**5)
+        return (1.0 - weight)[None] * base + (weight * coat)[None]
+
+    def eval_frame(self, params: Params, frame: Frame):
+        return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
+
+    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
+        """``gltf_pbr``'s starts (base colour from the diffuse estimate or the peak's
+        colour), each with a half-weight coat of each roughness of ``shape_grid``."""
+        base_grid = [s for s in _BASE.shape_grid if s["roughness"] >= 0.2]
+        base_starts = _BASE.start_candidates(table, usable, kd)
+        by_shape = {tuple(sorted(s.items())): u for s, u in
+                    zip(_BASE.shape_grid, base_starts, strict=True)}
+        starts = []
+        for shape in base_grid:
+            base = _BASE.constrain(by_shape[tuple(sorted(shape.items()))])
+            for r in COAT_ROUGHNESS_STARTS:
+                starts.append(self.unconstrain({
+                    "base_color": np.asarray(base["base_color"]), **shape,
+                    "clearcoat": 0.5, "clearcoat_roughness": r}))
+        return np.stack(starts)
