@@ -57,12 +57,11 @@ from brdffit.fitting.problem import (
     plain_params,
     report_pool,
     score_starts,
-    solve_batch,
     takes_steps_as_data,
 )
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
-from brdffit.fitting.solve import Outcome, Solve, padded_starts
+from brdffit.fitting.solve import Outcome, Solve
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io.angles import N_BINS
@@ -146,8 +145,8 @@ def fit(
     if ready_here is not None and takes_steps_as_data(solver, max_steps):
         # the solve's program depends on the number of starts, not on which: in a new
         # process it compiles here, beside the scoring below
-        report_pool().submit(runtime.in_float64(_ready_solve), m, solver, u_candidates,
-                             n_starts, DTYPES[precision], prep.data, max_steps)
+        ahead = Solve(m, solver, precision, prep.data, max_steps, bucket=n_starts)
+        report_pool().submit(runtime.in_float64(ahead.ready), u_candidates[:n_starts])
     best_starts = _ranked_starts(m, u_candidates, n_starts, prep, precision)
     if ready_here is not None:
         ready_here()
@@ -306,13 +305,3 @@ def _resolved(parent_fit) -> FitResult | None:
         return parent_fit()
     except FitInputError:
         return None
-
-
-def _ready_solve(m, solver, u_candidates, n_starts, dtype, data, max_steps) -> None:
-    """Compile (or load) the solve that ``fit`` is about to run, without running it."""
-    try:
-        solve_batch.ready(m, solver, jnp.asarray(padded_starts(u_candidates[:n_starts]), dtype),
-                          data,
-                          jnp.asarray(max_steps), n_live=jnp.asarray(n_starts))
-    except Exception as e:  # noqa: BLE001 - speed only: the solve itself will say
-        runtime.log.debug("brdffit: solve of %s not made ready ahead (%s)", m.name, e)

@@ -215,9 +215,9 @@ def _objective_residuals(u, args):
 
 def _objective_normal_equations(u, args):
     model, data, term = args
-    if term is None:
-        return normal_equations(u, (model, data))
     loss, jtj, jtr = normal_equations(u, (model, data))
+    if term is None:
+        return loss, jtj, jtr
     add_loss, add_jtj, add_jtr = term.normal_equations(u, model)
     return loss + add_loss, jtj + add_jtj, jtr + add_jtr
 

@@ -114,6 +114,22 @@ class Solve:
             None if a is None else np.asarray(a)[:k] for a in (*out, bread, meat))
         return Outcome(np.asarray(starts), values, codes, steps, losses, bread, meat)
 
+    def ready(self, starts: np.ndarray) -> None:
+        """Compile (or load) the program :meth:`__call__` runs for ``starts``, without
+        running it: a new process compiles it beside other work (the lm solver only,
+        whose program depends on the number of starts, not on which)."""
+        try:
+            padded = padded_starts(starts, max(self.bucket, start_bucket(len(starts))))
+            solve_batch.ready(self.model, self.solver, jnp.asarray(padded, self.dtype),
+                              self.data, jnp.asarray(self.max_steps),
+                              n_live=jnp.asarray(len(starts)),
+                              **({} if self.term is None else {"term": self.term}))
+        except Exception as e:  # noqa: BLE001 - speed only: the solve itself will say
+            from brdffit import runtime
+
+            runtime.log.debug("brdffit: solve of %s not made ready ahead (%s)",
+                              self.model.name, e)
+
     def loss_at(self, u: np.ndarray) -> float:
         """The objective at ``u`` itself (no step): from the solve's own normal
         equations where it can take no steps, else the scoring program's."""

@@ -83,16 +83,13 @@ class GltfClearcoat(AbstractBRDFModel):
 
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """``gltf_pbr``'s starts (base colour from the diffuse estimate or the peak's
-        colour), each with a half-weight coat of each roughness of ``shape_grid``."""
-        base_grid = [s for s in _BASE.shape_grid if s["roughness"] >= 0.2]
+        colour) on every base broader than the coat, each with a half-weight coat of each
+        roughness of ``shape_grid``: the base's unconstrained values, then the coat's
+        (this model's parameter order)."""
         base_starts = _BASE.start_candidates(table, usable, kd)
-        by_shape = {tuple(sorted(s.items())): u for s, u in
-                    zip(_BASE.shape_grid, base_starts, strict=True)}
-        starts = []
-        for shape in base_grid:
-            base = _BASE.constrain(by_shape[tuple(sorted(shape.items()))])
-            for r in COAT_ROUGHNESS_STARTS:
-                starts.append(self.unconstrain({
-                    "base_color": np.asarray(base["base_color"]), **shape,
-                    "clearcoat": 0.5, "clearcoat_roughness": r}))
-        return np.stack(starts)
+        broad = [u for shape, u in zip(_BASE.shape_grid, base_starts, strict=True)
+                 if shape["roughness"] >= 0.2]
+        coats = [np.concatenate([CLEARCOAT.unconstrain(np.array([0.5])),
+                                 CLEARCOAT_ROUGHNESS.unconstrain(np.array([r]))])
+                 for r in COAT_ROUGHNESS_STARTS]
+        return np.stack([np.concatenate([u, coat]) for u in broad for coat in coats])
