@@ -295,6 +295,22 @@ def test_a_lone_or_foreign_worker_keeps_its_cores(monkeypatch):
     assert len(calls) == 1
 
 
+@pytest.mark.unit
+def test_a_local_worker_drops_only_the_heartbeat_to_a_stopped_batch():
+    import logging
+
+    from brdffit.batch.local_worker import HeartbeatToStoppedBatch
+
+    def record(msg, level=logging.ERROR):
+        return logging.LogRecord("distributed.worker", level, __file__, 1, msg, None, None)
+
+    drop = HeartbeatToStoppedBatch()
+    assert not drop.filter(record("Failed to communicate with scheduler during heartbeat."))
+    for kept in ("Unexpected exception during heartbeat. Closing worker.",
+                 "Compute Failed", "Worker process died unexpectedly"):
+        assert drop.filter(record(kept)), kept
+
+
 def test_dask_runner_reports_a_dead_worker():
     import dask
     from distributed import LocalCluster

@@ -6,7 +6,11 @@ N``): ``distributed`` calls :func:`dask_setup` in each worker as it starts.
   the middle of a fit, printing a 30-line traceback under the batch's one-line
   message. The batch process owns its workers and stops them itself when it is
   interrupted (it cancels their tasks and closes the cluster), so a worker ignores
-  SIGINT.
+  SIGINT. Its scheduler lives in the batch process, so when the batch stops, a
+  worker's next heartbeat can find the scheduler gone before the worker is told to
+  close, and ``distributed`` logs that as an error with a traceback
+  (:class:`HeartbeatToStoppedBatch` drops exactly that record, nothing else: a local
+  worker loses its scheduler only when the batch that owns both ends).
 - **Cores.** XLA sizes its CPU thread pools by the cores a process may run on, when
   JAX first runs (after this, in the worker's first task). Worker ``i`` of ``N``
   (``BRDFFIT_LOCAL_WORKERS``) is given cores ``i, i + N, ...`` of the batch's own
@@ -18,6 +22,7 @@ N``): ``distributed`` calls :func:`dask_setup` in each worker as it starts.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import threading
@@ -30,7 +35,18 @@ def dask_setup(worker) -> None:
     # handlers can be set; elsewhere there is nothing to undo.
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(HeartbeatToStoppedBatch())
     take_cores(worker.name)
+
+
+class HeartbeatToStoppedBatch(logging.Filter):
+    """Drops ``distributed``'s "Failed to communicate with scheduler during heartbeat"
+    record in a local worker: its scheduler is the batch process's, gone only when the
+    batch is (which says so itself). Every other worker record passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith(
+            "Failed to communicate with scheduler during heartbeat")
 
 
 def core_share(index: int, workers: int, cores: list[int]) -> list[int]:
