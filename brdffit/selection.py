@@ -200,7 +200,7 @@ def _order(candidates) -> list[models.AbstractBRDFModel]:
     just before its base model); unknown names raise ``UnknownModelError``."""
     from brdffit.models.mono_ks import MonoKs
 
-    ms = [models.get(c) for c in candidates]
+    ms = [models.get(c) for c in models.catalogue.expand_candidates(candidates)]
     if not ms:
         raise FitInputError("select needs at least one candidate model")
     names = [m.name for m in ms]
@@ -390,6 +390,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         if loss == "render":
             reason += (" (The budget is a log_rmse figure: given one, it decides even under "
                        "the render loss.)")
+    _layer_gains(ok)
+    chosen, reason = _layer_that_looks_no_worse(chosen, reason, ok)
     doubtful = [row for row in ok if (row is chosen or row is best) and not row["converged"]]
     if doubtful:
         reason += " " + "; ".join(
@@ -601,6 +603,47 @@ def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
     return c, why + "."
 
 
+def _layer_gains(ok: list[dict]) -> None:
+    """Each fitted row whose model was fitted from another candidate's fit (a layer
+    over its base: gltf_clearcoat over gltf_pbr; ggx2's second lobe over ggx) gets
+    ``over_parent``: that candidate, the log_rmse ratio and the PSNR gain (dB), what
+    its layer bought."""
+    by_name = {row["model"]: row for row in ok}
+    for row in ok:
+        parent = by_name.get(models.get(row["model"]).parent)
+        if parent is None:
+            continue
+        ratio = (row["log_rmse"] / parent["log_rmse"] if parent["log_rmse"] > 0
+                 else (1.0 if row["log_rmse"] == 0 else None))
+        gain = _psnr(row) - _psnr(parent)
+        row["over_parent"] = {"model": parent["model"], "log_rmse_ratio": ratio,
+                              "psnr_gain_db": gain if math.isfinite(gain) else None}
+
+
+#: How much worse (dB) than its base a layered candidate may render and still be
+#: chosen: a layer is taken where the rule says it gains and its render agrees.
+LAYER_RENDER_SLACK_DB = 0.5
+
+
+def _layer_that_looks_no_worse(chosen: dict, reason: str, ok: list[dict]) -> tuple[dict, str]:
+    """``chosen``, or its base where ``chosen`` is a layered model (a coat, a sheen:
+    ``AbstractBRDFModel.layers``) that renders more than :data:`LAYER_RENDER_SLACK_DB`
+    worse than the base it was fitted from: under the log loss a layer can buy
+    log_rmse at grazing bins and cost the look. The reason says so."""
+    by_name = {row["model"]: row for row in ok}
+    while models.get(chosen["model"]).layers and chosen.get("over_parent"):
+        gain = chosen["over_parent"]["psnr_gain_db"]
+        if gain is None or gain >= -LAYER_RENDER_SLACK_DB:
+            break
+        base = by_name[chosen["over_parent"]["model"]]
+        reason += (f" {chosen['model']} passes the rule but renders {-gain:.1f} dB worse than "
+                   f"its base {base['model']} ({_psnr(chosen):.1f} against {_psnr(base):.1f} "
+                   f"dB): a layer is taken only where its render agrees, so {base['model']} "
+                   "is chosen.")
+        chosen = base
+    return chosen, reason
+
+
 def _all_poor_warning(ok: list[dict]) -> str:
     """A sentence for the reason when every candidate looks poor (else empty)."""
     if not ok or any(row.get("verdict") != "poor" for row in ok):
@@ -707,6 +750,12 @@ def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):
     }
 
 
+def _gain_words(gain: dict) -> str:
+    ratio, db = gain["log_rmse_ratio"], gain["psnr_gain_db"]
+    return (("log_rmse " + ("-" if ratio is None else f"x{ratio:.3g}"))
+            + (", PSNR " + ("-" if db is None else f"{db:+.1f} dB")))
+
+
 def format_selection(sel: Selection) -> str:
     """The ranking as a text table, then the reason (what ``brdffit fit --model auto``
     prints)."""
@@ -728,6 +777,11 @@ def format_selection(sel: Selection) -> str:
             + f"{r['cost_ns']:>8.1f} {r['bic']:>12.4g}"
             + f"  {r['status']}" + ("" if r["converged"] else " (not converged)")
         )
+    layers = [r for r in sel.ranking if r.get("over_parent")]
+    if layers:
+        lines.append("over their base: " + "; ".join(
+            f"{r['model']} over {r['over_parent']['model']} "
+            + _gain_words(r["over_parent"]) for r in layers))
     lines.append("")
     if held:
         from brdffit.fitting.samples import FOLDS

@@ -140,6 +140,13 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         (label, {**params, "clearcoat": coat, "clearcoat_roughness": rough})
         for (label, params), coat, rough in zip(
             (GLTF[0], GLTF[3]), (0.8, 0.7), (0.1, 0.04), strict=True)],
+    # a sheen over a broad base (velvet) and a faint sharp one (satin)
+    "gltf_sheen": [
+        ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],
+                     "sheen_roughness": 0.5}),
+        ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],
+                           "sheen_roughness": 0.2}),
+    ],
     "principled_clearcoat": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5, "clearcoat": 0.8,

@@ -163,3 +163,45 @@ def test_gltf_threejs_is_what_threejs_shows(threejs, params):
     if params["metallic"] == 1.0:
         spec = check.preview_radiance("gltf_pbr", params, size)[inner]
         assert np.median(np.abs(spec / shown - 1)) > 0.05
+
+
+def test_the_sheen_is_what_threejs_shows(threejs, monkeypatch):
+    """gltf_sheen's sheen layer (its BRDF, and the albedo scaling it leaves the base)
+    against three.js's: the file rendered with the sheen and without it, three.js's
+    sheen is ``with - scale * without`` pixel by pixel, down to grazing views where a
+    sheen is brightest; within 1% at the median pixel and 3% at the 95th percentile,
+    for a broad sheen and a sharp one over a velvet's base. On a finer sphere than the
+    export's own (256 x 128 segments): a sharp sheen's ``sin^(1/a)`` of the mesh's
+    interpolated normals (64 x 32) is 4% brighter at the median, and 0.2% on this one."""
+    import jax.numpy as jnp
+
+    from brdffit import runtime
+    from brdffit.models.frame import shading_frame
+    from brdffit.models.gltf_sheen import sheen_layer
+
+    monkeypatch.setattr(gltf, "SEGMENTS", 256)
+    monkeypatch.setattr(gltf, "RINGS", 128)
+    size = 256
+    base = {"base_color": [0.3, 0.05, 0.08], "metallic": 0.0, "roughness": 0.8}
+
+    def shown(params):
+        fit = FitResult("gltf_sheen", params, {"log_rmse": 0.01}, True, "successful", 5,
+                        0.1, {})
+        doc = export(fit, "gltf").material
+        return check.threejs_render(doc, threejs, size=size)[..., :3].reshape(-1, 3)
+
+    without = shown({**base, "sheen_color": [0.0, 0.0, 0.0], "sheen_roughness": 0.5})
+    wi, wo, hit, _ = check.gltf_preview_pairs(size)
+    for sheen_color, sheen_roughness in (([0.9, 0.5, 0.6], 0.5), ([0.2, 0.5, 1.0], 0.15)):
+        params = {**base, "sheen_color": sheen_color, "sheen_roughness": sheen_roughness}
+        with runtime.float64():
+            sheen, scale = sheen_layer(jnp.asarray(sheen_color, jnp.float64),
+                                       jnp.float64(sheen_roughness),
+                                       shading_frame(jnp.asarray(wi), jnp.asarray(wo)))
+        ours = np.asarray(sheen).T * np.pi * np.clip(wi[:, 2:3], 0.0, None)
+        theirs = shown(params) - np.asarray(scale)[:, None] * without
+        seen = hit & (wi[:, 2] > 0.1) & (wo[:, 2] > 0.1) & (ours.max(-1) > 2e-3)
+        assert seen.sum() > 2000 and (wo[seen, 2] < 0.3).sum() > 500  # grazing ones too
+        rel = np.abs(theirs[seen] / ours[seen] - 1)
+        assert np.median(rel) < 0.01 and np.percentile(rel, 95) < 0.03, (
+            sheen_roughness, np.median(rel), np.percentile(rel, 95))

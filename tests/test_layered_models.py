@@ -1,4 +1,5 @@
-"""Layered materials (issue 40): a coat over glTF's base, ``gltf_clearcoat``.
+"""Layered materials (issue 40): a coat over glTF's base, ``gltf_clearcoat``, a sheen
+over it, ``gltf_sheen``, and Mitsuba's principled with its coat.
 
 Against the extension's text written independently in numpy
 (``brdffit.export.validate.gltf_spec_eval``), NaN-free on the closed hemisphere, its
@@ -15,9 +16,10 @@ import pytest
 from brdffit import models
 from brdffit.export import export
 from brdffit.export import validate as check
-from brdffit.export.gltf import CLEARCOAT_EXTENSION
+from brdffit.export.gltf import CLEARCOAT_EXTENSION, SHEEN_EXTENSION
 from brdffit.export.validate import gltf_spec_eval
 from brdffit.fitting.pipeline import fit
+from brdffit.fitting.result import FitResult
 from data_synth import make_table
 from tests.compiled_models import assert_finite_values_and_gradients
 from tests.test_export_tools import gltf_validator  # noqa: F401 - the fixture
@@ -172,3 +174,149 @@ def test_principled_clearcoat_starts_from_principled_and_finds_a_coat():
     assert coated.converged, coated.result
     assert coated.error["log_rmse"] < 0.5 * base.error["log_rmse"]
     assert_params_close(coated.params, PRINCIPLED_COATED, rel=0.05, abs_small=0.02)
+
+
+# -- glTF's base under a sheen (KHR_materials_sheen) --------------------------------------
+
+SHEENED = {"base_color": [0.25, 0.04, 0.06], "metallic": 0.0, "roughness": 0.8,
+           "sheen_color": [0.8, 0.35, 0.4], "sheen_roughness": 0.45}
+
+
+def test_gltf_sheen_is_the_extension_layering_of_threejs_sheen():
+    """KHR_materials_sheen's layering (``f_sheen + material * sheenAlbedoScaling``) of
+    three.js's sheen BRDF, against its GLSL transcribed in numpy, for sheens from off to
+    full and from sharp to broad, over dielectric and metal bases."""
+    m = models.get("gltf_sheen")
+    wi, wo = _above(5000, seed=5)
+    for p in (SHEENED, {**SHEENED, "metallic": 1.0, "sheen_roughness": 1.0},
+              {**SHEENED, "sheen_color": [1.0, 1.0, 1.0], "sheen_roughness": 0.1},
+              {**SHEENED, "sheen_color": [0.0, 0.0, 0.0]}):
+        ours = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
+        np.testing.assert_allclose(ours, gltf_spec_eval(p, wi, wo), rtol=1e-9, atol=1e-12)
+
+
+def test_with_the_sheen_off_it_is_its_base_exactly():
+    m, base = models.get("gltf_sheen"), models.get("gltf_pbr")
+    assert m.parent == "gltf_pbr"
+    wi, wo = _above(2000, seed=6)
+    p = {k: SHEENED[k] for k in ("base_color", "metallic", "roughness")}
+    sheened = m(_jnp(m.embed_parent(p)), jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_array_equal(np.asarray(sheened),
+                                  np.asarray(base(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))))
+
+
+def test_the_sheen_is_finite_on_the_closed_hemisphere():
+    m = models.get("gltf_sheen")
+    edges = [{**SHEENED, "roughness": r, "sheen_color": [c] * 3, "sheen_roughness": sr}
+             for r in (0.0317, 1.0) for c in (0.0, 1.0) for sr in (0.1, 1.0)]
+    assert_finite_values_and_gradients(m, edges, *_edge_directions())
+
+
+@pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
+def test_a_sheen_is_found_where_there_is_one_and_never_costs_the_base():
+    """On a velvet it made, the sheen is recovered from the base's fit; on the base's
+    own table it finds nothing to add and ends at the base's fit."""
+    velvet, _ = make_table("gltf_sheen", SHEENED, noise=0.01, seed=7)
+    plain, _ = make_table("gltf_pbr", {"base_color": [0.5, 0.3, 0.2], "metallic": 0.2,
+                                       "roughness": 0.5})
+    for table, gains in ((velvet, True), (plain, False)):
+        base = fit(table, "gltf_pbr", samples=8192)
+        sheened = fit(table, "gltf_sheen", samples=8192, parent_fit=base)
+        assert sheened.error["log_rmse"] <= 1.001 * base.error["log_rmse"]
+        if gains:
+            assert sheened.converged, sheened.result
+            assert sheened.error["log_rmse"] < 0.5 * base.error["log_rmse"]
+            assert_params_close(sheened.params, SHEENED, rel=0.05, abs_small=0.02)
+
+
+def test_a_sheened_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
+    r = FitResult("gltf_sheen", SHEENED, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
+    e = export(r, "gltf")
+    report = check.gltf_validate(e.material, gltf_validator)  # the Khronos validator
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, report
+    assert e.fidelity["exact"]
+    (material,) = e.material["materials"]
+    assert material["extensions"][SHEEN_EXTENSION] == {
+        "sheenColorFactor": pytest.approx(SHEENED["sheen_color"]),
+        "sheenRoughnessFactor": pytest.approx(SHEENED["sheen_roughness"])}
+    assert SHEEN_EXTENSION in e.material["extensionsUsed"]
+    assert any(SHEEN_EXTENSION in w for w in e.warnings)
+
+
+# -- auto chooses the layers ---------------------------------------------------------------
+
+
+def test_a_renderers_name_stands_for_its_materials_layers_included():
+    from brdffit.fitting.options import SelectionRule
+    from brdffit.models.catalogue import CANDIDATE_SETS
+
+    assert SelectionRule(candidates=("gltf",)).candidates == (
+        "gltf_pbr", "gltf_clearcoat", "gltf_sheen")
+    assert SelectionRule(candidates=("ggx", "gltf", "gltf_pbr")).candidates == (
+        "ggx", "gltf_pbr", "gltf_clearcoat", "gltf_sheen")
+    for name, members in CANDIDATE_SETS.items():  # each a registry model, base first
+        assert all(models.get(m).parent in (None, *members[:i])
+                   for i, m in enumerate(members)), name
+    with pytest.raises(Exception, match="unknown model 'gltf2'"):
+        SelectionRule(candidates=("gltf2",))
+
+
+@pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
+def test_auto_takes_a_sheen_where_it_is_seen_and_not_where_it_is_not():
+    """auto among glTF's materials on a velvet: the sheen wins, and the ranking says
+    what each layer bought over the base; in a scene whose lights and views stay within
+    30 degrees of the normal, where the fibres show nothing, the base is enough."""
+    from brdffit.fitting.scene import Scene
+    from brdffit.selection import format_selection, select
+
+    velvet, _ = make_table("gltf_sheen", SHEENED, noise=0.01, seed=8)
+    sel = select(velvet, ("gltf",), samples=8192)
+    assert sel.chosen == "gltf_sheen", sel.reason
+    rows = {row["model"]: row for row in sel.ranking}
+    gain = rows["gltf_sheen"]["over_parent"]
+    assert gain["model"] == "gltf_pbr" and gain["log_rmse_ratio"] < 0.5
+    assert gain["psnr_gain_db"] > 1.0
+    assert rows["gltf_clearcoat"]["over_parent"]["model"] == "gltf_pbr"
+    assert "over_parent" not in rows["gltf_pbr"]
+    assert "gltf_sheen over gltf_pbr log_rmse x" in format_selection(sel)
+    near_normal = Scene(max_theta_i=30.0, max_theta_o=30.0)
+    assert select(velvet, ("gltf",), scene=near_normal, samples=8192).chosen == "gltf_pbr"
+
+
+def test_an_export_without_the_layer_says_what_was_lost():
+    """A layer the target's model lacks is named with the refit's log_rmse to the fit
+    (MaterialX's standard_surface here has no sheen; Mitsuba's principled has Burley's,
+    so a sheen exported there is not called lost)."""
+    from brdffit.export import _layer_warning
+    from brdffit.export.conversion import Conversion
+
+    (lost,) = _layer_warning("gltf_sheen", Conversion("standard_surface", {}, False, 0.0239))
+    assert lost.startswith("layer: the sheen of the gltf_sheen fit has no counterpart in "
+                           "standard_surface") and "log_rmse 0.0239 to the fit" in lost
+    (coat,) = _layer_warning("principled_clearcoat", Conversion("principled", {}, False, 0.01))
+    assert "the clearcoat of the principled_clearcoat fit" in coat
+    assert _layer_warning("gltf_sheen", Conversion("principled", {}, False, 0.02)) == []
+    assert _layer_warning("gltf_clearcoat", Conversion("gltf_clearcoat", {}, True, 0.0)) == []
+    assert _layer_warning("ggx", Conversion("gltf_pbr", {}, False, 0.01)) == []
+
+
+def test_a_layer_that_renders_worse_than_its_base_is_not_chosen():
+    """Under the log loss a layer can buy log_rmse at grazing bins and cost the look:
+    the rule's choice falls back to the base where the layer renders more than 0.5 dB
+    worse, and says so; a second lobe (ggx2 over ggx) is no layer and stays."""
+    from brdffit.selection import _layer_gains, _layer_that_looks_no_worse
+
+    rows = [{"model": "gltf_pbr", "log_rmse": 0.02, "psnr_db": 30.0},
+            {"model": "gltf_sheen", "log_rmse": 0.015, "psnr_db": 25.0},
+            {"model": "ggx", "log_rmse": 0.03, "psnr_db": 30.0},
+            {"model": "ggx2", "log_rmse": 0.01, "psnr_db": 28.0}]
+    _layer_gains(rows)
+    assert rows[1]["over_parent"] == {"model": "gltf_pbr", "log_rmse_ratio": 0.75,
+                                      "psnr_gain_db": -5.0}
+    chosen, reason = _layer_that_looks_no_worse(rows[1], "Chose gltf_sheen.", rows)
+    assert chosen is rows[0]
+    assert "gltf_sheen passes the rule but renders 5.0 dB worse than its base gltf_pbr" \
+        in reason and reason.endswith("so gltf_pbr is chosen.")
+    assert _layer_that_looks_no_worse(rows[3], "r", rows) == (rows[3], "r")
+    rows[1]["over_parent"]["psnr_gain_db"] = -0.4  # within the slack: the layer stays
+    assert _layer_that_looks_no_worse(rows[1], "r", rows) == (rows[1], "r")

@@ -236,7 +236,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if spec.viewers and measured is not None:
         fidelity["viewers"] = _viewer_fidelity(spec, measured, conv.params, shaded_as,
                                                fidelity)
-    warnings += _looks_warning(result)
+    warnings += _looks_warning(result) + _layer_warning(result.model, conv)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
     name = _material_name(result)
@@ -251,6 +251,22 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         material, files, notes = module.write(conv.params, name, conv.target_model)
     return Export(target, result.model, spec.media_type, material, files,
                   {**fidelity, **energy}, conv.params, warnings + notes, result.table, variants)
+
+
+def _layer_warning(source_model: str, conv) -> list[str]:
+    """A warning where the fit has a layer (a coat, a sheen) that the exported model
+    has not: the export is refitted without it, and its log_rmse to the fit is what
+    that cost (with the rest of the conversion)."""
+    from brdffit import models
+
+    lost = [k for k in models.get(source_model).layers
+            if k not in models.get(conv.target_model).layers]
+    if not lost or conv.exact:
+        return []
+    what = " and ".join(lost)
+    return [f"layer: the {what} of the {source_model} fit has no counterpart in "
+            f"{conv.target_model}: refitted without it, log_rmse {conv.log_rmse_to_fit:.4g} "
+            f"to the fit (the {what} lost, with the rest of the conversion)"]
 
 
 def _looks_warning(result: FitResult) -> list[str]:

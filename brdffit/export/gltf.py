@@ -9,7 +9,9 @@ Appendix B, so the mapping is a copy:
 
 A ``gltf_clearcoat`` fit also writes ``KHR_materials_clearcoat`` (``clearcoatFactor``,
 ``clearcoatRoughnessFactor``: the model is the extension's definition, so the mapping is
-a copy too). A ``gltf_pbr_ior`` fit also writes the extension ``KHR_materials_ior``
+a copy too), and a ``gltf_sheen`` fit ``KHR_materials_sheen`` (``sheenColorFactor``,
+``sheenRoughnessFactor``, copied; the sheen's BRDF is three.js's, the extension leaving
+it to the viewer). A ``gltf_pbr_ior`` fit also writes the extension ``KHR_materials_ior``
 (``{"ior": ior}``, listed in ``extensionsUsed``), which carries the dielectric's
 reflectance ``((ior - 1)/(ior + 1))^2``; a ``gltf_pbr`` fit is the spec's default
 (ior 1.5, f0 = 0.04, white specular), which ``KHR_materials_ior`` and
@@ -38,7 +40,8 @@ import numpy as np
 #: The models this target shades exactly; other fits are refitted as the first.
 #: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
-TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat")
+TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",
+                 "gltf_sheen")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -57,17 +60,22 @@ IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the d
 CLEARCOAT_EXTENSION = "KHR_materials_clearcoat"
 CLEARCOAT_NOTE = ("uses KHR_materials_clearcoat: a viewer without the extension shades the "
                   "base without its coat")
+SHEEN_EXTENSION = "KHR_materials_sheen"
+SHEEN_NOTE = ("uses KHR_materials_sheen: a viewer without the extension shades the base "
+              "without its sheen; viewers with it may shade the sheen differently (the "
+              "extension leaves its BRDF to them; gltf_sheen's is three.js's)")
 
 
 def _extensions(params: dict) -> list[str]:
     """The material extensions ``params`` need, in the order they are written."""
     return ([IOR_EXTENSION] if "ior" in params else []) + (
+        [SHEEN_EXTENSION] if "sheen_color" in params else []) + (
         [CLEARCOAT_EXTENSION] if "clearcoat" in params else [])
 
 
 def material(params: dict, name: str) -> dict:
-    """The glTF material object of ``gltf_pbr`` (``gltf_pbr_ior``, ``gltf_clearcoat``)
-    parameters."""
+    """The glTF material object of ``gltf_pbr`` (``gltf_pbr_ior``, ``gltf_clearcoat``,
+    ``gltf_sheen``) parameters."""
     out = {
         "name": name,
         "pbrMetallicRoughness": {
@@ -79,6 +87,10 @@ def material(params: dict, name: str) -> dict:
     extensions = {}
     if "ior" in params:
         extensions[IOR_EXTENSION] = {"ior": float(params["ior"])}
+    if "sheen_color" in params:  # gltf_sheen: the sheen's two factors, copied
+        extensions[SHEEN_EXTENSION] = {
+            "sheenColorFactor": [float(x) for x in params["sheen_color"]],
+            "sheenRoughnessFactor": float(params["sheen_roughness"])}
     if "clearcoat" in params:  # gltf_clearcoat: the coat's two factors, copied
         extensions[CLEARCOAT_EXTENSION] = {
             "clearcoatFactor": float(params["clearcoat"]),
@@ -196,6 +208,7 @@ def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, s
     from brdffit import jsonout
 
     doc = document(params, name)
-    notes = [{IOR_EXTENSION: IOR_NOTE, CLEARCOAT_EXTENSION: CLEARCOAT_NOTE}[e]
+    notes = [{IOR_EXTENSION: IOR_NOTE, CLEARCOAT_EXTENSION: CLEARCOAT_NOTE,
+              SHEEN_EXTENSION: SHEEN_NOTE}[e]
              for e in _extensions(params)]
     return doc, {f"{name}.gltf": jsonout.dumps(doc, indent=1)}, notes

@@ -168,7 +168,8 @@ def materialx_validate(text: str) -> tuple[bool, str]:
 
 def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = False):
     """f_r (n, 3) of a glTF material (``base_color``, ``metallic``, ``roughness``,
-    optionally KHR_materials_ior's ``ior`` and KHR_materials_clearcoat's ``clearcoat``
+    optionally KHR_materials_ior's ``ior``, KHR_materials_sheen's ``sheen_color`` and
+    ``sheen_roughness`` (:func:`_sheen_over`) and KHR_materials_clearcoat's ``clearcoat``
     and ``clearcoat_roughness``) at direction pairs ``wi``, ``wo`` (n, 3)
     strictly above the horizon: glTF 2.0 Appendix B, term by term as the spec writes it
     (its V = G / (4 N.L N.V), G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2))): its
@@ -203,6 +204,8 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
         dielectric_brdf = diffuse_brdf * (1 - fr) + specular_brdf * fr  # mix(base, layer, fr)
         metal_brdf = specular_brdf * schlick(base)
         material = dielectric_brdf * (1 - m) + metal_brdf * m
+    if "sheen_color" in p:
+        material = _sheen_over(material, p, nl, nv, nh)
     if not p.get("clearcoat"):
         return material
     # KHR_materials_clearcoat, "Implementation": the coat's normal is the surface's
@@ -219,6 +222,27 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
     clearcoat_fresnel = 0.04 + (1 - 0.04) * (1 - np.abs(nv)) ** 5
     weight = p["clearcoat"] * clearcoat_fresnel
     return material * (1 - weight) + clearcoat_brdf * weight
+
+
+def _sheen_over(material, p: dict, nl, nv, nh):
+    """KHR_materials_sheen's layering, ``f_sheen + material * sheenAlbedoScaling``, with
+    the sheen BRDF three.js r187 writes (``BRDF_Sheen``, ``IBLSheenBRDF``,
+    ``RE_Direct_Physical``), transcribed from its GLSL: the extension leaves the BRDF
+    to the implementation."""
+    color, r = np.asarray(p["sheen_color"], float), float(p["sheen_roughness"])
+    alpha = r * r
+    sin2h = np.maximum(1.0 - nh * nh, 0.0078125)
+    d_charlie = (2.0 + 1.0 / alpha) * sin2h ** (0.5 / alpha) / (2.0 * np.pi)
+    v_neubelt = np.clip(1.0 / (4.0 * (nl + nv - nl * nv)), 0.0, 1.0)
+
+    def albedo(cos):  # IBLSheenBRDF
+        r_inv = 1.0 / (r + 0.1)
+        a = -1.9362 + 1.0678 * r + 0.4573 * r * r - 0.8469 * r_inv
+        b = -0.6014 + 0.5538 * r - 0.4670 * r * r - 0.1255 * r_inv
+        return np.clip(np.exp(a * np.clip(cos, 0, 1) + b), 0.0, 1.0)
+
+    scaling = 1.0 - color.max() * np.maximum(albedo(nv), albedo(nl))
+    return color * d_charlie * v_neubelt + material * scaling
 
 
 _GLTF_SCRIPT = """

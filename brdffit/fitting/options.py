@@ -252,7 +252,8 @@ class SelectionRule:
     candidates: tuple[str, ...] = _option(
         models.catalogue.auto_candidates(), kind=tuple, words="a list of model names",
         doc="the models to choose among, fitted cheapest first (default: `brdffit models`' "
-            "auto candidates)")
+            "auto candidates); gltf, mitsuba or materialx stands for the materials that "
+            "renderer's file carries, layers included")
     mono_ks: bool = _option(
         False, kind=bool,
         doc="also fit the chosen model with a grey ks (<model>_mono) when its fitted "
@@ -260,7 +261,8 @@ class SelectionRule:
 
     def __post_init__(self):
         _check_fields(self)
-        names = tuple(dict.fromkeys(self.candidates))  # twice is once
+        # a set's name (gltf, mitsuba, materialx) stands for its models; twice is once
+        names = tuple(dict.fromkeys(models.catalogue.expand_candidates(self.candidates)))
         for name in names:
             models.check_name(name)
         object.__setattr__(self, "candidates", names)

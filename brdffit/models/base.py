@@ -123,6 +123,10 @@ class AbstractBRDFModel(eqx.Module):
     #: contains ggx), or None. A fit seeds itself from the parent's optimum
     #: (:meth:`embed_parent`), so it can never end worse than its parent.
     parent: ClassVar[str | None] = None
+    #: The layers this model has over a single base material, by their kind
+    #: (``"clearcoat"``, ``"sheen"``): an export into a model without one of them
+    #: says what was lost (``brdffit.export``).
+    layers: ClassVar[tuple[str, ...]] = ()
     #: Whether ``model="auto"`` tries this model by default (``brdffit.selection``): the
     #: docs/models.md models are candidates; a renderer's target model is not (its fit
     #: is what an export makes, not a choice among the measured material's models).

@@ -83,6 +83,29 @@ def describe() -> list[dict]:
     return known
 
 
+#: Candidate sets by the renderer a material is for: ``auto`` among the materials
+#: that renderer's file carries, layers included (``--candidates gltf``; a set's name
+#: stands for its models, in the registry's order). A layered model is fitted from
+#: its base's fit and chosen only where its layer gains what the rule asks.
+CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
+    "gltf": ("gltf_pbr", "gltf_clearcoat", "gltf_sheen"),
+    "mitsuba": ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat"),
+    "materialx": ("standard_surface_dielectric", "standard_surface"),
+}
+
+
+def expand_candidates(names) -> tuple:
+    """``names`` with each :data:`CANDIDATE_SETS` name replaced by those of its models
+    not named before it (a name given twice stays twice: the caller decides)."""
+    out: list = []
+    for name in names:
+        if isinstance(name, str) and name in CANDIDATE_SETS:
+            out += [m for m in CANDIDATE_SETS[name] if m not in out]
+        else:
+            out.append(name)
+    return tuple(out)
+
+
 def auto_candidates() -> tuple[str, ...]:
     """The models ``model="auto"`` tries by default, cheapest first: every model of the
     catalogue that declares itself one (``auto_candidate``), in the registry's order;

@@ -57,6 +57,7 @@ class GltfClearcoat(AbstractBRDFModel):
     name = "gltf_clearcoat"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, CLEARCOAT, CLEARCOAT_ROUGHNESS)
     parent = "gltf_pbr"
+    layers = ("clearcoat",)
 
     @property
     def shape_grid(self) -> tuple[dict[str, float], ...]:

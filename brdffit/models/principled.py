@@ -90,6 +90,10 @@ class Principled(AbstractBRDFModel):
         return "principled_clearcoat" if self.clearcoat else "principled"
 
     @property
+    def layers(self) -> tuple[str, ...]:  # Burley's sheen is a lobe of its own
+        return ("sheen", "clearcoat") if self.clearcoat else ("sheen",)
+
+    @property
     def param_specs(self) -> tuple[ParamSpec, ...]:
         coat = (CLEARCOAT, CLEARCOAT_GLOSS) if self.clearcoat else ()
         return (BASE_COLOR, ROUGHNESS, SPECULAR, SHEEN, SHEEN_TINT, *coat)

@@ -18,6 +18,7 @@ from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import GltfClearcoat
 from brdffit.models.gltf_pbr import GltfPBR
+from brdffit.models.gltf_sheen import GltfSheen
 from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
@@ -34,8 +35,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), GltfBlender(),
-    # layered: a coat over the glTF base (KHR_materials_clearcoat)
-    GltfClearcoat(),
+    # layered: a coat or a sheen over the glTF base (KHR_materials_clearcoat, _sheen)
+    GltfClearcoat(), GltfSheen(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),

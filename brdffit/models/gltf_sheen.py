@@ -1,0 +1,134 @@
+"""glTF 2.0 metallic-roughness with a sheen (``KHR_materials_sheen``), the sheen as
+three.js shades it for a direct light.
+
+``gltf_sheen``: the core material (``gltf_pbr``, Appendix B) under a layer of fibres
+that reflect towards grazing angles (velvet, felt, satin). The extension fixes the
+layering and leaves the sheen's BRDF to the implementation ("Implementations of the
+BRDF itself can vary"; its formulas are a non-normative note): the sheen here is
+three.js r187's (``BRDF_Sheen``, ``IBLSheenBRDF`` and ``RE_Direct_Physical`` of its
+ShaderChunk ``lights_physical_pars_fragment``), the viewer most glTF files are opened
+in:
+
+    a       = sheenRoughness^2                     (as three.js and Khronos's Sample
+                                                    Viewer do; the note's text has a = r)
+    D       = (2 + 1/a) s^(1/(2a)) / (2 pi),  s = max(sin^2 theta_h, 2^-7)
+                                               (Conty-Kulla "Charlie"; the floor is three.js's)
+    V       = min(1, 1 / (4 (cos_i + cos_o - cos_i cos_o)))    (Neubelt, the note's
+                                                               "simpler visibility")
+    E(x)    = min(1, exp(A(r) x + B(r)))       (three.js's fit of the sheen's albedo)
+    scale   = 1 - max(sheenColor) max(E(cos_o), E(cos_i))     (the note's albedo scaling)
+    f       = sheenColor D V + scale material
+
+with A, B the quadratics in r of :func:`sheen_albedo`. At ``sheen_color = 0`` the
+material is ``gltf_pbr``'s exactly (scale 1, no sheen): a fit starts from the
+``gltf_pbr`` fit with the sheen off (``parent``), so it never ends worse than it.
+``tests/test_layered_models.py`` checks the sheen against three.js's own render of
+the exported file.
+
+| name            | range              | meaning                                       |
+|-----------------|--------------------|-----------------------------------------------|
+| base_color      | [0, 1], RGB        | ``baseColorFactor`` (linear RGB)              |
+| metallic        | [0, 1]             | ``metallicFactor``                            |
+| roughness       | [0.0316, 1] (log)  | ``roughnessFactor``                           |
+| sheen_color     | [0, 1], RGB        | ``sheenColorFactor`` (linear RGB)             |
+| sheen_roughness | [0.1, 1] (log)     | ``sheenRoughnessFactor`` (alpha = its square) |
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .base import AbstractBRDFModel, Params, ParamSpec
+from .frame import Frame
+from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS, GltfPBR
+
+SHEEN_COLOR = ParamSpec("sheen_color", "sheenColorFactor, linear RGB", 0.0, 1.0, rgb=True)
+#: The sheen's least roughness, 0.1 (alpha 0.01): the fibres' lobe then still spans
+#: ~8 degrees of theta_h below 90, several of the MERL grid's coarse bins there. At
+#: glTF's own floor (0.0316, as the other roughnesses here) a fit put a 2-degree spike
+#: on one or two grazing bins of a phenolic's noise (-1.7 dB on its render).
+SHEEN_ROUGHNESS = ParamSpec(
+    "sheen_roughness", "sheenRoughnessFactor (the fibres' alpha = its square)",
+    0.1, 1.0, scale="log")
+
+#: three.js's floor of sin^2 theta_h in D (``D_Charlie``: 2^-7, so that its square
+#: stays above zero in half precision). It also keeps D's power finite at the normal.
+SIN2_H_FLOOR = 2.0**-7
+#: The sheen's roughness and colour a fit starts from (beside the base's fit with
+#: the sheen off): fibres from sharp to broad, a grey sheen of moderate strength.
+SHEEN_ROUGHNESS_STARTS = (0.3, 0.6, 0.9)
+SHEEN_COLOR_START = 0.3
+
+_BASE = GltfPBR()
+
+
+def charlie_d(alpha, sin2_h):
+    """Conty and Kulla's "Charlie" distribution of fibre normals, three.js's floor."""
+    s = jnp.maximum(sin2_h, SIN2_H_FLOOR)
+    return (2.0 + 1.0 / alpha) * jnp.exp(jnp.log(s) * (0.5 / alpha)) / (2.0 * jnp.pi)
+
+
+def neubelt_v(cos_i, cos_o):
+    """Neubelt and Pettineo's visibility, saturated as three.js does (``V_Neubelt``):
+    ``min(1, 1/(4 (cos_i + cos_o - cos_i cos_o)))``, 1 at grazing on both sides."""
+    return 0.25 / jnp.maximum(cos_i + cos_o - cos_i * cos_o, 0.25)
+
+
+def sheen_albedo(roughness, cos):
+    """three.js's curve fit of the sheen's directional albedo (``IBLSheenBRDF``), of the
+    sheen's roughness (not squared) and the cosine to the normal."""
+    r = roughness
+    r_inv = 1.0 / (r + 0.1)
+    a = -1.9362 + 1.0678 * r + 0.4573 * r * r - 0.8469 * r_inv
+    b = -0.6014 + 0.5538 * r - 0.4670 * r * r - 0.1255 * r_inv
+    return jnp.minimum(jnp.exp(a * cos + b), 1.0)
+
+
+def sheen_layer(sheen_color, sheen_roughness, frame: Frame):
+    """The sheen's BRDF (3, ...) and the scale (...) it leaves the base, for
+    ``sheen_color`` (3,) and ``sheen_roughness`` (a scalar)."""
+    expand = (slice(None),) + (None,) * frame.cos_i.ndim
+    r = sheen_roughness
+    lobe = charlie_d(r * r, frame.sin2_h) * neubelt_v(frame.cos_i, frame.cos_o)
+    albedo = jnp.maximum(sheen_albedo(r, frame.cos_o), sheen_albedo(r, frame.cos_i))
+    scale = 1.0 - jnp.max(sheen_color) * albedo
+    return sheen_color[expand] * lobe[None], scale
+
+
+class GltfSheen(AbstractBRDFModel):
+    name = "gltf_sheen"
+    param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, SHEEN_COLOR, SHEEN_ROUGHNESS)
+    parent = "gltf_pbr"
+    layers = ("sheen",)
+
+    @property
+    def shape_grid(self) -> tuple[dict[str, float], ...]:
+        return tuple({**shape, "sheen_color": SHEEN_COLOR_START, "sheen_roughness": r}
+                     for shape in _BASE.shape_grid
+                     if shape["roughness"] >= 0.2  # fabrics: a broad base
+                     for r in SHEEN_ROUGHNESS_STARTS)
+
+    def embed_parent(self, parent_params: dict) -> dict:
+        """The ``gltf_pbr`` fit with the sheen off (black), ready to grow."""
+        return {**parent_params, "sheen_color": np.zeros(3), "sheen_roughness": 0.6}
+
+    def eval_channels(self, params: Params, frame: Frame):
+        base = _BASE.eval_channels(params, frame)
+        sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
+        return sheen + scale[None] * base
+
+    def eval_frame(self, params: Params, frame: Frame):
+        return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
+
+    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
+        """``gltf_pbr``'s starts on every broad base, each with a grey sheen of each
+        roughness of ``shape_grid``: the base's unconstrained values, then the
+        sheen's (this model's parameter order)."""
+        base_starts = _BASE.start_candidates(table, usable, kd)
+        broad = [u for shape, u in zip(_BASE.shape_grid, base_starts, strict=True)
+                 if shape["roughness"] >= 0.2]
+        sheens = [np.concatenate([SHEEN_COLOR.unconstrain(np.full(3, SHEEN_COLOR_START)),
+                                  SHEEN_ROUGHNESS.unconstrain(np.array([r]))])
+                  for r in SHEEN_ROUGHNESS_STARTS]
+        return np.stack([np.concatenate([u, sheen]) for u in broad for sheen in sheens])
