@@ -111,6 +111,38 @@ def test_grid_cache_round_trip(tmp_path, monkeypatch):
         grid.bin_grid.cache_clear()
 
 
+def test_sphere_integral_cache_round_trip(tmp_path, monkeypatch):
+    """A sphere integral read from brdffit's cache equals the one computed, to the bit;
+    a damaged file is computed again and replaced; without a cache nothing is kept."""
+    from brdffit.fitting import sphere
+    from brdffit.io import array_cache
+
+    light = sphere.LIGHTS[0][1]
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path))
+    sphere._sphere_integral.cache_clear()
+    try:
+        first = sphere.sphere_integral(light)  # computes and stores (on another thread)
+        array_cache.wait_until_stored()
+        (stored,) = tmp_path.glob("sphere-integral-v*.npz")
+        sphere._sphere_integral.cache_clear()
+        loaded = sphere.sphere_integral(light)
+        for k in ("bins", "weight", "wi", "wo"):
+            np.testing.assert_array_equal(getattr(first, k), getattr(loaded, k))
+            assert not getattr(loaded, k).flags.writeable
+        stored.write_bytes(b"garbage")
+        sphere._sphere_integral.cache_clear()
+        np.testing.assert_array_equal(sphere.sphere_integral(light).weight, first.weight)
+        array_cache.wait_until_stored()
+        with np.load(stored) as z:  # replaced by a whole file
+            np.testing.assert_array_equal(z["bins"], first.bins)
+        monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
+        sphere._sphere_integral.cache_clear()
+        np.testing.assert_array_equal(sphere.sphere_integral(light).wi, first.wi)
+        assert array_cache._writers == []
+    finally:
+        sphere._sphere_integral.cache_clear()
+
+
 def test_the_separable_grid_equals_the_flat_conversion():
     """brdffit.io.grid computes the directions axis by axis; they are what
     half_diff_to_dirs gives for every bin centre, and the weights follow the

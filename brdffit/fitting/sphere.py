@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 
 import jax.numpy as jnp
 import numpy as np
@@ -41,6 +42,7 @@ import numpy as np
 from brdffit import executables, runtime
 from brdffit.fitting.colour import brightness_and_colour
 from brdffit.fitting.render_loss import MEAN_FLOOR
+from brdffit.io import array_cache
 from brdffit.io.angles import (
     N_THETA_H,
     SHAPE,
@@ -219,14 +221,30 @@ class SphereIntegral:
     wo: np.ndarray
 
 
+#: Bumped when :func:`_bin_weights` or the nodes change: the integrals kept in
+#: brdffit's cache directory are then computed again.
+_INTEGRAL_VERSION = 1
+
+
 def sphere_integral(light: np.ndarray) -> SphereIntegral:
-    """The :class:`SphereIntegral` of ``light`` (camera space), made once per process
-    (~0.2 s)."""
+    """The :class:`SphereIntegral` of ``light`` (camera space), made once per process:
+    read from brdffit's cache directory, or computed (~0.5 s) and kept there
+    (``brdffit.io.array_cache``)."""
     return _sphere_integral(tuple(float(c) for c in np.ravel(light)))
 
 
 @functools.lru_cache(maxsize=8)
 def _sphere_integral(light: tuple[float, ...]) -> SphereIntegral:
+    key = repr((light, COLOUR_NODES, CHECK_NODES, N_THETA_H, SHAPE)).encode()
+    name = f"sphere-integral-v{_INTEGRAL_VERSION}-{hashlib.sha256(key).hexdigest()[:16]}"
+    arrays = array_cache.load_or_compute(name, ("bins", "weight", "wi", "wo"),
+                                         lambda: _compute_integral(light))
+    for a in arrays.values():
+        a.setflags(write=False)
+    return SphereIntegral(**arrays)
+
+
+def _compute_integral(light: tuple[float, ...]) -> dict[str, np.ndarray]:
     n_flat = int(np.prod(SHAPE))
     fine, wi_sum, wo_sum = _bin_weights(np.array(light), *COLOUR_NODES, n_flat)
     coarse = _bin_weights(np.array(light), *CHECK_NODES, n_flat)[0]
@@ -236,9 +254,7 @@ def _sphere_integral(light: tuple[float, ...]) -> SphereIntegral:
     mean_wo = wo_sum[bins] / np.linalg.norm(wo_sum[bins], axis=-1, keepdims=True).clip(1e-300)
     wi, wo = _bin_dirs(bins, mean_wi, mean_wo)
     weight = np.stack([fine[bins], coarse[bins]])
-    for a in (bins, weight):
-        a.setflags(write=False)
-    return SphereIntegral(bins, weight, wi, wo)
+    return {"bins": bins, "weight": weight, "wi": wi, "wo": wo}
 
 
 def _bin_weights(light: np.ndarray, per_bin: int, per_degree: int, n_flat: int):

@@ -15,15 +15,13 @@ normalised to sum to 1 over the bins above the horizon.
 from __future__ import annotations
 
 import functools
-import os
 import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brdffit import runtime
-from brdffit.io import angles
+from brdffit.io import angles, array_cache
 
 if TYPE_CHECKING:
     from brdffit.io.merl import MerlTable
@@ -61,46 +59,19 @@ def bin_grid() -> BinGrid:
 
 @functools.cache
 def _bin_grid() -> BinGrid:
-    directory = runtime.cache_dir()
-    path = os.path.join(directory, f"merl-grid-v{_CACHE_VERSION}.npz") if directory else None
-    if path and os.path.exists(path):
-        try:
-            with np.load(path) as z:
-                arrays = {k: z[k] for k in z.files}
-            return _freeze(BinGrid(**arrays))
-        except (OSError, ValueError, KeyError, TypeError):
-            pass  # damaged or from another layout: recompute below
-    grid = _compute_grid()
-    if path:
-        # written beside the fit, not before it (~0.3 s of a new process's first fit);
-        # not a daemon, so that the interpreter finishes the file before it exits
-        writer = threading.Thread(target=_store, args=(grid, directory, path),
-                                  name="brdffit-grid-store")
-        writer.start()
-        _writers.append(writer)
-    return grid
+    fields = tuple(BinGrid.__dataclass_fields__)
+
+    def compute() -> dict:
+        grid = _compute_grid()
+        return {k: getattr(grid, k) for k in fields}
+
+    arrays = array_cache.load_or_compute(f"merl-grid-v{_CACHE_VERSION}", fields, compute)
+    return _freeze(BinGrid(**arrays))
 
 
 bin_grid.cache_clear = _bin_grid.cache_clear  # as functools.cache's (tests)
-
-_writers: list[threading.Thread] = []
-
-
-def wait_until_stored() -> None:
-    """Wait for the grid's file that :func:`bin_grid` is writing, if any."""
-    while _writers:
-        _writers.pop().join()
-
-
-def _store(grid: BinGrid, directory: str, path: str) -> None:
-    try:
-        tmp = f"{path}.{os.getpid()}.tmp.npz"
-        os.makedirs(directory, exist_ok=True)
-        np.savez(tmp, **{k: getattr(grid, k) for k in grid.__dataclass_fields__})
-        os.replace(tmp, path)
-        runtime.log.info("brdffit: cached the MERL bin grid in %s", path)
-    except OSError as e:
-        runtime.log.info("brdffit: bin grid not cached (%s)", e)  # costs speed only
+#: Wait for the grid's file (and any other array file) being written (tests).
+wait_until_stored = array_cache.wait_until_stored
 
 
 def _freeze(grid: BinGrid) -> BinGrid:
