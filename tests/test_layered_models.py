@@ -41,22 +41,30 @@ def _above(n, seed=0):
 def test_gltf_clearcoat_is_the_extension_brdf():
     """KHR_materials_clearcoat's coated material, term by term, for coats from off to
     full and from sharp to rough, on dielectric and metal bases."""
-    m = models.get("gltf_clearcoat")
-    wi, wo = _above(5000)
-    for p in (COATED, {**COATED, "metallic": 0.0, "clearcoat": 0.3, "clearcoat_roughness": 1.0},
-              {**COATED, "clearcoat": 1.0, "clearcoat_roughness": 0.0317},
-              {**COATED, "clearcoat": 0.0}):
+    _assert_spec("gltf_clearcoat", (
+        COATED, {**COATED, "metallic": 0.0, "clearcoat": 0.3, "clearcoat_roughness": 1.0},
+        {**COATED, "clearcoat": 1.0, "clearcoat_roughness": 0.0317},
+        {**COATED, "clearcoat": 0.0}), seed=0)
+
+
+def _assert_spec(name: str, param_sets, seed: int) -> None:
+    """``name`` against ``validate.gltf_spec_eval`` (the extensions written in numpy,
+    no code shared) at random pairs above the horizon, to 1e-9."""
+    m = models.get(name)
+    wi, wo = _above(5000, seed)
+    for p in param_sets:
         ours = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
         np.testing.assert_allclose(ours, gltf_spec_eval(p, wi, wo), rtol=1e-9, atol=1e-12)
 
 
-def test_with_the_coat_off_it_is_its_base_exactly():
-    m, base = models.get("gltf_clearcoat"), models.get("gltf_pbr")
-    assert m.parent == "gltf_pbr"
+@pytest.mark.parametrize("name", ["gltf_clearcoat", "gltf_sheen"])
+def test_with_the_layer_off_it_is_its_base_exactly(name):
+    m, base = models.get(name), models.get("gltf_pbr")
+    assert m.parent == "gltf_pbr" and m.layers == (name.removeprefix("gltf_"),)
     wi, wo = _above(2000, seed=1)
-    p = {k: COATED[k] for k in ("base_color", "metallic", "roughness")}
-    coated = m(_jnp(m.embed_parent(p)), jnp.asarray(wi), jnp.asarray(wo))
-    np.testing.assert_array_equal(np.asarray(coated),
+    p = {"base_color": [0.45, 0.08, 0.05], "metallic": 0.7, "roughness": 0.55}
+    layered = m(_jnp(m.embed_parent(p)), jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_array_equal(np.asarray(layered),
                                   np.asarray(base(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))))
 
 
@@ -186,23 +194,10 @@ def test_gltf_sheen_is_the_extension_layering_of_threejs_sheen():
     """KHR_materials_sheen's layering (``f_sheen + material * sheenAlbedoScaling``) of
     three.js's sheen BRDF, against its GLSL transcribed in numpy, for sheens from off to
     full and from sharp to broad, over dielectric and metal bases."""
-    m = models.get("gltf_sheen")
-    wi, wo = _above(5000, seed=5)
-    for p in (SHEENED, {**SHEENED, "metallic": 1.0, "sheen_roughness": 1.0},
-              {**SHEENED, "sheen_color": [1.0, 1.0, 1.0], "sheen_roughness": 0.1},
-              {**SHEENED, "sheen_color": [0.0, 0.0, 0.0]}):
-        ours = np.asarray(m(_jnp(p), jnp.asarray(wi), jnp.asarray(wo)))
-        np.testing.assert_allclose(ours, gltf_spec_eval(p, wi, wo), rtol=1e-9, atol=1e-12)
-
-
-def test_with_the_sheen_off_it_is_its_base_exactly():
-    m, base = models.get("gltf_sheen"), models.get("gltf_pbr")
-    assert m.parent == "gltf_pbr"
-    wi, wo = _above(2000, seed=6)
-    p = {k: SHEENED[k] for k in ("base_color", "metallic", "roughness")}
-    sheened = m(_jnp(m.embed_parent(p)), jnp.asarray(wi), jnp.asarray(wo))
-    np.testing.assert_array_equal(np.asarray(sheened),
-                                  np.asarray(base(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))))
+    _assert_spec("gltf_sheen", (
+        SHEENED, {**SHEENED, "metallic": 1.0, "sheen_roughness": 1.0},
+        {**SHEENED, "sheen_color": [1.0, 1.0, 1.0], "sheen_roughness": 0.1},
+        {**SHEENED, "sheen_color": [0.0, 0.0, 0.0]}), seed=5)
 
 
 def test_the_sheen_is_finite_on_the_closed_hemisphere():

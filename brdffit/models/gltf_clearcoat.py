@@ -34,11 +34,11 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
-import numpy as np
 
-from .base import AbstractBRDFModel, Params, ParamSpec
+from .base import Params, ParamSpec
 from .frame import Frame
-from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS, GltfPBR
+from .gltf_layer import BASE, GltfLayer
+from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
 from .renderer_terms import separable_ggx_dg
 
 CLEARCOAT = ParamSpec("clearcoat", "clearcoatFactor: the clear coat's weight", 0.0, 1.0)
@@ -50,47 +50,25 @@ CLEARCOAT_ROUGHNESS = ParamSpec(
 #: (alpha 0.002 .. 0.04), or it would be one lobe twice.
 COAT_ROUGHNESS_STARTS = (0.045, 0.1, 0.2)
 
-_BASE = GltfPBR()
 
 
-class GltfClearcoat(AbstractBRDFModel):
+class GltfClearcoat(GltfLayer):
     name = "gltf_clearcoat"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, CLEARCOAT, CLEARCOAT_ROUGHNESS)
-    parent = "gltf_pbr"
     layers = ("clearcoat",)
-
-    @property
-    def shape_grid(self) -> tuple[dict[str, float], ...]:
-        return tuple({**shape, "clearcoat": 0.5, "clearcoat_roughness": r}
-                     for shape in _BASE.shape_grid
-                     if shape["roughness"] >= 0.2  # a base broader than the coat
-                     for r in COAT_ROUGHNESS_STARTS)
+    #: a half-weight coat of each roughness
+    layer_starts = tuple({"clearcoat": 0.5, "clearcoat_roughness": r}
+                         for r in COAT_ROUGHNESS_STARTS)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The ``gltf_pbr`` fit with the coat off (clearcoat 0) and sharp, ready to grow."""
         return {**parent_params, "clearcoat": 0.0, "clearcoat_roughness": 0.1}
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = _BASE.eval_channels(params, frame)
+        base = BASE.eval_channels(params, frame)
         cr = params["clearcoat_roughness"]
         coat = separable_ggx_dg(cr * cr, frame.cos_h, frame.sin2_h, frame.cos_i,
                                 frame.sin2_i, frame.cos_o, frame.sin2_o)
         view = jnp.clip(1.0 - jnp.abs(frame.cos_o), 0.0, 1.0)
         weight = params["clearcoat"] * (DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * view**5)
         return (1.0 - weight)[None] * base + (weight * coat)[None]
-
-    def eval_frame(self, params: Params, frame: Frame):
-        return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
-
-    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """``gltf_pbr``'s starts (base colour from the diffuse estimate or the peak's
-        colour) on every base broader than the coat, each with a half-weight coat of each
-        roughness of ``shape_grid``: the base's unconstrained values, then the coat's
-        (this model's parameter order)."""
-        base_starts = _BASE.start_candidates(table, usable, kd)
-        broad = [u for shape, u in zip(_BASE.shape_grid, base_starts, strict=True)
-                 if shape["roughness"] >= 0.2]
-        coats = [np.concatenate([CLEARCOAT.unconstrain(np.array([0.5])),
-                                 CLEARCOAT_ROUGHNESS.unconstrain(np.array([r]))])
-                 for r in COAT_ROUGHNESS_STARTS]
-        return np.stack([np.concatenate([u, coat]) for u in broad for coat in coats])

@@ -39,9 +39,10 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .base import AbstractBRDFModel, Params, ParamSpec
+from .base import Params, ParamSpec
 from .frame import Frame
-from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS, GltfPBR
+from .gltf_layer import BASE, GltfLayer
+from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS
 
 SHEEN_COLOR = ParamSpec("sheen_color", "sheenColorFactor, linear RGB", 0.0, 1.0, rgb=True)
 #: The sheen's least roughness, 0.1 (alpha 0.01): the fibres' lobe then still spans
@@ -60,7 +61,6 @@ SIN2_H_FLOOR = 2.0**-7
 SHEEN_ROUGHNESS_STARTS = (0.3, 0.6, 0.9)
 SHEEN_COLOR_START = 0.3
 
-_BASE = GltfPBR()
 
 
 def charlie_d(alpha, sin2_h):
@@ -96,39 +96,19 @@ def sheen_layer(sheen_color, sheen_roughness, frame: Frame):
     return sheen_color[expand] * lobe[None], scale
 
 
-class GltfSheen(AbstractBRDFModel):
+class GltfSheen(GltfLayer):
     name = "gltf_sheen"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, SHEEN_COLOR, SHEEN_ROUGHNESS)
-    parent = "gltf_pbr"
     layers = ("sheen",)
-
-    @property
-    def shape_grid(self) -> tuple[dict[str, float], ...]:
-        return tuple({**shape, "sheen_color": SHEEN_COLOR_START, "sheen_roughness": r}
-                     for shape in _BASE.shape_grid
-                     if shape["roughness"] >= 0.2  # fabrics: a broad base
-                     for r in SHEEN_ROUGHNESS_STARTS)
+    #: a grey sheen of moderate strength, fibres from sharp to broad
+    layer_starts = tuple({"sheen_color": SHEEN_COLOR_START, "sheen_roughness": r}
+                         for r in SHEEN_ROUGHNESS_STARTS)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The ``gltf_pbr`` fit with the sheen off (black), ready to grow."""
         return {**parent_params, "sheen_color": np.zeros(3), "sheen_roughness": 0.6}
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = _BASE.eval_channels(params, frame)
+        base = BASE.eval_channels(params, frame)
         sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
         return sheen + scale[None] * base
-
-    def eval_frame(self, params: Params, frame: Frame):
-        return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
-
-    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """``gltf_pbr``'s starts on every broad base, each with a grey sheen of each
-        roughness of ``shape_grid``: the base's unconstrained values, then the
-        sheen's (this model's parameter order)."""
-        base_starts = _BASE.start_candidates(table, usable, kd)
-        broad = [u for shape, u in zip(_BASE.shape_grid, base_starts, strict=True)
-                 if shape["roughness"] >= 0.2]
-        sheens = [np.concatenate([SHEEN_COLOR.unconstrain(np.full(3, SHEEN_COLOR_START)),
-                                  SHEEN_ROUGHNESS.unconstrain(np.array([r]))])
-                  for r in SHEEN_ROUGHNESS_STARTS]
-        return np.stack([np.concatenate([u, sheen]) for u in broad for sheen in sheens])
