@@ -65,12 +65,23 @@ SHEEN_NOTE = ("uses KHR_materials_sheen: a viewer without the extension shades t
               "without its sheen; viewers with it may shade the sheen differently (the "
               "extension leaves its BRDF to them; gltf_sheen's is three.js's)")
 
+#: The material extensions a fit's parameters call for, in the order they are written:
+#: (extension, the parameter that calls for it, its object from the parameters (the
+#: factors copied: each model is its extension's definition), the export's note).
+_EXTENSIONS = (
+    (IOR_EXTENSION, "ior", lambda p: {"ior": float(p["ior"])}, IOR_NOTE),
+    (SHEEN_EXTENSION, "sheen_color", lambda p: {
+        "sheenColorFactor": [float(x) for x in p["sheen_color"]],
+        "sheenRoughnessFactor": float(p["sheen_roughness"])}, SHEEN_NOTE),
+    (CLEARCOAT_EXTENSION, "clearcoat", lambda p: {
+        "clearcoatFactor": float(p["clearcoat"]),
+        "clearcoatRoughnessFactor": float(p["clearcoat_roughness"])}, CLEARCOAT_NOTE),
+)
 
-def _extensions(params: dict) -> list[str]:
-    """The material extensions ``params`` need, in the order they are written."""
-    return ([IOR_EXTENSION] if "ior" in params else []) + (
-        [SHEEN_EXTENSION] if "sheen_color" in params else []) + (
-        [CLEARCOAT_EXTENSION] if "clearcoat" in params else [])
+
+def _extensions(params: dict) -> list[tuple]:
+    """The rows of :data:`_EXTENSIONS` that ``params`` call for."""
+    return [row for row in _EXTENSIONS if row[1] in params]
 
 
 def material(params: dict, name: str) -> dict:
@@ -84,17 +95,7 @@ def material(params: dict, name: str) -> dict:
             "roughnessFactor": float(params["roughness"]),
         },
     }
-    extensions = {}
-    if "ior" in params:
-        extensions[IOR_EXTENSION] = {"ior": float(params["ior"])}
-    if "sheen_color" in params:  # gltf_sheen: the sheen's two factors, copied
-        extensions[SHEEN_EXTENSION] = {
-            "sheenColorFactor": [float(x) for x in params["sheen_color"]],
-            "sheenRoughnessFactor": float(params["sheen_roughness"])}
-    if "clearcoat" in params:  # gltf_clearcoat: the coat's two factors, copied
-        extensions[CLEARCOAT_EXTENSION] = {
-            "clearcoatFactor": float(params["clearcoat"]),
-            "clearcoatRoughnessFactor": float(params["clearcoat_roughness"])}
+    extensions = {name: factors(params) for name, _, factors, _ in _extensions(params)}
     if extensions:
         out["extensions"] = extensions
     return out
@@ -118,7 +119,7 @@ SEGMENTS, RINGS = 64, 32
 def document(params: dict, name: str) -> dict:
     """A glTF 2.0 JSON document: the one material on the preview scene (module
     docstring), every buffer embedded as a ``data:`` URI."""
-    used = [LIGHTS_EXTENSION, *_extensions(params)]
+    used = [LIGHTS_EXTENSION, *(name for name, *_ in _extensions(params))]
     blob, accessors, views = _sphere_buffers()
     return {
         "asset": {"version": "2.0", "generator": "brdffit"},
@@ -208,7 +209,5 @@ def write(params: dict, name: str, target_model: str) -> tuple[dict, dict[str, s
     from brdffit import jsonout
 
     doc = document(params, name)
-    notes = [{IOR_EXTENSION: IOR_NOTE, CLEARCOAT_EXTENSION: CLEARCOAT_NOTE,
-              SHEEN_EXTENSION: SHEEN_NOTE}[e]
-             for e in _extensions(params)]
+    notes = [note for *_, note in _extensions(params)]
     return doc, {f"{name}.gltf": jsonout.dumps(doc, indent=1)}, notes

@@ -237,11 +237,8 @@ def sphere_integral(light: np.ndarray) -> SphereIntegral:
 def _sphere_integral(light: tuple[float, ...]) -> SphereIntegral:
     key = repr((light, COLOUR_NODES, CHECK_NODES, N_THETA_H, SHAPE)).encode()
     name = f"sphere-integral-v{_INTEGRAL_VERSION}-{hashlib.sha256(key).hexdigest()[:16]}"
-    arrays = array_cache.load_or_compute(name, ("bins", "weight", "wi", "wo"),
-                                         lambda: _compute_integral(light))
-    for a in arrays.values():
-        a.setflags(write=False)
-    return SphereIntegral(**arrays)
+    return SphereIntegral(**array_cache.load_or_compute(
+        name, ("bins", "weight", "wi", "wo"), lambda: _compute_integral(light)))
 
 
 def _compute_integral(light: tuple[float, ...]) -> dict[str, np.ndarray]:

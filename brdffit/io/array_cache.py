@@ -28,23 +28,29 @@ _writers: list[threading.Thread] = []
 def load_or_compute(name: str, keys: tuple[str, ...],
                     compute: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """The arrays ``keys`` kept as ``<cache>/<name>.npz``, else ``compute()``'s (and
-    kept for the next process)."""
+    kept for the next process); read-only either way, one copy shared by the process."""
     directory = runtime.cache_dir()
     path = os.path.join(directory, f"{name}.npz") if directory else None
     if path and os.path.exists(path):
         try:
             with np.load(path) as z:
                 if set(z.files) == set(keys):
-                    return {k: z[k] for k in keys}
+                    return _frozen({k: z[k] for k in keys})
         except (OSError, ValueError, EOFError, zipfile.BadZipFile):
             pass  # damaged: computed again below, and replaced
-    arrays = compute()
+    arrays = _frozen(compute())
     if path:
         # not a daemon: the interpreter finishes the file before it exits
         writer = threading.Thread(target=_store, args=(arrays, directory, path, name),
                                   name=f"brdffit-store-{name}")
         writer.start()
         _writers.append(writer)
+    return arrays
+
+
+def _frozen(arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    for a in arrays.values():
+        a.setflags(write=False)
     return arrays
 
 

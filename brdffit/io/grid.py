@@ -65,8 +65,8 @@ def _bin_grid() -> BinGrid:
         grid = _compute_grid()
         return {k: getattr(grid, k) for k in fields}
 
-    arrays = array_cache.load_or_compute(f"merl-grid-v{_CACHE_VERSION}", fields, compute)
-    return _freeze(BinGrid(**arrays))
+    return BinGrid(**array_cache.load_or_compute(f"merl-grid-v{_CACHE_VERSION}", fields,
+                                                 compute))
 
 
 bin_grid.cache_clear = _bin_grid.cache_clear  # as functools.cache's (tests)
