@@ -1,47 +1,77 @@
 """What a requested fit will cost, before it is queued: peak memory and run time.
 
-A fit's solver works on ``samples`` bins x 3 channels for each of ``starts``
-starts side by side, with a Jacobian of ``n_params`` columns: its memory and its
-time per step grow with ``samples * starts * n_params``. On top of that a worker
-holds a fixed amount: the process (JAX, the table) and the full-table error pass.
+The figures are fitted to measured jobs (``python -m bench.job_shapes``:
+``bench/results/job_shapes.md``), each a new process on a 2-core x86 machine running
+``brdffit.request.run`` on a real MERL table, as a service worker does: the default
+fit, every bin with one and four starts, ggx2, auto, the render loss, subsamples of
+131,072 and 262,144 bins with several starts, the bounded fit. The estimate is above
+every one of those measurements and within 2x of it: a job it accepts fits in what it
+promised, and it does not refuse jobs the machine can do.
 
-The constants were measured on a 2-core x86 machine with
-``resource.getrusage(RUSAGE_SELF).ru_maxrss`` around ``brdffit.fit`` on a real
-MERL table (gold-metallic-paint), for ggx and ggx2 at 16,384 and 131,072 samples
-and 1 to 8 starts (ggx2 at 131,072 x 8: 2.2 GB peak, 259 s for 109 steps; this
-estimate: 3.9 GB, 808 s at 256 steps), and rounded up: the estimate is meant to be above what a fit
-takes, so that a refusal is never wrong by much and an acceptance is safe.
-Re-measured after the compiled programs were shared across sample counts (a sample
-set is padded up to ``brdffit.fitting.sampling.bucket_size``, so 2,048 samples cost
-what 16,384 do), ggx2 in a bare process with its programs compiled:
-16,384 x 1 start 728 MiB, x 4 810-945 MiB; 65,536 x 1 1,011 MiB, x 4 1,090 MiB; this
-estimate: 952, 1,108, 1,108 and 1,732 MiB. At small sample counts the fixed part
-dominates; at the full table the estimate is about 5x the measured peak. The
-time is an upper bound: every start running all ``max_steps`` steps (a fit
-usually stops well before); refits that ``model="auto"`` may add for an
-unconverged candidate are not counted, nor is a scene's smaller set of bins.
+How a fit spends, and so how the estimate counts:
+
+- **memory** is a worker's process (JAX, the programs, the table and its full-table
+  error pass: ~750 MiB whatever the fit) plus the largest solve's arrays, which grow
+  with its padded sample count and parameters, not with its starts (the starts are
+  solved one after another in one program);
+- **time** is a job's fixed part (reading the table, loading the programs, the
+  report: about a second per job and half a second per model) plus the solves: samples x starts x
+  parameters x steps. A fit stops when the optimality test holds, in 3 to 50 steps
+  on the measured tables, so the estimate counts ``TYPICAL_STEPS`` (or ``max_steps``
+  where fewer), not every start running ``max_steps``: the hard bound on a running job
+  is the server's ``job_time_limit_s``, which stops it.
+- a fit of every bin (``samples`` null) is the default subsample fit, with the starts
+  asked, then one start on every bin that polishes its optimum (``POLISH_STEPS_PER_PARAM``
+  steps per parameter at most); a nested model (ggx2, oren_nayar) fits its parent too.
+
+Not counted: the compilation of a worker whose cache is empty. After ``brdffit warmup``
+(which ``brdffit serve --warmup`` and the image run) there is none; before it a first
+job compiles its programs, ~3 s per model on this machine (the default ggx job took
+4.3 s from an empty cache against 1.6 s, auto 14.8 s against 3.6 s:
+``bench/results/job_shapes_cold.md``). Nor are auto's refits of an unconverged candidate, and
+a scene's smaller set of bins (an overestimate).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from brdffit.fitting.sampling import bucket_size
+from brdffit.fitting.sampling import DEFAULT_SAMPLES, bucket_size
 from brdffit.models import catalogue
 
 MiB = 1024 * 1024
 
-#: A worker's memory besides the solve: process, table, compilation, full-table error
-#: pass and the uncertainty's Jacobian (up to 65,536 bins): a bare ggx2 fit of 16,384
-#: samples x 1 start peaks at 730 MiB, of 65,536 x 1 at 1,011 MiB.
-FIXED_BYTES = 900 * MiB
-#: Peak memory per padded sample x start x (parameter + 1).
-BYTES_PER_UNIT = 256
-#: Seconds per sample x start x parameter x solver step (measured: 1.4e-7 to 1.9e-7
-#: for ggx2, 3e-8 for ggx; the larger, rounded up).
-SECONDS_PER_UNIT_STEP = 2.5e-7
-#: Seconds of compilation and table reading per model fitted.
-SECONDS_PER_MODEL = 3.0
+#: A worker's memory besides the solve's arrays: the process with JAX and the
+#: programs, the table, the full-table error pass, the sphere renders (measured: 733
+#: MiB for the default ggx fit, 745 MiB with compilation).
+FIXED_BYTES = 850 * MiB
+#: Peak memory per padded sample x (parameter + 1) of the largest solve (measured:
+#: every bin of a MERL table, ~1.1M, adds ~210 MiB to a ggx fit, ~200 MiB to ggx2's).
+BYTES_PER_SAMPLE_PARAM = 32
+#: auto holds every candidate's fit and its programs at once (measured: +110 MiB).
+AUTO_BYTES = 150 * MiB
+#: The render loss's sphere targets and tone curve (measured: +50 MiB).
+RENDER_BYTES = 100 * MiB
+
+#: Seconds per job besides its fits: reading the table, loading the programs.
+SECONDS_PER_JOB = 1.5
+#: Seconds per model fitted besides its solve: starts, full-table errors, uncertainty,
+#: sphere renders and verdict (auto counts each candidate's).
+SECONDS_PER_MODEL = 0.5
+#: Seconds per sample x start x parameter x solver step (measured 1.9e-8 for ggx on
+#: 131,072 samples x 8 starts, 2.9e-8 for ggx2 on 262,144 x 4; rounded up).
+SECONDS_PER_UNIT_STEP = 3.3e-8
+#: Steps a start is counted for (``max_steps`` where fewer): fits on the measured
+#: tables stopped in 25 to 47.
+TYPICAL_STEPS = 48
+#: A polish of every bin takes up to ~1.5 steps per parameter (measured: 3 for ggx,
+#: 16 for ggx2), each costing more per sample than a subsample's step.
+POLISH_STEPS_PER_PARAM = 1.5
+SECONDS_PER_POLISH_UNIT_STEP = 4e-8
+#: The render loss costs more per step (its tone curve, its energy term) and per model
+#: (its sphere targets).
+RENDER_STEP_FACTOR = 2.0
+RENDER_MODEL_FACTOR = 1.5
 #: A physically bounded fit (``physical``) adds this many one-start solves to the
 #: unconstrained fit (``len(brdffit.fitting.physical.BARRIERS)``; a test checks it).
 PHYSICAL_SOLVES = 2
@@ -66,25 +96,47 @@ def _n_params() -> dict[str, int]:
     return {d["name"]: d["n_params"] for d in catalogue.describe()}
 
 
+def _with_parents(names) -> list[str]:
+    """The models a fit of ``names`` makes: a nested model fits its parent too (read
+    from the catalogue: the service's front does not import JAX)."""
+    parents = {d["name"]: d.get("parent") for d in catalogue.describe()}
+    out: list[str] = []
+    for name in names:
+        for m in (parents.get(name), name):
+            if m is not None and m not in out:
+                out.append(m)
+    return out
+
+
 def estimate(request, usable_bins: int) -> Estimate:
     """The cost of the fits ``request`` (a ``brdffit.request.FitRequest``) asks for on
     a table with ``usable_bins`` measured bins."""
     n_params = _n_params()
     options = request.options
-    samples = usable_bins if options.samples is None else min(options.samples, usable_bins)
-    starts, steps = options.starts, options.max_steps
-    auto = request.auto
-    fitted = list(request.fitted_models)
-    padded = bucket_size(samples)  # the compiled solve's length, which memory follows
-    memory, seconds = FIXED_BYTES, 0.0
+    polish = options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
+    samples = (min(DEFAULT_SAMPLES, usable_bins) if polish else
+               usable_bins if options.samples is None else min(options.samples, usable_bins))
+    starts, steps = options.starts, min(options.max_steps, TYPICAL_STEPS)
+    render = options.loss == "render"
+    step_factor, model_factor = (RENDER_STEP_FACTOR, RENDER_MODEL_FACTOR) if render else (1, 1)
+    fitted = _with_parents(request.fitted_models)
+    largest_solve = bucket_size(usable_bins if polish else samples)
+    memory = 0
+    seconds = SECONDS_PER_JOB
     for name in fitted:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
-        memory = max(memory, FIXED_BYTES + BYTES_PER_UNIT * padded * starts * (k + 1))
-        seconds += SECONDS_PER_MODEL + SECONDS_PER_UNIT_STEP * samples * starts * k * steps
-        if options.physical:
-            seconds += PHYSICAL_SOLVES * SECONDS_PER_UNIT_STEP * samples * k * steps
-    what = "the auto candidates " + ", ".join(fitted) if auto else ", ".join(fitted)
-    detail = (f"{what} on {samples:,} samples x {starts} start(s), at most {steps} steps "
-              f"each{', and the physically bounded solves' if options.physical else ''} "
-              "(an upper bound: fits usually stop sooner)")
+        memory = max(memory, BYTES_PER_SAMPLE_PARAM * largest_solve * (k + 1))
+        seconds += model_factor * SECONDS_PER_MODEL + step_factor * SECONDS_PER_UNIT_STEP * (
+            samples * k * (starts * steps + (PHYSICAL_SOLVES * steps if options.physical else 0)))
+        if polish:
+            polish_steps = min(options.max_steps, POLISH_STEPS_PER_PARAM * k)
+            seconds += step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps
+    memory += FIXED_BYTES + (AUTO_BYTES if request.auto else 0) + (RENDER_BYTES if render else 0)
+    what = "the auto candidates " + ", ".join(request.fitted_models) if request.auto else (
+        ", ".join(request.fitted_models))
+    how = (f"{samples:,} samples x {starts} start(s), then one start on every bin "
+           f"({usable_bins:,})" if polish else f"{samples:,} samples x {starts} start(s)")
+    detail = (f"{what} on {how}, ~{steps} steps each"
+              f"{', and the physically bounded solves' if options.physical else ''} "
+              "(from measured jobs: bench/results/job_shapes.md)")
     return Estimate(int(memory), seconds, detail)

@@ -617,8 +617,14 @@ def _layer_gains(ok: list[dict]) -> None:
                  else (1.0 if row["log_rmse"] == 0 else None))
         gain = _psnr(row) - _psnr(parent)
         row["over_parent"] = {"model": parent["model"], "log_rmse_ratio": ratio,
-                              "psnr_gain_db": gain if math.isfinite(gain) else None}
+                              "psnr_gain_db": gain if math.isfinite(gain) else None,
+                              "no_gain": ratio is not None and ratio > 1.0 - NO_GAIN}
 
+
+#: A richer candidate whose log_rmse is within this fraction of its base's gained
+#: nothing (``over_parent.no_gain``, printed "nested: no gain"): its lobe or layer
+#: collapsed, or its parent fitted exactly (the fit's ``notes`` then say so).
+NO_GAIN = 1e-3
 
 #: How much worse (dB) than its base a layered candidate may render and still be
 #: chosen: a layer is taken where the rule says it gains and its render agrees.
@@ -752,6 +758,8 @@ def _fit_mono(table, model, rgb_fit: FitResult, scene, tolerance, fit_options):
 
 def _gain_words(gain: dict) -> str:
     ratio, db = gain["log_rmse_ratio"], gain["psnr_gain_db"]
+    if gain.get("no_gain"):
+        return "nested: no gain"
     return (("log_rmse " + ("-" if ratio is None else f"x{ratio:.3g}"))
             + (", PSNR " + ("-" if db is None else f"{db:+.1f} dB")))
 

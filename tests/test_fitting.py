@@ -96,9 +96,19 @@ def test_float32_agrees_with_float64(synth_tables):
 
 @pytest.mark.slow
 def test_all_samples_and_subsample_agree(synth_tables):
-    a = fit(synth_tables["beckmann"], "beckmann", samples=None, starts=1)
+    a = fit(synth_tables["beckmann"], "beckmann", samples=None, starts=2)
     assert a.samples["used"] == a.samples["usable"]
     assert_params_close(a.params, TRUTH["beckmann"], rel=0.02)
+    # the starts asked ran on the subsample fit whose optimum every bin polished
+    assert a.starts == 2 and any("polished, from one start" in n for n in a.notes)
+
+
+def test_starts_say_what_was_refined(synth_tables):
+    r = fit(synth_tables["lambert"], "lambert", starts=32, samples=4096)
+    assert r.starts == 1
+    assert r.notes == ("32 starts asked; lambert has 1 start candidate on these data, and "
+                       "every one was refined",)
+    assert fit(synth_tables["lambert"], "lambert", samples=4096).notes == ()
 
 
 def test_bin_weight_restricts_the_loss(synth_tables):

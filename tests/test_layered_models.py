@@ -312,7 +312,7 @@ def test_a_layer_that_renders_worse_than_its_base_is_not_chosen():
             {"model": "ggx2", "log_rmse": 0.01, "psnr_db": 28.0}]
     _layer_gains(rows)
     assert rows[1]["over_parent"] == {"model": "gltf_pbr", "log_rmse_ratio": 0.75,
-                                      "psnr_gain_db": -5.0}
+                                      "psnr_gain_db": -5.0, "no_gain": False}
     chosen, reason = _layer_that_looks_no_worse(rows[1], "Chose gltf_sheen.", rows)
     assert chosen is rows[0]
     assert "gltf_sheen passes the rule but renders 5.0 dB worse than its base gltf_pbr" \

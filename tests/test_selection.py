@@ -70,6 +70,21 @@ def test_ggx_table_selects_ggx(ggx_selection):
     assert "beckmann +" in ggx_selection.reason  # why the cheaper one lost
 
 
+def test_a_nested_model_over_an_exact_parent_is_not_solved_again(ggx_selection):
+    """ggx fits the noise-free GGX table exactly: ggx2 is ggx's optimum with its second
+    lobe off, its own starts not solved (they spent dozens of steps finding ggx again),
+    and the ranking says it gained nothing."""
+    ggx, ggx2 = ggx_selection.fits["ggx"], ggx_selection.fits["ggx2"]
+    assert ggx2.steps == 0 and ggx2.converged
+    assert any(n.startswith("nested: no gain: ggx fits these data exactly") for n in ggx2.notes)
+    assert max(ggx2.params["ks2"]) < 1e-9
+    assert ggx2.params["alpha1"] == pytest.approx(ggx.params["alpha"], rel=1e-12)
+    assert ggx2.error["log_rmse"] == pytest.approx(ggx.error["log_rmse"], rel=1e-6)
+    row = next(r for r in ggx_selection.ranking if r["model"] == "ggx2")
+    assert row["over_parent"]["no_gain"]
+    assert "ggx2 over ggx nested: no gain" in format_selection(ggx_selection)
+
+
 def test_a_cheaper_model_is_chosen_only_within_tolerance(ggx_table, ggx_selection):
     phong = next(r for r in ggx_selection.ranking if r["model"] == "phong")
     loose = phong["excess"] * 1.5
@@ -100,6 +115,8 @@ def test_two_lobe_table_selects_ggx2():
     ])
     sel = select(table, **FAST)
     assert sel.chosen == "ggx2", format_selection(sel)
+    assert not any("no gain" in n for n in sel.chosen_fit.notes)
+    assert not sel.row["over_parent"]["no_gain"] and sel.row["over_parent"]["log_rmse_ratio"] < 0.1
     p = sel.chosen_fit.params
     assert sorted([p["alpha1"], p["alpha2"]]) == pytest.approx([0.03, 0.3], rel=1e-3)
 

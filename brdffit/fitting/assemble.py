@@ -40,7 +40,8 @@ class Later:
 def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dict,
              prep: Prepared, *, result: str, steps: int, starts: int, sample_loss: float,
              loss: str, solver: str, precision: str, t0: float, uncertainty,
-             refit: Refit | None = None, seed: int = 0, physical: bool = False) -> FitResult:
+             refit: Refit | None = None, seed: int = 0, physical: bool = False,
+             notes=()) -> FitResult:
     """The :class:`FitResult` of ``model`` at ``u`` (unconstrained; ``params`` the same
     point as the model's parameters) fitted to ``source`` prepared as ``prep``.
 
@@ -50,7 +51,7 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     (a ``Future`` or :class:`Later`) or None; ``refit``: the fit's own solve from a
     start on other data, for a sample list's held-out folds (None where the solve
     diverged); ``physical``: a bound is active (the verdict says so); ``t0``: the
-    fit's start (``time.perf_counter``).
+    fit's start (``time.perf_counter``); ``notes``: where the fit did other than asked.
     """
     measured = source.measure(
         model, u, params, prep, None if result == "nonfinite" else refit, seed,
@@ -95,4 +96,5 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
         table=source.source,
         quality=look,
         input=fitted_input,
+        notes=tuple(notes),
     )

@@ -429,7 +429,8 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
         sample_loss=float(sum_squares(jnp.asarray(u, dtype), bounded, prep.data)),
         loss=loss, solver=solver, precision=precision, t0=t0,
         uncertainty=Later(lambda: parameter_uncertainty(bounded, u, prep.data)),
-        physical=bool(active))
+        physical=bool(active), notes=(*free.notes, "the bounded step started from the "
+                                     "free fit's optimum, one start"))
     return dataclasses.replace(
         bounded_fit, time_s=free.time_s + time.perf_counter() - t0,
         physical=report(free, bounded_fit.error, before, after, active, scale))

@@ -139,8 +139,9 @@ def fit(
     again = dict(loss=loss, solver=solver, precision=precision, starts=starts,
                  max_steps=max_steps, seed=seed, bin_weight=bin_weight)
     polish = source.polishes(samples, init, prep)
-    u_candidates = _start_candidates(source, m, prep, init, polish, again)
+    u_candidates, coarse = _start_candidates(source, m, prep, init, polish, again)
     n_starts = min(starts, len(u_candidates))
+    notes = _start_notes(m, starts, len(u_candidates), init, coarse, prep)
     ready_here = source.ready_report(m, u_candidates[0], prep, loss, precision, solver)
     if ready_here is not None and takes_steps_as_data(solver, max_steps):
         # the solve's program depends on the number of starts, not on which: in a new
@@ -155,9 +156,19 @@ def fit(
         parent = _parent_fit(source, table, m, parent_fit, prep, polish, samples, again)
 
     solve = Solve(m, solver, precision, prep.data, max_steps, bucket=len(best_starts))
-    outcome = solve(best_starts)
-    if parent is not None:
-        outcome = _from_the_parent(m, solve, outcome, parent, polish)
+    parent_loss = None if parent is None else solve.loss_at(parent)
+    if parent is not None and parent_loss <= _exact_fit_loss(prep):
+        # The parent fits these data exactly: nothing is left for what this model adds
+        # (a second lobe, a layer), whose own starts would only spend steps (dozens, on
+        # ggx2's collapsing lobe) finding the parent again.
+        outcome = solve(parent[None])
+        notes.append(f"nested: no gain: {m.parent} fits these data exactly (its loss is at "
+                     f"the exact-fit floor); this is {m.parent}'s optimum with what "
+                     f"{m.name} adds switched off, its own starts not solved")
+    else:
+        outcome = solve(best_starts)
+        if parent is not None:
+            outcome = _from_the_parent(m, solve, outcome, parent, parent_loss, polish, notes)
     best = outcome.best()
 
     # The uncertainty needs the solution alone: it runs on another thread while this
@@ -174,9 +185,10 @@ def fit(
         return out.values[0], out.codes[0]
 
     return assemble(source, m, best.u, plain_params(constrained(m, np.asarray(best.u))), prep,
-                    result=best.result, steps=best.steps, starts=len(outcome.starts),
+                    result=best.result, steps=best.steps,
+                    starts=len(outcome.starts) if coarse is None else coarse.starts,
                     sample_loss=best.loss, loss=loss, solver=solver, precision=precision,
-                    t0=t0, uncertainty=pending, refit=refit, seed=seed)
+                    t0=t0, uncertainty=pending, refit=refit, seed=seed, notes=notes)
 
 
 def _check_options(loss, solver, precision, samples, starts, max_steps, physical) -> None:
@@ -222,19 +234,44 @@ def _bound_stage(table, m, parent_fit, *, bin_weight, **options) -> FitResult:
     return bound(table, free, model=m, bin_weight=bin_weight, **options)
 
 
-def _start_candidates(source, m, prep, init, polish: bool, again: dict) -> np.ndarray:
-    """The starts to rank: the caller's ``init`` alone; for a polish (every bin), the
-    default fit's optimum alone; else the data-driven candidates
-    (``brdffit.fitting.starts``)."""
+def _start_candidates(source, m, prep, init, polish: bool, again: dict):
+    """The starts to rank, and the subsample fit they came from where they did: the
+    caller's ``init`` alone; for a polish (every bin), the default fit's optimum
+    alone, and that fit; else the data-driven candidates (``brdffit.fitting.starts``)."""
     if init is not None:
-        return m.unconstrain(m.check_params(init))[None]
+        return m.unconstrain(m.check_params(init))[None], None
     if polish:
         coarse = fit(source.table, m, samples=DEFAULT_SAMPLES, **again)
         # A coordinate deep in its transform's flat tail (a scale at 1e-14) is pulled
         # back to the tail's edge (|u| <= 14, as every start is): the full table may
         # want it back, and from deep in the tail capped steps would only crawl.
-        return np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
-    return start_vectors(m, source.start_table(prep), prep.counts.usable, prep.hints)
+        u = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
+        return u, coarse
+    return start_vectors(m, source.start_table(prep), prep.counts.usable, prep.hints), None
+
+
+def _start_notes(m, starts: int, n_candidates: int, init, coarse, prep) -> list[str]:
+    """What the result's ``starts`` means where it is not simply the starts asked."""
+    if coarse is not None:
+        return [*coarse.notes,
+                f"every bin ({prep.n_usable:,}) polished, from one start, the optimum of the "
+                f"fit on {coarse.samples['used']:,} samples, which refined {coarse.starts} "
+                "start(s): starts counts those"]
+    if init is not None and starts > 1:
+        return [f"init was the only start ({starts} starts asked)"]
+    if starts > n_candidates:
+        return [f"{starts} starts asked; {m.name} has {n_candidates} start "
+                f"candidate{'' if n_candidates == 1 else 's'} on these data, and every one "
+                "was refined"]
+    return []
+
+
+def _exact_fit_loss(prep) -> float:
+    """The loss at or below which a fit of ``prep``'s data is exact (the solver's own
+    floor, ``brdffit.fitting.solver.loss_floor``)."""
+    from brdffit.fitting.solver import loss_floor
+
+    return float(loss_floor(prep.data.target, prep.data.weight))
 
 
 def _ranked_starts(m, u_candidates: np.ndarray, n_starts: int, prep, precision: str):
@@ -260,7 +297,7 @@ def _parent_fit(source, table, m, parent_fit, prep, polish: bool, samples, again
 
 
 def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray,
-                     polish: bool) -> Outcome:
+                     parent_loss: float, polish: bool, notes: list[str]) -> Outcome:
     """A model that contains its parent starts from the parent's optimum too, but
     only where its own starts did not do: they ended without converging, or above
     the parent's loss. Where they converged below it (most tables), a second solve
@@ -271,12 +308,16 @@ def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray
     the softplus tail): a saddle, from which LM crawls for dozens of steps. The first
     retry starts from that point pulled back to where every coordinate moves (|u| <=
     LIVE_U); the exact embedding comes last, so the fit never ends worse than the
-    parent on its samples."""
-    parent_loss = solve.loss_at(parent_start)
+    parent on its samples. Each retry is named in ``notes`` (the result's ``starts``
+    counts them)."""
     if not polish and (not outcome.converged or outcome.lowest_loss() > parent_loss):
+        why = "did not converge" if not outcome.converged else f"ended above {m.parent}'s loss"
         outcome = outcome.plus(solve(np.clip(parent_start, -LIVE_U, LIVE_U)[None]))
+        notes.append(f"its own start(s) {why}: refined from {m.parent}'s optimum too")
     if outcome.lowest_loss() > parent_loss:
         outcome = outcome.plus(solve(parent_start[None]))
+        notes.append(f"{m.parent}'s optimum itself was refined last, so that the fit ends no "
+                     f"worse than {m.parent} on its samples")
     return outcome
 
 

@@ -25,12 +25,15 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: key ``input`` (a fit of samples: what binning them did), which a reader of version
 #: 2 refuses as unknown. 4: a sample list fitted at its own directions: ``error``'s
 #: ``held_out_*``, ``quality.basis``, and ``input``'s ``fitted_at``, ``used``,
-#: ``held_out``, ``coverage``, ``identifiability``, ``spectral``.
-SCHEMA = "brdffit.fit/4"
+#: ``held_out``, ``coverage``, ``identifiability``, ``spectral``. 5: ``notes`` (where the
+#: fit did other than asked), and ``starts`` of a fit of every bin counts the starts of
+#: the subsample fit whose optimum every bin polished (it said 1). Older results read
+#: with no notes.
+SCHEMA = "brdffit.fit/5"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)
@@ -90,6 +93,7 @@ class FitResult:
     physical: dict | None = None
     quality: dict | None = None
     input: dict | None = None
+    notes: tuple[str, ...] = ()
 
     @classmethod
     def described(cls) -> dict[str, str]:
@@ -118,6 +122,8 @@ class FitResult:
         if schema not in READS:
             raise ValueError(f"result schema {schema!r}; this brdffit reads "
                              f"{' and '.join(map(repr, READS))}")
+        if "notes" in d:  # JSON has lists; the result holds a tuple
+            d["notes"] = tuple(d["notes"] or ())
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -166,4 +172,7 @@ FIELD_DOCS = {
                "(good, visible or poor), reason and next (what to try, best first)",
     "input": "on a fit of samples (ASTM, CSV, HDF5): their format, count and what binning "
              "them onto the MERL grid moved, or null for a MERL table",
+    "notes": "where the fit did other than the request says, and why: the starts a fit of "
+             "every bin used, fewer start candidates than starts asked, a nested model "
+             "whose parent left it nothing to add",
 }

@@ -207,6 +207,17 @@ class AbstractBRDFModel(eqx.Module):
             parts.append(spec.unconstrain(v))
         return np.concatenate(parts)
 
+    def unconstrain_rows(self, params: dict) -> np.ndarray:
+        """:meth:`unconstrain` of K parameter sets at once, each value (K,) or (K, size)
+        -> (K, n): the same numbers, without a Python call per start (a grid of 70
+        starts took ~15 ms one by one)."""
+        parts = []
+        for spec in self.param_specs:
+            v = np.asarray(params[spec.name], np.float64)
+            k = v.shape[0]
+            parts.append(spec.unconstrain(np.broadcast_to(v.reshape(k, -1), (k, spec.size))))
+        return np.concatenate(parts, axis=1)
+
     def bound_side(self, u: Float[Array, " n"]) -> Array:
         """Per coordinate of ``u``: -1 / +1 at the lower / upper bound, else 0
         (:meth:`ParamSpec.bound_side`)."""

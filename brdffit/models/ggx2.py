@@ -113,7 +113,7 @@ class GGX2(AbstractBRDFModel):
                                      jnp.asarray(g.wi[sel]), jnp.asarray(g.wo[sel])))
         # Relative residuals: the haze must count as much as the peak.
         w = 1.0 / np.maximum(f_meas.mean(axis=1), 1e-6)
-        starts = []
+        rows = {name: [] for name in ("kd", "ks1", "ks2", "alpha1", "alpha2", "f0")}
         for shape in self.shape_grid:
             j1 = int(np.searchsorted(alphas, shape["alpha1"]))
             j2 = int(np.searchsorted(alphas, shape["alpha2"]))
@@ -125,11 +125,10 @@ class GGX2(AbstractBRDFModel):
             # A negative scale is no start. Floor it where the softplus still has a
             # slope (1e-3, not 1e-6): a lobe started at ~0 takes LM hundreds of steps.
             coef = np.clip(coef, 1e-3, 1e6)
-            starts.append(self.unconstrain({
-                "kd": coef[0] if np.any(coef[0] > 1e-3) else kd,
-                "ks1": coef[1], "ks2": coef[2], **shape,
-            }))
-        return np.stack(starts)
+            for name, v in (("kd", coef[0] if np.any(coef[0] > 1e-3) else kd),
+                            ("ks1", coef[1]), ("ks2", coef[2]), *shape.items()):
+                rows[name].append(v)
+        return self.unconstrain_rows(rows)
 
 
 @jax.custom_jvp

@@ -1,0 +1,63 @@
+"""The service's cost estimate against the jobs measured on this machine.
+
+``bench/results/job_shapes.json`` holds peak memory and wall time of each job shape
+(``python -m bench.job_shapes``); the estimate for the same request must be above the
+measurement and within 2x of it. A change to the estimate's constants, or to how a
+request is counted, that breaks either side fails here; a change to the fits' cost
+needs the benchmark run again.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from api.estimate import estimate
+from brdffit.request import FitRequest
+
+pytestmark = pytest.mark.unit
+
+MEASURED = Path(__file__).resolve().parents[1] / "bench" / "results" / "job_shapes.json"
+
+
+def _rows():
+    res = json.loads(MEASURED.read_text())
+    return res["usable_bins"], res["rows"]
+
+
+def _request(spec: dict) -> FitRequest:
+    spec = dict(spec)
+    return FitRequest.of(spec.pop("model"), **spec)
+
+
+@pytest.mark.parametrize("row", _rows()[1], ids=lambda r: r["shape"])
+def test_the_estimate_is_above_the_measured_job_and_within_2x(row):
+    usable, _ = _rows()
+    cost = estimate(_request(row["request"]), usable)
+    assert row["peak_rss_mib"] <= cost.memory_mib <= 2 * row["peak_rss_mib"], cost.detail
+    assert row["wall_s"] <= cost.seconds <= 2 * row["wall_s"], cost.detail
+
+
+def test_the_measured_shapes_cover_what_the_issue_names():
+    shapes = {r["shape"] for r in _rows()[1]}
+    assert {"default ggx", "every bin, 1 start", "every bin, 4 starts", "ggx2", "auto",
+            "render loss"} <= shapes
+
+
+def test_a_full_table_four_start_ggx_job_is_accepted_under_the_default_limits():
+    from api.services.fits import over_limits
+    from api.settings import Settings
+
+    cost = estimate(FitRequest.of("ggx", samples=None, starts=4), 1_096_216)
+    assert over_limits(cost, Settings()) is None
+    assert "then one start on every bin" in cost.detail
+
+
+def test_starts_and_steps_count_but_max_steps_only_as_a_cap():
+    base = estimate(FitRequest.of("ggx"), 1_000_000)
+    assert estimate(FitRequest.of("ggx", starts=8), 1_000_000).seconds > base.seconds
+    assert estimate(FitRequest.of("ggx", max_steps=10), 1_000_000).seconds < base.seconds
+    assert estimate(FitRequest.of("ggx", max_steps=10_000), 1_000_000).seconds == base.seconds
+    # a nested model fits its parent too; auto holds every candidate
+    assert estimate(FitRequest.of("ggx2"), 1_000_000).seconds > base.seconds
+    assert estimate(FitRequest.of("auto"), 1_000_000).memory_mib > base.memory_mib
