@@ -122,7 +122,10 @@ def serve(conn, parent_pid: int) -> None:
     from the pipe, answer ``("value", v)`` or ``("error", text)``, with
     ``("progress", stage, fraction)`` messages on the way; ``None`` ends it."""
     global _reporter
+    from brdffit import heap
+
     watch_parent(parent_pid)
+    heap.keep_freed_memory()  # while a job runs: its table-sized arrays reuse the heap
     warm_up()
     _reporter = lambda stage, fraction: conn.send(("progress", stage, float(fraction)))  # noqa: E731
     while True:
@@ -137,6 +140,7 @@ def serve(conn, parent_pid: int) -> None:
             answer = ("value", fn(*args))
         except Exception as e:  # tasks return failures as values; this is a bug
             answer = ("error", f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
+        heap.give_memory_back()  # an idle worker does not hold its last job's peak
         try:
             conn.send(answer)
         except (EOFError, OSError):

@@ -33,7 +33,8 @@ FLOORS = (
     (3, ("brdffit.fitting",)),
     (2, ("brdffit.models",)),
     (1, ("brdffit.io", "brdffit.errors", "brdffit.jsonout", "brdffit.runtime",
-         "brdffit.extras", "brdffit.executables", "brdffit.outcome", "brdffit.child_process")),
+         "brdffit.extras", "brdffit.executables", "brdffit.outcome", "brdffit.child_process",
+         "brdffit.heap")),
 )
 
 
