@@ -404,7 +404,9 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         elif budget is not None and row["log_rmse"] <= budget:
             row["status"] = "under budget"
         else:
-            row["status"] = "within tolerance" if row["excess"] <= tolerance_used else "too far"
+            row["status"] = ("looks worse" if rule == "render_psnr_db" and _verdict_rank(row)
+                             > _verdict_rank(chosen) else
+                             "within tolerance" if row["excess"] <= tolerance_used else "too far")
     reason += _all_poor_warning(ok)
 
     for row in ok:
@@ -571,19 +573,50 @@ def _psnr(row: dict) -> float:
     return p if isinstance(p, int | float) and math.isfinite(p) else -math.inf
 
 
+#: The verdicts (``brdffit.fitting.quality``), best first; a row without one (a fit
+#: whose look could not be judged) ranks with "poor".
+VERDICT_ORDER = ("good", "visible", "poor")
+
+
+#: How much worse (dB) than the best-looking candidate one with a better verdict may
+#: render and still be preferred: 3 dB, twice the squared error. Beyond it the PSNR
+#: gap is itself a visible difference, and the worse verdict (a brightness or colour
+#: threshold crossed) no longer outweighs it.
+VERDICT_WINDOW_DB = 3.0
+
+
+def _verdict_rank(row: dict) -> int:
+    v = row.get("verdict")
+    return VERDICT_ORDER.index(v) if v in VERDICT_ORDER else len(VERDICT_ORDER) - 1
+
+
 def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
                    ) -> tuple[dict, str]:
-    """The render rule: the cheapest of the fitted rows ``ok`` (cheapest first) whose
-    ``psnr_db`` is within ``tolerance_db`` of the best; among candidates as large, the
-    better-looking. Sets each row's ``excess`` (dB below the best) and ``rank`` (by
-    PSNR). Returns the row and the reason, in words."""
+    """The render rule: among the fitted rows ``ok`` (cheapest first) that render within
+    :data:`VERDICT_WINDOW_DB` of the best-looking, those with the best verdict any of
+    them has; of those, the cheapest whose ``psnr_db`` is within ``tolerance_db`` of the
+    best of them; among candidates as large, the better-looking. The verdict
+    comes first because it is what the chosen fit will say of itself: a higher PSNR
+    with a brightness or colour shift the verdict calls poor is not the better look
+    (five metals chose Mitsuba's dielectric principled, poor, over a visible fit).
+    Sets each row's ``excess`` (dB below the best-looking of them all) and ``rank``
+    (by PSNR). Returns the row and the reason, in words."""
     best_row = max(ok, key=_psnr)
     top = _psnr(best_row)
     for row in ok:
         row["excess"] = top - _psnr(row) if math.isfinite(top) else 0.0
     for i, row in enumerate(sorted(ok, key=lambda row: -_psnr(row))):
         row["rank"] = i + 1
-    within = [row for row in ok if row["excess"] <= tolerance_db]
+    # the verdicts of the candidates that render within VERDICT_WINDOW_DB of the best
+    window = [row for row in ok if not math.isfinite(top) or _psnr(row) >= top - VERDICT_WINDOW_DB]
+    best_verdict = min(_verdict_rank(row) for row in window)
+    judged = [row for row in window if _verdict_rank(row) == best_verdict]
+    if len(judged) < len(ok) and _verdict_rank(best_row) > best_verdict:
+        passed_over = best_row
+        best_row = max(judged, key=_psnr)
+    else:
+        passed_over = None
+    within = [row for row in judged if _psnr(best_row) - _psnr(row) <= tolerance_db]
     first = within[0]
     same = [row for row in within if row.get("n_params") == first.get("n_params")]
     c = max(same, key=_psnr)
@@ -596,7 +629,12 @@ def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
                f"cheapest candidate within {tolerance_db:g} dB of the best-looking "
                f"({best_row['model']}, {_psnr(best_row):.1f} dB): it renders at "
                f"{_psnr(c):.1f} dB")
-    cheaper = [row for row in ok[: ok.index(c)] if row not in within]
+    if passed_over is not None:
+        why += (f", among the candidates that look {VERDICT_ORDER[best_verdict]}: "
+                f"{passed_over['model']} renders closer ({_psnr(passed_over):.1f} dB) but "
+                f"looks {passed_over.get('verdict') or 'unjudged'} (its brightness or "
+                "colour is further off, quality.reason)")
+    cheaper = [row for row in ok[: ok.index(c)] if row not in within and row in judged]
     if cheaper:
         why += "; cheaper ones look further off (" + ", ".join(
             f"{r['model']} {_psnr(r):.1f} dB" for r in cheaper) + ")"

@@ -450,6 +450,31 @@ def test_the_render_rule_ranks_by_the_picture():
     assert "within 0.5 dB of the best-looking (beckmann, 27.4 dB)" in reason
 
 
+def test_the_render_rule_takes_the_best_verdict_first():
+    """A candidate that renders closer but reads worse is passed over (real metals:
+    Mitsuba's dielectric principled, poor, rendered above a visible rough_conductor)."""
+    from brdffit.selection import choose_by_look
+
+    rows = _rows(("ggx", 8, 0.03, 24.0, "visible"), ("rough_conductor", 8, 0.03, 24.3, "visible"),
+                 ("principled", 10, 0.02, 26.0, "poor"))
+    chosen, reason = choose_by_look(rows)
+    assert chosen["model"] == "rough_conductor"  # the better-looking of the as-large
+    assert "among the candidates that look visible" in reason
+    assert "principled renders closer (26.0 dB) but looks poor" in reason
+    assert rows[2]["rank"] == 1  # the ranking still says which renders closest
+    # all alike: the PSNR rule as before, nothing passed over
+    alike = _rows(("ggx", 8, 0.03, 24.0, "poor"), ("principled", 10, 0.02, 26.0, "poor"))
+    chosen, reason = choose_by_look(alike)
+    assert chosen["model"] == "principled" and "passed" not in reason and "among" not in reason
+    # a better verdict with a lower PSNR wins over a cheaper worse one within 0.5 dB
+    rows = _rows(("phong", 7, 0.03, 27.9, "visible"), ("ggx", 8, 0.03, 28.2, "good"))
+    assert choose_by_look(rows)[0]["model"] == "ggx"
+    # more than 3 dB (VERDICT_WINDOW_DB) below: the PSNR gap is the visible difference
+    rows = _rows(("phong", 7, 0.03, 23.6, "visible"), ("ggx", 8, 0.03, 28.1, "poor"))
+    chosen, reason = choose_by_look(rows)
+    assert chosen["model"] == "ggx" and "among" not in reason
+
+
 def test_auto_with_the_render_loss_says_which_rule_it_used(ggx_table):
     sel = select(ggx_table, ("lambert", "ggx"), loss="render", **FAST)
     assert sel.rule == "render_psnr_db" and "sphere render" in sel.reason
