@@ -106,8 +106,9 @@ class FitResult:
         return self.error["log_rmse"]
 
     def to_dict(self) -> dict:
-        """The result schema: ``{"schema": SCHEMA, ...every field}``."""
-        return {"schema": SCHEMA, **asdict(self)}
+        """The result schema: ``{"schema": SCHEMA, ...every field}`` (``notes`` a list,
+        as JSON and a results file give it back)."""
+        return {"schema": SCHEMA, **asdict(self), "notes": list(self.notes)}
 
     def to_json(self, **kw) -> str:
         """Strict JSON (``brdffit.jsonout``): a metric that is NaN or inf here is null."""
