@@ -109,6 +109,9 @@ def test_starts_say_what_was_refined(synth_tables):
     assert r.notes == ("32 starts asked; lambert has 1 start candidate on these data, and "
                        "every one was refined",)
     assert fit(synth_tables["lambert"], "lambert", samples=4096).notes == ()
+    from brdffit.cli.fit import format_result
+
+    assert format_result(r).endswith("\n  note: " + r.notes[0])  # what brdffit fit prints
 
 
 def test_bin_weight_restricts_the_loss(synth_tables):

@@ -169,6 +169,7 @@ def format_result(r: FitResult) -> str:
             f"  bins: {s['used']:,} fitted of {s['usable']:,} usable; dropped "
             f"{d['unmeasured']:,} unmeasured, {d['nonfinite']:,} non-finite, "
             f"{d['below_horizon']:,} below the horizon")
+    lines += [f"  note: {n}" for n in r.notes]  # where the fit did other than asked
     return "\n".join(lines)
 
 
