@@ -92,14 +92,9 @@ class Estimate:
                 "detail": self.detail}
 
 
-def _n_params() -> dict[str, int]:
-    return {d["name"]: d["n_params"] for d in catalogue.describe()}
-
-
-def _with_parents(names) -> list[str]:
-    """The models a fit of ``names`` makes: a nested model fits its parent too (read
-    from the catalogue: the service's front does not import JAX)."""
-    parents = {d["name"]: d.get("parent") for d in catalogue.describe()}
+def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
+    """The models a fit of ``names`` makes: a nested model fits its parent too (from
+    the catalogue: the service's front does not import JAX)."""
     out: list[str] = []
     for name in names:
         for m in (parents.get(name), name):
@@ -111,7 +106,8 @@ def _with_parents(names) -> list[str]:
 def estimate(request, usable_bins: int) -> Estimate:
     """The cost of the fits ``request`` (a ``brdffit.request.FitRequest``) asks for on
     a table with ``usable_bins`` measured bins."""
-    n_params = _n_params()
+    described = catalogue.describe()
+    n_params = {d["name"]: d["n_params"] for d in described}
     options = request.options
     polish = options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
     samples = (min(DEFAULT_SAMPLES, usable_bins) if polish else
@@ -119,7 +115,7 @@ def estimate(request, usable_bins: int) -> Estimate:
     starts, steps = options.starts, min(options.max_steps, TYPICAL_STEPS)
     render = options.loss == "render"
     step_factor, model_factor = (RENDER_STEP_FACTOR, RENDER_MODEL_FACTOR) if render else (1, 1)
-    fitted = _with_parents(request.fitted_models)
+    fitted = _with_parents(request.fitted_models, {d["name"]: d.get("parent") for d in described})
     largest_solve = bucket_size(usable_bins if polish else samples)
     memory = 0
     seconds = SECONDS_PER_JOB

@@ -42,9 +42,11 @@ def _libc():
     return libc
 
 
+@functools.cache
 def keep_freed_memory() -> bool:
     """Serve large blocks from the heap and keep what is freed, in this process; True
-    where that took effect (glibc)."""
+    where that took effect (glibc). Once per process: later calls return the first's
+    answer."""
     libc = _libc()
     if libc is None:
         return False

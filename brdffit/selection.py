@@ -611,7 +611,7 @@ def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
     window = [row for row in ok if not math.isfinite(top) or _psnr(row) >= top - VERDICT_WINDOW_DB]
     best_verdict = min(_verdict_rank(row) for row in window)
     judged = [row for row in window if _verdict_rank(row) == best_verdict]
-    if len(judged) < len(ok) and _verdict_rank(best_row) > best_verdict:
+    if _verdict_rank(best_row) > best_verdict:  # the best-looking reads worse
         passed_over = best_row
         best_row = max(judged, key=_psnr)
     else:

@@ -13,7 +13,6 @@ compiles each (model, options) once and reuses it for every later table.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import os
 import socket
@@ -23,7 +22,7 @@ from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
-from brdffit import __version__
+from brdffit import __version__, heap
 from brdffit.errors import BrdffitError, MerlFormatError
 from brdffit.fitting.options import FitOptions  # a batch's options are the library's, key() and all
 
@@ -184,18 +183,11 @@ def fit_table(path: str, request: dict, item: list[str], expected_sha256: str | 
 
     Returns ``{"table": TableReadRecord dict, "fits": [FitRecord dict, ...]}``.
     """
-    _keep_freed_memory_once()
+    # A batch worker (local or on any Dask cluster) keeps the table-sized blocks its fits
+    # free: unmapped and faulted in again on every pass, they cost 51 tables x 6 models
+    # on 2 workers ~40% of their time in the kernel (brdffit.heap; once per process).
+    heap.keep_freed_memory()
     return fit_read_table(recent_table(path), request, item, expected_sha256, done_models)
-
-
-@functools.cache
-def _keep_freed_memory_once() -> bool:
-    """A batch worker (local or on any Dask cluster) keeps the table-sized blocks its
-    fits free (:mod:`brdffit.heap`): unmapped and faulted in again on every pass, they
-    cost 51 tables x 6 models on 2 workers ~40% of their time in the kernel."""
-    from brdffit import heap
-
-    return heap.keep_freed_memory()
 
 
 #: Tables this worker process read last: path -> (the file's identity when read, what

@@ -62,6 +62,7 @@ from brdffit.fitting.problem import (
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.fitting.solve import Outcome, Solve
+from brdffit.fitting.solver import loss_floor
 from brdffit.fitting.starts import candidates as start_vectors
 from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io.angles import N_BINS
@@ -269,8 +270,6 @@ def _start_notes(m, starts: int, n_candidates: int, init, coarse, prep) -> list[
 def _exact_fit_loss(prep) -> float:
     """The loss at or below which a fit of ``prep``'s data is exact (the solver's own
     floor, ``brdffit.fitting.solver.loss_floor``)."""
-    from brdffit.fitting.solver import loss_floor
-
     return float(loss_floor(prep.data.target, prep.data.weight))
 
 
