@@ -108,6 +108,7 @@ def estimate(request, usable_bins: int) -> Estimate:
     a table with ``usable_bins`` measured bins."""
     described = catalogue.describe()
     n_params = {d["name"]: d["n_params"] for d in described}
+    least_starts = {d["name"]: d.get("least_starts", 1) for d in described}
     options = request.options
     polish = options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
     samples = (min(DEFAULT_SAMPLES, usable_bins) if polish else
@@ -122,8 +123,10 @@ def estimate(request, usable_bins: int) -> Estimate:
     for name in fitted:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
         memory = max(memory, BYTES_PER_SAMPLE_PARAM * largest_solve * (k + 1))
+        solves = max(starts, least_starts.get(name, 1)) + (
+            PHYSICAL_SOLVES if options.physical else 0)
         seconds += model_factor * SECONDS_PER_MODEL + step_factor * SECONDS_PER_UNIT_STEP * (
-            samples * k * (starts * steps + (PHYSICAL_SOLVES * steps if options.physical else 0)))
+            samples * k * solves * steps)
         if polish:
             polish_steps = min(options.max_steps, POLISH_STEPS_PER_PARAM * k)
             seconds += step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps

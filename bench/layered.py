@@ -7,7 +7,8 @@ For each real material of the half (``bench.render_loss.half``: sorted names, ev
 positions design, odd ones check), each layered model is fitted from its base's fit
 (``parent_fit``) beside that base, with the default options: ``gltf_clearcoat`` over
 ``gltf_pbr`` (glTF with ``KHR_materials_clearcoat``), ``gltf_sheen`` over ``gltf_pbr``
-(``KHR_materials_sheen``) and ``principled_clearcoat`` over ``principled`` (Mitsuba's
+(``KHR_materials_sheen``), ``gltf_iridescence`` over ``gltf_pbr`` (a thin film,
+``KHR_materials_iridescence``) and ``principled_clearcoat`` over ``principled`` (Mitsuba's
 principled with its clearcoat); ``--layered`` picks some of them. Reported per pair: the
 log_rmse ratio layered / base (never above 1.001 by construction), the sphere PSNR gain
 (dB), the verdicts, how many ``poor`` became better, and the warm fit times. Writes
@@ -30,10 +31,10 @@ from bench.render_loss import half
 HERE = os.path.dirname(os.path.abspath(__file__))
 #: layered model -> its base
 PAIRS = {"gltf_clearcoat": "gltf_pbr", "gltf_sheen": "gltf_pbr",
-         "principled_clearcoat": "principled"}
+         "gltf_iridescence": "gltf_pbr", "principled_clearcoat": "principled"}
 #: layered model -> the prefix of its layer's parameters (reported per material)
 LAYER_PREFIX = {"gltf_clearcoat": "clearcoat", "gltf_sheen": "sheen",
-                "principled_clearcoat": "clearcoat"}
+                "gltf_iridescence": "iridescence", "principled_clearcoat": "clearcoat"}
 
 
 def run(names: list[str], loss: str, pairs: dict[str, str]) -> list[dict]:
@@ -61,6 +62,9 @@ def run(names: list[str], loss: str, pairs: dict[str, str]) -> list[dict]:
                             "psnr_db": coat.error["psnr_db"],
                             "verdict": coat.quality["verdict"], "time_s": coat_s,
                             "result": coat.result,
+                            # whether the data determine the layer (the uncertainty's)
+                            "layer": ((coat.uncertainty or {}).get("layers") or {}).get(
+                                LAYER_PREFIX[layered], {}).get("status"),
                             "coat": {k: (float(v) if np.ndim(v) == 0
                                          else [float(x) for x in v])
                                      for k, v in coat.params.items()
@@ -81,8 +85,9 @@ def report(rows: list[dict], which: str, loss: str, pairs: dict[str, str]) -> st
              f"{picked}`. "
              "Each layered fit starts from its base's fit (``parent_fit``), default options.",
              "", "| layered over base | log_rmse ratio, median (max) | PSNR gain median (min) "
-             "| poor base -> not poor | not poor -> poor | median warm fit ms base / layered |",
-             "|---|---|---|---|---|---|"]
+             "| poor base -> not poor | not poor -> poor | median warm fit ms base / layered "
+             "| layer identified / unresolved / absent |",
+             "|---|---|---|---|---|---|---|"]
     for layered, base in pairs.items():
         fits = [r[layered] for r in rows]
         ratio = [p["layered"]["log_rmse"] / p["base"]["log_rmse"] for p in fits]
@@ -94,10 +99,12 @@ def report(rows: list[dict], which: str, loss: str, pairs: dict[str, str]) -> st
         poor = sum(p["base"]["verdict"] == "poor" for p in fits)
         ms = (1000 * statistics.median(p["base"]["time_s"] for p in fits),
               1000 * statistics.median(p["layered"]["time_s"] for p in fits))
+        seen = [p["layered"].get("layer") for p in fits]
         lines.append(f"| {layered} over {base} | {statistics.median(ratio):.4f} "
                      f"({max(ratio):.4f}) | {statistics.median(gain):+.2f} dB "
                      f"({min(gain):+.2f}) | {fixed} of {poor} | {broke} | "
-                     f"{ms[0]:.0f} / {ms[1]:.0f} |")
+                     f"{ms[0]:.0f} / {ms[1]:.0f} | {seen.count('identified')} / "
+                     f"{seen.count('unresolved')} / {seen.count('absent')} |")
     lines += ["", "| material | " + " | ".join(
         f"{m}: base -> layered (dB), layer" for m in pairs) + " |",
         "|---|" + "---|" * len(pairs)]

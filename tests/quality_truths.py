@@ -147,6 +147,12 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],
                            "sheen_roughness": 0.2}),
     ],
+    # a film over a grey metal (a soap-bubble hue): one set, as its fit costs 4 starts
+    # (tests/test_layered_models.py recovers a faint film over a dark base)
+    "gltf_iridescence": [
+        ("example", {**GLTF[0][1], "base_color": [0.5, 0.5, 0.5], "metallic": 1.0,
+                     "iridescence": 1.0, "iridescence_ior": 1.5, "iridescence_thickness": 400.0}),
+    ],
     "principled_clearcoat": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5, "clearcoat": 0.8,

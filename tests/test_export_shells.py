@@ -88,7 +88,7 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
         ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
          "gltf carries gltf_pbr, gltf_pbr_ior, gltf_threejs, gltf_blender, gltf_clearcoat, "
-         "gltf_sheen, not 'ggx'"),
+         "gltf_sheen, gltf_iridescence, not 'ggx'"),
         ([str(fit_json), "--to", "mitsuba", "--viewer", "threejs"],
          "viewer 'threejs': the glTF export is made for spec, threejs"),
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],

@@ -60,12 +60,14 @@ VARIANTS = ("beckmann_dielectric", "ggx_dielectric", "gltf_pbr_ior", "gltf_three
 
 @pytest.mark.parametrize(("model", "label", "params"), [
     # rough_plastic's fits evaluate its interface's quadratures at every step: ~3-8 s
-    # each; standard_surface's (the conductor) 5-9 s: the full suite runs them, the
-    # quick tier keeps each model's other truths (a layered model's example only)
+    # each; standard_surface's (the conductor) 5-9 s; gltf_iridescence's (4 starts)
+    # ~15 s: the full suite runs them, the quick tier keeps each model's other truths
+    # (a layered model's example only)
     pytest.param(name, label, params,
-                 marks=[pytest.mark.slow] if name == "rough_plastic" or (
+                 marks=[pytest.mark.slow] if name in ("rough_plastic", "gltf_iridescence") or (
                      name.startswith("standard_surface") and label in ("example", "dark"))
-                 or (name.endswith(("_clearcoat", "_sheen")) and label != "example")
+                 or (name.endswith(("_clearcoat", "_sheen", "_iridescence"))
+                     and label != "example")
                  else [])
     for name, sets in QUALITY_TRUTHS.items() for label, params in sets
     if name not in VARIANTS or label in ("example", "near-mirror")])

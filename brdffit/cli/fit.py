@@ -140,6 +140,8 @@ def format_result(r: FitResult) -> str:
         lines.append(f"    {entry}: {why}")
     for entry, others in u.get("strongly_correlated", {}).items():
         lines.append(f"    {entry} correlates (|r| > 0.95) with {', '.join(others)}")
+    for layer, seen in (u.get("layers") or {}).items():
+        lines.append(f"  layer {layer}: {seen['status']} ({seen['why']})")
     e = r.error
     on_samples = (r.input or {}).get("fitted_at") == "samples"
     whole = "every sample" if on_samples else "full table"

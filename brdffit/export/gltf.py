@@ -11,11 +11,14 @@ A ``gltf_clearcoat`` fit also writes ``KHR_materials_clearcoat`` (``clearcoatFac
 ``clearcoatRoughnessFactor``: the model is the extension's definition, so the mapping is
 a copy too), and a ``gltf_sheen`` fit ``KHR_materials_sheen`` (``sheenColorFactor``,
 ``sheenRoughnessFactor``, copied; the sheen's BRDF is three.js's, the extension leaving
-it to the viewer). A ``gltf_pbr_ior`` fit also writes the extension ``KHR_materials_ior``
-(``{"ior": ior}``, listed in ``extensionsUsed``), which carries the dielectric's
-reflectance ``((ior - 1)/(ior + 1))^2``; a ``gltf_pbr`` fit is the spec's default
-(ior 1.5, f0 = 0.04, white specular), which ``KHR_materials_ior`` and
-``KHR_materials_specular`` would only restate, so neither is written. Other fits are
+it to the viewer), and a ``gltf_iridescence`` fit ``KHR_materials_iridescence``
+(``iridescenceFactor``, ``iridescenceIor``, and the thickness as both
+``iridescenceThicknessMinimum`` and ``Maximum``, copied). A ``gltf_pbr_ior`` fit also
+writes the extension ``KHR_materials_ior`` (``{"ior": ior}``, listed in
+``extensionsUsed``), which carries the dielectric's reflectance
+``((ior - 1)/(ior + 1))^2``; a ``gltf_pbr`` fit is the spec's default (ior 1.5, f0 =
+0.04, white specular), which ``KHR_materials_ior`` and ``KHR_materials_specular``
+would only restate, so neither is written. Other fits are
 converted to the core ``gltf_pbr`` (every viewer shades it), their loss reported.
 
 The document is a file a viewer opens and shows: the material (still ``materials[0]``,
@@ -41,7 +44,7 @@ import numpy as np
 #: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",
-                 "gltf_sheen")
+                 "gltf_sheen", "gltf_iridescence")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -64,6 +67,12 @@ SHEEN_EXTENSION = "KHR_materials_sheen"
 SHEEN_NOTE = ("uses KHR_materials_sheen: a viewer without the extension shades the base "
               "without its sheen; viewers with it may shade the sheen differently (the "
               "extension leaves its BRDF to them; gltf_sheen's is three.js's)")
+IRIDESCENCE_EXTENSION = "KHR_materials_iridescence"
+IRIDESCENCE_NOTE = ("uses KHR_materials_iridescence: a viewer without the extension shades the "
+                    "base without its thin film; three.js (and Khronos's sample viewer) "
+                    "evaluate the film at the view's angle to the normal, the extension's "
+                    "model (gltf_iridescence) at the view's to the half vector: their hue "
+                    "turns with the view alone")
 
 #: The material extensions a fit's parameters call for, in the order they are written:
 #: (extension, the parameter that calls for it, its object from the parameters (the
@@ -73,6 +82,13 @@ _EXTENSIONS = (
     (SHEEN_EXTENSION, "sheen_color", lambda p: {
         "sheenColorFactor": [float(x) for x in p["sheen_color"]],
         "sheenRoughnessFactor": float(p["sheen_roughness"])}, SHEEN_NOTE),
+    # no thickness texture: the film is iridescenceThicknessMaximum thick everywhere;
+    # the minimum is written equal, so that a texture added later keeps the thickness
+    (IRIDESCENCE_EXTENSION, "iridescence", lambda p: {
+        "iridescenceFactor": float(p["iridescence"]),
+        "iridescenceIor": float(p["iridescence_ior"]),
+        "iridescenceThicknessMinimum": float(p["iridescence_thickness"]),
+        "iridescenceThicknessMaximum": float(p["iridescence_thickness"])}, IRIDESCENCE_NOTE),
     (CLEARCOAT_EXTENSION, "clearcoat", lambda p: {
         "clearcoatFactor": float(p["clearcoat"]),
         "clearcoatRoughnessFactor": float(p["clearcoat_roughness"])}, CLEARCOAT_NOTE),
@@ -86,7 +102,7 @@ def _extensions(params: dict) -> list[tuple]:
 
 def material(params: dict, name: str) -> dict:
     """The glTF material object of ``gltf_pbr`` (``gltf_pbr_ior``, ``gltf_clearcoat``,
-    ``gltf_sheen``) parameters."""
+    ``gltf_sheen``, ``gltf_iridescence``) parameters."""
     out = {
         "name": name,
         "pbrMetallicRoughness": {

@@ -169,8 +169,10 @@ def materialx_validate(text: str) -> tuple[bool, str]:
 def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = False):
     """f_r (n, 3) of a glTF material (``base_color``, ``metallic``, ``roughness``,
     optionally KHR_materials_ior's ``ior``, KHR_materials_sheen's ``sheen_color`` and
-    ``sheen_roughness`` (:func:`_sheen_over`) and KHR_materials_clearcoat's ``clearcoat``
-    and ``clearcoat_roughness``) at direction pairs ``wi``, ``wo`` (n, 3)
+    ``sheen_roughness`` (:func:`_sheen_over`), KHR_materials_iridescence's
+    ``iridescence``, ``iridescence_ior`` and ``iridescence_thickness``
+    (:func:`_iridescent`) and KHR_materials_clearcoat's ``clearcoat`` and
+    ``clearcoat_roughness``) at direction pairs ``wi``, ``wo`` (n, 3)
     strictly above the horizon: glTF 2.0 Appendix B, term by term as the spec writes it
     (its V = G / (4 N.L N.V), G1(X) = 2 N.X / (N.X + sqrt(a^2 + (1 - a^2) (N.X)^2))): its
     definition, ``mix(dielectric_brdf, metal_brdf, metallic)`` with
@@ -203,6 +205,9 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
         fr = schlick(dielectric_f0)
         dielectric_brdf = diffuse_brdf * (1 - fr) + specular_brdf * fr  # mix(base, layer, fr)
         metal_brdf = specular_brdf * schlick(base)
+        if p.get("iridescence"):
+            dielectric_brdf, metal_brdf = _iridescent(p, dielectric_brdf, metal_brdf,
+                                                      diffuse_brdf, specular_brdf, vh)
         material = dielectric_brdf * (1 - m) + metal_brdf * m
     if "sheen_color" in p:
         material = _sheen_over(material, p, nl, nv, nh)
@@ -222,6 +227,81 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
     clearcoat_fresnel = 0.04 + (1 - 0.04) * (1 - np.abs(nv)) ** 5
     weight = p["clearcoat"] * clearcoat_fresnel
     return material * (1 - weight) + clearcoat_brdf * weight
+
+
+def _iridescent(p: dict, dielectric_brdf, metal_brdf, diffuse_brdf, specular_brdf, vh):
+    """KHR_materials_iridescence's two BRDFs ("Implementation Notes"):
+    ``iridescent_conductor_layer`` and ``iridescent_dielectric_layer`` (base ior 1.5),
+    the film's Fresnel at the angle ``vh`` the core's Fresnel reads."""
+    strength = p["iridescence"]
+    film_ior, thickness = p["iridescence_ior"], p["iridescence_thickness"]
+    base_f0 = ((1 - 1.5) / (1 + 1.5)) ** 2
+    iridescent_f = _iridescent_fresnel(1.0, film_ior, np.full((len(vh), 3), base_f0),
+                                       thickness, vh)
+    rgb_alpha_max = iridescent_f.max(axis=-1, keepdims=True)
+    rgb_mix = (1 - rgb_alpha_max) * diffuse_brdf + iridescent_f * specular_brdf
+    dielectric = dielectric_brdf * (1 - strength) + rgb_mix * strength
+    conductor_f = _iridescent_fresnel(
+        1.0, film_ior, np.broadcast_to(np.asarray(p["base_color"], float), (len(vh), 3)),
+        thickness, vh)
+    metal = metal_brdf * (1 - strength) + specular_brdf * conductor_f * strength
+    return dielectric, metal
+
+
+def _iridescent_fresnel(outside_ior, film_ior, base_f0, thickness, cos_theta1):
+    """``iridescent_fresnel`` (n, 3), the extension's GLSL in numpy, line by line; the
+    base's f0 guarded as three.js does where the text's ``+ 0.0001`` overshoots 1."""
+
+    def f_schlick(f0, cos):
+        return f0 + (1 - f0) * (1 - cos) ** 5
+
+    def ior_to_fresnel0(transmitted, incident):
+        return ((transmitted - incident) / (transmitted + incident)) ** 2
+
+    # first interface
+    r0 = ior_to_fresnel0(film_ior, outside_ior)
+    r12 = f_schlick(r0, cos_theta1)  # (n, 1)
+    t121 = 1.0 - r12
+    sin_theta2_sq = (outside_ior / film_ior) ** 2 * (1 - cos_theta1**2)
+    cos_theta2 = np.sqrt(1 - sin_theta2_sq)  # no total internal reflection: film_ior > 1
+    # second interface
+    sqrt_f0 = np.sqrt(np.minimum(base_f0 + 0.0001, 0.9999))
+    base_ior = (1 + sqrt_f0) / (1 - sqrt_f0)
+    r1 = ior_to_fresnel0(base_ior, film_ior)
+    r23 = f_schlick(r1, cos_theta2)
+    phi12 = np.pi if film_ior < outside_ior else 0.0
+    phi21 = np.pi - phi12
+    phi23 = np.where(base_ior < film_ior, np.pi, 0.0)
+    opd = 2 * film_ior * thickness * cos_theta2  # (n, 1)
+    phi = phi21 + phi23
+    # compound terms
+    r123 = np.clip(r12 * r23, 1e-5, 0.9999)
+    sqrt_r123 = np.sqrt(r123)
+    rs = t121**2 * r23 / (1 - r123)
+    intensity = r12 + rs
+    cm = rs - t121
+    for order in (1, 2):
+        cm = cm * sqrt_r123
+        intensity = intensity + cm * 2 * _eval_sensitivity(order * opd, order * phi)
+    return np.maximum(intensity, 0.0)
+
+
+def _eval_sensitivity(opd, shift):
+    """``evalSensitivity``: (n, 3) linear Rec. 709 of optical path differences (n, 1) nm
+    and phase shifts (n, 3), the shift's k-th component applied to X, Y, Z's k-th."""
+    phase = 2 * np.pi * opd * 1.0e-9
+    val = np.array([5.4856e-13, 4.4201e-13, 5.2481e-13])
+    pos = np.array([1.6810e06, 1.7953e06, 2.2084e06])
+    var = np.array([4.3278e09, 9.3046e09, 6.6121e09])
+    xyz = val * np.sqrt(2 * np.pi * var) * np.cos(pos * phase + shift) * np.exp(-phase**2 * var)
+    xyz[:, 0] += (9.7470e-14 * np.sqrt(2 * np.pi * 4.5282e09) * np.cos(2.2399e06 * phase[:, 0]
+                  + shift[:, 0]) * np.exp(-4.5282e09 * phase[:, 0] ** 2))
+    xyz /= 1.0685e-7
+    # GLSL's mat3(...) is column-major: these rows are its columns
+    xyz_to_rec709 = np.array([[3.2404542, -0.9692660, 0.0556434],
+                              [-1.5371385, 1.8760108, -0.2040259],
+                              [-0.4985314, 0.0415560, 1.0572252]]).T
+    return xyz @ xyz_to_rec709.T
 
 
 def _sheen_over(material, p: dict, nl, nv, nh):

@@ -199,25 +199,32 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     scale = _scale(model, theta)
 
     def significant(scale_names) -> bool:
-        # a scale held at a bound above 0 (ks = 1 under the physical bounds) is a lobe
-        # at its limit, not a vanished one: its partners are judged as any others
+        # a scale held at its upper bound (ks = 1 under the physical bounds) is a lobe
+        # at its limit, not a vanished one: its partners are judged as any others; one
+        # held at its lower bound (a coat's weight 4e-6, deep in its sigmoid's tail) is 0
         for j, name in enumerate(names):
             if name.split("[")[0] not in scale_names:
                 continue
-            if at_bound[j] and theta[j] > 0:
+            if at_bound[j] and bound_side[j] > 0 and theta[j] > 0:
                 return True
             if not at_bound[j] and np.isfinite(se[j]) and theta[j] > SIGNIFICANT * se[j]:
                 return True
         return False
 
+    layer_weight = {shape: weight for weight, shapes in model.layer_params.values()
+                    for shape in shapes}
     reasons: list[str | None] = []
     for i in range(p):
         lobe = [x for x in LOBE_SCALE.get(names[i], ()) if x in names_of(model)]
+        weight = layer_weight.get(names[i])
         if at_bound[i]:
             reasons.append(None)
         elif lobe and not significant(lobe):
             reasons.append(f"no lobe: {' and '.join(lobe)} within {SIGNIFICANT:g} standard "
                            "errors of 0 in every channel")
+        elif weight is not None and not significant((weight,)):
+            reasons.append(f"no layer: {weight} within {SIGNIFICANT:g} standard errors of 0"
+                           f"{' in every channel' if _is_rgb(model, weight) else ''}")
         elif no_effect[i]:
             reasons.append("no effect: the residuals do not depend on it")
         elif flat_partners[i]:
@@ -247,6 +254,35 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         "at_bound": _grouped(model, [bool(x) for x in at_bound]),
         "why": {names[i]: reasons[i] for i in range(p) if reasons[i] is not None},
         "strongly_correlated": {names[i]: strong[i] for i in range(p) if strong[i]},
+        "layers": _layers(model, names, reasons, significant),
         "residuals": n,
         "jacobian_every": k,
     }
+
+
+def _is_rgb(model: AbstractBRDFModel, name: str) -> bool:
+    return any(s.rgb for s in model.param_specs if s.name == name)
+
+
+def _layers(model: AbstractBRDFModel, names: list[str], reasons: list[str | None],
+            significant) -> dict:
+    """Each of the model's layers (``model.layer_params``) as the data determine it:
+    ``identified`` (its weight is above 0 by more than its error and every parameter
+    of it is determined), ``absent`` (its weight is within its error of 0: the data show
+    no such layer, and what shapes it means nothing), or ``unresolved`` (the layer is
+    there, but some of its parameters are not pinned down: which, and why)."""
+    out = {}
+    for layer, (weight, shapes) in model.layer_params.items():
+        if not significant((weight,)):
+            out[layer] = {"status": "absent",
+                          "why": f"{weight} within {SIGNIFICANT:g} standard errors of 0: the "
+                                 f"data show no {layer}"}
+            continue
+        own = (weight, *shapes)
+        loose = [(names[i], reasons[i]) for i in range(len(names))
+                 if names[i].split("[")[0] in own and reasons[i] is not None]
+        out[layer] = ({"status": "unresolved",
+                       "why": "; ".join(f"{name}: {why}" for name, why in loose)} if loose else
+                      {"status": "identified",
+                       "why": f"{', '.join(own)} each determined by the data"})
+    return out

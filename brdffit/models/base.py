@@ -123,10 +123,24 @@ class AbstractBRDFModel(eqx.Module):
     #: contains ggx), or None. A fit seeds itself from the parent's optimum
     #: (:meth:`embed_parent`), so it can never end worse than its parent.
     parent: ClassVar[str | None] = None
+    #: Values of what this model adds to its parent (a layer's parameters), each tried
+    #: over the parent's optimum as one more start candidate, scored with the rest
+    #: (brdffit.fitting.pipeline): for a layer whose loss is many-moded in its own
+    #: parameters (a thin film's thickness), where the parent's optimum with the layer
+    #: off is a point from which no gradient finds them. Empty: none.
+    parent_scan: ClassVar[tuple[dict, ...]] = ()
+    #: The fewest starts a fit of this model refines (more where asked), for a model
+    #: whose best-scored start candidate often lies in another mode than the optimum
+    #: (a thin film's); the result's notes say so where it is more than was asked.
+    least_starts: ClassVar[int] = 1
     #: The layers this model has over a single base material, by their kind
     #: (``"clearcoat"``, ``"sheen"``): an export into a model without one of them
     #: says what was lost (``brdffit.export``).
     layers: ClassVar[tuple[str, ...]] = ()
+    #: Each of ``layers`` as (its weight, the parameters that shape it): a layer whose
+    #: weight the data cannot tell from 0 is absent, and its shape means nothing
+    #: (``brdffit.fitting.uncertainty``: the identifiability reported per layer).
+    layer_params: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
     #: Whether ``model="auto"`` tries this model by default (``brdffit.selection``): the
     #: docs/models.md models are candidates; a renderer's target model is not (its fit
     #: is what an export makes, not a choice among the measured material's models).

@@ -94,6 +94,12 @@ class Principled(AbstractBRDFModel):
         return ("sheen", "clearcoat") if self.clearcoat else ("sheen",)
 
     @property
+    def layer_params(self) -> dict[str, tuple[str, tuple[str, ...]]]:
+        sheen = {"sheen": ("sheen", ("sheen_tint",))}
+        return {**sheen, "clearcoat": ("clearcoat", ("clearcoat_gloss",))} if self.clearcoat \
+            else sheen
+
+    @property
     def param_specs(self) -> tuple[ParamSpec, ...]:
         coat = (CLEARCOAT, CLEARCOAT_GLOSS) if self.clearcoat else ()
         return (BASE_COLOR, ROUGHNESS, SPECULAR, SHEEN, SHEEN_TINT, *coat)

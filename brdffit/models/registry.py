@@ -17,6 +17,7 @@ from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import GltfClearcoat
+from brdffit.models.gltf_iridescence import GltfIridescence
 from brdffit.models.gltf_pbr import GltfPBR
 from brdffit.models.gltf_sheen import GltfSheen
 from brdffit.models.gltf_threejs import GltfThreejs
@@ -35,8 +36,9 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Beckmann(), Beckmann(fresnel="dielectric"), GGX(), GGX(fresnel="dielectric"),
     # renderer targets: a fit of these is the renderer's material (brdffit.export)
     GltfPBR(), GltfPBR(ior=True), GltfPBR(dielectric=True), GltfThreejs(), GltfBlender(),
-    # layered: a coat or a sheen over the glTF base (KHR_materials_clearcoat, _sheen)
-    GltfClearcoat(), GltfSheen(),
+    # layered: a coat, a sheen or a thin film over the glTF base (KHR_materials_clearcoat,
+    # _sheen, _iridescence)
+    GltfClearcoat(), GltfSheen(), GltfIridescence(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),
