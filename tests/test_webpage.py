@@ -262,6 +262,7 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         page.click("#model-boxes input[value=ggx]")
         assert page.is_checked("#mode-list")
         page.fill("#samples-input", "2048")
+        page.fill("#starts-input", "32")  # more than ggx has: the result's notes say so
         page.select_option("#loss-select", "cube_root")
         page.check("#physical-input")
         page.click("#fit-button")
@@ -271,6 +272,7 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         visit.shot("token-results")
         row = page.locator("#results-table tbody tr[data-model=ggx]").inner_text()
         assert "physically bounded: log_rmse" in row and "against the unconstrained" in row
+        assert "note: 32 starts asked; ggx has 20 start candidates" in row  # its notes
 
         headers = {"Authorization": "Bearer s3cret-token"}
         job = httpx.get(server.url + "/v1/fits", headers=headers).json()["items"][0]

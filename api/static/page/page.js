@@ -159,6 +159,11 @@ function paramsCell(result) {
     });
     cell.append(line);
   }
+  // whether the data determine each layer (hover: why)
+  for (const [layer, seen] of Object.entries(u.layers || {})) {
+    cell.append(el("div", `layer ${layer}: ${seen.status}`,
+      { class: `layer ${seen.status}`, title: seen.why }));
+  }
   return cell;
 }
 
@@ -356,9 +361,12 @@ function showResults(job) {
     row.append(el("td", q.verdict || "—", { class: `verdict ${q.verdict || ""}`,
                                             title: q.reason || "not measured" }));
     row.append(paramsCell(r));
-    row.append(el("td", (r.converged ? `${r.result}, ${r.steps} steps`
+    const solve = el("td", (r.converged ? `${r.result}, ${r.steps} steps`
       : `NOT converged: ${r.result}, ${r.steps} steps`) + physicalNote(r.physical),
-      { class: r.converged ? "" : "warn" }));
+      { class: r.converged ? "" : "warn" });
+    // where the fit did other than asked (more or fewer starts, a nested model's refits)
+    for (const note of r.notes || []) solve.append(el("div", `note: ${note}`, { class: "note" }));
+    row.append(solve);
     row.append(el("td", fmt(r.time_s, 3), { class: "num" }));
     row.addEventListener("click", () => showModel(r.model));
     body.append(row);
