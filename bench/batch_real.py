@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.speed import machine
+from bench.machine import machine
 from brdffit import jsonout
 
 RESULTS = Path(__file__).with_name("results")
@@ -44,6 +44,7 @@ def tables(n: int) -> Path:
 
 
 def one_run(checkout: Path, directory: Path, out: Path) -> dict:
+    # each checkout's batch in brdffit's default cache, as a user's would run
     env = {k: v for k, v in os.environ.items() if k != "BRDFFIT_CACHE_DIR"}
     env["PYTHONPATH"] = str(checkout)
     out.unlink(missing_ok=True)

@@ -30,7 +30,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bench.speed import machine
+from bench.machine import machine
 from brdffit import jsonout
 
 RESULTS = Path(__file__).with_name("results")
@@ -70,9 +70,9 @@ print(json.dumps({"wall_s": wall, "peak_rss_mib": peak, "starts": r.starts,
 
 
 def run_one(spec: dict, table: Path, cache_dir: str | None) -> dict:
-    """One job in a new process; ``cache_dir`` None: brdffit's default cache (this
-    process's ``BRDFFIT_CACHE_DIR`` is not passed on: importing ``bench.speed`` empties
-    it, which switches caching off)."""
+    """One job in a new process; ``cache_dir`` None: brdffit's default cache, whatever
+    this process's ``BRDFFIT_CACHE_DIR`` says (the measured jobs are a service worker's,
+    which uses its own)."""
     env = {k: v for k, v in os.environ.items() if k != "BRDFFIT_CACHE_DIR"}
     if cache_dir is not None:
         env["BRDFFIT_CACHE_DIR"] = cache_dir

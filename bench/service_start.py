@@ -23,8 +23,8 @@ import time
 import urllib.request
 from pathlib import Path
 
+from bench.machine import machine
 from bench.service_load import free_port
-from bench.speed import machine
 from brdffit import jsonout
 
 RESULTS = Path(__file__).with_name("results")

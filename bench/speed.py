@@ -25,22 +25,20 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
-from datetime import UTC, datetime
 
 # Compile times are only measurable without the persistent cache; must precede
 # the first brdffit import.
 os.environ["BRDFFIT_CACHE_DIR"] = ""
 
-import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from brdffit import __version__, fit, jsonout
+from bench.machine import machine  # noqa: E402
+from brdffit import fit, jsonout
 from brdffit.io import merl  # noqa: E402
 from data_synth import Component, make_table  # noqa: E402
 from data_synth.synth import DEFAULT_PARAMS, write_table  # noqa: E402
@@ -224,23 +222,6 @@ def bench_library(tables, n_tables: int) -> dict:
     elapsed = time.perf_counter() - t0
     return {"tables": n_tables, "models": len(MODELS), "fits": n_fits, "wall_s": elapsed,
             "nonfinite_params": bad, "fits_per_s": n_fits / elapsed}
-
-
-def machine() -> dict:
-    try:
-        load = os.getloadavg()
-    except OSError:
-        load = None
-    cpu = ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if "model name" in ln), "")
-    except OSError:
-        pass
-    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
-            "jax": jax.__version__, "backend": jax.default_backend(),
-            "device": str(jax.devices()[0]), "brdffit": __version__,
-            "date": datetime.now(UTC).isoformat(timespec="seconds"), "loadavg": load}
 
 
 def main(argv=None) -> int:

@@ -33,8 +33,8 @@ import time
 
 import numpy as np
 
+from bench.machine import machine
 from bench.real_materials import cache_dir
-from bench.speed import machine
 from brdffit import fit, jsonout
 from brdffit.io import merl
 from brdffit.selection import select
