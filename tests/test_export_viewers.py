@@ -205,3 +205,50 @@ def test_the_sheen_is_what_threejs_shows(threejs, monkeypatch):
         rel = np.abs(theirs[seen] / ours[seen] - 1)
         assert np.median(rel) < 0.01 and np.percentile(rel, 95) < 0.03, (
             sheen_roughness, np.median(rel), np.percentile(rel, 95))
+
+
+def test_the_thin_film_is_what_threejs_shows(threejs):
+    """A gltf_iridescence file in three.js: the film is there, and it is the model's.
+    On a metal (no diffuse), three.js's highlight with the film over the same file
+    without it is ``mix(F, F_film, iridescence) / F`` pixel by pixel, with F the base's
+    Schlick at v.h (three.js's exp2 form) and F_film gltf_iridescence's film, lit at the
+    view's angle to the normal: within 1% at the median pixel and 3% at the 95th
+    percentile. (Lit at v.h instead, the film was 19% off at the median.)"""
+    import jax.numpy as jnp
+
+    from brdffit import runtime
+    from brdffit.models.gltf_iridescence import film_fresnel
+    from brdffit.models.gltf_threejs import schlick_exp2
+
+    size = 256
+    base = {"base_color": [0.6, 0.55, 0.5], "metallic": 1.0, "roughness": 0.45,
+            "iridescence_ior": 1.8, "iridescence_thickness": 450.0}
+
+    def shown(iridescence):
+        params = {**base, "iridescence": iridescence}
+        fit = FitResult("gltf_iridescence", params, {"log_rmse": 0.01}, True, "successful",
+                        5, 0.1, {})
+        return check.threejs_render(export(fit, "gltf").material, threejs,
+                                    size=size)[..., :3].reshape(-1, 3)
+
+    without = shown(0.0)
+    with_film = shown(0.8)
+    wi, wo, hit, _ = check.gltf_preview_pairs(size)
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
+    cos_d = np.clip(np.sum(wo * h, -1), 0.0, 1.0)
+    colour = np.asarray(base["base_color"])[:, None]
+    with runtime.float64():
+        film = np.asarray(film_fresnel(jnp.float64(1.8), jnp.float64(450.0),
+                                       jnp.asarray(np.broadcast_to(colour, (3, len(wo)))),
+                                       jnp.asarray(np.clip(wo[:, 2], 0.0, 1.0)))).T
+        fs = np.asarray(schlick_exp2(jnp.asarray(cos_d)))[:, None]
+    fresnel = colour.T * (1 - fs) + fs
+    ours = 0.2 + 0.8 * film / fresnel
+    seen = hit & (wi[:, 2] > 0.2) & (wo[:, 2] > 0.3) & (without.max(-1) > 1e-3)
+    assert seen.sum() > 2000
+    theirs = with_film[seen] / without[seen]
+    rel = np.abs(theirs / ours[seen] - 1)
+    assert np.median(rel) < 0.01 and np.percentile(rel, 95) < 0.03, (
+        np.median(rel), np.percentile(rel, 95))
+    # and the film shows: the highlight's hue turns across the sphere
+    assert np.ptp(theirs[:, 0] / theirs[:, 2]) > 0.2

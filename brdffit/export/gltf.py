@@ -69,10 +69,7 @@ SHEEN_NOTE = ("uses KHR_materials_sheen: a viewer without the extension shades t
               "extension leaves its BRDF to them; gltf_sheen's is three.js's)")
 IRIDESCENCE_EXTENSION = "KHR_materials_iridescence"
 IRIDESCENCE_NOTE = ("uses KHR_materials_iridescence: a viewer without the extension shades the "
-                    "base without its thin film; three.js (and Khronos's sample viewer) "
-                    "evaluate the film at the view's angle to the normal, the extension's "
-                    "model (gltf_iridescence) at the view's to the half vector: their hue "
-                    "turns with the view alone")
+                    "base without its thin film")
 
 #: The material extensions a fit's parameters call for, in the order they are written:
 #: (extension, the parameter that calls for it, its object from the parameters (the

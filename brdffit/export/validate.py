@@ -207,7 +207,7 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
         metal_brdf = specular_brdf * schlick(base)
         if p.get("iridescence"):
             dielectric_brdf, metal_brdf = _iridescent(p, dielectric_brdf, metal_brdf,
-                                                      diffuse_brdf, specular_brdf, vh)
+                                                      diffuse_brdf, specular_brdf, nv)
         material = dielectric_brdf * (1 - m) + metal_brdf * m
     if "sheen_color" in p:
         material = _sheen_over(material, p, nl, nv, nh)
@@ -229,21 +229,22 @@ def gltf_spec_eval(p: dict, wi: np.ndarray, wo: np.ndarray, pseudocode: bool = F
     return material * (1 - weight) + clearcoat_brdf * weight
 
 
-def _iridescent(p: dict, dielectric_brdf, metal_brdf, diffuse_brdf, specular_brdf, vh):
+def _iridescent(p: dict, dielectric_brdf, metal_brdf, diffuse_brdf, specular_brdf, nv):
     """KHR_materials_iridescence's two BRDFs ("Implementation Notes"):
     ``iridescent_conductor_layer`` and ``iridescent_dielectric_layer`` (base ior 1.5),
-    the film's Fresnel at the angle ``vh`` the core's Fresnel reads."""
+    the film's Fresnel at "the viewing angle theta_1", ``nv``: the view's to the normal,
+    as the extension's reference implementation reads it."""
     strength = p["iridescence"]
     film_ior, thickness = p["iridescence_ior"], p["iridescence_thickness"]
     base_f0 = ((1 - 1.5) / (1 + 1.5)) ** 2
-    iridescent_f = _iridescent_fresnel(1.0, film_ior, np.full((len(vh), 3), base_f0),
-                                       thickness, vh)
+    iridescent_f = _iridescent_fresnel(1.0, film_ior, np.full((len(nv), 3), base_f0),
+                                       thickness, nv)
     rgb_alpha_max = iridescent_f.max(axis=-1, keepdims=True)
     rgb_mix = (1 - rgb_alpha_max) * diffuse_brdf + iridescent_f * specular_brdf
     dielectric = dielectric_brdf * (1 - strength) + rgb_mix * strength
     conductor_f = _iridescent_fresnel(
-        1.0, film_ior, np.broadcast_to(np.asarray(p["base_color"], float), (len(vh), 3)),
-        thickness, vh)
+        1.0, film_ior, np.broadcast_to(np.asarray(p["base_color"], float), (len(nv), 3)),
+        thickness, nv)
     metal = metal_brdf * (1 - strength) + specular_brdf * conductor_f * strength
     return dielectric, metal
 

@@ -17,9 +17,14 @@ and ``F_film(base_f0)`` the film's Fresnel (:func:`film_fresnel`): Belcour and B
 two-interface Airy model as the extension writes it (Schlick at each interface, phase
 shifts of 0 or pi, the first two orders of the spectral integral against Gaussian fits
 of the XYZ matching functions, XYZ to linear Rec. 709, negative values clamped). The
-film's angle theta_1 is the view's to the microfacet normal, ``v.h`` (``cos_d``), the
-angle the core's Fresnel reads: the model is reciprocal. Where the text leaves a
-choice:
+film is lit at "the viewing angle theta_1", the view's angle to the normal (``n.v``,
+``cos_o``), as the extension's reference implementation (Khronos's sample viewer),
+three.js and Filament evaluate it, once per pixel: the viewers people open show the
+fitted film. (At the view's angle to the half vector, ``v.h``, as the core's Fresnel
+reads it, the model would be reciprocal, and three.js's render of the same file was
+19% off at the median pixel: tests/test_export_viewers.py.) So, as the clear coat's
+Fresnel (``gltf_clearcoat``), the film reads the view alone, and the model is not
+reciprocal. Where the text leaves a choice:
 
 - the base's index from its f0 is taken at ``min(f0 + 1e-4, 0.9999)``: the text adds
   1e-4 "to guard against 1.0", which at a base colour of 1 still makes the index
@@ -27,9 +32,9 @@ choice:
 - the thickness is ``iridescenceThicknessMaximum``: without a thickness texture the
   extension reads the film as that thickness everywhere.
 
-What a viewer shows differs: three.js r187 (and Khronos's sample viewer) evaluate the
-film once per pixel at the view's angle to the normal (``n.v``, not ``v.h``) and with
-Schlick's exp2 form; the export says so.
+What three.js r187 shows differs in the rest of its shading (``gltf_threejs``: its
+Schlick's exp2 form, here at each interface of the film too, and its
+multiple-scattering term).
 
 At ``iridescence = 0`` the material is ``gltf_pbr``'s exactly: a fit starts from the
 ``gltf_pbr`` fit with the film off (``parent``), and from that base under each film of a
@@ -183,8 +188,10 @@ class GltfIridescence(GltfLayer):
         _, m, dg, _ = BASE._terms(params, frame)
         colour = params["base_color"][expand]
         ior, d = params["iridescence_ior"], params["iridescence_thickness"]
-        film_d = film_fresnel(ior, d, DIELECTRIC_F0, frame.cos_d)
-        film_m = film_fresnel(ior, d, colour * jnp.ones_like(frame.cos_d)[None], frame.cos_d)
+        # the film at the view's angle to the normal (module docstring)
+        cos_v = jnp.clip(frame.cos_o, 0.0, 1.0)
+        film_d = film_fresnel(ior, d, DIELECTRIC_F0, cos_v)
+        film_m = film_fresnel(ior, d, colour * jnp.ones_like(cos_v)[None], cos_v)
         dielectric = (1.0 - jnp.max(film_d, axis=0))[None] * colour / jnp.pi + film_d * dg
         filmed = (1.0 - m) * dielectric + m * film_m * dg
         weight = params["iridescence"]
