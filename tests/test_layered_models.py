@@ -417,6 +417,13 @@ def test_each_layer_says_whether_the_data_determine_it():
                                    "standard error 0.4 against a scale of 0.5"}
     reasons[-1] = None
     assert _layers(m, names, reasons, lambda s: True)["clearcoat"]["status"] == "identified"
+    # determined one by one, yet the data tell them apart only together: said
+    tied = _layers(m, names, reasons, lambda s: True,
+                   {"clearcoat": ["clearcoat_gloss", "roughness"],
+                    "clearcoat_gloss": ["clearcoat"]})["clearcoat"]
+    assert tied["status"] == "identified" and tied["why"].endswith(
+        "; clearcoat, clearcoat_gloss correlate beyond 0.95: the data tell them apart only "
+        "together")
     assert _layers(models.get("ggx"), ["kd[0]"], [None], lambda s: True) == {}
 
 

@@ -254,7 +254,8 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         "at_bound": _grouped(model, [bool(x) for x in at_bound]),
         "why": {names[i]: reasons[i] for i in range(p) if reasons[i] is not None},
         "strongly_correlated": {names[i]: strong[i] for i in range(p) if strong[i]},
-        "layers": _layers(model, names, reasons, significant),
+        "layers": _layers(model, names, reasons, significant,
+                          {names[i]: strong[i] for i in range(p) if strong[i]}),
         "residuals": n,
         "jacobian_every": k,
     }
@@ -265,12 +266,14 @@ def _is_rgb(model: AbstractBRDFModel, name: str) -> bool:
 
 
 def _layers(model: AbstractBRDFModel, names: list[str], reasons: list[str | None],
-            significant) -> dict:
+            significant, strongly_correlated: dict | None = None) -> dict:
     """Each of the model's layers (``model.layer_params``) as the data determine it:
     ``identified`` (its weight is above 0 by more than its error and every parameter
     of it is determined), ``absent`` (its weight is within its error of 0: the data show
     no such layer, and what shapes it means nothing), or ``unresolved`` (the layer is
-    there, but some of its parameters are not pinned down: which, and why)."""
+    there, but some of its parameters are not pinned down: which, and why). An
+    identified layer whose own parameters correlate beyond 0.95 says so: each is
+    determined, but the data tell them apart only together."""
     out = {}
     for layer, (weight, shapes) in model.layer_params.items():
         if not significant((weight,)):
@@ -281,8 +284,15 @@ def _layers(model: AbstractBRDFModel, names: list[str], reasons: list[str | None
         own = (weight, *shapes)
         loose = [(names[i], reasons[i]) for i in range(len(names))
                  if names[i].split("[")[0] in own and reasons[i] is not None]
-        out[layer] = ({"status": "unresolved",
-                       "why": "; ".join(f"{name}: {why}" for name, why in loose)} if loose else
-                      {"status": "identified",
-                       "why": f"{', '.join(own)} each determined by the data"})
+        if loose:
+            out[layer] = {"status": "unresolved",
+                          "why": "; ".join(f"{name}: {why}" for name, why in loose)}
+            continue
+        entries = [n for n in names if n.split("[")[0] in own]
+        tied = sorted({n for n in entries for other in (strongly_correlated or {}).get(n, ())
+                       if other.split("[")[0] in own and other.split("[")[0] != n.split("[")[0]})
+        out[layer] = {"status": "identified",
+                      "why": f"{', '.join(own)} each determined by the data" + (
+                          f"; {', '.join(tied)} correlate beyond {STRONG_CORRELATION:g}: the "
+                          "data tell them apart only together" if tied else "")}
     return out
