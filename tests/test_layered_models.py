@@ -21,6 +21,7 @@ from brdffit.export.gltf import CLEARCOAT_EXTENSION, IRIDESCENCE_EXTENSION, SHEE
 from brdffit.export.validate import gltf_spec_eval
 from brdffit.fitting.pipeline import fit
 from brdffit.fitting.result import FitResult
+from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from data_synth import make_table
 from tests.compiled_models import assert_finite_values_and_gradients
 from tests.test_export_tools import gltf_validator  # noqa: F401 - the fixture
@@ -321,6 +322,9 @@ def test_the_film_is_finite_on_the_closed_hemisphere():
 
 
 @pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
+# with test_quality.py's film truth on one worker, at its default samples: the film's
+# programs compile once (~100 s of a fresh clone's run, each, when they were apart)
+@pytest.mark.xdist_group("gltf_iridescence")
 def test_a_film_is_found_in_its_cycle_and_never_costs_the_base():
     """On a table it made, a weak film over a dark base is recovered from the base's
     fit (the scan over the base's fit and the four starts: one start ended a hue cycle
@@ -331,13 +335,13 @@ def test_a_film_is_found_in_its_cycle_and_never_costs_the_base():
                                        "roughness": 0.5}, noise=0.01, seed=2)
     for params, seed in ((FAINT_FILM, 3),):
         table, _ = make_table("gltf_iridescence", params, noise=0.01, seed=seed)
-        base, filmed = _base_and_layered(table, "gltf_iridescence", samples=8192)
+        base, filmed = _base_and_layered(table, "gltf_iridescence", samples=DEFAULT_SAMPLES)
         assert filmed.converged, filmed.result
         assert filmed.error["log_rmse"] < 0.3 * base.error["log_rmse"]
         assert_params_close(filmed.params, params, rel=0.03, abs_small=0.02)
         assert filmed.starts >= 4 and "4 starts refined (1 asked)" in filmed.notes[0]
         assert filmed.uncertainty["layers"]["iridescence"]["status"] == "identified"
-    _, filmed = _base_and_layered(plain, "gltf_iridescence", samples=4096)
+    _, filmed = _base_and_layered(plain, "gltf_iridescence", samples=DEFAULT_SAMPLES)
     assert filmed.uncertainty["layers"]["iridescence"]["status"] == "absent"
 
 

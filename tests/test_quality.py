@@ -64,7 +64,9 @@ VARIANTS = ("beckmann_dielectric", "ggx_dielectric", "gltf_pbr_ior", "gltf_three
     # ~15 s: the full suite runs them, the quick tier keeps each model's other truths
     # (a layered model's example only)
     pytest.param(name, label, params,
-                 marks=[pytest.mark.slow] if name in ("rough_plastic", "gltf_iridescence") or (
+                 marks=[pytest.mark.slow, pytest.mark.xdist_group("gltf_iridescence")]
+                 if name == "gltf_iridescence"  # one worker compiles its fit, for both tests
+                 else [pytest.mark.slow] if name == "rough_plastic" or (
                      name.startswith("standard_surface") and label in ("example", "dark"))
                  or (name.endswith(("_clearcoat", "_sheen", "_iridescence"))
                      and label != "example")
