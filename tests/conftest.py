@@ -84,16 +84,15 @@ def _spread_over_workers(items) -> None:
     runs on the worker that holds its file's other such tests, so that the fixture
     starts once; every other test goes to whichever worker is free. The ``system``
     tests (processes, servers, real materials: most of the run's time) are handed out
-    first, then the other ``slow`` ones (fits of several seconds to minutes, as a
-    thin film's from an empty cache), so that the last minutes are not one worker
-    finishing a long test alone. Without xdist the marks are inert and the order is
-    the only change.
+    first, so that the last minutes are not one worker finishing a long file alone.
+    (Handing the other ``slow`` tests out right after them made a fresh clone's run
+    slower, 16:08 against 15:37: two workers both on heavy tests at once.) Without
+    xdist the marks are inert and the order is the only change.
     """
     for item in items:
         if _uses_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-    # stable: files keep their order
-    items.sort(key=lambda i: (_layer(i) != "system", i.get_closest_marker("slow") is None))
+    items.sort(key=lambda i: _layer(i) != "system")  # stable: files keep their order
 
 
 @pytest.fixture(autouse=True)
