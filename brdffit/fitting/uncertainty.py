@@ -244,6 +244,7 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
                  for j in range(p)] for i in range(p)]
     strong = [[names[j] for j in range(p) if j != i and corr_out[i][j] is not None
                and abs(corr_out[i][j]) > STRONG_CORRELATION] for i in range(p)]
+    strongly_correlated = {names[i]: strong[i] for i in range(p) if strong[i]}
     return {
         "method": "sandwich",
         "entries": names,
@@ -253,9 +254,8 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         "undetermined": _grouped(model, undetermined),
         "at_bound": _grouped(model, [bool(x) for x in at_bound]),
         "why": {names[i]: reasons[i] for i in range(p) if reasons[i] is not None},
-        "strongly_correlated": {names[i]: strong[i] for i in range(p) if strong[i]},
-        "layers": _layers(model, names, reasons, significant,
-                          {names[i]: strong[i] for i in range(p) if strong[i]}),
+        "strongly_correlated": strongly_correlated,
+        "layers": _layers(model, names, reasons, significant, strongly_correlated),
         "residuals": n,
         "jacobian_every": k,
     }

@@ -134,12 +134,10 @@ class AbstractBRDFModel(eqx.Module):
     #: (a thin film's); the result's notes say so where it is more than was asked.
     least_starts: ClassVar[int] = 1
     #: The layers this model has over a single base material, by their kind
-    #: (``"clearcoat"``, ``"sheen"``): an export into a model without one of them
-    #: says what was lost (``brdffit.export``).
-    layers: ClassVar[tuple[str, ...]] = ()
-    #: Each of ``layers`` as (its weight, the parameters that shape it): a layer whose
-    #: weight the data cannot tell from 0 is absent, and its shape means nothing
-    #: (``brdffit.fitting.uncertainty``: the identifiability reported per layer).
+    #: (``"clearcoat"``, ``"sheen"``, ``"iridescence"``), each as (its weight, the
+    #: parameters that shape it): an export into a model without one of them says what
+    #: was lost (``brdffit.export``), and a layer whose weight the data cannot tell from
+    #: 0 is absent, its shape meaning nothing (``brdffit.fitting.uncertainty``).
     layer_params: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
     #: Whether ``model="auto"`` tries this model by default (``brdffit.selection``): the
     #: docs/models.md models are candidates; a renderer's target model is not (its fit
@@ -179,6 +177,11 @@ class AbstractBRDFModel(eqx.Module):
         (``brdffit.executables``): itself, but for a member of a family of lobe
         models that share their programs (:func:`share_programs`)."""
         return self
+
+    @property
+    def layers(self) -> tuple[str, ...]:
+        """The kinds of :attr:`layer_params`, in its order (none: a single material)."""
+        return tuple(self.layer_params)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The parent's parameters as a point of this model with the same values."""

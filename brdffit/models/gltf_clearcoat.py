@@ -55,7 +55,6 @@ COAT_ROUGHNESS_STARTS = (0.045, 0.1, 0.2)
 class GltfClearcoat(GltfLayer):
     name = "gltf_clearcoat"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, CLEARCOAT, CLEARCOAT_ROUGHNESS)
-    layers = ("clearcoat",)
     layer_params = {"clearcoat": ("clearcoat", ("clearcoat_roughness",))}
     #: a half-weight coat of each roughness
     layer_starts = tuple({"clearcoat": 0.5, "clearcoat_roughness": r}

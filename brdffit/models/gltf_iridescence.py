@@ -86,7 +86,7 @@ FILM_START = 0.5
 
 
 def _film_scan() -> tuple[dict, ...]:
-    lo, hi = 30.0, 1200.0  # IRIDESCENCE_THICKNESS's range
+    lo, hi = IRIDESCENCE_THICKNESS.lower, IRIDESCENCE_THICKNESS.upper
     films = []
     for n in IOR_STARTS:
         for path in np.arange(PATH_STEP, 2 * n * hi + 1, PATH_STEP):
@@ -165,7 +165,6 @@ class GltfIridescence(GltfLayer):
     name = "gltf_iridescence"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, IRIDESCENCE, IRIDESCENCE_IOR,
                    IRIDESCENCE_THICKNESS)
-    layers = ("iridescence",)
     layer_params = {"iridescence": ("iridescence", ("iridescence_ior", "iridescence_thickness"))}
     #: a half-weight film at each optical path of the scan, at each index
     layer_starts = _film_scan()
@@ -184,8 +183,9 @@ class GltfIridescence(GltfLayer):
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
-        base = BASE.eval_channels(params, frame)
-        _, m, dg, _ = BASE._terms(params, frame)
+        terms = BASE._terms(params, frame)
+        base = BASE.mixed_channels(params, terms)
+        _, m, dg, _ = terms
         colour = params["base_color"][expand]
         ior, d = params["iridescence_ior"], params["iridescence_thickness"]
         # the film at the view's angle to the normal (module docstring)

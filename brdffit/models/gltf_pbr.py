@@ -110,7 +110,12 @@ class GltfPBR(AbstractBRDFModel):
         return r * r
 
     def eval_channels(self, params: Params, frame: Frame):
-        base, m, dg, s = self._terms(params, frame)
+        return self.mixed_channels(params, self._terms(params, frame))
+
+    def mixed_channels(self, params: Params, terms):
+        """The material (3, ...) from :meth:`_terms` (a layer over it takes the terms
+        once, for the base and for itself)."""
+        base, m, dg, s = terms
         f0_d = self.dielectric_f0(params)
         fresnel_d = f0_d + (1.0 - f0_d) * s  # the dielectric's, colourless
         fresnel_m = base + (1.0 - base) * s  # the metal's, coloured by base_color

@@ -99,7 +99,6 @@ def sheen_layer(sheen_color, sheen_roughness, frame: Frame):
 class GltfSheen(GltfLayer):
     name = "gltf_sheen"
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, SHEEN_COLOR, SHEEN_ROUGHNESS)
-    layers = ("sheen",)
     layer_params = {"sheen": ("sheen_color", ("sheen_roughness",))}
     #: a grey sheen of moderate strength, fibres from sharp to broad
     layer_starts = tuple({"sheen_color": SHEEN_COLOR_START, "sheen_roughness": r}

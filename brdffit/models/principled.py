@@ -90,12 +90,8 @@ class Principled(AbstractBRDFModel):
         return "principled_clearcoat" if self.clearcoat else "principled"
 
     @property
-    def layers(self) -> tuple[str, ...]:  # Burley's sheen is a lobe of its own
-        return ("sheen", "clearcoat") if self.clearcoat else ("sheen",)
-
-    @property
     def layer_params(self) -> dict[str, tuple[str, tuple[str, ...]]]:
-        sheen = {"sheen": ("sheen", ("sheen_tint",))}
+        sheen = {"sheen": ("sheen", ("sheen_tint",))}  # Burley's sheen: a lobe of its own
         return {**sheen, "clearcoat": ("clearcoat", ("clearcoat_gloss",))} if self.clearcoat \
             else sheen
 
