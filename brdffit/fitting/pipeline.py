@@ -178,7 +178,7 @@ def fit(
                      f"the exact-fit floor); this is {m.parent}'s optimum with what "
                      f"{m.name} adds switched off, its own starts not solved")
     else:
-        outcome = solve(best_starts)
+        outcome = solve.best_of(best_starts)
         if parent is not None:
             outcome = _from_the_parent(m, solve, outcome, parent, parent_loss, polish, notes)
     n_solved = len(outcome.starts) if coarse is None else coarse.starts
