@@ -6,7 +6,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
 
-.PHONY: demo test test-quick bench bench-real lint clean
+.PHONY: demo test test-quick programs bench bench-real lint clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -37,6 +37,12 @@ test: $(STAMP)
 # (over ~4 s each; `make test` runs every one): under 4 minutes on 2 cores
 test-quick: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not system and not slow" --durations=15 $(XDIST)
+
+# the default fits' programs lowered (StableHLO, jax.export) and shipped in the package:
+# a new process compiles them without tracing. Run after changing what they import
+# (brdffit/models, brdffit/fitting, ...); tests/test_exported.py fails while they are stale
+programs: $(STAMP)
+	$(BIN)/python -m brdffit.build_programs build
 
 bench: $(STAMP)
 	$(BIN)/python -m bench

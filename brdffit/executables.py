@@ -5,7 +5,9 @@ function, but a new process still traces it and lowers it to find the cache entr
 for a default fit that is ~1 s of a 2 s command. :func:`jit` keeps the compiled
 executable itself (``jax.experimental.serialize_executable``) under
 ``cache_dir()/executables/<fingerprint>/``, found again from the arguments' shapes
-alone; loading one takes milliseconds to ~0.1 s.
+alone; loading one takes milliseconds to ~0.1 s. Where none is kept yet, a program
+the package ships already lowered (``brdffit.exported``: the default fits') is
+compiled from that, without tracing.
 
 :func:`jit` is a drop-in ``equinox.filter_jit``: arrays are traced, every other
 argument is static. The key of an executable on disk is everything its code depends
@@ -41,7 +43,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
-from brdffit import runtime
+from brdffit import exported, runtime
 
 #: Fingerprint directories not used for this long are removed (old brdffit or jax).
 KEEP_DAYS = 7
@@ -138,12 +140,16 @@ def _without_jax_cache():
 class Event(NamedTuple):
     """One program that :func:`jit` made ready: compiled (``how`` = "compiled", its
     tracing and lowering in ``lower_s``, XLA's compilation in ``compile_s``) or
-    loaded from disk ("loaded", the load and first run in ``compile_s``)."""
+    loaded from disk ("loaded", the load and first run in ``compile_s``). A compiled
+    program's ``lowering`` says where its StableHLO came from: "traced" from brdffit's
+    Python, or "shipped" (read from the package's lowered programs,
+    ``brdffit.exported``: ``lower_s`` is then reading and lowering that file)."""
 
     name: str
     how: str
     lower_s: float
     compile_s: float
+    lowering: str = "traced"
 
 
 #: Every program made ready in this process, in order: what a cold start spends
@@ -365,6 +371,14 @@ def _compiling_elsewhere_waited(path: Path | None):
         os.close(fd)
 
 
+def _example(out_def):
+    """A picklable value of the structure ``out_def`` (its leaves zeros): what a
+    program returns, kept beside it on disk."""
+    import jax
+
+    return jax.tree_util.tree_unflatten(out_def, [0] * out_def.num_leaves)
+
+
 def _compiled_form(x):
     form = getattr(x, "compiled_form", None)
     return form() if callable(form) else x
@@ -406,7 +420,8 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
             for x in leaves), jax.config.jax_enable_x64)
         return leaves, treedef, dynamic, key
 
-    def compile_entry(leaves, treedef, dynamic, to_store: bool) -> _Entry:
+    def compile_entry(leaves, treedef, dynamic, to_store: bool,
+                      file_name: str | None) -> _Entry:
         out_defs = []
 
         def flat(*arrays):
@@ -418,20 +433,30 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
             out_defs.append(out_def)
             return out_leaves
 
+        arrays = [leaves[i] for i in dynamic]
         t0 = time.perf_counter()
-        lowered = jax.jit(flat).lower(*(leaves[i] for i in dynamic))
+        shipped = None if file_name is None else exported.lowered(file_name, arrays)
+        if shipped is not None:
+            lowered, example = shipped
+            out_def, lowering = jax.tree_util.tree_structure(example), "shipped"
+        else:
+            lowered = jax.jit(flat).lower(*arrays)
+            out_def, lowering = out_defs[0], "traced"
+            if exported.recording is not None and file_name is not None:
+                exported.record(file_name, flat, arrays, _example(out_def))
         t1 = time.perf_counter()
         # An executable that JAX's own cache loaded serialises without its machine
         # code (its fused kernels are then "not found" when run): the one kept on
         # disk is compiled afresh, once per fingerprint.
         with _without_jax_cache() if to_store else contextlib.nullcontext():
             compiled = _compile(lowered)
-        events.append(Event(name, "compiled", t1 - t0, time.perf_counter() - t1))
-        return _Entry(compiled, out_defs[0])
+        events.append(Event(name, "compiled", t1 - t0, time.perf_counter() - t1, lowering))
+        return _Entry(compiled, out_def)
 
-    def disk_path(leaves, treedef) -> Path | None:
-        directory = _directory()
-        if directory is None or not own_code or not _treedef_is_keyed(treedef):
+    def program_name(leaves, treedef) -> str | None:
+        """The program's file name (no suffix), the same on every machine: its
+        function and digest of its key; None where the key cannot vouch for its code."""
+        if not own_code or not _treedef_is_keyed(treedef):
             return None
         parts = [name, _ADDRESS.sub("", str(treedef)), str(jax.config.jax_enable_x64)]
         for x in leaves:
@@ -443,7 +468,11 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
                     return None
                 parts.append(text)
         digest = hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
-        return directory / f"{fn.__name__}-{digest}.xla"
+        return f"{fn.__name__}-{digest}"
+
+    def disk_path(file_name: str | None) -> Path | None:
+        directory = _directory()
+        return None if directory is None or file_name is None else directory / f"{file_name}.xla"
 
     def load(path: Path) -> _Entry | None:
         from jax.experimental import serialize_executable
@@ -467,7 +496,7 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
 
         try:
             payload, in_tree, out_tree = serialize_executable.serialize(entry.call)
-            example = jax.tree_util.tree_unflatten(entry.out_def, [0] * entry.out_def.num_leaves)
+            example = _example(entry.out_def)
             tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
             with open(tmp, "wb") as f:
                 pickle.dump((payload, in_tree, out_tree, example), f,
@@ -514,7 +543,8 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
             entry = entries.get(key)
             if entry is not None:
                 return entry, None
-            path = disk_path(leaves, treedef)
+            file_name = program_name(leaves, treedef)
+            path = disk_path(file_name)
             found = loaded(path, key, arrays)
             if found is not None:
                 return found
@@ -528,7 +558,8 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
                 if on_compile is not None:
                     on_compile(name)
                 with _ready.shared():
-                    entry = compile_entry(leaves, treedef, dynamic, path is not None)
+                    entry = compile_entry(leaves, treedef, dynamic, path is not None,
+                                          file_name)
                     out = jax.block_until_ready(entry.call(*arrays)) if run else None
                 if path is not None:
                     store(path, entry)

@@ -25,7 +25,7 @@ PACKAGES = ("brdffit", "api")
 #: Floors, top to bottom; a module is on the floor of the first prefix it matches.
 #: ``brdffit`` itself (the package's lazy facade) is on no floor.
 FLOORS = (
-    (7, ("brdffit.cli", "brdffit.client", "api.routes", "api.services", "api.main",
+    (7, ("brdffit.cli", "brdffit.client", "brdffit.build_programs", "api.routes", "api.services", "api.main",
          "api.deps", "api.errors", "api.limits")),
     (6, ("brdffit.batch", "api")),
     (5, ("brdffit.export", "brdffit.view")),
@@ -33,8 +33,8 @@ FLOORS = (
     (3, ("brdffit.fitting",)),
     (2, ("brdffit.models",)),
     (1, ("brdffit.io", "brdffit.errors", "brdffit.jsonout", "brdffit.runtime",
-         "brdffit.extras", "brdffit.executables", "brdffit.outcome", "brdffit.child_process",
-         "brdffit.heap")),
+         "brdffit.extras", "brdffit.executables", "brdffit.exported", "brdffit.outcome",
+         "brdffit.child_process", "brdffit.heap")),
 )
 
 
