@@ -13,9 +13,9 @@ instead of tracing, then keeps the compiled executable as before.
 A shipped program is used only where it is what tracing would give:
 
 - the **source digest** in ``programs/INDEX`` is the digest of every brdffit module
-  that the programs' own modules import, directly or not (:func:`source_files`),
-  with the versions of equinox, lineax and optimistix, whose code is traced into
-  the programs; any change to either and the whole directory is passed over;
+  that the programs' own modules import, directly or not (listed in the index), with
+  the versions of equinox, lineax and optimistix, whose code is traced into the
+  programs; any change to either and the whole directory is passed over;
 - each file is found by the same key as a compiled executable on disk (the
   function, its static arguments, the shapes and dtypes of its arrays), less the
   machine;
@@ -28,7 +28,6 @@ runs it. A file that does not load is traced as before.
 
 from __future__ import annotations
 
-import ast
 import functools
 import hashlib
 import importlib.metadata
@@ -43,80 +42,19 @@ PACKAGE = Path(__file__).resolve().parent
 DIRECTORY = PACKAGE / "programs"
 INDEX = DIRECTORY / "INDEX"
 SUFFIX = ".stablehlo.xz"
-#: Where the programs' code lives: the modules whose functions are ``executables.jit``
-#: programs, and the registry of models (every built-in model's code is traced).
-ROOT_MODULES = ("brdffit.fitting.problem", "brdffit.fitting.samples", "brdffit.fitting.sphere",
-                "brdffit.fitting.starts", "brdffit.fitting.uncertainty", "brdffit.models",
-                "brdffit.executables")
 #: Libraries whose code is traced into the programs (JAX's own lowering is what
 #: ``jax.export``'s compatibility covers).
 TRACED_LIBRARIES = ("equinox", "lineax", "optimistix")
 _FORMAT = 1
 
 
-def _module_file(module: str) -> Path | None:
-    parts = module.split(".")[1:]
-    base = PACKAGE.joinpath(*parts)
-    for path in (base.with_suffix(".py"), base / "__init__.py"):
-        if path.is_file():
-            return path
-    return None
-
-
-def _imports(path: Path, module: str) -> set[str]:
-    """The brdffit modules ``path`` (module ``module``) imports anywhere in its code,
-    a function's body included, with every package above each of them."""
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_bytes())):
-        names = []
-        if isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                up = package.split(".")
-                up = up[:len(up) - node.level + 1]
-                base = ".".join([*up, base] if base else up)
-            names = [base] + [f"{base}.{a.name}" for a in node.names]
-        for name in names:
-            if name == "brdffit" or name.startswith("brdffit."):
-                parts = name.split(".")
-                found.update(".".join(parts[:i]) for i in range(1, len(parts) + 1))
-    return found
-
-
-@functools.cache
-def source_files() -> tuple[Path, ...]:
-    """Every brdffit source file that the programs' code can run: the closure of
-    :data:`ROOT_MODULES` under imports (an over-estimate: a module imported for one
-    name counts whole)."""
-    seen: dict[str, Path] = {}
-    todo = [m for root in ROOT_MODULES for m in _parents(root)]
-    while todo:
-        module = todo.pop()
-        if module in seen:
-            continue
-        path = _module_file(module)
-        if path is None:  # a name imported from a module, not a module
-            continue
-        seen[module] = path
-        todo.extend(_imports(path, module) - seen.keys())
-    return tuple(sorted(set(seen.values())))
-
-
-def _parents(module: str) -> list[str]:
-    parts = module.split(".")
-    return [".".join(parts[:i]) for i in range(1, len(parts) + 1)]
-
-
-@functools.cache
-def source_digest() -> str:
-    """The digest the shipped programs were built at, when they are current."""
+def digest_of(files) -> str:
+    """The digest of the brdffit source ``files`` (paths relative to the package)
+    and of the :data:`TRACED_LIBRARIES`' installed versions."""
     h = hashlib.sha256(f"format {_FORMAT}\n".encode())
-    for path in source_files():
-        h.update(str(path.relative_to(PACKAGE)).encode())
-        h.update(path.read_bytes())
+    for name in sorted(files):
+        h.update(name.encode())
+        h.update((PACKAGE / name).read_bytes())
     for dist in TRACED_LIBRARIES:
         try:
             h.update(f"{dist} {importlib.metadata.version(dist)}\n".encode())
@@ -125,11 +63,17 @@ def source_digest() -> str:
     return h.hexdigest()[:24]
 
 
-def index_digest() -> str | None:
+def read_index() -> tuple[str, tuple[str, ...]] | None:
+    """(the digest the programs were built at, the source files it covers), or None
+    where there is no index. The files are listed at build time
+    (``brdffit.build_programs``: the modules the programs' code imports): a change to
+    what they import changes one of them, so the list is current while the digest is."""
     try:
-        return INDEX.read_text().split()[0]
-    except (OSError, IndexError):
+        lines = INDEX.read_text().splitlines()
+    except OSError:
         return None
+    files = tuple(ln.split(" ", 1)[1] for ln in lines[1:] if ln.startswith("source "))
+    return (lines[0].strip(), files) if lines and files else None
 
 
 @functools.cache
@@ -137,8 +81,13 @@ def usable() -> bool:
     """Whether the shipped programs are current and this process runs on the CPU."""
     import jax
 
-    return (jax.default_backend() == "cpu" and index_digest() is not None
-            and index_digest() == source_digest())
+    index = read_index()
+    if index is None or jax.default_backend() != "cpu":
+        return False
+    try:
+        return digest_of(index[1]) == index[0]
+    except OSError:  # a listed file gone: sources changed since
+        return False
 
 
 def lowered(file_name: str, arrays):

@@ -25,8 +25,8 @@ PACKAGES = ("brdffit", "api")
 #: Floors, top to bottom; a module is on the floor of the first prefix it matches.
 #: ``brdffit`` itself (the package's lazy facade) is on no floor.
 FLOORS = (
-    (7, ("brdffit.cli", "brdffit.client", "brdffit.build_programs", "api.routes", "api.services", "api.main",
-         "api.deps", "api.errors", "api.limits")),
+    (7, ("brdffit.cli", "brdffit.client", "brdffit.build_programs", "api.routes",
+         "api.services", "api.main", "api.deps", "api.errors", "api.limits")),
     (6, ("brdffit.batch", "api")),
     (5, ("brdffit.export", "brdffit.view")),
     (4, ("brdffit.request", "brdffit.selection")),
