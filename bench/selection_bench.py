@@ -91,8 +91,8 @@ def run(quick: bool = False) -> dict:
         # Each table once untimed, then three times alternating, medians: a table's
         # first select can still meet a program kind the warm-up did not (a retry's
         # more starts), and one timing on a shared machine is one sample.
-        select(table, **FIT), fit(table, truth, **FIT)
-        auto_times, one_times = [], []
+        select(table, **FIT), fit(table, truth, **FIT), fit(table, "ggx", **FIT)
+        auto_times, one_times, ggx_times = [], [], []
         for _ in range(REPEATS):
             t = time.perf_counter()
             sel = select(table, **FIT)
@@ -100,7 +100,11 @@ def run(quick: bool = False) -> dict:
             t = time.perf_counter()
             single = fit(table, truth, **FIT)
             one_times.append(time.perf_counter() - t)
+            t = time.perf_counter()  # issue 41's yardstick: auto against a ggx fit
+            fit(table, "ggx", **FIT)
+            ggx_times.append(time.perf_counter() - t)
         auto_s, one_s = statistics.median(auto_times), statistics.median(one_times)
+        ggx_s = statistics.median(ggx_times)
         fitted = [r for r in sel.ranking if r["status"] != "failed"]
         picks = {}
         for tol in TOLERANCES:
@@ -114,6 +118,8 @@ def run(quick: bool = False) -> dict:
             "fits_s": sum(r["fit_time_s"] for r in fitted),
             "one_fit_s": one_s,
             "ratio": auto_s / one_s,
+            "ggx_fit_s": ggx_s,
+            "ratio_to_ggx": auto_s / ggx_s,
             "chosen_log_rmse": sel.row["log_rmse"],
             "truth_log_rmse": single.log_rmse,
             "picks_by_tolerance": picks,
@@ -178,14 +184,15 @@ def markdown(res: dict) -> str:
         "before it have compiled them already).",
         "",
         "| table | truth | auto chose | auto (s) | of which fits (s) | one fit (s) | ratio "
-        "| log_rmse chosen | log_rmse truth fit |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|",
+        "| ggx fit (s) | ratio to ggx | log_rmse chosen | log_rmse truth fit |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in res["cases"]:
         mark = "" if r["hit"] else " (miss)"
         lines.append(
             f"| {r['table']} | {r['truth']} | {r['chosen']}{mark} | {r['auto_s']:.2f} | "
             f"{r['fits_s']:.2f} | {r['one_fit_s']:.2f} | {r['ratio']:.1f} | "
+            f"{r['ggx_fit_s']:.2f} | {r['ratio_to_ggx']:.1f} | "
             f"{r['chosen_log_rmse']:.2g} | {r['truth_log_rmse']:.2g} |"
         )
     lines += ["", "Hit rate by tolerance (the same fits re-decided, no refit):", "",
