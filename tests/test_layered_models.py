@@ -343,6 +343,27 @@ def test_a_film_is_found_in_its_cycle_and_never_costs_the_base():
         assert filmed.uncertainty["layers"]["iridescence"]["status"] == "identified"
     _, filmed = _base_and_layered(plain, "gltf_iridescence", samples=DEFAULT_SAMPLES)
     assert filmed.uncertainty["layers"]["iridescence"]["status"] == "absent"
+    # the absent film's thickness and index are held while its weight is at 0, so the
+    # fit ends optimal (free, they kept every start crawling to the step limit)
+    assert filmed.converged, (filmed.result, filmed.steps)
+
+
+def test_an_absent_films_shape_is_held_by_the_solver_and_a_coats_is_not():
+    from brdffit.models.base import HELD
+
+    film = models.get("gltf_iridescence")
+    u = film.unconstrain(film.check_params(FAINT_FILM))
+    names = [s.name for s in film.param_specs for _ in range(s.size)]
+    shape = [i for i, n in enumerate(names) if n in ("iridescence_ior", "iridescence_thickness")]
+    weight = names.index("iridescence")
+    assert not np.any(np.asarray(film.solver_bound_side(jnp.asarray(u))) >= HELD)
+    off = jnp.asarray(u).at[weight].set(-14.0)  # a film of 1e-6: in its lower tail
+    side = np.asarray(film.solver_bound_side(off))
+    assert np.all(side[shape] == HELD + weight) and side[weight] == -1
+    np.testing.assert_array_equal(np.asarray(film.bound_side(off))[shape], 0)  # as reported
+    coat = models.get("gltf_clearcoat")  # not opted in: its roughness stays free
+    cu = jnp.full(sum(s.size for s in coat.param_specs), -14.0)
+    assert not np.any(np.asarray(coat.solver_bound_side(cu)) >= HELD)
 
 
 def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811

@@ -89,6 +89,47 @@ def test_without_bound_information_the_optimality_test_does_not_hold_there():
     assert not bool(is_optimal(loss, jtj, jtr, _bounds(y, None), 1e-7, 0.0))
 
 
+def _gated_problem(y, args):
+    """A layer of weight w = softplus(y0) and a shape y1 (a frequency, as a film's
+    thickness: the loss many-moded in it) over a base y2 fitting the data alone: the
+    optimum is w = 0, where y1 changes nothing the data show."""
+    return y[2] - jax.nn.softplus(y[0]) * jnp.sin(7.0 * y[1] * T) - TARGET
+
+
+def _gated_bounds(held: bool):
+    def sides(y, args):
+        off = y[0] < -11.5
+        shape = jnp.where(off, solvers.HELD + 0, 0) if held else 0  # held by coordinate 0
+        return jnp.array([jnp.where(off, -1, 0), shape, 0], jnp.int32)
+    return sides
+
+
+def test_a_layer_that_is_off_holds_its_shape_and_the_fit_ends_optimal():
+    """At w ~ 1e-9 the shape's column is ~1e-9 of the base's: free, it kept a linear
+    model promising a decrease the loss never gave (a thin film's thickness over its
+    absent film: 256 steps, never optimal). HELD, it stays where it is, promises
+    nothing, and the weight heads for its bound as any pinned coordinate. Where the
+    data pull the weight back in, the shape is free again."""
+    y0 = jnp.array([-20.0, 1.3, 0.0])
+    y = jnp.array([-20.7, 1.3, TARGET.mean()])  # the base at its optimum, the layer off
+    loss, jtj, jtr = _normal(_gated_problem, y)
+    side_free, side_held = _gated_bounds(False)(y, None), _gated_bounds(True)(y, None)
+    assert not bool(is_optimal(loss, jtj, jtr, side_free, 1e-7, 0.0))
+    assert bool(is_optimal(loss, jtj, jtr, side_held, 1e-7, 0.0))
+    pinned = solvers.pinned_coordinates(jtj, jtr, side_held)
+    assert bool(pinned[1]) and not bool(pinned[2])
+    sol = _solve(_gated_problem, y0, options={"bound_side": _gated_bounds(True)})
+    assert int(sol.stats["stop"]) == solvers.OPTIMAL
+    assert float(sol.value[1]) == 1.3  # held: not moved
+    np.testing.assert_allclose(float(sol.value[2]), TARGET.mean(), rtol=1e-6)
+    # the layer pulled in (the sign flipped: a positive weight now helps): not pinned,
+    # so its shape is free
+    flipped = lambda y, a: y[2] + jax.nn.softplus(y[0]) * jnp.sin(7.0 * y[1] * T) - TARGET  # noqa: E731
+    loss, jtj, jtr = _normal(flipped, y)
+    pinned = solvers.pinned_coordinates(jtj, jtr, side_held)
+    assert not bool(pinned[0]) and not bool(pinned[1])
+
+
 def test_exact_fit_converges_through_the_floor_not_the_decrement():
     def fn(y, args):
         return y[0] * jnp.exp(-y[1] * T) - 1.5 * jnp.exp(-2.0 * T)

@@ -183,7 +183,7 @@ def constrained(model, u) -> dict:
 
 
 def _bound_side(u, args):
-    return args[0].bound_side(u)  # (model, data) or (model, data, term)
+    return args[0].solver_bound_side(u)  # (model, data) or (model, data, term)
 
 
 def start_bucket(n: int) -> int:
@@ -283,7 +283,8 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None, 
         else:
             loss, jtj, jtr = _objective_normal_equations(sol.value, args)
             optimal = solvers.is_optimal(
-                loss, jtj, jtr, model.bound_side(sol.value), solvers.gtol_for(loss.dtype), floor
+                loss, jtj, jtr, model.solver_bound_side(sol.value), solvers.gtol_for(loss.dtype),
+                floor
             )
             terms = None
         # Return values, not the Solution: its state holds a jaxpr.

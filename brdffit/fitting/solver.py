@@ -56,6 +56,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Bool, Float, Int
 
 from brdffit.fitting.result import STATUS_NAMES  # noqa: F401 - re-exported
+from brdffit.models.base import HELD
 
 #: Damping beyond which no step can change the parameters at float precision.
 _LAMBDA_MAX = 1e14
@@ -162,8 +163,13 @@ def pinned_coordinates(jtj, jtr, bound_side: Int[Array, " p"]) -> Bool[Array, " 
     full = _damped_step(jtj, jtr, jnp.finfo(jtj.dtype).eps ** 0.5, jnp.zeros_like(bound_side, bool))
     d = jnp.diag(jtj)
     unidentified = d <= _RANK_FLOOR * jnp.max(d)
+    tail = jnp.abs(bound_side) == 1
     outward = (-jtr * bound_side >= 0) & ((full * bound_side >= MAX_STEP) | unidentified)
-    return (bound_side != 0) & outward
+    pinned = tail & outward
+    # HELD + i: a shape of a layer whose weight (coordinate i) sits in its lower tail
+    # (a model's solver_bound_side); held still where that weight is pinned
+    shape = bound_side >= HELD
+    return pinned | (shape & pinned[jnp.where(shape, bound_side - HELD, 0)])
 
 
 def _damped_step(jtj, jtr, lam, pinned, outward=None, floor=1e-12):
@@ -198,7 +204,8 @@ def split_decrement(jtj, jtr, bound_side):
     lam = jnp.finfo(jtj.dtype).eps ** 0.5
     pinned = pinned_coordinates(jtj, jtr, bound_side)
     delta = _damped_step(jtj, jtr, lam, pinned, floor=_RANK_FLOOR)
-    gain = 2.0 * jnp.sum(jnp.where(pinned, jnp.abs(jtr), 0.0))
+    # a held coordinate is at no bound: it has no way to go that a step could take
+    gain = 2.0 * jnp.sum(jnp.where(pinned & (jnp.abs(bound_side) == 1), jnp.abs(jtr), 0.0))
     return pinned, jnp.maximum(-(delta @ jtr), 0.0), gain
 
 
@@ -309,7 +316,8 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # one full step per iteration (geometrically closer in value). Either
         # way they never shrink the free coordinates' step.
         settled = state.free_dec <= self.gtol * state.loss
-        outward = jnp.where(state.pinned & settled, self.max_step * side, 0.0).astype(flat.dtype)
+        outward = jnp.where(state.pinned & settled & (jnp.abs(side) == 1), self.max_step * side,
+                            0.0).astype(flat.dtype)
         delta = _damped_step(state.jtj, state.jtr, state.lam, state.pinned, outward)
         # Cap the step in the unconstrained space: a parameter with a tiny Jacobian
         # column (kd of a dark channel) would otherwise jump deep into the flat tail

@@ -88,7 +88,7 @@ def describe() -> list[dict]:
 #: stands for its models, in the registry's order). A layered model is fitted from
 #: its base's fit and chosen only where its layer gains what the rule asks. glTF's thin
 #: film (``gltf_iridescence``) is tried where named: its fit refines 4 starts over a scan
-#: of films (5-65 s on a real table, median 15 s, against gltf_pbr's 0.2 s), and on the MERL
+#: of films (4-12 s on a real table, median 5.5 s, against gltf_pbr's 0.2 s), and on the MERL
 #: colour-changing paints it gained under 1% of log_rmse (docs/models.md).
 CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
     "gltf": ("gltf_pbr", "gltf_clearcoat", "gltf_sheen"),

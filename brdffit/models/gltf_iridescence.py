@@ -166,6 +166,7 @@ class GltfIridescence(GltfLayer):
     param_specs = (BASE_COLOR, METALLIC, ROUGHNESS, IRIDESCENCE, IRIDESCENCE_IOR,
                    IRIDESCENCE_THICKNESS)
     layer_params = {"iridescence": ("iridescence", ("iridescence_ior", "iridescence_thickness"))}
+    holds_absent_layers = True  # an absent film's thickness and index: 4 x 256 steps
     #: a half-weight film at each optical path of the scan, at each index
     layer_starts = _film_scan()
     #: the scan over the base's own fit too: a film's hue is many-moded in its
