@@ -146,6 +146,12 @@ def _solve_spd(a: Float[Array, "p p"], b: Float[Array, " p"]) -> Float[Array, " 
     return jax.lax.fori_loop(0, n, eliminate, m)[:, n]
 
 
+def _in_tail(bound_side: Int[Array, " p"]) -> Bool[Array, " p"]:
+    """Coordinates in a flat tail of their transform (``bound_side`` -1 / +1), as
+    against free (0) or a held layer's shape (``HELD + i``), which is at no bound."""
+    return jnp.abs(bound_side) == 1
+
+
 def pinned_coordinates(jtj, jtr, bound_side: Int[Array, " p"]) -> Bool[Array, " p"]:
     """Coordinates held at a bound: in a flat tail (``bound_side`` = -1 / +1), with
     both the steepest descent ``-J^T r`` and the Gauss-Newton step pointing further
@@ -163,9 +169,8 @@ def pinned_coordinates(jtj, jtr, bound_side: Int[Array, " p"]) -> Bool[Array, " 
     full = _damped_step(jtj, jtr, jnp.finfo(jtj.dtype).eps ** 0.5, jnp.zeros_like(bound_side, bool))
     d = jnp.diag(jtj)
     unidentified = d <= _RANK_FLOOR * jnp.max(d)
-    tail = jnp.abs(bound_side) == 1
     outward = (-jtr * bound_side >= 0) & ((full * bound_side >= MAX_STEP) | unidentified)
-    pinned = tail & outward
+    pinned = _in_tail(bound_side) & outward
     # HELD + i: a shape of a layer whose weight (coordinate i) sits in its lower tail
     # (a model's solver_bound_side); held still where that weight is pinned
     shape = bound_side >= HELD
@@ -205,7 +210,7 @@ def split_decrement(jtj, jtr, bound_side):
     pinned = pinned_coordinates(jtj, jtr, bound_side)
     delta = _damped_step(jtj, jtr, lam, pinned, floor=_RANK_FLOOR)
     # a held coordinate is at no bound: it has no way to go that a step could take
-    gain = 2.0 * jnp.sum(jnp.where(pinned & (jnp.abs(bound_side) == 1), jnp.abs(jtr), 0.0))
+    gain = 2.0 * jnp.sum(jnp.where(pinned & _in_tail(bound_side), jnp.abs(jtr), 0.0))
     return pinned, jnp.maximum(-(delta @ jtr), 0.0), gain
 
 
@@ -316,7 +321,7 @@ class NormalLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # one full step per iteration (geometrically closer in value). Either
         # way they never shrink the free coordinates' step.
         settled = state.free_dec <= self.gtol * state.loss
-        outward = jnp.where(state.pinned & settled & (jnp.abs(side) == 1), self.max_step * side,
+        outward = jnp.where(state.pinned & settled & _in_tail(side), self.max_step * side,
                             0.0).astype(flat.dtype)
         delta = _damped_step(state.jtj, state.jtr, state.lam, state.pinned, outward)
         # Cap the step in the unconstrained space: a parameter with a tiny Jacobian
