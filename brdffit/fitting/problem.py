@@ -145,6 +145,13 @@ def takes_steps_as_data(solver: str, max_steps: int) -> bool:
     return get_solver(solver).steps_as_data and max_steps <= STEP_CAP
 
 
+#: The solvers' relative tolerance on the loss, by precision: float32 cannot resolve
+#: relative changes much below 1e-6, and looser tolerances there stop the solver at its
+#: attainable accuracy instead of at max_steps. Two optima whose losses differ by less
+#: are one optimum as far as the solver can tell.
+LOSS_RTOL = {"float64": 1e-8, "float32": 1e-5}
+
+
 @functools.cache
 def solver_for(name: str, precision: str):
     """The solver ``name`` for ``precision``, built once. optimistix is imported
@@ -152,10 +159,8 @@ def solver_for(name: str, precision: str):
     fits from compiled executables (``brdffit.executables``) never needs it."""
     from brdffit.fitting import solver as solvers
 
-    # float32 cannot resolve relative changes much below 1e-6: looser tolerances
-    # there stop the solver at its attainable accuracy instead of at max_steps.
-    rtol, atol = (1e-8, 1e-12) if precision == "float64" else (1e-5, 1e-12)
-    return get_solver(name).make(rtol, atol, solvers.gtol_for(DTYPES[precision]))
+    return get_solver(name).make(LOSS_RTOL[precision], 1e-12,
+                                 solvers.gtol_for(DTYPES[precision]))
 
 
 # -- compiled pieces -----------------------------------------------------------
