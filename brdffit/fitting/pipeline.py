@@ -367,7 +367,12 @@ def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray
     retry starts from that point pulled back to where every coordinate moves (|u| <=
     LIVE_U); the exact embedding comes last, so the fit never ends worse than the
     parent on its samples. Each retry is named in ``notes`` (the result's ``starts``
-    counts them).
+    counts them). Where the own starts converged above the parent's loss, the first
+    retry is scouted as they are (:meth:`Solve.best_of`): still above the parent's
+    loss after its first steps, it goes no further (on a diffuse table ggx2's crawled
+    256 steps, 0.66 s, to end 1e-8 above ggx's loss). Where they did not converge, it
+    takes every step: on pink-fabric2 and polyurethane-foam such a retry, above ggx's
+    loss after 32 steps, went on to a second lobe 0.3-0.5% better.
 
     Own starts that converged to the parent's loss within the solver's own tolerance
     found the parent's optimum (oren_nayar's sigma run down to 0 on a table no
@@ -376,7 +381,9 @@ def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray
     above = outcome.lowest_loss() > parent_loss * (1.0 + solve.loss_rtol)
     if not polish and (not outcome.converged or above):
         why = "did not converge" if not outcome.converged else f"ended above {m.parent}'s loss"
-        outcome = outcome.plus(solve(np.clip(parent_start, -LIVE_U, LIVE_U)[None]))
+        retry = np.clip(parent_start, -LIVE_U, LIVE_U)[None]
+        outcome = outcome.plus(solve.best_of(retry, parent_loss) if outcome.converged
+                               else solve(retry))
         notes.append(f"its own start(s) {why}: refined from {m.parent}'s optimum too")
     if outcome.lowest_loss() > parent_loss:
         outcome = outcome.plus(solve(parent_start[None]))
