@@ -290,6 +290,54 @@ def test_an_export_of_a_fit_that_does_not_look_good_says_so():
     assert not [w for w in export(good, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
 
 
+def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled():
+    """The spec's definition takes in the extensions that define their BRDF: a
+    KHR_materials_clearcoat, _iridescence or _ior file is its own model under "spec"
+    (the export's own figures, exact); a KHR_materials_sheen file, whose BRDF the
+    extension leaves to the viewer, has no spec model, and no viewer modelled here
+    shades a layer it lacks: null, never another model's figures."""
+    coated = {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1}
+    filmed = {**GLTF, "metallic": 1.0, "iridescence": 0.7, "iridescence_ior": 1.6,
+              "iridescence_thickness": 400.0}
+    sheened = {**GLTF, "sheen_color": [0.9, 0.5, 0.6], "sheen_roughness": 0.5}
+    for model, params in (("gltf_clearcoat", coated), ("gltf_iridescence", filmed),
+                          ("gltf_pbr_ior", {**GLTF, "ior": 1.6})):
+        r = result(model, params)
+        e = export(r, "gltf", table=fit_as_table(r))
+        spec = e.fidelity["viewers"]["spec"]
+        assert spec["model"] == model, e.fidelity["viewers"]
+        assert spec["log_rmse_to_table"] == e.fidelity["log_rmse_to_table"] < 1e-6
+        assert e.fidelity["viewers"]["threejs"] is None
+    r = result("gltf_sheen", sheened)
+    viewers = export(r, "gltf", table=fit_as_table(r)).fidelity["viewers"]
+    assert viewers == {"spec": None, "threejs": None, "blender": None}
+
+
+def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, capsys):
+    """A null viewer is said in the CLI's report, not left out (a silent line read as
+    a good one)."""
+    from brdffit import cli
+    from brdffit.io import merl
+
+    r = result("gltf_sheen", {**GLTF, "sheen_color": [0.9, 0.5, 0.6], "sheen_roughness": 0.5})
+    fit_file = tmp_path / "fit.json"
+    fit_file.write_text(json.dumps(r.to_dict()))
+    merl.write(tmp_path / "t.binary", fit_as_table(r))
+    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
+                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    for viewer in ("spec", "threejs", "blender"):
+        assert f"  in {viewer}: not modelled" in err, err
+    r = result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1})
+    fit_file.write_text(json.dumps(r.to_dict()))
+    merl.write(tmp_path / "t.binary", fit_as_table(r))
+    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
+                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "  in spec (gltf_clearcoat): log_rmse to the table " in err, err
+    assert "  in threejs: not modelled" in err
+
+
 @pytest.mark.slow
 def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     """fidelity.viewers: the file's factors under the spec's definition and under

@@ -134,7 +134,10 @@ def run(args) -> int:
                  f"{_figure(colour.get('colour_shift'), '.1f')}")
     print(line, file=sys.stderr)
     for viewer, v in (fid.get("viewers") or {}).items():
-        if v is not None:
+        if v is None:  # said, so that a silent viewer is not read as a good one
+            print(f"  in {viewer}: not modelled (no model here shades this file as "
+                  f"{viewer} does; docs/exports.md, Viewers)", file=sys.stderr)
+        else:
             colour = v["sphere_colour"] or {}
             print(f"  in {viewer} ({v['model']}): log_rmse to the table "
                   f"{v['log_rmse_to_table']:.4g}, lit sphere "

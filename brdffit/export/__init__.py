@@ -302,20 +302,24 @@ def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: st
     measured table: ``{viewer: {"model", "log_rmse_to_table", "sphere_colour"}}``; a
     viewer that reads some factors of the file and not others shades the ones it reads
     (Blender ignores ``KHR_materials_ior``: ``gltf.VIEWER_IGNORES``, said in
-    ``"ignores"``); a viewer whose model cannot shade the file (three.js's
-    ``gltf_threejs`` has no ``KHR_materials_ior``; three.js shades it with a physical
-    material) is null. The viewer whose model is ``shaded_as`` takes the export's own
-    figures (``fidelity``), measured already."""
+    ``"ignores"``). Of the viewer's models (``VIEWER_MODELS``: the spec's are its
+    definition and the extensions that define their BRDF) the one whose parameters are
+    the file's shades it; a viewer with none is null (three.js's ``gltf_threejs`` has
+    no ``KHR_materials_ior``, which three.js shades with a physical material). The
+    viewer whose model is ``shaded_as`` takes the export's own figures (``fidelity``),
+    measured already."""
     from brdffit import models
     from brdffit.fitting.problem import table_error
     from brdffit.fitting.sphere import sphere_colour
 
     out = {}
-    for viewer, name in target.viewers.items():
-        model = models.get(name)
+    for viewer, default in target.viewers.items():
         ignored = [k for k in target.module.VIEWER_IGNORES.get(viewer, ()) if k in params]
         seen = {k: v for k, v in params.items() if k not in ignored}
-        if {s.name for s in model.param_specs} != set(seen):
+        name = next((n for n in target.module.VIEWER_MODELS.get(viewer, (default,))
+                     if {s.name for s in models.get(n).param_specs} == set(seen)), None)
+        model = None if name is None else models.get(name)
+        if model is None:
             out[viewer] = None
         elif name == shaded_as:
             out[viewer] = {"model": name, "log_rmse_to_table": fidelity["log_rmse_to_table"],

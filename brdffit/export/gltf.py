@@ -53,6 +53,14 @@ SHADED_AS = {m: m for m in TARGET_MODELS}
 #: is checked against three.js itself (tests/test_export_viewers.py), Blender's against
 #: its Cycles render (tests/test_export_blender.py).
 VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs", "blender": "gltf_blender"}
+#: viewer -> the models that shade a file as that viewer does, by the factors the file
+#: carries (``fidelity.viewers`` takes the one whose parameters are the file's; with
+#: none, that viewer's shading of the file is not modelled, and reported null). The
+#: spec's definition takes in the extensions that define their BRDF (KHR_materials_ior,
+#: _clearcoat, _iridescence: each of those models is its extension's text); a
+#: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer).
+VIEWER_MODELS = {"spec": ("gltf_pbr", "gltf_pbr_ior", "gltf_clearcoat", "gltf_iridescence"),
+                 "threejs": ("gltf_threejs",), "blender": ("gltf_blender",)}
 #: viewer -> the factors its importer ignores: Blender 3.4's shades a KHR_materials_ior
 #: file at its Specular 0.5, an index of 1.5.
 VIEWER_IGNORES = {"blender": ("ior",)}
