@@ -147,6 +147,13 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],
                            "sheen_roughness": 0.2}),
     ],
+    # the same sheen files as three.js shades them
+    "gltf_threejs_sheen": [
+        ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],
+                     "sheen_roughness": 0.5}),
+        ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],
+                           "sheen_roughness": 0.2}),
+    ],
     # a film over a grey metal (a soap-bubble hue): one set, as its fit costs 4 starts
     # (tests/test_layered_models.py recovers a faint film over a dark base)
     "gltf_iridescence": [

@@ -294,8 +294,9 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
     """The spec's definition takes in the extensions that define their BRDF: a
     KHR_materials_clearcoat, _iridescence or _ior file is its own model under "spec"
     (the export's own figures, exact); a KHR_materials_sheen file, whose BRDF the
-    extension leaves to the viewer, has no spec model, and no viewer modelled here
-    shades a layer it lacks: null, never another model's figures."""
+    extension leaves to the viewer, has no spec model, three.js's is
+    gltf_threejs_sheen, and a viewer whose model lacks a layer is null, never another
+    model's figures."""
     coated = {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1}
     filmed = {**GLTF, "metallic": 1.0, "iridescence": 0.7, "iridescence_ior": 1.6,
               "iridescence_thickness": 400.0}
@@ -309,8 +310,14 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
         assert spec["log_rmse_to_table"] == e.fidelity["log_rmse_to_table"] < 1e-6
         assert e.fidelity["viewers"]["threejs"] is None
     r = result("gltf_sheen", sheened)
-    viewers = export(r, "gltf", table=fit_as_table(r)).fidelity["viewers"]
-    assert viewers == {"spec": None, "threejs": None, "blender": None}
+    measured = fit_as_table(r)
+    viewers = export(r, "gltf", table=measured).fidelity["viewers"]
+    assert viewers["spec"] is None and viewers["blender"] is None
+    assert viewers["threejs"]["model"] == "gltf_threejs_sheen"
+    assert viewers["threejs"]["log_rmse_to_table"] == pytest.approx(
+        table_error(measured, "gltf_threejs_sheen", sheened)["log_rmse"], rel=1e-12)
+    # a velvet's base shaded as three.js does is not the spec's: the figure is its own
+    assert viewers["threejs"]["log_rmse_to_table"] > 1e-3
 
 
 def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, capsys):
@@ -326,8 +333,9 @@ def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, cap
     assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
                      str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
     err = capsys.readouterr().err
-    for viewer in ("spec", "threejs", "blender"):
+    for viewer in ("spec", "blender"):
         assert f"  in {viewer}: not modelled" in err, err
+    assert "  in threejs (gltf_threejs_sheen): log_rmse to the table " in err
     r = result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1})
     fit_file.write_text(json.dumps(r.to_dict()))
     merl.write(tmp_path / "t.binary", fit_as_table(r))

@@ -656,11 +656,15 @@ def gltf_preview_pairs(size: int):
     return wi, wo, (disc > 0).ravel(), step.max(-1).ravel()
 
 
+#: The models of three.js's shading, whose previews take its per-pixel roughness term.
+THREEJS_MODELS = ("gltf_threejs", "gltf_threejs_sheen")
+
+
 def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
     """Each pixel's radiance (n, 3, row by row from the top) of an exported glTF
     file's preview scene, as ``model_name`` shades the file's ``params``: what a
-    viewer of that shading renders (:func:`gltf_preview_pairs`; ``gltf_threejs`` with
-    three.js's per-pixel roughness term, ``screen_roughness``)."""
+    viewer of that shading renders (:func:`gltf_preview_pairs`; three.js's models with
+    its per-pixel roughness term, ``screen_roughness``)."""
     import jax.numpy as jnp
 
     from brdffit import models, runtime
@@ -670,7 +674,7 @@ def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
     wi, wo, _, step = gltf_preview_pairs(size)
     with runtime.float64():
         p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
-        if model_name == "gltf_threejs":
+        if model_name in THREEJS_MODELS:  # three.js adds it to the base's roughness only
             p["roughness"] = screen_roughness(p["roughness"], jnp.asarray(step))
         f = np.asarray(models.get(model_name).eval_frame(
             p, shading_frame(jnp.asarray(wi), jnp.asarray(wo))))

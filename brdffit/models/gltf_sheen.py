@@ -43,6 +43,7 @@ from .base import Params, ParamSpec
 from .frame import Frame
 from .gltf_layer import BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS
+from .gltf_threejs import GltfThreejs
 
 SHEEN_COLOR = ParamSpec("sheen_color", "sheenColorFactor, linear RGB", 0.0, 1.0, rgb=True)
 #: The sheen's least roughness, 0.1 (alpha 0.01): the fibres' lobe then still spans
@@ -110,5 +111,30 @@ class GltfSheen(GltfLayer):
 
     def eval_channels(self, params: Params, frame: Frame):
         base = BASE.eval_channels(params, frame)
+        sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
+        return sheen + scale[None] * base
+
+
+THREEJS_BASE = GltfThreejs()
+
+
+class GltfThreejsSheen(GltfSheen):
+    """A ``KHR_materials_sheen`` file as three.js shades it: the same five parameters,
+    the sheen (:func:`sheen_layer`, three.js's) over three.js's own shading of the core
+    factors (``gltf_threejs``: its roughness floor, Fresnel, height-correlated V and
+    multiple-scattering compensation) instead of the spec's:
+
+        f = sheenColor D V + scale f_threejs(base_color, metallic, roughness)
+
+    What ``fidelity.viewers["threejs"]`` judges a sheen export by;
+    ``tests/test_export_viewers.py`` checks it against three.js's render of the file.
+    Its fit starts from ``gltf_threejs``'s with the sheen off, as ``gltf_sheen``'s
+    from ``gltf_pbr``'s."""
+
+    name = "gltf_threejs_sheen"
+    parent = "gltf_threejs"
+
+    def eval_channels(self, params: Params, frame: Frame):
+        base = THREEJS_BASE.eval_channels(params, frame)
         sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
         return sheen + scale[None] * base

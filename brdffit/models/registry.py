@@ -19,7 +19,7 @@ from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import GltfClearcoat
 from brdffit.models.gltf_iridescence import GltfIridescence
 from brdffit.models.gltf_pbr import GltfPBR
-from brdffit.models.gltf_sheen import GltfSheen
+from brdffit.models.gltf_sheen import GltfSheen, GltfThreejsSheen
 from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
@@ -39,6 +39,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     # layered: a coat, a sheen or a thin film over the glTF base (KHR_materials_clearcoat,
     # _sheen, _iridescence)
     GltfClearcoat(), GltfSheen(), GltfIridescence(),
+    # a sheen file as three.js shades it (fidelity.viewers["threejs"])
+    GltfThreejsSheen(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),
