@@ -140,6 +140,12 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         (label, {**params, "clearcoat": coat, "clearcoat_roughness": rough})
         for (label, params), coat, rough in zip(
             (GLTF[0], GLTF[3]), (0.8, 0.7), (0.1, 0.04), strict=True)],
+    # the same coats as three.js shades them (the sharp one above its roughness floor,
+    # 0.045: below it the coat does not change, and a fit there ends anywhere)
+    "gltf_threejs_clearcoat": [
+        (label, {**params, "clearcoat": coat, "clearcoat_roughness": rough})
+        for (label, params), coat, rough in zip(
+            (GLTF[0], GLTF[3]), (0.8, 0.7), (0.1, 0.08), strict=True)],
     # a sheen over a broad base (velvet) and a faint sharp one (satin)
     "gltf_sheen": [
         ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],

@@ -238,6 +238,25 @@ def test_gltf_threejs_sheen_is_what_threejs_shows(threejs, monkeypatch, params):
                           spec_model="gltf_sheen")
 
 
+@pytest.mark.parametrize("params", [
+    {"base_color": [0.5, 0.05, 0.04], "metallic": 0.0, "roughness": 0.6,
+     "clearcoat": 0.8, "clearcoat_roughness": 0.1},
+    {"base_color": [0.9, 0.8, 0.5], "metallic": 1.0, "roughness": 0.45,
+     "clearcoat": 1.0, "clearcoat_roughness": 0.2},
+])
+def test_gltf_threejs_clearcoat_is_what_threejs_shows(threejs, params):
+    """A coat file (the spec's model's fit, exported as it is) in three.js against
+    gltf_threejs_clearcoat: three.js puts the coat's Fresnel at v.h inside its lobe and
+    the view's on the base, where the spec (gltf_clearcoat) weights the lobe by the
+    view's alone, 11% off on the coated metal."""
+    fit = FitResult("gltf_clearcoat", params, {"log_rmse": 0.01}, True, "successful", 5,
+                    0.1, {})
+    e = export(fit, "gltf")
+    assert e.fidelity["exact"] and gltf.CLEARCOAT_EXTENSION in e.material["extensionsUsed"]
+    _assert_threejs_shows(threejs, e.material, "gltf_threejs_clearcoat", params,
+                          spec_model="gltf_clearcoat")
+
+
 def test_the_thin_film_is_what_threejs_shows(threejs):
     """A gltf_iridescence file in three.js: the film is there, and it is the model's.
     On a metal (no diffuse), three.js's highlight with the film over the same file

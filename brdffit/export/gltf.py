@@ -44,7 +44,8 @@ import numpy as np
 #: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",
-                 "gltf_sheen", "gltf_threejs_sheen", "gltf_iridescence")
+                 "gltf_threejs_clearcoat", "gltf_sheen", "gltf_threejs_sheen",
+                 "gltf_iridescence")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -59,9 +60,11 @@ VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs", "blender": "gltf_blend
 #: spec's definition takes in the extensions that define their BRDF (KHR_materials_ior,
 #: _clearcoat, _iridescence: each of those models is its extension's text); a
 #: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer), and
-#: three.js's is ``gltf_threejs_sheen`` (its sheen over its own base).
+#: three.js's is ``gltf_threejs_sheen`` (its sheen over its own base), as
+#: ``gltf_threejs_clearcoat`` is its coat.
 VIEWER_MODELS = {"spec": ("gltf_pbr", "gltf_pbr_ior", "gltf_clearcoat", "gltf_iridescence"),
-                 "threejs": ("gltf_threejs", "gltf_threejs_sheen"), "blender": ("gltf_blender",)}
+                 "threejs": ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen"),
+                 "blender": ("gltf_blender",)}
 #: viewer -> the factors its importer ignores: Blender 3.4's shades a KHR_materials_ior
 #: file at its Specular 0.5, an index of 1.5.
 VIEWER_IGNORES = {"blender": ("ior",)}

@@ -657,7 +657,7 @@ def gltf_preview_pairs(size: int):
 
 
 #: The models of three.js's shading, whose previews take its per-pixel roughness term.
-THREEJS_MODELS = ("gltf_threejs", "gltf_threejs_sheen")
+THREEJS_MODELS = ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen")
 
 
 def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
@@ -674,8 +674,10 @@ def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
     wi, wo, _, step = gltf_preview_pairs(size)
     with runtime.float64():
         p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
-        if model_name in THREEJS_MODELS:  # three.js adds it to the base's roughness only
-            p["roughness"] = screen_roughness(p["roughness"], jnp.asarray(step))
+        if model_name in THREEJS_MODELS:  # to the base's and the coat's, not the sheen's
+            for name in ("roughness", "clearcoat_roughness"):
+                if name in p:
+                    p[name] = screen_roughness(p[name], jnp.asarray(step))
         f = np.asarray(models.get(model_name).eval_frame(
             p, shading_frame(jnp.asarray(wi), jnp.asarray(wo))))
     return f * np.pi * np.clip(wi[:, 2:3], 0.0, None)

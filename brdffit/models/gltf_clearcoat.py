@@ -39,6 +39,7 @@ from .base import Params, ParamSpec
 from .frame import Frame
 from .gltf_layer import BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
+from .gltf_threejs import MIN_ROUGHNESS, GltfThreejs, ggx_vd, schlick_exp2
 from .renderer_terms import separable_ggx_dg
 
 CLEARCOAT = ParamSpec("clearcoat", "clearcoatFactor: the clear coat's weight", 0.0, 1.0)
@@ -72,3 +73,34 @@ class GltfClearcoat(GltfLayer):
         view = jnp.clip(1.0 - jnp.abs(frame.cos_o), 0.0, 1.0)
         weight = params["clearcoat"] * (DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * view**5)
         return (1.0 - weight)[None] * base + (weight * coat)[None]
+
+
+THREEJS_BASE = GltfThreejs()
+
+
+class GltfThreejsClearcoat(GltfClearcoat):
+    """A ``KHR_materials_clearcoat`` file as three.js r187 shades it for a direct light
+    (``BRDF_GGX_Clearcoat``, ``RE_Direct_Physical``, meshphysical's output), the same
+    five parameters:
+
+        f = (1 - clearcoat Fc(cos_o)) f_threejs + clearcoat Fc(v.h) V D(max(cr, 0.045))
+
+    with ``Fc(x) = 0.04 + 0.96 Fs(x)`` (three.js's exp2 Schlick), V and D three.js's
+    height-correlated Smith and GGX, and ``f_threejs`` the base as three.js shades it
+    (``gltf_threejs``). The spec (``gltf_clearcoat``) weights an unshadowed coat lobe by
+    the Fresnel at the view's angle alone; three.js puts the Fresnel at v.h inside the
+    coat's BRDF and takes the view's for the base's attenuation. What a coat export's
+    ``fidelity.viewers["threejs"]`` is measured with (tests/test_export_viewers.py
+    checks it against three.js's render of the file)."""
+
+    name = "gltf_threejs_clearcoat"
+    parent = "gltf_threejs"
+
+    def eval_channels(self, params: Params, frame: Frame):
+        base = THREEJS_BASE.eval_channels(params, frame)
+        cc = params["clearcoat"]
+        r = jnp.clip(params["clearcoat_roughness"], MIN_ROUGHNESS, 1.0)
+        lobe = ggx_vd(r, frame.cos_i, frame.cos_o, frame.cos_h)
+        coat_fresnel = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * schlick_exp2(frame.cos_d)
+        view_fresnel = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * schlick_exp2(frame.cos_o)
+        return (1.0 - cc * view_fresnel)[None] * base + (cc * coat_fresnel * lobe)[None]

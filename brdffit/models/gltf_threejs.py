@@ -101,6 +101,17 @@ def lut_bilinear(table, r, mu):
     return top * (1 - fy) + bottom * fy
 
 
+def ggx_vd(r, nl, nv, nh):
+    """three.js's ``V_GGX_SmithCorrelated`` times ``D_GGX`` at roughness ``r`` (its
+    alpha = r^2): the specular lobe of ``BRDF_GGX`` and ``BRDF_GGX_Clearcoat`` without
+    their Fresnel."""
+    a2 = (r * r) ** 2
+    vis = 0.5 / jnp.maximum(nl * jnp.sqrt(a2 + (1.0 - a2) * nv * nv)
+                            + nv * jnp.sqrt(a2 + (1.0 - a2) * nl * nl), EPSILON)
+    denom = nh * nh * (a2 - 1.0) + 1.0
+    return vis * a2 / (jnp.pi * denom * denom)
+
+
 def screen_roughness(roughness, geometry_roughness):
     """The roughness three.js shades a pixel with (``lights_physical_fragment``): the
     factor at least :data:`MIN_ROUGHNESS`, plus the normal's change to the next pixel
@@ -123,18 +134,13 @@ class GltfThreejs(GltfPBR):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         base, m = params["base_color"][expand], params["metallic"]
         r = jnp.clip(params["roughness"], MIN_ROUGHNESS, 1.0)
-        a2 = (r * r) ** 2
-        nl, nv, nh = frame.cos_i, frame.cos_o, frame.cos_h
+        nv = frame.cos_o
         fs = schlick_exp2(frame.cos_d)[None]
         f0 = DIELECTRIC_F0 * (1.0 - m) + base * m
         fresnel = f0 * (1.0 - fs) + fs
-        vis = 0.5 / jnp.maximum(nl * jnp.sqrt(a2 + (1.0 - a2) * nv * nv)
-                                + nv * jnp.sqrt(a2 + (1.0 - a2) * nl * nl), EPSILON)
-        denom = nh * nh * (a2 - 1.0) + 1.0
-        d = a2 / (jnp.pi * denom * denom)
         ess = lut_bilinear(ess_table(), r, nv)
         compensation = 1.0 + f0 * (1.0 / ess - 1.0)[None]
-        specular = fresnel * (vis * d)[None] * compensation
+        specular = fresnel * ggx_vd(r, frame.cos_i, nv, frame.cos_h)[None] * compensation
         fresnel_d = DIELECTRIC_F0 * (1.0 - fs) + fs
         diffuse = base * (1.0 - m) / jnp.pi * (1.0 - fresnel_d)
         return specular + diffuse
