@@ -230,12 +230,17 @@ def test_gltf_threejs_sheen_is_what_threejs_shows(threejs, monkeypatch, params):
     own model reports three.js's fidelity of a sheen export."""
     monkeypatch.setattr(gltf, "SEGMENTS", 256)
     monkeypatch.setattr(gltf, "RINGS", 128)
-    fit = FitResult("gltf_threejs_sheen", params, {"log_rmse": 0.01}, True, "successful", 5,
-                    0.1, {})
-    e = export(fit, "gltf")
-    assert e.fidelity["exact"] and gltf.SHEEN_EXTENSION in e.material["extensionsUsed"]
-    _assert_threejs_shows(threejs, e.material, "gltf_threejs_sheen", params,
+    material = _layered_file("gltf_threejs_sheen", params, gltf.SHEEN_EXTENSION)
+    _assert_threejs_shows(threejs, material, "gltf_threejs_sheen", params,
                           spec_model="gltf_sheen")
+
+
+def _layered_file(model: str, params: dict, extension: str) -> dict:
+    """The glTF file of a ``model`` fit of ``params``: exact, and with ``extension``."""
+    fit = FitResult(model, params, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
+    e = export(fit, "gltf")
+    assert e.fidelity["exact"] and extension in e.material["extensionsUsed"]
+    return e.material
 
 
 @pytest.mark.parametrize("params", [
@@ -249,11 +254,8 @@ def test_gltf_threejs_clearcoat_is_what_threejs_shows(threejs, params):
     gltf_threejs_clearcoat: three.js puts the coat's Fresnel at v.h inside its lobe and
     the view's on the base, where the spec (gltf_clearcoat) weights the lobe by the
     view's alone, 11% off on the coated metal."""
-    fit = FitResult("gltf_clearcoat", params, {"log_rmse": 0.01}, True, "successful", 5,
-                    0.1, {})
-    e = export(fit, "gltf")
-    assert e.fidelity["exact"] and gltf.CLEARCOAT_EXTENSION in e.material["extensionsUsed"]
-    _assert_threejs_shows(threejs, e.material, "gltf_threejs_clearcoat", params,
+    material = _layered_file("gltf_clearcoat", params, gltf.CLEARCOAT_EXTENSION)
+    _assert_threejs_shows(threejs, material, "gltf_threejs_clearcoat", params,
                           spec_model="gltf_clearcoat")
 
 
