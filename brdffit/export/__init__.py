@@ -313,20 +313,20 @@ def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: st
     from brdffit.fitting.sphere import sphere_colour
 
     out = {}
-    for viewer, default in target.viewers.items():
+    for viewer in target.viewers:
         ignored = [k for k in target.module.VIEWER_IGNORES.get(viewer, ()) if k in params]
         seen = {k: v for k, v in params.items() if k not in ignored}
-        name = next((n for n in target.module.VIEWER_MODELS.get(viewer, (default,))
-                     if {s.name for s in models.get(n).param_specs} == set(seen)), None)
-        model = None if name is None else models.get(name)
+        model = next((m for m in map(models.get, target.module.VIEWER_MODELS[viewer])
+                      if {s.name for s in m.param_specs} == set(seen)), None)
         if model is None:
             out[viewer] = None
-        elif name == shaded_as:
-            out[viewer] = {"model": name, "log_rmse_to_table": fidelity["log_rmse_to_table"],
+        elif model.name == shaded_as:
+            out[viewer] = {"model": model.name,
+                           "log_rmse_to_table": fidelity["log_rmse_to_table"],
                            "sphere_colour": fidelity["sphere_colour"]}
         else:
-            out[viewer] = {"model": name,
-                           "log_rmse_to_table": table_error(measured, name, seen)["log_rmse"],
+            out[viewer] = {"model": model.name,
+                           "log_rmse_to_table": table_error(measured, model, seen)["log_rmse"],
                            "sphere_colour": sphere_colour(measured, model, seen)["key"]}
         if out[viewer] is not None and ignored:
             out[viewer]["ignores"] = ignored

@@ -49,11 +49,6 @@ TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gl
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
-#: viewer -> the model that shades a file as that viewer does (``fidelity.viewers``),
-#: and the target model of an export made for it (``export(..., viewer=)``). three.js's
-#: is checked against three.js itself (tests/test_export_viewers.py), Blender's against
-#: its Cycles render (tests/test_export_blender.py).
-VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs", "blender": "gltf_blender"}
 #: viewer -> the models that shade a file as that viewer does, by the factors the file
 #: carries (``fidelity.viewers`` takes the one whose parameters are the file's; with
 #: none, that viewer's shading of the file is not modelled, and reported null). The
@@ -61,10 +56,15 @@ VIEWERS = {"spec": "gltf_pbr", "threejs": "gltf_threejs", "blender": "gltf_blend
 #: _clearcoat, _iridescence: each of those models is its extension's text); a
 #: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer), and
 #: three.js's is ``gltf_threejs_sheen`` (its sheen over its own base), as
-#: ``gltf_threejs_clearcoat`` is its coat.
+#: ``gltf_threejs_clearcoat`` is its coat. three.js's are checked against three.js
+#: itself (tests/test_export_viewers.py), Blender's against its Cycles render
+#: (tests/test_export_blender.py).
 VIEWER_MODELS = {"spec": ("gltf_pbr", "gltf_pbr_ior", "gltf_clearcoat", "gltf_iridescence"),
                  "threejs": ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen"),
                  "blender": ("gltf_blender",)}
+#: viewer -> the model that shades the core factors as that viewer does: the target
+#: model of an export made for it (``export(..., viewer=)``).
+VIEWERS = {viewer: names[0] for viewer, names in VIEWER_MODELS.items()}
 #: viewer -> the factors its importer ignores: Blender 3.4's shades a KHR_materials_ior
 #: file at its Specular 0.5, an index of 1.5.
 VIEWER_IGNORES = {"blender": ("ior",)}

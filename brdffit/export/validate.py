@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.errors import BrdffitError
+from brdffit.export.gltf import VIEWER_MODELS
 from brdffit.extras import MissingExtraError
 from brdffit.io.grid import bin_grid
 
@@ -656,10 +657,6 @@ def gltf_preview_pairs(size: int):
     return wi, wo, (disc > 0).ravel(), step.max(-1).ravel()
 
 
-#: The models of three.js's shading, whose previews take its per-pixel roughness term.
-THREEJS_MODELS = ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen")
-
-
 def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
     """Each pixel's radiance (n, 3, row by row from the top) of an exported glTF
     file's preview scene, as ``model_name`` shades the file's ``params``: what a
@@ -674,7 +671,7 @@ def preview_radiance(model_name: str, params: dict, size: int) -> np.ndarray:
     wi, wo, _, step = gltf_preview_pairs(size)
     with runtime.float64():
         p = {k: jnp.asarray(v, dtype=jnp.float64) for k, v in params.items()}
-        if model_name in THREEJS_MODELS:  # to the base's and the coat's, not the sheen's
+        if model_name in VIEWER_MODELS["threejs"]:  # the base's and coat's, not the sheen's
             for name in ("roughness", "clearcoat_roughness"):
                 if name in p:
                     p[name] = screen_roughness(p[name], jnp.asarray(step))

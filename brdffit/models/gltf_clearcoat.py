@@ -37,9 +37,9 @@ import jax.numpy as jnp
 
 from .base import Params, ParamSpec
 from .frame import Frame
-from .gltf_layer import BASE, GltfLayer
+from .gltf_layer import THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
-from .gltf_threejs import MIN_ROUGHNESS, GltfThreejs, ggx_vd, schlick_exp2
+from .gltf_threejs import MIN_ROUGHNESS, ggx_vd, schlick_exp2
 from .renderer_terms import separable_ggx_dg
 
 CLEARCOAT = ParamSpec("clearcoat", "clearcoatFactor: the clear coat's weight", 0.0, 1.0)
@@ -66,16 +66,13 @@ class GltfClearcoat(GltfLayer):
         return {**parent_params, "clearcoat": 0.0, "clearcoat_roughness": 0.1}
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = BASE.eval_channels(params, frame)
+        base = self.base_model.eval_channels(params, frame)
         cr = params["clearcoat_roughness"]
         coat = separable_ggx_dg(cr * cr, frame.cos_h, frame.sin2_h, frame.cos_i,
                                 frame.sin2_i, frame.cos_o, frame.sin2_o)
         view = jnp.clip(1.0 - jnp.abs(frame.cos_o), 0.0, 1.0)
         weight = params["clearcoat"] * (DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * view**5)
         return (1.0 - weight)[None] * base + (weight * coat)[None]
-
-
-THREEJS_BASE = GltfThreejs()
 
 
 class GltfThreejsClearcoat(GltfClearcoat):
@@ -95,9 +92,10 @@ class GltfThreejsClearcoat(GltfClearcoat):
 
     name = "gltf_threejs_clearcoat"
     parent = "gltf_threejs"
+    base_model = THREEJS_BASE
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = THREEJS_BASE.eval_channels(params, frame)
+        base = self.base_model.eval_channels(params, frame)
         cc = params["clearcoat"]
         r = jnp.clip(params["clearcoat_roughness"], MIN_ROUGHNESS, 1.0)
         lobe = ggx_vd(r, frame.cos_i, frame.cos_o, frame.cos_h)

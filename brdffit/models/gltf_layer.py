@@ -18,15 +18,21 @@ import numpy as np
 from .base import AbstractBRDFModel
 from .frame import Frame
 from .gltf_pbr import GltfPBR
+from .gltf_threejs import GltfThreejs
 
 #: The base's least roughness among a layered model's starts.
 BROAD_BASE = 0.2
 
 BASE = GltfPBR()
+#: The same base as three.js shades it: under a layer's three.js twin
+#: (``gltf_threejs_clearcoat``, ``gltf_threejs_sheen``).
+THREEJS_BASE = GltfThreejs()
 
 
 class GltfLayer(AbstractBRDFModel):
     parent: ClassVar[str] = "gltf_pbr"
+    #: The model that shades the base under the layer (``parent``'s).
+    base_model: ClassVar[AbstractBRDFModel] = BASE
     #: The layer's parameter values a fit starts from, one dict per start.
     layer_starts: ClassVar[tuple[dict[str, float], ...]] = ()
 

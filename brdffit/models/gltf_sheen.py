@@ -41,9 +41,8 @@ import numpy as np
 
 from .base import Params, ParamSpec
 from .frame import Frame
-from .gltf_layer import BASE, GltfLayer
+from .gltf_layer import THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS
-from .gltf_threejs import GltfThreejs
 
 SHEEN_COLOR = ParamSpec("sheen_color", "sheenColorFactor, linear RGB", 0.0, 1.0, rgb=True)
 #: The sheen's least roughness, 0.1 (alpha 0.01): the fibres' lobe then still spans
@@ -110,12 +109,9 @@ class GltfSheen(GltfLayer):
         return {**parent_params, "sheen_color": np.zeros(3), "sheen_roughness": 0.6}
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = BASE.eval_channels(params, frame)
+        base = self.base_model.eval_channels(params, frame)
         sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
         return sheen + scale[None] * base
-
-
-THREEJS_BASE = GltfThreejs()
 
 
 class GltfThreejsSheen(GltfSheen):
@@ -133,8 +129,4 @@ class GltfThreejsSheen(GltfSheen):
 
     name = "gltf_threejs_sheen"
     parent = "gltf_threejs"
-
-    def eval_channels(self, params: Params, frame: Frame):
-        base = THREEJS_BASE.eval_channels(params, frame)
-        sheen, scale = sheen_layer(params["sheen_color"], params["sheen_roughness"], frame)
-        return sheen + scale[None] * base
+    base_model = THREEJS_BASE
