@@ -166,6 +166,11 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         ("example", {**GLTF[0][1], "base_color": [0.5, 0.5, 0.5], "metallic": 1.0,
                      "iridescence": 1.0, "iridescence_ior": 1.5, "iridescence_thickness": 400.0}),
     ],
+    # the same film as three.js shades it
+    "gltf_threejs_iridescence": [
+        ("example", {**GLTF[0][1], "base_color": [0.5, 0.5, 0.5], "metallic": 1.0,
+                     "iridescence": 1.0, "iridescence_ior": 1.5, "iridescence_thickness": 400.0}),
+    ],
     "principled_clearcoat": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5, "clearcoat": 0.8,

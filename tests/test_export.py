@@ -9,7 +9,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export
+from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export, gltf
 from brdffit.export.conversion import fit_as_table
 from brdffit.fitting.problem import table_error
 from brdffit.fitting.result import FitResult
@@ -294,9 +294,9 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
     """The spec's definition takes in the extensions that define their BRDF: a
     KHR_materials_clearcoat, _iridescence or _ior file is its own model under "spec"
     (the export's own figures, exact); a KHR_materials_sheen file, whose BRDF the
-    extension leaves to the viewer, has no spec model, three.js's is
-    gltf_threejs_sheen, and a viewer whose model lacks a layer is null, never another
-    model's figures."""
+    extension leaves to the viewer, has no spec model; three.js's are
+    gltf_threejs_clearcoat, _iridescence and _sheen; and a viewer whose model lacks a
+    layer is null, never another model's figures."""
     coated = {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1}
     filmed = {**GLTF, "metallic": 1.0, "iridescence": 0.7, "iridescence_ior": 1.6,
               "iridescence_thickness": 400.0}
@@ -309,9 +309,13 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
         assert spec["model"] == model, e.fidelity["viewers"]
         assert spec["log_rmse_to_table"] == e.fidelity["log_rmse_to_table"] < 1e-6
         three = e.fidelity["viewers"]["threejs"]
-        assert (three is None) == (model != "gltf_clearcoat"), three  # film, ior: not modelled
-        if model == "gltf_clearcoat":
-            assert three["model"] == "gltf_threejs_clearcoat"
+        twin = {"gltf_clearcoat": "gltf_threejs_clearcoat",
+                "gltf_iridescence": "gltf_threejs_iridescence"}.get(model)
+        assert (three is None) == (twin is None), three  # ior: not modelled
+        if twin is not None:
+            assert three["model"] == twin
+            # three.js's base and film are not the spec's: the figure is its own
+            assert three["log_rmse_to_table"] > 1e-3
     r = result("gltf_sheen", sheened)
     measured = fit_as_table(r)
     viewers = export(r, "gltf", table=measured).fidelity["viewers"]
@@ -391,6 +395,31 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
         export(r, "mitsuba", table=measured, viewer="threejs")
     with pytest.raises(ExportError, match="carries gltf_threejs"):
         export(r, "gltf", table=measured, viewer="threejs", target_model="gltf_pbr")
+
+
+@pytest.mark.slow
+def test_a_layered_fit_exported_for_a_viewer_keeps_the_layers_that_viewer_shades():
+    """viewer="threejs" refits a coat fit as three.js's coat (gltf_threejs_clearcoat),
+    the file keeping KHR_materials_clearcoat, and no worse in three.js than the spec's
+    file; Blender's model here has no coat: the export is its core material, and the
+    warning says that the coat was lost."""
+    coated = {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1}
+    r = result("gltf_clearcoat", coated)
+    measured = fit_as_table(r)
+    spec_file = export(r, "gltf", table=measured)
+    for_three = export(r, "gltf", table=measured, viewer="threejs")
+    assert for_three.fidelity["target_model"] == "gltf_threejs_clearcoat"
+    assert gltf.CLEARCOAT_EXTENSION in for_three.material["extensionsUsed"]
+    three = for_three.fidelity["viewers"]["threejs"]
+    assert three["model"] == "gltf_threejs_clearcoat"
+    assert (three["log_rmse_to_table"]
+            <= spec_file.fidelity["viewers"]["threejs"]["log_rmse_to_table"] * 1.001)
+    assert not any(w.startswith("layer:") for w in for_three.warnings)
+    for_blender = export(r, "gltf", table=measured, viewer="blender")
+    assert for_blender.fidelity["target_model"] == "gltf_blender"
+    assert gltf.CLEARCOAT_EXTENSION not in for_blender.material.get("extensionsUsed", [])
+    assert any(w.startswith("layer: the clearcoat of the gltf_clearcoat fit")
+               for w in for_blender.warnings), for_blender.warnings
 
 
 def test_a_glTF_refit_that_comes_out_a_metal_mixture_is_weighed_against_a_dielectric():

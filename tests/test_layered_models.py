@@ -382,8 +382,10 @@ def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa:
         "iridescenceThicknessMinimum": 400.0, "iridescenceThicknessMaximum": 400.0}
     assert IRIDESCENCE_EXTENSION in e.material["extensionsUsed"]
     assert any(IRIDESCENCE_EXTENSION in w for w in e.warnings)
-    # three.js's and Blender's models here have no film: their figures are not claimed
-    assert e.fidelity["viewers"]["threejs"] is None and e.fidelity["viewers"]["blender"] is None
+    # three.js's film is its own model (tests/test_export_viewers.py); Blender's model
+    # here has no film: its figure is not claimed
+    assert e.fidelity["viewers"]["threejs"]["model"] == "gltf_threejs_iridescence"
+    assert e.fidelity["viewers"]["blender"] is None
 
 
 # -- auto chooses the layers ---------------------------------------------------------------

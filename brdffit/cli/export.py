@@ -43,7 +43,8 @@ def add_arguments(p) -> None:
                         "(with --out, the files are written too)")
     p.add_argument("--viewer", choices=("spec", "threejs", "blender"), default="spec",
                    help="with --to gltf: fit the factors for the spec's definition (default) "
-                        "or for the way three.js or Blender (Cycles) shades them")
+                        "or for the way three.js or Blender (Cycles) shades them (a coat, "
+                        "sheen or film fit keeps its layer for three.js)")
     p.add_argument("--glb", action="store_true",
                    help="with --to gltf --out DIR: one binary .glb instead of the .gltf")
     store = p.add_argument_group("a batch results file (docs/batch.md)")

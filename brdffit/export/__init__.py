@@ -185,8 +185,10 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     the fit's own table file, where it is still there). ``viewer`` (glTF): ``"spec"``
     (the spec's definition, default), ``"threejs"`` or ``"blender"``: the factors fitted
     for the way three.js or Blender's Cycles shades them (target model ``gltf_threejs``,
-    ``gltf_blender``). A glTF export's fidelity
-    has ``viewers``: the file under each viewer's shading.
+    ``gltf_blender``; a layered fit keeps the layers the viewer's models shade: a coat,
+    sheen or film fit for three.js is refitted as ``gltf_threejs_clearcoat``, ``_sheen``
+    or ``_iridescence``). A glTF export's fidelity has ``viewers``: the file under each
+    viewer's shading.
     """
     from brdffit import models
     from brdffit.export.conversion import convert, dielectric_or_mixture
@@ -198,7 +200,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = spec.module
-    target_model = _viewer_model(spec, viewer, target_model)
+    target_model = _viewer_model(spec, viewer, target_model, result.model)
     if target_model is not None and target_model not in spec.shaded_as:
         raise ExportError(f"{target} carries {', '.join(spec.shaded_as)}, not {target_model!r}")
     models_wanted = (target_model,) if target_model else spec.target_models
@@ -281,8 +283,14 @@ def _looks_warning(result: FitResult) -> list[str]:
             f"({look.get('reason', '')}){hint}"]
 
 
-def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None) -> str | None:
-    """The target model an export for ``viewer`` carries (None: the target's default)."""
+def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
+                  fitted: str) -> str | None:
+    """The target model an export for ``viewer`` carries (None: the target's default):
+    ``target_model`` where the viewer shades it, else the viewer's model that keeps most
+    of the ``fitted`` model's layers (a coat fit for three.js: three.js's coat), the
+    viewer's core model first among equals."""
+    from brdffit import models
+
     if viewer == "spec":
         return target_model
     if viewer not in target.viewers:
@@ -290,10 +298,14 @@ def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None) -
                     for t in TARGETS.values() if t.viewers]
         raise ExportError(f"viewer {viewer!r}: {'; '.join(made_for)}; other targets have "
                           "their renderer's own")
-    wanted = target.viewers[viewer]
-    if target_model not in (None, wanted):
-        raise ExportError(f"viewer {viewer!r} carries {wanted}, not {target_model!r}")
-    return wanted
+    shading = target.module.VIEWER_MODELS[viewer]
+    if target_model is not None:
+        if target_model not in shading:
+            raise ExportError(f"viewer {viewer!r} carries {', '.join(shading)}, "
+                              f"not {target_model!r}")
+        return target_model
+    layers = set(models.get(fitted).layers)
+    return max(shading, key=lambda m: len(layers & set(models.get(m).layers)))
 
 
 def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,

@@ -45,7 +45,7 @@ import numpy as np
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",
                  "gltf_threejs_clearcoat", "gltf_sheen", "gltf_threejs_sheen",
-                 "gltf_iridescence")
+                 "gltf_iridescence", "gltf_threejs_iridescence")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -56,11 +56,12 @@ SHADED_AS = {m: m for m in TARGET_MODELS}
 #: _clearcoat, _iridescence: each of those models is its extension's text); a
 #: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer), and
 #: three.js's is ``gltf_threejs_sheen`` (its sheen over its own base), as
-#: ``gltf_threejs_clearcoat`` is its coat. three.js's are checked against three.js
-#: itself (tests/test_export_viewers.py), Blender's against its Cycles render
-#: (tests/test_export_blender.py).
+#: ``gltf_threejs_clearcoat`` is its coat and ``gltf_threejs_iridescence`` its film.
+#: three.js's are checked against three.js itself (tests/test_export_viewers.py),
+#: Blender's against its Cycles render (tests/test_export_blender.py).
 VIEWER_MODELS = {"spec": ("gltf_pbr", "gltf_pbr_ior", "gltf_clearcoat", "gltf_iridescence"),
-                 "threejs": ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen"),
+                 "threejs": ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen",
+                             "gltf_threejs_iridescence"),
                  "blender": ("gltf_blender",)}
 #: viewer -> the model that shades the core factors as that viewer does: the target
 #: model of an export made for it (``export(..., viewer=)``).

@@ -32,9 +32,10 @@ reciprocal. Where the text leaves a choice:
 - the thickness is ``iridescenceThicknessMaximum``: without a thickness texture the
   extension reads the film as that thickness everywhere.
 
-What three.js r187 shows differs in the rest of its shading (``gltf_threejs``: its
-Schlick's exp2 form, here at each interface of the film too, and its
-multiple-scattering term).
+What three.js r187 shows differs in the rest of its shading: ``gltf_threejs_iridescence``
+is the same file as three.js shades it (its base, ``gltf_threejs``; its Schlick's exp2
+form at each interface of the film; the film replacing the specular Fresnel alone, the
+diffuse kept as the base leaves it).
 
 At ``iridescence = 0`` the material is ``gltf_pbr``'s exactly: a fit starts from the
 ``gltf_pbr`` fit with the film off (``parent``), and from that base under each film of a
@@ -58,8 +59,9 @@ import numpy as np
 
 from .base import Params, ParamSpec
 from .frame import Frame
-from .gltf_layer import BASE, GltfLayer
+from .gltf_layer import BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
+from .gltf_threejs import schlick_exp2
 
 IRIDESCENCE = ParamSpec("iridescence", "iridescenceFactor: the thin film's weight", 0.0, 1.0)
 #: Films of real coatings: from ~1.3 (the extension's default; fluorides, oxides of
@@ -118,6 +120,16 @@ def _schlick(f0, cos):
     return f0 + (1.0 - f0) * (1.0 - cos) ** 5
 
 
+def _threejs_schlick(f0, cos):
+    """three.js's ``F_Schlick(f0, 1, cos)``: its exp2 form of ``(1 - cos)^5``."""
+    fs = schlick_exp2(cos)
+    return f0 * (1.0 - fs) + fs
+
+
+#: three.js's film (``evalIridescence``): its Schlick, the base's f0 clamped, not guarded.
+THREEJS_FILM = {"schlick": _threejs_schlick, "f0_guard": 0.0}
+
+
 def _sensitivity(opd, shift):
     """The film's reflectance spectrum's m-th order, integrated against the matching
     functions (``evalSensitivity``): (3, ...) linear Rec. 709 of an optical path
@@ -133,20 +145,24 @@ def _sensitivity(opd, shift):
     return jnp.tensordot(jnp.asarray(XYZ_TO_REC709), xyz, axes=1)
 
 
-def film_fresnel(film_ior, thickness, base_f0, cos1):
+def film_fresnel(film_ior, thickness, base_f0, cos1, schlick=_schlick, f0_guard=_F0_GUARD):
     """The thin film's Fresnel (3, ...) (``iridescent_fresnel``): a film of index
     ``film_ior`` and ``thickness`` nm in air over a base of reflectance ``base_f0``
-    ((3, ...) or a scalar), lit at ``cos1`` (...) to the (micro)surface's normal."""
+    ((3, ...) or a scalar), lit at ``cos1`` (...) to the (micro)surface's normal.
+    ``schlick`` computes ``f0 + (1 - f0) (1 - cos)^5`` at each interface and
+    ``f0_guard`` is added to the base's f0 before its index is taken: the extension's
+    text by default; three.js's ``evalIridescence`` takes its exp2 form and no guard
+    (:data:`THREEJS_FILM`)."""
     base_f0 = jnp.broadcast_to(base_f0, (3,) + cos1.shape) if jnp.ndim(base_f0) == 0 \
         else base_f0
     # Snell into the film; the film is denser than air, so no total internal reflection
     cos2 = jnp.sqrt(jnp.maximum(1.0 - (1.0 - cos1 * cos1) / (film_ior * film_ior), 1e-12))
     # the first interface (air to film) and the second (film to base), each Schlick's
-    r12 = _schlick(((film_ior - 1.0) / (film_ior + 1.0)) ** 2, cos1)
+    r12 = schlick(((film_ior - 1.0) / (film_ior + 1.0)) ** 2, cos1)
     t121 = 1.0 - r12
-    sqrt_f0 = jnp.sqrt(jnp.minimum(base_f0 + _F0_GUARD, _F0_MAX))
+    sqrt_f0 = jnp.sqrt(jnp.minimum(base_f0 + f0_guard, _F0_MAX))
     base_ior = (1.0 + sqrt_f0) / (1.0 - sqrt_f0)
-    r23 = _schlick(((base_ior - film_ior) / (base_ior + film_ior)) ** 2, cos2[None])
+    r23 = schlick(((base_ior - film_ior) / (base_ior + film_ior)) ** 2, cos2[None])
     # a reflection off a denser medium shifts the phase by pi: air to film always
     # (phi21 = pi), film to base where the base's index is the lower
     phi = jnp.pi + jnp.where(base_ior < film_ior, jnp.pi, 0.0)
@@ -197,3 +213,40 @@ class GltfIridescence(GltfLayer):
         filmed = (1.0 - m) * dielectric + m * film_m * dg
         weight = params["iridescence"]
         return (1.0 - weight) * base + weight * filmed
+
+
+class GltfThreejsIridescence(GltfIridescence):
+    """A ``KHR_materials_iridescence`` file as three.js r187 shades it for a direct light
+    (``evalIridescence`` in ``lights_fragment_begin``, ``BRDF_GGX``,
+    ``RE_Direct_Physical``), the same six parameters:
+
+        F_film   = mix(film(0.04), film(base_color), metallic)    at n.v, once per pixel
+        f        = mix(F, F_film, iridescence) D V compensation + diffuse
+
+    with F, D, V, the compensation and the diffuse three.js's shading of the core
+    factors (``gltf_threejs``), and the film three.js's: the extension's Airy model with
+    its exp2 Schlick at each interface and the base's f0 clamped to 0.9999, not guarded
+    (:data:`THREEJS_FILM`). The spec (``gltf_iridescence``) also takes the film into the
+    dielectric's diffuse (``1 - max(F_film)``); three.js leaves the diffuse under the
+    base's own Fresnel, and its multiple-scattering compensation untinted by the film.
+    What a film export's ``fidelity.viewers["threejs"]`` is measured with
+    (tests/test_export_viewers.py checks it against three.js's render of the file). Its
+    fit starts from ``gltf_threejs``'s with the film off, as ``gltf_iridescence``'s from
+    ``gltf_pbr``'s."""
+
+    name = "gltf_threejs_iridescence"
+    parent = "gltf_threejs"
+    base_model = THREEJS_BASE
+
+    def eval_channels(self, params: Params, frame: Frame):
+        expand = (slice(None),) + (None,) * frame.cos_i.ndim
+        fresnel, lobe, compensation, diffuse = THREEJS_BASE.shading_terms(params, frame)
+        m = params["metallic"]
+        ior, d = params["iridescence_ior"], params["iridescence_thickness"]
+        cos_v = jnp.clip(frame.cos_o, 0.0, 1.0)
+        colour = params["base_color"][expand] * jnp.ones_like(cos_v)[None]
+        film = ((1.0 - m) * film_fresnel(ior, d, DIELECTRIC_F0, cos_v, **THREEJS_FILM)
+                + m * film_fresnel(ior, d, colour, cos_v, **THREEJS_FILM))
+        weight = params["iridescence"]
+        specular = ((1.0 - weight) * fresnel + weight * film) * lobe * compensation
+        return specular + diffuse

@@ -131,6 +131,15 @@ class GltfThreejs(GltfPBR):
         return None
 
     def eval_channels(self, params: Params, frame: Frame):
+        fresnel, lobe, compensation, diffuse = self.shading_terms(params, frame)
+        return fresnel * lobe * compensation + diffuse
+
+    def shading_terms(self, params: Params, frame: Frame):
+        """three.js's pieces of ``f = F (D V) compensation + diffuse``: the specular
+        Fresnel F at v.h (3, ...), the lobe ``D V`` (1, ...), the multiple-scattering
+        compensation (3, ...) and the diffuse (3, ...). A thin film
+        (``gltf_threejs_iridescence``) replaces F alone, as three.js's ``BRDF_GGX``
+        does."""
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         base, m = params["base_color"][expand], params["metallic"]
         r = jnp.clip(params["roughness"], MIN_ROUGHNESS, 1.0)
@@ -140,7 +149,7 @@ class GltfThreejs(GltfPBR):
         fresnel = f0 * (1.0 - fs) + fs
         ess = lut_bilinear(ess_table(), r, nv)
         compensation = 1.0 + f0 * (1.0 / ess - 1.0)[None]
-        specular = fresnel * ggx_vd(r, frame.cos_i, nv, frame.cos_h)[None] * compensation
+        lobe = ggx_vd(r, frame.cos_i, nv, frame.cos_h)[None]
         fresnel_d = DIELECTRIC_F0 * (1.0 - fs) + fs
         diffuse = base * (1.0 - m) / jnp.pi * (1.0 - fresnel_d)
-        return specular + diffuse
+        return fresnel, lobe, compensation, diffuse

@@ -17,7 +17,7 @@ from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import GltfClearcoat, GltfThreejsClearcoat
-from brdffit.models.gltf_iridescence import GltfIridescence
+from brdffit.models.gltf_iridescence import GltfIridescence, GltfThreejsIridescence
 from brdffit.models.gltf_pbr import GltfPBR
 from brdffit.models.gltf_sheen import GltfSheen, GltfThreejsSheen
 from brdffit.models.gltf_threejs import GltfThreejs
@@ -39,8 +39,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     # layered: a coat, a sheen or a thin film over the glTF base (KHR_materials_clearcoat,
     # _sheen, _iridescence)
     GltfClearcoat(), GltfSheen(), GltfIridescence(),
-    # a coat or a sheen file as three.js shades it (fidelity.viewers["threejs"])
-    GltfThreejsClearcoat(), GltfThreejsSheen(),
+    # a coat, a sheen or a film file as three.js shades it (fidelity.viewers["threejs"])
+    GltfThreejsClearcoat(), GltfThreejsSheen(), GltfThreejsIridescence(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),
