@@ -146,6 +146,11 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
         (label, {**params, "clearcoat": coat, "clearcoat_roughness": rough})
         for (label, params), coat, rough in zip(
             (GLTF[0], GLTF[3]), (0.8, 0.7), (0.1, 0.08), strict=True)],
+    # the same coats as Blender shades them (Disney's GTR1 coat at a quarter weight)
+    "gltf_blender_clearcoat": [
+        (label, {**params, "clearcoat": coat, "clearcoat_roughness": rough})
+        for (label, params), coat, rough in zip(
+            (GLTF[0], GLTF[3]), (0.8, 0.7), (0.1, 0.08), strict=True)],
     # a sheen over a broad base (velvet) and a faint sharp one (satin)
     "gltf_sheen": [
         ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],
@@ -155,6 +160,13 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
     ],
     # the same sheen files as three.js shades them
     "gltf_threejs_sheen": [
+        ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],
+                     "sheen_roughness": 0.5}),
+        ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],
+                           "sheen_roughness": 0.2}),
+    ],
+    # the same sheen files as Blender shades them (a Velvet BSDF added)
+    "gltf_blender_sheen": [
         ("example", {**GLTF[4][1], "base_color": [0.3, 0.05, 0.08], "sheen_color": [0.9, 0.5, 0.6],
                      "sheen_roughness": 0.5}),
         ("grazing-heavy", {**GLTF[1][1], "sheen_color": [0.3, 0.3, 0.3],

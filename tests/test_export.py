@@ -316,10 +316,22 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
             assert three["model"] == twin
             # three.js's base and film are not the spec's: the figure is its own
             assert three["log_rmse_to_table"] > 1e-3
+        # Blender shades its own coat; it ignores the film and the ior: the base's figure
+        blender = e.fidelity["viewers"]["blender"]
+        if model == "gltf_clearcoat":
+            assert blender["model"] == "gltf_blender_clearcoat" and "ignores" not in blender
+        else:
+            assert blender["model"] == "gltf_blender"
+            ignored = [k for k in params if k not in GLTF]
+            assert blender["ignores"] == ignored
+            assert blender["log_rmse_to_table"] == pytest.approx(table_error(
+                fit_as_table(r), "gltf_blender",
+                {k: v for k, v in params.items() if k not in ignored})["log_rmse"], rel=1e-12)
     r = result("gltf_sheen", sheened)
     measured = fit_as_table(r)
     viewers = export(r, "gltf", table=measured).fidelity["viewers"]
-    assert viewers["spec"] is None and viewers["blender"] is None
+    assert viewers["spec"] is None
+    assert viewers["blender"]["model"] == "gltf_blender_sheen"
     assert viewers["threejs"]["model"] == "gltf_threejs_sheen"
     assert viewers["threejs"]["log_rmse_to_table"] == pytest.approx(
         table_error(measured, "gltf_threejs_sheen", sheened)["log_rmse"], rel=1e-12)
@@ -340,9 +352,9 @@ def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, cap
     assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
                      str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
     err = capsys.readouterr().err
-    for viewer in ("spec", "blender"):
-        assert f"  in {viewer}: not modelled" in err, err
+    assert "  in spec: not modelled" in err, err
     assert "  in threejs (gltf_threejs_sheen): log_rmse to the table " in err
+    assert "  in blender (gltf_blender_sheen): log_rmse to the table " in err, err
     r = result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1})
     fit_file.write_text(json.dumps(r.to_dict()))
     merl.write(tmp_path / "t.binary", fit_as_table(r))
@@ -351,7 +363,15 @@ def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, cap
     err = capsys.readouterr().err
     assert "  in spec (gltf_clearcoat): log_rmse to the table " in err, err
     assert "  in threejs (gltf_threejs_clearcoat): log_rmse to the table " in err
-    assert "  in blender: not modelled" in err
+    assert "  in blender (gltf_blender_clearcoat): log_rmse to the table " in err
+    r = result("gltf_pbr_ior", {**GLTF, "ior": 1.6})  # three.js's physical material
+    fit_file.write_text(json.dumps(r.to_dict()))
+    merl.write(tmp_path / "t.binary", fit_as_table(r))
+    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
+                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "  in threejs: not modelled" in err
+    assert "(it ignores ior: shades the rest)" in err, err
 
 
 @pytest.mark.slow
@@ -401,8 +421,8 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
 def test_a_layered_fit_exported_for_a_viewer_keeps_the_layers_that_viewer_shades():
     """viewer="threejs" refits a coat fit as three.js's coat (gltf_threejs_clearcoat),
     the file keeping KHR_materials_clearcoat, and no worse in three.js than the spec's
-    file; Blender's model here has no coat: the export is its core material, and the
-    warning says that the coat was lost."""
+    file; viewer="blender" as Blender's coat. Blender reads no film: a film fit for it
+    is its core material, and the warning says that the film was lost."""
     coated = {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1}
     r = result("gltf_clearcoat", coated)
     measured = fit_as_table(r)
@@ -416,9 +436,16 @@ def test_a_layered_fit_exported_for_a_viewer_keeps_the_layers_that_viewer_shades
             <= spec_file.fidelity["viewers"]["threejs"]["log_rmse_to_table"] * 1.001)
     assert not any(w.startswith("layer:") for w in for_three.warnings)
     for_blender = export(r, "gltf", table=measured, viewer="blender")
+    assert for_blender.fidelity["target_model"] == "gltf_blender_clearcoat"
+    assert gltf.CLEARCOAT_EXTENSION in for_blender.material["extensionsUsed"]
+    assert (for_blender.fidelity["viewers"]["blender"]["log_rmse_to_table"]
+            <= spec_file.fidelity["viewers"]["blender"]["log_rmse_to_table"] * 1.001)
+    filmed = result("gltf_iridescence", {**GLTF, "iridescence": 0.7, "iridescence_ior": 1.6,
+                                         "iridescence_thickness": 400.0})
+    for_blender = export(filmed, "gltf", table=fit_as_table(filmed), viewer="blender")
     assert for_blender.fidelity["target_model"] == "gltf_blender"
-    assert gltf.CLEARCOAT_EXTENSION not in for_blender.material.get("extensionsUsed", [])
-    assert any(w.startswith("layer: the clearcoat of the gltf_clearcoat fit")
+    assert gltf.IRIDESCENCE_EXTENSION not in for_blender.material.get("extensionsUsed", [])
+    assert any(w.startswith("layer: the iridescence of the gltf_iridescence fit")
                for w in for_blender.warnings), for_blender.warnings
 
 

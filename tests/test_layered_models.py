@@ -160,10 +160,10 @@ def test_a_coated_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa:
     np.testing.assert_allclose(gltf_spec_eval(e.target_params, wi, wo),
                                np.asarray(m(_jnp(r.params), jnp.asarray(wi), jnp.asarray(wo))),
                                rtol=1e-6)
-    # three.js's coat is its own model (tests/test_export_viewers.py); Blender's model
-    # here has no coat: its figure is not claimed
+    # three.js's and Blender's coats are their own models (tests/test_export_viewers.py,
+    # tests/test_export_blender.py)
     assert e.fidelity["viewers"]["threejs"]["model"] == "gltf_threejs_clearcoat"
-    assert e.fidelity["viewers"]["blender"] is None
+    assert e.fidelity["viewers"]["blender"]["model"] == "gltf_blender_clearcoat"
 
 
 # -- Mitsuba's principled with its clearcoat ---------------------------------------------
@@ -382,10 +382,11 @@ def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa:
         "iridescenceThicknessMinimum": 400.0, "iridescenceThicknessMaximum": 400.0}
     assert IRIDESCENCE_EXTENSION in e.material["extensionsUsed"]
     assert any(IRIDESCENCE_EXTENSION in w for w in e.warnings)
-    # three.js's film is its own model (tests/test_export_viewers.py); Blender's model
-    # here has no film: its figure is not claimed
+    # three.js's film is its own model (tests/test_export_viewers.py); Blender reads no
+    # film: it shades the base (tests/test_export_blender.py)
     assert e.fidelity["viewers"]["threejs"]["model"] == "gltf_threejs_iridescence"
-    assert e.fidelity["viewers"]["blender"] is None
+    assert e.fidelity["viewers"]["blender"]["ignores"] == [
+        "iridescence", "iridescence_ior", "iridescence_thickness"]
 
 
 # -- auto chooses the layers ---------------------------------------------------------------

@@ -44,7 +44,7 @@ def add_arguments(p) -> None:
     p.add_argument("--viewer", choices=("spec", "threejs", "blender"), default="spec",
                    help="with --to gltf: fit the factors for the spec's definition (default) "
                         "or for the way three.js or Blender (Cycles) shades them (a coat, "
-                        "sheen or film fit keeps its layer for three.js)")
+                        "sheen or film fit keeps its layer where the viewer shades it)")
     p.add_argument("--glb", action="store_true",
                    help="with --to gltf --out DIR: one binary .glb instead of the .gltf")
     store = p.add_argument_group("a batch results file (docs/batch.md)")
@@ -140,10 +140,12 @@ def run(args) -> int:
                   f"{viewer} does; docs/exports.md, Viewers)", file=sys.stderr)
         else:
             colour = v["sphere_colour"] or {}
+            ignored = (f" (it ignores {', '.join(v['ignores'])}: shades the rest)"
+                       if v.get("ignores") else "")
             print(f"  in {viewer} ({v['model']}): log_rmse to the table "
                   f"{v['log_rmse_to_table']:.4g}, lit sphere "
                   f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
-                  f"{_figure(colour.get('colour_shift'), '.1f')}", file=sys.stderr)
+                  f"{_figure(colour.get('colour_shift'), '.1f')}{ignored}", file=sys.stderr)
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

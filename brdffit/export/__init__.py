@@ -187,8 +187,9 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     for the way three.js or Blender's Cycles shades them (target model ``gltf_threejs``,
     ``gltf_blender``; a layered fit keeps the layers the viewer's models shade: a coat,
     sheen or film fit for three.js is refitted as ``gltf_threejs_clearcoat``, ``_sheen``
-    or ``_iridescence``). A glTF export's fidelity has ``viewers``: the file under each
-    viewer's shading.
+    or ``_iridescence``, a coat or sheen fit for Blender as ``gltf_blender_clearcoat`` or
+    ``_sheen``). A glTF export's fidelity has ``viewers``: the file under each viewer's
+    shading.
     """
     from brdffit import models
     from brdffit.export.conversion import convert, dielectric_or_mixture

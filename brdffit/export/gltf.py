@@ -45,7 +45,8 @@ import numpy as np
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",
                  "gltf_threejs_clearcoat", "gltf_sheen", "gltf_threejs_sheen",
-                 "gltf_iridescence", "gltf_threejs_iridescence")
+                 "gltf_blender_clearcoat", "gltf_blender_sheen", "gltf_iridescence",
+                 "gltf_threejs_iridescence")
 #: target model -> the model that evaluates the file as it is meant to be shaded: the
 #: spec's definition (gltf_pbr, tests/test_target_models.py), or three.js's shading
 SHADED_AS = {m: m for m in TARGET_MODELS}
@@ -54,21 +55,25 @@ SHADED_AS = {m: m for m in TARGET_MODELS}
 #: none, that viewer's shading of the file is not modelled, and reported null). The
 #: spec's definition takes in the extensions that define their BRDF (KHR_materials_ior,
 #: _clearcoat, _iridescence: each of those models is its extension's text); a
-#: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer), and
-#: three.js's is ``gltf_threejs_sheen`` (its sheen over its own base), as
-#: ``gltf_threejs_clearcoat`` is its coat and ``gltf_threejs_iridescence`` its film.
+#: KHR_materials_sheen file has none (the extension leaves the sheen to the viewer).
+#: three.js's coat, sheen and film are ``gltf_threejs_clearcoat``, ``_sheen`` and
+#: ``_iridescence`` (each over three.js's own base), Blender's coat and sheen (a Velvet
+#: BSDF its importer adds) ``gltf_blender_clearcoat`` and ``gltf_blender_sheen``.
 #: three.js's are checked against three.js itself (tests/test_export_viewers.py),
 #: Blender's against its Cycles render (tests/test_export_blender.py).
 VIEWER_MODELS = {"spec": ("gltf_pbr", "gltf_pbr_ior", "gltf_clearcoat", "gltf_iridescence"),
                  "threejs": ("gltf_threejs", "gltf_threejs_clearcoat", "gltf_threejs_sheen",
                              "gltf_threejs_iridescence"),
-                 "blender": ("gltf_blender",)}
+                 "blender": ("gltf_blender", "gltf_blender_clearcoat", "gltf_blender_sheen")}
 #: viewer -> the model that shades the core factors as that viewer does: the target
 #: model of an export made for it (``export(..., viewer=)``).
 VIEWERS = {viewer: names[0] for viewer, names in VIEWER_MODELS.items()}
 #: viewer -> the factors its importer ignores: Blender 3.4's shades a KHR_materials_ior
-#: file at its Specular 0.5, an index of 1.5.
-VIEWER_IGNORES = {"blender": ("ior",)}
+#: file at its Specular 0.5, an index of 1.5, and does not read KHR_materials_iridescence
+#: (Principled v1 has no film): it shades such a file's base alone
+#: (tests/test_export_blender.py).
+VIEWER_IGNORES = {"blender": ("ior", "iridescence", "iridescence_ior",
+                              "iridescence_thickness")}
 MEDIA_TYPE = "model/gltf+json"
 IOR_EXTENSION = "KHR_materials_ior"
 IOR_NOTE = ("uses KHR_materials_ior: a viewer without the extension shades the dielectric "

@@ -17,6 +17,7 @@ import numpy as np
 
 from .base import AbstractBRDFModel
 from .frame import Frame
+from .gltf_blender import GltfBlender
 from .gltf_pbr import GltfPBR
 from .gltf_threejs import GltfThreejs
 
@@ -27,6 +28,8 @@ BASE = GltfPBR()
 #: The same base as three.js shades it: under a layer's three.js twin
 #: (``gltf_threejs_clearcoat``, ``gltf_threejs_sheen``).
 THREEJS_BASE = GltfThreejs()
+#: ... and as Blender's Cycles shades it (under ``gltf_blender_clearcoat``).
+BLENDER_BASE = GltfBlender()
 
 
 class GltfLayer(AbstractBRDFModel):

@@ -16,10 +16,14 @@ from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
-from brdffit.models.gltf_clearcoat import GltfClearcoat, GltfThreejsClearcoat
+from brdffit.models.gltf_clearcoat import (
+    GltfBlenderClearcoat,
+    GltfClearcoat,
+    GltfThreejsClearcoat,
+)
 from brdffit.models.gltf_iridescence import GltfIridescence, GltfThreejsIridescence
 from brdffit.models.gltf_pbr import GltfPBR
-from brdffit.models.gltf_sheen import GltfSheen, GltfThreejsSheen
+from brdffit.models.gltf_sheen import GltfBlenderSheen, GltfSheen, GltfThreejsSheen
 from brdffit.models.gltf_threejs import GltfThreejs
 from brdffit.models.lambert import Lambert
 from brdffit.models.mono_ks import MonoKs, specular_colour_specs
@@ -41,6 +45,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     GltfClearcoat(), GltfSheen(), GltfIridescence(),
     # a coat, a sheen or a film file as three.js shades it (fidelity.viewers["threejs"])
     GltfThreejsClearcoat(), GltfThreejsSheen(), GltfThreejsIridescence(),
+    # a coat or a sheen file as Blender shades it (fidelity.viewers["blender"])
+    GltfBlenderClearcoat(), GltfBlenderSheen(),
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),

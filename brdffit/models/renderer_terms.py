@@ -93,3 +93,15 @@ def burley_diffuse(roughness, cos_i, cos_o, cos_d) -> Float[Array, ...]:
     fi, fo = schlick_weight(cos_i), schlick_weight(cos_o)
     rr = 2.0 * roughness * cos_d * cos_d
     return (1.0 - 0.5 * fi) * (1.0 - 0.5 * fo) + rr * (fi + fo + fi * fo * (rr - 1.0))
+
+
+def gtr1_d(alpha, cos_h) -> Float[Array, ...]:
+    """Burley's GTR1 distribution (Disney's clear coat; Mitsuba's principled and Cycles'
+    Principled v1 clearcoat): ``(a^2 - 1) / (pi log(a^2) (1 + (a^2 - 1) cos_h^2))``, its
+    limit ``1 / pi`` at ``a = 1`` (as Cycles' ``D_GTR1`` returns there), with no NaN in
+    either branch's gradient."""
+    a2 = alpha * alpha
+    flat = jnp.abs(a2 - 1.0) < 1e-6
+    a2 = jnp.where(flat, 0.5, a2)
+    d = (a2 - 1.0) / (jnp.pi * jnp.log(a2) * (1.0 + (a2 - 1.0) * cos_h * cos_h))
+    return jnp.where(flat, 1.0 / jnp.pi, d)
