@@ -56,7 +56,7 @@ from .base import AbstractBRDFModel, Params, ParamSpec
 from .frame import Frame
 from .guarded import safe_div, safe_sqrt
 from .microfacet import ALPHA_GRID, dielectric_fresnel
-from .renderer_terms import burley_diffuse, schlick_weight, separable_ggx_dg
+from .renderer_terms import burley_diffuse, gtr1_d, schlick_weight, separable_ggx_dg
 
 BASE_COLOR = ParamSpec("base_color", "base colour (diffuse and sheen tint), RGB", 0.0, 1.0,
                        rgb=True)
@@ -150,8 +150,7 @@ class Principled(AbstractBRDFModel):
 def _clearcoat_term(clearcoat, gloss, frame: Frame):
     """Mitsuba's clearcoat lobe (module docstring), f_r (1/sr), shared by R, G, B."""
     a = 0.1 + (0.001 - 0.1) * gloss  # dr::lerp(0.1, 0.001, gloss)
-    a2 = a * a
-    d = (a2 - 1.0) / (jnp.pi * jnp.log(a2) * (1.0 + (a2 - 1.0) * frame.cos_h * frame.cos_h))
+    d = gtr1_d(a, frame.cos_h)
     fresnel = 0.04 + (1.0 - 0.04) * schlick_weight(frame.cos_d)
     return 0.25 * clearcoat * fresnel * d * _smith_g1(frame.cos_i, frame.sin2_i) * _smith_g1(
         frame.cos_o, frame.sin2_o)
