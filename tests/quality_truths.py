@@ -122,6 +122,16 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
             STANDARD_SURFACE[4],
         )
     ],
+    # a lacquer over a rough plastic (a coated car paint's build), and a sharp coat over
+    # a dark broad metal
+    "standard_surface_coat": [
+        ("example", {"base_color": [0.6, 0.1, 0.05], "metalness": 0.0,
+                     "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.5,
+                     "specular_IOR": 1.5, "coat": 1.0, "coat_roughness": 0.1}),
+        ("near-mirror", {"base_color": [0.3, 0.3, 0.35], "metalness": 1.0,
+                         "specular_color": [0.8, 0.8, 0.9], "specular_roughness": 0.45,
+                         "specular_IOR": 1.5, "coat": 0.8, "coat_roughness": 0.06}),
+    ],
     "principled": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5}),

@@ -392,6 +392,24 @@ def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa:
 # -- auto chooses the layers ---------------------------------------------------------------
 
 
+@pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
+def test_a_coated_fit_exports_to_materialx_with_its_coat():
+    """MaterialX's standard_surface has a coat: a gltf_clearcoat fit is refitted as
+    standard_surface_coat (the coat kept, no layer warning), closer to the fit than the
+    plain node, which says the coat was lost."""
+    table, _ = make_table("gltf_clearcoat", COATED)
+    r = fit(table, "gltf_clearcoat", samples=4096)
+    e = export(r, "materialx", table=table)
+    assert e.fidelity["target_model"] == "standard_surface_coat"
+    assert e.target_params["coat"] > 0.3
+    assert '<input name="coat" type="float"' in e.material
+    assert not any(w.startswith("layer:") for w in e.warnings), e.warnings
+    plain = export(r, "materialx", table=table, target_model="standard_surface")
+    assert e.fidelity["log_rmse_to_fit"] < 0.5 * plain.fidelity["log_rmse_to_fit"]
+    assert any(w.startswith("layer: the clearcoat of the gltf_clearcoat fit")
+               for w in plain.warnings), plain.warnings
+
+
 def test_a_renderers_name_stands_for_its_materials_layers_included():
     from brdffit.fitting.options import SelectionRule
     from brdffit.models.catalogue import CANDIDATE_SETS

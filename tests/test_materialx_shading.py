@@ -70,6 +70,22 @@ PINNED = [
              [4624474, 4966663, 5149590], [0.03265848, 0.08164435, 0.1469588]]),
 ]
 
+#: standard_surface_coat: a coated plastic and a coated gold.
+COATED_PLASTIC = {**PLASTIC, "specular_roughness": 0.5, "coat": 1.0, "coat_roughness": 0.1}
+COATED_METAL = {**METAL, "specular_roughness": 0.4, "coat": 0.7, "coat_roughness": 0.3}
+#: MaterialX's generated GLSL's f_r of the coated node at PAIRS (materialx_eval,
+#: 2026-12-02).
+PINNED_COAT = [
+    (COATED_PLASTIC, [[32.11148, 31.97952, 31.90621], [44.35897, 44.22647, 44.15286],
+                      [0.2404346, 0.1080967, 0.03457556], [0.4139793, 0.3187099, 0.2657824],
+                      [0.2422692, 0.1102076, 0.03684005], [0.07931339, 0.03552323, 0.01119535],
+                      [2104902.0, 2104902.0, 2104902.0], [0.2339757, 0.1030298, 0.03028208]]),
+    (COATED_METAL, [[3.050928, 2.423681, 1.186995], [4.116818, 3.26226, 1.613347],
+                    [0.06509187, 0.05047438, 0.02191953], [1.849045, 1.444663, 0.9218152],
+                    [0.07636226, 0.05917744, 0.02761684], [0.0373096, 0.02855199, 0.01253302],
+                    [4881.615, 4895.844, 4892.712], [0.01265703, 0.009747674, 0.004142258]]),
+]
+
 #: Further parameter sets for the live comparison: grey, rough, high-index, bounds.
 MORE = [
     {"base_color": [0.05, 0.05, 0.05], "metalness": 0.0,
@@ -85,12 +101,23 @@ MORE = [
 ]
 
 
+#: Coats for the live comparison: a faint broad one over a blend, a near-mirror one
+#: (coat_roughness at its bound) over a rough dielectric, the roughest over a metal.
+MORE_COAT = [
+    {**BLEND, "specular_roughness": 0.6, "coat": 0.4, "coat_roughness": 0.05},
+    {**MORE[0], "coat": 1.0, "coat_roughness": 0.0317},
+    {**METAL, "coat": 0.5, "coat_roughness": 1.0},
+]
+
+
 def _model(params, wi, wo):
-    m = models.get("standard_surface")
+    name = "standard_surface_coat" if "coat" in params else "standard_surface"
+    m = models.get(name)
     return np.asarray(evaluate(m, m.check_params(params), wi, wo))  # compiled, not op by op
 
 
-@pytest.mark.parametrize("params, pinned", PINNED, ids=["plastic", "metal", "blend"])
+@pytest.mark.parametrize("params, pinned", PINNED + PINNED_COAT,
+                         ids=["plastic", "metal", "blend", "coated-plastic", "coated-metal"])
 def test_model_matches_materialx_glsl_values(params, pinned):
     # float32 shader values: agreement measured at 1.7e-6 relative at worst
     np.testing.assert_allclose(_model(params, WI, WO), pinned, rtol=1e-5)
@@ -127,7 +154,8 @@ def _random_pairs(n_light, n_view, seed):
     return np.repeat(hemi(n_light), n_view, 0), hemi(n_light * n_view)
 
 
-@pytest.mark.parametrize("params", [PLASTIC, METAL, BLEND, *MORE])
+@pytest.mark.parametrize("params", [PLASTIC, METAL, BLEND, *MORE, COATED_PLASTIC,
+                                    COATED_METAL, *MORE_COAT])
 def test_model_matches_materialx_glsl_live(params):
     _needs_gl()
     wi, wo = _random_pairs(16, 20, seed=3)
@@ -138,20 +166,21 @@ def test_model_matches_materialx_glsl_live(params):
     # the directions as the shader receives them: rounding them to float32 moves a sharp
     # grazing peak (alpha 0.0064, 89.94 deg) by 4e-4 relative, on both sides alike
     wi, wo = (w.astype(np.float32).astype(np.float64) for w in (wi, wo))
-    text = materialx.document(params, "check", "standard_surface")
+    text = materialx.document(params, "check")  # the node, coated where params have a coat
     gl = check.materialx_eval(text, wi, wo)
     np.testing.assert_allclose(_model(params, wi, wo), gl, rtol=1e-4, atol=1e-9)
 
 
 def test_pinned_values_are_what_materialx_computes_now():
     _needs_gl()
-    for params, pinned in PINNED:
-        text = materialx.document(params, "check", "standard_surface")
+    for params, pinned in PINNED + PINNED_COAT:
+        text = materialx.document(params, "check")
         np.testing.assert_allclose(check.materialx_eval(text, WI, WO), pinned, rtol=1e-6)
 
 
 @pytest.mark.parametrize("model, params", [
     ("standard_surface", PLASTIC),
+    ("standard_surface_coat", COATED_PLASTIC),
     ("gltf_pbr", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}),
     ("gltf_pbr_ior", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45,
                       "ior": 1.9}),
@@ -161,17 +190,21 @@ def test_documents_pass_materialx_validation(model, params):
     text = materialx.document(params, "3 red/plastic", model)
     ok, message = check.materialx_validate(text)
     assert ok, message
-    node = "standard_surface" if model == "standard_surface" else "gltf_pbr"
+    node = "standard_surface" if model.startswith("standard_surface") else "gltf_pbr"
     assert f"<{node} " in text
     assert materialx.document(params, "3 red/plastic") == text  # the model from the names
 
 
 def test_the_export_writes_the_inputs_the_model_holds_fixed():
     from brdffit.models.standard_surface import FIXED_INPUTS
+    from brdffit.models.standard_surface_coat import COAT_IOR
 
     assert materialx.STANDARD_SURFACE_FIXED == FIXED_INPUTS
     assert set(materialx.STANDARD_SURFACE_INPUTS) == {
         s.name for s in models.get("standard_surface").param_specs}
+    assert materialx.COAT_FIXED == {"coat_IOR": COAT_IOR}
+    assert set(materialx.STANDARD_SURFACE_INPUTS) | set(materialx.COAT_INPUTS) == {
+        s.name for s in models.get("standard_surface_coat").param_specs}
 
 
 def test_only_the_gltf_node_needs_the_shading_note():

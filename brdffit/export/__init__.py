@@ -204,7 +204,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     target_model = _viewer_model(spec, viewer, target_model, result.model)
     if target_model is not None and target_model not in spec.shaded_as:
         raise ExportError(f"{target} carries {', '.join(spec.shaded_as)}, not {target_model!r}")
-    models_wanted = (target_model,) if target_model else spec.target_models
+    models_wanted = ((target_model,) if target_model
+                     else keeping_layers(spec.target_models, result.model))
     warnings: list[str] = []
     measured = None
     carried = result.model if result.model in models_wanted else models_wanted[0]
@@ -290,8 +291,6 @@ def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
     ``target_model`` where the viewer shades it, else the viewer's model that keeps most
     of the ``fitted`` model's layers (a coat fit for three.js: three.js's coat), the
     viewer's core model first among equals."""
-    from brdffit import models
-
     if viewer == "spec":
         return target_model
     if viewer not in target.viewers:
@@ -305,8 +304,19 @@ def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
             raise ExportError(f"viewer {viewer!r} carries {', '.join(shading)}, "
                               f"not {target_model!r}")
         return target_model
+    return keeping_layers(shading, fitted)[0]
+
+
+def keeping_layers(candidates: tuple[str, ...], fitted: str) -> tuple[str, ...]:
+    """``candidates`` with the one that keeps most of the ``fitted`` model's layers
+    first (the earliest among equals: a fit without layers keeps the order), the
+    model a conversion refits when the fit is none of them: a coat fit to MaterialX
+    goes to ``standard_surface_coat``, to glTF to ``gltf_clearcoat``."""
+    from brdffit import models
+
     layers = set(models.get(fitted).layers)
-    return max(shading, key=lambda m: len(layers & set(models.get(m).layers)))
+    best = max(candidates, key=lambda m: len(layers & set(models.get(m).layers)))
+    return (best, *(m for m in candidates if m != best))
 
 
 def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,

@@ -93,7 +93,7 @@ def describe() -> list[dict]:
 CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
     "gltf": ("gltf_pbr", "gltf_clearcoat", "gltf_sheen"),
     "mitsuba": ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat"),
-    "materialx": ("standard_surface_dielectric", "standard_surface"),
+    "materialx": ("standard_surface_dielectric", "standard_surface", "standard_surface_coat"),
 }
 
 
