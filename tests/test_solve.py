@@ -81,3 +81,19 @@ def test_of_many_starts_only_those_still_going_below_every_ended_one_go_on():
     assert out.losses.tolist() == [0.2, 0.5, 0.05, 0.3]
     assert out.steps.tolist() == [10, SCOUT_STEPS, SCOUT_STEPS + 7, SCOUT_STEPS]
     assert out.best(1e-8).index == 2
+
+
+def test_starts_cut_short_resume_from_where_they_stopped():
+    """resume: the starts best_of stopped (out of steps before the limit) go on for the
+    rest of it; those that ended, or ran the whole limit, are left as they are."""
+    cut = _outcome([0.6, 0.2, 0.4, 0.5], [OUT_OF_STEPS, OPTIMAL, OUT_OF_STEPS, OUT_OF_STEPS],
+                   [SCOUT_STEPS, 10, SCOUT_STEPS, 256])
+    solve = _Scripted(_outcome([0.1, 0.35], [OPTIMAL, OUT_OF_STEPS], [40, 224]))
+    out = solve.resume(cut)
+    assert solve.limits == [256 - SCOUT_STEPS]
+    assert out.losses.tolist() == [0.1, 0.2, 0.35, 0.5]
+    assert out.steps.tolist() == [SCOUT_STEPS + 40, 10, 256, 256]
+    assert out.codes.tolist() == [OPTIMAL, OPTIMAL, OUT_OF_STEPS, OUT_OF_STEPS]
+    # nothing cut short: no call, the same outcome
+    solve = _Scripted()
+    assert solve.resume(out) is out and solve.limits == []

@@ -164,16 +164,29 @@ class Solve:
         going = first.codes == _OUT_OF_STEPS
         ended = ~going & np.isfinite(first.losses)
         bar = min(losses[ended].min() if ended.any() else np.inf, known)
-        on = going & (losses < bar)
+        return self._go_on(first, going & (losses < bar))
+
+    def resume(self, outcome: Outcome) -> Outcome:
+        """``outcome`` with the starts :meth:`best_of` cut short (out of steps before
+        ``max_steps``) taken on to ``max_steps`` from where they stopped: where nothing
+        else converged, the scout's bet that they would only crawl lost."""
+        if not self.steps_as_data:
+            return outcome
+        return self._go_on(outcome, (outcome.codes == _OUT_OF_STEPS)
+                           & (outcome.steps < self.max_steps))
+
+    def _go_on(self, outcome: Outcome, on: np.ndarray) -> Outcome:
+        """``outcome`` with its starts ``on`` (each stopped after the same number of
+        steps) solved on for the rest of ``max_steps``."""
         if not on.any():
-            return first
-        more = self(first.values[on], max_steps=self.max_steps - SCOUT_STEPS)
-        merged = first._asdict()
+            return outcome
+        more = self(outcome.values[on], max_steps=self.max_steps - int(outcome.steps[on][0]))
+        merged = outcome._asdict()
         for name in ("values", "codes", "losses", "bread", "meat"):
             if merged[name] is not None:
                 merged[name] = merged[name].copy()
                 merged[name][on] = getattr(more, name)
-        merged["steps"] = first.steps.copy()
+        merged["steps"] = outcome.steps.copy()
         merged["steps"][on] += more.steps
         return Outcome(**merged)
 
