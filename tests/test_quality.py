@@ -177,8 +177,9 @@ def test_next_names_what_nothing_here_can_fit():
     ggx = models.get("ggx")
     turning = quality.next_steps(_look(grazing={"brightness_stops": 0.0, "colour_shift": 15.0}),
                                  model=ggx, params={"alpha": 0.2}, loss="log", converged=True)
-    assert turning[0]["try"].startswith("nothing here: a layered model")
+    assert turning[0]["try"] == "nothing here: a colour that turns across the highlight"
     assert "turns with the angle" in turning[0]["why"]
+    assert "--model gltf_iridescence" in turning[0]["why"]  # what there is, and its limit
     narrow = quality.next_steps(_look(), model=ggx, params={"alpha": 0.004}, loss="render",
                                 converged=False)
     assert [s["try"].split(":")[0] for s in narrow] == [
