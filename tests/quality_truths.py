@@ -132,6 +132,17 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
                          "specular_color": [0.8, 0.8, 0.9], "specular_roughness": 0.45,
                          "specular_IOR": 1.5, "coat": 0.8, "coat_roughness": 0.06}),
     ],
+    # a velvet (a broad tinted sheen over a rough dark base) and a satin (a sharp faint one)
+    "standard_surface_sheen": [
+        ("example", {"base_color": [0.3, 0.05, 0.08], "metalness": 0.0,
+                     "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.8,
+                     "specular_IOR": 1.5, "sheen": 1.0, "sheen_color": [0.9, 0.5, 0.6],
+                     "sheen_roughness": 0.3}),
+        ("grazing-heavy", {"base_color": [0.5, 0.45, 0.4], "metalness": 0.0,
+                           "specular_color": [1.0, 1.0, 1.0], "specular_roughness": 0.5,
+                           "specular_IOR": 1.5, "sheen": 0.5, "sheen_color": [1.0, 1.0, 1.0],
+                           "sheen_roughness": 0.08}),
+    ],
     "principled": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5}),

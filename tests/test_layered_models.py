@@ -261,6 +261,25 @@ def test_a_sheen_is_found_where_there_is_one_and_never_costs_the_base():
             assert_params_close(sheened.params, SHEENED, rel=0.05, abs_small=0.02)
 
 
+@pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
+def test_a_sheened_fit_exports_to_materialx_with_its_sheen():
+    """MaterialX's standard_surface has a sheen: a gltf_sheen fit of a velvet is
+    refitted as standard_surface_sheen (the sheen kept), closer to the fit than the
+    plain node, which says the sheen was lost."""
+    table, _ = make_table("gltf_sheen", SHEENED)
+    r = fit(table, "gltf_sheen", samples=4096)
+    e = export(r, "materialx", table=table)
+    assert e.fidelity["target_model"] == "standard_surface_sheen"
+    assert e.target_params["sheen"] > 0.2
+    assert '<input name="sheen_color" type="color3"' in e.material
+    assert not any(w.startswith("layer:") for w in e.warnings), e.warnings
+    plain = export(r, "materialx", table=table, target_model="standard_surface")
+    assert e.fidelity["log_rmse_to_fit"] < 0.7 * plain.fidelity["log_rmse_to_fit"], (
+        e.fidelity["log_rmse_to_fit"], plain.fidelity["log_rmse_to_fit"])
+    assert any(w.startswith("layer: the sheen of the gltf_sheen fit")
+               for w in plain.warnings), plain.warnings
+
+
 def test_a_sheened_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
     r = FitResult("gltf_sheen", SHEENED, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
     e = export(r, "gltf")

@@ -86,6 +86,22 @@ PINNED_COAT = [
                     [4881.615, 4895.844, 4892.712], [0.01265703, 0.009747674, 0.004142258]]),
 ]
 
+#: standard_surface_sheen: a velvet and a sharp blue sheen over a half-metal gold.
+VELVET = {**PLASTIC, "base_color": [0.3, 0.05, 0.08], "specular_roughness": 0.8,
+          "sheen": 1.0, "sheen_color": [0.9, 0.5, 0.6], "sheen_roughness": 0.3}
+SHEENED_METAL = {**METAL, "metalness": 0.5, "specular_roughness": 0.4, "sheen": 0.6,
+                 "sheen_color": [0.2, 0.5, 1.0], "sheen_roughness": 0.05}
+PINNED_SHEEN = [
+    (VELVET, [[0.09637864, 0.02274449, 0.03158059], [0.09592644, 0.02466386, 0.03321537],
+              [0.1055279, 0.02777785, 0.03776873], [0.1460011, 0.1012897, 0.1067991],
+              [0.1291132, 0.04256742, 0.05466298], [0.1012065, 0.04824189, 0.05832351],
+              [16.29373, 16.28071, 16.28227], [0.1703772, 0.06622408, 0.08378405]]),
+    (SHEENED_METAL, [[1.62572, 1.269124, 0.5651054], [2.140219, 1.665983, 0.7484756],
+                     [0.1714852, 0.1334479, 0.05772329], [1.251102, 0.9867196, 0.6245339],
+                     [0.1776463, 0.1382747, 0.06097762], [0.07065165, 0.05487635, 0.02428433],
+                     [1050.882, 1034.755, 979.5934], [0.1404677, 0.1097112, 0.04816931]]),
+]
+
 #: Further parameter sets for the live comparison: grey, rough, high-index, bounds.
 MORE = [
     {"base_color": [0.05, 0.05, 0.05], "metalness": 0.0,
@@ -108,16 +124,24 @@ MORE_COAT = [
     {**MORE[0], "coat": 1.0, "coat_roughness": 0.0317},
     {**METAL, "coat": 0.5, "coat_roughness": 1.0},
 ]
+#: Sheens for the live comparison: the sharpest (its albedo fit clamped at grazing
+#: views) over a grey, the broadest over a blend.
+MORE_SHEEN = [
+    {**MORE[0], "sheen": 0.8, "sheen_color": [1.0, 1.0, 1.0], "sheen_roughness": 0.01},
+    {**BLEND, "sheen": 0.4, "sheen_color": [0.3, 0.9, 0.1], "sheen_roughness": 1.0},
+]
 
 
 def _model(params, wi, wo):
-    name = "standard_surface_coat" if "coat" in params else "standard_surface"
+    name = ("standard_surface_coat" if "coat" in params
+            else "standard_surface_sheen" if "sheen" in params else "standard_surface")
     m = models.get(name)
     return np.asarray(evaluate(m, m.check_params(params), wi, wo))  # compiled, not op by op
 
 
-@pytest.mark.parametrize("params, pinned", PINNED + PINNED_COAT,
-                         ids=["plastic", "metal", "blend", "coated-plastic", "coated-metal"])
+@pytest.mark.parametrize("params, pinned", PINNED + PINNED_COAT + PINNED_SHEEN,
+                         ids=["plastic", "metal", "blend", "coated-plastic", "coated-metal",
+                              "velvet", "sheened-metal"])
 def test_model_matches_materialx_glsl_values(params, pinned):
     # float32 shader values: agreement measured at 1.7e-6 relative at worst
     np.testing.assert_allclose(_model(params, WI, WO), pinned, rtol=1e-5)
@@ -155,7 +179,8 @@ def _random_pairs(n_light, n_view, seed):
 
 
 @pytest.mark.parametrize("params", [PLASTIC, METAL, BLEND, *MORE, COATED_PLASTIC,
-                                    COATED_METAL, *MORE_COAT])
+                                    COATED_METAL, *MORE_COAT, VELVET, SHEENED_METAL,
+                                    *MORE_SHEEN])
 def test_model_matches_materialx_glsl_live(params):
     _needs_gl()
     wi, wo = _random_pairs(16, 20, seed=3)
@@ -173,7 +198,7 @@ def test_model_matches_materialx_glsl_live(params):
 
 def test_pinned_values_are_what_materialx_computes_now():
     _needs_gl()
-    for params, pinned in PINNED + PINNED_COAT:
+    for params, pinned in PINNED + PINNED_COAT + PINNED_SHEEN:
         text = materialx.document(params, "check")
         np.testing.assert_allclose(check.materialx_eval(text, WI, WO), pinned, rtol=1e-6)
 
@@ -181,6 +206,7 @@ def test_pinned_values_are_what_materialx_computes_now():
 @pytest.mark.parametrize("model, params", [
     ("standard_surface", PLASTIC),
     ("standard_surface_coat", COATED_PLASTIC),
+    ("standard_surface_sheen", VELVET),
     ("gltf_pbr", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}),
     ("gltf_pbr_ior", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45,
                       "ior": 1.9}),
@@ -203,8 +229,10 @@ def test_the_export_writes_the_inputs_the_model_holds_fixed():
     assert set(materialx.STANDARD_SURFACE_INPUTS) == {
         s.name for s in models.get("standard_surface").param_specs}
     assert materialx.COAT_FIXED == {"coat_IOR": COAT_IOR}
-    assert set(materialx.STANDARD_SURFACE_INPUTS) | set(materialx.COAT_INPUTS) == {
-        s.name for s in models.get("standard_surface_coat").param_specs}
+    for model, (layer, fixed) in materialx.LAYER_INPUTS.items():
+        assert set(materialx.STANDARD_SURFACE_INPUTS) | set(layer) == {
+            s.name for s in models.get(model).param_specs}
+        assert not set(fixed) & set(layer)
 
 
 def test_only_the_gltf_node_needs_the_shading_note():

@@ -61,7 +61,7 @@ VARIANTS = ("beckmann_dielectric", "ggx_dielectric", "gltf_pbr_ior", "gltf_three
 @pytest.mark.parametrize(("model", "label", "params"), [
     # rough_plastic's fits evaluate its interface's quadratures at every step: ~3-8 s
     # each; standard_surface's (the conductor) 5-9 s; gltf_iridescence's and its
-    # three.js twin's (4 starts) ~15 s, standard_surface_coat's ~12 s: the full suite
+    # three.js twin's (4 starts) ~15 s, standard_surface's coat and sheen ~12 s: the full suite
     # runs them, the quick tier keeps each model's other truths (a layered model's
     # example only)
     pytest.param(name, label, params,
@@ -69,7 +69,7 @@ VARIANTS = ("beckmann_dielectric", "ggx_dielectric", "gltf_pbr_ior", "gltf_three
                  if name == "gltf_iridescence"  # one worker compiles its fit, for both tests
                  else [pytest.mark.slow]
                  if name in ("rough_plastic", "gltf_threejs_iridescence",
-                             "standard_surface_coat") or (
+                             "standard_surface_coat", "standard_surface_sheen") or (
                      name.startswith("standard_surface") and label in ("example", "dark"))
                  or (name.endswith(("_clearcoat", "_sheen", "_iridescence"))
                      and label != "example")

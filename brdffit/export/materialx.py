@@ -32,13 +32,15 @@ from xml.sax.saxutils import quoteattr
 
 #: the models a fit is copied to by default (any other fit is refitted as the first);
 #: ``export(..., target_model=)`` chooses among every key of SHADED_AS
-TARGET_MODELS = ("standard_surface", "standard_surface_dielectric", "standard_surface_coat")
+TARGET_MODELS = ("standard_surface", "standard_surface_dielectric", "standard_surface_coat",
+                 "standard_surface_sheen")
 #: target model -> the model that evaluates the file as MaterialX shades it: its
 #: generated GLSL agrees with standard_surface to 1e-5 (validate.materialx_eval); its
 #: shading of the gltf_pbr node is not modelled (None)
 SHADED_AS = {"standard_surface": "standard_surface",
              "standard_surface_dielectric": "standard_surface_dielectric",
              "standard_surface_coat": "standard_surface_coat",
+             "standard_surface_sheen": "standard_surface_sheen",
              "gltf_pbr": None, "gltf_pbr_ior": None}
 UNMODELLED_NOTE = ("fidelity: MaterialX's own shading of its gltf_pbr node is not modelled, "
                    "so log_rmse_to_table is not measured; the default standard_surface is")
@@ -58,6 +60,11 @@ STANDARD_SURFACE_FIXED = {"base": 1.0, "specular": 1.0, "diffuse_roughness": 0.0
 #: and the index it holds (its COAT_IOR; not imported: writing a document loads no JAX)
 COAT_INPUTS = {"coat": "float", "coat_roughness": "float"}
 COAT_FIXED = {"coat_IOR": 1.5}
+#: standard_surface_sheen's sheen (models/standard_surface_sheen.py)
+SHEEN_INPUTS = {"sheen": "float", "sheen_color": "color3", "sheen_roughness": "float"}
+#: the layered models: node standard_surface, these inputs beside its own
+LAYER_INPUTS = {"standard_surface_coat": (COAT_INPUTS, COAT_FIXED),
+                "standard_surface_sheen": (SHEEN_INPUTS, {})}
 GLTF_PBR_INPUTS = {"base_color": "color3", "metallic": "float", "roughness": "float",
                    "ior": "float"}
 
@@ -86,13 +93,15 @@ def _input(name: str, kind: str, value) -> str:
 def document(params: dict, name: str, model: str | None = None) -> str:
     """The MaterialX document (XML text) of ``model`` parameters (one of
     :data:`SHADED_AS`): a ``standard_surface`` node for ``standard_surface`` (with its
-    coat for ``standard_surface_coat``), a ``gltf_pbr`` node for ``gltf_pbr`` and
-    ``gltf_pbr_ior``, and its ``surfacematerial``. ``model=None``: the model whose
-    parameters ``params`` holds (``coat``: standard_surface_coat; ``metalness``:
+    coat or sheen for ``standard_surface_coat``, ``_sheen``), a ``gltf_pbr`` node for
+    ``gltf_pbr`` and ``gltf_pbr_ior``, and its ``surfacematerial``. ``model=None``: the model whose
+    parameters ``params`` holds (``coat``: standard_surface_coat; ``sheen``:
+    standard_surface_sheen; ``metalness``:
     standard_surface; ``specular_IOR`` alone: standard_surface_dielectric, written as
     the node at metalness 0; ``ior``: gltf_pbr_ior; else gltf_pbr)."""
     if model is None:
         model = ("standard_surface_coat" if "coat" in params
+                 else "standard_surface_sheen" if "sheen" in params
                  else "standard_surface" if "metalness" in params
                  else "standard_surface_dielectric" if "specular_IOR" in params
                  else "gltf_pbr_ior" if "ior" in params else "gltf_pbr")
@@ -102,13 +111,13 @@ def document(params: dict, name: str, model: str | None = None) -> str:
         model, params = "standard_surface", {**params, "metalness": 0.0}
     ident = _identifier(name)
     shader = quoteattr("SR_" + ident)
-    if model in ("standard_surface", "standard_surface_coat"):
+    if model == "standard_surface" or model in LAYER_INPUTS:
         node = "standard_surface"
         inputs = [_input(k, "float", v) for k, v in STANDARD_SURFACE_FIXED.items()]
         inputs += [_input(k, kind, params[k]) for k, kind in STANDARD_SURFACE_INPUTS.items()]
-        if model == "standard_surface_coat":
-            inputs += [_input(k, kind, params[k]) for k, kind in COAT_INPUTS.items()]
-            inputs += [_input(k, "float", v) for k, v in COAT_FIXED.items()]
+        layer, fixed = LAYER_INPUTS.get(model, ({}, {}))
+        inputs += [_input(k, kind, params[k]) for k, kind in layer.items()]
+        inputs += [_input(k, "float", v) for k, v in fixed.items()]
     else:
         node = "gltf_pbr"
         inputs = [_input(k, kind, params[k]) for k, kind in GLTF_PBR_INPUTS.items()

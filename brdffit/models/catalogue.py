@@ -93,7 +93,8 @@ def describe() -> list[dict]:
 CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
     "gltf": ("gltf_pbr", "gltf_clearcoat", "gltf_sheen"),
     "mitsuba": ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat"),
-    "materialx": ("standard_surface_dielectric", "standard_surface", "standard_surface_coat"),
+    "materialx": ("standard_surface_dielectric", "standard_surface", "standard_surface_coat",
+                  "standard_surface_sheen"),
 }
 
 

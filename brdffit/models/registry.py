@@ -34,6 +34,7 @@ from brdffit.models.rough_conductor import RoughConductor
 from brdffit.models.rough_plastic import RoughPlastic
 from brdffit.models.standard_surface import StandardSurface
 from brdffit.models.standard_surface_coat import StandardSurfaceCoat
+from brdffit.models.standard_surface_sheen import StandardSurfaceSheen
 
 #: The built-in models, cheapest to richest (``auto`` tries them in this order).
 BUILTIN: tuple[AbstractBRDFModel, ...] = (
@@ -51,8 +52,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     RoughConductor(),
     RoughPlastic(), Principled(), StandardSurface(), StandardSurface(dielectric=True),
     Principled(clearcoat=True),
-    # MaterialX's standard_surface with its coat
-    StandardSurfaceCoat(),
+    # MaterialX's standard_surface with its coat, with its sheen
+    StandardSurfaceCoat(), StandardSurfaceSheen(),
     GGX2(),
 )
 

@@ -174,6 +174,14 @@ class StandardSurface(AbstractBRDFModel):
         )
 
     def eval_channels(self, params: Params, frame: Frame):
+        m, metal, spec, throughput, diffuse = self.lobes(params, frame)
+        return m * metal + (1.0 - m) * (spec + throughput[None] * diffuse)
+
+    def lobes(self, params: Params, frame: Frame):
+        """The pieces of ``f = m metal + (1 - m)(spec + T diffuse)``: the metalness
+        ``m``, the conductor (3, ...), the dielectric's lobe (3, ...), its throughput T
+        (...) and the diffuse (3, ...) under it, where a sheen layers
+        (``standard_surface_sheen``)."""
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
         alpha = specular_alpha(params["specular_roughness"])
         # MaterialX clamps N.V, V.H to [1e-8, 1] (M_FLOAT_EPS)
@@ -205,7 +213,7 @@ class StandardSurface(AbstractBRDFModel):
         metal = dv[None] * f_c * (1.0 + f_c * ms_gain[None])
 
         m = 0.0 if self.dielectric else params["metalness"]
-        return m * metal + (1.0 - m) * (spec + throughput[None] * diffuse)
+        return m, metal, spec, throughput, diffuse
 
     def eval_frame(self, params: Params, frame: Frame):
         return jnp.moveaxis(self.eval_channels(params, frame), 0, -1)
