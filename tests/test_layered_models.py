@@ -261,25 +261,6 @@ def test_a_sheen_is_found_where_there_is_one_and_never_costs_the_base():
             assert_params_close(sheened.params, SHEENED, rel=0.05, abs_small=0.02)
 
 
-@pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
-def test_a_sheened_fit_exports_to_materialx_with_its_sheen():
-    """MaterialX's standard_surface has a sheen: a gltf_sheen fit of a velvet is
-    refitted as standard_surface_sheen (the sheen kept), closer to the fit than the
-    plain node, which says the sheen was lost."""
-    table, _ = make_table("gltf_sheen", SHEENED)
-    r = fit(table, "gltf_sheen", samples=4096)
-    e = export(r, "materialx", table=table)
-    assert e.fidelity["target_model"] == "standard_surface_sheen"
-    assert e.target_params["sheen"] > 0.2
-    assert '<input name="sheen_color" type="color3"' in e.material
-    assert not any(w.startswith("layer:") for w in e.warnings), e.warnings
-    plain = export(r, "materialx", table=table, target_model="standard_surface")
-    assert e.fidelity["log_rmse_to_fit"] < 0.7 * plain.fidelity["log_rmse_to_fit"], (
-        e.fidelity["log_rmse_to_fit"], plain.fidelity["log_rmse_to_fit"])
-    assert any(w.startswith("layer: the sheen of the gltf_sheen fit")
-               for w in plain.warnings), plain.warnings
-
-
 def test_a_sheened_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
     r = FitResult("gltf_sheen", SHEENED, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
     e = export(r, "gltf")
@@ -412,20 +393,25 @@ def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa:
 
 
 @pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
-def test_a_coated_fit_exports_to_materialx_with_its_coat():
-    """MaterialX's standard_surface has a coat: a gltf_clearcoat fit is refitted as
-    standard_surface_coat (the coat kept, no layer warning), closer to the fit than the
-    plain node, which says the coat was lost."""
-    table, _ = make_table("gltf_clearcoat", COATED)
-    r = fit(table, "gltf_clearcoat", samples=4096)
+@pytest.mark.parametrize(("model", "params", "layered", "weight", "layer", "gain"), [
+    ("gltf_clearcoat", COATED, "standard_surface_coat", "coat", "clearcoat", 0.5),
+    ("gltf_sheen", SHEENED, "standard_surface_sheen", "sheen", "sheen", 0.7)])
+def test_a_layered_fit_exports_to_materialx_with_its_layer(model, params, layered, weight,
+                                                           layer, gain):
+    """MaterialX's standard_surface has a coat and a sheen: a coat or sheen fit is
+    refitted as standard_surface_coat or _sheen (the layer kept, no layer warning),
+    closer to the fit than the plain node, which says the layer was lost."""
+    table, _ = make_table(model, params)
+    r = fit(table, model, samples=4096)
     e = export(r, "materialx", table=table)
-    assert e.fidelity["target_model"] == "standard_surface_coat"
-    assert e.target_params["coat"] > 0.3
-    assert '<input name="coat" type="float"' in e.material
+    assert e.fidelity["target_model"] == layered
+    assert e.target_params[weight] > 0.2
+    assert f'<input name="{weight}" type="float"' in e.material
     assert not any(w.startswith("layer:") for w in e.warnings), e.warnings
     plain = export(r, "materialx", table=table, target_model="standard_surface")
-    assert e.fidelity["log_rmse_to_fit"] < 0.5 * plain.fidelity["log_rmse_to_fit"]
-    assert any(w.startswith("layer: the clearcoat of the gltf_clearcoat fit")
+    assert e.fidelity["log_rmse_to_fit"] < gain * plain.fidelity["log_rmse_to_fit"], (
+        e.fidelity["log_rmse_to_fit"], plain.fidelity["log_rmse_to_fit"])
+    assert any(w.startswith(f"layer: the {layer} of the {model} fit")
                for w in plain.warnings), plain.warnings
 
 

@@ -35,13 +35,13 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
-import numpy as np
 
 from .base import Params, ParamSpec
 from .frame import Frame
 from .guarded import safe_div
 from .microfacet import dielectric_fresnel
-from .standard_surface import StandardSurface, ggx_dir_albedo_ab, ggx_dv, specular_alpha
+from .standard_surface import ggx_dir_albedo_ab, ggx_dv, specular_alpha
+from .standard_surface_layer import BASE, StandardSurfaceLayer
 
 COAT = ParamSpec("coat", "coat: the clear coat's weight", 0.0, 1.0)
 COAT_ROUGHNESS = ParamSpec("coat_roughness", "coat_roughness (alpha = roughness^2)",
@@ -49,12 +49,8 @@ COAT_ROUGHNESS = ParamSpec("coat_roughness", "coat_roughness (alpha = roughness^
 #: The coat's index: MaterialX's default ``coat_IOR``, a lacquer's (glTF's clear coat's
 #: too); held, and written by the export.
 COAT_IOR = 1.5
-#: The base's least roughness among the starts with a coat: a coat sharper than its base.
-BROAD_BASE = 0.2
 #: The coats a fit starts from over every broad base (beside the base's fit, coat off).
 COAT_STARTS = tuple({"coat": 0.5, "coat_roughness": r} for r in (0.05, 0.15))
-
-BASE = StandardSurface()
 
 
 def coat_terms(coat, coat_roughness, frame: Frame):
@@ -73,29 +69,19 @@ def coat_terms(coat, coat_roughness, frame: Frame):
     return response, throughput
 
 
-class StandardSurfaceCoat(StandardSurface):
+class StandardSurfaceCoat(StandardSurfaceLayer):
     """``standard_surface`` with its coat (module docstring)."""
+
+    layer_specs = (COAT, COAT_ROUGHNESS)
+    layer_starts = COAT_STARTS
 
     @property
     def name(self) -> str:
         return "standard_surface_coat"
 
     @property
-    def param_specs(self) -> tuple[ParamSpec, ...]:
-        return (*BASE.param_specs, COAT, COAT_ROUGHNESS)
-
-    @property
     def layer_params(self) -> dict[str, tuple[str, tuple[str, ...]]]:
         return {"clearcoat": ("coat", ("coat_roughness",))}
-
-    @property
-    def parent(self) -> str | None:
-        return "standard_surface"
-
-    @property
-    def shape_grid(self) -> tuple[dict[str, float], ...]:
-        return tuple({**shape, **coat} for shape in BASE.shape_grid
-                     if shape["specular_roughness"] >= BROAD_BASE for coat in COAT_STARTS)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The ``standard_surface`` fit with the coat off, ready to grow."""
@@ -105,14 +91,3 @@ class StandardSurfaceCoat(StandardSurface):
         base = BASE.eval_channels(params, frame)
         coat, throughput = coat_terms(params["coat"], params["coat_roughness"], frame)
         return coat[None] + throughput[None] * base
-
-    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """``standard_surface``'s starts on every broad base, each with each of
-        :data:`COAT_STARTS`."""
-        base_starts = BASE.start_candidates(table, usable, kd)
-        broad = [u for shape, u in zip(BASE.shape_grid, base_starts, strict=True)
-                 if shape["specular_roughness"] >= BROAD_BASE]
-        coats = [np.concatenate([COAT.unconstrain(np.array([c["coat"]])),
-                                 COAT_ROUGHNESS.unconstrain(np.array([c["coat_roughness"]]))])
-                 for c in COAT_STARTS]
-        return np.stack([np.concatenate([u, c]) for u in broad for c in coats])

@@ -38,7 +38,7 @@ import numpy as np
 
 from .base import Params, ParamSpec
 from .frame import Frame
-from .standard_surface import StandardSurface
+from .standard_surface_layer import BASE, StandardSurfaceLayer
 
 SHEEN = ParamSpec("sheen", "sheen: the sheen's weight", 0.0, 1.0)
 SHEEN_COLOR = ParamSpec("sheen_color", "sheen_color: the sheen's colour", 0.0, 1.0, rgb=True)
@@ -48,8 +48,6 @@ SHEEN_ROUGHNESS = ParamSpec("sheen_roughness", "sheen_roughness: the fibres' spr
                             0.01, 1.0, scale="log")
 #: MaterialX's floor of the roughness in D (``mx_imageworks_sheen_NDF``).
 NDF_MIN_ROUGHNESS = 0.005
-#: The base's least roughness among the starts with a sheen (as the coat's).
-BROAD_BASE = 0.2
 #: The sheens a fit starts from over every broad base (beside the base's fit, sheen off).
 SHEEN_STARTS = tuple({"sheen": 0.5, "sheen_color": 1.0, "sheen_roughness": r}
                      for r in (0.3, 0.6))
@@ -57,8 +55,6 @@ SHEEN_STARTS = tuple({"sheen": 0.5, "sheen_color": 1.0, "sheen_roughness": r}
 #: 1, x, y, x y, x^2, y^2 (x = cos_o, y = roughness).
 _ALBEDO_FIT = np.array([[13.67300, -68.78018, 799.08825, -905.00061, 60.28956, 1086.96473],
                         [1.0, 61.57746, 442.78211, 2597.49308, 121.81241, 3045.55075]])
-
-BASE = StandardSurface()
 
 
 def sheen_dir_albedo(cos_o, roughness):
@@ -91,29 +87,19 @@ def sheen_terms(params: Params, frame: Frame):
     return brdf, throughput
 
 
-class StandardSurfaceSheen(StandardSurface):
+class StandardSurfaceSheen(StandardSurfaceLayer):
     """``standard_surface`` with its sheen (module docstring)."""
+
+    layer_specs = (SHEEN, SHEEN_COLOR, SHEEN_ROUGHNESS)
+    layer_starts = SHEEN_STARTS
 
     @property
     def name(self) -> str:
         return "standard_surface_sheen"
 
     @property
-    def param_specs(self) -> tuple[ParamSpec, ...]:
-        return (*BASE.param_specs, SHEEN, SHEEN_COLOR, SHEEN_ROUGHNESS)
-
-    @property
     def layer_params(self) -> dict[str, tuple[str, tuple[str, ...]]]:
         return {"sheen": ("sheen", ("sheen_color", "sheen_roughness"))}
-
-    @property
-    def parent(self) -> str | None:
-        return "standard_surface"
-
-    @property
-    def shape_grid(self) -> tuple[dict[str, float], ...]:
-        return tuple({**shape, **sheen} for shape in BASE.shape_grid
-                     if shape["specular_roughness"] >= BROAD_BASE for sheen in SHEEN_STARTS)
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The ``standard_surface`` fit with the sheen off, ready to grow."""
@@ -125,15 +111,3 @@ class StandardSurfaceSheen(StandardSurface):
         sheen, sheen_throughput = sheen_terms(params, frame)
         under = sheen + sheen_throughput[None] * diffuse
         return m * metal + (1.0 - m) * (spec + throughput[None] * under)
-
-    def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
-        """``standard_surface``'s starts on every broad base, each with each of
-        :data:`SHEEN_STARTS`."""
-        base_starts = BASE.start_candidates(table, usable, kd)
-        broad = [u for shape, u in zip(BASE.shape_grid, base_starts, strict=True)
-                 if shape["specular_roughness"] >= BROAD_BASE]
-        sheens = [np.concatenate([SHEEN.unconstrain(np.array([s["sheen"]])),
-                                  SHEEN_COLOR.unconstrain(np.full(3, s["sheen_color"])),
-                                  SHEEN_ROUGHNESS.unconstrain(np.array([s["sheen_roughness"]]))])
-                  for s in SHEEN_STARTS]
-        return np.stack([np.concatenate([u, s]) for u in broad for s in sheens])
