@@ -417,6 +417,30 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
         export(r, "gltf", table=measured, viewer="threejs", target_model="gltf_pbr")
 
 
+def test_a_refit_keeps_the_layers_the_fit_uses_where_a_model_layered_over_the_core_has_them():
+    """The model a conversion refits: the core model, or the one layered over it that
+    keeps most of the layers the fit uses (a weight above LAYER_IN_USE). Mitsuba's coat
+    is a dielectric's, not layered over its rough_conductor: a coat is not carried
+    there. A spec export never takes a viewer's twin."""
+    from brdffit.export import _by_layers_kept
+
+    coated = result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1})
+    bare = result("gltf_clearcoat", {**GLTF, "clearcoat": 1e-9, "clearcoat_roughness": 0.1})
+    principled = {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
+                  "sheen_tint": 0.5}
+    first = {name: _by_layers_kept(TARGETS[name].target_models, coated)[0]
+             for name in ("gltf", "materialx", "mitsuba")}
+    assert first == {"gltf": "gltf_clearcoat", "materialx": "standard_surface_coat",
+                     "mitsuba": "rough_conductor"}
+    assert _by_layers_kept(TARGETS["materialx"].target_models, bare)[0] == "standard_surface"
+    for sheen, want in ((0.0, "gltf_pbr"), (0.6, "gltf_sheen")):
+        r = result("principled", {**principled, "sheen": sheen})
+        assert _by_layers_kept(TARGETS["gltf"].target_models, r)[0] == want
+    assert _by_layers_kept(gltf.VIEWER_MODELS["threejs"], coated)[0] == "gltf_threejs_clearcoat"
+    assert _by_layers_kept(gltf.VIEWER_MODELS["blender"], coated)[0] == "gltf_blender_clearcoat"
+    assert _by_layers_kept(TARGETS["gltf"].target_models, result("ggx", GGX))[0] == "gltf_pbr"
+
+
 @pytest.mark.slow
 def test_a_layered_fit_exported_for_a_viewer_keeps_the_layers_that_viewer_shades():
     """viewer="threejs" refits a coat fit as three.js's coat (gltf_threejs_clearcoat),

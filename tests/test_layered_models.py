@@ -70,6 +70,43 @@ def test_with_the_layer_off_it_is_its_base_exactly(name):
                                   np.asarray(base(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))))
 
 
+STANDARD = {"base_color": [0.45, 0.08, 0.05], "metalness": 0.7,
+            "specular_color": [0.9, 0.8, 0.7], "specular_roughness": 0.55, "specular_IOR": 1.5}
+#: The viewers' and MaterialX's layered models, each over its parent's parameters.
+TWINS = [("gltf_threejs_clearcoat", "gltf_threejs"), ("gltf_threejs_sheen", "gltf_threejs"),
+         ("gltf_threejs_iridescence", "gltf_threejs"), ("gltf_blender_clearcoat", "gltf_blender"),
+         ("gltf_blender_sheen", "gltf_blender"), ("standard_surface_coat", "standard_surface"),
+         ("standard_surface_sheen", "standard_surface")]
+
+
+@pytest.mark.parametrize(("name", "parent"), TWINS)
+def test_a_renderers_layered_model_with_the_layer_off_is_its_parent_exactly(name, parent):
+    m, base = models.get(name), models.get(parent)
+    assert m.parent == parent
+    wi, wo = _above(2000, seed=1)
+    p = STANDARD if parent == "standard_surface" else {
+        "base_color": [0.45, 0.08, 0.05], "metallic": 0.7, "roughness": 0.55}
+    layered = m(_jnp(m.embed_parent(p)), jnp.asarray(wi), jnp.asarray(wo))
+    np.testing.assert_array_equal(np.asarray(layered),
+                                  np.asarray(base(_jnp(p), jnp.asarray(wi), jnp.asarray(wo))))
+
+
+@pytest.mark.parametrize(("name", "parent"), TWINS)
+def test_a_renderers_layered_model_is_finite_on_the_closed_hemisphere(name, parent):
+    """Values and gradients at the parameters' bounds (a black base colour, whose film
+    and metal reflectivity take square roots of 0, among them) and at grazing."""
+    m = models.get(name)
+    wi, wo = _edge_directions()
+    edges = []
+    for corner in (0.0, 1.0):
+        p = {s.name: np.full(s.size, s.lower if corner == 0.0 else s.upper)
+             for s in m.param_specs}
+        edges.append({k: (v if len(v) > 1 else float(v[0])) for k, v in p.items()})
+    edges.append({**m.embed_parent(STANDARD if parent == "standard_surface" else {
+        "base_color": [0.0, 0.5, 1.0], "metallic": 0.5, "roughness": 0.0317})})
+    assert_finite_values_and_gradients(m, edges, wi, wo)
+
+
 def test_finite_values_and_gradients_on_the_closed_hemisphere():
     m = models.get("gltf_clearcoat")
     wi, wo = _edge_directions()

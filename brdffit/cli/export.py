@@ -32,7 +32,9 @@ def add_arguments(p) -> None:
     p.add_argument("--target-model", metavar="MODEL",
                    help="which of the renderer's models the file carries: "
                         + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
-                        + " (default: the first)")
+                        + " (default: the fit's own model where it is one of them, else the "
+                        "first, or the one layered over it that keeps the fit's coat or "
+                        "sheen)")
     p.add_argument("--measured", metavar="TABLE",
                    help="the measured .binary table the fidelity is judged against "
                         "(default: the fit's own table file, where it is still there)")

@@ -17,6 +17,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from types import MappingProxyType, ModuleType
 
+import numpy as np
+
 from brdffit import jsonout
 from brdffit.errors import BrdffitError
 from brdffit.export import gltf, materialx, mitsuba
@@ -44,7 +46,8 @@ class ExportTarget:
     name: str
     label: str  # as its users write it, in messages
     module: ModuleType
-    #: viewer -> the target model that the export for it carries
+    #: viewer -> the target model that the export for it carries (a layered fit: the
+    #: viewer's model that keeps its layers, ``_viewer_model``)
     #: (``export(..., viewer=)``; the module's ``VIEWER_IGNORES``: what each viewer
     #: does not read), each judged in ``fidelity.viewers``; empty: the renderer's own
     #: shading only
@@ -179,8 +182,10 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
            target_model: str | None = None, viewer: str = "spec") -> Export:
     """``result`` as a material of ``target`` (one of ``TARGETS``).
 
-    ``target_model``: which of the target's models the file carries (default the
-    target's first, e.g. MaterialX's ``standard_surface``). ``table``: the measured
+    ``target_model``: which of the target's models the file carries (default: the fit's
+    own model where it is one of them, else the target's first, e.g. MaterialX's
+    ``standard_surface``, or the model layered over it that keeps the layers the fit
+    uses, e.g. ``standard_surface_coat`` for a coat fit). ``table``: the measured
     table, for ``fidelity.log_rmse_to_table`` and the sphere's colour error (default:
     the fit's own table file, where it is still there). ``viewer`` (glTF): ``"spec"``
     (the spec's definition, default), ``"threejs"`` or ``"blender"``: the factors fitted
@@ -201,11 +206,11 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = spec.module
-    target_model = _viewer_model(spec, viewer, target_model, result.model)
+    target_model = _viewer_model(spec, viewer, target_model, result)
     if target_model is not None and target_model not in spec.shaded_as:
         raise ExportError(f"{target} carries {', '.join(spec.shaded_as)}, not {target_model!r}")
     models_wanted = ((target_model,) if target_model
-                     else keeping_layers(spec.target_models, result.model))
+                     else _by_layers_kept(spec.target_models, result))
     warnings: list[str] = []
     measured = None
     carried = result.model if result.model in models_wanted else models_wanted[0]
@@ -286,11 +291,11 @@ def _looks_warning(result: FitResult) -> list[str]:
 
 
 def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
-                  fitted: str) -> str | None:
+                  result: FitResult) -> str | None:
     """The target model an export for ``viewer`` carries (None: the target's default):
     ``target_model`` where the viewer shades it, else the viewer's model that keeps most
-    of the ``fitted`` model's layers (a coat fit for three.js: three.js's coat), the
-    viewer's core model first among equals."""
+    of the layers ``result`` uses (a coat fit for three.js: three.js's coat), the
+    viewer's core model first among equals (:func:`_by_layers_kept`)."""
     if viewer == "spec":
         return target_model
     if viewer not in target.viewers:
@@ -304,20 +309,43 @@ def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
             raise ExportError(f"viewer {viewer!r} carries {', '.join(shading)}, "
                               f"not {target_model!r}")
         return target_model
-    return keeping_layers(shading, fitted)[0]
+    return _by_layers_kept(shading, result)[0]
 
 
-def keeping_layers(candidates: tuple[str, ...], fitted: str) -> tuple[str, ...]:
-    """``candidates`` with the one that keeps most of the ``fitted`` model's layers
-    first (the earliest among equals: a fit without layers keeps the order), the
-    model a conversion refits when the fit is none of them: a coat fit to MaterialX
-    goes to ``standard_surface_coat``, to glTF to ``gltf_clearcoat``."""
+#: A layer whose weight (its largest channel) is at most this in a fit is not one the
+#: fit uses: an export does not choose a layered model for it (a principled fit's sheen
+#: at 0 stays a core glTF material).
+LAYER_IN_USE = 1e-3
+
+
+def _layers_in_use(result: FitResult) -> set[str]:
+    """The kinds of layer (``AbstractBRDFModel.layers``) whose weight ``result`` holds
+    above :data:`LAYER_IN_USE`."""
     from brdffit import models
 
-    layers = set(models.get(fitted).layers)
-    best = max(candidates, key=lambda m: len(layers & set(models.get(m).layers)))
-    return (best, *(m for m in candidates if m != best))
+    return {kind for kind, (weight, _) in models.get(result.model).layer_params.items()
+            if float(np.max(np.abs(np.asarray(result.params[weight], float))))
+            > LAYER_IN_USE}
 
+
+def _by_layers_kept(candidates: tuple[str, ...], result: FitResult) -> tuple[str, ...]:
+    """``candidates`` (a target's or a viewer's models, its core model first) reordered
+    so that the model a conversion refits comes first: the one layered over the core
+    (its ``parent``) that keeps most of the layers ``result`` uses, the core where none
+    keeps any. A coat fit goes to MaterialX as ``standard_surface_coat``, to glTF as
+    ``gltf_clearcoat``, to three.js's viewer as ``gltf_threejs_clearcoat``; to Mitsuba,
+    whose coat is a dielectric's (``principled_clearcoat`` over ``principled``, not over
+    its default ``rough_conductor``), as ``rough_conductor``, the coat named lost."""
+    from brdffit import models
+
+    used, core = _layers_in_use(result), candidates[0]
+
+    def kept(name: str) -> int:
+        m = models.get(name)
+        return len(used & set(m.layers)) if name == core or m.parent == core else -1
+
+    best = max(candidates, key=kept)  # the first among equals: the core
+    return (best, *(m for m in candidates if m != best))
 
 def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,
                      fidelity: dict) -> dict:

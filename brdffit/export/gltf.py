@@ -40,7 +40,8 @@ import struct
 
 import numpy as np
 
-#: The models this target shades exactly; other fits are refitted as the first.
+#: The models this target shades exactly; other fits are refitted as the first, or as
+#: the one layered over it that keeps the fit's layers (``export._by_layers_kept``).
 #: ``gltf_threejs`` and ``gltf_blender`` carry the same factors, fitted for three.js's or
 #: Blender's shading (``viewer="threejs"``, ``viewer="blender"``).
 TARGET_MODELS = ("gltf_pbr", "gltf_pbr_ior", "gltf_threejs", "gltf_blender", "gltf_clearcoat",

@@ -16,6 +16,10 @@ Target models (docs/models.md), the first the default:
   generated GLSL run on OpenGL agrees with the model to 1e-5 relative (7e-5 at
   89.9 degrees, the shader's float32)
   (``brdffit.export.validate.materialx_eval``, ``tests/test_materialx_shading.py``).
+- ``standard_surface_coat``, ``standard_surface_sheen``: the same node with its coat
+  (``coat``, ``coat_roughness``; ``coat_IOR`` 1.5 written) or its sheen (``sheen``,
+  ``sheen_color``, ``sheen_roughness``), as MaterialX's GLSL shades them (1e-6); a fit
+  with a coat or a sheen is refitted as these rather than the plain node.
 - ``gltf_pbr``, ``gltf_pbr_ior``: MaterialX's ``gltf_pbr`` node
   (``ND_gltf_pbr_surfaceshader``), inputs glTF's parameters under the same names:
   ``base_color``, ``metallic``, ``roughness`` (and ``ior``); the other inputs at their
@@ -30,7 +34,8 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-#: the models a fit is copied to by default (any other fit is refitted as the first);
+#: the models a fit is copied to by default (any other fit is refitted as the first, or
+#: as the one layered over it that keeps the fit's coat or sheen);
 #: ``export(..., target_model=)`` chooses among every key of SHADED_AS
 TARGET_MODELS = ("standard_surface", "standard_surface_dielectric", "standard_surface_coat",
                  "standard_surface_sheen")

@@ -55,7 +55,8 @@ import numpy as np
 from brdffit.errors import BrdffitError
 from brdffit.export import spectral_ior
 
-#: the models a fit is copied to (any other fit is refitted as the first)
+#: the models a fit is copied to (any other fit is refitted as the first: principled's
+#: coat is a dielectric's, not layered over rough_conductor, so a coat is named lost)
 TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat")
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
 #: agrees with rough_conductor to 2.1e-5 relative, with rough_plastic to 4e-6 and with

@@ -132,7 +132,7 @@ class GltfBlenderClearcoat(GltfClearcoat):
     base_model = BLENDER_BASE
 
     def eval_channels(self, params: Params, frame: Frame):
-        base = BLENDER_BASE.eval_channels(params, frame)
+        base = self.base_model.eval_channels(params, frame)
         # Cycles' GTR1 alpha is the Clearcoat Roughness squared (its render: with the
         # roughness itself the model was 2% brighter than Cycles at the median pixel)
         alpha = params["clearcoat_roughness"] ** 2

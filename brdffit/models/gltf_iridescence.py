@@ -62,6 +62,7 @@ from .frame import Frame
 from .gltf_layer import BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
 from .gltf_threejs import schlick_exp2
+from .guarded import safe_sqrt
 
 IRIDESCENCE = ParamSpec("iridescence", "iridescenceFactor: the thin film's weight", 0.0, 1.0)
 #: Films of real coatings: from ~1.3 (the extension's default; fluorides, oxides of
@@ -160,7 +161,9 @@ def film_fresnel(film_ior, thickness, base_f0, cos1, schlick=_schlick, f0_guard=
     # the first interface (air to film) and the second (film to base), each Schlick's
     r12 = schlick(((film_ior - 1.0) / (film_ior + 1.0)) ** 2, cos1)
     t121 = 1.0 - r12
-    sqrt_f0 = jnp.sqrt(jnp.minimum(base_f0 + f0_guard, _F0_MAX))
+    # three.js's film has no guard: a black base's f0 of 0 takes safe_sqrt's finite
+    # gradient (the same value)
+    sqrt_f0 = safe_sqrt(jnp.minimum(base_f0 + f0_guard, _F0_MAX))
     base_ior = (1.0 + sqrt_f0) / (1.0 - sqrt_f0)
     r23 = schlick(((base_ior - film_ior) / (base_ior + film_ior)) ** 2, cos2[None])
     # a reflection off a denser medium shifts the phase by pi: air to film always
@@ -240,7 +243,7 @@ class GltfThreejsIridescence(GltfIridescence):
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
-        fresnel, lobe, compensation, diffuse = THREEJS_BASE.shading_terms(params, frame)
+        fresnel, lobe, compensation, diffuse = self.base_model.shading_terms(params, frame)
         m = params["metallic"]
         ior, d = params["iridescence_ior"], params["iridescence_thickness"]
         cos_v = jnp.clip(frame.cos_o, 0.0, 1.0)

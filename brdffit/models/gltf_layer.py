@@ -1,5 +1,7 @@
-"""What glTF's layered models share (``gltf_clearcoat``, ``gltf_sheen``): a layer over
-the core material (``gltf_pbr``), whose parameters follow the base's.
+"""What glTF's layered models share (``gltf_clearcoat``, ``gltf_sheen``,
+``gltf_iridescence`` and their three.js and Blender twins, ``gltf_threejs_*``,
+``gltf_blender_*``): a layer over the core material (``gltf_pbr``, or the viewer's
+``gltf_threejs``, ``gltf_blender``: ``base_model``), whose parameters follow the base's.
 
 A fit of one starts from the ``gltf_pbr`` fit with the layer off (``parent``,
 ``embed_parent``), beside starts that put each of the layer's start values

@@ -43,6 +43,7 @@ from .base import Params, ParamSpec
 from .frame import Frame
 from .gltf_layer import BLENDER_BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, METALLIC, ROUGHNESS
+from .renderer_terms import ashikhmin_velvet
 
 SHEEN_COLOR = ParamSpec("sheen_color", "sheenColorFactor, linear RGB", 0.0, 1.0, rgb=True)
 #: The sheen's least roughness, 0.1 (alpha 0.01): the fibres' lobe then still spans
@@ -132,39 +133,12 @@ class GltfThreejsSheen(GltfSheen):
     base_model = THREEJS_BASE
 
 
-#: Cycles' least velvet sigma (``bsdf_ashikhmin_velvet_setup``).
-VELVET_MIN_SIGMA = 0.01
-#: Cycles' velvet is zero within this of the normal (``|cos_h| < 1 - 1e-5``): sin^2
-#: theta_h below ~2e-5.
-VELVET_NORMAL_SIN2 = 1.0 - (1.0 - 1e-5) ** 2
-
-
-def ashikhmin_velvet(sigma, frame: Frame):
-    """Cycles' Velvet BSDF (``bsdf_ashikhmin_velvet``), white, f_r (1/sr):
-
-        D = exp(-cot^2 theta_h / s^2) / (pi s^2 sin^4 theta_h),   s = max(sigma, 0.01)
-        G = min(1, 2 (cos_h / v.h) cos_o, 2 (cos_h / v.h) cos_i)
-        f = D G / (4 cos_i cos_o)
-
-    (``cos_h / v.h`` at least 1e-5), zero within Cycles' cutoff of the normal."""
-    inv_s2 = 1.0 / jnp.maximum(sigma, VELVET_MIN_SIGMA) ** 2
-    near_normal = frame.sin2_h < VELVET_NORMAL_SIN2
-    sin2 = jnp.where(near_normal, 1.0, frame.sin2_h)
-    cot2 = frame.cos_h * frame.cos_h / sin2
-    d = jnp.exp(-cot2 * inv_s2) * inv_s2 / (jnp.pi * sin2 * sin2)
-    ratio = jnp.maximum(frame.cos_h / jnp.maximum(frame.cos_d, 1e-5), 1e-5)
-    # G / (4 cos_i cos_o) without a cosine in a denominator: min(1, 2 r cos_o, 2 r cos_i)
-    # over 4 cos_i cos_o is min(1 / (4 cos_i cos_o), r / (2 cos_i), r / (2 cos_o))
-    g_over = 0.5 * ratio / jnp.maximum(jnp.maximum(frame.cos_i, frame.cos_o), 1e-12)
-    g_over = jnp.minimum(g_over, 0.25 / jnp.maximum(frame.cos_i * frame.cos_o, 1e-24))
-    return jnp.where(near_normal, 0.0, d * g_over)
-
-
 class GltfBlenderSheen(GltfSheen):
     """A ``KHR_materials_sheen`` file as Blender 3.4 shades it: its importer adds a
     Velvet BSDF (Color the sheen colour, Sigma the sheen roughness) to the Principled
     BSDF (an Add Shader; ``gltf2_blender_pbrMetallicRoughness``), and Cycles shades it
-    as Ashikhmin's velvet (:func:`ashikhmin_velvet`), with no albedo scaling of the base:
+    as Ashikhmin's velvet (``renderer_terms.ashikhmin_velvet``), with no albedo scaling
+    of the base:
 
         f = f_blender + sheen_color f_velvet(sheen_roughness)
 
@@ -177,6 +151,7 @@ class GltfBlenderSheen(GltfSheen):
 
     def eval_channels(self, params: Params, frame: Frame):
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
-        base = BLENDER_BASE.eval_channels(params, frame)
-        velvet = ashikhmin_velvet(params["sheen_roughness"], frame)
+        base = self.base_model.eval_channels(params, frame)
+        velvet = ashikhmin_velvet(params["sheen_roughness"], frame.cos_i, frame.cos_o,
+                                  frame.cos_h, frame.sin2_h, frame.cos_d)
         return base + params["sheen_color"][expand] * velvet[None]

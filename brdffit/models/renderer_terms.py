@@ -1,4 +1,5 @@
-"""The renderers' own microfacet terms: separable Smith GGX and the conductor Fresnel.
+"""The renderers' own microfacet terms: separable Smith GGX, the conductor Fresnel,
+Burley's GTR1 (Disney's clear coat) and Cycles' Ashikhmin velvet.
 
 The base models use the height-correlated Smith G (docs/models.md). Renderers do not:
 the glTF 2.0 spec (Appendix B) and Mitsuba 3 (``microfacet.h``) both shade with the
@@ -105,3 +106,31 @@ def gtr1_d(alpha, cos_h) -> Float[Array, ...]:
     a2 = jnp.where(flat, 0.5, a2)
     d = (a2 - 1.0) / (jnp.pi * jnp.log(a2) * (1.0 + (a2 - 1.0) * cos_h * cos_h))
     return jnp.where(flat, 1.0 / jnp.pi, d)
+
+
+#: Cycles' least velvet sigma (``bsdf_ashikhmin_velvet_setup``).
+VELVET_MIN_SIGMA = 0.01
+#: Cycles' velvet is zero within this of the normal (``|cos_h| < 1 - 1e-5``): sin^2
+#: theta_h below ~2e-5.
+VELVET_NORMAL_SIN2 = 1.0 - (1.0 - 1e-5) ** 2
+
+
+def ashikhmin_velvet(sigma, cos_i, cos_o, cos_h, sin2_h, cos_d) -> Float[Array, ...]:
+    """Cycles' Velvet BSDF (``bsdf_ashikhmin_velvet``), white, f_r (1/sr):
+
+        D = exp(-cot^2 theta_h / s^2) / (pi s^2 sin^4 theta_h),   s = max(sigma, 0.01)
+        G = min(1, 2 (cos_h / v.h) cos_o, 2 (cos_h / v.h) cos_i)
+        f = D G / (4 cos_i cos_o)
+
+    (``cos_h / v.h`` at least 1e-5), zero within Cycles' cutoff of the normal."""
+    inv_s2 = 1.0 / jnp.maximum(sigma, VELVET_MIN_SIGMA) ** 2
+    near_normal = sin2_h < VELVET_NORMAL_SIN2
+    sin2 = jnp.where(near_normal, 1.0, sin2_h)
+    cot2 = cos_h * cos_h / sin2
+    d = jnp.exp(-cot2 * inv_s2) * inv_s2 / (jnp.pi * sin2 * sin2)
+    ratio = jnp.maximum(cos_h / jnp.maximum(cos_d, 1e-5), 1e-5)
+    # G / (4 cos_i cos_o) without a cosine in a denominator: min(1, 2 r cos_o, 2 r cos_i)
+    # over 4 cos_i cos_o is min(1 / (4 cos_i cos_o), r / (2 cos_i), r / (2 cos_o))
+    g_over = 0.5 * ratio / jnp.maximum(jnp.maximum(cos_i, cos_o), 1e-12)
+    g_over = jnp.minimum(g_over, 0.25 / jnp.maximum(cos_i * cos_o, 1e-24))
+    return jnp.where(near_normal, 0.0, d * g_over)

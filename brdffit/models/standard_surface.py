@@ -174,10 +174,10 @@ class StandardSurface(AbstractBRDFModel):
         )
 
     def eval_channels(self, params: Params, frame: Frame):
-        m, metal, spec, throughput, diffuse = self.lobes(params, frame)
+        m, metal, spec, throughput, diffuse = self.shading_terms(params, frame)
         return m * metal + (1.0 - m) * (spec + throughput[None] * diffuse)
 
-    def lobes(self, params: Params, frame: Frame):
+    def shading_terms(self, params: Params, frame: Frame):
         """The pieces of ``f = m metal + (1 - m)(spec + T diffuse)``: the metalness
         ``m``, the conductor (3, ...), the dielectric's lobe (3, ...), its throughput T
         (...) and the diffuse (3, ...) under it, where a sheen layers

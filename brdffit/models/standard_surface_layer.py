@@ -25,6 +25,9 @@ BASE = StandardSurface()
 
 
 class StandardSurfaceLayer(StandardSurface):
+    """A layer of the ``standard_surface`` node over the full node (metalness fitted:
+    the ``dielectric`` field stays False) (module docstring)."""
+
     #: The layer's parameters, after the node's own.
     layer_specs: ClassVar[tuple[ParamSpec, ...]] = ()
     #: The layer's parameter values a fit starts from, one dict per start.

@@ -107,7 +107,7 @@ class StandardSurfaceSheen(StandardSurfaceLayer):
                 "sheen_roughness": 0.3}
 
     def eval_channels(self, params: Params, frame: Frame):
-        m, metal, spec, throughput, diffuse = BASE.lobes(params, frame)
+        m, metal, spec, throughput, diffuse = BASE.shading_terms(params, frame)
         sheen, sheen_throughput = sheen_terms(params, frame)
         under = sheen + sheen_throughput[None] * diffuse
         return m * metal + (1.0 - m) * (spec + throughput[None] * under)
