@@ -40,9 +40,9 @@ from .frame import Frame
 from .gltf_blender import SPECULAR_IOR
 from .gltf_layer import BLENDER_BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
-from .gltf_threejs import MIN_ROUGHNESS, ggx_vd, schlick_exp2
+from .gltf_threejs import MIN_ROUGHNESS, ggx_vd, threejs_fresnel
 from .microfacet import dielectric_fresnel
-from .renderer_terms import gtr1_d, separable_ggx_dg
+from .renderer_terms import gtr1_d, separable_ggx_dg, separable_smith_denominator
 
 CLEARCOAT = ParamSpec("clearcoat", "clearcoatFactor: the clear coat's weight", 0.0, 1.0)
 CLEARCOAT_ROUGHNESS = ParamSpec(
@@ -101,8 +101,8 @@ class GltfThreejsClearcoat(GltfClearcoat):
         cc = params["clearcoat"]
         r = jnp.clip(params["clearcoat_roughness"], MIN_ROUGHNESS, 1.0)
         lobe = ggx_vd(r, frame.cos_i, frame.cos_o, frame.cos_h)
-        coat_fresnel = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * schlick_exp2(frame.cos_d)
-        view_fresnel = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * schlick_exp2(frame.cos_o)
+        coat_fresnel = threejs_fresnel(DIELECTRIC_F0, frame.cos_d)
+        view_fresnel = threejs_fresnel(DIELECTRIC_F0, frame.cos_o)
         return (1.0 - cc * view_fresnel)[None] * base + (cc * coat_fresnel * lobe)[None]
 
 
@@ -136,10 +136,9 @@ class GltfBlenderClearcoat(GltfClearcoat):
         # Cycles' GTR1 alpha is the Clearcoat Roughness squared (its render: with the
         # roughness itself the model was 2% brighter than Cycles at the median pixel)
         alpha = params["clearcoat_roughness"] ** 2
-        a2 = BLENDER_COAT_G_ALPHA * BLENDER_COAT_G_ALPHA
-        shadowing = 1.0 / ((frame.cos_i + jnp.sqrt(frame.cos_i**2 + a2 * frame.sin2_i))
-                           * (frame.cos_o + jnp.sqrt(frame.cos_o**2 + a2 * frame.sin2_o)))
+        shadowing = separable_smith_denominator(BLENDER_COAT_G_ALPHA, frame.cos_i,
+                                                frame.sin2_i, frame.cos_o, frame.sin2_o)
         coat = (BLENDER_COAT_WEIGHT * params["clearcoat"]
                 * dielectric_fresnel(SPECULAR_IOR, frame.cos_d)
-                * gtr1_d(alpha, frame.cos_h) * shadowing)
+                * gtr1_d(alpha, frame.cos_h) / shadowing)
         return base + coat[None]

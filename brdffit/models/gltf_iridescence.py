@@ -61,7 +61,7 @@ from .base import Params, ParamSpec
 from .frame import Frame
 from .gltf_layer import BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
-from .gltf_threejs import schlick_exp2
+from .gltf_threejs import threejs_fresnel
 from .guarded import safe_sqrt
 
 IRIDESCENCE = ParamSpec("iridescence", "iridescenceFactor: the thin film's weight", 0.0, 1.0)
@@ -121,14 +121,8 @@ def _schlick(f0, cos):
     return f0 + (1.0 - f0) * (1.0 - cos) ** 5
 
 
-def _threejs_schlick(f0, cos):
-    """three.js's ``F_Schlick(f0, 1, cos)``: its exp2 form of ``(1 - cos)^5``."""
-    fs = schlick_exp2(cos)
-    return f0 * (1.0 - fs) + fs
-
-
 #: three.js's film (``evalIridescence``): its Schlick, the base's f0 clamped, not guarded.
-THREEJS_FILM = {"schlick": _threejs_schlick, "f0_guard": 0.0}
+THREEJS_FILM = {"schlick": threejs_fresnel, "f0_guard": 0.0}
 
 
 def _sensitivity(opd, shift):

@@ -55,6 +55,12 @@ def schlick_exp2(c):
     return jnp.exp2((-5.55473 * c - 6.98316) * c)
 
 
+def threejs_fresnel(f0, c):
+    """three.js's ``F_Schlick(f0, 1, c)``: ``f0 (1 - Fs) + Fs``, Fs its exp2 form."""
+    fs = schlick_exp2(c)
+    return f0 * (1.0 - fs) + fs
+
+
 @functools.cache
 def ess_table(nodes: int = 64) -> np.ndarray:
     """Ess at the table's texel centres, (cos_o, roughness) = ((j + 0.5)/16, (i + 0.5)/16),
@@ -144,12 +150,11 @@ class GltfThreejs(GltfPBR):
         base, m = params["base_color"][expand], params["metallic"]
         r = jnp.clip(params["roughness"], MIN_ROUGHNESS, 1.0)
         nv = frame.cos_o
-        fs = schlick_exp2(frame.cos_d)[None]
         f0 = DIELECTRIC_F0 * (1.0 - m) + base * m
-        fresnel = f0 * (1.0 - fs) + fs
+        fresnel = threejs_fresnel(f0, frame.cos_d[None])
         ess = lut_bilinear(ess_table(), r, nv)
         compensation = 1.0 + f0 * (1.0 / ess - 1.0)[None]
         lobe = ggx_vd(r, frame.cos_i, nv, frame.cos_h)[None]
-        fresnel_d = DIELECTRIC_F0 * (1.0 - fs) + fs
+        fresnel_d = threejs_fresnel(DIELECTRIC_F0, frame.cos_d[None])
         diffuse = base * (1.0 - m) / jnp.pi * (1.0 - fresnel_d)
         return fresnel, lobe, compensation, diffuse

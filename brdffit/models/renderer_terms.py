@@ -39,9 +39,17 @@ def separable_ggx_dg(alpha, cos_h, sin2_h, cos_i, sin2_i, cos_o, sin2_o) -> Floa
     a2 = alpha * alpha
     t = cos_h * cos_h * a2 + sin2_h  # cos^2 (a^2 - 1) + 1, without the cancellation
     d = a2 / (3.141592653589793 * t * t)
+    return safe_div(d, separable_smith_denominator(alpha, cos_i, sin2_i, cos_o, sin2_o),
+                    1e-30)
+
+
+def separable_smith_denominator(alpha, cos_i, sin2_i, cos_o, sin2_o) -> Float[Array, ...]:
+    """``(cos_i + r_i) (cos_o + r_o)`` = ``4 cos_i cos_o / (G1(wi) G1(wo))`` of separable
+    Smith GGX at ``alpha`` (module docstring): what a lobe ``D`` is divided by."""
+    a2 = alpha * alpha
     ri = safe_sqrt(cos_i * cos_i + a2 * sin2_i)
     ro = safe_sqrt(cos_o * cos_o + a2 * sin2_o)
-    return safe_div(d, (cos_i + ri) * (cos_o + ro), 1e-30)
+    return (cos_i + ri) * (cos_o + ro)
 
 
 def conductor_fresnel(eta, k, cos_d) -> Float[Array, ...]:

@@ -49,6 +49,7 @@ clamped to 1e-8 as MaterialX clamps them (``M_FLOAT_EPS``). T can dip below 0 (t
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -140,6 +141,37 @@ def ggx_dv(alpha, frame: Frame):
     return safe_div(d, 2.0 * (lam_i * co + lam_o * ci), 1e-30)
 
 
+class LobeTerms(NamedTuple):
+    """What MaterialX's dielectric and conductor lobes at one alpha share
+    (:func:`ggx_lobe_terms`)."""
+
+    dv: jnp.ndarray  # D G2 / (4 cos_i cos_o), :func:`ggx_dv`
+    big_a: jnp.ndarray  # the albedo fit's A and B at the view
+    big_b: jnp.ndarray
+    ms_gain: jnp.ndarray  # (1 - E) / E: the energy compensation is 1 + F ms_gain
+    cos_d: jnp.ndarray  # V.H, clamped to [1e-8, 1] as MaterialX clamps it
+
+
+def ggx_lobe_terms(alpha, frame: Frame) -> LobeTerms:
+    """:class:`LobeTerms` at ``alpha`` (cosines clamped to 1e-8, as MaterialX's)."""
+    co = jnp.maximum(frame.cos_o, 1e-8)
+    big_a, big_b = ggx_dir_albedo_ab(co, alpha)
+    e_ss = big_a + big_b
+    return LobeTerms(ggx_dv(alpha, frame), big_a, big_b, safe_div(1.0 - e_ss, e_ss, 1e-6),
+                     jnp.maximum(frame.cos_d, 1e-8))
+
+
+def dielectric_lobe(ior, terms: LobeTerms):
+    """``mx_dielectric_bsdf``'s reflection, white and at weight 1: its lobe ``D V2 F_d
+    comp(F_d)`` (...) and its directional albedo ``comp(F_d) (F0 A + B)`` (...), of
+    which a layer under it sees ``1 - weight albedo`` (the BSDF's throughput)."""
+    dv, big_a, big_b, ms_gain, cd = terms
+    f_d = dielectric_fresnel(ior, cd)
+    comp = 1.0 + f_d * ms_gain
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+    return dv * f_d * comp, comp * (f0 * big_a + big_b)
+
+
 class StandardSurface(AbstractBRDFModel):
     #: True: ``standard_surface_dielectric``, metalness held at 0 (not a parameter): the
     #: MaterialX export's dielectric alternative to a metal mixture
@@ -183,23 +215,12 @@ class StandardSurface(AbstractBRDFModel):
         (...) and the diffuse (3, ...) under it, where a sheen layers
         (``standard_surface_sheen``)."""
         expand = (slice(None),) + (None,) * frame.cos_i.ndim
-        alpha = specular_alpha(params["specular_roughness"])
-        # MaterialX clamps N.V, V.H to [1e-8, 1] (M_FLOAT_EPS)
-        co = jnp.maximum(frame.cos_o, 1e-8)
-        cd = jnp.maximum(frame.cos_d, 1e-8)
-        dv = ggx_dv(alpha, frame)
-
-        big_a, big_b = ggx_dir_albedo_ab(co, alpha)
-        e_ss = big_a + big_b
-        ms_gain = safe_div(1.0 - e_ss, e_ss, 1e-6)  # (1 - E) / E, what comp adds per F
-
-        ior = params["specular_IOR"]
-        f_d = dielectric_fresnel(ior, cd)
-        comp_d = 1.0 + f_d * ms_gain
-        f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        terms = ggx_lobe_terms(specular_alpha(params["specular_roughness"]), frame)
+        dv, ms_gain, cd = terms.dv, terms.ms_gain, terms.cos_d
+        lobe, albedo = dielectric_lobe(params["specular_IOR"], terms)
         tint = params["specular_color"][expand]
-        spec = tint * (dv * f_d * comp_d)[None]
-        throughput = 1.0 - comp_d * (f0 * big_a + big_b)
+        spec = tint * lobe[None]
+        throughput = 1.0 - albedo
 
         # mx_oren_nayar_diffuse at roughness 0: A = 1, B = 0
         base = params["base_color"][expand]

@@ -34,13 +34,9 @@ from __future__ import annotations
 
 import math
 
-import jax.numpy as jnp
-
 from .base import Params, ParamSpec
 from .frame import Frame
-from .guarded import safe_div
-from .microfacet import dielectric_fresnel
-from .standard_surface import ggx_dir_albedo_ab, ggx_dv, specular_alpha
+from .standard_surface import dielectric_lobe, ggx_lobe_terms, specular_alpha
 from .standard_surface_layer import BASE, StandardSurfaceLayer
 
 COAT = ParamSpec("coat", "coat: the clear coat's weight", 0.0, 1.0)
@@ -56,17 +52,9 @@ COAT_STARTS = tuple({"coat": 0.5, "coat_roughness": r} for r in (0.05, 0.15))
 def coat_terms(coat, coat_roughness, frame: Frame):
     """MaterialX's coat (``mx_dielectric_bsdf`` at ``COAT_IOR``, white, reflection):
     its BRDF (...) and its throughput (...), what the layers under it are weighted by."""
-    alpha = specular_alpha(coat_roughness)
-    co = jnp.maximum(frame.cos_o, 1e-8)
-    cd = jnp.maximum(frame.cos_d, 1e-8)
-    big_a, big_b = ggx_dir_albedo_ab(co, alpha)
-    e_ss = big_a + big_b
-    f_c = dielectric_fresnel(COAT_IOR, cd)
-    comp = 1.0 + f_c * safe_div(1.0 - e_ss, e_ss, 1e-6)
-    f0 = ((COAT_IOR - 1.0) / (COAT_IOR + 1.0)) ** 2
-    response = coat * ggx_dv(alpha, frame) * f_c * comp
-    throughput = 1.0 - coat * comp * (f0 * big_a + big_b)
-    return response, throughput
+    lobe, albedo = dielectric_lobe(COAT_IOR, ggx_lobe_terms(specular_alpha(coat_roughness),
+                                                            frame))
+    return coat * lobe, 1.0 - coat * albedo
 
 
 class StandardSurfaceCoat(StandardSurfaceLayer):
