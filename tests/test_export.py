@@ -345,31 +345,25 @@ def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, cap
     from brdffit import cli
     from brdffit.io import merl
 
-    r = result("gltf_sheen", {**GLTF, "sheen_color": [0.9, 0.5, 0.6], "sheen_roughness": 0.5})
-    fit_file = tmp_path / "fit.json"
-    fit_file.write_text(json.dumps(r.to_dict()))
-    merl.write(tmp_path / "t.binary", fit_as_table(r))
-    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
-                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
-    err = capsys.readouterr().err
+    def exported(r) -> str:  # `brdffit export` of the fit against its own table: stderr
+        fit_file = tmp_path / "fit.json"
+        fit_file.write_text(json.dumps(r.to_dict()))
+        merl.write(tmp_path / "t.binary", fit_as_table(r))
+        assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
+                         str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
+        return capsys.readouterr().err
+
+    err = exported(result("gltf_sheen", {**GLTF, "sheen_color": [0.9, 0.5, 0.6],
+                                         "sheen_roughness": 0.5}))
     assert "  in spec: not modelled" in err, err
     assert "  in threejs (gltf_threejs_sheen): log_rmse to the table " in err
     assert "  in blender (gltf_blender_sheen): log_rmse to the table " in err, err
-    r = result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8, "clearcoat_roughness": 0.1})
-    fit_file.write_text(json.dumps(r.to_dict()))
-    merl.write(tmp_path / "t.binary", fit_as_table(r))
-    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
-                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
-    err = capsys.readouterr().err
+    err = exported(result("gltf_clearcoat", {**GLTF, "clearcoat": 0.8,
+                                             "clearcoat_roughness": 0.1}))
     assert "  in spec (gltf_clearcoat): log_rmse to the table " in err, err
     assert "  in threejs (gltf_threejs_clearcoat): log_rmse to the table " in err
     assert "  in blender (gltf_blender_clearcoat): log_rmse to the table " in err
-    r = result("gltf_pbr_ior", {**GLTF, "ior": 1.6})  # three.js's physical material
-    fit_file.write_text(json.dumps(r.to_dict()))
-    merl.write(tmp_path / "t.binary", fit_as_table(r))
-    assert cli.main(["export", str(fit_file), "--to", "gltf", "--measured",
-                     str(tmp_path / "t.binary"), "--out", str(tmp_path)]) == 0
-    err = capsys.readouterr().err
+    err = exported(result("gltf_pbr_ior", {**GLTF, "ior": 1.6}))  # three.js's physical one
     assert "  in threejs: not modelled" in err
     assert "(it ignores ior: shades the rest)" in err, err
 

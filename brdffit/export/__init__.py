@@ -347,6 +347,7 @@ def _by_layers_kept(candidates: tuple[str, ...], result: FitResult) -> tuple[str
     best = max(candidates, key=kept)  # the first among equals: the core
     return (best, *(m for m in candidates if m != best))
 
+
 def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,
                      fidelity: dict) -> dict:
     """The glTF file's factors under each of ``target``'s viewers' shading, against the
