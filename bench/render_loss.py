@@ -218,6 +218,8 @@ def run(names, model_name: str, log=print, losses=LOSSES) -> list[dict]:
                 "log_rmse": r.error["log_rmse"], "psnr_db": r.error["psnr_db"],
                 "colour_shift": colour["colour_shift"],
                 "brightness_stops": colour["brightness_stops"],
+                "displayed_brightness_stops": (r.quality or {}).get(
+                    "displayed_brightness_stops"),
                 "verdict": (r.quality or {}).get("verdict"),
                 "time_ms": dt * 1e3, "steps": r.steps,
                 **judge(ref, views.model_radiance(m, r.params)), "params": r.params,

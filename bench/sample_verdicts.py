@@ -31,7 +31,7 @@ VERDICTS = ("good", "visible", "poor")
 def run(names: list[str], model: str, n: int, noise: float) -> list[dict]:
     from brdffit import models
     from brdffit.fitting.pipeline import fit
-    from brdffit.fitting.quality import verdict
+    from brdffit.fitting.quality import judged_brightness, verdict
     from brdffit.fitting.sphere import SphereReference
     from data_synth import nbrdf
     from data_synth.sparse import sample_material
@@ -52,7 +52,7 @@ def run(names: list[str], model: str, n: int, noise: float) -> list[dict]:
             # how the samples' fit really looks: its sphere against the dense table's
             psnr, colour = reference.psnr_and_colour(m, r.params)
             key = colour["key"]
-            true, _ = verdict(psnr, key["brightness_stops"], key["colour_shift"])
+            true, _ = verdict(psnr, judged_brightness(key), key["colour_shift"])
             row[layout] = {"verdict": r.quality["verdict"], "psnr_db": r.error["psnr_db"],
                            "true_verdict": true, "true_psnr_db": psnr,
                            "basis": r.quality["basis"],

@@ -6,7 +6,7 @@ CIEDE2000 of 3 look like, side by side (docs/results.md shows them).
 
 Reads the fits of a ``bench.render_loss`` run (each material's ``params`` under each
 loss), picks materials along each of the verdict's three figures (render PSNR,
-brightness in stops, colour shift in CIEDE2000), and renders each table and its fit
+brightness in stops as displayed, colour shift in CIEDE2000), and renders each table and its fit
 on the key-light sphere at the table's exposure, the fit read through the table's
 bins as the verdict reads it (``brdffit.fitting.sphere``). Tables come from the
 bench cache (``$BRDFFIT_BENCH_CACHE/nbrdf``), as ``bench.render_loss`` left them.
@@ -30,9 +30,12 @@ DEFAULT_OUT = os.path.join(os.path.dirname(HERE), "docs", "img", "verdict_levels
 #: (figure, target values): for each, the fit whose figure is nearest each target.
 LADDERS = (
     ("psnr_db", (36.0, 28.0, 24.0, 20.0, 14.0)),
-    ("brightness_stops", (0.05, 0.15, 0.35, 0.6, 1.0)),
+    ("displayed_brightness_stops", (0.05, 0.15, 0.35, 0.6, 1.0)),
     ("colour_shift", (1.0, 2.0, 3.5, 6.0, 8.0)),
 )
+
+#: a ladder's figure in the pictures' captions
+LABELS = {"displayed_brightness_stops": "brightness (displayed)"}
 
 
 def pick(rows: list[dict]) -> list[tuple[str, dict]]:
@@ -46,7 +49,7 @@ def pick(rows: list[dict]) -> list[tuple[str, dict]]:
                 continue
             r = min(ok, key=lambda r: abs(abs(r[key]) - target))
             used.add((r["material"], r["loss"]))
-            out.append((f"{key} ~{target:g}", r))
+            out.append((f"{LABELS.get(key, key)} ~{target:g}", r))
     return out
 
 
@@ -95,9 +98,10 @@ def figure(picked, model_name: str):
         measured, fit = render_pair(table, model, r["params"])
         ax.imshow(np.concatenate([measured, fit], axis=1), interpolation="nearest")
         ax.set_title(f"{r['material']} ({r['loss']})\n{r['psnr_db']:.1f} dB, "
-                     f"{r['brightness_stops']:+.2f} stops, dE {r['colour_shift']:.1f}: "
+                     f"{r['displayed_brightness_stops']:+.2f} stops, "
+                     f"dE {r['colour_shift']:.1f}: "
                      f"{r['verdict']}", fontsize=8)
-        ax.text(0.5, -0.04, f"{label}   (left: measured, right: fit)", fontsize=7,
+        ax.text(0.5, -0.04, f"{label}  (left: measured, right: fit)", fontsize=7,
                 ha="center", va="top", transform=ax.transAxes)
     fig.suptitle(f"The quality verdict's levels: {model_name} fits to real materials, the "
                  "key-light sphere at the table's exposure", fontsize=11)
@@ -111,13 +115,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     with open(args.rows) as f:
         data = json.load(f)
-    rows = [r for r in data["rows"] if r.get("brightness_stops") is not None]
+    rows = [r for r in data["rows"] if r.get("displayed_brightness_stops") is not None]
     picked = pick(rows)
     fig = figure(picked, data.get("model", "ggx"))
     fig.savefig(args.out, dpi=90, facecolor="white")
     for label, r in picked:
         print(f"{label:24s} {r['material']:26s} {r['loss']:7s} {r['psnr_db']:5.1f} dB "
-              f"{r['brightness_stops']:+.2f} stops dE {r['colour_shift']:5.1f} {r['verdict']}")
+              f"{r['displayed_brightness_stops']:+.2f} stops dE {r['colour_shift']:5.1f} "
+              f"{r['verdict']}")
     print(f"wrote {args.out}")
     return 0
 

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.unit
     (35.0, 0.05, 1.0, "good", "35.0 dB"),
     (28.0, -0.15, 3.0, "good", "28.0 dB"),
     (27.9, 0.0, 0.0, "visible", "good from 28 dB"),
-    (33.0, -0.3, 0.5, "visible", "-0.30 stops in brightness"),
+    (33.0, -0.3, 0.5, "visible", "-0.30 stops in displayed brightness"),
     (33.0, 0.0, 5.0, "visible", "CIEDE2000 5.0"),
     (19.9, 0.0, 0.0, "poor", "poor below 20 dB"),
     (30.0, 0.7, 0.0, "poor", "+0.70 stops"),
@@ -38,8 +38,11 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
     table = make_table("ggx", TRUTH["ggx"], noise=0.02, seed=1)[0]
     r = fitting.fit(table, "ggx", samples=2048)
     q = r.quality
-    assert set(q) == {"render_psnr_db", "brightness_stops", "colour_shift", "estimate_error",
-                      "grazing", "basis", "verdict", "reason", "next"}
+    assert set(q) == {"render_psnr_db", "displayed_brightness_stops", "brightness_stops",
+                      "colour_shift", "estimate_error", "grazing", "basis", "verdict",
+                      "reason", "next"}
+    assert set(q["grazing"]) == {"displayed_brightness_stops", "brightness_stops",
+                                 "colour_shift"}
     assert q["render_psnr_db"] == r.error["psnr_db"] and q["verdict"] == "good"
     assert abs(q["brightness_stops"]) < 0.03 and q["colour_shift"] < 0.5 and q["next"] == []
     assert FitResult.from_dict(r.to_dict()).quality == q
@@ -87,6 +90,53 @@ def test_every_models_exact_truth_fitted_by_itself_looks_good(model, label, para
     q = r.quality
     assert q["verdict"] == "good", (r.params, q)
     assert q["render_psnr_db"] > 40 and abs(q["brightness_stops"]) < 0.01, q
+    assert abs(q["displayed_brightness_stops"]) < 0.01, q
+
+
+def _glossy_black_look(ks: float, uniform: float = 1.0):
+    """The key light's figures of a near-black glossy GGX table (kd 0.002, alpha 0.03)
+    against the same lobe with ``ks`` (the table's is 0.05), everything times
+    ``uniform``."""
+    from brdffit.fitting.sphere import SphereReference
+
+    truth = {"kd": [0.002] * 3, "ks": [0.05] * 3, "alpha": 0.03, "f0": 0.05}
+    reference = SphereReference(make_table("ggx", truth)[0])
+    params = {k: np.asarray(v, float) for k, v in truth.items()}
+    params.update(kd=params["kd"] * uniform, ks=np.full(3, ks * uniform))
+    psnr, colour = reference.psnr_and_colour(models.get("ggx"), params)
+    return psnr, colour["key"]
+
+
+def test_a_highlight_blown_out_in_both_pictures_is_not_a_brightness_error():
+    """Three times the highlight's energy on a near-black glossy material: +0.8 stops
+    of mean radiance, but the highlight is blown out in both pictures and they look
+    alike (34 dB). The verdict judges the brightness as displayed; the radiance figure
+    is still reported."""
+    psnr, key = _glossy_black_look(0.15)
+    assert key["brightness_stops"] > 0.6  # poor by the radiance figure
+    assert 0.0 < key["displayed_brightness_stops"] < 0.15, key
+    block = quality.quality(psnr, {"key": key, "grazing": None}, model=models.get("ggx"),
+                            params={}, loss="render", converged=True)
+    assert block["verdict"] == "good", block
+    assert block["brightness_stops"] == key["brightness_stops"]
+
+
+def test_the_displayed_brightness_reads_a_uniform_change_as_its_stops():
+    """Where nothing saturates, the displayed figure is the radiance one, within the
+    tone curve's compression of the brighter pixels (5%): a diffuse sphere 0.3 stops
+    brighter or 0.6 darker; the glossy one made uniformly brighter keeps its sign."""
+    from brdffit.fitting.sphere import SphereReference
+
+    lambert = models.get("lambert")
+    kd = np.array([0.5, 0.4, 0.3])
+    reference = SphereReference(make_table("lambert", {"kd": kd})[0])
+    for stops in (0.3, -0.6):
+        _, colour = reference.psnr_and_colour(lambert, {"kd": kd * 2.0 ** stops})
+        key = colour["key"]
+        assert key["brightness_stops"] == pytest.approx(stops, abs=1e-9)
+        assert key["displayed_brightness_stops"] == pytest.approx(stops, rel=0.06), key
+    _, key = _glossy_black_look(0.05, uniform=2.0)
+    assert key["displayed_brightness_stops"] > 0.6, key
 
 
 def test_the_issues_near_mirror_ggx_is_good_not_21_percent_off():

@@ -141,7 +141,7 @@ def test_a_real_material_sampled_sparsely_gets_the_verdict_its_sphere_would():
     (the in-plane samples leave the fit's blue diffuse at 0; bench/results/
     sample_verdicts_*.md measures this on 100 materials)."""
     from brdffit import models
-    from brdffit.fitting.quality import verdict
+    from brdffit.fitting.quality import judged_brightness, verdict
     from brdffit.fitting.sphere import SphereReference
     from data_synth import nbrdf
 
@@ -151,9 +151,12 @@ def test_a_real_material_sampled_sparsely_gets_the_verdict_its_sphere_would():
     assert ggx.error["held_out_log_rmse"] < 0.5 * lam.error["held_out_log_rmse"]
     psnr, colour = SphereReference(nbrdf.make_table("red-plastic")).psnr_and_colour(
         models.get("ggx"), ggx.params)
-    true, _ = verdict(psnr, colour["key"]["brightness_stops"], colour["key"]["colour_shift"])
+    true, _ = verdict(psnr, judged_brightness(colour["key"]), colour["key"]["colour_shift"])
     assert ggx.quality["verdict"] == true
     assert ggx.quality["colour_shift"] == pytest.approx(colour["key"]["colour_shift"], abs=1.0)
+    # the held-out samples' displayed brightness is the sphere's, as the radiance one is
+    assert ggx.quality["displayed_brightness_stops"] == pytest.approx(
+        colour["key"]["displayed_brightness_stops"], abs=0.1)
 
 
 def test_data_synth_writes_sample_files(tmp_path):

@@ -460,7 +460,7 @@ def test_the_render_rule_takes_the_best_verdict_first():
     chosen, reason = choose_by_look(rows)
     assert chosen["model"] == "rough_conductor"  # the better-looking of the as-large
     assert "among the candidates that look visible" in reason
-    assert "principled renders closer (26.0 dB) but looks poor" in reason
+    assert "principled renders closer (26.0 dB) but reads poor" in reason
     assert rows[2]["rank"] == 1  # the ranking still says which renders closest
     # all alike: the PSNR rule as before, nothing passed over
     alike = _rows(("ggx", 8, 0.03, 24.0, "poor"), ("principled", 10, 0.02, 26.0, "poor"))
@@ -473,6 +473,26 @@ def test_the_render_rule_takes_the_best_verdict_first():
     rows = _rows(("phong", 7, 0.03, 23.6, "visible"), ("ggx", 8, 0.03, 28.1, "poor"))
     chosen, reason = choose_by_look(rows)
     assert chosen["model"] == "ggx" and "among" not in reason
+
+
+def test_the_render_rule_weighs_the_light_a_highlight_holds():
+    """A candidate that looks right at the table's exposure (its verdict) but whose
+    highlight holds 0.6 stops too little light (its radiance verdict, poor) reads poor
+    to the render rule: red-metallic-paint's beckmann rendered 0.6 dB closer than ggx2
+    on brdffit's sphere and 5.2 dB further off under bench.render_loss's other lights."""
+    from brdffit.fitting import quality
+    from brdffit.selection import choose_by_look
+
+    rows = _rows(("beckmann", 8, 0.08, 26.0, "visible"), ("ggx2", 12, 0.044, 25.4, "visible"))
+    rows[0]["radiance_verdict"] = quality.radiance_verdict(
+        {"render_psnr_db": 26.0, "brightness_stops": -0.65, "colour_shift": 1.0})
+    rows[1]["radiance_verdict"] = "visible"
+    assert rows[0]["radiance_verdict"] == "poor"
+    chosen, reason = choose_by_look(rows)
+    assert chosen["model"] == "ggx2"
+    assert "beckmann renders closer (26.0 dB) but reads poor" in reason
+    del rows[0]["radiance_verdict"]  # a row stored without it ranks by its verdict
+    assert choose_by_look(rows)[0]["model"] == "beckmann"
 
 
 def test_auto_with_the_render_loss_says_which_rule_it_used(ggx_table):

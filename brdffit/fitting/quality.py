@@ -1,7 +1,8 @@
 """How a fit looks next to its measurement, and what to try next: the ``quality``
 block of every result.
 
-    quality = {"render_psnr_db": ..., "brightness_stops": ..., "colour_shift": ...,
+    quality = {"render_psnr_db": ..., "displayed_brightness_stops": ...,
+               "brightness_stops": ..., "colour_shift": ...,
                "estimate_error": {...}, "grazing": {...},
                "verdict": ..., "reason": ..., "next": [...]}
 
@@ -9,13 +10,21 @@ block of every result.
   table's (``brdffit.fitting.sphere``: key and grazing light, one exposure per
   light; the result's ``error.psnr_db``), the fit read through the table's bins as
   the table is, so that a fit equal to the table bin for bin is 100 dB;
-- ``brightness_stops``: log2 of the fit's mean luminance over the table's, on the
-  key-light sphere (``sphere.sphere_colour``; +1 = twice as bright);
+- ``displayed_brightness_stops``: the brightness the verdict judges, of the key-light
+  sphere as displayed (``sphere.displayed_stops``: each picture's mean tone-mapped
+  luminance read back through the tone curve; +1 = twice as bright);
+- ``brightness_stops``: log2 of the fit's mean luminance (radiance) over the table's,
+  on the key-light sphere (``sphere.sphere_colour``). A glossy material's mean radiance
+  is its highlight's, which the picture shows blown out: on the real MERL materials'
+  render-loss fits the two differed by up to 0.85 stops where the pictures looked
+  alike (silver-metallic-paint -0.84 in radiance, +0.01 displayed; a broader highlight),
+  and agreed within 0.03 where nothing saturates (``bench.verdict_levels``);
 - ``colour_shift``: CIEDE2000 between the two mean colours at equal luminance, hue
   and saturation alone (``brdffit.fitting.colour``; ~1 is at the threshold of
   seeing it side by side, 10 is another colour);
-- ``estimate_error``: the integral's own error in each of the two (its change from a
-  coarser quadrature); ``grazing``: the same three under the grazing light, the rim;
+- ``estimate_error``: the integral's own error in the radiance figures (their change
+  from a coarser quadrature); ``grazing``: the same figures under the grazing light, the
+  rim;
 - ``verdict``: ``good``, ``visible`` or ``poor``; ``reason``: the figure that decided
   it, in words (the CLI prints both on one line);
 - ``next``: for a verdict other than good, what to try, best first, each
@@ -71,21 +80,41 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
         return "poor", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                         f"(poor below {POOR[0]:g} dB)")
     if stops > POOR[1]:
-        return "poor", (f"{_stops(brightness_stops)} in brightness (poor beyond "
+        return "poor", (f"{_stops(brightness_stops)} in displayed brightness (poor beyond "
                         f"{POOR[1]:g} stops)")
     if de > POOR[2]:
         return "poor", f"colour off by CIEDE2000 {de:.1f} (poor beyond {POOR[2]:g})"
     if render_psnr_db >= GOOD[0] and stops <= GOOD[1] and de <= GOOD[2]:
-        return "good", (f"{figure} {render_psnr_db:.1f} dB, brightness "
+        return "good", (f"{figure} {render_psnr_db:.1f} dB, displayed brightness "
                         f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f} (good: >= "
                         f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and {GOOD[2]:g})")
     if render_psnr_db < GOOD[0]:
         return "visible", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                            f"(good from {GOOD[0]:g} dB)")
     if stops > GOOD[1]:
-        return "visible", (f"{_stops(brightness_stops)} in brightness (good within "
+        return "visible", (f"{_stops(brightness_stops)} in displayed brightness (good within "
                            f"{GOOD[1]:g} stops)")
     return "visible", f"colour off by CIEDE2000 {de:.1f} (good within {GOOD[2]:g})"
+
+
+def judged_brightness(figures: dict) -> float | None:
+    """The brightness figure the verdict judges in a light's ``figures``: the displayed
+    one, or, in a result stored before it was reported, the radiance one."""
+    if "displayed_brightness_stops" in figures:
+        return figures["displayed_brightness_stops"]
+    return figures.get("brightness_stops")
+
+
+def radiance_verdict(look: dict | None) -> str | None:
+    """The verdict a quality block's figures give with the radiance brightness
+    (``brightness_stops``) in place of the displayed one: what the lit sphere's
+    highlight holds, which a picture at the table's exposure shows blown out but
+    another light or exposure shows. ``auto``'s render rule ranks candidates by the
+    worse of the two (``brdffit.selection``); None without a block."""
+    if not look:
+        return None
+    return verdict(look.get("render_psnr_db"), look.get("brightness_stops"),
+                   look.get("colour_shift"), look.get("basis", "sphere"))[0]
 
 
 def _stops(s: float) -> str:
@@ -103,14 +132,16 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     measured elsewhere (:func:`next_steps`). ``basis``: :func:`verdict`'s."""
     psnr = float(render_psnr_db) if _finite(render_psnr_db) else None
     key = colour["key"]
-    word, reason = verdict(psnr, key["brightness_stops"], key["colour_shift"], basis)
+    word, reason = verdict(psnr, judged_brightness(key), key["colour_shift"], basis)
     graze = colour.get("grazing")
     block = {"render_psnr_db": psnr,
+             "displayed_brightness_stops": key.get("displayed_brightness_stops"),
              "brightness_stops": key["brightness_stops"],
              "colour_shift": key["colour_shift"],
              "estimate_error": key["estimate_error"],
              "grazing": None if graze is None else {
-                 k: graze[k] for k in ("brightness_stops", "colour_shift")},
+                 k: graze.get(k) for k in ("displayed_brightness_stops", "brightness_stops",
+                                           "colour_shift")},
              "basis": basis,
              "verdict": word, "reason": reason, "next": []}
     if word != "good":
@@ -213,17 +244,27 @@ def describe(look: dict | None, indent: str = "  ") -> list[str]:
         return []
     lines = [f"{indent}looks {look['verdict']}: {look['reason']}"]
     if "brightness_stops" in look:  # not in results stored before brdffit.fit/2
-        figures = [f"brightness {_maybe(look['brightness_stops'], '+.2f')} stops",
+        figures = [_brightness_words(look),
                    f"colour CIEDE2000 {_maybe(look['colour_shift'], '.1f')} (key light)"]
         graze = look.get("grazing") or {}
         if graze:
-            figures.append(f"grazing light {_maybe(graze.get('brightness_stops'), '+.2f')} "
-                           f"stops, {_maybe(graze.get('colour_shift'), '.1f')}")
+            figures.append(f"grazing light {_brightness_words(graze)}, "
+                           f"{_maybe(graze.get('colour_shift'), '.1f')}")
         lines.append(f"{indent}  " + "; ".join(figures))
     for i, step in enumerate(look.get("next") or [], 1):
         gain = "" if step.get("gain_db") is None else f" ({step['gain_db']:+.1f} dB)"
         lines.append(f"{indent}  next {i}: {step['try']}{gain}: {step['why']}")
     return lines
+
+
+def _brightness_words(figures: dict) -> str:
+    """"brightness +0.02 stops as displayed (radiance +0.78)", or the radiance figure
+    alone in a result stored before the displayed one was reported."""
+    radiance = f"{_maybe(figures.get('brightness_stops'), '+.2f')}"
+    if "displayed_brightness_stops" not in figures:
+        return f"brightness {radiance} stops"
+    return (f"brightness {_maybe(figures['displayed_brightness_stops'], '+.2f')} stops "
+            f"as displayed (radiance {radiance})")
 
 
 def _maybe(x, fmt: str) -> str:

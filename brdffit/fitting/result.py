@@ -28,12 +28,15 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: ``held_out``, ``coverage``, ``identifiability``, ``spectral``. 5: ``notes`` (where the
 #: fit did other than asked), and ``starts`` of a fit of every bin counts the starts of
 #: the subsample fit whose optimum every bin polished (it said 1). Older results read
-#: with no notes.
-SCHEMA = "brdffit.fit/5"
+#: with no notes. 6: ``quality.displayed_brightness_stops`` (and the grazing light's),
+#: which the verdict judges instead of ``brightness_stops`` (the radiance figure, still
+#: reported); an older result's verdict stays as it was stored.
+SCHEMA = "brdffit.fit/6"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2",
+         "brdffit.fit/1")
 
 
 @dataclass(frozen=True)
@@ -169,7 +172,8 @@ FIELD_DOCS = {
     "physical": "on a physically bounded fit: the unconstrained and bounded log_rmse, the "
                 "relative cost, the largest albedo before and after, the active constraints",
     "quality": "how the fit looks next to the measurement: render_psnr_db, "
-               "brightness_stops, colour_shift (CIEDE2000), estimate_error, grazing, verdict "
+               "displayed_brightness_stops (judged), brightness_stops (radiance), "
+               "colour_shift (CIEDE2000), estimate_error, grazing, verdict "
                "(good, visible or poor), reason and next (what to try, best first)",
     "input": "on a fit of samples (ASTM, CSV, HDF5): their format, count and what binning "
              "them onto the MERL grid moved, or null for a MERL table",

@@ -61,6 +61,8 @@ from brdffit.fitting.sphere import (
     LIGHTS,
     LUMINANCE,
     SphereReference,
+    displayed_level,
+    displayed_stops,
     psnr_of,
     radiance,
     sphere_bins,
@@ -392,7 +394,9 @@ def held_out_look(meas: Measurements, prep: Prepared, held: HeldOut) -> tuple[fl
     mse = float(np.sum(w[:, None] * d * d) / (3.0 * w.sum()))
     psnr = psnr_of(mse)
     stops, shift = brightness_and_colour(w @ predicted, w @ measured)
+    shown = [w @ displayed_level(x, exposure) / w.sum() for x in (predicted, measured)]
     return psnr, {"key": {"brightness_stops": stops, "colour_shift": shift,
+                          "displayed_brightness_stops": displayed_stops(*shown),
                           "estimate_error": None}, "grazing": None}
 
 

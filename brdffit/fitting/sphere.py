@@ -25,6 +25,13 @@ The colour figures (:func:`sphere_colour`) integrate the mean colour of the lit
 sphere over the bins instead of summing pixels (:class:`SphereIntegral`), and report
 the integral's own error.
 
+The brightness a person sees (:func:`displayed_stops`) is taken from the pictures
+instead: the mean of each sphere's tone-mapped luminance, read back through the tone
+curve as a uniform level. A near-black glossy material's mean radiance is its
+highlight's, and a fit whose highlight is broader reads +0.8 stops in radiance where
+the two pictures look alike (specular-black-phenolic); where nothing saturates the
+two agree (diffuse materials: within 0.03 stops).
+
 Tone mapping first: a difference the eye cannot see inside a blown-out highlight
 should not dominate the score, and a visible error in the dark diffuse part should
 count.
@@ -107,6 +114,38 @@ def psnr_of(mse: float) -> float:
     if not np.isfinite(mse):
         return float("nan")
     return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
+
+
+def displayed_level(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
+    """Per pixel, the displayed luminance before the sRGB curve: the luminance of the
+    Reinhard-mapped channels of :func:`tonemap` (``rad`` (..., 3) -> (...)), in [0, 1)."""
+    x = xp.maximum(rad * exposure, 0.0)
+    return (x / (1.0 + x)) @ xp.asarray(LUMINANCE)
+
+
+def displayed_stops(fit_level: float, table_level: float) -> float | None:
+    """The brightness, in stops, between two pictures whose mean displayed levels
+    (:func:`displayed_level`, averaged over the same pixels) are ``fit_level`` and
+    ``table_level``: each mean read back through the tone curve (``m / (1 - m)``, the
+    uniform exposed luminance Reinhard shows as ``m``), then log2 of their ratio. For
+    a uniform change by k where nothing saturates, ~log2 k; a highlight blown out in
+    both counts for what it adds to the picture. None where either picture is black
+    and the other is not; 0 where both are."""
+    def level(m):
+        m = min(max(float(m), 0.0), 1.0 - 1e-12)
+        return m / (1.0 - m)
+
+    a, b = level(fit_level), level(table_level)
+    black = DISPLAY_BLACK
+    if not (np.isfinite(a) and np.isfinite(b)):
+        return None
+    if b <= black or a <= black:
+        return 0.0 if (a <= black and b <= black) else None
+    return float(np.log2(a / b))
+
+
+#: A picture whose mean exposed level is below this is black (~1/1000 of mid grey).
+DISPLAY_BLACK = 3.5e-4
 
 
 def tonemap(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
@@ -379,6 +418,7 @@ class SphereReference:
         self.size = size
         self.lights = [light for _, light in lights]
         self.images, self.masks, self.exposures = [], [], []
+        self.levels = []  # the table's mean displayed level per light (displayed_stops)
         for light in self.lights:
             rad, lit = render_table(table, light, size)
             ok = lit & np.all(np.isfinite(rad), axis=-1)
@@ -386,6 +426,8 @@ class SphereReference:
             self.images.append(tonemap(np.nan_to_num(rad), exposure))
             self.masks.append(ok)
             self.exposures.append(exposure)
+            self.levels.append(float(np.mean(displayed_level(rad[ok], exposure)))
+                               if ok.any() else float("nan"))
         self._scored = None  # made on the first psnr
         # the colour's integrals (no reference to the table itself is kept: a
         # reference is cached per table, weakly)
@@ -411,16 +453,29 @@ class SphereReference:
                 parts.append((wi_bin, wo_bin, wi[lit], ref[lit],
                               ok[lit].astype(np.float64), np.full(int(lit.sum()), exposure)))
             self._scored = tuple(np.concatenate(a) for a in zip(*parts))
+            self._light_of = np.repeat(np.arange(len(parts)), [len(a[0]) for a in parts])
         n = 3 * int(self._scored[4].sum())
         p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-        se, finite, f_c = _sphere_measures(model, p, *self._scored, self._colour.wi,
-                                           self._colour.wo)
+        se, finite, f_c, shown = _sphere_measures(model, p, *self._scored, self._colour.wi,
+                                                  self._colour.wo)
         colour = self._colour.compare(self._colour.split(np.asarray(f_c, np.float64)))
+        self._add_displayed(colour, np.asarray(shown, np.float64))
         if n == 0 or not bool(finite):
             return float("nan"), colour
         mse = float(se) / n
         psnr = psnr_of(mse)
         return psnr, colour
+
+    def _add_displayed(self, colour: dict, shown: np.ndarray) -> None:
+        """Each light's ``displayed_brightness_stops`` (:func:`displayed_stops`) into
+        ``colour``, from the fit's displayed level at every scored pixel."""
+        scored = self._scored[4] > 0
+        for i, name in enumerate(COLOUR_LIGHTS):
+            at = scored & (self._light_of == i)
+            fit = float(np.mean(shown[at])) if at.any() else float("nan")
+            colour[name]["displayed_brightness_stops"] = (
+                displayed_stops(fit, self.levels[i])
+                if np.isfinite(fit) and np.isfinite(self.levels[i]) else None)
 
 
 @executables.jit
@@ -429,13 +484,15 @@ def _sphere_measures(model, params, wi, wo, wi_pixel, ref, scored, exposure, wi_
     over the ``scored`` pixels (weight 1; 0 elsewhere), the model evaluated at
     ``(wi, wo)`` (each pixel's bin) and lit from ``wi_pixel`` (the pixel's own); whether
     every scored one is finite; and the model's values at ``(wi_c, wo_c)`` (the colour
-    integrals' bins): one compiled call, the model evaluated once over both sets of
-    directions."""
+    integrals' bins); and each pixel's :func:`displayed_level`: one compiled call, the
+    model evaluated once over both sets of directions."""
     n = wi.shape[0]
     f = model(params, jnp.concatenate([wi, wi_c]), jnp.concatenate([wo, wo_c]))
-    mapped = tonemap(radiance(f[:n], wi_pixel, jnp), exposure[:, None], jnp)
+    rad = radiance(f[:n], wi_pixel, jnp)
+    mapped = tonemap(rad, exposure[:, None], jnp)
     d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
-    return jnp.sum(d * d), jnp.all(jnp.isfinite(d)), f[n:]
+    return (jnp.sum(d * d), jnp.all(jnp.isfinite(d)), f[n:],
+            displayed_level(rad, exposure[:, None], jnp))
 
 
 def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:

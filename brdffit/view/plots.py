@@ -40,6 +40,7 @@ try:
 except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
+from brdffit.fitting.quality import judged_brightness
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
 from brdffit.io import atomic
@@ -566,9 +567,10 @@ def _looks_lines(look: dict | None) -> list[str]:
     if not look:
         return []
     lines = [f"looks           {look['verdict']}"]
-    stops, shift = look.get("brightness_stops"), look.get("colour_shift")
+    stops, shift = judged_brightness(look), look.get("colour_shift")
     if isinstance(stops, int | float):
-        lines.append(f"brightness      {stops:+.2f} stops")
+        shown = " shown" if "displayed_brightness_stops" in look else ""
+        lines.append(f"brightness      {stops:+.2f} stops{shown}")
     if isinstance(shift, int | float):
         lines.append(f"colour          CIEDE2000 {shift:.1f}")
     steps = look.get("next") or []
