@@ -471,11 +471,13 @@ class SphereReference:
         ``colour``, from the fit's displayed level at every scored pixel."""
         scored = self._scored[4] > 0
         for i, name in enumerate(COLOUR_LIGHTS):
+            # a reference made with other lights than LIGHTS has no picture of this one
             at = scored & (self._light_of == i)
             fit = float(np.mean(shown[at])) if at.any() else float("nan")
+            table = self.levels[i] if i < len(self.levels) else float("nan")
             colour[name]["displayed_brightness_stops"] = (
-                displayed_stops(fit, self.levels[i])
-                if np.isfinite(fit) and np.isfinite(self.levels[i]) else None)
+                displayed_stops(fit, table) if np.isfinite(fit) and np.isfinite(table)
+                else None)
 
 
 @executables.jit
