@@ -126,6 +126,22 @@ def test_spheres_share_one_exposure_so_dark_and_bright_tables_look_different():
     assert bright > 2.5 * dark, (dark, bright)
 
 
+def test_each_verdict_light_says_at_which_exposure_the_verdict_judged_it():
+    from brdffit.fitting.sphere import SphereReference
+    from data_synth import make_table
+
+    # a dark diffuse: the verdict exposes it ~4.6 stops over the picture (0.04 vs 1)
+    t, _ = make_table("lambert", {"kd": [0.04] * 3})
+    words = plots._verdict_exposure_words(t, plots.SPHERE_LIGHTS, 0.0)
+    assert set(words) == {0, 1}  # the key and grazing lights; the back light is not judged
+    ev = np.log2(SphereReference(t).exposures[0] / plots.EXPOSURE)
+    assert ev > 3.0
+    assert words[0] == f"\nverdict judged at {round(4 * ev) / 4:+g} EV"
+    # asked at +2 EV, the verdict's exposure is 2 stops nearer the picture's
+    shifted = plots._verdict_exposure_words(t, plots.SPHERE_LIGHTS, 2.0)
+    assert shifted[0] == f"\nverdict judged at {round(4 * (ev - 2)) / 4:+g} EV"
+
+
 @pytest.mark.slow
 def test_exposure_brightens_table_and_fit_alike_before_the_tone_curve():
     t = table("lambert")

@@ -42,7 +42,7 @@ except ModuleNotFoundError:
 
 from brdffit.fitting.quality import judged_brightness
 from brdffit.fitting.result import FitResult
-from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
+from brdffit.fitting.sphere import LIGHTS, SphereReference, radiance, sphere_disc, tonemap
 from brdffit.io import atomic
 from brdffit.io.angles import (
     N_PHI_D,
@@ -363,12 +363,30 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     return _png(fig)
 
 
+def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dict[int, str]:
+    """Per row of a verdict's light: at how many stops over this picture's exposure the
+    verdict judged it. The verdict exposes each light at the table's own typical lit
+    pixel (``brdffit.fitting.sphere.table_exposure``), the picture at one exposure
+    for every material: what looks alike here may differ there (a highlight blown out
+    in both at the verdict's exposure), so the figure says which one was judged."""
+    judged = dict(zip((tuple(light) for _, light in LIGHTS),
+                      SphereReference(table).exposures, strict=True))
+    words = {}
+    for row, (_, light) in enumerate(lights):
+        exposure = judged.get(tuple(np.asarray(light, float)))
+        if exposure is not None:
+            ev = round(4 * np.log2(exposure / (EXPOSURE * 2.0**exposure_ev))) / 4
+            words[row] = f"\nverdict judged at {ev:+g} EV"
+    return words
+
+
 def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS,
                   exposure_ev: float = 0.0):
     axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = np.array(to_rgb(NO_DATA))
     ratio_img = colour_img = None
+    verdict_ev = _verdict_exposure_words(table, lights, exposure_ev)
     for row, (label, light) in enumerate(lights):
         measured, fitted, coverage, unmeasured = sphere_images(table, result, light, size)
         images = [_composite(measured, coverage, background, exposure_ev),
@@ -386,7 +404,7 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         axes[row, 3].imshow(base, interpolation="nearest")
         colour_img = np.where(np.isnan(colour), base, colour)
         axes[row, 3].imshow(colour_img, interpolation="nearest")
-        axes[row, 0].set_ylabel(label, fontsize=10)
+        axes[row, 0].set_ylabel(label + verdict_ev.get(row, ""), fontsize=10)
         for ax in axes[row]:  # the unlit part is black: outline the sphere
             ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False,
                                 lw=0.8, ec="0.65"))
