@@ -310,7 +310,7 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
     assert http.get(f"/v1/fits/{job['id']}/plots/spheres.png").content == plain.content
     assert_error(http.get(f"/v1/fits/{job['id']}/plots/slices.png",
                           params={"exposure_ev": 1}), 422, "no sphere renders")
-    for bad in (0.3, 7, "nan"):
+    for bad in (0.3, 12.25, -6.25, "nan"):
         assert http.get(f"/v1/fits/{job['id']}/plots/spheres.png",
                         params={"exposure_ev": bad}).status_code == 422
 

@@ -157,7 +157,7 @@ def test_exposure_brightens_table_and_fit_alike_before_the_tone_curve():
     png = plots.render("spheres", t, r, exposure_ev=1.5)
     assert_sane_png(png)
     assert png != plots.render("spheres", t, r)
-    for bad in (7, float("nan"), "bright"):
+    for bad in (12.5, -7, float("nan"), "bright"):
         with pytest.raises(ValueError, match="exposure_ev"):
             plots.render("spheres", t, r, exposure_ev=bad)
     with pytest.raises(ValueError, match="no sphere renders"):
