@@ -155,6 +155,7 @@ print(json.dumps({"how": [e.how for e in executables.events], "sum": float(out.s
 """
 
 
+@pytest.mark.slow  # 5 s warm (a second process): make test runs it
 def test_a_program_kept_in_a_process_that_used_jax_cache_loads_later(tmp_path):
     """A program kept on disk is compiled afresh even where JAX's persistent cache
     holds it (JAX serves it from there without its machine code): the kept file is

@@ -290,6 +290,7 @@ def test_an_export_of_a_fit_that_does_not_look_good_says_so():
     assert not [w for w in export(good, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
 
 
+@pytest.mark.slow  # 9 s warm: make test runs it
 def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled():
     """The spec's definition takes in the extensions that define their BRDF: a
     KHR_materials_clearcoat, _iridescence or _ior file is its own model under "spec"
