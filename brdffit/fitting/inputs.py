@@ -23,13 +23,12 @@ import numpy as np
 from brdffit.errors import FitInputError
 from brdffit.fitting.problem import (
     Prepared,
-    cached,
     full_table_metrics,
     prepare,
     ready_report_once,
+    sphere_reference,
 )
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
-from brdffit.fitting.sphere import SphereReference
 from brdffit.io import merl
 from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
@@ -87,9 +86,7 @@ class TableInput:
         metrics = full_table_metrics(self.table, model, u_best, prep.weight, peak=prep.peak)
         metrics.update(solver_metrics)
         measurable = all(np.isfinite(v) for v in metrics.values())
-        metrics["psnr_db"], colour = cached(
-            self.table, "sphere", lambda: SphereReference(self.table)).psnr_and_colour(
-                model, params)
+        metrics["psnr_db"], colour = sphere_reference(self.table).psnr_and_colour(model, params)
         return Measured(metrics, colour, "sphere", None, measurable)
 
     def judged(self, look: dict, measured: Measured, uncertainty: dict | None) -> tuple[dict,

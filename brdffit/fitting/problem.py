@@ -436,6 +436,13 @@ def cached(table: MerlTable, key, make):
         return per_table[key]
 
 
+def sphere_reference(table: MerlTable) -> SphereReference:
+    """The table's sphere renders (``brdffit.fitting.sphere.SphereReference``), made once
+    per table object: every fit of it scores its sphere against them, and a plot of it
+    reads at which exposure the verdict judged each light."""
+    return cached(table, "sphere", lambda: SphereReference(table))
+
+
 def _device_rgb(table: MerlTable):
     """The table's values on the device, as they are (float64, channel-major): no
     copy at all on the CPU, where a 64-byte-aligned array (``merl.read`` allocates
@@ -567,7 +574,7 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
 
     def sphere(u0) -> None:
         params = plain_params(constrained(model, u0))
-        cached(table, "sphere", lambda: SphereReference(table)).psnr_and_colour(model, params)
+        sphere_reference(table).psnr_and_colour(model, params)
 
     report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
         table, model, u0, prep.weight, peak=prep.peak))

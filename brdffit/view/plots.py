@@ -40,9 +40,10 @@ try:
 except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
+from brdffit.fitting.problem import sphere_reference
 from brdffit.fitting.quality import judged_brightness
 from brdffit.fitting.result import FitResult
-from brdffit.fitting.sphere import LIGHTS, SphereReference, radiance, sphere_disc, tonemap
+from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
 from brdffit.io import atomic
 from brdffit.io.angles import (
     N_PHI_D,
@@ -369,11 +370,12 @@ def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dic
     pixel (``brdffit.fitting.sphere.table_exposure``), the picture at one exposure
     for every material: what looks alike here may differ there (a highlight blown out
     in both at the verdict's exposure), so the figure says which one was judged."""
-    judged = dict(zip((tuple(light) for _, light in LIGHTS),
-                      SphereReference(table).exposures, strict=True))
+    reference = sphere_reference(table)  # the fit's own, where it fitted this table object
     words = {}
     for row, (_, light) in enumerate(lights):
-        exposure = judged.get(tuple(np.asarray(light, float)))
+        exposure = next((e for judged, e in zip(reference.lights, reference.exposures,
+                                                strict=True)
+                         if np.allclose(judged, light, rtol=0.0, atol=1e-12)), None)
         if exposure is not None:
             ev = round(4 * np.log2(exposure / (EXPOSURE * 2.0**exposure_ev))) / 4
             words[row] = f"\nverdict judged at {ev:+g} EV"
