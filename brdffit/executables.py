@@ -380,6 +380,8 @@ def _example(out_def):
 
 
 def _compiled_form(x):
+    if type(x) is tuple:  # several models (auto's candidates measured in one pass)
+        return tuple(map(_compiled_form, x))
     form = getattr(x, "compiled_form", None)
     return form() if callable(form) else x
 

@@ -421,3 +421,24 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     assert stored["loss"] == "render"
     for name, v in cli["params"].items():
         np.testing.assert_allclose(stored["params"][name], v, rtol=1e-9)
+
+
+def test_one_pass_of_several_models_is_each_models_own_pass(noisy_ggx):
+    """auto measures its candidates in one pass over the table: each model's metrics
+    are those of its own pass (float32 sums in another order: 1e-6 relative), and a
+    model that overflows float32 is measured again in float64 alone, the others as
+    they were."""
+    w = sampling.bin_weights(sampling.usable_bins(noisy_ggx).usable)
+    names = ("lambert", "phong", "ggx", "ggx2")
+    fits = [(models.get(n), models.get(n).unconstrain({**TRUTH, **MORE}[n])) for n in names]
+    huge = models.get("ggx").unconstrain({**TRUTH["ggx"], "ks": [1e30] * 3})
+    fits.append((models.get("ggx"), huge))  # (f cos)^2 ~1e60: past float32
+    together = fitting.full_table_metrics_of(noisy_ggx, fits, w)
+    assert len(together) == len(fits)
+    for (m, u), metrics in zip(fits, together, strict=True):
+        alone = fitting.full_table_metrics(noisy_ggx, m, u, w)
+        assert set(metrics) == set(alone)
+        for k in alone:
+            assert metrics[k] == pytest.approx(alone[k], rel=1e-6), (m.name, k)
+    assert together[-1]["rmse_cos"] > 1e28  # measured, in float64
+    assert together[0]["log_rmse"] > together[2]["log_rmse"]  # lambert on a ggx table

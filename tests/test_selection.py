@@ -165,13 +165,13 @@ def test_ranking_reports_every_candidate(ggx_selection):
 
 def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
     calls = []
-    real_fit = brdffit.fitting.pipeline.fit
+    real_solve = brdffit.fitting.pipeline.solved_fit  # every fit's solve, auto's too
 
-    def counting_fit(table, model, **kw):
+    def counting_solve(table, model, **kw):
         calls.append(models.get(model).name)
-        return real_fit(table, model, **kw)
+        return real_solve(table, model, **kw)
 
-    monkeypatch.setattr(brdffit.fitting.pipeline, "fit", counting_fit)
+    monkeypatch.setattr(brdffit.fitting.pipeline, "solved_fit", counting_solve)
     sel = select(ggx_table, ("ggx", "lambert"), **FAST)
     assert sorted(calls) == ["ggx", "lambert"]  # once each (side by side: in any order)
     calls.clear()
@@ -185,6 +185,51 @@ def test_the_same_fits_serve_the_ranking(ggx_table, monkeypatch):
     # (the truth's own fit is the table bin for bin: 100 dB at any size)
     assert rows["lambert"]["psnr_db"] != sel.fits["lambert"].error["psnr_db"]
     assert rows["ggx"]["psnr_db"] > rows["lambert"]["psnr_db"]
+
+
+def test_candidates_are_measured_in_one_pass_and_fit_as_alone(monkeypatch):
+    """auto solves its candidates, then measures all of them in one pass over the table
+    (issue 41): each fit is the one ``fit`` makes alone (a nested one started from its
+    parent's fit), its errors within float32 summation of its own pass. Where a parent's
+    solution could still change when measured, its child waits for the parent's fit
+    and is fitted as one fit: the same fits again."""
+    import brdffit.fitting.problem
+    from brdffit import fit
+
+    table = make_table("ggx", noise=0.03, seed=5)[0]
+    passes = []
+    real_pass = brdffit.fitting.problem.full_table_metrics_of
+
+    def counting_pass(table, fits, *a, **kw):
+        passes.append(tuple(m.name for m, _ in fits))
+        return real_pass(table, fits, *a, **kw)
+
+    monkeypatch.setattr(brdffit.fitting.problem, "full_table_metrics_of", counting_pass)
+    candidates = ("lambert", "oren_nayar", "ggx", "ggx2")
+    sel = select(table, candidates, **FAST)
+    assert passes[-1] == candidates, passes  # every candidate in the last pass: one pass
+    alone = {"lambert": fit(table, "lambert", **FAST), "ggx": fit(table, "ggx", **FAST)}
+    alone["oren_nayar"] = fit(table, "oren_nayar", parent_fit=alone["lambert"], **FAST)
+    alone["ggx2"] = fit(table, "ggx2", parent_fit=alone["ggx"], **FAST)
+
+    def same(fits):
+        for name in candidates:
+            assert fits[name].params == alone[name].params, name
+            assert fits[name].steps == alone[name].steps, name
+            assert fits[name].notes == alone[name].notes, name
+            for k, v in alone[name].error.items():
+                assert fits[name].error[k] == pytest.approx(v, rel=1e-6), (name, k)
+
+    same(sel.fits)
+    # parents whose solutions may change when measured: their children wait, and are
+    # fitted as one fit each after the pass, from the parents' fits
+    monkeypatch.setattr(brdffit.fitting.pipeline.Solved, "final_as_is", lambda self: False)
+    passes.clear()
+    waited = select(table, candidates, **FAST)
+    # the parents in one pass; each child in its own, as a fit alone
+    assert {("lambert", "ggx"), ("oren_nayar",), ("ggx2",)} <= set(passes), passes
+    same(waited.fits)
+    assert waited.chosen == sel.chosen
 
 
 def test_budget_picks_the_cheapest_under_it(ggx_table, ggx_selection):

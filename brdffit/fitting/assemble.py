@@ -41,7 +41,7 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
              prep: Prepared, *, result: str, steps: int, starts: int, sample_loss: float,
              loss: str, solver: str, precision: str, t0: float, uncertainty,
              refit: Refit | None = None, seed: int = 0, physical: bool = False,
-             notes=()) -> FitResult:
+             notes=(), table_metrics: dict | None = None) -> FitResult:
     """The :class:`FitResult` of ``model`` at ``u`` (unconstrained; ``params`` the same
     point as the model's parameters) fitted to ``source`` prepared as ``prep``.
 
@@ -51,13 +51,15 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     (a ``Future`` or :class:`Later`) or None; ``refit``: the fit's own solve from a
     start on other data, for a sample list's held-out folds (None where the solve
     diverged); ``physical``: a bound is active (the verdict says so); ``t0``: the
-    fit's start (``time.perf_counter``); ``notes``: where the fit did other than asked.
+    fit's start (``time.perf_counter``); ``notes``: where the fit did other than asked;
+    ``table_metrics``: a table's full-table error at ``u``, measured already (beside
+    other fits', in one pass).
     """
     measured = source.measure(
         model, u, params, prep, None if result == "nonfinite" else refit, seed,
         # the optimised loss on the solver's own subsample: sample_log_rmse for the log loss
         {f"sample_{LOSS_METRIC[loss]}": float(np.sqrt(max(sample_loss, 0.0) / 3.0))
-         if np.isfinite(sample_loss) else float("nan")})
+         if np.isfinite(sample_loss) else float("nan")}, table_metrics)
     if result == "successful" and not measured.measurable:
         result = "nonfinite"  # an error that cannot be measured is no success
     found = None

@@ -72,18 +72,23 @@ class TableInput:
         per step; every bin then only polishes it (a few steps instead of dozens)."""
         return samples is None and init is None and prep.n_usable > 4 * DEFAULT_SAMPLES
 
-    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str):
-        return ready_report_once(self.table, model, u, prep, loss, precision, solver)
+    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str,
+                     full_table: bool = True):
+        return ready_report_once(self.table, model, u, prep, loss, precision, solver,
+                                 full_table=full_table)
 
     def refuse_bound(self) -> None:
         """A table can be fitted under the physical bounds."""
 
     def measure(self, model, u_best, params: dict, prep: Prepared, refit: Refit | None,
-                seed: int, solver_metrics: dict) -> Measured:
-        """The full-table error (``solver_metrics``, the solver's own, beside it), and
-        the image error of the whole sphere (no scene weighting: one figure that
-        compares fits made under different losses)."""
-        metrics = full_table_metrics(self.table, model, u_best, prep.weight, peak=prep.peak)
+                seed: int, solver_metrics: dict, table_metrics: dict | None = None,
+                ) -> Measured:
+        """The full-table error (``table_metrics`` where it was measured already;
+        ``solver_metrics``, the solver's own, beside it), and the image error of the
+        whole sphere (no scene weighting: one figure that compares fits made under
+        different losses)."""
+        metrics = dict(table_metrics) if table_metrics is not None else full_table_metrics(
+            self.table, model, u_best, prep.weight, peak=prep.peak)
         metrics.update(solver_metrics)
         measurable = all(np.isfinite(v) for v in metrics.values())
         metrics["psnr_db"], colour = sphere_reference(self.table).psnr_and_colour(model, params)
@@ -119,7 +124,8 @@ class SampleInput:
     def polishes(self, samples, init, prep: Prepared) -> bool:
         return False  # a list up to `samples` is fitted whole
 
-    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str):
+    def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str,
+                     full_table: bool = True):
         return None
 
     def refuse_bound(self) -> None:
@@ -128,11 +134,13 @@ class SampleInput:
             "yet (their albedo check reads a table): fit it without them")
 
     def measure(self, model, u_best, params: dict, prep: Prepared, refit: Refit | None,
-                seed: int, solver_metrics: dict) -> Measured:
+                seed: int, solver_metrics: dict, table_metrics: dict | None = None,
+                ) -> Measured:
         """Every metric over every sample (``solver_metrics`` beside them), the k-fold
         held-out error (each fold refitted by ``refit``; none where the solve diverged
         or the error cannot be measured), and the look from the sphere where the
-        samples cover it, else from the held-out predictions."""
+        samples cover it, else from the held-out predictions. (``table_metrics``: a
+        table's only; a sample list's fits are measured one by one.)"""
         s = self._samples
         metrics = s.sample_metrics(model, u_best, s.every_sample(self.meas, prep.weight))
         metrics.update(solver_metrics)

@@ -21,6 +21,9 @@ The pipeline is a sequence of stages, each a function here or a module of its ow
    fit, solved by the same solve with the bound as an objective term
    (``brdffit.fitting.physical``), assembled by the same ``assemble``.
 
+Stages 1-4 are :func:`solved_fit`, stage 5 :func:`finish`: ``auto`` solves its
+candidates, then measures all of them in one pass over the table.
+
 What differs between a table and a sample list is asked of the input
 (``brdffit.fitting.inputs``), never tested here.
 """
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -118,23 +122,100 @@ def fit(
             accepts steps that lower the loss: the richer model never ends worse on
             the fit's samples than the one it contains. Or a function that returns
             that fit (``auto`` passes its parent's fit still running: this fit's
-            programs compile and its starts are scored meanwhile); where it raises
-            ``FitInputError``, the parent is fitted here.
+            programs compile and its starts are scored meanwhile), or of its
+            :class:`Solved` solution (``auto``'s, before it is measured); where it
+            raises ``FitInputError``, the parent is fitted here.
         physical: constrain the fit to conserve energy (directional albedo <= 1)
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
     """
-    t0 = time.perf_counter()
     m = models.get(model)
     _check_options(loss, solver, precision, samples, starts, max_steps, physical)
-    source = fit_input(table)
-    bin_weight = _checked_bin_weight(bin_weight)
     if physical:
-        source.refuse_bound()
+        fit_input(table).refuse_bound()
         return _bound_stage(table, m, parent_fit, loss=loss, solver=solver, samples=samples,
                             precision=precision, starts=starts, max_steps=max_steps,
-                            seed=seed, init=init, bin_weight=bin_weight)
+                            seed=seed, init=init, bin_weight=_checked_bin_weight(bin_weight))
+    return finish(solved_fit(table, m, loss=loss, solver=solver, samples=samples,
+                             precision=precision, starts=starts, max_steps=max_steps,
+                             seed=seed, init=init, bin_weight=bin_weight,
+                             parent_fit=parent_fit))
 
+
+class Solved(NamedTuple):
+    """A fit solved and not yet measured (:func:`solved_fit`): what :func:`finish`
+    needs to make it a ``FitResult``. ``auto`` solves its candidates first and
+    measures all of them in one pass over the table
+    (``brdffit.fitting.problem.full_table_metrics_of``).
+
+    It answers, for its best solution, what a nested model asks of its parent's fit
+    (``model``, ``loss``, ``params``, ``samples["used"]``), so that a candidate that
+    contains another can start from that one's solution before it is measured."""
+
+    m: models.AbstractBRDFModel
+    source: object  # brdffit.fitting.inputs.TableInput | SampleInput
+    prep: object  # brdffit.fitting.problem.Prepared
+    solve: Solve
+    outcome: Outcome
+    notes: tuple[str, ...]
+    parent: np.ndarray | None  # the parent's optimum, embedded (unconstrained)
+    parent_result: object  # the parent's fit (a FitResult, or a Solved in auto)
+    n_solved: int
+    loss: str
+    solver: str
+    precision: str
+    seed: int
+    t0: float  # when the fit began (time.perf_counter)
+    solved_at: float  # when its solve ended
+
+    def best(self):
+        return self.outcome.best(self.solve.loss_rtol)
+
+    @property
+    def model(self) -> str:
+        return self.m.name
+
+    @property
+    def params(self) -> dict:
+        return plain_params(constrained(self.m, np.asarray(self.best().u)))
+
+    @property
+    def samples(self) -> dict:
+        return {"used": self.prep.sample_set.n_used}
+
+    def final_as_is(self) -> bool:
+        """:func:`finish` gives this solution (the measured error decides nothing
+        more): it converged, and no parent's fit can be better on the table."""
+        return self.parent_result is None and self.best().result == "successful"
+
+
+@runtime.in_float64
+def solved_fit(
+    table: MerlTable | Measurements,
+    model: str | models.AbstractBRDFModel = DEFAULT_MODEL,
+    *,
+    loss: str = DEFAULT_LOSS,
+    solver: str = DEFAULT_SOLVER,
+    samples: int | None = DEFAULT_SAMPLES,
+    precision: str = DEFAULT_PRECISION,
+    starts: int = DEFAULT_STARTS,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    seed: int = DEFAULT_SEED,
+    init: dict | None = None,
+    bin_weight: np.ndarray | None = None,
+    parent_fit: FitResult | Solved | Callable[[], FitResult | Solved] | None = None,
+    full_table_ahead: bool = True,
+) -> Solved:
+    """:func:`fit`'s stages up to the solve (prepare, starts, solve, nested parent),
+    for a fit without the physical bounds; :func:`finish` measures and assembles it.
+    ``full_table_ahead=False``: in a new process, the full-table error's program of
+    this one model is not made ready ahead (``auto`` measures its candidates in one
+    pass of its own)."""
+    t0 = time.perf_counter()
+    m = models.get(model)
+    _check_options(loss, solver, precision, samples, starts, max_steps, False)
+    source = fit_input(table)
+    bin_weight = _checked_bin_weight(bin_weight)
     prep = source.prepare(bin_weight, samples, seed, precision, loss)
     check_enough(source, prep, m, scene=bin_weight is not None)
     again = dict(loss=loss, solver=solver, precision=precision, starts=starts,
@@ -153,7 +234,8 @@ def fit(
         starts = m.least_starts
     n_starts = min(starts, len(u_candidates))
     notes += _start_notes(m, starts, len(u_candidates), init, coarse, prep)
-    ready_here = source.ready_report(m, u_candidates[0], prep, loss, precision, solver)
+    ready_here = source.ready_report(m, u_candidates[0], prep, loss, precision, solver,
+                                     full_table=full_table_ahead)
     if ready_here is not None and takes_steps_as_data(solver, max_steps):
         # the solve's program depends on the number of starts, not on which: in a new
         # process it compiles here, beside the scoring below
@@ -183,40 +265,58 @@ def fit(
         if parent is not None:
             outcome = _from_the_parent(m, solve, outcome, parent, parent_loss, polish, notes)
     n_solved = len(outcome.starts) if coarse is None else coarse.starts
+    return Solved(m, source, prep, solve, outcome, tuple(notes), parent, parent_result,
+                  n_solved, loss, solver, precision, seed, t0, time.perf_counter())
 
-    def assembled(best, notes: list[str]) -> FitResult:
-        # The uncertainty needs the solution alone: it runs on another thread while this
-        # one measures the full table and the sphere. Warm, that overlaps a few ms; in a
-        # new process each of them compiles its programs first, and side by side they
-        # compile at the same time (bench/results/startup.md).
-        pending = None
-        if best.result != "nonfinite":
-            pending = report_pool().submit(runtime.in_float64(parameter_uncertainty), m,
-                                           best.u, prep.data, best.terms)
 
-        def refit(fold_data):  # one start from the optimum, in this fit's solve
-            out = solve(np.asarray(best.u, np.float64)[None], on=fold_data)
-            return out.values[0], out.codes[0]
-
-        return assemble(source, m, best.u, plain_params(constrained(m, np.asarray(best.u))),
-                        prep, result=best.result, steps=best.steps, starts=n_solved,
-                        sample_loss=best.loss, loss=loss, solver=solver, precision=precision,
-                        t0=t0, uncertainty=pending, refit=refit, seed=seed, notes=notes)
-
-    result = assembled(outcome.best(solve.loss_rtol), notes)
+@runtime.in_float64
+def finish(solved: Solved, table_metrics: dict | None = None, *, parent_result=None,
+           shared_s: float | None = None) -> FitResult:
+    """The ``FitResult`` of a :func:`solved_fit`: measured on the full table (or given
+    ``table_metrics``, its full-table error measured beside other fits') and
+    assembled; a nested fit worse on the table than its parent is the parent's
+    optimum, refined. ``parent_result``: the parent's fit, where the solve started from
+    a :class:`Solved` parent. ``shared_s``: the fit's share of a pass measured beside
+    others; its ``time_s`` then counts that share, not the wait for the others."""
+    s = solved
+    t0 = s.t0 if shared_s is None else s.t0 + (time.perf_counter() - s.solved_at) - shared_s
+    parent_result = s.parent_result if parent_result is None else parent_result
+    result = _assembled(s, s.best(), s.notes, s.n_solved, t0, table_metrics)
     if parent_result is not None and _worse_than_the_parent(result, parent_result):
         # Better than the parent on the solver's samples, worse on the rest of the table:
         # what the model adds fitted the samples' noise (a thin film of 30 nm on
         # color-changing-paint2: log_rmse 0.0415 against 0.0420 on the samples, 0.0444
         # against 0.0421 on every bin). The parent's optimum, embedded, is the answer.
-        back = solve(parent[None])
-        n_solved += 1
-        result = assembled(back.best(solve.loss_rtol), [
-            *notes, f"{m.name}'s optimum on the samples was worse than {m.parent}'s on the "
-            f"table (log_rmse {result.error['log_rmse']:.4g} against "
-            f"{parent_result.error['log_rmse']:.4g}): this is {m.parent}'s optimum with "
-            f"what {m.name} adds switched off, refined"])
+        back = s.solve(s.parent[None])
+        result = _assembled(s, back.best(s.solve.loss_rtol), [
+            *s.notes, f"{s.m.name}'s optimum on the samples was worse than {s.m.parent}'s on "
+            f"the table (log_rmse {result.error['log_rmse']:.4g} against "
+            f"{parent_result.error['log_rmse']:.4g}): this is {s.m.parent}'s optimum with "
+            f"what {s.m.name} adds switched off, refined"], s.n_solved + 1, t0)
     return result
+
+
+def _assembled(s: Solved, best, notes, n_solved: int, t0: float,
+               table_metrics: dict | None = None) -> FitResult:
+    # The uncertainty needs the solution alone: it runs on another thread while this
+    # one measures the full table and the sphere. Warm, that overlaps a few ms; in a
+    # new process each of them compiles its programs first, and side by side they
+    # compile at the same time (bench/results/startup.md).
+    m, prep = s.m, s.prep
+    pending = None
+    if best.result != "nonfinite":
+        pending = report_pool().submit(runtime.in_float64(parameter_uncertainty), m,
+                                       best.u, prep.data, best.terms)
+
+    def refit(fold_data):  # one start from the optimum, in this fit's solve
+        out = s.solve(np.asarray(best.u, np.float64)[None], on=fold_data)
+        return out.values[0], out.codes[0]
+
+    return assemble(s.source, m, best.u, plain_params(constrained(m, np.asarray(best.u))),
+                    prep, result=best.result, steps=best.steps, starts=n_solved,
+                    sample_loss=best.loss, loss=s.loss, solver=s.solver,
+                    precision=s.precision, t0=t0, uncertainty=pending, refit=refit,
+                    seed=s.seed, notes=notes, table_metrics=table_metrics)
 
 
 def _check_options(loss, solver, precision, samples, starts, max_steps, physical) -> None:

@@ -475,34 +475,44 @@ def _fit_cos(model, u, frame):
 
 
 @executables.jit
-def _full_errors(model, u, rgb, weight, frame, peak, part, parts: int):
-    """The sums behind log_rmse, cube_root_rmse and rmse_cos over the ``part``-th of
-    ``parts`` runs of the table's blocks (``brdffit.fitting.loss.sum_over_blocks``),
-    and the relative error at the peak bin.
+def _full_errors(models, us, rgb, weight, frame, peak, part, parts: int):
+    """The sums behind log_rmse, cube_root_rmse and rmse_cos of each of ``models`` at
+    its ``us`` (one row per model) over the ``part``-th of ``parts`` runs of the
+    table's blocks (``brdffit.fitting.loss.sum_over_blocks``), and each one's relative
+    error at the peak bin.
 
     The measured side of every metric is made here, per block, from the table's own
     values: the model is evaluated once per bin, each block's temporaries stay in
     cache, and no per-table array of targets is built first. Building the three
     targets of 4.4M values beforehand cost 15-25 ms per table; here they cost ~1 ms
-    per pass (issue 15)."""
+    per pass (issue 15). Several models (``auto``'s candidates) share one pass: the
+    table's side (its values, directions, weights and their compressed forms) is read
+    and made once for all of them, which was most of a pass's time (issue 41)."""
+    dtype = us[0].dtype
 
     def sums(block):
-        fit_cos = _fit_cos(model, u, block["frame"])
-        meas_cos = block["rgb"].astype(u.dtype) * jnp.maximum(block["frame"].cos_i, 0.0)
-        w = block["weight"].astype(u.dtype)
-        sums = []
-        for name in FULL_TABLE_LOSSES:
-            g = LOSS_REGISTRY[name].compress
-            d = g(fit_cos) - g(meas_cos)
-            sums.append(jnp.sum(w * d * d))
-        return jnp.stack(sums)
+        cos_i = jnp.maximum(block["frame"].cos_i, 0.0)
+        meas_cos = block["rgb"].astype(dtype) * cos_i
+        w = block["weight"].astype(dtype)
+        measured = [LOSS_REGISTRY[name].compress(meas_cos) for name in FULL_TABLE_LOSSES]
+        rows = []
+        for model, u in zip(models, us, strict=True):
+            fit_cos = _fit_cos(model, u, block["frame"])
+            row = []
+            for name, g_meas in zip(FULL_TABLE_LOSSES, measured, strict=True):
+                d = LOSS_REGISTRY[name].compress(fit_cos) - g_meas
+                row.append(jnp.sum(w * d * d))
+            rows.append(jnp.stack(row))
+        return jnp.stack(rows)
 
     arrays = {"frame": frame, "weight": weight, "rgb": rgb}
     total = sum_over_blocks(sums, arrays, weight.shape[-1], part, parts)
     at = jax.tree_util.tree_map(lambda a: a[peak][None], frame)
-    meas_peak = rgb[:, peak].astype(u.dtype) * jnp.maximum(at.cos_i[0], 0.0)
-    at_peak = _fit_cos(model, u, at)[:, 0] - meas_peak
-    return total, jnp.max(jnp.abs(at_peak) / jnp.maximum(meas_peak, 1e-12))
+    meas_peak = rgb[:, peak].astype(dtype) * jnp.maximum(at.cos_i[0], 0.0)
+    rel_peak = [jnp.max(jnp.abs(_fit_cos(model, u, at)[:, 0] - meas_peak)
+                        / jnp.maximum(meas_peak, 1e-12))
+                for model, u in zip(models, us, strict=True)]
+    return total, jnp.stack(rel_peak)
 
 
 #: The full-table pass is a loop over blocks on one core: on a machine with more,
@@ -541,7 +551,7 @@ _REPORTS_READY: set = set()
 
 
 def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str,
-                      solver: str = DEFAULT_SOLVER):
+                      solver: str = DEFAULT_SOLVER, full_table: bool = True):
     """The first fit of its kind in a process: make the programs of its report (the
     full-table error, the parameters, the sphere, the uncertainty) ready by running
     them on a start vector, while the scoring and the solve compile (or load). They
@@ -555,12 +565,14 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
     now. The rest (the parameters, the sphere, the quality block) is returned, for
     the caller to run on its own thread once it has scored its starts: it would
     otherwise wait there, idle, for the solve compiling on the pool. None when this
-    is not the first fit of its kind."""
+    is not the first fit of its kind. ``full_table=False``: the full-table error is
+    measured beside other fits' (:func:`full_table_metrics_of`, made ready by
+    :func:`ready_metrics_of_once`), not alone."""
     # the kind of the programs, not of the model: members of a family fitted on its
     # programs (ggx and beckmann in auto; also inside MonoKs) make them ready once
     form = model.compiled_form()
     kind = (type(form), form.name, precision, loss, prep.data.weight.shape,
-            prep.weight is None or prep.weight.size)
+            prep.weight is None or prep.weight.size, full_table)
     with _ERROR_THREADS_LOCK:
         if kind in _REPORTS_READY:
             return None
@@ -576,13 +588,36 @@ def ready_report_once(table, model, u, prep: Prepared, loss: str, precision: str
         params = plain_params(constrained(model, u0))
         sphere_reference(table).psnr_and_colour(model, params)
 
-    report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
-        table, model, u0, prep.weight, peak=prep.peak))
+    if full_table:
+        report_pool().submit(runtime.in_float64(ready), lambda u0: full_table_metrics(
+            table, model, u0, prep.weight, peak=prep.peak))
     # a solve that carries the uncertainty's terms makes them; only float64 ones are used
     if not (get_solver(solver).carries_terms and precision == "float64"):
         report_pool().submit(runtime.in_float64(ready),
                              lambda u0: parameter_uncertainty(model, u0, prep.data))
     return functools.partial(runtime.in_float64(ready), sphere)
+
+
+def ready_metrics_of_once(table, fits: list, prep: Prepared) -> None:
+    """The first time in a process that these models' full-table error is measured in
+    one pass (:func:`full_table_metrics_of`, ``auto``'s candidates): make its program
+    ready on the report pool now, at start vectors ``fits`` (``(model, u)``), while the
+    fits' own programs compile (or load): it depends on the models and shapes alone."""
+    kind = (tuple((type(f), f.name) for f in (m.compiled_form() for m, _ in fits)),
+            prep.weight.size)
+    with _ERROR_THREADS_LOCK:
+        if kind in _REPORTS_READY:
+            return
+        _REPORTS_READY.add(kind)
+
+    def ready() -> None:
+        try:
+            full_table_metrics_of(table, fits, prep.weight, peak=prep.peak)
+        except Exception as e:  # noqa: BLE001 - a start far off the table: speed only
+            runtime.log.debug("brdffit: one pass of %d fits not made ready ahead (%s)",
+                              len(fits), e)
+
+    report_pool().submit(runtime.in_float64(ready))
 
 
 def report_pool():
@@ -615,19 +650,26 @@ def error_sums(model, u, rgb, weight, frame, peak):
     ``frame``, weighted by ``weight``, and the relative error at index ``peak``: one
     implementation for a table's bins and a sample list's directions
     (:func:`metrics_from_sums`)."""
+    totals, rel_peaks = _error_sums_of((model,), (u,), rgb, weight, frame, peak)
+    return totals[0], rel_peaks[0]
+
+
+def _error_sums_of(models: tuple, us: tuple, rgb, weight, frame, peak):
+    """:func:`error_sums` of several models in one pass: one row each, as numpy arrays
+    (rows taken from device arrays would each be a program of its own to compile)."""
     n = weight.shape[-1]
     parts = _error_parts(n)
     if parts == 1:
-        return _full_errors(model, u, rgb, weight, frame, peak, jnp.asarray(0), 1)
+        total, rel_peak = _full_errors(models, us, rgb, weight, frame, peak, jnp.asarray(0), 1)
+        return np.asarray(total), np.asarray(rel_peak)
     # float64 is a per-thread setting in JAX: each run sets it as this thread has it
-    runs = [_error_pool(parts).submit(runtime.in_float64(_full_errors), model, u, rgb, weight,
-                                      frame, peak, jnp.asarray(i), parts)
+    runs = [_error_pool(parts).submit(runtime.in_float64(_full_errors), models, us, rgb,
+                                      weight, frame, peak, jnp.asarray(i), parts)
             for i in range(parts)]
     results = [run.result() for run in runs]
-    return sum(total for total, _ in results), results[0][1]
+    return sum(np.asarray(total) for total, _ in results), np.asarray(results[0][1])
 
 
-@runtime.in_float64
 def full_table_metrics(
     table: MerlTable,
     model: models.AbstractBRDFModel,
@@ -647,15 +689,40 @@ def full_table_metrics(
     is not finite even in float64 is returned as it is (NaN or inf): the caller must
     not report such a fit as a success.
     """
+    return full_table_metrics_of(table, [(model, u)], weight, dtype, peak)[0]
+
+
+def full_table_metrics_of(
+    table: MerlTable,
+    fits: list[tuple[models.AbstractBRDFModel, object]],
+    weight: np.ndarray,
+    dtype=FULL_TABLE_DTYPE,
+    peak: int | None = None,
+) -> list[dict[str, float]]:
+    """:func:`full_table_metrics` of each ``(model, u)`` of ``fits``, in one pass over
+    the table (``auto``'s candidates: one pass costs about what two of one model do,
+    where each alone reads the whole table again). Each fit's metrics are evaluated
+    again in float64 alone where they overflow ``dtype``, as one fit's are."""
     peak = jnp.asarray(peak_bin(table, weight) if peak is None else peak)
     rgb = _device_rgb(table)
+    w = jnp.asarray(weight)
+    out: list[dict[str, float] | None] = [None] * len(fits)
+    todo = list(range(len(fits)))
     for dt in (dtype, jnp.float64):
         frame = _device_frames(jnp.dtype(dt).name)
-        ut, w = jnp.asarray(u, dt), jnp.asarray(weight)
-        metrics = metrics_from_sums(*error_sums(model, ut, rgb, w, frame, peak))
-        if jnp.dtype(dt) == jnp.float64 or all(map(np.isfinite, metrics.values())):
+        totals, rel_peaks = _error_sums_of(
+            tuple(fits[i][0] for i in todo),
+            tuple(jnp.asarray(np.asarray(fits[i][1], dt)) for i in todo),
+            rgb, w, frame, peak)
+        last = jnp.dtype(dt) == jnp.float64
+        for i, total, rel_peak in zip(todo, totals, rel_peaks, strict=True):
+            metrics = metrics_from_sums(total, rel_peak)
+            if last or all(map(np.isfinite, metrics.values())):
+                out[i] = metrics
+        todo = [i for i in todo if out[i] is None]
+        if not todo:
             break
-    return metrics
+    return out
 
 
 @runtime.in_float64
