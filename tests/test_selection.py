@@ -540,12 +540,34 @@ def test_the_render_rule_weighs_the_light_a_highlight_holds():
     assert choose_by_look(rows)[0]["model"] == "beckmann"
 
 
+def test_the_render_rule_ranks_by_the_render_loss_s_eight_lights():
+    """Where a row carries ``views_psnr_db`` (the sphere under the render loss's eight
+    lights), the render rule ranks by it, not by the verdict's two lights: on
+    blue-rubber, gltf_clearcoat rendered 0.7 dB above ggx on the two, 5.7 dB below on
+    the eight and 8.9 dB below under bench.render_loss's independent lights."""
+    from brdffit.selection import choose_by_look
+
+    rows = _rows(("ggx", 8, 0.0068, 41.4, "good"), ("gltf_clearcoat", 11, 0.0092, 42.1, "good"))
+    assert choose_by_look([dict(r) for r in rows])[0]["model"] == "gltf_clearcoat"
+    rows[0]["views_psnr_db"], rows[1]["views_psnr_db"] = 38.3, 32.6
+    chosen, reason = choose_by_look(rows)
+    assert chosen["model"] == "ggx" and "eight lights" in reason and "38.3 dB" in reason
+    assert [r["rank"] for r in rows] == [1, 2]
+    assert rows[1]["excess"] == pytest.approx(5.7)
+
+
 def test_auto_with_the_render_loss_says_which_rule_it_used(ggx_table):
     sel = select(ggx_table, ("lambert", "ggx"), loss="render", **FAST)
     assert sel.rule == "render_psnr_db" and "sphere render" in sel.reason
     assert sel.summary()["rule"] == "render_psnr_db"
+    # ranked by the render loss's eight lights, shown beside the two lights' PSNR
+    views = {r["model"]: r["views_psnr_db"] for r in sel.ranking}
+    assert views["ggx"] > views["lambert"] and views["ggx"] > 60  # the truth's own fit
+    assert "eight lights" in sel.reason and "8 lights" in format_selection(sel)
     plain = select(ggx_table, ("lambert", "ggx"), **FAST)
     assert plain.rule == "log_rmse" and "log_rmse" in plain.reason
+    assert all(r["views_psnr_db"] is None for r in plain.ranking)
+    assert "8 lights" not in format_selection(plain)
 
 
 def test_a_warning_when_every_candidate_looks_poor():
