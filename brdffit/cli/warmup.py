@@ -9,8 +9,7 @@ cache under ``BRDFFIT_CACHE_DIR``): the next process, a server's workers or a
 container's first request, loads them in milliseconds. The programs do not depend on
 the table, only on the model and the options' shapes: one sample count per bucket
 (``brdffit.fitting.sampling.SAMPLE_BUCKETS``) serves every count up to it, so the
-default options warm every ``--samples`` from 4097 to 16384 (4096 and fewer is a
-bucket of its own, for speed, compiled on first use).
+default options warm every ``--samples`` up to 16384.
 """
 
 from __future__ import annotations

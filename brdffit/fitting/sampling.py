@@ -31,22 +31,16 @@ DEFAULT_SAMPLES = 16384
 
 #: The sample counts a fit's compiled programs are made for: a count up to the
 #: largest is padded with zero-weight slots to the first bucket that holds it, so
-#: ``samples=5000`` runs the default fit's programs (compiled, or kept on disk by
-#: ``brdffit.executables``) instead of compiling its own; zero weights add nothing to
-#: any sum (tests/test_fitting.py checks the fits agree to 1e-9). A quarter of the
-#: default is a bucket of its own: a caller who asks for 4096 samples or fewer asks for
-#: speed, and padded to 16384 every solver step cost what the default's does (warm,
-#: 4096 samples: ggx 70 -> 36 ms, ggx2 160 -> 96, gltf_clearcoat 205 -> 148,
-#: standard_surface 1022 -> 401; the first such fit on a machine compiles its own
-#: programs, 2-6 s, kept for the next). A count above the largest is padded to a
-#: multiple of it: every bin of a real table (``samples=None``, 0.9-1.3M usable bins)
-#: then shares its programs with the tables whose counts round alike, where each table
-#: compiled its own (a batch of every bin over 100 tables compiled ~100 solves), for
-#: at most 65535 more slots (~6% at 1.1M) to sum per step; a ggx2 fit to every bin of
-#: red-plastic (1,096,216 bins, padded to 1,114,112) took as long either way (min of 5
-#: alternating runs 4.04 s vs 4.15 s).
-SAMPLE_BUCKETS = (DEFAULT_SAMPLES // 4, DEFAULT_SAMPLES, 2 * DEFAULT_SAMPLES,
-                  4 * DEFAULT_SAMPLES)
+#: ``samples=4096`` or ``5000`` runs the default fit's programs (compiled, or kept on
+#: disk by ``brdffit.executables``) instead of compiling its own; zero weights add
+#: nothing to any sum (tests/test_fitting.py checks the fits agree to 1e-9). A larger
+#: count is padded to a multiple of the largest bucket: every bin of a real table
+#: (``samples=None``, 0.9-1.3M usable bins) then shares its programs with the tables
+#: whose counts round alike, where each table compiled its own (a batch of every bin
+#: over 100 tables compiled ~100 solves), for at most 65535 more slots (~6% at 1.1M)
+#: to sum per step; a ggx2 fit to every bin of red-plastic (1,096,216 bins, padded to
+#: 1,114,112) took as long either way (min of 5 alternating runs 4.04 s vs 4.15 s).
+SAMPLE_BUCKETS = (DEFAULT_SAMPLES, 2 * DEFAULT_SAMPLES, 4 * DEFAULT_SAMPLES)
 
 
 @dataclass(frozen=True)
