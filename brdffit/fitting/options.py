@@ -167,7 +167,9 @@ class FitOptions:
         doc="least-squares solver; lm is brdffit's Levenberg-Marquardt")
     samples: int | None = _option(
         DEFAULT_SAMPLES, kind=int, least=64, most=N_BINS, none="every bin; slow", cli_none="all",
-        doc="bins the solver sees (stratified subsample); the error is always on the full table")
+        doc="bins the solver sees (stratified subsample); the error is always on the full "
+            "table. Fewer than the default buy no speed: they run the default's compiled "
+            "fit, padded with bins of no weight")
     precision: str = _option(
         DEFAULT_PRECISION, kind=str, choices=PRECISIONS,
         doc="floating point precision of the solve")
