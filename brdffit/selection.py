@@ -269,7 +269,7 @@ def select(
             ``precision``, ``starts``, ``max_steps``, ``seed``).
     """
     # JAX's modules, imported here rather than by the threads below (see the imports)
-    from brdffit.fitting import problem  # noqa: F401
+    from brdffit.fitting import problem
     from brdffit.fitting.sphere import SphereReference
 
     t0 = time.perf_counter()
@@ -294,10 +294,13 @@ def select(
     views = None
     if (fit_options.get("loss") == "render" and budget is None
             and isinstance(table, MerlTable)):
-        # the render rule ranks by the render loss's own eight lights (views_psnr_db)
+        # the render rule ranks by the render loss's own eight lights (views_psnr_db);
+        # made once per table object, as its two-light reference (~25 ms warm)
         from brdffit.fitting.render_loss import LIGHTS as VIEW_LIGHTS
 
-        views = SphereReference(table, image_size or 128, lights=VIEW_LIGHTS)
+        size = image_size or 128
+        views = problem.cached(table, ("render-loss-views", size),
+                               lambda: SphereReference(table, size, lights=VIEW_LIGHTS))
 
     rows, fits = [], {}
     with (_CandidateFits(table, ordered, scene, fit_options, threads) as running,
