@@ -17,7 +17,7 @@ import brdffit.fitting.pipeline
 from brdffit import models
 from brdffit.errors import FitInputError
 from brdffit.fitting.scene import Scene
-from brdffit.selection import DEFAULT_CANDIDATES, format_selection, select
+from brdffit.selection import DEFAULT_CANDIDATES, choose, format_selection, select
 from data_synth import Component, make_table
 from data_synth.synth import make_preset
 
@@ -85,14 +85,33 @@ def test_a_nested_model_over_an_exact_parent_is_not_solved_again(ggx_selection):
     assert "ggx2 over ggx nested: no gain" in format_selection(ggx_selection)
 
 
-def test_a_cheaper_model_is_chosen_only_within_tolerance(ggx_table, ggx_selection):
+def test_a_cheaper_model_is_chosen_only_within_tolerance(ggx_selection):
+    """The rule alone, on rows that read the same verdict: the tolerance decides."""
+    rows = [dict(r, verdict="visible", radiance_verdict="visible")
+            for r in ggx_selection.ranking if r["model"] in ("phong", "ggx")]
+    phong = rows[0]
+    assert phong["model"] == "phong" and phong["excess"] > 0
+    chosen, reason = choose([dict(r) for r in rows], phong["excess"] * 1.5)
+    assert chosen["model"] == "phong"
+    assert "within tolerance" in reason and "(ggx," in reason and "read worse" not in reason
+    chosen, _ = choose([dict(r) for r in rows], phong["excess"] / 1.5)
+    assert chosen["model"] == "ggx"
+
+
+def test_within_tolerance_a_cheaper_fit_that_reads_worse_is_passed_over(ggx_table,
+                                                                       ggx_selection):
+    """phong within a loose tolerance of ggx on a GGX table, but its sphere reads worse
+    than ggx's exact fit: ggx is chosen, phong's row says it looks worse, and the reason
+    says why. Without the look (``by_look=False``, or a scene) the cheaper one wins."""
     phong = next(r for r in ggx_selection.ranking if r["model"] == "phong")
     loose = phong["excess"] * 1.5
     sel = select(ggx_table, ("phong", "ggx"), tolerance=loose, **FAST)
-    assert sel.chosen == "phong"
-    assert "within tolerance" in sel.reason and "(ggx," in sel.reason
-    tight = select(ggx_table, ("phong", "ggx"), tolerance=phong["excess"] / 1.5, **FAST)
-    assert tight.chosen == "ggx"
+    rows = {r["model"]: r for r in sel.ranking}
+    assert rows["ggx"]["verdict"] == "good" and rows["phong"]["verdict"] != "good"
+    assert sel.chosen == "ggx", sel.reason
+    assert rows["phong"]["status"] == "looks worse"
+    assert f"read worse (phong {rows['phong']['verdict']}" in sel.reason
+    assert choose([dict(r) for r in sel.ranking], loose, by_look=False)[0]["model"] == "phong"
 
 
 def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
@@ -101,9 +120,11 @@ def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
     beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
     ggx = next(r for r in ggx_selection.ranking if r["model"] == "ggx")
     assert beckmann["n_params"] == ggx["n_params"] and beckmann["log_rmse"] > ggx["log_rmse"]
-    sel = select(ggx_table, ("beckmann", "ggx"), tolerance=beckmann["excess"] * 1.5, **FAST)
-    assert sel.chosen == "ggx"
-    assert "as cheap and within tolerance too, but with a higher error: beckmann" in sel.reason
+    # the rule alone, on rows that read alike (on this table beckmann also reads worse)
+    rows = [dict(r, verdict="good", radiance_verdict="good") for r in (beckmann, ggx)]
+    chosen, reason = choose(rows, beckmann["excess"] * 1.5)
+    assert chosen["model"] == "ggx"
+    assert "as cheap and within tolerance too, but with a higher error: beckmann" in reason
     under = select(ggx_table, ("beckmann", "ggx"), budget=beckmann["log_rmse"] * 1.01, **FAST)
     assert under.chosen == "ggx" and "cheaper ones miss it" not in under.reason
 
@@ -365,7 +386,10 @@ def test_batch_auto_fits_the_candidates_and_reports_the_choice(ggx_table, tmp_pa
     table = rank(out).tables[0]
     chosen, reason = table.chosen()
     assert chosen == "ggx" and "tolerance" in reason
-    assert table.chosen(tolerance=1.0)[0] == "lambert"
+    # within a tolerance wide enough for lambert, its look (stored with the fit) reads
+    # worse than ggx's exact fit: auto's rule, as select applies it
+    loose, why = table.chosen(tolerance=1.0)
+    assert loose == "ggx" and "read worse (lambert" in why, why
     assert "auto" in format_ranking(rank(out))
     assert cli.main(["batch-report", str(out), "--json", "--no-png"]) == 0
     assert json.loads(capsys.readouterr().out)["tables"][0]["auto"] == "ggx"

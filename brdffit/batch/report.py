@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from brdffit import extras, models
 from brdffit.batch.store import read_attrs, read_index, read_looks
-from brdffit.fitting.quality import VERDICTS
+from brdffit.fitting.quality import VERDICTS, radiance_verdict
 from brdffit.selection import DEFAULT_TOLERANCE, best, choose
 
 METRIC = "log_rmse"
@@ -36,7 +36,11 @@ class TableRanking:
     def _rows(self) -> list[dict]:
         """The successful fits as ranking rows, cheapest first (the registry's order)."""
         order = models.names()
-        rows = [{"model": m, "log_rmse": e, "n_params": _n_params(m)}
+        rows = [{"model": m, "log_rmse": e, "n_params": _n_params(m),
+                 # the look, which auto's rule reads within its tolerance (none for a fit
+                 # stored before results had one: the rule is then the error's alone)
+                 "verdict": self.looks.get(m, {}).get("verdict"),
+                 "radiance_verdict": radiance_verdict(self.looks.get(m))}
                 for m, e in self.errors.items() if math.isfinite(e)]
         rows.sort(key=lambda r: order.index(r["model"]) if r["model"] in order else len(order))
         return rows
@@ -49,7 +53,8 @@ class TableRanking:
 
     def chosen(self, tolerance: float = DEFAULT_TOLERANCE) -> tuple[str | None, str]:
         """What ``model="auto"`` picks from these fits, and why: the cheapest model
-        within ``tolerance`` of the best, in quadrature (``brdffit.selection.choose``)."""
+        within ``tolerance`` of the best, in quadrature, of those that look best
+        (``brdffit.selection.choose``)."""
         rows = self._rows()
         if not rows:
             return None, "no successful fit"

@@ -247,7 +247,8 @@ class SelectionRule:
 
     tolerance: float = _option(
         DEFAULT_TOLERANCE, kind=float, least=0, most=10,
-        doc="the cheapest model within this log_rmse of the best (in quadrature) is chosen")
+        doc="the cheapest model within this log_rmse of the best (in quadrature) is chosen, "
+            "of those whose sphere reads the best verdict among them")
     budget: float | None = _option(
         None, kind=float, above=0, most=10, none="no budget",
         doc="the cheapest model with log_rmse under this budget is chosen")
