@@ -114,6 +114,33 @@ def test_within_tolerance_a_cheaper_fit_that_reads_worse_is_passed_over(ggx_tabl
     assert choose([dict(r) for r in sel.ranking], loose, by_look=False)[0]["model"] == "phong"
 
 
+def test_under_the_render_rule_a_layer_is_taken_only_where_it_gains_on_the_base_choice():
+    """principled_clearcoat (9 values) within the render rule's 0.5 dB of ggx2 (12) but
+    no closer: the rule alone takes the cheaper, layered one; its coat bought nothing
+    the render loss's lights saw, so ggx2, the choice without layers, is chosen. A
+    layered fit that renders at least as close, or reads better, keeps its place."""
+    from brdffit.selection import _layer_that_gains_on_the_base_choice, choose_by_look
+
+    def rows(coat_db, coat_verdict="good"):
+        return [{"model": m, "n_params": n, "views_psnr_db": db, "verdict": v,
+                 "radiance_verdict": v}
+                for m, n, db, v in (("ggx", 8, 30.0, "good"),
+                                    ("principled_clearcoat", 9, coat_db, coat_verdict),
+                                    ("ggx2", 12, 31.3, "visible" if coat_db < 31 else "good"))]
+
+    ok = rows(31.0, "good")
+    ok[2]["verdict"] = ok[2]["radiance_verdict"] = "good"
+    chosen, reason = choose_by_look(ok)
+    assert chosen["model"] == "principled_clearcoat"
+    chosen, reason = _layer_that_gains_on_the_base_choice(chosen, reason, ok)
+    assert chosen is ok[2], reason
+    assert "principled_clearcoat renders no closer than ggx2 (31.0 against 31.3 dB)" in reason
+    assert "rank" in ok[1] and ok[2]["rank"] == 1  # the ranking's ranks are the whole rule's
+    for ok in (rows(31.3), rows(30.9, "good")):  # as close, or reads better than ggx2
+        chosen, reason = choose_by_look(ok)
+        assert _layer_that_gains_on_the_base_choice(chosen, reason, ok)[0] is chosen
+
+
 def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
     """beckmann and ggx both have 8 parameters: within tolerance of each other, the
     registry's order (beckmann first) is no reason to keep the worse fit."""
