@@ -710,22 +710,27 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None,
         eligible = [row for row in within if _verdict_rank(row) == look]
     c = _lowest_of_its_size(eligible[0], eligible)
     cheaper = [row for row in ok[: ok.index(c)] if row not in within]
-    if c is best:
+    # cheaper candidates within tolerance that the look passed over
+    looks_worse = [r for r in ok[: ok.index(c)] if r in within and r not in eligible]
+    reads = f" that reads {c.get('verdict')}" if looks_worse else ""
+    if c is best and looks_worse:
+        why = (f"Chose {c['model']}: the best log_rmse ({_fmt(c['log_rmse'])}) and the "
+               f"cheapest candidate within tolerance {_fmt(tolerance)} of it{reads}")
+    elif c is best:
         why = (f"Chose {c['model']}: the best log_rmse ({_fmt(c['log_rmse'])}) and no cheaper "
                f"candidate within tolerance {_fmt(tolerance)} of it")
     else:
         why = (f"Chose {c['model']}: the cheapest candidate within tolerance {_fmt(tolerance)} "
-               f"of the best ({best['model']}, log_rmse {_fmt(best['log_rmse'])}): its "
+               f"of the best ({best['model']}, log_rmse {_fmt(best['log_rmse'])}){reads}: its "
                f"log_rmse {_fmt(c['log_rmse'])} is {_fmt(c['excess'])} above it in quadrature")
     if cheaper:
         why += "; cheaper ones are further off (" + ", ".join(
             f"{r['model']} +{_fmt(r['excess'])}" for r in cheaper) + ")"
-    looks_worse = [r for r in ok[: ok.index(c)] if r in within and r not in eligible]
     if looks_worse:
-        why += (f"; among those within tolerance it reads {c.get('verdict')}, cheaper ones "
-                "read worse (" + ", ".join(f"{r['model']} {_look_words(r)}" for r in looks_worse)
-                + ": their brightness, colour or PSNR past the verdict's thresholds, "
-                "quality.reason)")
+        why += ("; cheaper ones within tolerance read worse (" + ", ".join(
+            f"{r['model']} {_look_words(r)}" for r in looks_worse)
+            + ": their PSNR, brightness or colour past the verdict's thresholds, "
+            "quality.reason)")
     same_size = [r for r in eligible if r is not c and r.get("n_params") == c.get("n_params")]
     if same_size:
         why += ("; as cheap and within tolerance too, but with a higher error: " + ", ".join(
