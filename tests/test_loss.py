@@ -442,3 +442,39 @@ def test_one_pass_of_several_models_is_each_models_own_pass(noisy_ggx):
             assert metrics[k] == pytest.approx(alone[k], rel=1e-6), (m.name, k)
     assert together[-1]["rmse_cos"] > 1e28  # measured, in float64
     assert together[0]["log_rmse"] > together[2]["log_rmse"]  # lambert on a ggx table
+
+
+@pytest.mark.parametrize("name", [
+    # the big models' two Jacobians compile for seconds each: the full suite runs them
+    pytest.param(n, marks=pytest.mark.slow)
+    if n.startswith(("standard_surface", "rough_plastic")) or n.endswith("iridescence") else n
+    for n in models.names()])
+def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
+    """The residuals' Jacobian taken one parameter at a time (the solver's, for every
+    model without the closed form) is ``jacfwd``'s of the whole, to rounding, for each
+    registry model, at a random point and on random directions."""
+    import jax
+
+    model = models.get(name)
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(2, 64, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 0.05
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    from brdffit.models.frame import shading_frame
+
+    frame = shading_frame(jnp.asarray(v[0]), jnp.asarray(v[1]))
+    target, weight = jnp.asarray(rng.uniform(0.0, 1.0, (3, 64))), jnp.full(64, 1.0 / 64)
+    u = jnp.asarray(rng.normal(size=model.n_params) * 0.5)
+    # the log loss's residuals, and the render loss's with its energy row (3, S + 1)
+    for data in (loss.LossData(frame=frame, target=target, weight=weight, loss="log"),
+                 loss.LossData(frame=frame, target=target, weight=weight, loss="render",
+                               exposure=jnp.full((3, 1), 2.0), energy=jnp.full((3, 1), 0.2))):
+        r, jac = loss.residual_jacobian(u, (model, data))
+        whole = jax.jacfwd(lambda w, d=data: loss.residuals(w, (model, d)).reshape(-1))(u)
+        assert jac.shape == whole.shape and whole.shape[1] == model.n_params
+        np.testing.assert_allclose(np.asarray(r),
+                                   np.asarray(loss.residuals(u, (model, data))).ravel(),
+                                   rtol=1e-12, atol=1e-15)
+        scale = float(np.max(np.abs(np.asarray(whole))))
+        np.testing.assert_allclose(np.asarray(jac), np.asarray(whole), rtol=1e-9,
+                                   atol=1e-12 * max(scale, 1.0))
