@@ -192,6 +192,32 @@ def test_padding_a_sample_count_to_its_bucket_changes_no_result(model, kwargs, m
     assert bucketed.uncertainty["residuals"] == exact.uncertainty["residuals"]
 
 
+@pytest.mark.parametrize("name", ["standard_surface", "standard_surface_coat", "ggx"])
+def test_the_solve_compiled_ahead_holds_every_start_the_ranking_refines(name):
+    """In a new process the solve compiles while the starts are scored, before the
+    ranking says how many it refines: the best-scored and, for standard_surface and
+    its layers, the best of each metalness. Its bucket of starts is the one the solve
+    then runs in, whatever the scores (some of them not finite)."""
+    from brdffit import models
+    from brdffit.fitting.pipeline import _best_of_each_family, _most_refined
+    from brdffit.fitting.problem import start_bucket
+
+    m = models.get(name)
+    n = len(m.shape_grid)
+    rng = np.random.default_rng(0)
+    reached = 0
+    for n_starts in (1, 2, 4):
+        most = _most_refined(m, n, n_starts)
+        for _ in range(50):
+            scores = rng.uniform(size=n)
+            scores[rng.uniform(size=n) < 0.2] = np.inf
+            refined = len(_best_of_each_family(m, scores, n_starts))
+            assert start_bucket(max(most, refined)) == start_bucket(most)
+            reached = max(reached, refined - n_starts)
+    # the family adds starts for standard_surface's models (so the bound is needed)
+    assert (reached > 0) == (m.start_family is not None)
+
+
 def test_tables_of_every_bin_share_the_compiled_fit_of_their_bucket():
     """Every bin of two tables with different usable counts, padded to the same
     multiple of the largest bucket: the second table compiles (or loads) nothing."""

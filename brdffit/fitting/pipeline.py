@@ -236,10 +236,13 @@ def solved_fit(
     notes += _start_notes(m, starts, len(u_candidates), init, coarse, prep)
     ready_here = source.ready_report(m, u_candidates[0], prep, loss, precision, solver,
                                      full_table=full_table_ahead)
+    # the solve's program holds as many starts as the ranking may refine, so that the
+    # program compiled ahead is the one the solve runs
+    bucket = _most_refined(m, len(u_candidates), n_starts)
     if ready_here is not None and takes_steps_as_data(solver, max_steps):
         # the solve's program depends on the number of starts, not on which: in a new
         # process it compiles here, beside the scoring below
-        ahead = Solve(m, solver, precision, prep.data, max_steps, bucket=n_starts)
+        ahead = Solve(m, solver, precision, prep.data, max_steps, bucket=bucket)
         report_pool().submit(runtime.in_float64(ahead.ready), u_candidates[:n_starts])
     best_starts = _ranked_starts(m, u_candidates, n_starts, prep, precision,
                                  n_scan=0 if parent is None else len(m.parent_scan))
@@ -249,7 +252,8 @@ def solved_fit(
         parent, parent_result = _parent_fit(source, table, m, parent_fit, prep, polish,
                                             samples, again)
 
-    solve = Solve(m, solver, precision, prep.data, max_steps, bucket=len(best_starts))
+    solve = Solve(m, solver, precision, prep.data, max_steps,
+                  bucket=max(bucket, len(best_starts)))
     parent_loss = None if parent is None else solve.loss_at(parent)
     if parent is not None and parent_loss <= _exact_fit_loss(prep):
         # The parent fits these data exactly: nothing is left for what this model adds
@@ -503,6 +507,19 @@ def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray
         notes.append(f"{m.parent}'s optimum itself was refined last, so that the fit ends no "
                      f"worse than {m.parent} on its samples")
     return outcome
+
+
+def _most_refined(m, n_candidates: int, n_starts: int) -> int:
+    """The most starts :func:`_ranked_starts` refines of ``n_candidates``: ``n_starts``,
+    and where the model names a ``start_family``, the best of each other value of it
+    too. (The solve compiled ahead of the ranking once held ``n_starts``: for
+    standard_surface and its layers, whose ranking adds each metalness's best, every
+    new process compiled a second solve of 5-10 s that nothing ran.)"""
+    family = m.start_family
+    if family is None or len(m.shape_grid) != n_candidates:
+        return n_starts
+    values = len(dict.fromkeys(shape[family] for shape in m.shape_grid))
+    return min(n_candidates, n_starts + values - 1)
 
 
 def _best_of_each_family(m, scores: np.ndarray, n_starts: int) -> np.ndarray:
