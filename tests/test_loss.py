@@ -448,8 +448,10 @@ def test_one_pass_of_several_models_is_each_models_own_pass(noisy_ggx):
     # each case compiles two Jacobians of its model under two losses (every registry
     # model took the full suite 300 s): RGB and scalar parameters, linear and log
     # ranges, a layer over a base, and one of MaterialX's big models
-    "ggx", "gltf_sheen", "principled_clearcoat", "rough_conductor",
-    pytest.param("standard_surface_coat", marks=pytest.mark.slow)])
+    # (the quick tier keeps the first two: its 4 minutes)
+    "ggx", "gltf_sheen",
+    *(pytest.param(name, marks=pytest.mark.slow)
+      for name in ("principled_clearcoat", "rough_conductor", "standard_surface_coat"))])
 def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
     """The residuals' Jacobian taken one parameter at a time (the solver's, for every
     model without the closed form) is ``jacfwd``'s of the whole, to rounding, at a
