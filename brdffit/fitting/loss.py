@@ -297,11 +297,6 @@ def residuals_of_params(params: dict, model, data) -> Float[Array, "3 s"]:
                            axis=1)
 
 
-def _sample_residuals(u, args):
-    model, data = args
-    return _sample_residuals_of_params(model.constrain(u), model, data)
-
-
 def _sample_residuals_of_params(params: dict, model, data):
     return _compared(model.eval_channels(params, data.frame), data)
 
