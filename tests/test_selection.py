@@ -280,6 +280,26 @@ def test_candidates_are_measured_in_one_pass_and_fit_as_alone(monkeypatch):
     assert waited.chosen == sel.chosen
 
 
+def test_the_longest_chain_of_candidates_starts_first(monkeypatch):
+    """Candidates start longest chain first (a nested one's cost counts for its
+    parent), parents always before their children: by parameter count before a
+    candidate has been solved in the process, by its last solve after."""
+    from brdffit import selection
+
+    ordered = [models.get(n) for n in DEFAULT_CANDIDATES]
+    monkeypatch.setattr(selection, "_SOLVE_SECONDS", {})
+    names = [m.name for m in selection.longest_chains_first(ordered)]
+    assert names[:2] == ["ggx", "ggx2"], names
+    assert sorted(names) == sorted(DEFAULT_CANDIDATES)
+    for m in ordered:
+        if m.parent in names:
+            assert names.index(m.parent) < names.index(m.name), names
+    # oren_nayar solved slowly last time: lambert and it lead, lambert first
+    monkeypatch.setattr(selection, "_SOLVE_SECONDS", {"oren_nayar": 5.0, "ggx2": 1.0})
+    names = [m.name for m in selection.longest_chains_first(ordered)]
+    assert names[:4] == ["lambert", "oren_nayar", "ggx", "ggx2"], names
+
+
 def test_budget_picks_the_cheapest_under_it(ggx_table, ggx_selection):
     errors = {r["model"]: r["log_rmse"] for r in ggx_selection.ranking}
     budget = (errors["beckmann"] + errors["phong"]) / 2  # beckmann under, phong over
