@@ -140,11 +140,23 @@ def test_user_init_is_used(synth_tables):
         ({"max_steps": 0}, "max_steps"),
         ({"bin_weight": np.ones(10)}, "bin_weight"),
         ({"bin_weight": -np.ones(90 * 90 * 180)}, "bin_weight"),
+        ({"seed": 1.5}, "seed must be an integer"),
+        ({"seed": -1}, "seed must be an integer"),
+        ({"starts": True}, "starts"),
+        ({"samples": 4096.0}, "samples"),
+        ({"init": {"kd": "a"}}, "init: lambert: kd must be a number or three, got 'a'"),
     ],
 )
 def test_bad_options_raise_input_errors(kwargs, message, synth_tables):
     with pytest.raises(FitInputError, match=message):
         fit(synth_tables["lambert"], "lambert", **kwargs)
+
+
+def test_numpy_integers_are_counts(synth_tables):
+    """A count read from an array (numpy's int64) is an integer like any other."""
+    r = fit(synth_tables["lambert"], "lambert", samples=np.int64(4096), starts=np.int64(2),
+            seed=np.uint32(3))
+    assert r.samples["used"] == 4096 and r.converged
 
 
 def test_table_with_too_few_bins_is_refused():

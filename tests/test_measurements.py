@@ -114,6 +114,18 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.astm", "NUM_POINTS 1\n0.1,0,0.2,0,1,1,1\n", "no VARS line"),
     ("a.csv", "# angles: furlongs\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n1,2,3,4,1,1,1\n",
      "unknown angle unit 'furlongs'"),
+    # value and sigma columns that would be guessed at or dropped are refused
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,value\n10,0,20,0,1,1,1\n",
+     "value columns of two kinds: r, g (RGB) and value (one channel)"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma_r,sigma_g\n"
+              "10,0,20,0,1,1,1,0.1,0.1\n",
+     "sigma columns sigma_r, sigma_g: expected sigma, or sigma_r, sigma_g and sigma_b"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma,sigma_r,sigma_g,sigma_b\n"
+              "10,0,20,0,1,1,1,0.1,0.1,0.1,0.1\n",
+     "sigma columns sigma, sigma_r, sigma_g, sigma_b"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,value,sigma_r,sigma_g,sigma_b\n"
+              "10,0,20,0,1,0.1,0.1,0.1\n",
+     "expected one column sigma"),
 ])
 def test_a_malformed_file_gets_one_line_naming_it(tmp_path, name, text, says):
     path = tmp_path / name
@@ -140,6 +152,52 @@ def test_hdf5_needs_its_units(tmp_path):
     binary.write_text("theta_i_deg\n")
     with pytest.raises(MerlFormatError, match="text"):
         read_measured(binary)  # a .binary is read as MERL, which says what is wrong
+
+
+def _h5(path, n=4, **datasets):
+    with h5py.File(path, "w") as f:
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            f[name] = np.linspace(5.0, 40.0, n)
+            f[name].attrs["units"] = "degrees"
+        for name, a in datasets.items():
+            if a is None:
+                f.create_group(name)
+            else:
+                f[name] = a
+    return path
+
+
+@pytest.mark.parametrize("datasets, says", [
+    # a (3, n) sigma reshaped to (n, 3) would hand each sample another's sigma
+    ({"rgb": np.ones((4, 3)), "sigma": np.tile([0.1, 0.2, 0.3, 0.4], (3, 1))},
+     "sigma has shape (3, 4): expected (4,) or (4, 3), one per sample"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.ones(8)}, "sigma has shape (8,)"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.ones(5)}, "sigma has shape (5,)"),
+    ({"rgb": np.array([[b"x"] * 3] * 4)}, "dataset rgb holds |S1, not numbers"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.array([b"x"] * 4)}, "dataset sigma holds |S1"),
+    ({"rgb": None}, "rgb is an HDF5 group, not a dataset"),
+    ({"rgb": np.ones((4, 3)), "value": np.ones(4)}, "datasets rgb and value"),
+    ({"spectral": np.ones(4), "wavelengths": np.array([500.0])},
+     "dataset spectral has shape (4,) and wavelengths (1,): expected (n, k) and (k,)"),
+    ({"spectral": np.ones((4, 5)), "wavelengths": np.linspace(400.0, 700.0, 4)},
+     "dataset spectral has shape (4, 5) and wavelengths (4,)"),
+])
+def test_a_malformed_hdf5_file_gets_one_line_naming_it(tmp_path, datasets, says):
+    path = _h5(tmp_path / "s.h5", **datasets)
+    with pytest.raises(MeasurementsError) as e:
+        read_measured(path)
+    message = str(e.value)
+    assert message.startswith(f"{path}: ") and says in message, message
+
+
+def test_hdf5_sigma_per_sample_or_per_value(tmp_path):
+    rgb = np.ones((4, 3))
+    per_sample = read_measured(_h5(tmp_path / "a.h5", rgb=rgb, sigma=[0.1, 0.2, 0.3, 0.4]))
+    np.testing.assert_array_equal(per_sample.sigma, np.repeat([[0.1], [0.2], [0.3], [0.4]], 3,
+                                                              axis=1))
+    per_value = np.arange(12.0).reshape(4, 3) + 1
+    got = read_measured(_h5(tmp_path / "b.h5", rgb=rgb, sigma=per_value))
+    np.testing.assert_array_equal(got.sigma, per_value)
 
 
 def test_binning_the_bin_centres_of_a_table_gives_the_table_back():

@@ -169,6 +169,11 @@ def _edges(name: str, of=FitOptions):
     if opt.most is not None:
         valid.append(opt.kind(opt.most))
         invalid.append(opt.kind(opt.most + step))
+    # the service is as strict as the library: true is no count, 1e4 (a JSON float) no
+    # integer, true no number
+    invalid.append(True)
+    if opt.kind is int and valid:
+        invalid.append(float(valid[0]))
     return valid, invalid
 
 

@@ -23,6 +23,8 @@ from pydantic import (
     ConfigDict,
     Field,
     StrictBool,
+    StrictFloat,
+    StrictInt,
     create_model,
     field_validator,
     model_validator,
@@ -62,8 +64,11 @@ def _contract_field(name: str, of: type = options.FitOptions):
     ``SelectionRule``): the request schema's type, default, bounds and description are
     the library's."""
     default, opt = options.spec(name, of)
+    # strict, as the library is: "yes" is no bool, true no count, 1e4 no integer
     annotation = (Literal[opt.choices] if opt.choices is not None
-                  else StrictBool if opt.kind is bool  # "yes" is no bool
+                  else StrictBool if opt.kind is bool
+                  else StrictInt if opt.kind is int
+                  else StrictFloat if opt.kind is float
                   else list[str] if opt.kind is tuple else opt.kind)
     if opt.none is not None or opt.kind is tuple:
         annotation = annotation | None

@@ -130,7 +130,8 @@ def fit(
             (``brdffit.fitting.physical``).
     """
     m = models.get(model)
-    _check_options(loss, solver, precision, samples, starts, max_steps, physical)
+    samples, starts, max_steps, seed = _check_options(loss, solver, precision, samples,
+                                                      starts, max_steps, physical, seed)
     if physical:
         fit_input(table).refuse_bound()
         return _bound_stage(table, m, parent_fit, loss=loss, solver=solver, samples=samples,
@@ -213,7 +214,8 @@ def solved_fit(
     pass of its own)."""
     t0 = time.perf_counter()
     m = models.get(model)
-    _check_options(loss, solver, precision, samples, starts, max_steps, False)
+    samples, starts, max_steps, seed = _check_options(loss, solver, precision, samples,
+                                                      starts, max_steps, False, seed)
     source = fit_input(table)
     bin_weight = _checked_bin_weight(bin_weight)
     prep = source.prepare(bin_weight, samples, seed, precision, loss)
@@ -323,21 +325,30 @@ def _assembled(s: Solved, best, notes, n_solved: int, t0: float,
                     seed=s.seed, notes=notes, table_metrics=table_metrics)
 
 
-def _check_options(loss, solver, precision, samples, starts, max_steps, physical) -> None:
+def _check_options(loss, solver, precision, samples, starts, max_steps, physical,
+                   seed) -> tuple[int | None, int, int, int]:
     """Refuse, with the reason, options ``fit`` was called with directly (a
-    ``FitOptions`` has checked its own already)."""
+    ``FitOptions`` has checked its own already); the counts as Python ints."""
     get_loss(loss)
     get_solver(solver)
     if precision not in PRECISIONS:
         raise FitInputError(f"unknown precision {precision!r}; choose float64 or float32")
-    if samples is not None and (not isinstance(samples, int) or samples < 64):
+    if samples is not None and (not _integer(samples) or samples < 64):
         raise FitInputError(f"samples must be an integer >= 64 or None, got {samples!r}")
-    if not isinstance(starts, int) or starts < 1:
+    if not _integer(starts) or starts < 1:
         raise FitInputError(f"starts must be a positive integer, got {starts!r}")
-    if not isinstance(max_steps, int) or max_steps < 1:
+    if not _integer(max_steps) or max_steps < 1:
         raise FitInputError(f"max_steps must be a positive integer, got {max_steps!r}")
     if physical is not True and physical is not False:
         raise FitInputError(f"physical must be true or false, got {physical!r}")
+    if not _integer(seed) or not 0 <= seed < 2**32:
+        raise FitInputError(f"seed must be an integer in 0 .. 2**32 - 1, got {seed!r}")
+    return None if samples is None else int(samples), int(starts), int(max_steps), int(seed)
+
+
+def _integer(x) -> bool:
+    """An integer, numpy's too (a count read from an array), but no bool."""
+    return isinstance(x, int | np.integer) and not isinstance(x, bool | np.bool_)
 
 
 def _checked_bin_weight(bin_weight) -> np.ndarray | None:
@@ -371,7 +382,10 @@ def _start_candidates(source, m, prep, init, polish: bool, again: dict):
     caller's ``init`` alone; for a polish (every bin), the default fit's optimum
     alone, and that fit; else the data-driven candidates (``brdffit.fitting.starts``)."""
     if init is not None:
-        return m.unconstrain(m.check_params(init))[None], None
+        try:
+            return m.unconstrain(m.check_params(init))[None], None
+        except ValueError as e:  # the caller's start: their input, said as such
+            raise FitInputError(f"init: {e}") from None
     if polish:
         coarse = fit(source.table, m, samples=DEFAULT_SAMPLES, **again)
         # A coordinate deep in its transform's flat tail (a scale at 1e-14) is pulled

@@ -136,7 +136,13 @@ class Measurements:
                         "or a corrupt value")
         rgb = np.repeat(values, 3, axis=1) if values.shape[1] == 1 else values
         if sigma is not None:
-            sigma = np.asarray(sigma, float).reshape(n, -1)
+            sigma = np.asarray(sigma, float)
+            # one per value: (n,) or (n, 1) for every channel, or (n, 3); a (3, n) array
+            # reshaped would hand one sample's sigma to another, silently
+            if sigma.shape not in ((n,), (n, 1), (n, 3)):
+                raise MeasurementsError(source, f"sigma has shape {sigma.shape}: expected "
+                                                f"({n},) or ({n}, 3), one per sample")
+            sigma = sigma.reshape(n, -1)
             sigma = np.repeat(sigma, 3, axis=1) if sigma.shape[1] == 1 else sigma
             bad = ~np.all(np.isfinite(sigma) & (sigma >= 0), axis=1)
             if bad.any():

@@ -114,14 +114,19 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out["values"] = [k for _, k in spectral]
         out["wavelengths"] = [lam for lam, _ in spectral]
         out["sigma"] = None
+    elif any(k is not None for k in rgb) and one:
+        # which of them is the value would be a guess: refused, not dropped
+        given = [c for c, k in zip(CHANNELS, rgb, strict=True) if k is not None]
+        raise MeasurementsError(
+            source, f"value columns of two kinds: {', '.join(given)} (RGB) and "
+                    f"{', '.join(c for c in ONE_CHANNEL if c in seen)} (one channel): keep "
+                    "r, g, b or one single-channel column")
     elif all(k is not None for k in rgb):
         out["values"] = rgb
-        sig = [seen.get(f"sigma_{c}") for c in CHANNELS]
-        out["sigma"] = sig if all(k is not None for k in sig) else (
-            [seen["sigma"]] if "sigma" in seen else None)
+        out["sigma"] = _sigma_columns(seen, source, rgb=True)
     elif len(one) == 1:
         out["values"] = one
-        out["sigma"] = [seen["sigma"]] if "sigma" in seen else None
+        out["sigma"] = _sigma_columns(seen, source, rgb=False)
     else:
         some = [c for c, k in zip(CHANNELS, rgb, strict=True) if k is not None]
         raise MeasurementsError(
@@ -130,6 +135,23 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                     + (f"; only {', '.join(some)} of r, g, b" if some else "")
                     + ("" if len(one) < 2 else "; more than one single-channel column"))
     return out
+
+
+def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | None:
+    """The sigma columns' indices: none, one ``sigma`` for every channel, or (RGB
+    values) ``sigma_r, sigma_g, sigma_b``. Any other mix is refused: a fit without the
+    sigma it was given, or with one channel's for another's, would be silently wrong."""
+    per_channel = [f"sigma_{c}" for c in CHANNELS]
+    given = [name for name in ("sigma", *per_channel) if name in seen]
+    if not given:
+        return None
+    if given == ["sigma"]:
+        return [seen["sigma"]]
+    if rgb and given == per_channel:
+        return [seen[name] for name in per_channel]
+    expected = "sigma, or sigma_r, sigma_g and sigma_b" if rgb else "one column sigma"
+    raise MeasurementsError(source, f"sigma columns {', '.join(given)}: expected {expected} "
+                                    "(each value's standard deviation, 1/sr)")
 
 
 def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
@@ -276,7 +298,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
                                                 "(degrees or radians), nor has the file")
             unit = unit.decode() if isinstance(unit, bytes) else str(unit)
-            angles.append(np.asarray(f[name], float).ravel() * _unit_scale(unit, source))
+            angles.append(_numeric(f, name, source).ravel() * _unit_scale(unit, source))
         provenance: dict = {"format": "hdf5"}
         stored = f.attrs.get("provenance")
         if stored is not None:  # a list brdffit wrote (brdffit.io.writers): what it was
@@ -284,27 +306,54 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 provenance = {**json.loads(stored), "stored_as": "hdf5"}
             except (TypeError, ValueError):
                 pass  # not ours after all: an HDF5 file like any other
+        kinds = [k for k in ("rgb", "value", "spectral") if k in f]
+        if len(kinds) > 1:
+            raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
+                                            "than one kind, keep one")
         if "rgb" in f:
-            values = np.asarray(f["rgb"], float)
+            values = _numeric(f, "rgb", source)
             if values.ndim != 2 or values.shape[1] != 3:
                 raise MeasurementsError(source, f"dataset rgb has shape {values.shape}, "
                                                 "not (n, 3)")
         elif "value" in f:
-            values = np.asarray(f["value"], float).ravel()
+            values = _numeric(f, "value", source).ravel()
         elif "spectral" in f:
             if "wavelengths" not in f:
                 raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
                                                 "(nm)")
             if "sigma" in f:
                 raise MeasurementsError(source, "sigma of spectral samples is not read yet")
-            values, provenance["spectral"] = _projected(
-                np.asarray(f["spectral"], float), np.asarray(f["wavelengths"], float), source)
+            spectral = _numeric(f, "spectral", source)
+            wavelengths = _numeric(f, "wavelengths", source)
+            if (spectral.ndim != 2 or wavelengths.ndim != 1
+                    or spectral.shape[1] != wavelengths.size):
+                raise MeasurementsError(
+                    source, f"dataset spectral has shape {spectral.shape} and wavelengths "
+                            f"{wavelengths.shape}: expected (n, k) and (k,)")
+            values, provenance["spectral"] = _projected(spectral, wavelengths, source)
         else:
             raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
                                             "spectral (n, k) with wavelengths (k,)")
-        sigma = np.asarray(f["sigma"], float) if "sigma" in f else None
+        sigma = _numeric(f, "sigma", source) if "sigma" in f else None
     return Measurements.from_angles(*angles, values, sigma, source=source,
                                     provenance=provenance)
+
+
+def _numeric(f, name: str, source: str) -> np.ndarray:
+    """Dataset ``name`` of the open HDF5 file ``f`` as float64; refused, with its
+    name, where it is a group or holds no numbers (strings, compounds)."""
+    import h5py
+
+    d = f[name]
+    if not isinstance(d, h5py.Dataset):
+        raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset")
+    if d.dtype.kind not in "iuf":
+        raise MeasurementsError(source, f"dataset {name} holds {d.dtype}, not numbers")
+    try:
+        return np.asarray(d, float)
+    except (TypeError, ValueError, OSError) as e:
+        raise MeasurementsError(source, f"dataset {name} cannot be read as numbers "
+                                        f"({e})") from None
 
 
 #: suffix -> reader; a MERL table is read as a table.

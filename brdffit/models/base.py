@@ -294,7 +294,12 @@ class AbstractBRDFModel(eqx.Module):
         for spec in self.param_specs:
             if spec.name not in params:
                 raise ValueError(f"{self.name}: missing parameter {spec.name!r}")
-            v = np.asarray(params[spec.name], dtype=np.float64)
+            try:
+                v = np.asarray(params[spec.name], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"{self.name}: {spec.name} must be a number"
+                                 + (" or three" if spec.rgb else "")
+                                 + f", got {params[spec.name]!r}") from None
             if v.size == 1 and spec.rgb:
                 v = np.full(3, float(v.reshape(())))
             if v.shape not in ((spec.size,), ()) or v.size != spec.size:
