@@ -298,3 +298,26 @@ def test_max_steps_is_data_for_the_lm_solve(synth_tables):
     for n, r in zip((1, 2, 3), short, strict=True):
         assert (r.result, r.steps) == ("nonlinear_max_steps_reached", n)
     assert fit(table, "ggx", max_steps=500).result == "successful"
+
+
+def test_a_black_channel_has_no_relative_peak_error_of_its_own(synth_tables):
+    """A pure red table (G and B all 0): each channel's error at the peak is relative
+    to no less than 1% of the peak's brightest channel (it read 250 for an exact fit,
+    an error divided by 1e-12)."""
+    from brdffit.io.merl import MerlTable
+
+    rgb = synth_tables["ggx"].rgb.copy()
+    rgb[1:] = 0.0
+    red = MerlTable.from_values(rgb, source="red.binary")
+    r = fit(red, "ggx")
+    assert r.converged and r.error["log_rmse"] < 1e-6
+    assert r.error["rel_peak_error"] < 1e-4, r.error
+    # a miss still reads as one: the red highlight 1.5x too high, ~50%; light in a black
+    # channel counts against 1% of the red peak's value
+    from brdffit.fitting.problem import table_error
+
+    ks = np.asarray(r.params["ks"])
+    high = table_error(red, "ggx", {**r.params, "ks": [1.5 * ks[0], 0.0, 0.0]})
+    assert 0.3 < high["rel_peak_error"] < 0.7, high
+    green = table_error(red, "ggx", {**r.params, "ks": [ks[0], 0.001 * ks[0], 0.0]})
+    assert 0.05 < green["rel_peak_error"] < 0.2, green

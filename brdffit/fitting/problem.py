@@ -474,6 +474,11 @@ def _fit_cos(model, u, frame):
     return f * jnp.maximum(frame.cos_i, 0.0)
 
 
+#: ``rel_peak_error`` divides a channel's error at the peak by that channel's value,
+#: or by this fraction of the peak's brightest channel where the channel is darker.
+PEAK_CHANNEL_FLOOR = 0.01
+
+
 @executables.jit
 def _full_errors(models, us, rgb, weight, frame, peak, part, parts: int):
     """The sums behind log_rmse, cube_root_rmse and rmse_cos of each of ``models`` at
@@ -509,8 +514,11 @@ def _full_errors(models, us, rgb, weight, frame, peak, part, parts: int):
     total = sum_over_blocks(sums, arrays, weight.shape[-1], part, parts)
     at = jax.tree_util.tree_map(lambda a: a[peak][None], frame)
     meas_peak = rgb[:, peak].astype(dtype) * jnp.maximum(at.cos_i[0], 0.0)
-    rel_peak = [jnp.max(jnp.abs(_fit_cos(model, u, at)[:, 0] - meas_peak)
-                        / jnp.maximum(meas_peak, 1e-12))
+    # each channel relative to itself, but to no less than PEAK_CHANNEL_FLOOR of the
+    # peak's brightest: a black channel (a pure red table's G and B) made a fit exact
+    # to 1e-8 read 250 here, an error divided by 1e-12
+    scale = jnp.maximum(meas_peak, jnp.maximum(PEAK_CHANNEL_FLOOR * jnp.max(meas_peak), 1e-12))
+    rel_peak = [jnp.max(jnp.abs(_fit_cos(model, u, at)[:, 0] - meas_peak) / scale)
                 for model, u in zip(models, us, strict=True)]
     return total, jnp.stack(rel_peak)
 
