@@ -321,3 +321,11 @@ def test_a_black_channel_has_no_relative_peak_error_of_its_own(synth_tables):
     assert 0.3 < high["rel_peak_error"] < 0.7, high
     green = table_error(red, "ggx", {**r.params, "ks": [ks[0], 0.001 * ks[0], 0.0]})
     assert 0.05 < green["rel_peak_error"] < 0.2, green
+    # the render loss's colour term: a black channel's mean is as black below 0.1% of
+    # the brightest's as at 1e-30 (it pulled the shared alpha and f0 to their bounds,
+    # ks 232 where 0.8, "successful" and "looks good")
+    rendered = fit(red, "ggx", loss="render")
+    assert rendered.converged and rendered.error["log_rmse"] < 1e-6, rendered.error
+    truth = TRUTH["ggx"]
+    assert rendered.params["alpha"] == pytest.approx(truth["alpha"], rel=1e-3)
+    assert rendered.params["ks"][0] == pytest.approx(np.ravel(truth["ks"])[0], rel=1e-3)

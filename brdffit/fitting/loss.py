@@ -306,12 +306,27 @@ def _compared(f, data):
         compress(f, data.frame.cos_i, data.loss, data.exposure, data.selector) - data.target)
 
 
+#: The render loss's colour-holding term compares a channel's mean no lower than this
+#: fraction of the table's brightest channel's: any mean below it is as black as the
+#: next. Without it, a black channel (a pure red table's G and B, 0 in every bin) asked
+#: the fit to bring its mean to 1e-30 in log space, a pull without end that bent the
+#: shared lobe (alpha, f0) to its bounds: a wrong fit reported successful and good.
+#: The darkest channel of every MERL material holds >= 6% of the brightest's energy.
+ENERGY_FLOOR = 1e-3
+
+
+def _energy_floor(data):
+    return jnp.maximum(ENERGY_FLOOR * jnp.max(data.energy), 1e-30)
+
+
 def energy_residuals(total, weight_sum, data):
     """The colour-holding residual per channel (3,): ``sqrt(ENERGY_WEIGHT) log(M_c /
-    M*_c)``, ``M_c = total_c / weight_sum`` the fit's weighted mean of ``f cos_i``."""
-    mean = jnp.maximum(total / weight_sum, 1e-30)
+    M*_c)``, ``M_c = total_c / weight_sum`` the fit's weighted mean of ``f cos_i``, both
+    means at least :data:`ENERGY_FLOOR` of the table's brightest channel's."""
+    floor = _energy_floor(data)
+    mean = jnp.maximum(total / weight_sum, floor)
     return jnp.sqrt(ENERGY_WEIGHT) * (jnp.log(mean) - jnp.log(jnp.maximum(data.energy[:, 0],
-                                                                        1e-30)))
+                                                                        floor)))
 
 
 def _energy_sums(u, model, data):
@@ -378,7 +393,10 @@ def _energy_rows(total, grad, data):
     sums of :func:`_energy_sums` over every sample."""
     weight_sum = jnp.sum(data.weight)
     rho = energy_residuals(total, weight_sum, data)
-    g = jnp.sqrt(ENERGY_WEIGHT) * grad / jnp.maximum(total, 1e-30 * weight_sum)[:, None]
+    above = total > _energy_floor(data) * weight_sum  # below the floor: flat
+    g = jnp.where(above[:, None],
+                  jnp.sqrt(ENERGY_WEIGHT) * grad / jnp.maximum(total, 1e-30 * weight_sum)[:, None],
+                  0.0)
     return rho, g
 
 
