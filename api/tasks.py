@@ -102,8 +102,17 @@ def export_fit(result: dict, target: str, table_path: str | None = None,
     from brdffit.fitting.result import FitResult
 
     try:
-        out = export(FitResult.from_dict(result), target, table=table_path,
-                     target_model=target_model, viewer=viewer)
+        fitted = FitResult.from_dict(result)
+        table = None
+        if table_path is not None:
+            import dataclasses
+
+            from brdffit.io import readers
+
+            # the job's own table, stored under its hash: named as the fit knows it
+            stored = readers.read_table(table_path)[0]
+            table = dataclasses.replace(stored, source=fitted.table or stored.source)
+        out = export(fitted, target, table=table, target_model=target_model, viewer=viewer)
         return Outcome.success(jsonout.strict(out.to_dict()))
     except Exception as e:  # noqa: BLE001 - an ExportError is the request's, else a bug
         return Outcome.failure(e)

@@ -72,6 +72,16 @@ def test_unknown_model_and_missing_file(tmp_path, ggx_file):
     assert r.returncode == 2 and "cannot read" in r.stderr
 
 
+def test_a_plots_folder_that_cannot_be_made_is_refused_before_the_fit(tmp_path, ggx_file):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--plots",
+            str(blocker / "plots"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"--plots {blocker / 'plots'}: cannot make the folder (Not a directory)" in r.stderr
+    assert "ggx fit" not in r.stdout  # nothing was fitted first
+
+
 def test_models_lists_every_model_with_ranges():
     r = run("brdffit.cli", "models")
     assert r.returncode == 0

@@ -277,6 +277,21 @@ def test_fidelity_to_the_measured_table_and_the_colour_a_sphere_shows():
 
 
 @pytest.mark.slow
+def test_a_table_that_is_not_the_fits_own_is_said():
+    """Measured against a table of another name than the fit's: a warning (a result
+    keeps the table's name alone); the same name in another folder is the same table."""
+    import dataclasses
+
+    r = result("ggx", GGX)  # fitted on mats/gold.binary
+    table = fit_as_table(r)
+    other = export(r, "gltf", table=dataclasses.replace(table, source="elsewhere/silver.binary"))
+    assert any("measured against elsewhere/silver.binary, but the fit was made on "
+               "mats/gold.binary" in w for w in other.warnings), other.warnings
+    moved = export(r, "gltf", table=dataclasses.replace(table, source="/data/gold.binary"))
+    assert not any("the fit was made on" in w for w in moved.warnings), moved.warnings
+
+
+@pytest.mark.slow
 def test_an_export_of_a_fit_that_does_not_look_good_says_so():
     """An export cannot look better than the fit it carries: a poor or visible verdict
     is a warning, with the fit's first next step."""

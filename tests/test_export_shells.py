@@ -84,7 +84,7 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     for args, message in (
-        ([str(bad), "--to", "gltf"], "not JSON"),
+        ([str(bad), "--to", "gltf"], "neither a fit result (JSON"),
         ([str(fit_json), "--to", "blender"], "invalid choice: 'blender'"),
         ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
          f"gltf carries {', '.join(gltf.TARGET_MODELS)}, not 'ggx'"),
@@ -93,6 +93,9 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
          "No such file"),
         ([str(tmp_path / "missing.json"), "--to", "gltf"], "No such file"),
+        # refused before the export, naming the flag
+        ([str(fit_json), "--to", "gltf", "--out", str(bad / "sub")],
+         f"--out {bad / 'sub'}: cannot make the folder (Not a directory)"),
     ):
         r = run("brdffit.cli", "export", *args)
         assert r.returncode == 2 and message in r.stderr, r.stderr
@@ -101,6 +104,14 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
     other.write_text(json.dumps({"schema": "brdffit.fit/0", "model": "ggx"}))
     r = run("brdffit.cli", "export", str(other), "--to", "gltf")
     assert r.returncode == 2 and "not a fit result" in r.stderr and "Traceback" not in r.stderr
+    # a result without its keys: which ones, not a constructor's complaint
+    partial = json.loads(fit_json.read_text())
+    for key in ("error", "converged"):
+        del partial[key]
+    other.write_text(json.dumps(partial))
+    r = run("brdffit.cli", "export", str(other), "--to", "gltf")
+    assert r.returncode == 2 and "not a fit result: no error, converged (" in r.stderr, r.stderr
+    assert "__init__" not in r.stderr
 
 
 @pytest.fixture(scope="module")

@@ -103,6 +103,9 @@ def test_from_bytes_matches_read(tmp_path, good_raw):
         ),
         ("no measured bin", lambda p: _raw_file(p, body=np.full(3 * N, -1.0)), "no measured bin"),
         ("all nan", lambda p: _raw_file(p, body=np.full(3 * N, np.nan)), "no measured bin"),
+        ("one channel never measured",
+         lambda p: _raw_file(p, body=np.concatenate([np.ones(N), np.full(N, -1.0), np.ones(N)])),
+         "no measured bin: channel G is negative or non-finite in every bin"),
     ],
 )
 def test_malformed_files_raise_clear_errors(tmp_path, name, make, message):

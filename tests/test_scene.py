@@ -137,6 +137,19 @@ def test_bad_scene_files(tmp_path):
         Scene.from_file(tmp_path / "s.json")
     with pytest.raises(SceneError, match="no such"):
         Scene.from_file(tmp_path / "missing.csv")
+    (tmp_path / "latin1.json").write_bytes(b'{"name": "caf\xe9"}')
+    with pytest.raises(SceneError, match="latin1.json: not UTF-8 text"):
+        Scene.from_file(tmp_path / "latin1.json")
+    (tmp_path / "latin1.csv").write_bytes(b"\xff\xfe0,0,1,0,0,1\n")
+    with pytest.raises(SceneError, match="latin1.csv: not UTF-8 text"):
+        Scene.from_file(tmp_path / "latin1.csv")
+    (tmp_path / "folder.npy").mkdir()
+    with pytest.raises(SceneError, match="folder.npy: not a file"):
+        Scene.from_file(tmp_path / "folder.npy")
+    # a pairs_file names a file of pairs, not another scene
+    (tmp_path / "points.json").write_text('{"pairs_file": "s.json"}')
+    with pytest.raises(SceneError, match="direction pairs are a .npy or .csv file, not .json"):
+        Scene.from_file(tmp_path / "points.json")
 
 
 def test_from_options_combines_and_overrides():

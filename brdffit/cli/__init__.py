@@ -37,6 +37,23 @@ EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
 
 
+def output_folder(path: str, flag: str):
+    """The folder ``path`` a command will write into (``--plots``, ``--out``), made
+    now, before the work: a path under a regular file, or one this user may not
+    write, is refused in one line naming the flag, not after a fit of minutes."""
+    import os
+    from pathlib import Path
+
+    folder = Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BrdffitError(f"{flag} {path}: cannot make the folder ({e.strerror})") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise BrdffitError(f"{flag} {path}: the folder is not writable")
+    return folder
+
+
 def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
     """The ``brdffit`` parser with the arguments of the commands ``full`` (every
     command when None); the others are listed with their summary only."""

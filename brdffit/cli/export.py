@@ -15,6 +15,7 @@ import json
 import sys
 from pathlib import Path
 
+from brdffit.cli import output_folder
 from brdffit.errors import BrdffitError
 from brdffit.export import TARGETS, export
 from brdffit.fitting.result import FitResult
@@ -60,7 +61,8 @@ def _read_result(source: str) -> FitResult:
     try:
         data = json.loads(text)
     except json.JSONDecodeError as e:
-        raise BrdffitError(f"{source}: not JSON ({e})") from None
+        raise BrdffitError(f"{source}: neither a fit result (JSON, as brdffit fit --json "
+                           f"writes; {e}) nor a batch's results file (HDF5)") from None
     if isinstance(data, dict) and "results" in data and "schema" not in data:
         raise BrdffitError(f"{source}: holds several fits; export one of them "
                            "(brdffit fit --json writes one result)")
@@ -105,13 +107,12 @@ def _export(args):
 def run(args) -> int:
     if args.glb and (args.target != "gltf" or not args.out):
         raise BrdffitError("--glb writes a binary glTF file: it needs --to gltf and --out DIR")
+    folder = output_folder(args.out, "--out") if args.out else None  # before the export
     out = _export(args)
     written = []
-    if args.out:
+    if folder is not None:
         from brdffit.io.atomic import write_bytes
 
-        folder = Path(args.out)
-        folder.mkdir(parents=True, exist_ok=True)
         for name, data in out.file_bytes(glb=args.glb).items():
             write_bytes(folder / name, data)
             written.append(folder / name)

@@ -7,6 +7,7 @@ import sys
 import threading
 
 from brdffit import executables, extras, jsonout, runtime
+from brdffit.cli import output_folder
 from brdffit.fitting import options
 from brdffit.fitting.options import FIT_KEYWORDS, FitOptions, SelectionRule
 from brdffit.fitting.quality import describe
@@ -220,6 +221,7 @@ def run(args) -> int:
     request = request_from_args(args)  # refused before the table is read
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
+        output_folder(args.plots, "--plots")
     measured = readers.read_measured(args.table)
     table = measured
     if isinstance(measured, Measurements):  # said before the fit: what it will see

@@ -163,10 +163,9 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[st
     warning that says so, where neither is at hand."""
     from brdffit.io import readers
 
-    if isinstance(table, MerlTable):
-        return table, []
     if table is not None:
-        return readers.read_table(table)[0], []
+        given = table if isinstance(table, MerlTable) else readers.read_table(table)[0]
+        return given, _another_table(result, given)
     source = result.table
     if source and os.path.isfile(source):
         try:  # the fit's own file, in whichever layout it was read
@@ -176,6 +175,18 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[st
     return None, [f"fidelity: log_rmse_to_table not measured: the fitted table "
                   f"{source or '(unnamed)'} is not at hand (pass the table: "
                   "export(..., table=...), brdffit export --measured PATH)"]
+
+
+def _another_table(result: FitResult, table: MerlTable) -> list[str]:
+    """A warning where the table given to measure against is, by its file's name, not
+    the one the fit was made on (their names are all a result keeps of them)."""
+    fitted, given = (os.path.basename(s or "") for s in (result.table, table.source))
+    if not fitted or not given or given.startswith("<") or fitted.startswith("<"):
+        return []
+    if fitted == given:
+        return []
+    return [f"fidelity: measured against {table.source}, but the fit was made on "
+            f"{result.table}: log_rmse_to_table is to another table than the fit's"]
 
 
 def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,

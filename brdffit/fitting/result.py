@@ -11,7 +11,7 @@ key, ``schema``, names the version; a change of a key's meaning is a new version
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 
 from brdffit import jsonout
 
@@ -132,6 +132,11 @@ class FitResult:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"unknown result keys {unknown} for schema {SCHEMA!r}")
+        missing = [f.name for f in fields(cls) if f.name not in d
+                   and f.default is MISSING and f.default_factory is MISSING]
+        if missing:
+            raise ValueError(f"no {', '.join(missing)} (a fit result has "
+                             f"{', '.join(f.name for f in fields(cls))})")
         return cls(**d)
 
     @classmethod

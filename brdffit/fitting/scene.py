@@ -134,12 +134,19 @@ class Scene:
     def from_file(cls, path: str | os.PathLike) -> Scene:
         """A scene from a .json description or a .npy / .csv file of pairs."""
         path = os.fspath(path)
-        if path.lower().endswith(".json"):
+        ext = os.path.splitext(path)[1].lower()
+        if ext not in (".json", ".npy", ".csv"):
+            raise SceneError(f"{path}: a scene file is .json, .npy or .csv, not "
+                             f"{ext or 'no suffix'}")
+        if ext == ".json":
+            _a_file(path)
             try:
-                with open(path) as f:
+                with open(path, encoding="utf-8") as f:
                     d = json.load(f)
             except json.JSONDecodeError as e:
                 raise SceneError(f"{path}: not valid JSON ({e})") from None
+            except UnicodeDecodeError:
+                raise SceneError(f"{path}: not UTF-8 text (a scene's JSON is)") from None
             if isinstance(d, dict) and "name" not in d and "preset" not in d:
                 d["name"] = os.path.basename(path)
             return cls.from_dict(d, base_dir=os.path.dirname(path))
@@ -268,23 +275,33 @@ class Scene:
 def read_pairs(path: str) -> np.ndarray:
     """(N, 2, 3) direction pairs from a .npy or .csv file (see the module docstring)."""
     ext = os.path.splitext(path)[1].lower()
-    if not os.path.exists(path):
-        raise SceneError(f"{path}: no such scene file")
+    if ext not in (".npy", ".csv"):
+        raise SceneError(f"{path}: direction pairs are a .npy or .csv file, not "
+                         f"{ext or 'no suffix'}")
+    _a_file(path)
     if ext == ".npy":
         try:
             a = np.load(path, allow_pickle=False)
         except ValueError as e:
             raise SceneError(f"{path}: not a numeric .npy array ({e})") from None
-    elif ext == ".csv":
-        a = _read_csv(path)
     else:
-        raise SceneError(f"{path}: a scene file is .json, .npy or .csv, not {ext or 'no suffix'}")
+        try:
+            a = _read_csv(path)
+        except UnicodeDecodeError:
+            raise SceneError(f"{path}: not UTF-8 text (a .csv of pairs is)") from None
     return _as_pairs(a, path)
+
+
+def _a_file(path: str) -> None:
+    if not os.path.exists(path):
+        raise SceneError(f"{path}: no such scene file")
+    if not os.path.isfile(path):
+        raise SceneError(f"{path}: not a file (a directory?)")
 
 
 def _read_csv(path: str) -> np.ndarray:
     rows, header_allowed = [], True
-    with open(path) as f:
+    with open(path, encoding="utf-8") as f:
         for n, line in enumerate(f, 1):
             line = line.split("#", 1)[0].strip()
             if not line:

@@ -202,7 +202,14 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     np.maximum(top, bits[2], out=top)
     unmeasured = top >= _INF_BITS
     if unmeasured.all():
-        raise MerlFormatError(source, "no measured bin: every value is negative or non-finite")
+        # one channel never measured makes every bin unmeasured: say which
+        dead = [c for c, b in zip("RGB", bits, strict=True) if bool((b >= _INF_BITS).all())]
+        raise MerlFormatError(
+            source, "no measured bin: every value is negative or non-finite"
+            if len(dead) == 3 else
+            f"no measured bin: channel {' and '.join(dead)} is negative or non-finite in "
+            "every bin (a bin is measured where all three channels are)"
+            if dead else "no measured bin: every bin has a negative or non-finite channel")
     # bins with a NaN or infinite channel (np.isfinite per channel: ~4x faster than
     # masking the bits' magnitudes)
     finite = np.isfinite(raw[0])
