@@ -253,6 +253,13 @@ def test_bad_requests_are_clear_errors():
         export(failed, "gltf")
     with pytest.raises(ValueError, match="roughness"):
         export(result("gltf_pbr", {**GLTF, "roughness": 3.0}), "gltf")
+    # fits no table holds are said of the fit (they read as a corrupt or blank file)
+    black = result("ggx", {**GGX, "kd": [0.0] * 3, "ks": [1e-30] * 3})
+    with pytest.raises(ExportError, match="the ggx fit is black .*: nothing to export"):
+        export(black, "gltf")
+    glaring = result("ggx", {**GGX, "kd": [1e300] * 3})
+    with pytest.raises(ExportError, match="the ggx fit reaches 3.18e\\+299 1/sr"):
+        export(glaring, "mitsuba")
 
 
 @pytest.mark.slow

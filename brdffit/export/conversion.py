@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from brdffit import models, runtime
+from brdffit.export import ExportError
 from brdffit.fitting.result import FitResult
 from brdffit.io.grid import bin_grid
-from brdffit.io.merl import MerlTable
+from brdffit.io.merl import MAX_VALUE, MIN_PEAK, MerlTable
 
 #: Bins the conversion's refit samples (the reported loss is on every bin).
 CONVERSION_SAMPLES = 16384
@@ -60,6 +61,16 @@ def fit_as_table(result: FitResult) -> MerlTable:
     idx = np.flatnonzero(g.above_horizon)
     values = np.zeros((3, g.weight.size))
     values[:, idx] = np.asarray(model(params, jnp.asarray(g.wi[idx]), jnp.asarray(g.wo[idx]))).T
+    # a fit outside what any table holds has nothing a renderer could show: said of the
+    # fit, not in the words of a corrupt file's refusal
+    peak = float(np.max(values, initial=0.0)) if np.all(np.isfinite(values)) else np.inf
+    if not peak >= MIN_PEAK:
+        raise ExportError(f"the {result.model} fit is black (its brightest value is "
+                          f"{peak:.3g} 1/sr, below {MIN_PEAK:g}): nothing to export")
+    if peak > MAX_VALUE:
+        raise ExportError(f"the {result.model} fit reaches {peak:.3g} 1/sr (measured BRDFs "
+                          f"peak near 1e4, at most {MAX_VALUE:g}): its parameters are no "
+                          "material a renderer could show")
     return MerlTable.from_values(values, g.above_horizon, source=f"<{result.model} fit>")
 
 

@@ -71,6 +71,7 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     look = quality(metrics["psnr_db"], measured.colour, model=model, params=params, loss=loss,
                    converged=result == "successful", physical=physical, basis=measured.basis)
     look, fitted_input = source.judged(look, measured, found)
+    notes = (*notes, *_peak_missed(metrics, look))
     counts = prep.counts
     return FitResult(
         model=model.name,
@@ -100,3 +101,22 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
         input=fitted_input,
         notes=tuple(notes),
     )
+
+
+#: A fit this far off the table's brightest bin (``rel_peak_error``) has next to none of
+#: it: a fitted ggx is 0.53-0.91 off on the sharpest MERL metals, a lambert 1.0 on any.
+PEAK_MISSED = 0.99
+
+
+def _peak_missed(metrics: dict, look: dict) -> list[str]:
+    """Where the verdict is not poor but the fit misses the table's brightest bin
+    entirely: a note that the verdict judged the look without that peak (a lone hot
+    bin, or a peak in fewer bins than the sphere's pixels see, renders as nothing)."""
+    rel = metrics.get("rel_peak_error")
+    if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
+        return []
+    return [f"the fit misses the table's brightest bin by {rel:.0%} of its value "
+            f"(rel_peak_error {rel:.3g}): a peak in too few bins for the sphere render to "
+            f"see (a lone hot bin, an outlier?); the '{look.get('verdict')}' verdict judges "
+            "the look without it"]
+
