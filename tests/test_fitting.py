@@ -152,6 +152,15 @@ def test_bad_options_raise_input_errors(kwargs, message, synth_tables):
         fit(synth_tables["lambert"], "lambert", **kwargs)
 
 
+def test_a_scene_weight_far_from_one_is_only_its_shape(synth_tables):
+    """bin_weight multiplies the solid angles and is normalised with them: at 5e-324
+    everywhere (denormal) it underflowed into a 'nonfinite' fit with a log_rmse of 0."""
+    n = 90 * 90 * 180
+    ones = fit(synth_tables["lambert"], "lambert", bin_weight=np.ones(n))
+    tiny = fit(synth_tables["lambert"], "lambert", bin_weight=np.full(n, 5e-324))
+    assert tiny.converged and tiny.params == ones.params and tiny.error == ones.error
+
+
 def test_numpy_integers_are_counts(synth_tables):
     """A count read from an array (numpy's int64) is an integer like any other."""
     r = fit(synth_tables["lambert"], "lambert", samples=np.int64(4096), starts=np.int64(2),

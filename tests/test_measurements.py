@@ -75,6 +75,26 @@ def test_every_layout_reads_to_the_same_samples(tmp_path):
     assert read_measured(h5).provenance["format"] == "hdf5"
 
 
+def test_a_pipe_is_read_as_the_file_it_carries(tmp_path):
+    """brdffit fit <(zcat t.csv.gz): a stream has no size and is read once (it read as
+    an empty file); copied whole, it reads as the layout it carries, named as given."""
+    import os
+    import threading
+
+    s = _samples(50)
+    files = _write_all(tmp_path, s)
+    for kind in ("csv", "hdf5"):
+        fifo = tmp_path / f"stream-{kind}"
+        os.mkfifo(fifo)
+        data = files[kind].read_bytes()
+        writer = threading.Thread(target=lambda f=fifo, d=data: f.write_bytes(d))
+        writer.start()
+        got = read_measured(fifo)
+        writer.join(10)
+        assert got.n == 50 and got.source == str(fifo), kind
+        np.testing.assert_allclose(got.rgb, s[4], rtol=1e-15, err_msg=kind)
+
+
 def test_one_channel_and_sigma(tmp_path):
     p = tmp_path / "grey.csv"
     p.write_text("theta_i_rad,phi_i_rad,theta_o_rad,phi_o_rad,value,sigma\n"
@@ -112,6 +132,11 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.astm", "NUM_POINTS 2\nVARS theta_i,phi_i,theta_s,phi_s,R,G,B\n0.1,0,0.2,0,1,1,1\n",
      "NUM_POINTS says 2 rows, the file has 1"),
     ("a.astm", "NUM_POINTS 1\n0.1,0,0.2,0,1,1,1\n", "no VARS line"),
+    # a row of NaN first is a data row (it was read as a header key and dropped)
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\nnan,0,0.2,0,1,1,1\n"
+               "0.1,0,0.2,0,1,1,1\n", "theta_i is not finite in 1 row (first: row 2)"),
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\nInf,0,0.2,0,1,1,1\n",
+     "theta_i is not finite"),
     ("a.csv", "# angles: furlongs\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n1,2,3,4,1,1,1\n",
      "unknown angle unit 'furlongs'"),
     # value and sigma columns that would be guessed at or dropped are refused

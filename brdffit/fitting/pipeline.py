@@ -359,6 +359,12 @@ def _checked_bin_weight(bin_weight) -> np.ndarray | None:
         raise FitInputError("bin_weight needs one finite value per MERL bin")
     if np.any(bin_weight < 0):
         raise FitInputError("bin_weight must be >= 0")
+    # only its shape matters (it is normalised with the solid angles); one far from 1
+    # (denormals: 5e-324 everywhere) underflowed there into a 'nonfinite' fit with a
+    # log_rmse of 0, so it is scaled to a peak of 1 first
+    top = float(bin_weight.max())
+    if top > 0 and not 1e-100 <= top <= 1e100:
+        bin_weight = bin_weight / top
     return bin_weight
 
 

@@ -205,6 +205,17 @@ def _text(path: Path) -> str:
                                            "text (ASTM, CSV) or HDF5") from None
 
 
+def _a_number(line: str) -> bool:
+    """Whether ``line`` starts with a number as Python reads one, ``nan`` and ``inf``
+    too: a data row (a row of NaN before the first numeric one was read as a header
+    key, and silently dropped)."""
+    try:
+        float(re.split(r"[,\s]+", line, maxsplit=1)[0])
+    except ValueError:
+        return False
+    return True
+
+
 def read_astm(path: str | os.PathLike) -> Measurements:
     """An ASTM E1392 file as Cornell's and ALTA's (module docstring)."""
     path = Path(path)
@@ -215,7 +226,7 @@ def read_astm(path: str | os.PathLike) -> Measurements:
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
-        if data or re.match(r"^[-+.\d]", stripped):
+        if data or re.match(r"^[-+.\d]", stripped) or _a_number(stripped):
             data.append((number, stripped))
             continue
         key, _, value = stripped.partition(" ")
@@ -401,6 +412,17 @@ def read_measured(path: str | os.PathLike,
         raise MerlFormatError(name or str(path), "is a directory, not a measured table")
     if not path.exists():  # as the MERL reader says it
         raise MerlFormatError(name or str(path), "cannot read: No such file or directory")
+    if not path.is_file():
+        # a pipe (brdffit fit <(zcat t.binary.gz), /dev/stdin) has no size and is read
+        # once: copied whole first, then read as the file it carries (it read as empty)
+        import shutil
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="brdffit-stream-") as folder:
+            copy = Path(folder) / (Path(name or path).name or "stream")
+            with open(path, "rb") as stream, open(copy, "wb") as out:
+                shutil.copyfileobj(stream, out)
+            return read_measured(copy, name or str(path))
     reader = reader_for(path, name)
     try:
         got = reader(path)
