@@ -511,6 +511,48 @@ def test_a_second_writer_is_refused(tmp_path):
             BatchStore(out).open()
 
 
+def test_a_refused_out_leaves_no_journal_and_a_damaged_file_is_one_error(tmp_path, monkeypatch):
+    """--out a folder, a text file or a foreign HDF5 file: refused, and the journal the
+    lock made (empty) is gone. A damaged results file (an attribute not as written,
+    a group h5py cannot open) is one BatchFileError naming it, reading or writing;
+    where a run's results were journaled, they are kept there and the message says so."""
+    import h5py
+
+    from brdffit.batch.store import read_looks
+
+    folder = tmp_path / "out"
+    folder.mkdir()
+    text = tmp_path / "notes.txt"
+    text.write_text("not hdf5")
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["x"] = 1
+    for out, says in ((folder, "a directory"), (text, "not a readable HDF5 file"),
+                      (foreign, "not a brdffit batch results file")):
+        with pytest.raises(BatchFileError, match=says):
+            BatchStore(out).open()
+        assert not os.path.exists(str(out) + ".journal"), out
+    out = tmp_path / "r.h5"
+    with BatchStore(out) as store:
+        store.add(TableReadRecord(path="/x.binary", status="ok", sha256="1"), [])
+        store.checkpoint()
+    with h5py.File(out, "r+") as f:
+        f["tables"]["x"].create_group("ggx").attrs["fit_json"] = "null"
+    with pytest.raises(BatchFileError, match=r"r.h5: a damaged batch results file \(Attribute"):
+        read_looks(out)
+
+    def unreadable(self, group, record):
+        raise KeyError("Unable to synchronously open object (incorrect metadata checksum)")
+
+    monkeypatch.setattr(BatchStore, "_write_table", unreadable)
+    with BatchStore(out) as store:
+        store.add(TableReadRecord(path="/y.binary", status="ok", sha256="2"), [])
+        with pytest.raises(BatchFileError, match="damaged .* kept in .*r.h5.journal"):
+            store.checkpoint()
+    with open(str(out) + ".journal") as f:
+        assert [json.loads(line)["path"] for line in f] == ["/y.binary"]
+
+
 def _two_lambert_tables(tmp_path):
     """A folder of two small Lambert tables, m0 and m1, and fast options."""
     from brdffit.io import merl

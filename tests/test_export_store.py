@@ -49,6 +49,16 @@ def _stored(out, name: str, model: str) -> FitResult:
     return FitResult.from_dict(table["fits"][model]["fit"])
 
 
+def test_two_tables_of_one_file_name_export_to_files_of_their_own(store):
+    """a/gold.binary and b/gold.binary are gold and gold~2 in the file: their exports
+    are named so (both were gold_lambert.*, the second overwriting the first)."""
+    _, out = store
+    first = export_from_store(out, "gold", "mitsuba", model="lambert")
+    second = export_from_store(out, "gold~2", "mitsuba", model="lambert")
+    assert "gold_lambert.xml" in first.files and "gold~2_lambert.xml" in second.files
+    assert set(first.files).isdisjoint(second.files)
+
+
 @pytest.mark.slow
 def test_a_stored_fit_exports_as_the_fit_itself(store):
     root, out = store

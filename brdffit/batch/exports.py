@@ -7,7 +7,7 @@ export exactly as a single fit's do.
 
 from __future__ import annotations
 
-from brdffit.batch.store import read_fit
+from brdffit.batch.store import read_fit, table_name
 from brdffit.export import TARGETS, Export, ExportError, export
 from brdffit.fitting.result import FitResult
 
@@ -23,5 +23,8 @@ def export_from_store(store: str, table: str, target: str, model: str | None = N
     ``target_model`` and ``viewer``."""
     if target not in TARGETS:  # before the file is opened
         raise ExportError(f"unknown export target {target!r}; choose one of {', '.join(TARGETS)}")
-    return export(FitResult.from_dict(read_fit(store, table, model)), target, table=table_file,
-                  target_model=target_model, viewer=viewer)
+    fitted = FitResult.from_dict(read_fit(store, table, model))
+    # named by the table's name in the file: two tables whose files share a name
+    # (a/mat.binary, b/mat.binary: mat, mat~2) would write the same files
+    return export(fitted, target, table=table_file, target_model=target_model, viewer=viewer,
+                  name=f"{table_name(store, table)}_{fitted.model}")

@@ -45,6 +45,7 @@ The journal is also the lock: a second batch on the same file is refused.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import glob
 import json
@@ -171,6 +172,9 @@ class BatchStore:
         directory = os.path.dirname(self.path)
         if not os.path.isdir(directory):
             raise BatchFileError(f"{self.path}: directory {directory} does not exist")
+        if os.path.isdir(self.path):
+            raise BatchFileError(f"{self.path}: a directory; the results file is a .h5 "
+                                 "file in it, e.g. --out DIR/results.h5")
         self._journal_fd = _lock(self.journal_path, self.path)
         try:
             if os.path.exists(self.path):
@@ -182,6 +186,9 @@ class BatchStore:
                 os.unlink(stale)  # a checkpoint a kill interrupted; we hold the lock
             self._replay_journal()
         except BaseException:
+            if os.fstat(self._journal_fd).st_size == 0:
+                # ours, under the lock, and nothing in it: a refused --out leaves nothing
+                os.unlink(self.journal_path)
             os.close(self._journal_fd)
             self._journal_fd = None
             raise
@@ -258,8 +265,9 @@ class BatchStore:
         64 KiB, and a batch may name thousands of tables).
         """
         tmp = f"{self._tmp_prefix}{os.getpid()}"
+        existed = os.path.exists(self.path)
         try:
-            if os.path.exists(self.path):
+            if existed:
                 shutil.copyfile(self.path, tmp)
                 f = h5py.File(tmp, "r+")
             else:
@@ -293,9 +301,18 @@ class BatchStore:
             _fsync_path(tmp)
             os.replace(tmp, self.path)
             _fsync_path(os.path.dirname(self.path))
-        except BaseException:
+        except BaseException as e:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+            if (existed and isinstance(e, (OSError, KeyError, ValueError, TypeError,
+                                           AttributeError, RuntimeError))
+                    and getattr(e, "errno", None) is None):  # h5py's, not the disk's
+                # the results are safe in the journal; the file they go into is damaged
+                raise BatchFileError(
+                    f"{self.path}: a damaged batch results file ({type(e).__name__}: "
+                    f"{' '.join(str(e).split())}); this run's results are kept in "
+                    f"{self.journal_path}: move the damaged file away and run again (they "
+                    "go into a new file)") from None
             raise
         # Only now is the journal redundant; a kill before this line replays
         # records that are already in the file, which rewrites them unchanged.
@@ -407,10 +424,15 @@ class BatchStore:
 
 
 def _open(path: str) -> h5py.File:
+    if os.path.isdir(path):
+        raise BatchFileError(f"{path}: a directory, not a batch results file")
+    if not os.path.exists(path):
+        raise BatchFileError(f"{path}: no such file")
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise BatchFileError(f"{path}: not a readable HDF5 file ({e})") from None
+        raise BatchFileError(f"{path}: not a readable HDF5 file "
+                             f"({' '.join(str(e).split())})") from None
     if f.attrs.get("format") != FORMAT:
         f.close()
         raise BatchFileError(f"{path}: an HDF5 file, but not a brdffit batch results file")
@@ -421,16 +443,31 @@ def _open(path: str) -> h5py.File:
     return f
 
 
+@contextlib.contextmanager
+def _reading(path: str):
+    """The batch file at ``path``, open for reading; what goes wrong inside (a damaged
+    file: a checksum, an address past its end, an attribute that is not what was
+    written) is one :class:`BatchFileError` naming the file, not h5py's traceback."""
+    with _open(path) as f:
+        try:
+            yield f
+        except BatchFileError:
+            raise
+        except (OSError, KeyError, ValueError, TypeError, AttributeError, RuntimeError) as e:
+            raise BatchFileError(f"{path}: a damaged batch results file ({type(e).__name__}: "
+                                 f"{' '.join(str(e).split())})") from None
+
+
 def read_attrs(path: str | os.PathLike) -> dict:
     """The file-level attributes of a batch file, as plain Python values."""
-    with _open(os.fspath(path)) as f:
+    with _reading(os.fspath(path)) as f:
         return {k: _plain(v) for k, v in f.attrs.items()}
 
 
 def read_index(path: str | os.PathLike) -> dict[str, TableEntry]:
     """Every table of a batch file, by path, with its current fits: the ``/index``
     replayed (two reads of one dataset, fast at any size)."""
-    with _open(os.fspath(path)) as f:
+    with _reading(os.fspath(path)) as f:
         rows = f["index"][()]
     tables: dict[str, TableEntry] = {}
     names = rows.dtype.names
@@ -448,7 +485,7 @@ def read_results(path: str | os.PathLike) -> dict:
     ``fit``: its whole result in the result schema (``FitResult.to_dict()``,
     docs/results.md), the JSON ``brdffit fit --json`` prints.
     """
-    with _open(os.fspath(path)) as f:
+    with _reading(os.fspath(path)) as f:
         out = {"attrs": {k: _plain(v) for k, v in f.attrs.items()}, "tables": [],
                "inputs": [_plain(s) for s in f["inputs"][()]] if "inputs" in f else []}
         for name, g in f["tables"].items():
@@ -469,7 +506,7 @@ def read_looks(path: str | os.PathLike) -> dict[tuple[str, str], dict]:
     """(table name, model) -> the fit's ``quality`` block (its verdict, reason and
     ``next``; empty for a fit stored before results had one), for every fit that ran."""
     out = {}
-    with _open(os.fspath(path)) as f:
+    with _reading(os.fspath(path)) as f:
         for name, g in f["tables"].items():
             for model, m in g.items():
                 if "fit_json" in m.attrs:
@@ -488,7 +525,7 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
     no such model, or the fit failed.
     """
     path = os.fspath(path)
-    with _open(path) as f:
+    with _reading(path) as f:
         groups = f["tables"]
         name = _find_table(path, groups, table)
         g = groups[name]
@@ -510,6 +547,14 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
             raise BatchFileError(f"{path}: the {model} fit of table {name!r} failed: "
                                  f"{a.get('message') or 'no result stored'}")
         return json.loads(a["fit_json"])
+
+
+def table_name(path: str | os.PathLike, table: str) -> str:
+    """The group name of ``table`` in the batch file (see :func:`read_fit`): unique in
+    the file where two tables' files share a name (``mat``, ``mat~2``)."""
+    path = os.fspath(path)
+    with _reading(path) as f:
+        return _find_table(path, f["tables"], table)
 
 
 def _find_table(path: str, groups: h5py.Group, table: str) -> str:

@@ -190,7 +190,8 @@ def _another_table(result: FitResult, table: MerlTable) -> list[str]:
 
 
 def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,
-           target_model: str | None = None, viewer: str = "spec") -> Export:
+           target_model: str | None = None, viewer: str = "spec",
+           name: str | None = None) -> Export:
     """``result`` as a material of ``target`` (one of ``TARGETS``).
 
     ``target_model``: which of the target's models the file carries (default: the fit's
@@ -205,7 +206,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     sheen or film fit for three.js is refitted as ``gltf_threejs_clearcoat``, ``_sheen``
     or ``_iridescence``, a coat or sheen fit for Blender as ``gltf_blender_clearcoat`` or
     ``_sheen``). A glTF export's fidelity has ``viewers``: the file under each viewer's
-    shading.
+    shading. ``name``: the material's name, and its files' (default: the table's file
+    name and the fit's model, ``gold_ggx``).
     """
     from brdffit import models
     from brdffit.export.conversion import convert, dielectric_or_mixture
@@ -259,7 +261,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     warnings += _looks_warning(result) + _layer_warning(result.model, conv)
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
-    name = _material_name(result)
+    name = name or _material_name(result)
     variants = None
     if spec.variants:  # both variant families' dictionaries, in the JSON too
         made = module.variants(conv.params)
