@@ -55,6 +55,11 @@ class ApiError(ClientError):
         super().__init__(f"{status_code} from {method} {url}: {detail}".replace("  ", " "))
 
 
+class Unreachable(ClientError):
+    """No brdffit server answered at the client's URL (refused, unknown host, a URL
+    that is no http(s) one): the request never reached the service."""
+
+
 class FitFailed(ClientError):
     """The fit job ended in ``failed``; ``reason`` is the server's explanation."""
 
@@ -155,7 +160,17 @@ class Client:
     # -- plumbing ---------------------------------------------------------------------
 
     def _request(self, method: str, url: str, **kw) -> httpx.Response:
-        response = self._http.request(method, url, **kw)
+        base = str(self._http.base_url).rstrip("/")
+        try:
+            response = self._http.request(method, url, **kw)
+        except httpx.TimeoutException as e:
+            raise TimeoutError(f"{method} {base}{url}: no answer within the client's "
+                               f"timeout ({type(e).__name__})") from None
+        except httpx.UnsupportedProtocol:
+            raise Unreachable(f"{base}: not an http:// or https:// URL") from None
+        except httpx.TransportError as e:
+            raise Unreachable(f"cannot reach the brdffit server at {base} "
+                              f"({' '.join(str(e).split()) or type(e).__name__})") from None
         if response.is_error:
             raise ApiError(response.status_code, _detail(response), method,
                            str(response.request.url))
@@ -322,7 +337,10 @@ def _detail(response: httpx.Response) -> str:
     try:
         body = response.json()
     except ValueError:
-        return response.text.strip()[:500] or response.reason_phrase
+        # not the service's JSON: another server on that port (an HTML error page)
+        kind = response.headers.get("content-type", "no content type").split(";")[0]
+        return (f"{response.reason_phrase or 'error'}, answered in {kind}, not the brdffit "
+                "service's JSON: is this URL a brdffit server?")
     if isinstance(body, dict) and isinstance(body.get("detail"), str):
         return body["detail"]
     return str(body)[:500]

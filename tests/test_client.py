@@ -191,6 +191,40 @@ def test_non_json_errors_are_still_explained():
     assert e.value.status_code == 502 and "Bad Gateway" in e.value.detail
 
 
+def test_no_server_and_another_server_are_one_line_each():
+    """Nothing listening, a URL that is no http one, a request that times out, and an
+    HTML page from another server: one ClientError line each, naming the URL."""
+    import socket
+
+    from brdffit.client import Unreachable
+
+    with socket.socket() as s:  # a free port on loopback, closed again: nothing listens
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with Client(f"http://127.0.0.1:{port}", token="") as c:
+        with pytest.raises(Unreachable, match=f"cannot reach the brdffit server at "
+                                              f"http://127.0.0.1:{port}"):
+            c.health()
+    with Client("127.0.0.1:8000", token="") as c:
+        with pytest.raises(Unreachable, match="not an http:// or https:// URL"):
+            c.models()
+
+    def slow(request):
+        raise httpx.ReadTimeout("timed out", request=request)
+
+    with Client("http://brdffit.test", token="", transport=httpx.MockTransport(slow)) as c:
+        with pytest.raises(TimeoutError, match="GET http://brdffit.test/v1/models: no answer"):
+            c.models()
+    page = httpx.MockTransport(lambda r: httpx.Response(
+        404, text="<!DOCTYPE HTML>\n<html>\n<body>\n<h1>Error response</h1>\n</body>\n</html>\n",
+        headers={"content-type": "text/html;charset=utf-8"}))
+    with Client("http://127.0.0.1:9", token="", transport=page) as c:
+        with pytest.raises(ApiError) as e:
+            c.models()
+    assert isinstance(e.value, ClientError) and "\n" not in str(e.value)
+    assert "answered in text/html, not the brdffit service's JSON" in str(e.value)
+
+
 N_CLIENTS = 20
 N_TABLES = 5
 
