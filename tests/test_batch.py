@@ -664,6 +664,13 @@ def test_find_tables(table_dir, tmp_path):
         find_tables([str(table_dir / "nope.binary")])
     with pytest.raises(BatchInputError, match="no file matches"):
         find_tables([str(table_dir / "zz*.binary")])
+    # a folder whose one file is the results file: said, not "holds no measured file"
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    (alone / "r.h5").write_bytes(b"x")
+    with pytest.raises(BatchInputError, match="holds no measured file but .*r.h5, the "
+                                              "batch's own results file"):
+        find_tables([str(alone)], exclude=[alone / "r.h5"])
 
 
 @pytest.mark.parametrize("argv, message", [

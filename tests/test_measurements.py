@@ -215,6 +215,15 @@ def test_a_malformed_hdf5_file_gets_one_line_naming_it(tmp_path, datasets, says)
     assert message.startswith(f"{path}: ") and says in message, message
 
 
+def test_an_hdf5_file_that_says_what_it_is_is_named_so(tmp_path):
+    path = tmp_path / "results.h5"
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "brdffit-batch"
+        f.create_group("tables")
+    with pytest.raises(MeasurementsError, match="a brdffit-batch file, not a sample list"):
+        read_measured(path)
+
+
 def test_hdf5_sigma_per_sample_or_per_value(tmp_path):
     rgb = np.ones((4, 3))
     per_sample = read_measured(_h5(tmp_path / "a.h5", rgb=rgb, sigma=[0.1, 0.2, 0.3, 0.4]))

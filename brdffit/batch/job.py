@@ -115,6 +115,8 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     found: dict[str, None] = {}
     skip = {os.path.abspath(os.fspath(p)) for p in exclude}
 
+    skipped: list[str] = []
+
     def add_dir(d: str) -> int:
         files = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
             os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
@@ -123,12 +125,17 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
             if os.path.isfile(f) and os.path.abspath(f) not in skip:
                 found.setdefault(os.path.abspath(f))
                 n += 1
+            elif os.path.abspath(f) in skip:
+                skipped.append(f)
         return n
 
     for text in inputs:
         if os.path.isdir(text):
+            skipped.clear()
             if not add_dir(text):
-                raise BatchInputError(f"{text}: directory holds no measured file "
+                but = (f" but {', '.join(skipped)}, the batch's own results file (--out)"
+                       if skipped else "")
+                raise BatchInputError(f"{text}: directory holds no measured file{but} "
                                       f"({', '.join('*' + s for s in DIR_SUFFIXES)})")
         elif os.path.lexists(text):
             found.setdefault(os.path.abspath(text))

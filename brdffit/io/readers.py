@@ -300,8 +300,12 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     with f:
         missing = [a for a in ANGLES if a not in f]
         if missing:
+            kind = f.attrs.get("format")  # a file that says what it is (a batch's results)
+            kind = kind.decode() if isinstance(kind, bytes) else kind
             raise MeasurementsError(source, f"no dataset {', '.join(missing)} (the file has "
-                                            f"{', '.join(f.keys()) or 'none'})")
+                                            f"{', '.join(f.keys()) or 'none'})"
+                                    + (f": a {kind} file, not a sample list"
+                                       if isinstance(kind, str) else ""))
         angles = []
         for name in ANGLES:
             unit = f[name].attrs.get("units", f.attrs.get("units"))
