@@ -23,3 +23,9 @@ class MerlFormatError(BrdffitError, ValueError):
 
 class FitInputError(BrdffitError, ValueError):
     """Fit options or a table that a fit cannot work with (explained in the message)."""
+
+
+class ExportError(BrdffitError, ValueError):
+    """An export that cannot be made: unknown target, or a fit with nothing to export
+    (``brdffit.export``; here, below it, so that its conversions raise it too)."""
+

@@ -20,7 +20,7 @@ from types import MappingProxyType, ModuleType
 import numpy as np
 
 from brdffit import jsonout
-from brdffit.errors import BrdffitError
+from brdffit.errors import BrdffitError, ExportError  # noqa: F401 - ExportError re-exported
 from brdffit.export import gltf, materialx, mitsuba
 from brdffit.fitting.result import FitResult
 from brdffit.io.merl import MerlTable
@@ -29,10 +29,6 @@ from brdffit.io.merl import MerlTable
 #: ``fidelity.sphere_colour`` (brightness in stops, CIEDE2000) replaces the per-channel
 #: ``sphere_colour_error``.
 SCHEMA = "brdffit.export/2"
-
-
-class ExportError(BrdffitError, ValueError):
-    """An export that cannot be made: unknown target, or a fit with nothing to export."""
 
 
 # one object per target: compared and hashed by identity (its viewers are a dict)

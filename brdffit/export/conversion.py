@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from brdffit import models, runtime
-from brdffit.export import ExportError
+from brdffit.errors import ExportError
 from brdffit.fitting.result import FitResult
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MAX_VALUE, MIN_PEAK, MerlTable
