@@ -545,3 +545,24 @@ def test_mitsuba_and_materialx_weigh_a_metal_mixture_too(mixture_model, mixture,
                                          metal)
     assert report["chosen"] == "metal mixture", report
     assert kept.target_model == mixture_model and not is_dielectric(kept.params)
+
+
+def test_a_diffuse_fit_goes_to_mitsuba_with_a_black_conductor_and_no_class_weighing():
+    """A pure diffuse fit's refit to Mitsuba's conductor blend has a conductor that
+    reflects nothing (eta ~1, k ~0, alpha wherever): no metal to weigh against a
+    dielectric (that refit cost ~5 s and 'kept the metal mixture'), no clamp on the
+    parameters that shape nothing, and the blend is the fit to 1e-6."""
+    from brdffit.export import mitsuba
+    from brdffit.export.conversion import CLASS_ALTERNATIVES
+
+    e = export(result("lambert", {"kd": [0.5, 0.35, 0.2]}), "mitsuba")
+    assert e.fidelity["target_model"] == "rough_conductor"
+    assert e.fidelity["log_rmse_to_fit"] < 1e-6
+    assert "material_class" not in e.fidelity
+    assert not [w for w in e.warnings if w.startswith(("clamp:", "class:"))], e.warnings
+    assert any("conductor reflects nothing" in w for w in e.warnings), e.warnings
+    assert mitsuba.VARIANTS_NOTE in e.warnings
+    # a conductor that reflects is a metal, however little of the blend it is
+    fraction = CLASS_ALTERNATIVES["rough_conductor"].metal_fraction
+    assert fraction({**CONDUCTOR, "weight": 0.9}) == pytest.approx(0.1)
+    assert fraction({**CONDUCTOR, "eta": [1.0] * 3, "k": [0.0] * 3, "weight": 0.2}) == 0.0

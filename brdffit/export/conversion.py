@@ -74,12 +74,47 @@ def fit_as_table(result: FitResult) -> MerlTable:
     return MerlTable.from_values(values, g.above_horizon, source=f"<{result.model} fit>")
 
 
+#: A blend's conductor that reflects less than this at normal incidence (its brightest
+#: channel) is no metal: a dielectric reflects 2-5% there, any metal ~50% or more. A
+#: refit of a pure diffuse fit (lambert, oren_nayar, a ggx whose lobe went to 0) makes
+#: one: eta ~1, k ~0, which the blend carries at no cost to its shading.
+BLACK_CONDUCTOR = 0.01
+
+
+def _black_conductor(p: dict) -> bool:
+    """Whether a ``rough_conductor`` blend's conductor reflects nothing to speak of
+    (:data:`BLACK_CONDUCTOR`), or has no weight in the blend."""
+    eta, k = np.asarray(p["eta"], float), np.asarray(p["k"], float)
+    f0 = ((eta - 1.0) ** 2 + k * k) / ((eta + 1.0) ** 2 + k * k)
+    return float(np.max(f0)) < BLACK_CONDUCTOR or float(p["weight"]) >= 1.0
+
+
+def _reflecting_metal(p: dict) -> float:
+    """The metal fraction of a ``rough_conductor`` blend: its conductor's weight,
+    where the conductor reflects; 0 where it is black."""
+    return 0.0 if _black_conductor(p) else 1.0 - float(p["weight"])
+
+
+#: Parameters that shape nothing where their part of a model is black: no bound of
+#: theirs is a clamp worth a warning (one line says why instead).
+_UNSEEN_PARTS = {"rough_conductor": (_black_conductor, ("eta", "k", "alpha"),
+                                     "the blend's conductor reflects nothing (under "
+                                     f"{BLACK_CONDUCTOR:.0%} at normal incidence, or "
+                                     "weight 1): a diffuse material, whose eta, k and "
+                                     "alpha shape nothing")}
+
+
 def bound_warnings(target_model: str, params: dict) -> list[str]:
     """One line per parameter with a value at the bound of the target's range (its
     channels named together): there the renderer's range, not the data, decided the
     value. Each says what to do next."""
-    out = []
+    out, unseen = [], ()
+    part = _UNSEEN_PARTS.get(target_model)
+    if part is not None and part[0](params):
+        out, unseen = [f"note: {part[2]}"], part[1]
     for spec in models.get(target_model).param_specs:
+        if spec.name in unseen:
+            continue
         v = np.atleast_1d(np.asarray(params[spec.name], float))
         hi = spec.upper if spec.upper is not None else np.inf
         span = (hi - spec.lower) if np.isfinite(hi) else max(1.0, abs(spec.lower))
@@ -191,8 +226,9 @@ CLASS_ALTERNATIVES = {
     "rough_conductor": ClassAlternative(
         "rough_conductor", (Dielectric("rough_plastic", "rough_plastic"),
                             Dielectric("principled", "principled")),
-        lambda p: 1.0 - float(p["weight"])),
+        _reflecting_metal),
 }
+
 #: A metal mixture whose metal fraction is above this is weighed against a dielectric.
 MIXTURE_METALLIC = 0.05
 #: The dielectric is exported where its error to the table is at most this times the
