@@ -658,6 +658,17 @@ def test_find_tables(table_dir, tmp_path):
     got = find_tables([str(mixed)], exclude=[mixed / "results.h5"])
     assert sorted(os.path.relpath(p, mixed) for p in got) == [
         "a.binary", "c.csv", "d.h5", "deep/b.astm"]
+    # a link to a table that is gone is taken, to fail as a table with its reason
+    # (it was skipped unsaid); a folder named like a table is not
+    os.symlink(tmp_path / "moved.binary", mixed / "gone.binary")
+    (mixed / "dir.binary").mkdir()
+    assert "gone.binary" in {os.path.basename(p) for p in find_tables([str(mixed)])}
+    assert "dir.binary" not in {os.path.basename(p) for p in find_tables([str(mixed)])}
+    from brdffit.batch.tasks import read_table
+
+    _, record = read_table(str(mixed / "gone.binary"))
+    assert record.message.endswith(f"cannot read: a link to {tmp_path / 'moved.binary'}, "
+                                   "which does not exist")
     assert find_tables([str(table_dir / "a_*.binary"), str(table_dir / "a_ggx.binary")]) == [
         str(table_dir / "a_ggx.binary")]
     with pytest.raises(BatchInputError, match="no such file"):

@@ -122,11 +122,13 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
             os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
         n = 0
         for f in files:
-            if os.path.isfile(f) and os.path.abspath(f) not in skip:
+            if os.path.abspath(f) in skip:
+                skipped.append(f)
+            # a link to nothing is taken too: it fails as a table, named with its
+            # reason, rather than vanishing from the batch unsaid
+            elif os.path.isfile(f) or not os.path.exists(f):
                 found.setdefault(os.path.abspath(f))
                 n += 1
-            elif os.path.abspath(f) in skip:
-                skipped.append(f)
         return n
 
     for text in inputs:

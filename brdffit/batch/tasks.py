@@ -109,7 +109,10 @@ def read_table(path: str) -> tuple[merl.MerlTable | Measurements | None, TableRe
                 while chunk := f.read(1 << 22):
                     h.update(chunk)
     except OSError as e:
-        record.message = str(MerlFormatError(path, f"cannot read: {e.strerror or e}"))
+        why = e.strerror or str(e)
+        if os.path.islink(path) and not os.path.exists(path):
+            why = f"a link to {os.readlink(path)}, which does not exist"
+        record.message = str(MerlFormatError(path, f"cannot read: {why}"))
         record.finished_at = now()
         return None, record
     record.sha256 = h.hexdigest()
