@@ -456,6 +456,7 @@ def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
     """The residuals' Jacobian taken one parameter at a time (the solver's, for every
     model without the closed form) is ``jacfwd``'s of the whole, to rounding, at a
     random point and on random directions."""
+    import equinox as eqx
     import jax
 
     model = models.get(name)
@@ -472,8 +473,11 @@ def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
     for data in (loss.LossData(frame=frame, target=target, weight=weight, loss="log"),
                  loss.LossData(frame=frame, target=target, weight=weight, loss="render",
                                exposure=jnp.full((3, 1), 2.0), energy=jnp.full((3, 1), 0.2))):
-        r, jac = loss.residual_jacobian(u, (model, data))
-        whole = jax.jacfwd(lambda w, d=data: loss.residuals(w, (model, d)).reshape(-1))(u)
+        # compiled, each a program: op by op, their thousands of small programs took
+        # longer to dispatch (and to load from the cache) than these take to compile
+        r, jac = eqx.filter_jit(loss.residual_jacobian)(u, (model, data))
+        whole = eqx.filter_jit(jax.jacfwd(
+            lambda w, d: loss.residuals(w, (model, d)).reshape(-1)))(u, data)
         assert jac.shape == whole.shape and whole.shape[1] == model.n_params
         np.testing.assert_allclose(np.asarray(r),
                                    np.asarray(loss.residuals(u, (model, data))).ravel(),
