@@ -101,6 +101,24 @@ def test_a_failed_fit_says_why(store):
         read_fit(out, "sparse")
 
 
+def test_a_table_that_failed_to_read_says_why(store, tmp_path):
+    """A table the batch could not read has a group with its reason and no fits: an
+    export of it says that reason (it said only 'has no successful fit')."""
+    import shutil
+
+    _, out = store
+    copy = tmp_path / "r.h5"
+    shutil.copy(out, copy)
+    with h5py.File(copy, "a") as f:  # as the batch records a failed read (tasks.read_table)
+        g = f["tables"].create_group("lost")
+        g.attrs.update({"status": "failed", "path": "/x/lost.binary",
+                        "message": "/x/lost.binary: cannot read: No such file or directory"})
+    for model in (None, "ggx"):
+        with pytest.raises(BatchFileError, match="table 'lost' was not fitted: /x/lost.binary: "
+                                                 "cannot read: No such file"):
+            read_fit(copy, "lost", model)
+
+
 def test_not_a_batch_file_and_a_bad_target_are_clear_errors(store, tmp_path):
     _, out = store
     other = tmp_path / "other.h5"

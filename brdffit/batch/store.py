@@ -529,6 +529,9 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
         groups = f["tables"]
         name = _find_table(path, groups, table)
         g = groups[name]
+        if _plain(g.attrs.get("status", "ok")) != "ok":  # read or refused: no fit ran
+            raise BatchFileError(f"{path}: table {name!r} was not fitted: "
+                                 f"{_plain(g.attrs.get('message', '')) or 'it failed to read'}")
         fits = {m: {k: _plain(v) for k, v in g[m].attrs.items()} for m in g}
         if model is None:
             ok = {m: a for m, a in fits.items() if a.get("status") == "ok" and "fit_json" in a}
