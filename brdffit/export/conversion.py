@@ -111,7 +111,7 @@ def bound_warnings(target_model: str, params: dict) -> list[str]:
     out, unseen = [], ()
     part = _UNSEEN_PARTS.get(target_model)
     if part is not None and part[0](params):
-        out, unseen = [f"note: {part[2]}"], part[1]
+        out, unseen = [f"diffuse: {part[2]}"], part[1]
     for spec in models.get(target_model).param_specs:
         if spec.name in unseen:
             continue
