@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -84,8 +85,9 @@ BLACK_CONDUCTOR = 0.01
 def _black_conductor(p: dict) -> bool:
     """Whether a ``rough_conductor`` blend's conductor reflects nothing to speak of
     (:data:`BLACK_CONDUCTOR`), or has no weight in the blend."""
-    eta, k = np.asarray(p["eta"], float), np.asarray(p["k"], float)
-    f0 = ((eta - 1.0) ** 2 + k * k) / ((eta + 1.0) ** 2 + k * k)
+    from brdffit.models.renderer_terms import conductor_fresnel
+
+    f0 = conductor_fresnel(np.asarray(p["eta"], float), np.asarray(p["k"], float), 1.0)
     return float(np.max(f0)) < BLACK_CONDUCTOR or float(p["weight"]) >= 1.0
 
 
@@ -95,13 +97,20 @@ def _reflecting_metal(p: dict) -> float:
     return 0.0 if _black_conductor(p) else 1.0 - float(p["weight"])
 
 
-#: Parameters that shape nothing where their part of a model is black: no bound of
-#: theirs is a clamp worth a warning (one line says why instead).
-_UNSEEN_PARTS = {"rough_conductor": (_black_conductor, ("eta", "k", "alpha"),
-                                     "the blend's conductor reflects nothing (under "
-                                     f"{BLACK_CONDUCTOR:.0%} at normal incidence, or "
-                                     "weight 1): a diffuse material, whose eta, k and "
-                                     "alpha shape nothing")}
+class _UnseenPart(NamedTuple):
+    """A part of a target model that can be black (``when(params)``): its ``params``
+    then shape nothing, no bound of theirs is a clamp worth a warning, and one line
+    (``why``) says so instead."""
+
+    when: Callable[[dict], bool]
+    params: tuple[str, ...]
+    why: str
+
+
+_UNSEEN_PARTS = {"rough_conductor": _UnseenPart(
+    _black_conductor, ("eta", "k", "alpha"),
+    f"the blend's conductor reflects nothing (under {BLACK_CONDUCTOR:.0%} at normal "
+    "incidence, or weight 1): a diffuse material, whose eta, k and alpha shape nothing")}
 
 
 def bound_warnings(target_model: str, params: dict) -> list[str]:
@@ -110,8 +119,8 @@ def bound_warnings(target_model: str, params: dict) -> list[str]:
     value. Each says what to do next."""
     out, unseen = [], ()
     part = _UNSEEN_PARTS.get(target_model)
-    if part is not None and part[0](params):
-        out, unseen = [f"diffuse: {part[2]}"], part[1]
+    if part is not None and part.when(params):
+        out, unseen = [f"diffuse: {part.why}"], part.params
     for spec in models.get(target_model).param_specs:
         if spec.name in unseen:
             continue
@@ -228,7 +237,6 @@ CLASS_ALTERNATIVES = {
                             Dielectric("principled", "principled")),
         _reflecting_metal),
 }
-
 #: A metal mixture whose metal fraction is above this is weighed against a dielectric.
 MIXTURE_METALLIC = 0.05
 #: The dielectric is exported where its error to the table is at most this times the
