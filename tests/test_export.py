@@ -547,15 +547,28 @@ def test_mitsuba_and_materialx_weigh_a_metal_mixture_too(mixture_model, mixture,
     assert kept.target_model == mixture_model and not is_dielectric(kept.params)
 
 
+def test_a_lambert_fit_goes_to_mitsuba_as_its_diffuse_plugin_exactly():
+    """Mitsuba's ``diffuse`` is kd/pi: a lambert fit is copied to it, not refitted as a
+    conductor blend (Mitsuba's own evaluation of it: tests/test_export_tools.py)."""
+    e = export(result("lambert", {"kd": [0.5, 0.35, 0.2]}), "mitsuba")
+    assert e.fidelity["exact"] and e.fidelity["target_model"] == "lambert"
+    assert e.material == {"type": "diffuse",
+                          "reflectance": {"type": "rgb", "value": [0.5, 0.35, 0.2]}}
+    assert '<bsdf type="diffuse" id=' in next(iter(e.files.values()))
+    assert e.variants["spectral"]["type"] == "diffuse"
+    assert not [w for w in e.warnings if w.startswith(("approximated:", "clamp:", "class:"))]
+
+
 def test_a_diffuse_fit_goes_to_mitsuba_with_a_black_conductor_and_no_class_weighing():
     """A pure diffuse fit's refit to Mitsuba's conductor blend has a conductor that
     reflects nothing (eta ~1, k ~0, alpha wherever): no metal to weigh against a
     dielectric (that refit cost ~5 s and 'kept the metal mixture'), no clamp on the
-    parameters that shape nothing, and the blend is the fit to 1e-6."""
+    parameters that shape nothing, and the blend is the fit to 1e-6. (An Oren-Nayar of
+    no roughness is Lambert's; a lambert fit itself is copied to ``diffuse``.)"""
     from brdffit.export import mitsuba
     from brdffit.export.conversion import CLASS_ALTERNATIVES
 
-    e = export(result("lambert", {"kd": [0.5, 0.35, 0.2]}), "mitsuba")
+    e = export(result("oren_nayar", {"kd": [0.5, 0.35, 0.2], "sigma": 0.0}), "mitsuba")
     assert e.fidelity["target_model"] == "rough_conductor"
     assert e.fidelity["log_rmse_to_fit"] < 1e-6
     assert "material_class" not in e.fidelity

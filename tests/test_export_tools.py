@@ -81,14 +81,15 @@ DIELECTRIC_PLUGINS = [
                                   "specular": 0.9, "sheen": 0.0, "sheen_tint": 0.0}),
     ("principled", "principled", {"base_color": [0.9, 0.9, 0.9], "roughness": 1.0,
                                   "specular": 0.05, "sheen": 1.0, "sheen_tint": 0.0}),
+    ("lambert", "diffuse", {"kd": [0.8, 0.35, 0.05]}),
 ]
 
 
 @pytest.mark.parametrize("model, plugin, params", DIELECTRIC_PLUGINS)
 def test_mitsubas_dielectrics_are_its_own(model, plugin, params):
-    """brdffit's rough_plastic and principled against Mitsuba's roughplastic (its
-    transmittance table and internal reflectance by Mitsuba's quadratures) and
-    principled (Burley's diffuse and a sheen), BSDF.eval at random pairs."""
+    """brdffit's rough_plastic, principled and lambert against Mitsuba's roughplastic
+    (its transmittance table and internal reflectance by Mitsuba's quadratures),
+    principled (Burley's diffuse and a sheen) and diffuse, BSDF.eval at random pairs."""
     from brdffit.export import mitsuba
 
     material = mitsuba.load_dict(params)

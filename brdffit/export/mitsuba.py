@@ -18,6 +18,12 @@ Target models (docs/models.md), Mitsuba's own plugins:
     {"type": "roughplastic", "distribution": "ggx", "alpha": alpha, "int_ior": eta,
      "ext_ior": 1.0, "diffuse_reflectance": <kd RGB>, "specular_reflectance": <ks RGB>}
 
+- ``lambert``: Mitsuba's ``diffuse`` plugin, ``kd / pi`` exactly: a ``lambert`` fit is
+  copied to it (it was refitted as a conductor blend: a diffuse base under a black
+  conductor whose eta, k and alpha shape nothing, a file that reads as a metal)::
+
+    {"type": "diffuse", "reflectance": <kd RGB>}
+
 - ``principled``: a dielectric with Burley's diffuse and a sheen, for fabrics::
 
     {"type": "principled", "base_color": <RGB>, "roughness": r, "specular": s,
@@ -57,10 +63,12 @@ from brdffit.export import spectral_ior
 
 #: the models a fit is copied to (any other fit is refitted as the first: principled's
 #: coat is a dielectric's, not layered over rough_conductor, so a coat is named lost)
-TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat")
+TARGET_MODELS = ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat",
+                 "lambert")
 #: target model -> the model that evaluates the file as Mitsuba does: its BSDF.eval
 #: agrees with rough_conductor to 2.1e-5 relative, with rough_plastic to 4e-6 and with
-#: principled to float32 rounding (docs/exports.md, tests/test_export_tools.py)
+#: principled and lambert (its ``diffuse``) to float32 rounding (docs/exports.md,
+#: tests/test_export_tools.py)
 SHADED_AS = {m: m for m in TARGET_MODELS}
 MEDIA_TYPE = "application/json"
 
@@ -105,12 +113,15 @@ def _spectral_ior(eta, k) -> tuple[float | dict, float | dict]:
 
 
 def load_dict(params: dict, spectral: bool = False) -> dict:
-    """The Mitsuba 3 BSDF dictionary of ``rough_conductor``, ``rough_plastic`` or
-    ``principled`` parameters (told apart by ``k`` and ``sheen``), for Mitsuba's RGB
-    variants, or with ``spectral=True`` for its spectral ones (module docstring). Raises
-    :class:`SpectralExportError` where a spectral form would not be the same material."""
+    """The Mitsuba 3 BSDF dictionary of ``rough_conductor``, ``rough_plastic``,
+    ``principled`` or ``lambert`` parameters (told apart by ``k``, ``sheen`` and ``kd``
+    alone), for Mitsuba's RGB variants, or with ``spectral=True`` for its spectral ones
+    (module docstring). Raises :class:`SpectralExportError` where a spectral form would
+    not be the same material."""
     if "sheen" in params:
         return _principled(params, spectral)
+    if set(params) == {"kd"}:
+        return {"type": "diffuse", "reflectance": _reflectance(params["kd"], "kd", spectral)}
     if "k" not in params:
         return _plastic(params, spectral)
     if spectral:
