@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
-from brdffit.export import export
+from brdffit.export import TARGETS, export
 from brdffit.export import validate as check
 from brdffit.export.gltf import CLEARCOAT_EXTENSION, IRIDESCENCE_EXTENSION, SHEEN_EXTENSION
 from brdffit.export.validate import gltf_spec_eval
@@ -463,6 +463,9 @@ def test_a_renderers_name_stands_for_its_materials_layers_included():
     for name, members in CANDIDATE_SETS.items():  # each a registry model, base first
         assert all(models.get(m).parent in (None, *members[:i])
                    for i, m in enumerate(members)), name
+        # ... and one its renderer's export copies exactly: auto's choice is the file
+        assert set(members) <= set(TARGETS[name].target_models), name
+    assert "lambert" in CANDIDATE_SETS["mitsuba"]  # Mitsuba's diffuse: a matte table's
     with pytest.raises(Exception, match="unknown model 'gltf2'"):
         SelectionRule(candidates=("gltf2",))
 

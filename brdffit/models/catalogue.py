@@ -92,7 +92,9 @@ def describe() -> list[dict]:
 #: colour-changing paints it gained under 1% of log_rmse (docs/models.md).
 CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
     "gltf": ("gltf_pbr", "gltf_clearcoat", "gltf_sheen"),
-    "mitsuba": ("rough_conductor", "rough_plastic", "principled", "principled_clearcoat"),
+    # lambert: Mitsuba's own diffuse plugin, exported exactly (a matte table's cheapest)
+    "mitsuba": ("lambert", "rough_conductor", "rough_plastic", "principled",
+                "principled_clearcoat"),
     "materialx": ("standard_surface_dielectric", "standard_surface", "standard_surface_coat",
                   "standard_surface_sheen"),
 }
