@@ -213,6 +213,22 @@ def test_every_clamp_is_a_warning():
     assert any("roughness" in w and "lower bound" in w for w in sharp.warnings)
 
 
+def test_an_index_of_one_is_a_matte_surface_not_a_clamp():
+    """An index of 1 reflects nothing at the surface (F0 0, as a ggx f0 of 0): what a
+    matte table asks for, not the renderer's range. A lambert fit's MaterialX refit ends
+    there and was told it was clamped; a glTF ior of 1 likewise. A rough_plastic eta at
+    its floor 1.001 is still said: 1 itself is outside its range."""
+    from brdffit.export.conversion import bound_warnings
+
+    matte = export(result("lambert", {"kd": [0.5, 0.35, 0.2]}), "materialx")
+    assert matte.target_params["specular_IOR"] < 1.001
+    assert not [w for w in matte.warnings if w.startswith("clamp:")], matte.warnings
+    assert bound_warnings("gltf_pbr_ior", {**GLTF, "metallic": 0.0, "ior": 1.0}) == []
+    assert [w.split(" is ")[0] for w in bound_warnings(
+        "rough_plastic", {"kd": [0.5] * 3, "alpha": 0.1, "eta": 1.001, "ks": [0.5] * 3})] \
+        == ["clamp: eta = 1.001"]
+
+
 def test_a_material_that_reflects_more_than_it_receives_is_a_warning():
     # glTF's own formula: a white dielectric's albedo passes 1 towards grazing
     white = export(result("gltf_pbr", {"base_color": [1.0, 1.0, 1.0], "metallic": 0.0,

@@ -130,7 +130,8 @@ def bound_warnings(target_model: str, params: dict) -> list[str]:
         low, high = [], []
         for c, x in zip("RGB" if spec.rgb else " ", v, strict=True):
             shown = f"{c} {x:.6g}" if spec.rgb else f"{x:.6g}"
-            if x <= spec.lower + _AT_BOUND * span and spec.lower > 0:
+            if x <= spec.lower + _AT_BOUND * span and spec.lower > 0 \
+                    and spec.name not in _NO_REFLECTION_LOWER:
                 low.append(shown)
             elif np.isfinite(hi) and x >= hi - _AT_BOUND * span and spec.name in _CLAMP_UPPER:
                 high.append(shown)
@@ -152,6 +153,11 @@ def _clamp_next(target_model: str) -> str:
 #: Parameters whose upper bound is a physical limit the data can push against (a
 #: metallic of 1 or a weight of 1 is a legitimate material, not a clamp).
 _CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha"}
+#: Indices whose lower bound 1 is a surface that reflects nothing (F0 = 0, as a ggx
+#: ``f0`` of 0, which is not flagged either): a material the data can ask for, a matte
+#: one, not a value the renderer's range imposed (a lambert fit's MaterialX refit ends
+#: at specular_IOR 1 and was told it was clamped there).
+_NO_REFLECTION_LOWER = {"specular_IOR", "ior"}
 
 
 def convert(result: FitResult, target_models: tuple[str, ...], *,
