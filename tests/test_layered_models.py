@@ -465,7 +465,7 @@ def test_a_renderers_name_stands_for_its_materials_layers_included():
                    for i, m in enumerate(members)), name
         # ... and one its renderer's export copies exactly: auto's choice is the file
         assert set(members) <= set(TARGETS[name].target_models), name
-    assert "lambert" in CANDIDATE_SETS["mitsuba"]  # Mitsuba's diffuse: a matte table's
+    assert "lambert" in CANDIDATE_SETS["mitsuba"]  # its diffuse: a matte table's cheapest
     with pytest.raises(Exception, match="unknown model 'gltf2'"):
         SelectionRule(candidates=("gltf2",))
 
