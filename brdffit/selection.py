@@ -32,6 +32,7 @@ import copy
 import dataclasses
 import functools
 import math
+import re
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -375,10 +376,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     """The choice over the fitted rows, its reason, and the optional grey-ks refit."""
     ok = [row for row in rows if row["status"] == "fitted"]
     if not ok:
-        raise FitInputError(
-            "no candidate could be fitted: "
-            + "; ".join(f"{row['model']}: {row.get('message', row.get('result'))}" for row in rows)
-        )
+        raise FitInputError(f"no candidate could be fitted: {_failures(rows)}")
     loss = fit_options.get("loss", DEFAULT_LOSS)
     rule = "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
     if rule == "render_psnr_db":
@@ -482,6 +480,28 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
 #: Each candidate's last solve in this process (s, wall, its wait for a parent
 #: included): the order in which candidates start (:func:`longest_chains_first`).
 _SOLVE_SECONDS: dict[str, float] = {}
+
+
+def _failures(rows: list[dict]) -> str:
+    """Why each candidate failed, in one line: a reason that every one of them gives
+    (too few samples for any of them) once, with the candidates it stopped."""
+    def said(row) -> str:
+        return str(row.get("message", row.get("result")))
+
+    def shape(row) -> str:  # the reason without its model's name and its counts
+        named = re.sub(rf"(?<![\w-]){re.escape(row['model'])}(?![\w-])", "<model>", said(row))
+        return re.sub(r"[\d,]+", "#", named)
+
+    groups: dict[str, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(shape(row), []).append(row)
+    parts = []
+    for same in groups.values():
+        first = same[0]
+        others = [row["model"] for row in same[1:]]
+        parts.append(f"{first['model']}: {said(first)}"
+                     + (f" (and likewise {', '.join(others)})" if others else ""))
+    return "; ".join(parts)
 
 
 def longest_chains_first(ordered: list) -> list:

@@ -139,6 +139,12 @@ def test_one_channel_and_sigma(tmp_path):
      "theta_i is not finite"),
     ("a.csv", "# angles: furlongs\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n1,2,3,4,1,1,1\n",
      "unknown angle unit 'furlongs'"),
+    # the last unit line won, and a file in degrees was read in radians
+    ("a.csv", "# angles: degrees\n# angles: radians\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n"
+              "1,2,3,4,1,1,1\n", "two angle units: 'degrees' (line 1) and 'radians' (line 2)"),
+    # Python's float() reads 1_0 as 10
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1_0,1,1\n",
+     "row 2 is not all numbers"),
     # value and sigma columns that would be guessed at or dropped are refused
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,value\n10,0,20,0,1,1,1\n",
      "value columns of two kinds: r, g (RGB) and value (one channel)"),
@@ -182,7 +188,7 @@ def test_hdf5_needs_its_units(tmp_path):
 def _h5(path, n=4, **datasets):
     with h5py.File(path, "w") as f:
         for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
-            f[name] = np.linspace(5.0, 40.0, n)
+            f[name] = datasets.pop(name, np.linspace(5.0, 40.0, n))
             f[name].attrs["units"] = "degrees"
         for name, a in datasets.items():
             if a is None:
@@ -190,6 +196,18 @@ def _h5(path, n=4, **datasets):
             else:
                 f[name] = a
     return path
+
+
+def test_quoted_cells_are_the_numbers_inside_them(tmp_path):
+    """As spreadsheets and pandas' QUOTE_ALL write a CSV: every cell quoted."""
+    s = _samples(50)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    quoted = tmp_path / "quoted.csv"
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    quoted.write_text("\n".join(",".join(f'"{c}"' for c in line.split(",")) for line in lines))
+    got = read_measured(quoted)
+    np.testing.assert_array_equal(got.rgb, plain.rgb)
+    np.testing.assert_array_equal(got.wi, plain.wi)
 
 
 @pytest.mark.parametrize("datasets, says", [
@@ -202,6 +220,10 @@ def _h5(path, n=4, **datasets):
     ({"rgb": np.ones((4, 3)), "sigma": np.array([b"x"] * 4)}, "dataset sigma holds |S1"),
     ({"rgb": None}, "rgb is an HDF5 group, not a dataset"),
     ({"rgb": np.ones((4, 3)), "value": np.ones(4)}, "datasets rgb and value"),
+    # flattened, a (2, n) angle array paired one sample's angle with another's values
+    ({"rgb": np.ones((4, 3)), "theta_i": np.full((2, 2), 10.0)},
+     "dataset theta_i has shape (2, 2): expected (n,), one number per sample"),
+    ({"value": np.ones((4, 2))}, "dataset value has shape (4, 2): expected (n,)"),
     ({"spectral": np.ones(4), "wavelengths": np.array([500.0])},
      "dataset spectral has shape (4,) and wavelengths (1,): expected (n, k) and (k,)"),
     ({"spectral": np.ones((4, 5)), "wavelengths": np.linspace(400.0, 700.0, 4)},

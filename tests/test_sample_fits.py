@@ -100,6 +100,40 @@ def test_sample_fit_refusals_are_one_line():
         fit(meas, "lambert", physical=True)
 
 
+def _doubled(meas: Measurements) -> Measurements:
+    """Every sample measured twice: the second copy 1% brighter, as a repeat is."""
+    return Measurements(np.concatenate([meas.wi, meas.wi]), np.concatenate([meas.wo, meas.wo]),
+                        np.concatenate([meas.rgb, 1.01 * meas.rgb]), source="twice")
+
+
+def test_copies_of_one_direction_count_once_and_stay_in_one_fold():
+    from brdffit.fitting.samples import FOLDS, direction_groups, fold_of
+
+    meas, _ = sample_model("ggx", None, "uniform", 300, seed=5)
+    # one direction pair 200 times is one sample of the BRDF's shape: it was fitted, and
+    # its held-out folds (copies of each other) judged 100 copies of the normal good
+    one = Measurements(np.repeat(meas.wi[:1], 200, 0), np.repeat(meas.wo[:1], 200, 0),
+                       np.repeat(meas.rgb[:1], 200, 0), source="one.csv")
+    with pytest.raises(FitInputError, match="the 200 usable samples hold only 1 distinct "
+                                            "direction pair .*ggx needs at least 32"):
+        fit(one, "ggx")
+    # every pair distinct: sample k is pair k, and the folds are the seeded permutation's
+    groups = direction_groups(meas)
+    np.testing.assert_array_equal(groups, np.arange(meas.n))
+    np.testing.assert_array_equal(fold_of(groups, FOLDS, 0),
+                                  np.random.default_rng(1).permutation(meas.n) % FOLDS)
+    # measured twice: each pair's two copies are predicted by the fit that saw neither
+    twice = _doubled(meas)
+    groups = direction_groups(twice)
+    np.testing.assert_array_equal(groups, np.tile(np.arange(meas.n), 2))
+    fold = fold_of(groups, FOLDS, 0)
+    np.testing.assert_array_equal(fold[:meas.n], fold[meas.n:])
+    assert sorted(np.bincount(fold)) == sorted(np.bincount(fold_of(np.arange(meas.n), FOLDS, 0))
+                                               * 2)
+    r = fit(twice, "ggx")
+    assert r.converged and r.input["held_out"]["results"] == ["successful"] * FOLDS
+
+
 def test_a_scene_weights_samples_and_reports_every_sample_beside():
     from brdffit.fitting.scene import Scene, fit_in_scene
 

@@ -649,3 +649,17 @@ def test_a_warning_when_every_candidate_looks_poor():
     assert "every candidate looks poor" in said and "ggx, 7.2 dB" in said
     assert "quality.next" in said
     assert _all_poor_warning([*poor, *_rows(("ggx2", 12, 0.04, 21.0, "visible"))]) == ""
+
+
+def test_a_reason_every_candidate_fails_for_is_said_once():
+    """Three samples are too few for any candidate: one reason, not seven copies of it
+    (an 882-character line)."""
+    from data_synth.sparse import sample_model
+
+    meas, _ = sample_model("ggx", None, "uniform", 3, seed=2)
+    with pytest.raises(FitInputError) as e:
+        select(meas)
+    message = str(e.value)
+    assert message.count("usable samples") == 1, message
+    assert "lambert needs at least 12 (and likewise oren_nayar, blinn_phong, phong, beckmann, "\
+           "ggx, ggx2)" in message

@@ -221,14 +221,16 @@ def run(args) -> int:
     request = request_from_args(args)  # refused before the table is read
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
-        output_folder(args.plots, "--plots")
     measured = readers.read_measured(args.table)
+    if args.plots:  # made once the input is read: a refused file leaves no empty folder
+        output_folder(args.plots, "--plots")
     table = measured
     if isinstance(measured, Measurements):  # said before the fit: what it will see
         from brdffit.fitting.samples import binned
 
-        print(f"brdffit: {measured.n} samples ({measured.provenance.get('format')}): fitted "
-              "at their own directions, with a held-out error", file=sys.stderr)
+        print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "
+              f"({measured.provenance.get('format')}): fitted at their own directions, with "
+              "a held-out error", file=sys.stderr)
         table = binned(measured)[0]  # what the plots draw: the samples in their bins
     # for this fit only: a caller of main() in its own process keeps its own hook
     previous, executables.on_compile = executables.on_compile, _say_compiling_once()

@@ -66,6 +66,9 @@ class TableInput:
     def start_table(self, prep: Prepared) -> MerlTable:
         return self.table
 
+    def distinct_usable(self, prep: Prepared) -> int:
+        return prep.n_usable  # each bin is its own direction pair
+
     def polishes(self, samples, init, prep: Prepared) -> bool:
         """Every bin (``samples=None``): the fit on the default subsample, with its
         starts and its nested parent, lands next to the optimum at ~1/70 of the cost
@@ -121,6 +124,9 @@ class SampleInput:
     def start_table(self, prep: Prepared) -> MerlTable:
         return prep.start_table  # the samples binned: the floor and the peak they hold
 
+    def distinct_usable(self, prep: Prepared) -> int:
+        return self._samples.distinct_usable(self.meas, prep)
+
     def polishes(self, samples, init, prep: Prepared) -> bool:
         return False  # a list up to `samples` is fitted whole
 
@@ -174,15 +180,29 @@ def fit_input(table) -> TableInput | SampleInput:
                         f"(brdffit.io.readers.read_measured), got {type(table).__name__}")
 
 
+def _count(n: int, plural: str) -> str:
+    """``n`` and its noun, singular for one: "1 usable sample", "2 usable samples"."""
+    return f"{n:,} {plural[:-1] if n == 1 and plural.endswith('s') else plural}"
+
+
 def check_enough(source: TableInput | SampleInput, prep: Prepared, model,
                  scene: bool) -> None:
     """Refuse, with the reason, an input with too little to fit ``model``."""
     what = source.what
-    if prep.n_usable < model.n_params * 4:
+    least = model.n_params * 4
+    if prep.n_usable < least:
         raise FitInputError(
-            f"{source.source}: only {prep.n_usable} usable {what} (measured, finite, above "
-            f"the horizon{', weighted by the scene' if scene else ''}); "
-            f"{model.name} needs at least {model.n_params * 4}")
+            f"{source.source}: only {_count(prep.n_usable, 'usable ' + what)} (measured, finite, "
+            f"above the horizon{', weighted by the scene' if scene else ''}); "
+            f"{model.name} needs at least {least}")
+    pairs = source.distinct_usable(prep)
+    if pairs < least:
+        # repeated measurements of one direction pair (or rows pasted twice) are one
+        # sample of the BRDF's shape: 100 copies of the normal's were fitted and judged good
+        raise FitInputError(
+            f"{source.source}: the {_count(prep.n_usable, 'usable ' + what)} hold only "
+            f"{_count(pairs, 'distinct direction pairs')} (repeats of a pair count once); "
+            f"{model.name} needs at least {least}")
     if prep.brightest < merl.MIN_PEAK:
         raise FitInputError(
             f"{source.source}: every usable {what[:-1]} is below {merl.MIN_PEAK:g} 1/sr"

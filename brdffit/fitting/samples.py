@@ -265,9 +265,35 @@ class HeldOut(NamedTuple):
     fold_ok: np.ndarray  # per solver sample: its fold's refit was finite
 
 
-def fold_of(n_used: int, folds: int, seed: int) -> np.ndarray:
-    """Each solver sample's fold: a seeded random split into ``folds`` near-equal parts."""
-    return np.random.default_rng(seed + 1).permutation(n_used) % folds
+def direction_groups(meas: Measurements) -> np.ndarray:
+    """Each sample's direction pair as a group number, in the order the pairs first
+    appear: repeated measurements of one pair (a noise estimate, or a file's rows
+    pasted twice) share one. Pairs within ~1e-9 of each other are one pair."""
+    def make() -> np.ndarray:
+        # + 0.0: -0.0 and 0.0 are one direction, and np.unique compares rows by bytes
+        key = np.round(np.concatenate([meas.wi, meas.wo], axis=1), 9) + 0.0
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        rank = np.empty(first.size, np.int64)
+        rank[np.argsort(first)] = np.arange(first.size)
+        return rank[inverse.ravel()]
+
+    return cached(meas, "direction-groups", make)
+
+
+def distinct_usable(meas: Measurements, prep: Prepared) -> int:
+    """How many distinct direction pairs the usable samples hold (:func:`direction_groups`)."""
+    return int(np.unique(direction_groups(meas)[prep.weight > 0]).size)
+
+
+def fold_of(groups: np.ndarray, folds: int, seed: int) -> np.ndarray:
+    """Each solver sample's fold: a seeded random split of its direction pairs
+    (``groups``, numbered in order of first appearance) into ``folds`` near-equal parts.
+    Copies of one pair go to one fold: a fold predicted by a fit that saw their twins
+    in the other folds was a held-out error of ~0 (100 copies of one direction were
+    judged good). Where every pair is distinct, sample ``k`` is pair ``k``."""
+    _, compact = np.unique(groups, return_inverse=True)  # the same order, no gaps
+    n_pairs = int(compact.max()) + 1 if compact.size else 0
+    return (np.random.default_rng(seed + 1).permutation(n_pairs) % folds)[compact.ravel()]
 
 
 @runtime.in_float64
@@ -276,15 +302,17 @@ def held_out(model, meas: Measurements, u_best: np.ndarray, prep: Prepared, refi
     """The k-fold held-out error of a fit whose optimum is ``u_best`` (module
     docstring). ``refit(data) -> (u, result)`` solves from ``u_best`` on ``data`` (the
     solver's data with other weights: the same compiled solve). None where there are
-    fewer than 2 samples per parameter in a fold's training set."""
+    fewer than 2 direction pairs per parameter in a fold's training set."""
     from brdffit.fitting.result import STATUS_NAMES
 
     data, n_used = prep.data, prep.sample_set.n_used
-    if n_used < folds or (n_used * (folds - 1)) // folds < 2 * model.n_params:
+    groups = direction_groups(meas)[prep.sample_set.index[:n_used]]
+    n_pairs = int(np.unique(groups).size)
+    if n_pairs < folds or (n_pairs * (folds - 1)) // folds < 2 * model.n_params:
         return None
     weight = np.asarray(prep.sample_set.weight, np.float64)
     fold = np.full(weight.size, -1)
-    fold[:n_used] = fold_of(n_used, folds, seed)
+    fold[:n_used] = fold_of(groups, folds, seed)
     frame64 = Frame(*(jnp.asarray(a, jnp.float64) for a in data.frame))
     rgb = jnp.asarray(meas.rgb[prep.sample_set.index].T, jnp.float64)
     predicted = np.zeros((3, weight.size))

@@ -120,6 +120,16 @@ def _looks_like_text(head: bytes) -> bool:
     return len(head) > 0 and all(32 <= b < 127 or b in (9, 10, 13) for b in head)
 
 
+#: The first bytes of files people mistake for a table, and what they are.
+OTHER_FORMATS = (
+    (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+    (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
+    (b"\x76\x2f\x31\x01", "an OpenEXR image"), (b"\x1f\x8b", "a gzip archive"),
+    (b"PK\x03\x04", "a zip archive"), (b"%PDF", "a PDF document"),
+    (b"\x93NUMPY", "a numpy .npy array"), (b"\x89HDF", "an HDF5 file"),
+)
+
+
 def _check_layout(header: bytes, size: int, source: str) -> None:
     """Validate header and total size; raises before anything large is allocated."""
     if size == 0:
@@ -128,7 +138,15 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
         raise MerlFormatError(source, f"only {size} bytes, shorter than the 12-byte header")
     if _looks_like_text(header):
         raise MerlFormatError(source, "looks like a text file, not a binary MERL table")
+    kind = next((what for magic, what in OTHER_FORMATS if header.startswith(magic)), None)
+    if kind is not None:
+        raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
     dims = [int(d) for d in np.frombuffer(header, dtype="<i4", count=3)]
+    if tuple(int(d) for d in np.frombuffer(header, dtype=">i4", count=3)) == SHAPE:
+        raise MerlFormatError(
+            source, f"header dims {dims} read little-endian, as MERL writes them, are "
+                    f"{list(SHAPE)} big-endian: the file was written byte-swapped; swap "
+                    "its 4-byte header and 8-byte values to little-endian")
     if any(d <= 0 for d in dims):
         raise MerlFormatError(source, f"header dims {dims} are not positive")
     body = size - HEADER_BYTES

@@ -183,12 +183,18 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
              source: str) -> tuple[np.ndarray, np.ndarray]:
     """The data lines as floats (rows, width), and their line numbers (0-based)."""
     out = np.empty((len(lines), width))
-    for j, (number, line) in enumerate(lines):
-        cells = line.split(delimiter) if delimiter else line.split()
+    # split as CSV is: a quoted cell ("55", as spreadsheets and pandas' QUOTE_ALL write
+    # it) is the number inside the quotes
+    rows = (csv.reader((line for _, line in lines), delimiter=delimiter) if delimiter
+            else (line.split() for _, line in lines))
+    for j, ((number, line), cells) in enumerate(zip(lines, rows, strict=True)):
         if len(cells) != width:
             raise MeasurementsError(source, f"row {number + 1} has {len(cells)} values, the "
                                             f"header names {width} columns")
         try:
+            # Python's float() also reads 1_0 as 10: no data file means that
+            if "_" in line:
+                raise ValueError
             out[j] = [float(c) for c in cells]
         except ValueError:
             raise MeasurementsError(source, f"row {number + 1} is not all numbers: "
@@ -256,7 +262,7 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     path = Path(path)
     source = str(path)
     text = _text(path)
-    unit = None
+    unit = unit_line = None
     lines = []
     for number, line in enumerate(text.splitlines()):
         stripped = line.strip()
@@ -265,13 +271,17 @@ def read_csv(path: str | os.PathLike) -> Measurements:
         if stripped.startswith("#"):
             m = re.fullmatch(r"#\s*angles\s*[:=]\s*(\w+)", stripped, re.IGNORECASE)
             if m:
-                unit = m[1]
+                # refused before any row is read, even where every column has its own
+                scale = _unit_scale(m[1], source)
+                if unit is not None and scale != _unit_scale(unit, source):
+                    raise MeasurementsError(
+                        source, f"two angle units: {unit!r} (line {unit_line + 1}) and "
+                                f"{m[1]!r} (line {number + 1}); keep the one the angles are in")
+                unit, unit_line = m[1], number
             continue
         lines.append((number, stripped))
     if not lines:
         raise MeasurementsError(source, "no header and no data: the file is empty")
-    if unit is not None:  # refused before any row is read, even where every column has its own
-        _unit_scale(unit, source)
     try:
         dialect = csv.Sniffer().sniff(lines[0][1], delimiters=",;\t ")
         delimiter = dialect.delimiter
@@ -313,7 +323,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
                                                 "(degrees or radians), nor has the file")
             unit = unit.decode() if isinstance(unit, bytes) else str(unit)
-            angles.append(_numeric(f, name, source).ravel() * _unit_scale(unit, source))
+            angles.append(_one_per_sample(f, name, source) * _unit_scale(unit, source))
         provenance: dict = {"format": "hdf5"}
         stored = f.attrs.get("provenance")
         if stored is not None:  # a list brdffit wrote (brdffit.io.writers): what it was
@@ -331,7 +341,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 raise MeasurementsError(source, f"dataset rgb has shape {values.shape}, "
                                                 "not (n, 3)")
         elif "value" in f:
-            values = _numeric(f, "value", source).ravel()
+            values = _one_per_sample(f, "value", source)
         elif "spectral" in f:
             if "wavelengths" not in f:
                 raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
@@ -369,6 +379,17 @@ def _numeric(f, name: str, source: str) -> np.ndarray:
     except (TypeError, ValueError, OSError) as e:
         raise MeasurementsError(source, f"dataset {name} cannot be read as numbers "
                                         f"({e})") from None
+
+
+def _one_per_sample(f, name: str, source: str) -> np.ndarray:
+    """Dataset ``name``, one number per sample: (n,), or (n, 1). Any other shape is
+    refused with it: a (2, 250) angle array flattened would pair one sample's angle
+    with another's values, silently."""
+    a = _numeric(f, name, source)
+    if a.ndim == 1 or (a.ndim == 2 and a.shape[1] == 1):
+        return a.ravel()
+    raise MeasurementsError(source, f"dataset {name} has shape {a.shape}: expected (n,), one "
+                                    "number per sample")
 
 
 #: suffix -> reader; a MERL table is read as a table.
