@@ -335,3 +335,36 @@ def test_cli_json_of_a_hot_bin_fit_is_strict_and_finite(tmp_path, model):
                                    for v in result["error"].values()), result["error"]
     if model == "auto":
         assert d["selection"]["chosen"] == result["model"]
+
+
+def _one_corrupt_bin(table: MerlTable, at=(0, 0, 0), value=9.3e11) -> MerlTable:
+    rgb = table.rgb.copy()
+    rgb[(slice(None), *at)] = value
+    return MerlTable(rgb, table.mask, "corrupt.binary")
+
+
+def test_a_lone_corrupt_bin_is_named_in_the_notes_and_leads_what_to_try():
+    """One bin at 9e11 1/sr (within the bound) made the default ggx fit ks 1e6 with
+    nothing pointing at the bin: it is found (1000x every neighbour) and named."""
+    base = merl.from_bytes(to_bytes(ggx_raw()), source="ggx.binary")
+    assert base.isolated_spikes().shape == (0, 3)
+    corrupt = _one_corrupt_bin(base)
+    np.testing.assert_array_equal(corrupt.isolated_spikes(), [[0, 0, 0]])
+    r = fit(corrupt, "ggx", samples=4096)
+    assert_honest(r)
+    said = [n for n in r.notes if "over 1,000x every measured neighbour" in n]
+    assert said and "9.3e+11 1/sr at theta_h, theta_d, phi_d bin [0, 0, 0]" in said[0], r.notes
+    if r.quality["verdict"] != "good":
+        assert r.quality["next"][0]["try"].startswith("the table without its spikes")
+    # a clean fit says nothing of spikes; neither does a bin outside what the fit used
+    assert not any("every measured neighbour" in n for n in fit(base, "ggx", samples=4096).notes)
+
+
+@pytest.mark.parametrize("alpha", [0.001, 0.01])
+def test_a_mirror_peak_is_no_spike(alpha):
+    """The sharpest lobe the models hold, noise-free and noisy: its first theta_h bins
+    change by far less than 1000x from one to the next."""
+    for noise in (0.0, 0.05):
+        table, _ = make_table("ggx", {"kd": [0.0, 0.0, 0.0], "ks": [1.0, 1.0, 1.0],
+                                      "alpha": alpha, "f0": 0.9}, seed=1, noise=noise)
+        assert table.isolated_spikes().shape == (0, 3)

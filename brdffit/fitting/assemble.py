@@ -71,7 +71,10 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     look = quality(metrics["psnr_db"], measured.colour, model=model, params=params, loss=loss,
                    converged=result == "successful", physical=physical, basis=measured.basis)
     look, fitted_input = source.judged(look, measured, found)
-    notes = (*notes, *_peak_missed(metrics, look))
+    found_notes, found_steps = source.findings(prep)
+    if found_steps and look.get("verdict") != "good":  # the data's fault comes first
+        look = {**look, "next": [*found_steps, *look.get("next", [])]}
+    notes = (*notes, *_peak_missed(metrics, look), *found_notes)
     counts = prep.counts
     return FitResult(
         model=model.name,

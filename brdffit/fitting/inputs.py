@@ -23,6 +23,7 @@ import numpy as np
 from brdffit.errors import FitInputError
 from brdffit.fitting.problem import (
     Prepared,
+    cached,
     full_table_metrics,
     prepare,
     ready_report_once,
@@ -101,6 +102,27 @@ class TableInput:
                                                                                        None]:
         return look, None
 
+    def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
+        """What the table holds that the fit's reader should be told of, as notes and
+        as next steps (``quality.next_steps``' form): bins the fit used that stand far
+        above all their neighbours (``MerlTable.isolated_spikes``), corrupt values that a
+        least-squares fit follows."""
+        spikes = cached(self.table, "isolated-spikes", self.table.isolated_spikes)
+        used = prep.counts.usable.reshape(merl.SHAPE)
+        spikes = [tuple(int(x) for x in b) for b in spikes if used[tuple(b)]]
+        if not spikes:
+            return [], []
+        first = spikes[0]
+        value = float(self.table.rgb[(slice(None), *first)].max())
+        what = (f"{len(spikes):,} bin{'s' if len(spikes) != 1 else ''} over "
+                f"{merl.SPIKE_FACTOR:,.0f}x every measured neighbour on the grid (the "
+                f"brightest: {value:.3g} 1/sr at theta_h, theta_d, phi_d bin {list(first)})")
+        return ([f"{what}: a corrupt value? A least-squares fit follows such a bin; mark it "
+                 "unmeasured (a negative value) to leave it out"],
+                [{"try": "the table without its spikes (mark them unmeasured: a negative value)",
+                  "why": f"{what}: no reflectance changes so from one bin to the next, and the "
+                         "fit follows them", "gain_db": None}])
+
 
 class SampleInput:
     """A sample list (``brdffit.io.measurements.Measurements``), fitted at its own
@@ -133,6 +155,9 @@ class SampleInput:
     def ready_report(self, model, u, prep: Prepared, loss: str, precision: str, solver: str,
                      full_table: bool = True):
         return None
+
+    def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
+        return [], []  # what the samples hold is reported in the input block
 
     def refuse_bound(self) -> None:
         raise FitInputError(

@@ -58,6 +58,13 @@ MAX_VALUE = 1e12
 MIN_PEAK = 1e-5
 
 
+#: :meth:`MerlTable.isolated_spikes`: a bin this many times every measured neighbour.
+SPIKE_FACTOR = 1000.0
+#: More bins than this above SPIKE_FACTOR times the table's typical value are a broad
+#: bright region, not a few corrupt values: the check leaves such a table alone.
+MAX_SPIKE_CANDIDATES = 100_000
+
+
 @dataclass(frozen=True, eq=False)
 class MerlTable:
     """A measured isotropic BRDF on the MERL grid.
@@ -94,6 +101,38 @@ class MerlTable:
     @property
     def n_measured(self) -> int:
         return int(np.count_nonzero(self.mask))
+
+    def isolated_spikes(self) -> np.ndarray:
+        """Measured bins over :data:`SPIKE_FACTOR` times every measured grid neighbour
+        (theta_h, theta_d and phi_d +-1; phi_d wraps, as reciprocity makes it) in some
+        channel: indices (k, 3) into the grid, brightest first. A reflectance changes
+        by less than that from one bin to the next, even at a mirror's peak; one such
+        bin is a corrupt value, which a least-squares fit follows (a bin at 9e11 1/sr
+        made a ggx of ks 1e6). Only bins above SPIKE_FACTOR times the table's typical
+        value (the median of a sample of its measured values) are looked at."""
+        rgb, mask = self.rgb, self.mask
+        flat = rgb.reshape(3, -1)
+        sample = flat[:, ::97][:, mask.ravel()[::97]]
+        typical = float(np.median(sample)) if sample.size else 0.0
+        bright = flat.max(axis=0) > SPIKE_FACTOR * typical
+        cand = np.argwhere(mask & bright.reshape(mask.shape))
+        if cand.size == 0 or cand.shape[0] > MAX_SPIKE_CANDIDATES:
+            return np.zeros((0, 3), np.int64)
+        th, td, pd = cand.T
+        neighbour = np.full((3, cand.shape[0]), -np.inf)
+        for i, j, k in ((th - 1, td, pd), (th + 1, td, pd), (th, td - 1, pd),
+                        (th, td + 1, pd), (th, td, (pd - 1) % N_PHI_D),
+                        (th, td, (pd + 1) % N_PHI_D)):
+            inside = (i >= 0) & (i < N_THETA_H) & (j >= 0) & (j < N_THETA_D)
+            i, j = np.clip(i, 0, N_THETA_H - 1), np.clip(j, 0, N_THETA_D - 1)
+            seen = inside & mask[i, j, k]
+            neighbour = np.maximum(neighbour, np.where(seen, rgb[:, i, j, k], -np.inf))
+        value = rgb[:, th, td, pd]
+        spike = np.any(np.isfinite(neighbour)
+                       & (value > SPIKE_FACTOR * np.maximum(neighbour, 0.0)), axis=0)
+        out = cand[spike]
+        return out[np.argsort(-rgb[:, out[:, 0], out[:, 1], out[:, 2]].max(axis=0),
+                              kind="stable")]
 
     def lookup(self, wi, wo) -> np.ndarray:
         """Nearest-bin values at direction pairs (..., 3) -> (..., 3); NaN where unmeasured."""
