@@ -139,6 +139,8 @@ def test_one_channel_and_sigma(tmp_path):
      "theta_i is not finite"),
     ("a.csv", "# angles: furlongs\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n1,2,3,4,1,1,1\n",
      "unknown angle unit 'furlongs'"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,1e300,20,0,1,1,1\n",
+     "phi_i is beyond +-720 degrees in 1 row (first: row 2)"),
     # the last unit line won, and a file in degrees was read in radians
     ("a.csv", "# angles: degrees\n# angles: radians\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n"
               "1,2,3,4,1,1,1\n", "two angle units: 'degrees' (line 1) and 'radians' (line 2)"),

@@ -47,6 +47,9 @@ MAX_VALUE = 1e12
 #: Directions this far below the horizon (radians) are refused, not clamped: a
 #: gonioreflectometer's 90.000 deg in a file reads as 1.5707963 (a little over pi / 2).
 HORIZON_SLACK = 1e-6
+#: The largest |phi| read (radians): two turns, for files that measure the view's
+#: azimuth from the light's in -360..360 degrees.
+MAX_AZIMUTH = 4 * np.pi
 
 
 class MeasurementsError(MerlFormatError):
@@ -107,6 +110,15 @@ class Measurements:
             if not np.all(np.isfinite(a)):
                 raise MeasurementsError(source, f"{name} is not finite in "
                                                 f"{_first_rows(~np.isfinite(a), rows)}")
+        for name, a in (("phi_i", angles[1]), ("phi_o", angles[3])):
+            # any azimuth is within a turn of 0; one of 1e300 degrees has lost every
+            # digit of its angle (in radians, a 1e300 degrees value is 1.7e298)
+            beyond = np.abs(a) > MAX_AZIMUTH
+            if beyond.any():
+                raise MeasurementsError(
+                    source, f"{name} is beyond +-{np.degrees(MAX_AZIMUTH):.0f} degrees in "
+                            f"{_first_rows(beyond, rows)}: an azimuth is within a turn or "
+                            "two of 0 (angles in another unit?)")
         for name, a in (("theta_i", angles[0]), ("theta_o", angles[2])):
             below = a > np.pi / 2 + HORIZON_SLACK
             if below.any():
