@@ -49,6 +49,17 @@ def _location(loc) -> str:
     return ".".join(parts)
 
 
+#: The longest message an error echoes: one quoting a 900,000-character model name was
+#: a 1.8 MB answer (the name twice).
+MAX_MESSAGE = 500
+
+
+def short(text: str) -> str:
+    if len(text) <= MAX_MESSAGE:
+        return text
+    return f"{text[:MAX_MESSAGE]}... ({len(text):,} characters in all)"
+
+
 def _message(error: dict) -> tuple[list[str], str]:
     """Where and what, in a reader's words: pydantic's "Value error, " prefix goes (the
     validator's own sentence is the message), and a body that is not JSON says so and
@@ -61,7 +72,7 @@ def _message(error: dict) -> tuple[list[str], str]:
         return ["body"], f"not valid JSON{at}" + (f": {why}" if why else "")
     if error.get("type") == "value_error":
         msg = msg.removeprefix("Value error, ")
-    return loc, msg
+    return [short(p) for p in loc], short(msg)
 
 
 async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -72,7 +83,8 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
 
 
 async def _input_error(request: Request, exc: Exception) -> JSONResponse:
-    return JSONResponse({"detail": str(exc)}, status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
+    return JSONResponse({"detail": short(str(exc))},
+                        status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
 def internal_error_body(scope, exc: Exception) -> dict:

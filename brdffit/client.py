@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from datetime import datetime
 
 from brdffit import extras
+from brdffit.errors import BrdffitError
 from brdffit.export import Export  # plain data, as FitResult
 from brdffit.fitting.options import DEFAULT_MODEL
 from brdffit.fitting.result import FitResult  # plain data: a client process imports no JAX
@@ -53,6 +54,11 @@ class ApiError(ClientError):
         self.method = method
         self.url = url
         super().__init__(f"{status_code} from {method} {url}: {detail}".replace("  ", " "))
+
+
+class InvalidRequest(ClientError, ValueError):
+    """A request the library refuses before it is sent (an unknown model, a bad option),
+    with the message the server would answer with."""
 
 
 class Unreachable(ClientError):
@@ -221,7 +227,10 @@ class Client:
                 raise TypeError("give a FitRequest or keywords, not both")
             request = model
         else:
-            request = FitRequest.of(DEFAULT_MODEL if model is None else model, **keywords)
+            try:
+                request = FitRequest.of(DEFAULT_MODEL if model is None else model, **keywords)
+            except BrdffitError as e:  # the library's own check, as the server makes it
+                raise InvalidRequest(str(e)) from None
         body = {"table_id": table_id, **request.to_dict()}
         return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
 

@@ -278,8 +278,18 @@ def test_malformed_fit_bodies_are_422(http):
     assert_error(http.post("/v1/fits", json=[1, 2, 3]), 422)
     assert_error(http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, "colour": "red"}), 422,
                  "colour")
-    r = http.post("/v1/fits", content=b"table_id=1", headers={"Content-Type": "text/plain"})
-    assert 400 <= r.status_code < 500
+    # a JSON request sent as text or a form: said so (it was 422 'Input should be a valid
+    # dictionary', which names no fault the sender can see)
+    for media in ("text/plain", "application/x-www-form-urlencoded", None):
+        r = http.post("/v1/fits", content=b'{"table_id": "1", "model": "ggx"}',
+                      headers={} if media is None else {"Content-Type": media})
+        assert_error(r, 415, "a fit request is a JSON object, sent as application/json")
+    # NaN and 1e999 (inf) are not finite, whatever the range says
+    for number in ("NaN", "1e999"):
+        r = http.post("/v1/fits", content=f'{{"table_id": "{UNKNOWN_TABLE}", "models": "auto", '
+                                           f'"rule": {{"tolerance": {number}}}}}'.encode(),
+                      headers={"Content-Type": "application/json"})
+        assert_error(r, 422, "finite number")
 
 
 def test_fit_runs_and_plots_wait_for_it(http, table_id):
@@ -613,3 +623,10 @@ def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
         c.upload(bad)
     assert e.value.status_code == 422
     assert "bad.csv: theta_o is below the horizon" in e.value.detail
+
+
+def test_an_error_quotes_at_most_a_few_hundred_characters_of_the_input(http, table_id):
+    """A 900,000-character model name was quoted whole, twice: a 1.8 MB answer."""
+    r = http.post("/v1/fits", json={"table_id": table_id, "models": "g" * 900_000})
+    assert_error(r, 422, "characters in all")
+    assert len(r.content) < 4000

@@ -688,6 +688,11 @@ def test_find_tables(table_dir, tmp_path):
     (["--models", "ggx,nope"], "unknown model 'nope'"),
     (["--models", "ggx", "--samples", "10"], "samples must be an integer in 64 .."),
     (["--models", "ggx", "--workers", "-1"], "workers must be an integer >= 0"),
+    (["--models", "ggx", "--checkpoint", "-5"], "checkpoint must be a number of seconds >= 0"),
+    (["--models", "ggx", "--checkpoint", "nan"], "checkpoint must be a number of seconds >= 0"),
+    # the cluster is reached before the file is made: it was made, and a resumed file's
+    # models and options rewritten, by a run refused for its address
+    (["--models", "ggx", "--scheduler", "notaurl"], "missing port number in address"),
 ])
 def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
     code = cli_main(["batch", str(table_dir), "--out", str(tmp_path / "r.h5"), *argv])
@@ -779,3 +784,32 @@ def test_the_summary_line_counts_in_words():
     assert summary_line(many).endswith("6 fits on 3 tables in 3s; 2 tables were already done")
     fresh = BatchSummary("out.h5", tables=2, fits=4, elapsed_s=3.1)
     assert summary_line(fresh).endswith("; none was done before")
+
+
+def test_a_file_of_a_newer_format_is_named_so(tmp_path):
+    import h5py
+
+    from brdffit.batch.store import read_looks
+
+    out = tmp_path / "r.h5"
+    with BatchStore(out) as store:
+        store.checkpoint()
+    with h5py.File(out, "r+") as f:
+        f.attrs["format_version"] = 99
+    with pytest.raises(BatchFileError, match=r"r.h5: written by a newer brdffit \(format "
+                                              r"version 99; this one reads up to 1\)"):
+        read_looks(out)
+
+
+def test_batch_report_refuses_a_png_it_would_write_elsewhere(tmp_path):
+    """matplotlib wrote --png summary as summary.png (and --png DIR as DIR.png) and the
+    report said it wrote the name given: refused before the report, in one line."""
+    from brdffit.cli.batch_report import _png_path
+    from brdffit.errors import BrdffitError
+
+    for path, says in ((tmp_path, "a folder"), (tmp_path / "summary", "name it FILE.png"),
+                       (tmp_path / "x.txt", "name it FILE.png"),
+                       (tmp_path / "no" / "x.png", "does not exist")):
+        with pytest.raises(BrdffitError, match=says):
+            _png_path(str(path))
+    assert _png_path(str(tmp_path / "s.PNG")) == str(tmp_path / "s.PNG")

@@ -92,7 +92,10 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
          "viewer 'threejs': the glTF export is made for spec, threejs"),
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
          "No such file"),
-        ([str(tmp_path / "missing.json"), "--to", "gltf"], "No such file"),
+        # the path and what is wrong, not Python's "[Errno 2] ...: 'path'"
+        ([str(tmp_path / "missing.json"), "--to", "gltf"],
+         f"brdffit: error: {tmp_path / 'missing.json'}: no such file or directory"),
+        ([str(tmp_path), "--to", "gltf"], f"brdffit: error: {tmp_path}: is a directory"),
         # refused before the export, naming the flag
         ([str(fit_json), "--to", "gltf", "--out", str(bad / "sub")],
          f"--out {bad / 'sub'}: cannot make the folder (Not a directory)"),

@@ -145,6 +145,10 @@ def test_user_init_is_used(synth_tables):
         ({"starts": True}, "starts"),
         ({"samples": 4096.0}, "samples"),
         ({"init": {"kd": "a"}}, "init: lambert: kd must be a number or three, got 'a'"),
+        # numpy reads these as 0.5 and 1.0: a hand-edited result's alpha: true was a roughness
+        ({"init": {"kd": "0.5"}}, "init: lambert: kd must be a number or three, got '0.5'"),
+        ({"init": {"kd": True}}, "init: lambert: kd must be a number or three, got True"),
+        ({"init": {"kd": [0.5, "0.5", 0.5]}}, "kd must be a number or three"),
     ],
 )
 def test_bad_options_raise_input_errors(kwargs, message, synth_tables):

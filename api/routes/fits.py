@@ -16,7 +16,7 @@ from datetime import UTC, datetime
 from enum import Enum
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Path, Query, Response, status
+from fastapi import APIRouter, Depends, HTTPException, Path, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from pydantic import (
     BaseModel,
@@ -32,7 +32,7 @@ from pydantic import (
 
 from api import tasks
 from api.deps import QueueDep, RunnerDep, SettingsDep, StoreDep, require_token
-from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.errors import ERROR_RESPONSES, ErrorMessage, short
 from api.runner import WorkerLost
 from api.services import fits
 from api.store import STATUSES, JobRecord, Store
@@ -76,8 +76,10 @@ def _contract_field(name: str, of: type = options.FitOptions):
         default, description = None, opt.doc + "; null for the default"
     else:
         description = opt.doc + (f"; null for {opt.none}" if opt.none is not None else "")
+    # a NaN or 1e999 (inf) is refused as not finite, not as "less than or equal to 10"
+    finite = {"allow_inf_nan": False} if opt.kind is float else {}
     return annotation, Field(default, ge=opt.least, gt=opt.above, le=opt.most,
-                             description=description,
+                             description=description, **finite,
                              **({"max_length": 32} if opt.kind is tuple else {}))
 
 
@@ -263,11 +265,23 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
     return job, result
 
 
+def json_body(request: Request) -> None:
+    """A fit request is JSON: one sent as text/plain or a form was answered 422 'Input
+    should be a valid dictionary', which names no fault the sender can see."""
+    media = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if media != "application/json" and not media.endswith("+json"):
+        raise HTTPException(status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
+                            f"Content-Type {media or 'none'!r}: a fit request is a JSON "
+                            "object, sent as application/json")
+
+
 @router.post(
     "",
     status_code=status.HTTP_202_ACCEPTED,
     summary="Queue a fit",
+    dependencies=[Depends(json_body)],
     responses={
+        415: {"model": ErrorMessage, "description": "the body is not sent as JSON"},
         202: {"description": "queued", "links": {
             "GetFit": {"operationId": "get_fit", "parameters": {"job_id": "$response.body#/id"}},
             "GetPlot": {"operationId": "get_plot", "parameters": {"job_id": "$response.body#/id"}},
@@ -282,7 +296,7 @@ def create_fit(body: FitJobRequest, response: Response, store: StoreDep, queue: 
     except fits.TableNotFound as e:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(e)) from None
     except (fits.OverLimits, FitInputError) as e:
-        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(e)) from None
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, short(str(e))) from None
     queue.notify()
     response.headers["Location"] = f"/v1/fits/{job.id}"
     return _out(job)
@@ -387,7 +401,7 @@ async def get_plot(
     runner: RunnerDep,
     model: FitModel = None,
     exposure_ev: Annotated[float, Query(
-        ge=EXPOSURE_EV_RANGE[0], le=EXPOSURE_EV_RANGE[1], multiple_of=0.25,
+        ge=EXPOSURE_EV_RANGE[0], le=EXPOSURE_EV_RANGE[1], multiple_of=0.25, allow_inf_nan=False,
         description="stops brighter (+) or darker (-) than the one exposure the sphere "
                     "renders share, applied before tone mapping; for spheres and report "
                     "only")] = 0.0,

@@ -25,6 +25,7 @@ import concurrent.futures
 import contextlib
 import glob
 import hashlib
+import math
 import os
 import threading
 import time
@@ -352,6 +353,10 @@ def run_batch(
     model_names = list(request.fitted_models)
     if not scheduler and (not isinstance(workers, int) or workers < 0):
         raise BatchInputError(f"workers must be an integer >= 0, got {workers!r}")
+    if not (isinstance(checkpoint_s, int | float) and math.isfinite(checkpoint_s)
+            and checkpoint_s >= 0):  # 0: after every result
+        raise BatchInputError(f"checkpoint must be a number of seconds >= 0, got "
+                              f"{checkpoint_s!r}")
     if scheduler or workers:
         require_dask()  # before the results file is created
     paths = find_tables(inputs, exclude=[out])
@@ -363,7 +368,11 @@ def run_batch(
         "engine": scheduler or ("in-process" if workers == 0 else f"local:{workers}"),
     }
 
-    with BatchStore(out) as store:
+    # an existing cluster is reached before the results file is touched: an address
+    # that is wrong or down is refused with nothing written (it rewrote a resumed
+    # file's models and options to the refused run's)
+    with (connect(workers, scheduler) if scheduler else contextlib.nullcontext()) as remote, \
+            BatchStore(out) as store:
         summary.recovered = store.recovered
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
@@ -412,7 +421,8 @@ def run_batch(
             elif tasks:
                 # closing(): on an interrupt the generator cancels its futures while
                 # the client is still connected, not whenever it is collected.
-                with connect(workers, scheduler) as client, contextlib.closing(
+                with (contextlib.nullcontext(remote) if remote is not None
+                      else connect(workers, scheduler)) as client, contextlib.closing(
                         _run_on_dask(client, tasks, request, timeout_s)) as results:
                     take(results)
         finally:

@@ -436,10 +436,11 @@ def _open(path: str) -> h5py.File:
     if f.attrs.get("format") != FORMAT:
         f.close()
         raise BatchFileError(f"{path}: an HDF5 file, but not a brdffit batch results file")
-    if int(f.attrs.get("format_version", 0)) > FORMAT_VERSION:
-        f.close()
+    version = int(f.attrs.get("format_version", 0))
+    if version > FORMAT_VERSION:
+        f.close()  # the version is read before: a closed file's attributes are gone
         raise BatchFileError(f"{path}: written by a newer brdffit (format version "
-                             f"{int(f.attrs['format_version'])})")
+                             f"{version}; this one reads up to {FORMAT_VERSION})")
     return f
 
 

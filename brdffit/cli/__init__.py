@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Collection
 from types import ModuleType
@@ -114,7 +115,10 @@ def main(argv: list[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
-    except (ValueError, OSError) as e:  # bad option values, unreadable paths
+    except OSError as e:  # unreadable paths, a full disk
+        print(f"brdffit: error: {_os_error_words(e)}", file=sys.stderr)
+        return EXIT_INPUT
+    except ValueError as e:  # bad option values
         print(f"brdffit: error: {e}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
@@ -122,6 +126,17 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+
+
+def _os_error_words(e: OSError) -> str:
+    """An OSError as a person reads it: the path and what is wrong, not Python's
+    ``[Errno 21] Is a directory: '.part-nns7hir4' -> 'ok_ggx.xml'`` (where a file is
+    written through a temporary and renamed, the path meant is the target)."""
+    if e.strerror is None:
+        return str(e)
+    path = e.filename2 if e.filename2 is not None else e.filename
+    what = e.strerror[:1].lower() + e.strerror[1:]
+    return f"{os.fsdecode(path)}: {what}" if path is not None else what
 
 
 def console() -> None:

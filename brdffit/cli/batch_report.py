@@ -7,6 +7,7 @@ import sys
 from brdffit import extras, jsonout
 from brdffit.batch.report import format_ranking, plot_summary, rank
 from brdffit.cli.fit import add_option_arguments, rule_from_args
+from brdffit.errors import BrdffitError
 from brdffit.fitting.options import SelectionRule
 
 
@@ -21,8 +22,10 @@ def add_arguments(p) -> None:
 
 def run(args) -> int:
     args.tolerance = (rule_from_args(args) or SelectionRule()).tolerance  # checked as anywhere
+    png = None
     if not args.no_png:
         extras.require("plots", "brdffit batch-report's figure", hint="--no-png prints only")
+        png = _png_path(args.png or (args.results.removesuffix(".h5") + ".summary.png"))
     ranking = rank(args.results)
     if args.json:
         # A model with no successful fit has mean and median NaN: null in JSON.
@@ -42,8 +45,26 @@ def run(args) -> int:
         sys.stdout.write("\n")
     else:
         print(format_ranking(ranking, args.results, args.tolerance))
-    if not args.no_png:
-        png = args.png or (args.results.removesuffix(".h5") + ".summary.png")
-        plot_summary(ranking, png, source=args.results)
+    if png is not None:
+        try:
+            plot_summary(ranking, png, source=args.results)
+        except OSError as e:
+            raise BrdffitError(f"--png {png}: cannot write it ({e.strerror or e})") from None
         print(f"wrote {png}", file=sys.stderr)
     return 0
+
+
+def _png_path(path: str) -> str:
+    """``--png``'s file, refused before the report is printed: a folder, another suffix
+    (matplotlib wrote ``summary`` as ``summary.png`` and said it wrote ``summary``) or a
+    folder that does not exist."""
+    import os
+
+    if os.path.isdir(path):
+        raise BrdffitError(f"--png {path}: a folder; name the figure's file (FILE.png)")
+    if not path.lower().endswith(".png"):
+        raise BrdffitError(f"--png {path}: the figure is a PNG; name it FILE.png")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise BrdffitError(f"--png {path}: the folder {folder} does not exist")
+    return path

@@ -126,7 +126,10 @@ class Option:
                           if x is not None]
                 text += (" " + " and ".join(bounds)) if bounds else ""
         if self.none is not None:
-            text += f", or {none_word} ({self.none})"
+            # one message for every caller: a command line spells None its own way
+            spelled = (f"{none_word} or {self.cli_none}" if none_word == "None" and self.cli_none
+                       else none_word)
+            text += f", or {spelled} ({self.none})"
         return text
 
 

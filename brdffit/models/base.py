@@ -295,6 +295,10 @@ class AbstractBRDFModel(eqx.Module):
             if spec.name not in params:
                 raise ValueError(f"{self.name}: missing parameter {spec.name!r}")
             try:
+                # numbers only: numpy reads "0.15" as 0.15 and True as 1.0, and an
+                # export of a hand-edited result took alpha: true as a roughness of 1
+                if np.asarray(params[spec.name]).dtype.kind not in "iuf":
+                    raise TypeError
                 v = np.asarray(params[spec.name], dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValueError(f"{self.name}: {spec.name} must be a number"
