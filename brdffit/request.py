@@ -96,10 +96,11 @@ class FitRequest:
             # The rule only chooses among auto's candidates: with a fixed model it
             # would be silently ignored, so it is refused, naming what to do instead.
             given = [f"{k} {v!r}" for k, v in self.rule.to_dict().items()
-                     if v != SelectionRule().to_dict()[k]] or ["a selection rule"]
+                     if v != SelectionRule().to_dict()[k]]
+            what = f"the selection rule ({', '.join(given)})" if given else "a selection rule"
             raise FitInputError(
-                f"{', '.join(given)} choose among auto's candidates; with model "
-                f"{', '.join(self.models)} they would be ignored: drop them, or fit model auto")
+                f"{what} chooses among auto's candidates; with model "
+                f"{', '.join(self.models)} it would be ignored: drop it, or fit model auto")
 
     @classmethod
     def of(cls, model=DEFAULT_MODEL, *, scene: Scene | dict | None = None,

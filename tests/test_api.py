@@ -347,7 +347,8 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     assert done["status"] == "done", done
     assert {x["model"] for x in done["results"]} == {"ggx", "ggx_mono"}
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "ggx", "options": {
-        **FAST, "mono_ks": True}}), 422, "mono_ks True choose among auto's candidates")
+        **FAST, "mono_ks": True}}), 422,
+        "the selection rule (mono_ks True) chooses among auto's candidates")
 
     def libraries(pid=None):
         return {part for f in server.mapped_files(pid) if ".so" in f for part in Path(f).parts
@@ -579,7 +580,8 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     settings = Settings(data_dir=tmp_path, max_job_estimate_s=60.0)
     with pytest.raises(fits.TableNotFound, match="upload it with POST /v1/tables"):
         fits.create(store, settings, "b" * 64, {"models": "ggx"})
-    with pytest.raises(FitInputError, match="tolerance 0.02 choose among auto's candidates"):
+    with pytest.raises(FitInputError, match=r"the selection rule \(tolerance 0.02\) chooses "
+                                            r"among auto's candidates"):
         fits.create(store, settings, "a" * 64, {"models": "ggx", "rule": {"tolerance": 0.02}})
     with pytest.raises(fits.OverLimits) as over:
         fits.create(store, settings, "a" * 64, {"models": "auto", "options": {

@@ -348,6 +348,9 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
         assert ranked.chosen()[0] == library["selection"]["chosen"]
         assert read_fit(tmp_path / "r.h5", ranked.name)["selection"] == stored[
             library["model"]]["fit"]["selection"]
+        # "auto" names that choice, as the service's ?model=auto does (it had "no auto fit")
+        assert read_fit(tmp_path / "r.h5", ranked.name, "auto") == read_fit(
+            tmp_path / "r.h5", ranked.name)
 
 
 def test_fit_seed_reaches_the_fit(noisy_table):

@@ -520,8 +520,9 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
 
     ``table``: its group name (``brdffit batch-report`` shows it), the path it was
     read from, or that path's file name (with or without ``.binary``); ``model``: the
-    fitted model, or None for the table's best fit (auto's choice where the batch fitted
-    auto, else the lowest ``log_rmse``: ``brdffit.selection.chosen_result``). Raises
+    fitted model, or None (or ``"auto"``) for the table's best fit (auto's choice where
+    the batch fitted auto, else the lowest ``log_rmse``:
+    ``brdffit.selection.chosen_result``). Raises
     :class:`BatchFileError` naming what the file holds when there is no such table,
     no such model, or the fit failed.
     """
@@ -534,6 +535,8 @@ def read_fit(path: str | os.PathLike, table: str, model: str | None = None) -> d
             raise BatchFileError(f"{path}: table {name!r} was not fitted: "
                                  f"{_plain(g.attrs.get('message', '')) or 'it failed to read'}")
         fits = {m: {k: _plain(v) for k, v in g[m].attrs.items()} for m in g}
+        if model == "auto" and "auto" not in fits:
+            model = None  # auto's choice, as the service's ?model=auto of an auto job
         if model is None:
             ok = {m: a for m, a in fits.items() if a.get("status") == "ok" and "fit_json" in a}
             if not ok:
