@@ -10,6 +10,7 @@ logged with its traceback, and the server carries on.
 from __future__ import annotations
 
 import logging
+import re
 import sqlite3
 
 from fastapi import FastAPI, Request, status
@@ -75,8 +76,32 @@ def _message(error: dict) -> tuple[list[str], str]:
     return [short(p) for p in loc], short(msg)
 
 
+#: The last part of a location that names a union's member, not a field: pydantic reports
+#: ``"models": null`` as "models.str: ...; models.list[str]: ...".
+_UNION_MEMBER = re.compile(r"^(str|int|float|bool|none|list\[.*\]|dict\[.*\])$")
+
+
+def _unions_merged(errors: list[dict]) -> list[dict]:
+    """One message per field for a value that fits none of a union's members: "models:
+    Input should be a valid string, or Input should be a valid list"."""
+    merged: dict[tuple, dict] = {}
+    for e in errors:
+        loc = e["loc"]
+        if len(loc) > 1 and _UNION_MEMBER.match(loc[-1]):
+            key = tuple(loc[:-1])
+            if key in merged:
+                merged[key]["msg"] += f", or {e['msg']}"
+                continue
+            e = {"loc": list(key), "msg": e["msg"]}
+        else:
+            key = (id(e),)
+        merged[key] = e
+    return list(merged.values())
+
+
 async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
-    errors = [dict(zip(("loc", "msg"), _message(e), strict=True)) for e in exc.errors()]
+    errors = _unions_merged([dict(zip(("loc", "msg"), _message(e), strict=True))
+                             for e in exc.errors()])
     detail = "; ".join(f"{_location(e['loc'])}: {e['msg']}" for e in errors) or "invalid request"
     return JSONResponse({"detail": detail, "errors": errors},
                         status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)

@@ -181,6 +181,10 @@ async def upload_table(
             parser = MultiPartParser(request.headers, body, max_files=1, max_fields=8)
             form = await parser.parse()
             upload = form.get("file")
+            if not form:  # python-multipart yields no parts for a body cut before its end
+                raise HTTPException(status.HTTP_400_BAD_REQUEST,
+                                    "malformed multipart body: no complete part (was it cut "
+                                    "short?); the table goes in a 'file' field")
             if not isinstance(upload, UploadFile):
                 raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                                     "the multipart body needs the table in a 'file' field")
