@@ -425,6 +425,11 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     assert for_three.fidelity["target_model"] == "gltf_threejs"
     assert not for_three.fidelity["exact"]
     assert any(w.startswith("refitted: gltf_threejs") for w in for_three.warnings)
+    # three.js's model asked for by name is three.js's export (it was a conversion that
+    # no viewer's refit made)
+    by_name = export(r, "gltf", table=measured, target_model="gltf_threejs")
+    assert by_name.target_params == for_three.target_params
+    assert by_name.warnings == for_three.warnings
     # the refit is three.js's optimum: no worse there than the spec's file
     assert (for_three.fidelity["viewers"]["threejs"]["log_rmse_to_table"]
             <= three["log_rmse_to_table"] * 1.001)

@@ -215,6 +215,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
     module = spec.module
+    viewer = _implied_viewer(spec, viewer, target_model)
     target_model = _viewer_model(spec, viewer, target_model, result)
     if target_model is not None and target_model not in spec.shaded_as:
         raise ExportError(f"{target} carries {', '.join(spec.shaded_as)}, not {target_model!r}")
@@ -297,6 +298,17 @@ def _looks_warning(result: FitResult) -> list[str]:
     hint = f"; next: {steps[0]['try']}" if steps else ""
     return [f"the {result.model} fit looks {look['verdict']} beside its table "
             f"({look.get('reason', '')}){hint}"]
+
+
+def _implied_viewer(target: ExportTarget, viewer: str, target_model: str | None) -> str:
+    """The viewer an export is made for: a viewer's own model asked for without a viewer
+    (``"spec"``, the default) is that viewer's export, refitted for its shading as
+    ``viewer=`` makes it. It was a conversion to three.js's model that no viewer's fit
+    made, while ``viewer="threejs"`` with Blender's model was refused."""
+    by_viewer = getattr(target.module, "VIEWER_MODELS", {})
+    if viewer != "spec" or target_model is None or target_model in by_viewer.get("spec", ()):
+        return viewer
+    return next((v for v, names in by_viewer.items() if target_model in names), viewer)
 
 
 def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
