@@ -16,7 +16,7 @@ from brdffit.models.base import KD, KS
 from brdffit.models.ggx import GGX
 from brdffit.models.microfacet import ALPHA, F0, dielectric_fresnel
 from data_synth import DEFAULT_PARAMS, make_table
-from tests.compiled_models import evaluate
+from tests.compiled_models import check_jit, evaluate
 
 pytestmark = pytest.mark.unit
 
@@ -157,11 +157,11 @@ def test_ggx2_derivatives_match_plain_autodiff():
     u = jnp.asarray(np.random.default_rng(2).normal(size=m.n_params))
     # jitted: op by op, each primitive of the four derivatives compiled on its own (~10 s)
     for fn in (jax.jacfwd, jax.jacrev):
-        a = jax.jit(fn(lambda u: custom(m.constrain(u), wi)))(u)
-        b = jax.jit(fn(lambda u: plain(m.constrain(u), wi)))(u)
+        a = check_jit(fn(lambda u: custom(m.constrain(u), wi)), comparison=True)(u)
+        b = check_jit(fn(lambda u: plain(m.constrain(u), wi)), comparison=True)(u)
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-14)
-    ga = jax.jit(jax.grad(lambda w: jnp.sum(custom(m.constrain(u), w))))(wi)
-    gb = jax.jit(jax.grad(lambda w: jnp.sum(plain(m.constrain(u), w))))(wi)
+    ga = check_jit(jax.grad(lambda w: jnp.sum(custom(m.constrain(u), w))), comparison=True)(wi)
+    gb = check_jit(jax.grad(lambda w: jnp.sum(plain(m.constrain(u), w))), comparison=True)(wi)
     np.testing.assert_allclose(np.asarray(ga), np.asarray(gb), rtol=1e-10, atol=1e-14)
 
 
@@ -258,7 +258,7 @@ def test_values_and_gradients_are_finite(name):
     wi = jnp.asarray(np.array([p[0] for p in pairs]))
     wo = jnp.asarray(np.array([p[1] for p in pairs]))
 
-    @jax.jit  # one program: op by op, every primitive compiles on its own
+    @check_jit  # one program: op by op, every primitive compiles on its own
     def values_and_gradients(u, wi):
         return (m(m.constrain(u), wi, wo),
                 jax.grad(lambda u: jnp.sum(m(m.constrain(u), wi, wo)))(u),

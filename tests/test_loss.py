@@ -12,16 +12,16 @@ from brdffit.fitting import loss, pipeline, sampling
 from brdffit.fitting import problem as fitting
 from brdffit.request import FitRequest
 from data_synth import make_table
-from tests.compiled_models import evaluate
+from tests.compiled_models import check_jit, evaluate
 from tests.truths import TRUTH
 
 pytestmark = pytest.mark.unit
 
 # The two sides of each comparison, compiled: op by op, every primitive of a Jacobian
 # compiles on its own (seconds per model in a new process), and fits run them compiled.
-normal_equations = eqx.filter_jit(loss.normal_equations)
-generic_normal_equations = eqx.filter_jit(loss._generic_normal_equations)
-one_pass_normal_equations = eqx.filter_jit(loss._normal_equations)
+normal_equations = check_jit(loss.normal_equations, comparison=True)
+generic_normal_equations = check_jit(loss._generic_normal_equations, comparison=True)
+one_pass_normal_equations = check_jit(loss._normal_equations, comparison=True)
 # the metrics and the loss alike: one compiled program each, as the fit runs them
 sum_squares = eqx.filter_jit(loss.sum_squares)
 
@@ -456,7 +456,6 @@ def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
     """The residuals' Jacobian taken one parameter at a time (the solver's, for every
     model without the closed form) is ``jacfwd``'s of the whole, to rounding, at a
     random point and on random directions."""
-    import equinox as eqx
     import jax
 
     model = models.get(name)
@@ -475,9 +474,9 @@ def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
                                exposure=jnp.full((3, 1), 2.0), energy=jnp.full((3, 1), 0.2))):
         # compiled, each a program: op by op, their thousands of small programs took
         # longer to dispatch (and to load from the cache) than these take to compile
-        r, jac = eqx.filter_jit(loss.residual_jacobian)(u, (model, data))
-        whole = eqx.filter_jit(jax.jacfwd(
-            lambda w, d: loss.residuals(w, (model, d)).reshape(-1)))(u, data)
+        r, jac = check_jit(loss.residual_jacobian, comparison=True)(u, (model, data))
+        whole = check_jit(jax.jacfwd(
+            lambda w, d: loss.residuals(w, (model, d)).reshape(-1)), comparison=True)(u, data)
         assert jac.shape == whole.shape and whole.shape[1] == model.n_params
         np.testing.assert_allclose(np.asarray(r),
                                    np.asarray(loss.residuals(u, (model, data))).ravel(),

@@ -23,6 +23,7 @@ from brdffit.fitting.loss import residuals
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bin_weights, stratified_sample, usable_bins
 from brdffit.fitting.solver import MAX_STEP
 from data_synth import nbrdf
+from tests.compiled_models import check_jit
 
 pytestmark = pytest.mark.system
 
@@ -53,11 +54,11 @@ def _independent_decrement(table, model_name, params, samples=DEFAULT_SAMPLES, s
     data = fitting.sample_data(table, ss.index, ss.weight)
     u = np.asarray(m.unconstrain(m.check_params(params)))
 
-    def r_of(v):
-        return residuals(v, (m, data)).ravel()
+    def r_of(v, d):  # the data as arguments: one program per model, not per table
+        return residuals(v, (m, d)).ravel()
 
-    r = np.asarray(jax.jit(r_of)(u))
-    jac = np.asarray(jax.jit(jax.jacfwd(r_of))(u))
+    r = np.asarray(check_jit(r_of)(u, data))
+    jac = np.asarray(check_jit(jax.jacfwd(r_of))(u, data))
     side = np.asarray(m.bound_side(u))
     # a coordinate in a flat tail whose descent and Gauss-Newton step point out of
     # range, by more than one capped step, is held at its bound (KKT)

@@ -9,7 +9,6 @@ import os
 import subprocess
 import sys
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -24,6 +23,7 @@ from brdffit.models.base import (
     with_shared_programs,
 )
 from brdffit.models.mono_ks import MonoKs
+from tests.compiled_models import check_jit
 
 pytestmark = pytest.mark.unit
 
@@ -47,7 +47,7 @@ def _params(model, seed=0):
     return model.constrain(jnp.asarray(u))
 
 
-@eqx.filter_jit  # one program per model: op by op, every primitive compiles on its own
+@check_jit  # one program per model: op by op, every primitive compiles on its own
 def _values_and_gradient(m, p, u, wi, wo):
     def loss(u):
         return jnp.sum(jnp.log1p(m.eval_channels(m.constrain(u), _frame(wi, wo))))

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -22,6 +21,7 @@ from brdffit.models.renderer_terms import conductor_fresnel
 from tests.compiled_models import (
     assert_finite_transform_gradients,
     assert_finite_values_and_gradients,
+    check_jit,
     evaluate,
 )
 from tests.test_models import _albedo, _jnp  # the same midpoint albedo and parameter cast
@@ -46,7 +46,7 @@ def _pairs(n, seed=0):
     return v[0], v[1]
 
 
-@eqx.filter_jit  # one program: op by op, every primitive compiles on its own
+@check_jit  # one program: op by op, every primitive compiles on its own
 def _pseudocode_channels(model, params, wi, wo):
     return model.pseudocode_channels(params, shading_frame(wi, wo))
 
@@ -298,8 +298,9 @@ def test_rough_plastic_interface_derivatives_are_autodiffs():
     def direct(a, e):
         return transmittance_table(a, e), internal_reflectance(a, e)
 
-    ours_jvp = jax.jit(lambda p, t: jax.jvp(interface_terms, p, t))  # compiled, not op by op
-    theirs_jvp = jax.jit(lambda p, t: jax.jvp(direct, p, t))
+    # compiled, not op by op
+    ours_jvp = check_jit(lambda p, t: jax.jvp(interface_terms, p, t), comparison=True)
+    theirs_jvp = check_jit(lambda p, t: jax.jvp(direct, p, t), comparison=True)
     for point, tangent in (((0.2, 1.5), (1.0, 0.0)), ((0.6, 2.1), (0.3, -0.7))):
         primals = tuple(jnp.asarray(x) for x in point)
         tangents = tuple(jnp.asarray(x) for x in tangent)
