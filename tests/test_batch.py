@@ -600,6 +600,34 @@ def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     assert json.loads(read_results(out)["attrs"]["request"])["scene"]["name"] == "camera-normal"
 
 
+def test_a_fit_whose_stored_result_is_damaged_is_fitted_again(tmp_path, capsys):
+    """A fit the index calls done but whose stored result does not read back (a disk
+    error, a bit flipped) is fitted again on resume, and said so; it was kept as done,
+    and every report of the file then failed on it."""
+    import h5py
+
+    d, opts = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    first = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                      progress=False)
+    assert first.ok and first.fits == 2
+    with h5py.File(out, "r+") as f:
+        f["tables/m1/lambert"].attrs["fit_json"] = '{"model": "lambert", "par'
+    with pytest.raises(BatchFileError, match="damaged"):
+        read_results(out)
+    second = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
+                       progress=False)
+    assert second.fits == 1 and second.skipped == 1 and second.damaged == 1
+    assert all(t["fits"]["lambert"]["fit"]["model"] == "lambert"
+               for t in read_results(out)["tables"])
+    with h5py.File(out, "r+") as f:
+        del f["tables/m0/lambert"].attrs["fit_json"]
+    capsys.readouterr()
+    assert cli_main(["batch", str(d), "--models", "lambert", "--samples", "1024", "--starts",
+                     "1", "--out", str(out), "--quiet"]) == 0
+    assert "fitted again: 1 fit whose stored result did not read back" in capsys.readouterr().err
+
+
 def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
     """brdffit batch's SIGINT/SIGTERM handler sets ``job.stop_requested`` beside the
     KeyboardInterrupt it raises. Python drops that exception where it cannot raise it

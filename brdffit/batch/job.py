@@ -84,6 +84,7 @@ class BatchSummary:
     failed_tables: list[tuple[str, str]] = field(default_factory=list)
     failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
     recovered: int = 0  # journal records of an interrupted run folded into the file
+    damaged: int = 0  # fits whose stored result did not read back: fitted again
     elapsed_s: float = 0.0
 
     @property
@@ -374,6 +375,7 @@ def run_batch(
     with (connect(workers, scheduler) if scheduler else contextlib.nullcontext()) as remote, \
             BatchStore(out) as store:
         summary.recovered = store.recovered
+        summary.damaged = len(store.damaged)
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
         tasks, summary.skipped = _plan(paths, model_names, request.fit_key(), store, refit)

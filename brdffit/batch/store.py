@@ -158,6 +158,7 @@ class BatchStore:
         self._pending: list[dict] = []  # journaled, not yet in the HDF5 file
         self._journal_fd: int | None = None
         self.recovered = 0  # records replayed from a previous run's journal
+        self.damaged: list[tuple[str, str]] = []  # (table path, model) fitted again
 
     # -- opening, closing ------------------------------------------------------------
 
@@ -182,6 +183,7 @@ class BatchStore:
                 for t in self._tables.values():
                     self._names[t.path] = t.name
                     self._taken.add(t.name)
+                self.damaged = _unreadable_fits(self.path, self._tables)
             for stale in glob.glob(glob.escape(self._tmp_prefix) + "*"):
                 os.unlink(stale)  # a checkpoint a kill interrupted; we hold the lock
             self._replay_journal()
@@ -457,6 +459,25 @@ def _reading(path: str):
         except (OSError, KeyError, ValueError, TypeError, AttributeError, RuntimeError) as e:
             raise BatchFileError(f"{path}: a damaged batch results file ({type(e).__name__}: "
                                  f"{' '.join(str(e).split())})") from None
+
+
+def _unreadable_fits(path: str, tables: dict[str, TableEntry]) -> list[tuple[str, str]]:
+    """The fits the index calls done whose stored result does not read back (a disk
+    error, a bit flipped): marked ``damaged`` in ``tables``, so that a resume fits them
+    again instead of keeping a result nobody can read. One attribute read per fit."""
+    damaged = []
+    with _reading(path) as f:
+        groups = f.get("tables")
+        for t in tables.values():
+            for model, entry in t.fits.items():
+                if entry.status != "ok":
+                    continue
+                try:
+                    json.loads(_plain(groups[t.name][model].attrs["fit_json"]))
+                except (KeyError, TypeError, ValueError, OSError, RuntimeError):
+                    entry.status = "damaged"
+                    damaged.append((t.path, model))
+    return damaged
 
 
 def read_attrs(path: str | os.PathLike) -> dict:

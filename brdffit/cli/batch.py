@@ -120,6 +120,9 @@ def run(args) -> int:
                 signal.signal(sig, handler)
     if s.recovered:
         print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
+    if s.damaged:
+        print(f"fitted again: {_count(s.damaged, 'fit')} whose stored result did not read back "
+              "(a damaged file)", file=sys.stderr)
     print(summary_line(s))
     if s.ok:
         return 0
