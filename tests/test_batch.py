@@ -721,6 +721,10 @@ def test_find_tables(table_dir, tmp_path):
     # the cluster is reached before the file is made: it was made, and a resumed file's
     # models and options rewritten, by a run refused for its address
     (["--models", "ggx", "--scheduler", "notaurl"], "missing port number in address"),
+    # a port nobody listens on is said at once (the client retried it for 30 s, then
+    # said "Timed out")
+    (["--models", "ggx", "--scheduler", f"tcp://127.0.0.1:{free_port()}"],
+     "nothing listens there (Connection refused)"),
 ])
 def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
     code = cli_main(["batch", str(table_dir), "--out", str(tmp_path / "r.h5"), *argv])

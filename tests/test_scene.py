@@ -152,6 +152,18 @@ def test_bad_scene_files(tmp_path):
         Scene.from_file(tmp_path / "points.json")
 
 
+def test_a_scene_name_is_short_text_and_angles_are_numbers():
+    # a 100,000-character name made a 508 KB job record; True was read as 1 degree
+    assert Scene.from_dict({"name": "n" * 255}).name == "n" * 255
+    for name, words in (("n" * 256, "got 256 characters"), ("", "got 0 characters"),
+                        (7, "got 7"), (None, "got None")):
+        with pytest.raises(SceneError, match=f"text of 1 to 255 characters, {words}"):
+            Scene.from_dict({"name": name})
+    for key in ("max_theta_i", "max_theta_o", "spread"):
+        with pytest.raises(SceneError, match=f"scene {key} must be in .* got True"):
+            Scene.from_dict({key: True})
+
+
 def test_from_options_combines_and_overrides():
     assert Scene.from_options() is None
     s = Scene.from_options(preset="camera-normal", max_theta_i=40)

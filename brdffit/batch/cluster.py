@@ -20,6 +20,7 @@ import concurrent.futures
 import contextlib
 import logging
 import os
+import socket
 from collections.abc import Iterator
 
 from brdffit import extras
@@ -72,6 +73,10 @@ def connect(workers: int = 1, scheduler: str | None = None,
     from distributed import Client, LocalCluster
 
     if scheduler:
+        refused = _refused(scheduler)
+        if refused:
+            raise OSError(f"cannot reach the Dask scheduler at {scheduler}: nothing listens "
+                          f"there ({refused})")
         try:
             client = Client(scheduler, timeout=timeout_s, set_as_default=False)
         except (OSError, TimeoutError) as e:
@@ -100,6 +105,29 @@ def connect(workers: int = 1, scheduler: str | None = None,
             yield client
     finally:
         cluster.close()
+
+
+def _refused(address: str) -> str | None:
+    """Why a TCP connection to ``address`` was refused at once (nothing listens at that
+    port), else None: the client retries a refused address until its timeout, and said
+    "Timed out" after 30 s of it. Other protocols, and other errors (a host that does
+    not answer), are left to the client."""
+    from distributed.comm import parse_address, parse_host_port
+
+    try:
+        protocol, location = parse_address(address)
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError):
+        return None  # the client says what is wrong with it
+    if protocol not in ("tcp", "tls"):
+        return None
+    try:
+        with socket.create_connection((host, port), timeout=5.0):
+            return None
+    except ConnectionRefusedError as e:
+        return e.strerror or "connection refused"
+    except OSError:
+        return None
 
 
 class DaskWorkerLost(RuntimeError):

@@ -60,6 +60,14 @@ PRESETS: dict[str, dict] = {
 _MAX_LOOKUPS = 400_000
 
 
+#: The longest scene name (a file name's 255, as the service's table names).
+MAX_NAME = 255
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)  # True is not 1 degree
+
+
 class SceneError(FitInputError):
     """A scene description that cannot be used (explained in the message)."""
 
@@ -79,10 +87,17 @@ class Scene:
     def __post_init__(self):
         for k in ("max_theta_i", "max_theta_o"):
             v = getattr(self, k)
-            if not (isinstance(v, int | float) and 0.0 < v <= 90.0):
+            if not (_is_number(v) and 0.0 < v <= 90.0):
                 raise SceneError(f"scene {k} must be in (0, 90] degrees, got {v!r}")
-        if not (isinstance(self.spread, int | float) and 0.0 <= self.spread <= 45.0):
+        if not (_is_number(self.spread) and 0.0 <= self.spread <= 45.0):
             raise SceneError(f"scene spread must be in [0, 45] degrees, got {self.spread!r}")
+        # the name is in every result, job and batch file that uses the scene: a
+        # 100,000-character one made a 508 KB job record
+        if not isinstance(self.name, str) or not 0 < len(self.name) <= MAX_NAME:
+            shown = (f"{len(self.name):,} characters" if isinstance(self.name, str)
+                     else repr(self.name)[:80])
+            raise SceneError(f"a scene name is text of 1 to {MAX_NAME} characters, "
+                             f"got {shown}")
         if self.pairs is not None:
             object.__setattr__(self, "pairs", _clean_pairs(self.pairs, self))
 
