@@ -59,11 +59,16 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
 #: sharpest (the full suite's time: five each cost it ~30 s)
 VARIANTS = ("beckmann_dielectric", "ggx_dielectric", "gltf_pbr_ior", "gltf_threejs",
             "gltf_blender", "gltf_pbr_dielectric", "standard_surface_dielectric")
-#: Twins of a model above them whose fit searches as that model's does (the same layer,
-#: scan and starts; another viewer's shading): fitted from their truth (``init``), so
-#: their test is the verdict on their exact fit. The search itself is the model's own
-#: test. (gltf_threejs_iridescence's four-start search cost the full suite 30-46 s.)
-FROM_THE_TRUTH = {"gltf_threejs_iridescence": "gltf_iridescence"}
+#: Models whose search is another test's subject, fitted here from their truth
+#: (``init``), so that this test is the verdict on their exact fit: model -> where its
+#: search is tested. (gltf_threejs_iridescence's four-start search cost the full suite
+#: 30-46 s; rough_plastic's five truths 16 s, 12 s from their truth: each of its steps
+#: evaluates the interface's quadratures. gltf_iridescence's search shares its compiled
+#: programs with its own test's, on one worker: from its truth it compiled others.)
+FROM_THE_TRUTH = {
+    "gltf_threejs_iridescence": "test_layered_models.py, gltf_iridescence's film search",
+    "rough_plastic": "test_target_models.py::test_rough_plastic_fit_recovers_its_parameters",
+}
 
 
 @pytest.mark.parametrize(("model", "label", "params"), [
