@@ -212,6 +212,75 @@ def test_quoted_cells_are_the_numbers_inside_them(tmp_path):
     np.testing.assert_array_equal(got.wi, plain.wi)
 
 
+@pytest.mark.parametrize("header", [
+    "theta_i [deg],phi_i [deg],theta_o [deg],phi_o [deg],r,g,b",
+    "theta_i (deg),phi_i (deg),theta_o (deg),phi_o (deg),r,g,b",
+    "theta_i (°),phi_i (°),theta_o (°),phi_o (°),r,g,b",
+    "theta_i/deg,phi_i/deg,theta_o/deg,phi_o/deg,r,g,b",
+    "Theta_i deg,Phi_i deg,Theta_o deg,Phi_o deg,R,G,B",
+])
+def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, header):
+    """As lab software and spreadsheets write a column's unit: the same samples as
+    ``theta_i_deg`` (they were refused: "no column for theta_i, ...")."""
+    s = _samples(50)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    other = tmp_path / "units.csv"
+    other.write_text("\n".join([header, *lines[1:]]) + "\n")
+    got = read_measured(other)
+    np.testing.assert_array_equal(got.wi, plain.wi)
+    np.testing.assert_array_equal(got.rgb, plain.rgb)
+
+
+@pytest.mark.parametrize("delimiter", [";", "\t"])
+def test_a_decimal_comma_is_read_where_the_cells_are_split_otherwise(tmp_path, delimiter):
+    """A spreadsheet of a comma-decimal locale: ``0,25;30;...``. Read as numbers, and
+    said in the fit's input; a file with points and commas in its numbers is refused,
+    not guessed at (a point may be a thousands separator there)."""
+    s = _samples(50)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    comma = tmp_path / "comma.csv"
+    comma.write_text("\n".join(line.replace(",", delimiter).replace(".", ",")
+                               for line in lines) + "\n")
+    got = read_measured(comma)
+    np.testing.assert_allclose(got.rgb, plain.rgb, rtol=1e-15)
+    np.testing.assert_allclose(got.wi, plain.wi, rtol=1e-15, atol=1e-15)
+    assert got.provenance["decimal_comma"] is True
+    assert read_table(comma)[1]["decimal_comma"] is True
+    assert "decimal_comma" not in read_table(tmp_path / "s.csv")[1]
+    both = tmp_path / "both.csv"
+    both.write_text("# angles: degrees\n"
+                    f"{delimiter.join(COLUMNS.split(','))}{delimiter}r{delimiter}g{delimiter}b\n"
+                    + delimiter.join(["10", "0", "1.020,5", "0", "0,5", "0,5", "0,5"]) + "\n")
+    with pytest.raises(MeasurementsError, match="row 3 is not all numbers"):
+        read_measured(both)
+
+
+def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
+    """Windows lab software writes Windows-1252: a comment or a header with ° or é is
+    read (it was "not a text file"); a row of numbers with such a byte, or a binary
+    file, is still refused."""
+    s = _samples(50)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    latin = tmp_path / "latin.csv"
+    latin.write_bytes("\n".join(["# mesuré à 25°C", "# angles: degrees",
+                                 "theta_i (°),phi_i (°),theta_o (°),phi_o (°),r,g,b",
+                                 *lines[1:]]).encode("cp1252"))
+    np.testing.assert_array_equal(read_measured(latin).rgb, plain.rgb)
+    astm = tmp_path / "latin.astm"
+    astm.write_bytes(b"SAMPLE M\xfcller\nNUM_POINTS 1\nVARS theta_i,phi_i,theta_s,phi_s,R,G,B\n"
+                     b"0.1,0,0.2,0,1,1,1\n")
+    assert read_measured(astm).n == 1
+    for name, data in (("row.csv", b"theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                                   b"10\xb0,0,20,0,1,1,1\n"),
+                       ("png.csv", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(MeasurementsError, match=f"{name}: not a text file"):
+            read_measured(tmp_path / name)
+
+
 @pytest.mark.parametrize("datasets, says", [
     # a (3, n) sigma reshaped to (n, 3) would hand each sample another's sigma
     ({"rgb": np.ones((4, 3)), "sigma": np.tile([0.1, 0.2, 0.3, 0.4], (3, 1))},

@@ -68,6 +68,19 @@ def _unit_scale(unit: str, source: str) -> float:
     raise MeasurementsError(source, f"unknown angle unit {unit!r}: degrees or radians")
 
 
+def _unit_suffixed(name: str) -> str:
+    """An angle column's name with its unit written as a suffix: ``theta_i [deg]``,
+    ``theta_i (deg)``, ``theta_i (°)``, ``theta_i deg`` and ``theta_i/rad`` are read as
+    ``theta_i_deg`` and ``theta_i_rad``, as lab software and spreadsheets write them."""
+    name = name.replace("°", "deg").replace("º", "deg")
+    m = re.fullmatch(r"(.*?)\s*(?:\[\s*(\w+)\s*\]|\(\s*(\w+)\s*\)|/\s*(\w+)|\s+(\w+))",
+                     name)
+    if m is None:
+        return name
+    unit = next(u for u in m.groups()[1:] if u is not None)
+    return f"{m[1]}_{unit}"
+
+
 def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     """Which column holds what: ``{"theta_i": (index, scale), ..., "values": [idx...],
     "sigma": [idx...] or None}``; refuses duplicated, missing or unit-less columns."""
@@ -81,7 +94,8 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         seen[name] = k
     out: dict = {}
     for name, k in seen.items():
-        m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?", name)
+        m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?",
+                         _unit_suffixed(name))
         if m is None or f"{m[1]}_{m[2]}" not in ANGLE_ALIASES:
             continue
         canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
@@ -179,9 +193,21 @@ def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
     return spectra.to_rgb(values, wavelengths, source)
 
 
+def decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
+    """Whether the numbers are written with a decimal comma, as spreadsheets in many
+    locales export them (``0,25;0;45;180;0,0937``): cells split by a semicolon or a
+    tab, commas in them, and no point anywhere (a point beside a comma could be a
+    thousands separator: such a file is refused, row by row, not guessed at)."""
+    if delimiter not in (";", "\t"):
+        return False
+    text = [line for _, line in lines]
+    return any("," in t for t in text) and not any("." in t for t in text)
+
+
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
-             source: str) -> tuple[np.ndarray, np.ndarray]:
-    """The data lines as floats (rows, width), and their line numbers (0-based)."""
+             source: str, comma: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The data lines as floats (rows, width), and their line numbers (0-based);
+    ``comma``: a decimal comma (:func:`decimal_comma`)."""
     out = np.empty((len(lines), width))
     # split as CSV is: a quoted cell ("55", as spreadsheets and pandas' QUOTE_ALL write
     # it) is the number inside the quotes
@@ -195,7 +221,7 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
             # Python's float() also reads 1_0 as 10: no data file means that
             if "_" in line:
                 raise ValueError
-            out[j] = [float(c) for c in cells]
+            out[j] = [float(c.replace(",", ".") if comma else c) for c in cells]
         except ValueError:
             raise MeasurementsError(source, f"row {number + 1} is not all numbers: "
                                             f"{line.strip()[:80]!r}") from None
@@ -203,12 +229,23 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
 
 
 def _text(path: Path) -> str:
+    """The file as text: UTF-8, or Windows-1252 (Latin-1) where only its comments and
+    its header lines hold other characters (``# measured at 25°C``, ``theta_i (°)``,
+    ``SAMPLE_NAME Müller``, as Windows lab software writes them); its rows of numbers
+    are ASCII either way."""
     data = path.read_bytes()
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
-                                           "text (ASTM, CSV) or HDF5") from None
+        pass
+    refused = MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
+                                           "text (ASTM, CSV) or HDF5")
+    if b"\x00" in data:
+        raise refused  # binary
+    text = data.decode("cp1252", errors="replace")
+    if any(not line.isascii() and re.match(r"\s*[-+.\d]", line) for line in text.splitlines()):
+        raise refused  # in a row of numbers: not text of a kind read here
+    return text
 
 
 def _a_number(line: str) -> bool:
@@ -291,11 +328,13 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     if delimiter == " ":
         names = [n for n in names if n]
     cols = _columns(names, source, default_unit=unit)
+    comma = decimal_comma(lines[1:], delimiter)
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
-                             source)
+                             source, comma=comma)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
-                       "angle_unit": unit or "per column"})
+                       "angle_unit": unit or "per column",
+                       **({"decimal_comma": True} if comma else {})})
 
 
 def read_hdf5(path: str | os.PathLike) -> Measurements:
@@ -481,6 +520,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
            "sigma": samples.sigma is not None}
     if "spectral" in samples.provenance:  # projected to RGB: which light, which observer
         out["spectral"] = samples.provenance["spectral"]
+    if samples.provenance.get("decimal_comma"):  # read as 0.25 from 0,25: said, not silent
+        out["decimal_comma"] = True
     if binning is not None:
         out.update(binning=binning.summary(), note=binning.describe())
     return out
