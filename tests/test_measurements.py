@@ -218,6 +218,8 @@ def test_quoted_cells_are_the_numbers_inside_them(tmp_path):
     "theta_i (°),phi_i (°),theta_o (°),phi_o (°),r,g,b",
     "theta_i/deg,phi_i/deg,theta_o/deg,phi_o/deg,r,g,b",
     "Theta_i deg,Phi_i deg,Theta_o deg,Phi_o deg,R,G,B",
+    # the values' own unit, and channels spelled out
+    "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,Red [1/sr],Green (1/sr),Blue [sr^-1]",
 ])
 def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, header):
     """As lab software and spreadsheets write a column's unit: the same samples as

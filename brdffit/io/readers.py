@@ -68,6 +68,21 @@ def _unit_scale(unit: str, source: str) -> float:
     raise MeasurementsError(source, f"unknown angle unit {unit!r}: degrees or radians")
 
 
+#: A value column's unit written after its name, which is the BRDF's own (1/sr): read
+#: as the name alone (``r [1/sr]``, ``brdf (sr^-1)``). Any other unit is not stripped,
+#: so that such a column is not read as a BRDF.
+_PER_STERADIAN = re.compile(r"\s*[\[(]\s*(?:1\s*/\s*sr|sr\s*\^?\s*-\s*1|sr⁻¹)\s*[\])]$")
+#: Spelled-out channel names, as some instruments' exports write them.
+_CHANNEL_WORDS = {"red": "r", "green": "g", "blue": "b"}
+
+
+def _value_name(name: str) -> str:
+    """A lower-case column name without a per-steradian unit, its channel spelled
+    as brdffit's (``Red [1/sr]`` is ``r``)."""
+    name = _PER_STERADIAN.sub("", name)
+    return _CHANNEL_WORDS.get(name, name)
+
+
 def _unit_suffixed(name: str) -> str:
     """An angle column's name with its unit written as a suffix: ``theta_i [deg]``,
     ``theta_i (deg)``, ``theta_i (°)``, ``theta_i deg`` and ``theta_i/rad`` are read as
@@ -86,7 +101,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     "sigma": [idx...] or None}``; refuses duplicated, missing or unit-less columns."""
     seen: dict[str, int] = {}
     for k, raw in enumerate(names):
-        name = raw.strip().lower()
+        name = _value_name(raw.strip().lower())
         if not name:
             raise MeasurementsError(source, f"column {k + 1} of the header has no name")
         if name in seen:
