@@ -110,6 +110,10 @@ def test_from_bytes_matches_read(tmp_path, good_raw):
         ("big-endian", lambda p: p.write_bytes(struct.pack(">3i", 90, 90, 180)
                                                + np.ones(30).astype(">f8").tobytes()),
          "are [90, 90, 180] big-endian: the file was written byte-swapped"),
+        # a converter that kept float32: named, not read as a truncated float64 body
+        ("float32", lambda p: p.write_bytes(struct.pack("<3i", 90, 90, 180)
+                                            + np.ones(3 * N, "<f4").tobytes()),
+         "exactly half: values written as float32? a MERL table holds float64"),
         ("no measured bin", lambda p: _raw_file(p, body=np.full(3 * N, -1.0)), "no measured bin"),
         ("all nan", lambda p: _raw_file(p, body=np.full(3 * N, np.nan)), "no measured bin"),
         ("one channel never measured",

@@ -201,8 +201,13 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
             ),
         )
     if body < expected:
+        # exactly half: the values written as float32 (a MERL table holds float64), as
+        # a converter that kept numpy's float32 writes them; not read as if they were
+        half = (" (exactly half: values written as float32? a MERL table holds float64; "
+                "convert them, e.g. numpy's astype('<f8'))" if 2 * body == expected else "")
         raise MerlFormatError(
             source, f"truncated: body has {body:,} bytes, the header promises {expected:,}"
+            + half
         )
     if body > expected:
         raise MerlFormatError(
