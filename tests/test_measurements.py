@@ -259,6 +259,27 @@ def test_a_decimal_comma_is_read_where_the_cells_are_split_otherwise(tmp_path, d
         read_measured(both)
 
 
+def test_an_astm_file_split_by_blanks_or_tabs_reads_as_one_split_by_commas(tmp_path):
+    """Files in the wild write ASTM rows and header lines with spaces or tabs (and
+    CRLF): the same samples ("no VARS line" and "row 4 has 1 values" before)."""
+    rows = ["0.1,0,0.2,0,1,2,3", "0.2,0,0.3,3.14,1,1,1", "0.3,0,0.4,1.0,0.5,1,1"]
+    commas = tmp_path / "c.astm"
+    commas.write_text("NUM_POINTS 3\nVARS theta_i,phi_i,theta_s,phi_s,R,G,B\n"
+                      + "\n".join(rows) + "\n")
+    blanks = tmp_path / "b.astm"
+    blanks.write_text("NUM_POINTS 3\nVARS theta_i, phi_i, theta_s, phi_s, R, G, B\n"
+                      + "\n".join(r.replace(",", "  ") for r in rows) + "\n")
+    tabs = tmp_path / "t.astm"
+    tabs.write_bytes(("SOURCE\tlab\r\nNUM_POINTS\t3\r\nVARS\ttheta_i\tphi_i\ttheta_s\tphi_s"
+                      "\tR\tG\tB\r\n" + "\r\n".join(r.replace(",", "\t") for r in rows)
+                      + "\r\n").encode())
+    want = read_measured(commas)
+    for other in (blanks, tabs):
+        got = read_measured(other)
+        np.testing.assert_array_equal(got.rgb, want.rgb)
+        np.testing.assert_array_equal(got.wo, want.wo)
+
+
 def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
     """Windows lab software writes Windows-1252: a comment or a header with ° or é is
     read (it was "not a text file"); a row of numbers with such a byte, or a binary

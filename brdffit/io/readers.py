@@ -287,14 +287,16 @@ def read_astm(path: str | os.PathLike) -> Measurements:
         if data or re.match(r"^[-+.\d]", stripped) or _a_number(stripped):
             data.append((number, stripped))
             continue
-        key, _, value = stripped.partition(" ")
+        key, value = (re.split(r"\s+", stripped, maxsplit=1) + [""])[:2]  # a tab too
         header[key.upper()] = value.strip()
     if "VARS" not in header:
         raise MeasurementsError(source, "no VARS line: an ASTM E1392 file names its columns "
                                         "(VARS theta_i,phi_i,theta_s,phi_s,R,G,B)")
     names = [n for n in re.split(r"[,\s]+", header["VARS"]) if n]
     cols = _columns(names, source, default_unit="radians")
-    rows, numbers = _numbers(data, ",", len(names), source)
+    # rows split by commas, as the standard's examples; by blanks where a file has none
+    commas = not data or "," in data[0][1]
+    rows, numbers = _numbers(data, "," if commas else None, len(names), source)
     if "NUM_POINTS" in header:
         try:
             promised = int(header["NUM_POINTS"])
