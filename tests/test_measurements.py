@@ -187,6 +187,26 @@ def test_hdf5_needs_its_units(tmp_path):
         read_measured(binary)  # a .binary is read as MERL, which says what is wrong
 
 
+def test_hdf5_angles_may_have_the_names_a_csv_column_has(tmp_path):
+    """``theta_in``, ``Theta_S``, ... as in a CSV header (they were "no dataset
+    theta_i"); two datasets for one angle are refused."""
+    s = _samples(30)
+    want = read_measured(_write_all(tmp_path, s)["hdf5"])
+    other = tmp_path / "other.h5"
+    with h5py.File(tmp_path / "s.h5", "r") as src, h5py.File(other, "w") as f:
+        for old, new in (("theta_i", "theta_in"), ("phi_i", "Phi_In"), ("theta_o", "Theta_S"),
+                         ("phi_o", "phi_s"), ("rgb", "rgb")):
+            f[new] = src[old][()]
+            f[new].attrs.update(src[old].attrs)
+    got = read_measured(other)
+    np.testing.assert_array_equal(got.wi, want.wi)
+    np.testing.assert_array_equal(got.wo, want.wo)
+    with h5py.File(other, "a") as f:
+        f["theta_o"] = f["Theta_S"][()]
+    with pytest.raises(MeasurementsError, match="two datasets give theta_o"):
+        read_measured(other)
+
+
 def _h5(path, n=4, **datasets):
     with h5py.File(path, "w") as f:
         for name in ("theta_i", "phi_i", "theta_o", "phi_o"):

@@ -354,6 +354,22 @@ def read_csv(path: str | os.PathLike) -> Measurements:
                        **({"decimal_comma": True} if comma else {})})
 
 
+def _hdf5_angles(f, source: str) -> dict[str, str]:
+    """Canonical angle -> the file's dataset that holds it: ``theta_i``, or any name a
+    CSV column may have (``theta_in``, ``Theta_S``, ...); two datasets for one angle
+    are refused."""
+    named: dict[str, str] = {}
+    for key in f.keys():
+        canonical = ANGLE_ALIASES.get(key.strip().lower())
+        if canonical is None:
+            continue
+        if canonical in named:
+            raise MeasurementsError(source, f"two datasets give {canonical} ({named[canonical]!r}"
+                                            f" and {key!r})")
+        named[canonical] = key
+    return named
+
+
 def read_hdf5(path: str | os.PathLike) -> Measurements:
     """An HDF5 file of sample datasets (module docstring)."""
     import h5py
@@ -364,7 +380,8 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     except OSError as e:
         raise MeasurementsError(source, f"not a readable HDF5 file ({e})") from None
     with f:
-        missing = [a for a in ANGLES if a not in f]
+        named = _hdf5_angles(f, source)
+        missing = [a for a in ANGLES if a not in named]
         if missing:
             kind = f.attrs.get("format")  # a file that says what it is (a batch's results)
             kind = kind.decode() if isinstance(kind, bytes) else kind
@@ -373,7 +390,8 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                     + (f": a {kind} file, not a sample list"
                                        if isinstance(kind, str) else ""))
         angles = []
-        for name in ANGLES:
+        for canonical in ANGLES:
+            name = named[canonical]
             unit = f[name].attrs.get("units", f.attrs.get("units"))
             if unit is None:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
