@@ -159,6 +159,10 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,value,sigma_r,sigma_g,sigma_b\n"
               "10,0,20,0,1,0.1,0.1,0.1\n",
      "expected one column sigma"),
+    # a reflectance in percent is named as such, not as a file without values
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r [%],g [%],b [%]\n"
+              "10,0,20,0,1,1,1\n",
+     "'r [%]', 'g [%]', 'b [%]': a unit that is not 1/sr"),
 ])
 def test_a_malformed_file_gets_one_line_naming_it(tmp_path, name, text, says):
     path = tmp_path / name

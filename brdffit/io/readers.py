@@ -162,8 +162,19 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
             source, "no value columns: r, g, b (RGB), one of value, brdf, y (one channel), "
                     "or spectral ones named by wavelength (450nm, ...)"
                     + (f"; only {', '.join(some)} of r, g, b" if some else "")
-                    + ("" if len(one) < 2 else "; more than one single-channel column"))
+                    + ("" if len(one) < 2 else "; more than one single-channel column")
+                    + _other_units(seen))
     return out
+
+
+def _other_units(seen: dict[str, int]) -> str:
+    """Value columns named with a unit that is not a BRDF's (``r [%]``): said, so that a
+    reflectance in percent is not taken for a file without values."""
+    other = [n for n in seen
+             if (m := re.fullmatch(r"(\w+)\s*[\[(].*[\])]", n))
+             and _value_name(m[1]) in (*CHANNELS, *ONE_CHANNEL)]
+    return (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
+            "a reflectance in % or a radiance is not one)" if other else "")
 
 
 def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | None:
