@@ -159,6 +159,10 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,value,sigma_r,sigma_g,sigma_b\n"
               "10,0,20,0,1,0.1,0.1,0.1\n",
      "expected one column sigma"),
+    # in-plane data without azimuths: which side a signed angle is on is asked for
+    ("a.csv", "theta_i_deg,theta_o_deg,r,g,b\n10,-20,1,1,1\n",
+     "no column for phi_i, phi_o (the header has theta_i_deg, theta_o_deg, r, g, b); "
+     "in-plane samples still need them: phi_i 0 and phi_o 180 on the side opposite"),
     # a reflectance in percent is named as such, not as a file without values
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r [%],g [%],b [%]\n"
               "10,0,20,0,1,1,1\n",

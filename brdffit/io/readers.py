@@ -127,8 +127,13 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out[canonical] = (k, _unit_scale(unit, source))
     missing = [a for a in ANGLES if a not in out]
     if missing:
+        # in-plane data often leaves the azimuths out, and which side a signed theta is
+        # on differs between instruments: asked for, not guessed
+        in_plane = ("; in-plane samples still need them: phi_i 0 and phi_o 180 on the "
+                    "side opposite the light (the specular side), 0 on the light's side"
+                    if set(missing) <= {"phi_i", "phi_o"} else "")
         raise MeasurementsError(source, f"no column for {', '.join(missing)} (the header has "
-                                        f"{', '.join(n.strip() for n in names)})")
+                                        f"{', '.join(n.strip() for n in names)}){in_plane}")
     rgb = [seen.get(c) for c in CHANNELS]
     one = [seen[c] for c in ONE_CHANNEL if c in seen]
     spectral = sorted((lam, k) for name, k in seen.items()
