@@ -262,6 +262,28 @@ def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, heade
     np.testing.assert_array_equal(got.rgb, plain.rgb)
 
 
+@pytest.mark.parametrize("units", ["deg,deg,deg,deg,1/sr,1/sr,1/sr",
+                                   "[°],[°],[°],[°],[1/sr],[1/sr],[1/sr]",
+                                   "deg,deg,deg,deg,,,"])
+def test_a_row_of_units_under_the_header_gives_the_columns_units(tmp_path, units):
+    """Instruments export names and units as two header lines; read as one (the units
+    row was "row 2 is not all numbers"). A name with its own unit keeps it."""
+    s = _samples(40)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    for header in ("theta_i,phi_i,theta_o,phi_o,r,g,b", lines[0]):
+        two = tmp_path / "two.csv"
+        two.write_text("\n".join([header, units, *lines[1:]]) + "\n")
+        got = read_measured(two)
+        np.testing.assert_array_equal(got.wi, plain.wi)
+        np.testing.assert_array_equal(got.rgb, plain.rgb)
+    percent = tmp_path / "percent.csv"
+    percent.write_text("\n".join(["theta_i,phi_i,theta_o,phi_o,r,g,b", "deg,deg,deg,deg,%,%,%",
+                                  *lines[1:]]) + "\n")
+    with pytest.raises(MeasurementsError, match="'r \\[%\\]'.*a unit that is not 1/sr"):
+        read_measured(percent)
+
+
 @pytest.mark.parametrize("delimiter", [";", "\t"])
 def test_a_decimal_comma_is_read_where_the_cells_are_split_otherwise(tmp_path, delimiter):
     """A spreadsheet of a comma-decimal locale: ``0,25;30;...``. Read as numbers, and

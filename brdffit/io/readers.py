@@ -327,6 +327,30 @@ def read_astm(path: str | os.PathLike) -> Measurements:
                        "header": header})
 
 
+#: What a units row under the header may hold, cell by cell.
+_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|)",
+                        re.IGNORECASE)
+
+
+def _names_a_unit(name: str) -> bool:
+    """Whether a column's name already carries its unit (``theta_i_deg``, ``r [1/sr]``)."""
+    name = name.strip().lower()
+    return bool(re.search(r"[\[(/]|_(deg|rad|degrees|radians)$", name))
+
+
+def _units_row(line: str, delimiter: str, width: int) -> list[str] | None:
+    """The cells of a row of units under the header (``deg,deg,deg,deg,1/sr,1/sr,
+    1/sr``), brackets dropped; None where the row is not one (a data row)."""
+    if not line:
+        return None
+    cells = (next(csv.reader(io.StringIO(line), delimiter=delimiter)) if delimiter != " "
+             else line.split())
+    cells = [c.strip().strip("[]()").strip() for c in cells]
+    if len(cells) != width or not any(cells) or not all(_UNIT_CELL.fullmatch(c) for c in cells):
+        return None
+    return cells
+
+
 def read_csv(path: str | os.PathLike) -> Measurements:
     """A CSV or TSV file with a header row (module docstring)."""
     path = Path(path)
@@ -360,6 +384,11 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     names = next(csv.reader(io.StringIO(lines[0][1]), delimiter=delimiter))
     if delimiter == " ":
         names = [n for n in names if n]
+    units = _units_row(lines[1][1] if len(lines) > 1 else "", delimiter, len(names))
+    if units is not None:  # a second header line of units, as instruments export them
+        names = [f"{n.strip()} [{u}]" if u and not _names_a_unit(n) else n
+                 for n, u in zip(names, units, strict=True)]
+        lines = [lines[0], *lines[2:]]
     cols = _columns(names, source, default_unit=unit)
     comma = decimal_comma(lines[1:], delimiter)
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
