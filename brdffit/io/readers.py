@@ -224,7 +224,7 @@ def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
     return spectra.to_rgb(values, wavelengths, source)
 
 
-def decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
+def _decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
     """Whether the numbers are written with a decimal comma, as spreadsheets in many
     locales export them (``0,25;0;45;180;0,0937``): cells split by a semicolon or a
     tab, commas in them, and no point anywhere (a point beside a comma could be a
@@ -238,7 +238,7 @@ def decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
              source: str, comma: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The data lines as floats (rows, width), and their line numbers (0-based);
-    ``comma``: a decimal comma (:func:`decimal_comma`)."""
+    ``comma``: a decimal comma (:func:`_decimal_comma`)."""
     out = np.empty((len(lines), width))
     # split as CSV is: a quoted cell ("55", as spreadsheets and pandas' QUOTE_ALL write
     # it) is the number inside the quotes
@@ -390,7 +390,7 @@ def read_csv(path: str | os.PathLike) -> Measurements:
                  for n, u in zip(names, units, strict=True)]
         lines = [lines[0], *lines[2:]]
     cols = _columns(names, source, default_unit=unit)
-    comma = decimal_comma(lines[1:], delimiter)
+    comma = _decimal_comma(lines[1:], delimiter)
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
                              source, comma=comma)
     return _from_rows(rows, numbers, cols, source,
