@@ -29,6 +29,7 @@ from brdffit.cli import main as cli_main
 from brdffit.fitting.options import FitOptions
 from brdffit.request import FitRequest
 from tests.api_fixtures import free_port
+from tests.dask_fixtures import separate_cluster
 from tests.table_files import write_tables
 
 pytestmark = pytest.mark.system
@@ -721,10 +722,10 @@ def test_find_tables(table_dir, tmp_path):
     # the cluster is reached before the file is made: it was made, and a resumed file's
     # models and options rewritten, by a run refused for its address
     (["--models", "ggx", "--scheduler", "notaurl"], "missing port number in address"),
-    # a port nobody listens on is said at once (the client retried it for 30 s, then
-    # said "Timed out")
+    # a port nobody listens on is said after a short grace (the client retried it
+    # for 30 s, then said "Timed out")
     (["--models", "ggx", "--scheduler", f"tcp://127.0.0.1:{free_port()}"],
-     "nothing listens there (Connection refused)"),
+     "nothing listens there (Connection refused for 5 s)"),
 ])
 def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
     code = cli_main(["batch", str(table_dir), "--out", str(tmp_path / "r.h5"), *argv])
@@ -767,42 +768,23 @@ def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path)
     """docs/batch.md, "On a real cluster": `dask scheduler` and `dask worker` run as
     their own processes (as they would on other machines), and `brdffit batch
     --scheduler` submits to them."""
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
     env = {**os.environ, "PYTHONPATH": REPO}
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
-                               "--host", "127.0.0.1", "--port", str(port),
-                               "--dashboard-address", "127.0.0.1:0"],
-                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                              start_new_session=True)]
-    try:
-        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker",
-                                       address, "--nworkers", "1", "--nthreads", "1",
-                                       "--host", "127.0.0.1", "--dashboard-address",
-                                       "127.0.0.1:0"],
-                                      env=env, stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.PIPE, start_new_session=True))
+    # the scheduler is up and its worker joined before the batch starts, as an operator
+    # would see them (a refused address is tried for REFUSED_GRACE_S only)
+    with separate_cluster(n_workers=1, env=env) as (address, _):
         out = tmp_path / "results.h5"
         r = subprocess.run(
             [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models",
              "lambert", "--out", str(out), *CLI_OPTIONS, "--scheduler", address],
             cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-        assert r.returncode == 1, r.stderr  # the bad tables are recorded: exit 1
-        tables = _tables(out)
-        for name in TRUTHS:
-            fit = tables[name]["fits"]["lambert"]
-            assert fit["status"] == "ok" and fit["fit"]["model"] == "lambert"
-            assert fit["worker"].split(":")[0], fit  # the worker process that ran it
-        for name in BAD:
-            assert tables[name]["status"] == "failed"
-    finally:
-        for p in reversed(procs):
-            os.killpg(p.pid, signal.SIGTERM)
-        for p in procs:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
+    assert r.returncode == 1, r.stderr  # the bad tables are recorded: exit 1
+    tables = _tables(out)
+    for name in TRUTHS:
+        fit = tables[name]["fits"]["lambert"]
+        assert fit["status"] == "ok" and fit["fit"]["model"] == "lambert"
+        assert fit["worker"].split(":")[0], fit  # the worker process that ran it
+    for name in BAD:
+        assert tables[name]["status"] == "failed"
 
 
 @pytest.mark.unit

@@ -21,11 +21,15 @@ import contextlib
 import logging
 import os
 import socket
+import time
 from collections.abc import Iterator
 
 from brdffit import extras
 
 SCHEDULER_ENV = "BRDFFIT_DASK_SCHEDULER"
+# how long a refused scheduler address is tried again before it is refused: a
+# scheduler started just before the batch takes a few seconds to listen
+REFUSED_GRACE_S = 5.0
 #: XLA's CPU backend spreads one fit over every core it sees. Several worker
 #: processes doing that on the same cores fight: measured here, 2 workers on 2
 #: cores fitted no faster than 1 until each was made single-threaded. Workers
@@ -107,10 +111,12 @@ def connect(workers: int = 1, scheduler: str | None = None,
         cluster.close()
 
 
-def _refused(address: str) -> str | None:
-    """Why a TCP connection to ``address`` was refused at once (nothing listens at that
-    port), else None: the client retries a refused address until its timeout, and said
-    "Timed out" after 30 s of it. Other protocols, and other errors (a host that does
+def _refused(address: str, grace_s: float = REFUSED_GRACE_S) -> str | None:
+    """Why a TCP connection to ``address`` was refused (nothing listens at that port)
+    throughout ``grace_s`` seconds, else None: the client retries a refused address
+    until its timeout, and said "Timed out" after 30 s of it. The grace is for a
+    scheduler started a moment before (``dask scheduler & brdffit batch ...``), which
+    takes a few seconds to listen. Other protocols, and other errors (a host that does
     not answer), are left to the client."""
     from distributed.comm import parse_address, parse_host_port
 
@@ -121,13 +127,17 @@ def _refused(address: str) -> str | None:
         return None  # the client says what is wrong with it
     if protocol not in ("tcp", "tls"):
         return None
-    try:
-        with socket.create_connection((host, port), timeout=5.0):
+    deadline = time.monotonic() + grace_s
+    while True:
+        try:
+            with socket.create_connection((host, port), timeout=5.0):
+                return None
+        except ConnectionRefusedError as e:
+            if time.monotonic() >= deadline:
+                return f"{e.strerror or 'connection refused'} for {grace_s:g} s"
+            time.sleep(0.25)
+        except OSError:
             return None
-    except ConnectionRefusedError as e:
-        return e.strerror or "connection refused"
-    except OSError:
-        return None
 
 
 class DaskWorkerLost(RuntimeError):
