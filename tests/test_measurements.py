@@ -167,6 +167,25 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r [%],g [%],b [%]\n"
               "10,0,20,0,1,1,1\n",
      "'r [%]', 'g [%]', 'b [%]': a unit that is not 1/sr"),
+    # two statements of one column's unit that disagree: which one holds is a guess
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\nrad,rad,rad,rad,,,\n"
+              "0.1,0,0.2,0,1,1,1\n",
+     "column 'theta_i_deg': two units (its name degrees, the units row radians)"),
+    ("a.csv", "# angles: radians\ntheta_i,phi_i,theta_o,phi_o,r,g,b\ndeg,deg,deg,deg,,,\n"
+              "10,0,20,0,1,1,1\n",
+     "column 'theta_i': two units (the units row degrees, the '# angles:' line radians)"),
+    ("a.csv", "# angles: radians\ntheta_i_deg,phi_i,theta_o,phi_o,r,g,b\n10,0,20,0,1,1,1\n",
+     "column 'theta_i_deg': two units (its name degrees, the '# angles:' line radians)"),
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\nNUM_POINTS 7\nNUM_POINTS 1\n"
+               "0.1,0,0.2,0,1,1,1\n", "NUM_POINTS is given twice: '7' and '1' (line 3)"),
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\nVARS R,G,B,theta_i,phi_i,theta_s,phi_s\n"
+               "0.1,0,0.2,0,1,1,1\n", "VARS is given twice"),
+    # np.savetxt(header=...) writes the header as a comment
+    ("a.csv", "# theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,1,1\n",
+     "no header: the first row is numbers; line 1 looks like one written as a comment"),
+    ("a.csv", "10,0,20,0,1,1,1\n", "no header: the first row is numbers: name the columns"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma\n"
+              "10,0,20,0,1,1,1,1e200\n", "sigma is above 1e+12 1/sr in 1 row (first: row 2)"),
 ])
 def test_a_malformed_file_gets_one_line_naming_it(tmp_path, name, text, says):
     path = tmp_path / name
@@ -511,3 +530,158 @@ def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
     with pytest.raises(MerlFormatError, match="keep one kind"):
         read_measured(both)
     assert spectra.wavelength_of("theta_i_deg") is None
+
+
+# -- files as they come: a sweep of 213 malformed and unusual inputs (2026-12-04) -----------
+
+
+def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all_of_it(
+        tmp_path, monkeypatch):
+    """csv.Sniffer's time grows with the square of its text: a one-line JSON export of
+    517 KB named .txt ran for minutes before its refusal. The delimiter is guessed from
+    the header's first SNIFF_CHARS, and the refusal quotes the header shortened."""
+    import csv
+
+    from brdffit.io import readers
+
+    sniffed = []
+    sniff = csv.Sniffer.sniff
+    monkeypatch.setattr(csv.Sniffer, "sniff",
+                        lambda self, text, *a, **k: sniffed.append(len(text))
+                        or sniff(self, text, *a, **k))
+    p = tmp_path / "records.txt"
+    p.write_text("[" + ", ".join(f'{{"theta_i": {k}, "phi_i": {k}, "value": {k}}}'
+                                 for k in range(12000)) + "]")
+    with pytest.raises(MeasurementsError, match="no column for theta_i") as e:
+        read_measured(p)
+    assert sniffed == [readers.SNIFF_CHARS]
+    assert len(str(e.value)) < 600 and "(36000 columns)" in str(e.value)
+
+
+@pytest.mark.parametrize("name, head", [
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,1,1\n"),
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\n0.1,0,0.2,0,1,1,1\n")],
+    ids=["csv", "astm"])
+def test_a_quote_left_open_names_its_row(tmp_path, name, head):
+    """A quote that opens a cell and never closes: that row is named; read as one CSV
+    stream, the cell swallowed every line after it, and past 128 KiB the csv module's
+    "field larger than field limit" came out as a traceback."""
+    row = head.splitlines()[-1]
+    path = tmp_path / name
+    path.write_text(head + '"' + row + "\n" + (row + "\n") * 20000)
+    with pytest.raises(MeasurementsError, match="row 3 has a quote that is not closed where "
+                                                "its cell ends"):
+        read_measured(path)
+
+
+def test_text_as_excel_and_numpy_write_it(tmp_path):
+    """UTF-16 with its mark (Excel's "Unicode text", tab-separated), Excel's 'sep=;'
+    line, a UTF-8 mark before Windows-1252 comments, a comment holding U+2028, and an
+    ASTM file named .txt read as the same samples; UTF-16 without a mark is refused as
+    what it is."""
+    s = _samples(60)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    variants = {
+        "excel.txt": "\r\n".join(line.replace(",", "\t") for line in lines).encode("utf-16"),
+        "sep.csv": "\n".join(["sep=;", *(line.replace(",", ";") for line in lines)]).encode(),
+        "bom.csv": b"\xef\xbb\xbf" + "\n".join(["# mesuré", *lines]).encode("cp1252"),
+        "u2028.csv": "\n".join(["# a comment\u2028theta, with a separator", *lines]).encode(),
+    }
+    for name, data in variants.items():
+        (tmp_path / name).write_bytes(data)
+        got = read_measured(tmp_path / name)
+        np.testing.assert_array_equal(got.rgb, plain.rgb, err_msg=name)
+    astm = read_measured(_write_all(tmp_path, s)["astm"])
+    (tmp_path / "astm.txt").write_bytes((tmp_path / "s.astm").read_bytes())
+    assert read_measured(tmp_path / "astm.txt").provenance["format"] == "astm"
+    np.testing.assert_array_equal(read_measured(tmp_path / "astm.txt").rgb, astm.rgb)
+    (tmp_path / "nomark.csv").write_bytes("\n".join(lines).encode("utf-16-le"))
+    with pytest.raises(MeasurementsError, match="holds NUL bytes: binary, or UTF-16 without"):
+        read_measured(tmp_path / "nomark.csv")
+
+
+def test_radians_said_to_be_degrees_are_refused(tmp_path):
+    """Radians under _deg names read as a list within 1.6 degrees of the normal, and
+    were fitted; degrees under _rad names are refused by the azimuth's bound."""
+    s = _samples(100)
+    rows = np.column_stack([*s[:4], s[4]])
+    p = tmp_path / "rad.csv"
+    p.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
+    with pytest.raises(MeasurementsError, match="said to be in degrees, but all 100 samples' "
+                                                "polar angles are within 1.5708"):
+        read_measured(p)
+    h5 = _h5(tmp_path / "rad.h5", n=100, rgb=np.ones((100, 3)),
+             **dict(zip(("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True)))
+    with pytest.raises(MeasurementsError, match="said to be in degrees"):
+        read_measured(h5)
+
+
+def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path):
+    """A dangling or external link is named (it was a KeyError); a dataset declaring
+    10^12 numbers is refused before it is read (numpy was asked for 7 TiB); an
+    attribute that is not UTF-8 is named; a provenance attribute that is not
+    brdffit's does not replace what was read."""
+    link = _h5(tmp_path / "link.h5", rgb=np.ones((4, 3)))
+    with h5py.File(link, "a") as f:
+        del f["theta_i"]
+        f["theta_i"] = h5py.SoftLink("/nowhere")
+    with pytest.raises(MeasurementsError, match="theta_i is a link to an object that cannot "
+                                                "be opened"):
+        read_measured(link)
+    ext = _h5(tmp_path / "ext.h5", rgb=np.ones((4, 3)))
+    with h5py.File(ext, "a") as f:
+        del f["rgb"]
+        f["rgb"] = h5py.ExternalLink("missing.h5", "/rgb")
+    with pytest.raises(MeasurementsError, match="rgb is a link to an object"):
+        read_measured(ext)
+    huge = _h5(tmp_path / "huge.h5", rgb=np.ones((4, 3)))
+    with h5py.File(huge, "a") as f:
+        del f["theta_i"]
+        f.create_dataset("theta_i", shape=(10**12,), dtype="f8", chunks=(1024,))
+        f["theta_i"].attrs["units"] = "degrees"
+    with pytest.raises(MeasurementsError, match=r"theta_i holds 1,000,000,000,000 numbers"):
+        read_measured(huge)
+    latin = _h5(tmp_path / "latin.h5", rgb=np.ones((4, 3)))
+    with h5py.File(latin, "a") as f:
+        f["theta_i"].attrs["units"] = np.bytes_(b"radi\xe1ns")
+    with pytest.raises(MeasurementsError, match=r"attribute units is not UTF-8 text"):
+        read_measured(latin)
+    rgb = np.column_stack([np.linspace(0.1, 1, 4)] * 2 + [np.ones(4)])
+    for stored in ('{"instrument": "goniometer 2", "operator": "A"}',
+                   '{"format": NaN, "decimal_comma": true}', '{"format": "csv", "channels": 1}'):
+        lab = _h5(tmp_path / "lab.h5", rgb=rgb)
+        with h5py.File(lab, "a") as f:
+            f.attrs["provenance"] = stored
+        got = read_measured(lab)
+        assert got.provenance["format"] in ("hdf5", "csv") and "channels" in got.provenance
+        assert got.provenance["channels"] == 3 and "decimal_comma" not in got.provenance
+
+
+def test_an_endless_stream_and_a_symlink_loop_are_named(tmp_path, monkeypatch):
+    """A stream is copied up to MAX_STREAM_BYTES, then refused (/dev/zero was copied
+    until the disk was full); a symbolic link loop is said in its own words."""
+    import os
+
+    from brdffit.io import readers
+
+    monkeypatch.setattr(readers, "MAX_STREAM_BYTES", 3 * 2**20)
+    with pytest.raises(MerlFormatError, match="a stream longer than 3,145,728 bytes"):
+        read_measured("/dev/zero")
+    os.symlink(tmp_path / "b.csv", tmp_path / "a.csv")
+    os.symlink(tmp_path / "a.csv", tmp_path / "b.csv")
+    with pytest.raises(MerlFormatError, match="cannot read: Too many levels of symbolic links"):
+        read_measured(tmp_path / "a.csv")
+
+
+def test_an_error_naming_a_file_with_a_line_break_is_one_line(tmp_path, capsys):
+    """The CLI's error is one line, also where the file's name holds a line break (its
+    own line had held the rest of the message)."""
+    from brdffit.cli import main as cli_main
+
+    path = tmp_path / "bad\nname.csv"
+    path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n")
+    assert cli_main(["fit", str(path), "--model", "lambert"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad\\nname.csv: no data" in err, err

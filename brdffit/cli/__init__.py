@@ -97,6 +97,12 @@ def _start_early(command: str | None) -> None:
         threading.Thread(target=grid.bin_grid, name="brdffit-grid", daemon=True).start()
 
 
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n``, ``\\x00``): an error is
+    one line, also where it quotes a file name or a cell that holds a line break."""
+    return "".join(c if c.isprintable() or c == "\t" else repr(c)[1:-1] for c in text)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
@@ -105,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
         return int(args.run(args) or 0)
     except BrdffitError as e:  # includes a missing extra (brdffit.extras)
-        print(f"brdffit: error: {e}", file=sys.stderr)
+        print(f"brdffit: error: {one_line(str(e))}", file=sys.stderr)
         return EXIT_INPUT
     except BrokenPipeError:
         # the reader stopped reading (`brdffit export --json | head`): as any Unix tool,
@@ -116,10 +122,10 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
     except OSError as e:  # unreadable paths, a full disk
-        print(f"brdffit: error: {_os_error_words(e)}", file=sys.stderr)
+        print(f"brdffit: error: {one_line(_os_error_words(e))}", file=sys.stderr)
         return EXIT_INPUT
     except ValueError as e:  # bad option values
-        print(f"brdffit: error: {e}", file=sys.stderr)
+        print(f"brdffit: error: {one_line(str(e))}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
         print("brdffit: interrupted", file=sys.stderr)

@@ -160,6 +160,13 @@ class Measurements:
             if bad.any():
                 raise MeasurementsError(source, "sigma is negative or not finite in "
                                                 f"{_first_rows(bad, rows)}")
+            if np.any(sigma > MAX_VALUE):
+                # its weight, 1 / sigma^2, is 0 in float64 from ~1e154: the samples
+                # weighed nothing, and the table was refused as blank
+                raise MeasurementsError(
+                    source, f"sigma is above {MAX_VALUE:g} 1/sr in "
+                            f"{_first_rows(np.any(sigma > MAX_VALUE, 1), rows)}: another "
+                            "unit, or a corrupt value")
         theta_i, phi_i, theta_o, phi_o = (np.minimum(a, np.pi / 2) if k % 2 == 0 else a
                                           for k, a in enumerate(angles))
         info = {"channels": 1 if one_channel or values.shape[1] == 1 else 3,

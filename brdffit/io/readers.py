@@ -10,7 +10,8 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   (``.astm``): header lines ``KEY value`` (``NUM_POINTS n``, ``VARS`` naming the
   columns, e.g. ``theta_i,phi_i,theta_s,phi_s,R,G,B``), then one comma-separated row
   per sample; angles in radians.
-- **CSV / TSV** (``.csv``, ``.tsv``, ``.txt``): a header row naming the columns;
+- **CSV / TSV** (``.csv``, ``.tsv``, ``.txt``; a ``.txt`` with a ``VARS`` line is ASTM): a
+  header row naming the columns;
   ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o`` (``theta_r``/``theta_s``/``theta_v`` and
   their ``phi`` read as ``_o``), each with its unit, ``theta_i_deg`` or
   ``theta_i_rad``, or one line ``# angles: degrees`` (or radians) before the header;
@@ -46,6 +47,14 @@ from brdffit.io.measurements import Measurements, MeasurementsError
 
 #: HDF5's file signature (its first eight bytes).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: The most numbers one HDF5 dataset may hold: 10^8 float64 (800 MB), ten million
+#: RGB samples with room to spare.
+MAX_NUMBERS = 10**8
+
+#: The most bytes read from a stream (a pipe, /dev/stdin), which is copied to a file
+#: first: a MERL table is 35 MB, a sample list of ten million rows about 1 GB; an
+#: endless one (/dev/zero) was copied until the disk was full.
+MAX_STREAM_BYTES = 2 * 2**30
 #: Column name -> the canonical name (light ``_i``, view ``_o``).
 ANGLE_ALIASES = {
     "theta_i": "theta_i", "phi_i": "phi_i", "theta_in": "theta_i", "phi_in": "phi_i",
@@ -105,13 +114,13 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         if not name:
             raise MeasurementsError(source, f"column {k + 1} of the header has no name")
         if name in seen:
-            raise MeasurementsError(source, f"column {raw.strip()!r} appears twice in the header")
+            raise MeasurementsError(source, f"column {raw.strip()[:80]!r} appears twice in "
+                                            "the header")
         seen[name] = k
     out: dict = {}
     for name, k in seen.items():
-        m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?",
-                         _unit_suffixed(name))
-        if m is None or f"{m[1]}_{m[2]}" not in ANGLE_ALIASES:
+        m = _angle_name(name)
+        if m is None:
             continue
         canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
         if canonical in out:
@@ -132,8 +141,10 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         in_plane = ("; in-plane samples still need them: phi_i 0 and phi_o 180 on the "
                     "side opposite the light (the specular side), 0 on the light's side"
                     if set(missing) <= {"phi_i", "phi_o"} else "")
+        listed = ", ".join(n.strip() for n in names)
+        listed = listed if len(listed) <= 200 else f"{listed[:200]}... ({len(names)} columns)"
         raise MeasurementsError(source, f"no column for {', '.join(missing)} (the header has "
-                                        f"{', '.join(n.strip() for n in names)}){in_plane}")
+                                        f"{listed}){in_plane}")
     rgb = [seen.get(c) for c in CHANNELS]
     one = [seen[c] for c in ONE_CHANNEL if c in seen]
     spectral = sorted((lam, k) for name, k in seen.items()
@@ -201,6 +212,8 @@ def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | 
 
 def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
                provenance: dict) -> Measurements:
+    _radians_said_to_be_degrees([rows[:, cols[a][0]] for a in ANGLES],
+                                [cols[a][1] for a in ANGLES], source)
     angles = [rows[:, cols[a][0]] * cols[a][1] for a in ANGLES]
     values = rows[:, cols["values"]]
     if "wavelengths" in cols:
@@ -210,6 +223,31 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     return Measurements.from_angles(*angles, values[:, 0] if values.shape[1] == 1 else values,
                                     sigma, source=source, provenance=provenance,
                                     rows=row_numbers)
+
+
+#: Fewer samples than this are not judged by :func:`_radians_said_to_be_degrees`.
+_JUDGED_FROM = 20
+
+
+def _radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
+                                source: str) -> None:
+    """Refuses angles in degrees (``scales``) whose numbers all fit radians' ranges:
+    every polar angle within pi/2 and every azimuth within 2 pi. Read as degrees, the
+    whole list sits within 1.6 degrees of the normal, where no lobe can be fitted; the
+    other mistake (degrees said to be radians) is refused by the angles' bounds."""
+    n = raw[0].size
+    if n < _JUDGED_FROM or any(scale == 1.0 for scale in scales):
+        return
+    polar, azimuth = np.abs(np.concatenate(raw[0::2])), np.abs(np.concatenate(raw[1::2]))
+    if (np.all(polar <= np.pi / 2 + 1e-6) and np.all(azimuth <= 2 * np.pi + 1e-6)
+            and np.max(polar) > 0.2):
+        raise MeasurementsError(
+            source, f"the angles are said to be in degrees, but all {n} samples' polar "
+                    f"angles are within {np.pi / 2:.4f} and azimuths within "
+                    f"{2 * np.pi:.4f}: radians' ranges (in degrees, every direction "
+                    "within 1.6 degrees of the normal); if they are radians, name the "
+                    "columns _rad (or '# angles: radians', an HDF5 units attribute "
+                    "'radians')")
 
 
 def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
@@ -240,11 +278,8 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
     """The data lines as floats (rows, width), and their line numbers (0-based);
     ``comma``: a decimal comma (:func:`_decimal_comma`)."""
     out = np.empty((len(lines), width))
-    # split as CSV is: a quoted cell ("55", as spreadsheets and pandas' QUOTE_ALL write
-    # it) is the number inside the quotes
-    rows = (csv.reader((line for _, line in lines), delimiter=delimiter) if delimiter
-            else (line.split() for _, line in lines))
-    for j, ((number, line), cells) in enumerate(zip(lines, rows, strict=True)):
+    for j, (number, line) in enumerate(lines):
+        cells = _cells(line, delimiter, source, number)
         if len(cells) != width:
             raise MeasurementsError(source, f"row {number + 1} has {len(cells)} values, the "
                                             f"header names {width} columns")
@@ -259,22 +294,57 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
     return out, np.array([n for n, _ in lines])
 
 
+def _cells(line: str, delimiter: str | None, source: str, number: int) -> list[str]:
+    """One line's cells: split at ``delimiter`` (None: at blanks), a quoted cell ("55",
+    as spreadsheets and pandas' QUOTE_ALL write it) read as what is inside its quotes.
+    Each line is split on its own, so that a stray quote cannot open a cell that
+    swallows the lines after it (the file read as one CSV stream did so, and failed
+    past 128 KiB with the csv module's "field larger than field limit")."""
+    if delimiter is None:
+        return line.split()
+    if '"' not in line:
+        return line.split(delimiter)
+    try:
+        return next(csv.reader([line], delimiter=delimiter, strict=True))
+    except csv.Error:
+        raise MeasurementsError(source, f"row {number + 1} has a quote that is not closed "
+                                        f"where its cell ends: {line.strip()[:80]!r}") from None
+
+
+def _lines(text: str) -> list[str]:
+    """``text``'s lines, split at CR, LF and CRLF only: ``str.splitlines`` also splits at
+    U+2028, form feeds, \\x1c-\\x1e and \\x85, which a comment may hold (its tail was
+    read as the header)."""
+    return re.split(r"\r\n|\r|\n", text)
+
+
 def _text(path: Path) -> str:
     """The file as text: UTF-8, or Windows-1252 (Latin-1) where only its comments and
     its header lines hold other characters (``# measured at 25°C``, ``theta_i (°)``,
     ``SAMPLE_NAME Müller``, as Windows lab software writes them); its rows of numbers
     are ASCII either way."""
     data = path.read_bytes()
+    refused = MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
+                                           "text (ASTM, CSV) or HDF5")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        # UTF-16 with its byte-order mark: Excel's "Unicode text" export
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError:
+            raise refused from None
+    if b"\x00" in data:
+        # binary, or UTF-16 without a mark: no text read here holds a NUL (it decoded
+        # as UTF-8, and its header was quoted back with a NUL between every letter)
+        raise MeasurementsError(str(path), "not a text file (it holds NUL bytes: binary, "
+                                           "or UTF-16 without a byte-order mark; save it "
+                                           "as UTF-8): a sample list is text (ASTM, CSV) "
+                                           "or HDF5")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         pass
-    refused = MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
-                                           "text (ASTM, CSV) or HDF5")
-    if b"\x00" in data:
-        raise refused  # binary
-    text = data.decode("cp1252", errors="replace")
-    if any(not line.isascii() and re.match(r"\s*[-+.\d]", line) for line in text.splitlines()):
+    text = data.removeprefix(b"\xef\xbb\xbf").decode("cp1252", errors="replace")
+    if any(not line.isascii() and re.match(r"\s*[-+.\d]", line) for line in _lines(text)):
         raise refused  # in a row of numbers: not text of a kind read here
     return text
 
@@ -296,7 +366,7 @@ def read_astm(path: str | os.PathLike) -> Measurements:
     source = str(path)
     header: dict[str, str] = {}
     data: list[tuple[int, str]] = []
-    for number, line in enumerate(_text(path).splitlines()):
+    for number, line in enumerate(_lines(_text(path))):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
@@ -304,7 +374,13 @@ def read_astm(path: str | os.PathLike) -> Measurements:
             data.append((number, stripped))
             continue
         key, value = (re.split(r"\s+", stripped, maxsplit=1) + [""])[:2]  # a tab too
-        header[key.upper()] = value.strip()
+        key, value = key.upper(), value.strip()
+        if key in header and header[key] != value:
+            # which one the rows follow would be a guess (a second VARS that swaps two
+            # columns within their ranges would be fitted, silently)
+            raise MeasurementsError(source, f"{key} is given twice: {header[key]!r} and "
+                                            f"{value!r} (line {number + 1}); keep one")
+        header[key] = value
     if "VARS" not in header:
         raise MeasurementsError(source, "no VARS line: an ASTM E1392 file names its columns "
                                         "(VARS theta_i,phi_i,theta_s,phi_s,R,G,B)")
@@ -350,6 +426,67 @@ def _units_row(line: str, delimiter: str, width: int) -> list[str] | None:
         return None
     return cells
 
+#: How much of a header line the delimiter is guessed from: ``csv.Sniffer`` takes time
+#: quadratic in its text (a one-line JSON file of 517 KB ran for minutes before its
+#: refusal); 4 KiB holds a spectral header of 400 wavelengths.
+SNIFF_CHARS = 4096
+
+
+def _delimiter(header: str) -> str:
+    """The header line's delimiter: comma, semicolon, tab or blank."""
+    try:
+        return csv.Sniffer().sniff(header[:SNIFF_CHARS], delimiters=",;\t ").delimiter
+    except csv.Error:
+        return ","
+
+
+def _numbers_for_a_header(names: list[str], comments: list[tuple[int, str]],
+                          source: str) -> None:
+    """Refuses a first row of numbers, saying where its header went: ``np.savetxt``
+    writes ``header=`` as a comment (``# theta_i_deg,...``), which is skipped here."""
+    try:
+        [float(n) for n in names]
+    except ValueError:
+        return
+    named = [(k, c) for k, c in comments if re.search(r"theta|phi", c, re.IGNORECASE)]
+    hint = (f"; line {named[-1][0] + 1} looks like one written as a comment "
+            f"({named[-1][1][:60]!r}): take away its '#' (numpy's savetxt writes its "
+            "header so unless given comments='')" if named else
+            ": name the columns on the first line (theta_i_deg, phi_i_deg, theta_o_deg, "
+            "phi_o_deg, r, g, b)")
+    raise MeasurementsError(source, f"no header: the first row is numbers{hint}")
+
+
+def _angle_name(name: str) -> re.Match | None:
+    """An angle column's name read (``theta_i_deg``, ``Theta_S [rad]``, ``phi_o``):
+    groups the angle's name and its unit, if any; None for any other column."""
+    m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?",
+                     _unit_suffixed(_value_name(name.strip().lower())))
+    return m if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES else None
+
+
+def _same_units(names: list[str], units: list[str], stated: str | None, source: str) -> None:
+    """Refuses two statements of one angle column's unit that disagree: its name's, the
+    units row's cell under it, and a ``# angles:`` line (``stated``). Which one the
+    numbers are in would be a guess."""
+    def words(unit: str | None) -> str | None:
+        unit = (unit or "").strip().lower().replace("°", "deg")
+        return ("degrees" if unit.startswith("deg") else "radians" if unit.startswith("rad")
+                else None)
+
+    for name, cell in zip(names, units, strict=True):
+        m = _angle_name(name)
+        if m is None:
+            continue
+        said = {what: u for what, u in (("its name", words(m[3])),
+                                        ("the units row", words(cell)),
+                                        ("the '# angles:' line", words(stated)))
+                if u is not None}
+        if len(set(said.values())) > 1:
+            told = ", ".join(f"{what} {u}" for what, u in said.items())
+            raise MeasurementsError(source, f"column {name.strip()!r}: two units ({told}); "
+                                            "keep the one its numbers are in")
+
 
 def read_csv(path: str | os.PathLike) -> Measurements:
     """A CSV or TSV file with a header row (module docstring)."""
@@ -357,12 +494,15 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     source = str(path)
     text = _text(path)
     unit = unit_line = None
-    lines = []
-    for number, line in enumerate(text.splitlines()):
+    lines: list[tuple[int, str]] = []
+    comments: list[tuple[int, str]] = []  # those before the header
+    for number, line in enumerate(_lines(text)):
         stripped = line.strip()
         if not stripped:
             continue
         if stripped.startswith("#"):
+            if not lines:
+                comments.append((number, stripped))
             m = re.fullmatch(r"#\s*angles\s*[:=]\s*(\w+)", stripped, re.IGNORECASE)
             if m:
                 # refused before any row is read, even where every column has its own
@@ -376,19 +516,22 @@ def read_csv(path: str | os.PathLike) -> Measurements:
         lines.append((number, stripped))
     if not lines:
         raise MeasurementsError(source, "no header and no data: the file is empty")
-    try:
-        dialect = csv.Sniffer().sniff(lines[0][1], delimiters=",;\t ")
-        delimiter = dialect.delimiter
-    except csv.Error:
-        delimiter = ","
-    names = next(csv.reader(io.StringIO(lines[0][1]), delimiter=delimiter))
-    if delimiter == " ":
-        names = [n for n in names if n]
+    if m := re.fullmatch(r"sep=(.)", lines[0][1]):  # Excel's line naming the delimiter
+        delimiter, lines = m[1], lines[1:]
+        if not lines:
+            raise MeasurementsError(source, "no header and no data after its 'sep=' line")
+    else:
+        delimiter = _delimiter(lines[0][1])
+    names = _cells(lines[0][1], None if delimiter == " " else delimiter, source, lines[0][0])
+    _numbers_for_a_header(names, comments, source)
     units = _units_row(lines[1][1] if len(lines) > 1 else "", delimiter, len(names))
     if units is not None:  # a second header line of units, as instruments export them
+        _same_units(names, units, unit, source)
         names = [f"{n.strip()} [{u}]" if u and not _names_a_unit(n) else n
                  for n, u in zip(names, units, strict=True)]
         lines = [lines[0], *lines[2:]]
+    elif unit is not None:
+        _same_units(names, [""] * len(names), unit, source)
     cols = _columns(names, source, default_unit=unit)
     comma = _decimal_comma(lines[1:], delimiter)
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
@@ -428,28 +571,24 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         named = _hdf5_angles(f, source)
         missing = [a for a in ANGLES if a not in named]
         if missing:
-            kind = f.attrs.get("format")  # a file that says what it is (a batch's results)
-            kind = kind.decode() if isinstance(kind, bytes) else kind
+            # a file that says what it is (a batch's results)
+            kind = _attr_text(f.attrs.get("format"), "format", source)
             raise MeasurementsError(source, f"no dataset {', '.join(missing)} (the file has "
                                             f"{', '.join(f.keys()) or 'none'})"
                                     + (f": a {kind} file, not a sample list"
                                        if isinstance(kind, str) else ""))
-        angles = []
+        raw, scales = [], []
         for canonical in ANGLES:
             name = named[canonical]
-            unit = f[name].attrs.get("units", f.attrs.get("units"))
+            unit = _dataset(f, name, source).attrs.get("units", f.attrs.get("units"))
             if unit is None:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
                                                 "(degrees or radians), nor has the file")
-            unit = unit.decode() if isinstance(unit, bytes) else str(unit)
-            angles.append(_one_per_sample(f, name, source) * _unit_scale(unit, source))
-        provenance: dict = {"format": "hdf5"}
-        stored = f.attrs.get("provenance")
-        if stored is not None:  # a list brdffit wrote (brdffit.io.writers): what it was
-            try:
-                provenance = {**json.loads(stored), "stored_as": "hdf5"}
-            except (TypeError, ValueError):
-                pass  # not ours after all: an HDF5 file like any other
+            raw.append(_one_per_sample(f, name, source))
+            scales.append(_unit_scale(_attr_text(unit, "units", source), source))
+        _radians_said_to_be_degrees(raw, scales, source)
+        angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
+        provenance = _stored_provenance(f.attrs.get("provenance"))
         kinds = [k for k in ("rgb", "value", "spectral") if k in f]
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
@@ -479,8 +618,54 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
             raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
                                             "spectral (n, k) with wavelengths (k,)")
         sigma = _numeric(f, "sigma", source) if "sigma" in f else None
+    if provenance.get("channels") == 1 and not (
+            values.ndim == 1 or np.all(values == values[:, :1])):
+        del provenance["channels"]  # said of grey values: these are coloured
     return Measurements.from_angles(*angles, values, sigma, source=source,
                                     provenance=provenance)
+
+
+#: The formats a sample list brdffit stored (brdffit.io.writers) was read from.
+_STORED_FORMATS = ("astm", "csv", "hdf5")
+
+
+def _stored_provenance(stored) -> dict:
+    """What a sample list's file says of where it came from: where brdffit stored it
+    (brdffit.io.writers), the provenance it wrote, read from which format; any other
+    file's attribute of that name (a lab's own JSON, of its instrument and operator) is
+    not brdffit's, and what was read here is said instead: a file's attribute replaced
+    the reader's facts (``input.format`` null, a one-channel claim on RGB values)."""
+    try:
+        said = json.loads(stored)
+    except (TypeError, ValueError):
+        said = None
+    if isinstance(said, dict) and said.get("format") in _STORED_FORMATS:
+        return {**said, "stored_as": "hdf5"}
+    return {"format": "hdf5"}
+
+
+def _attr_text(value, what: str, source: str) -> str | None:
+    """An HDF5 attribute's text (bytes decoded as UTF-8); None where it is absent."""
+    if value is None:
+        return None
+    if isinstance(value, bytes):
+        try:
+            return value.decode()
+        except UnicodeDecodeError:
+            raise MeasurementsError(source, f"attribute {what} is not UTF-8 text "
+                                            f"({value[:40]!r})") from None
+    return str(value)
+
+
+def _dataset(f, name: str, source: str):
+    """Object ``name`` of the open HDF5 file ``f``; refused, with its name, where it is
+    a link to nothing (a soft link whose target is gone, an external link to a missing
+    file): h5py lists such a link and raises KeyError when it is opened."""
+    try:
+        return f[name]
+    except (KeyError, OSError) as e:
+        raise MeasurementsError(source, f"{name} is a link to an object that cannot be "
+                                        f"opened ({e})") from None
 
 
 def _numeric(f, name: str, source: str) -> np.ndarray:
@@ -488,13 +673,22 @@ def _numeric(f, name: str, source: str) -> np.ndarray:
     name, where it is a group or holds no numbers (strings, compounds)."""
     import h5py
 
-    d = f[name]
+    d = _dataset(f, name, source)
     if not isinstance(d, h5py.Dataset):
         raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset")
     if d.dtype.kind not in "iuf":
         raise MeasurementsError(source, f"dataset {name} holds {d.dtype}, not numbers")
+    if (d.size or 0) > MAX_NUMBERS:  # None: a null dataspace, read below as empty
+        # the declared shape, before anything is read: a file of a few KB may declare
+        # 10^12 numbers never written (it asked numpy for 7 TiB)
+        raise MeasurementsError(source, f"dataset {name} holds {d.size:,} numbers (shape "
+                                        f"{d.shape}): more than a sample list read here "
+                                        f"({MAX_NUMBERS:,}); bin or thin it first")
     try:
         return np.asarray(d, float)
+    except MemoryError:
+        raise MeasurementsError(source, f"dataset {name} ({d.size:,} numbers) does not fit "
+                                        "in memory") from None
     except (TypeError, ValueError, OSError) as e:
         raise MeasurementsError(source, f"dataset {name} cannot be read as numbers "
                                         f"({e})") from None
@@ -511,24 +705,34 @@ def _one_per_sample(f, name: str, source: str) -> np.ndarray:
                                     "number per sample")
 
 
-#: suffix -> reader; a MERL table is read as a table.
-READERS: dict[str, Callable] = {
-    ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
-    ".txt": read_csv, ".h5": read_hdf5, ".hdf5": read_hdf5,
-}
-
-
 def _by_content(path: Path) -> Callable:
     with open(path, "rb") as f:
         head = f.read(4096)
     if head.startswith(HDF5_SIGNATURE):
         return read_hdf5
-    try:
-        text = head.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return merl.read  # binary: the MERL reader says what is wrong with it
-    keys = {line.split(" ", 1)[0].upper() for line in text.splitlines() if line.strip()}
-    return read_astm if {"VARS", "NUM_POINTS"} & keys else read_csv
+    # binary: the MERL reader says what is wrong with it
+    return read_text_samples if _looks_like_text(head) else merl.read
+
+
+def _looks_like_text(head: bytes) -> bool:
+    """Whether a file's first bytes are text (UTF-8, Windows-1252, or UTF-16 with its
+    mark): no NUL byte, which every MERL table's header holds."""
+    return head.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" not in head
+
+
+def read_text_samples(path: str | os.PathLike) -> Measurements:
+    """A text sample list of either layout: ASTM where it has a VARS or NUM_POINTS
+    line, else CSV (``.txt`` is both)."""
+    keys = {re.split(r"\s+", line.strip(), maxsplit=1)[0].upper()
+            for line in _lines(_text(Path(path))) if line.strip()}
+    return (read_astm if {"VARS", "NUM_POINTS"} & keys else read_csv)(path)
+
+
+#: suffix -> reader; a MERL table is read as a table.
+READERS: dict[str, Callable] = {
+    ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
+    ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5,
+}
 
 
 def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
@@ -554,18 +758,18 @@ def read_measured(path: str | os.PathLike,
     path = Path(path)
     if path.is_dir():
         raise MerlFormatError(name or str(path), "is a directory, not a measured table")
-    if not path.exists():  # as the MERL reader says it
-        raise MerlFormatError(name or str(path), "cannot read: No such file or directory")
+    try:
+        os.stat(path)
+    except OSError as e:  # as the MERL reader says it (a symbolic link loop: its words)
+        raise MerlFormatError(name or str(path), f"cannot read: {e.strerror}") from None
     if not path.is_file():
         # a pipe (brdffit fit <(zcat t.binary.gz), /dev/stdin) has no size and is read
-        # once: copied whole first, then read as the file it carries (it read as empty)
-        import shutil
+        # once: copied first, then read as the file it carries (it read as empty)
         import tempfile
 
         with tempfile.TemporaryDirectory(prefix="brdffit-stream-") as folder:
             copy = Path(folder) / (Path(name or path).name or "stream")
-            with open(path, "rb") as stream, open(copy, "wb") as out:
-                shutil.copyfileobj(stream, out)
+            _copy_stream(path, copy, name or str(path))
             return read_measured(copy, name or str(path))
     reader = reader_for(path, name)
     try:
@@ -577,6 +781,19 @@ def read_measured(path: str | os.PathLike,
     if name is not None:
         got = dataclasses.replace(got, source=name)
     return got
+
+
+def _copy_stream(path: Path, copy: Path, source: str) -> None:
+    """The stream at ``path`` copied to the file ``copy``, up to MAX_STREAM_BYTES."""
+    left = MAX_STREAM_BYTES
+    with open(path, "rb") as stream, open(copy, "wb") as out:
+        while chunk := stream.read(min(2**20, left + 1)):
+            if len(chunk) > left:
+                raise MerlFormatError(source, f"a stream longer than {MAX_STREAM_BYTES:,} "
+                                              "bytes: no measured file is that large (save "
+                                              "it to a file to see what it holds)")
+            out.write(chunk)
+            left -= len(chunk)
 
 
 def read_table(path: str | os.PathLike, name: str | None = None):
