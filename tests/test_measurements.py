@@ -6,6 +6,8 @@ the material that made it. (The shells: tests/test_measurement_shells.py.)"""
 
 from __future__ import annotations
 
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -685,3 +687,16 @@ def test_an_error_naming_a_file_with_a_line_break_is_one_line(tmp_path, capsys):
     assert cli_main(["fit", str(path), "--model", "lambert"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "bad\\nname.csv: no data" in err, err
+
+
+@pytest.mark.parametrize("values, says", [
+    (np.ones((5, 2)), "values have shape (5, 2): expected (n,) or (n, 3)"),
+    (np.ones((5, 3, 1)), "values have shape (5, 3, 1)"),
+    (None, "no values"),
+    (np.ones(4), "4 values but angles of [5, 5, 5, 5] rows"),
+])
+def test_values_of_another_shape_are_named_by_it(values, says):
+    """Two channels were "5 values but angles of [5, 5, 5, 5] rows", which they are."""
+    angles = [np.full(5, 0.3)] * 4
+    with pytest.raises(MeasurementsError, match=re.escape(says)):
+        Measurements.from_angles(*angles, values)

@@ -96,14 +96,19 @@ class Measurements:
         (n,) or (n, 3); ``sigma`` likewise. ``rows``: each sample's row number in its
         file (0-based), for the messages. Raises :class:`MeasurementsError` on what no
         fit can use (module docstring)."""
+        if values is None:
+            raise MeasurementsError(source, "no values: (n,) or (n, 3), one per sample")
         angles = [np.asarray(a, float).ravel() for a in (theta_i, phi_i, theta_o, phi_o)]
         values = np.asarray(values, float)
         if values.size == 0:
             raise MeasurementsError(source, "no data: the file holds no sample rows")
         one_channel = values.ndim == 1
+        if values.ndim > 2 or values.ndim == 2 and values.shape[1] not in (1, 3):
+            raise MeasurementsError(source, f"values have shape {values.shape}: expected "
+                                            "(n,) or (n, 3), one per sample")
         values = values.reshape(values.shape[0], -1) if values.ndim else values.reshape(1, 1)
         n = values.shape[0]
-        if any(a.size != n for a in angles) or values.shape[1] not in (1, 3):
+        if any(a.size != n for a in angles):
             raise MeasurementsError(source, f"{n} values but angles of "
                                             f"{[a.size for a in angles]} rows")
         for name, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), angles, strict=True):
