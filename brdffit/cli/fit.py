@@ -230,8 +230,8 @@ def run(args) -> int:
 
         comma = ", decimal commas" if measured.provenance.get("decimal_comma") else ""
         print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "
-              f"({measured.provenance.get('format')}{comma}): fitted at their own directions, "
-              "with a held-out error", file=sys.stderr)
+              f"({measured.provenance.get('format')}{comma}), to be fitted at their own "
+              "directions, with a held-out error", file=sys.stderr)
         table = binned(measured)[0]  # what the plots draw: the samples in their bins
     # for this fit only: a caller of main() in its own process keeps its own hook
     previous, executables.on_compile = executables.on_compile, _say_compiling_once()
