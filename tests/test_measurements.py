@@ -700,3 +700,23 @@ def test_values_of_another_shape_are_named_by_it(values, says):
     angles = [np.full(5, 0.3)] * 4
     with pytest.raises(MeasurementsError, match=re.escape(says)):
         Measurements.from_angles(*angles, values)
+
+
+def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path):
+    """As Excel exports a sheet: empty columns after the last one (`,,,`), rows of
+    empty cells after the data, and a column of text beside the numbers (a sample's
+    name): read as the same samples (each was refused: a header column without a
+    name, a row of the wrong width, a row not all numbers). A used column that is not a
+    number is still refused."""
+    s = _samples(40)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    header, *rows = (tmp_path / "s.csv").read_text().splitlines()
+    sheet = tmp_path / "sheet.csv"
+    sheet.write_text("\n".join([f"{header},note,,", *(f"{r},ok v1.2,," for r in rows),
+                                ",,,,,,,,,", ",,,,,,,,,"]) + "\n")
+    got = read_measured(sheet)
+    np.testing.assert_array_equal(got.rgb, plain.rgb)
+    np.testing.assert_array_equal(got.wo, plain.wo)
+    sheet.write_text("\n".join([f"{header},note", f"{rows[0]},x", f"{rows[1][:-3]}y,x"]))
+    with pytest.raises(MeasurementsError, match="row 3 is not all numbers"):
+        read_measured(sheet)

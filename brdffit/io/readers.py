@@ -274,20 +274,26 @@ def _decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
 
 
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
-             source: str, comma: bool = False) -> tuple[np.ndarray, np.ndarray]:
+             source: str, comma: bool = False,
+             used: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The data lines as floats (rows, width), and their line numbers (0-based);
-    ``comma``: a decimal comma (:func:`_decimal_comma`)."""
-    out = np.empty((len(lines), width))
+    ``comma``: a decimal comma (:func:`_decimal_comma`); ``used``: the columns read as
+    numbers (default all; the others, a sample's name or a note, are NaN)."""
+    used = list(range(width)) if used is None else used
+    out = np.full((len(lines), width), np.nan)
     for j, (number, line) in enumerate(lines):
         cells = _cells(line, delimiter, source, number)
+        if len(cells) > width and not any(c.strip() for c in cells[width:]):
+            cells = cells[:width]  # empty cells after the last column, as Excel leaves
         if len(cells) != width:
             raise MeasurementsError(source, f"row {number + 1} has {len(cells)} values, the "
                                             f"header names {width} columns")
         try:
+            read = [cells[k] for k in used]
             # Python's float() also reads 1_0 as 10: no data file means that
-            if "_" in line:
+            if any("_" in c for c in read):
                 raise ValueError
-            out[j] = [float(c.replace(",", ".") if comma else c) for c in cells]
+            out[j, used] = [float(c.replace(",", ".") if comma else c) for c in read]
         except ValueError:
             raise MeasurementsError(source, f"row {number + 1} is not all numbers: "
                                             f"{line.strip()[:80]!r}") from None
@@ -523,6 +529,12 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     else:
         delimiter = _delimiter(lines[0][1])
     names = _cells(lines[0][1], None if delimiter == " " else delimiter, source, lines[0][0])
+    while len(names) > 1 and not names[-1].strip():
+        names.pop()  # unnamed columns at the end, as Excel leaves them: empty cells
+    # rows of empty cells (",,,,,,", a spreadsheet's formatted but empty rows) are
+    # skipped as blank lines are
+    lines = [lines[0], *(line for line in lines[1:]
+                         if line[1].strip(f"{delimiter} \t"))]
     _numbers_for_a_header(names, comments, source)
     units = _units_row(lines[1][1] if len(lines) > 1 else "", delimiter, len(names))
     if units is not None:  # a second header line of units, as instruments export them
@@ -534,8 +546,10 @@ def read_csv(path: str | os.PathLike) -> Measurements:
         _same_units(names, [""] * len(names), unit, source)
     cols = _columns(names, source, default_unit=unit)
     comma = _decimal_comma(lines[1:], delimiter)
+    # only the columns read are numbers: a column of sample names or notes is left
+    used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ()))
     rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
-                             source, comma=comma)
+                             source, comma=comma, used=used)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column",
