@@ -121,6 +121,8 @@ def test_one_channel_and_sigma(tmp_path):
      "theta_o is below the horizon (more than 90 degrees from the normal) in 1 row (first: row 3)"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n-10,0,20,0,1,1,1\n",
      "theta_i is negative"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n-0.02,0,20,0,1,1,1\n",
+     "theta_i is negative"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,nan,0,1,1,1\n",
      "theta_o is not finite in 1 row (first: row 2)"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,inf,1\n",
@@ -720,3 +722,13 @@ def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path)
     sheet.write_text("\n".join([f"{header},note", f"{rows[0]},x", f"{rows[1][:-3]}y,x"]))
     with pytest.raises(MeasurementsError, match="row 3 is not all numbers"):
         read_measured(sheet)
+
+
+def test_a_polar_angle_a_rounding_below_zero_is_the_normal():
+    """An instrument's -0.0001 degrees at normal incidence is read as 0 (it was
+    refused as negative, while 90.00001 degrees was read as 90)."""
+    angles = [np.radians([-0.0001, 10.0]), np.zeros(2), np.radians([20.0, -0.005]),
+              np.zeros(2)]
+    m = Measurements.from_angles(*angles, np.ones(2))
+    np.testing.assert_array_equal(m.wi[0], [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(m.wo[1], [0.0, 0.0, 1.0])

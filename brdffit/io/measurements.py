@@ -47,6 +47,10 @@ MAX_VALUE = 1e12
 #: Directions this far below the horizon (radians) are refused, not clamped: a
 #: gonioreflectometer's 90.000 deg in a file reads as 1.5707963 (a little over pi / 2).
 HORIZON_SLACK = 1e-6
+#: Polar angles this little below 0 (radians; 0.01 degrees) are read as 0: an
+#: instrument's -0.0001 degrees at normal incidence is rounding, while an in-plane
+#: file's signed angles, which are refused, reach far below it.
+NORMAL_SLACK = float(np.radians(0.01))
 #: The largest |phi| read (radians): two turns, for files that measure the view's
 #: azimuth from the light's in -360..360 degrees.
 MAX_AZIMUTH = 4 * np.pi
@@ -131,7 +135,7 @@ class Measurements:
                     source, f"{name} is below the horizon (more than 90 degrees from the "
                             f"normal) in {_first_rows(below, rows)}: a reflectance sample "
                             "has both directions above the surface")
-            negative = a < 0
+            negative = a < -NORMAL_SLACK
             if negative.any():
                 raise MeasurementsError(
                     source, f"{name} is negative in {_first_rows(negative, rows)}: polar "
@@ -172,7 +176,7 @@ class Measurements:
                     source, f"sigma is above {MAX_VALUE:g} 1/sr in "
                             f"{_first_rows(np.any(sigma > MAX_VALUE, 1), rows)}: another "
                             "unit, or a corrupt value")
-        theta_i, phi_i, theta_o, phi_o = (np.minimum(a, np.pi / 2) if k % 2 == 0 else a
+        theta_i, phi_i, theta_o, phi_o = (np.clip(a, 0.0, np.pi / 2) if k % 2 == 0 else a
                                           for k, a in enumerate(angles))
         info = {"channels": 1 if one_channel or values.shape[1] == 1 else 3,
                 **(provenance or {})}
