@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import io
 import json
 import os
 import re
@@ -43,10 +42,12 @@ import numpy as np
 
 from brdffit.errors import MerlFormatError
 from brdffit.io import merl, spectra
-from brdffit.io.measurements import Measurements, MeasurementsError
+from brdffit.io.measurements import HORIZON_SLACK, Measurements, MeasurementsError
 
 #: HDF5's file signature (its first eight bytes).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: UTF-16's byte-order marks (little- and big-endian), as Excel's "Unicode text" starts.
+UTF16_MARKS = (b"\xff\xfe", b"\xfe\xff")
 #: The most numbers one HDF5 dataset may hold: 10^8 float64 (800 MB), ten million
 #: RGB samples with room to spare.
 MAX_NUMBERS = 10**8
@@ -239,7 +240,7 @@ def _radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
     if n < _JUDGED_FROM or any(scale == 1.0 for scale in scales):
         return
     polar, azimuth = np.abs(np.concatenate(raw[0::2])), np.abs(np.concatenate(raw[1::2]))
-    if (np.all(polar <= np.pi / 2 + 1e-6) and np.all(azimuth <= 2 * np.pi + 1e-6)
+    if (np.all(polar <= np.pi / 2 + HORIZON_SLACK) and np.all(azimuth <= 2 * np.pi + 1e-6)
             and np.max(polar) > 0.2):
         raise MeasurementsError(
             source, f"the angles are said to be in degrees, but all {n} samples' polar "
@@ -332,7 +333,7 @@ def _text(path: Path) -> str:
     data = path.read_bytes()
     refused = MeasurementsError(str(path), "not a text file (not UTF-8): a sample list is "
                                            "text (ASTM, CSV) or HDF5")
-    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+    if data.startswith(UTF16_MARKS):
         # UTF-16 with its byte-order mark: Excel's "Unicode text" export
         try:
             return data.decode("utf-16")
@@ -368,11 +369,13 @@ def _a_number(line: str) -> bool:
 
 def read_astm(path: str | os.PathLike) -> Measurements:
     """An ASTM E1392 file as Cornell's and ALTA's (module docstring)."""
-    path = Path(path)
-    source = str(path)
+    return _astm_samples(_text(Path(path)), str(path))
+
+
+def _astm_samples(text: str, source: str) -> Measurements:
     header: dict[str, str] = {}
     data: list[tuple[int, str]] = []
-    for number, line in enumerate(_lines(_text(path))):
+    for number, line in enumerate(_lines(text)):
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
@@ -420,14 +423,13 @@ def _names_a_unit(name: str) -> bool:
     return bool(re.search(r"[\[(/]|_(deg|rad|degrees|radians)$", name))
 
 
-def _units_row(line: str, delimiter: str, width: int) -> list[str] | None:
+def _units_row(row: tuple[int, str] | None, delimiter: str | None, width: int,
+               source: str) -> list[str] | None:
     """The cells of a row of units under the header (``deg,deg,deg,deg,1/sr,1/sr,
     1/sr``), brackets dropped; None where the row is not one (a data row)."""
-    if not line:
+    if row is None:
         return None
-    cells = (next(csv.reader(io.StringIO(line), delimiter=delimiter)) if delimiter != " "
-             else line.split())
-    cells = [c.strip().strip("[]()").strip() for c in cells]
+    cells = [c.strip().strip("[]()").strip() for c in _cells(row[1], delimiter, source, row[0])]
     if len(cells) != width or not any(cells) or not all(_UNIT_CELL.fullmatch(c) for c in cells):
         return None
     return cells
@@ -496,9 +498,10 @@ def _same_units(names: list[str], units: list[str], stated: str | None, source: 
 
 def read_csv(path: str | os.PathLike) -> Measurements:
     """A CSV or TSV file with a header row (module docstring)."""
-    path = Path(path)
-    source = str(path)
-    text = _text(path)
+    return _csv_samples(_text(Path(path)), str(path))
+
+
+def _csv_samples(text: str, source: str) -> Measurements:
     unit = unit_line = None
     lines: list[tuple[int, str]] = []
     comments: list[tuple[int, str]] = []  # those before the header
@@ -528,7 +531,8 @@ def read_csv(path: str | os.PathLike) -> Measurements:
             raise MeasurementsError(source, "no header and no data after its 'sep=' line")
     else:
         delimiter = _delimiter(lines[0][1])
-    names = _cells(lines[0][1], None if delimiter == " " else delimiter, source, lines[0][0])
+    split_at = None if delimiter == " " else delimiter  # blanks: any run of them
+    names = _cells(lines[0][1], split_at, source, lines[0][0])
     while len(names) > 1 and not names[-1].strip():
         names.pop()  # unnamed columns at the end, as Excel leaves them: empty cells
     # rows of empty cells (",,,,,,", a spreadsheet's formatted but empty rows) are
@@ -536,20 +540,17 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     lines = [lines[0], *(line for line in lines[1:]
                          if line[1].strip(f"{delimiter} \t"))]
     _numbers_for_a_header(names, comments, source)
-    units = _units_row(lines[1][1] if len(lines) > 1 else "", delimiter, len(names))
+    units = _units_row(lines[1] if len(lines) > 1 else None, split_at, len(names), source)
+    _same_units(names, units or [""] * len(names), unit, source)
     if units is not None:  # a second header line of units, as instruments export them
-        _same_units(names, units, unit, source)
         names = [f"{n.strip()} [{u}]" if u and not _names_a_unit(n) else n
                  for n, u in zip(names, units, strict=True)]
         lines = [lines[0], *lines[2:]]
-    elif unit is not None:
-        _same_units(names, [""] * len(names), unit, source)
     cols = _columns(names, source, default_unit=unit)
     comma = _decimal_comma(lines[1:], delimiter)
     # only the columns read are numbers: a column of sample names or notes is left
     used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ()))
-    rows, numbers = _numbers(lines[1:], None if delimiter == " " else delimiter, len(names),
-                             source, comma=comma, used=used)
+    rows, numbers = _numbers(lines[1:], split_at, len(names), source, comma=comma, used=used)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column",
@@ -731,15 +732,16 @@ def _by_content(path: Path) -> Callable:
 def _looks_like_text(head: bytes) -> bool:
     """Whether a file's first bytes are text (UTF-8, Windows-1252, or UTF-16 with its
     mark): no NUL byte, which every MERL table's header holds."""
-    return head.startswith((b"\xff\xfe", b"\xfe\xff")) or b"\x00" not in head
+    return head.startswith(UTF16_MARKS) or b"\x00" not in head
 
 
 def read_text_samples(path: str | os.PathLike) -> Measurements:
     """A text sample list of either layout: ASTM where it has a VARS or NUM_POINTS
     line, else CSV (``.txt`` is both)."""
+    text = _text(Path(path))  # decoded once, for the choice and the reader
     keys = {re.split(r"\s+", line.strip(), maxsplit=1)[0].upper()
-            for line in _lines(_text(Path(path))) if line.strip()}
-    return (read_astm if {"VARS", "NUM_POINTS"} & keys else read_csv)(path)
+            for line in _lines(text) if line.strip()}
+    return (_astm_samples if {"VARS", "NUM_POINTS"} & keys else _csv_samples)(text, str(path))
 
 
 #: suffix -> reader; a MERL table is read as a table.
