@@ -156,11 +156,13 @@ class Event(NamedTuple):
 #: (``bench/startup.py``, ``brdffit warmup``). A few dozen entries per process.
 events: list[Event] = []
 
-#: Called with a program's name just before :func:`jit` compiles it (not when it is
-#: loaded from disk), from whichever thread compiles: a shell can say that a first
-#: use is compiling (``brdffit fit``) instead of seeming to hang for seconds. The
-#: library says nothing (None).
-on_compile: Callable[[str], None] | None = None
+#: Called with a program's name, and whether the program will be kept on disk for
+#: the next process, just before :func:`jit` compiles it (not when it is loaded from
+#: disk), from whichever thread compiles: a shell can say that a first use is
+#: compiling (``brdffit fit``) instead of seeming to hang for seconds. Not kept: the
+#: cache is off, or the program holds a plugin model (whose code the fingerprint does
+#: not cover). The library says nothing (None).
+on_compile: Callable[[str, bool], None] | None = None
 
 
 @functools.cache
@@ -558,7 +560,7 @@ def jit(fn: Callable | None = None, *, compiled_forms: bool = True) -> Callable:
                 if found is not None:
                     return found
                 if on_compile is not None:
-                    on_compile(name)
+                    on_compile(name, path is not None)
                 with _ready.shared():
                     entry = compile_entry(leaves, treedef, dynamic, path is not None,
                                           file_name)

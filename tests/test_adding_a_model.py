@@ -99,9 +99,20 @@ def test_the_model_is_listed_with_its_parameters(plugin_path):
     assert r.returncode == 2 and "unknown model 'minnaert'" in r.stderr
 
 
-def test_the_cli_fits_it_and_auto_chooses_it(plugin_path, moon):
-    r = _cli(plugin_path, "fit", str(moon), "--model", "minnaert", "--json")
-    assert r.returncode == 0, r.stderr
+def test_the_cli_fits_it_and_auto_chooses_it(plugin_path, moon, tmp_path, monkeypatch):
+    # an empty cache: what the fit compiles and keeps is said, and that the plugin's
+    # own programs are compiled again in every run (a user saw "kept ... for the next
+    # run" on every run of a plugin fit)
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "cache"))
+    plugin_line = ("brdffit: compiling (seconds; not kept: a plugin model's programs are "
+                   "compiled in every run)")
+    for kept_too in (True, False):
+        r = _cli(plugin_path, "fit", str(moon), "--model", "minnaert", "--json")
+        assert r.returncode == 0, r.stderr
+        said = sorted(ln for ln in r.stderr.splitlines() if "compiling" in ln)
+        first_use = [f"brdffit: first use of these options on this machine: compiling "
+                     f"(seconds; kept in {tmp_path / 'cache'} for the next run)"]
+        assert said == [plugin_line, *(first_use if kept_too else [])], r.stderr
     d = json.loads(r.stdout)
     assert d["converged"] and d["params"]["k"] == pytest.approx(1.6, rel=1e-3)
     np.testing.assert_allclose(d["params"]["kd"], [0.3, 0.25, 0.2], rtol=1e-3)

@@ -88,6 +88,11 @@ def test_models_lists_every_model_with_ranges():
     for name in TRUTH:
         assert name in r.stdout
     assert "alpha" in r.stdout and "[0.001, 2]" in r.stdout
+    assert "also ggx_mono (6 values)" in r.stdout  # a registry entry too (docs/models.md)
+    assert "lambert_mono" not in r.stdout
+    # a long parameter name keeps its model's columns in line
+    assert "    specular_roughness [0.0316228, 1] (log)   specular_roughness" in r.stdout
+    assert "    base_color         [0, 1]" in r.stdout
     d = json.loads(run("brdffit.cli", "models", "--json").stdout)
     assert {m["name"] for m in d} >= set(TRUTH)
 
@@ -126,7 +131,8 @@ def test_a_fit_that_compiles_says_so_once_and_the_next_run_does_not(ggx_file, tm
                                         "time_s": json.loads(again.stdout)["time_s"]}
     monkeypatch.setenv("BRDFFIT_CACHE_DIR", "")
     off = run("brdffit.cli", "fit", str(ggx_file), "--model", "lambert", "--json")
-    assert off.returncode == 0 and "not kept: BRDFFIT_CACHE_DIR is empty" in off.stderr, \
+    assert off.returncode == 0, off.stderr
+    assert "brdffit: compiling (seconds; not kept: BRDFFIT_CACHE_DIR is empty)" in off.stderr, \
         off.stderr
 
 

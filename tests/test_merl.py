@@ -58,6 +58,14 @@ def test_negative_values_are_unmeasured(tmp_path, good_raw):
     neg = np.any(good_raw.reshape(3, 90, 90, 180) < 0, axis=0)
     np.testing.assert_array_equal(t.mask, ~neg)
     assert np.all(t.rgb[:, ~t.mask] == 0)
+    # bins negative in some channels only (noise around zero, not MERL's marker) are
+    # counted, by the reader and from values alike: the fit says what leaving them cost
+    rows = good_raw.reshape(3, -1) < 0
+    partial = int(np.count_nonzero(rows.any(axis=0) & ~rows.all(axis=0)))
+    assert t.n_partial == partial > 0
+    assert merl.MerlTable.from_values(good_raw.reshape(3, -1)).n_partial == partial
+    marked = np.where(rows.any(axis=0), -1.0, good_raw.reshape(3, -1))  # every channel
+    assert merl.read(_raw_file(tmp_path / "m.binary", body=marked.ravel())).n_partial == 0
 
 
 def test_nonfinite_values_are_masked_and_counted(tmp_path):

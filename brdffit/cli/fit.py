@@ -101,7 +101,8 @@ def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
-                   help="also write the plots (slices, error_map, spheres, polar) as DIR/*.png")
+                   help="also write the plots (report, slices, error_map, spheres, polar; ranking "
+                        "with auto) as DIR/*.png")
     add_request_arguments(p, "--model")
 
 
@@ -263,17 +264,25 @@ def format_models(report: FitReport) -> str:
 def _say_compiling_once():
     """``executables.on_compile`` for one command: the first compile says, on stderr,
     why this run takes seconds (a first use of these options on this machine), and
-    whether the next run will load what it compiles."""
-    first = threading.Lock()  # held for good by the first compile, of whichever thread
+    whether the next run will load what it compiles. A program that is not kept (a
+    plugin model's, or any with the cache off) is compiled in every run, which its
+    own line says, once."""
+    lock = threading.Lock()
+    said: set[bool] = set()  # whether a kept / a not-kept compile was announced
 
-    def say(name: str) -> None:
-        if not first.acquire(blocking=False):
+    def say(name: str, kept: bool) -> None:
+        with lock:
+            if kept in said:
+                return
+            said.add(kept)
+        if kept:
+            print(f"brdffit: first use of these options on this machine: compiling "
+                  f"(seconds; kept in {runtime.cache_dir()} for the next run)",
+                  file=sys.stderr, flush=True)
             return
-        kept = runtime.cache_dir()
-        later = (f"kept in {kept} for the next run" if kept is not None
-                 else "not kept: BRDFFIT_CACHE_DIR is empty")
-        print(f"brdffit: first use of these options on this machine: compiling "
-              f"(seconds; {later})", file=sys.stderr, flush=True)
+        why = ("BRDFFIT_CACHE_DIR is empty" if runtime.cache_dir() is None
+               else "a plugin model's programs are compiled in every run")
+        print(f"brdffit: compiling (seconds; not kept: {why})", file=sys.stderr, flush=True)
 
     return say
 

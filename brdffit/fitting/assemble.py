@@ -74,7 +74,8 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     found_notes, found_steps = source.findings(prep)
     if found_steps and look.get("verdict") != "good":  # the data's fault comes first
         look = {**look, "next": [*found_steps, *look.get("next", [])]}
-    notes = (*notes, *_peak_missed(metrics, look), *found_notes)
+    # once each: a polish carries its coarse fit's notes, which found the same table
+    notes = tuple(dict.fromkeys((*notes, *_peak_missed(metrics, look), *found_notes)))
     counts = prep.counts
     return FitResult(
         model=model.name,
@@ -118,8 +119,18 @@ def _peak_missed(metrics: dict, look: dict) -> list[str]:
     rel = metrics.get("rel_peak_error")
     if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
         return []
-    return [f"the fit misses the table's brightest bin by {rel:.0%} of its value "
+    if rel > 1.0:  # |fit - measured| beyond the measured value: the fit is above it
+        return [f"{PEAK_NOTE} is {1.0 + rel:.3g}x the table's there (rel_peak_error "
+                f"{rel:.3g}): a lobe brighter at the peak than anything measured, in too "
+                f"few bins for the sphere render to see; the '{look.get('verdict')}' "
+                "verdict judges the look without it"]
+    return [f"{PEAK_NOTE} misses the table's by {rel:.0%} of its value "
             f"(rel_peak_error {rel:.3g}): a peak in too few bins for the sphere render to "
             f"see (a lone hot bin, an outlier?); the '{look.get('verdict')}' verdict judges "
             "the look without it"]
+
+
+#: How :func:`_peak_missed`'s notes begin: a polish over every bin drops its coarse
+#: fit's (whose figures they were) and says its own.
+PEAK_NOTE = "at the table's brightest bin the fit"
 

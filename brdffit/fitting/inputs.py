@@ -107,21 +107,60 @@ class TableInput:
         as next steps (``quality.next_steps``' form): bins the fit used that stand far
         above all their neighbours (``MerlTable.isolated_spikes``), corrupt values that a
         least-squares fit follows."""
+        notes, steps = _too_bright(prep)
+        notes += _partly_negative(self.table)
         spikes = cached(self.table, "isolated-spikes", self.table.isolated_spikes)
         used = prep.counts.usable.reshape(merl.SHAPE)
         spikes = [tuple(int(x) for x in b) for b in spikes if used[tuple(b)]]
         if not spikes:
-            return [], []
+            return notes, steps
         first = spikes[0]
         value = float(self.table.rgb[(slice(None), *first)].max())
         what = (f"{len(spikes):,} bin{'s' if len(spikes) != 1 else ''} over "
                 f"{merl.SPIKE_FACTOR:,.0f}x every measured neighbour on the grid (the "
                 f"brightest: {value:.3g} 1/sr at theta_h, theta_d, phi_d bin {list(first)})")
-        return ([f"{what}: a corrupt value? A least-squares fit follows such a bin; mark it "
-                 "unmeasured (a negative value) to leave it out"],
-                [{"try": "the table without its spikes (mark them unmeasured: a negative value)",
-                  "why": f"{what}: no reflectance changes so from one bin to the next, and the "
-                         "fit follows them", "gain_db": None}])
+        return ([*notes, f"{what}: a corrupt value? A least-squares fit follows such a bin; "
+                 "mark it unmeasured (a negative value) to leave it out"],
+                [*steps, {"try": "the table without its spikes (mark them unmeasured: a "
+                          "negative value)",
+                          "why": f"{what}: no reflectance changes so from one bin to the next, "
+                                 "and the fit follows them", "gain_db": None}])
+
+
+#: The diffuse floor's albedo (pi times a low percentile of the mid-angle bins,
+#: ``brdffit.fitting.starts.diffuse_estimate``) above which a table's values are
+#: not in 1/sr: a surface reflects at most what it receives (albedo 1), and the
+#: brightest of the 100 MERL materials is at 0.41 (light-red-paint's red). A MERL
+#: table written without its channel scales (1/1500, 1.15/1500, 1.66/1500) is ~1500x
+#: too bright; the fit still runs, in the units it was given, and says so.
+SUSPECT_ALBEDO = 2.0
+
+
+#: The share of a table's bins, negative in some channels only, from which a fit says
+#: that they were left out and how that biases it.
+PARTIAL_SHARE = 0.01
+
+
+def _partly_negative(table: MerlTable) -> list[str]:
+    n, measured = table.n_partial, int(table.mask.sum())
+    if n < PARTIAL_SHARE * (n + measured):
+        return []
+    return [f"{n:,} bins ({n / (n + measured):.0%}) are negative in some channels and not "
+            "in others: left out whole, as MERL marks an unmeasured bin (negative in every "
+            "channel). If they are noise around zero (a dark frame subtracted), leaving them "
+            "out biases the dark channels upward: clip such values to 0 instead"]
+
+
+def _too_bright(prep: Prepared) -> tuple[list[str], list[dict]]:
+    hints = prep.hints
+    if hints is None or not np.all(np.isfinite(hints.kd)) or hints.kd.max() <= SUSPECT_ALBEDO:
+        return [], []
+    what = (f"the table's diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
+            "mid-angle level; no surface reflects more than it receives, 1): are its values "
+            "in 1/sr? MERL's .binary holds values to be scaled by 1/1500, 1.15/1500 and "
+            "1.66/1500 per channel")
+    return ([f"{what}; fitted as given, so kd and ks are in the table's units"],
+            [{"try": "the table in 1/sr", "why": what, "gain_db": None}])
 
 
 class SampleInput:

@@ -39,7 +39,7 @@ import numpy as np
 
 from brdffit import models, runtime
 from brdffit.errors import FitInputError
-from brdffit.fitting.assemble import assemble
+from brdffit.fitting.assemble import PEAK_NOTE, assemble
 from brdffit.fitting.inputs import check_enough, fit_input
 from brdffit.fitting.loss import get_loss
 from brdffit.fitting.options import (
@@ -248,6 +248,12 @@ def solved_fit(
         report_pool().submit(runtime.in_float64(ahead.ready), u_candidates[:n_starts])
     best_starts = _ranked_starts(m, u_candidates, n_starts, prep, precision,
                                  n_scan=0 if parent is None else len(m.parent_scan))
+    if len(best_starts) > n_starts and m.start_family is not None:
+        values = ", ".join(f"{v:g}" for v in dict.fromkeys(s[m.start_family]
+                                                          for s in m.shape_grid))
+        notes.append(f"{len(best_starts)} starts refined ({starts} asked): the best-scored, "
+                     f"and the best of each {m.start_family} ({values}): a metal and a "
+                     "dielectric explain a highlight differently, each in a basin of its own")
     if ready_here is not None:
         ready_here()
     if parent is None and init is None and m.parent is not None:
@@ -396,16 +402,27 @@ def _start_candidates(source, m, prep, init, polish: bool, again: dict):
         coarse = fit(source.table, m, samples=DEFAULT_SAMPLES, **again)
         # A coordinate deep in its transform's flat tail (a scale at 1e-14) is pulled
         # back to the tail's edge (|u| <= 14, as every start is): the full table may
-        # want it back, and from deep in the tail capped steps would only crawl.
-        u = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0, 14.0)[None]
+        # want it back, and from deep in the tail capped steps would only crawl. A
+        # softplus has no upper tail: a scale of 2000 (a table in other units) is
+        # where it is (clipped to 14, the polish ended 80x worse than its start).
+        u = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0,
+                    _upper_clip(m))[None]
         return u, coarse
     return start_vectors(m, source.start_table(prep), prep.counts.usable, prep.hints), None
+
+
+def _upper_clip(m) -> np.ndarray:
+    """Per coordinate, the largest unconstrained value a polish starts from: 14, the
+    edge of a sigmoid's upper tail, and none for a softplus (an unbounded scale)."""
+    return np.concatenate([np.full(s.size, np.inf if s.upper is None else 14.0)
+                           for s in m.param_specs])
 
 
 def _start_notes(m, starts: int, n_candidates: int, init, coarse, prep) -> list[str]:
     """What the result's ``starts`` means where it is not simply the starts asked."""
     if coarse is not None:
-        return [*coarse.notes,
+        # the coarse fit's figures are not this fit's: their notes are said again below
+        return [*(n for n in coarse.notes if not n.startswith(PEAK_NOTE)),
                 f"every bin ({prep.n_usable:,}) polished, from one start, the optimum of the "
                 f"fit on {coarse.samples['used']:,} samples, which refined {coarse.starts} "
                 "start(s): starts counts those"]

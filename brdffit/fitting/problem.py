@@ -191,6 +191,13 @@ def _bound_side(u, args):
     return args[0].solver_bound_side(u)  # (model, data) or (model, data, term)
 
 
+def _unbounded_above(u, args):
+    """The coordinates on a softplus (a scale with no upper bound; the solver's step
+    cap is relative there: ``brdffit.fitting.solver.RELATIVE_STEP``), a constant."""
+    return jnp.asarray(np.concatenate([np.full(s.size, s.upper is None)
+                                       for s in args[0].param_specs]))
+
+
 def start_bucket(n: int) -> int:
     """How many starts a compiled solve holds for ``n`` starts: the next power of two.
     With the step limit as data (the lm solver), the slots past ``n`` take no step
@@ -257,7 +264,8 @@ def solve_batch(model, solver_name: str, u_batch, data, max_steps, n_live=None, 
     carries_terms = spec.carries_terms and term is None
     options = {"normal_equations": (_objective_normal_equations_with_meat if carries_terms
                                     else _objective_normal_equations),
-               "bound_side": _bound_side, "loss_floor": floor}
+               "bound_side": _bound_side, "unbounded_above": _unbounded_above,
+               "loss_floor": floor}
     limits = None
     if spec.steps_as_data and isinstance(max_steps, jax.Array):
         # the step limit is data (fit passes an array): one solve for every max_steps,

@@ -30,7 +30,8 @@ block of every result.
 - ``next``: for a verdict other than good, what to try, best first, each
   ``{"try": ..., "why": ..., "gain_db": ...}`` (:func:`next_steps`); ``gain_db`` is
   measured on this table where it was cheap to (``auto`` has every candidate's
-  PSNR), else null. Empty for a good verdict.
+  PSNR), else null. Empty for a good verdict, but for a solve that did not converge:
+  it looks right, and its parameters are still those of a point short of the optimum.
 
 Thresholds (:data:`GOOD`, :data:`POOR`), set by looking at the key-light spheres of
 ggx fits to the design half of the real MERL materials at each level of each figure
@@ -147,7 +148,15 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     if word != "good":
         block["next"] = next_steps(block, model=model, params=params, loss=loss,
                                    converged=converged, physical=physical, gains=gains)
+    elif not converged:  # it looks right, but its parameters are a point short of optimal
+        block["next"] = [_CONVERGE]
     return block
+
+
+#: The next step of a fit whose solve stopped before its optimality test held.
+_CONVERGE = {"try": "more starts and steps (--starts 8 --max-steps 400)",
+             "why": "the solve stopped before its optimality test held: the figures are "
+                    "those of a point short of the optimum", "gain_db": None}
 
 
 #: A lobe this narrow (GGX or Beckmann alpha, in radians of slope) is resolved by
@@ -181,9 +190,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
             steps.append({"try": t, "why": why, "gain_db": None})
 
     if not converged:
-        add("more starts and steps (--starts 8 --max-steps 400)",
-            "the solve stopped before its optimality test held: the figures are those of a "
-            "point short of the optimum")
+        add(_CONVERGE["try"], _CONVERGE["why"])
     graze = look.get("grazing") or {}
     if (_finite(graze.get("colour_shift")) and graze["colour_shift"] > TURNING_COLOUR
             and (not _finite(look.get("colour_shift"))

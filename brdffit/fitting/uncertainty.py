@@ -99,9 +99,11 @@ def _on_parameter_scale(terms, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarr
     d theta / d u`` (:func:`linearisation`). A slope that underflows to 0 (a
     coordinate hundreds of units down a tail: at its bound) leaves its row and
     column at 0, as a parameter without effect."""
-    inverse = np.where(slopes != 0, 1.0 / np.where(slopes != 0, slopes, 1.0), 0.0)
-    scale = np.outer(inverse, inverse)
-    with np.errstate(invalid="ignore", over="ignore"):  # a diverged fit: the caller checks
+    # a diverged fit, or a slope of ~1e-160 (a coordinate far down a tail), overflows
+    # here: the caller checks what comes out, and stderr stays clean
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        inverse = np.where(slopes != 0, 1.0 / np.where(slopes != 0, slopes, 1.0), 0.0)
+        scale = np.outer(inverse, inverse)
         a, b = (np.asarray(t, np.float64) * scale for t in terms)
     return a, b
 

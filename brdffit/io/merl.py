@@ -71,6 +71,9 @@ class MerlTable:
 
     ``rgb``: physical values (1/sr), shape (3, 90, 90, 180), 0 where unmeasured.
     ``mask``: True where a bin is measured (all channels finite and >= 0).
+    ``n_partial``: unmeasured bins with some channels finite and >= 0: MERL marks an
+    unmeasured bin negative in every channel, so such bins are more likely noise
+    around zero (a dark frame subtracted), left out whole all the same (the fit says so).
     """
 
     rgb: np.ndarray
@@ -78,6 +81,7 @@ class MerlTable:
     source: str = "<memory>"
     n_nonfinite: int = 0
     sha256: str | None = field(default=None)
+    n_partial: int = 0
 
     def __post_init__(self):
         if self.rgb.shape != (3, *SHAPE) or self.mask.shape != SHAPE:
@@ -87,7 +91,9 @@ class MerlTable:
     def from_values(cls, rgb, mask=None, source: str = "<memory>") -> MerlTable:
         """A table from physical values; bins that are negative or non-finite are masked."""
         rgb = np.asarray(rgb, dtype=np.float64).reshape(3, *SHAPE)
-        ok = np.all(np.isfinite(rgb) & (rgb >= 0), axis=0)
+        channel_ok = np.isfinite(rgb) & (rgb >= 0)
+        ok = np.all(channel_ok, axis=0)
+        n_partial = int(np.count_nonzero(~ok & np.any(channel_ok, axis=0)))
         n_nonfinite = int(np.count_nonzero(~np.all(np.isfinite(rgb), axis=0)))
         if mask is not None:
             ok &= np.asarray(mask, dtype=bool).reshape(SHAPE)
@@ -96,7 +102,7 @@ class MerlTable:
                                           "non-finite or masked")
         rgb = np.where(ok, rgb, 0.0)
         _check_range(rgb, source)
-        return cls(rgb, ok, source, n_nonfinite)
+        return cls(rgb, ok, source, n_nonfinite, n_partial=n_partial)
 
     @property
     def n_measured(self) -> int:
@@ -263,6 +269,10 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     top = np.maximum(bits[0], bits[1])
     np.maximum(top, bits[2], out=top)
     unmeasured = top >= _INF_BITS
+    # of those, the bins with a channel finite and >= 0 (a few ms: only the
+    # unmeasured bins are looked at again)
+    low = np.minimum(bits[0][unmeasured], bits[1][unmeasured])
+    n_partial = int(np.count_nonzero(np.minimum(low, bits[2][unmeasured]) < _INF_BITS))
     if unmeasured.all():
         # one channel never measured makes every bin unmeasured: say which
         dead = [c for c, b in zip("RGB", bits, strict=True) if bool((b >= _INF_BITS).all())]
@@ -286,7 +296,7 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
         _check_range(rgb * SCALE[:, None, None, None], source, raw=rgb, measured=measured)
     for c in range(3):
         raw[c] *= SCALE[c]
-    return MerlTable(rgb, measured, source, n_nonfinite)
+    return MerlTable(rgb, measured, source, n_nonfinite, n_partial=n_partial)
 
 
 def _aligned_values() -> np.ndarray:
