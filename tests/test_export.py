@@ -9,9 +9,10 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
+from brdffit import models
 from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export, gltf
 from brdffit.export.conversion import fit_as_table
-from brdffit.fitting.problem import table_error
+from brdffit.fitting.problem import sphere_reference, table_error
 from brdffit.fitting.result import FitResult
 
 pytestmark = pytest.mark.unit
@@ -34,12 +35,15 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     energy = {k: g.fidelity.pop(k) for k in ("albedo_max", "albedo_max_theta_deg")}
     to_table = g.fidelity.pop("log_rmse_to_table")
     colour = g.fidelity.pop("sphere_colour")
+    psnr = g.fidelity.pop("render_psnr_db")
     viewers = g.fidelity.pop("viewers")
     assert viewers["spec"]["log_rmse_to_table"] == to_table
+    assert viewers["spec"]["render_psnr_db"] == psnr
     assert g.fidelity == {"exact": True, "target_model": "gltf_pbr", "log_rmse_to_fit": 0.0,
                           "fit_log_rmse": 0.02, "renderer_model": "gltf_pbr"}
     # both spheres read the table's bins: the exact export is the table's colour
     assert to_table < 1e-6 and abs(colour["brightness_stops"]) < 1e-6
+    assert abs(colour["displayed_brightness_stops"]) < 1e-6 and psnr > 60
     assert colour["colour_shift"] < 1e-3
     assert 0 < max(energy["albedo_max"]) < 1 and g.warnings == []
     (mat,) = g.material["materials"]
@@ -210,7 +214,10 @@ def test_every_clamp_is_a_warning():
     assert "next: fit gltf_pbr to the table itself" in line
     # at the lower roughness bound
     sharp = export(result("gltf_pbr", {**GLTF, "roughness": float(np.sqrt(1e-3))}), "gltf")
-    assert any("roughness" in w and "lower bound" in w for w in sharp.warnings)
+    (line,) = [w for w in sharp.warnings if "roughness" in w and "lower bound" in w]
+    # a fit of the target model itself is not told to fit that model again
+    assert "next: nothing within gltf_pbr: this fit of it ended there" in line
+    assert "to the table itself" not in line
 
 
 def test_an_index_of_one_is_a_matte_surface_not_a_clamp():
@@ -292,9 +299,18 @@ def test_fidelity_to_the_measured_table_and_the_colour_a_sphere_shows():
     # in brightness (its green, which weighs most in luminance, is higher)
     assert colour["colour_shift"] > 1.0 and colour["brightness_stops"] > 0.01
     assert colour["estimate_error"]["colour_shift"] < 0.01
+    # the figures of the fit's own quality block, from the same renders: an export of
+    # a fit as it is (Mitsuba's ggx-like conductor is not; gltf's own model is) shows
+    # what the fit's verdict judged
+    own = result("gltf_pbr", GLTF)
+    exact = export(own, "gltf", table=measured)
+    psnr, look = sphere_reference(measured).psnr_and_colour(models.get("gltf_pbr"), GLTF)
+    assert exact.fidelity["render_psnr_db"] == pytest.approx(psnr, rel=1e-9)
+    assert exact.fidelity["sphere_colour"]["displayed_brightness_stops"] == pytest.approx(
+        look["key"]["displayed_brightness_stops"], rel=1e-9)
     absent = export(r, "gltf")  # mats/gold.binary is not there
     assert absent.fidelity["log_rmse_to_table"] is None
-    assert absent.fidelity["sphere_colour"] is None
+    assert absent.fidelity["sphere_colour"] is None and absent.fidelity["render_psnr_db"] is None
     assert any(w.startswith("fidelity: log_rmse_to_table not measured") and "mats/gold.binary"
                in w for w in absent.warnings)
 
@@ -420,7 +436,9 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     assert spec["log_rmse_to_table"] == e.fidelity["log_rmse_to_table"]
     assert three["log_rmse_to_table"] == pytest.approx(
         table_error(measured, "gltf_threejs", e.target_params)["log_rmse"], rel=1e-12)
-    assert set(three["sphere_colour"]) == {"brightness_stops", "colour_shift", "estimate_error"}
+    assert set(three["sphere_colour"]) == {"brightness_stops", "displayed_brightness_stops",
+                                           "colour_shift", "estimate_error"}
+    assert three["render_psnr_db"] > 20
     for_three = export(r, "gltf", table=measured, viewer="threejs")
     assert for_three.fidelity["target_model"] == "gltf_threejs"
     assert not for_three.fidelity["exact"]

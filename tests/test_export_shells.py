@@ -188,6 +188,7 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
         assert got.fidelity["exact"] and got.fidelity["log_rmse_to_table"] == pytest.approx(
             expected["log_rmse"], rel=1e-9)
         assert set(got.fidelity["sphere_colour"]) == {"brightness_stops", "colour_shift",
+                                                      "displayed_brightness_stops",
                                                       "estimate_error"}
         best = c.export(job, "gltf")  # default: the best fit of the job
         assert best.source_model == c.result(job).model

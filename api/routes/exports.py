@@ -44,6 +44,7 @@ class ExportOut(BaseModel):
     files: dict[str, str] = Field(description="file name -> text, ready to save")
     fidelity: dict = Field(description="exact, target_model, renderer_model, log_rmse_to_fit, "
                                        "fit_log_rmse, log_rmse_to_table, sphere_colour, "
+                                       "render_psnr_db, "
                                        "viewers (glTF), albedo_max, albedo_max_theta_deg")
     target_params: dict = Field(description="the target model's parameters")
     warnings: list[str] = Field(description="every clamp and approximation")

@@ -100,8 +100,10 @@ class Export:
     Mitsuba scene XML. ``fidelity``: ``exact``, the ``target_model`` the renderer
     shades with, ``log_rmse_to_fit`` (what the conversion lost; 0 when exact), the
     fit's own ``fit_log_rmse`` to its table, ``sphere_colour``: the exported material's
-    lit sphere against the table's (``brightness_stops``, ``colour_shift`` as CIEDE2000,
-    ``estimate_error``: ``brdffit.fitting.sphere.sphere_colour``'s key light), and the
+    lit sphere against the table's (``brightness_stops``, ``displayed_brightness_stops``
+    (the one a verdict judges), ``colour_shift`` as CIEDE2000, ``estimate_error``:
+    ``brdffit.fitting.sphere.sphere_colour``'s key light), ``render_psnr_db``: its sphere
+    renders' PSNR against the table's (a fit's ``quality.render_psnr_db``), and the
     material's largest directional albedo ``albedo_max`` (RGB) at
     ``albedo_max_theta_deg`` (``brdffit.export.energy``). A fit that does not look good
     is exported with a warning that says so and what to try.
@@ -209,7 +211,6 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     from brdffit.export.conversion import convert, dielectric_or_mixture
     from brdffit.export.energy import energy_report
     from brdffit.fitting.problem import table_error
-    from brdffit.fitting.sphere import sphere_colour
 
     spec = get_target(target)
     if not result.params:
@@ -242,7 +243,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     warnings = list(conv.warnings) + warnings
     fidelity = conv.fidelity(result)
     fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
-                    log_rmse_to_table=None, sphere_colour=None)
+                    log_rmse_to_table=None, sphere_colour=None, render_psnr_db=None)
     if material_class is not None:
         fidelity["material_class"] = material_class
     if shaded_as is None:  # no table to read: nothing could be measured against it
@@ -250,8 +251,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         measured = None
     if measured is not None:
         fidelity["log_rmse_to_table"] = table_error(measured, shaded_as, conv.params)["log_rmse"]
-        fidelity["sphere_colour"] = sphere_colour(
-            measured, models.get(shaded_as), conv.params)["key"]
+        fidelity.update(_sphere_figures(measured, models.get(shaded_as), conv.params))
     if spec.viewers and measured is not None:
         fidelity["viewers"] = _viewer_fidelity(spec, measured, conv.params, shaded_as,
                                                fidelity)
@@ -369,6 +369,22 @@ def _by_layers_kept(candidates: tuple[str, ...], result: FitResult) -> tuple[str
     return (best, *(m for m in candidates if m != best))
 
 
+def _sphere_figures(measured, model, params: dict) -> dict:
+    """The exported material's key-light sphere against the measured table's, as a
+    fit's quality block measures its own (``SphereReference.psnr_and_colour``: the
+    same renders, so an exact export's figures are its fit's): ``sphere_colour``
+    (with the displayed brightness a verdict judges; the export reported the radiance
+    one alone, 0.42 stops on a fit whose picture was 0.05 stops off) and
+    ``render_psnr_db`` (None where not finite)."""
+    import math
+
+    from brdffit.fitting.problem import sphere_reference
+
+    psnr, colour = sphere_reference(measured).psnr_and_colour(model, params)
+    return {"sphere_colour": colour["key"],
+            "render_psnr_db": float(psnr) if math.isfinite(psnr) else None}
+
+
 def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: str,
                      fidelity: dict) -> dict:
     """The glTF file's factors under each of ``target``'s viewers' shading, against the
@@ -383,7 +399,6 @@ def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: st
     measured already."""
     from brdffit import models
     from brdffit.fitting.problem import table_error
-    from brdffit.fitting.sphere import sphere_colour
 
     out = {}
     for viewer in target.viewers:
@@ -395,12 +410,12 @@ def _viewer_fidelity(target: ExportTarget, measured, params: dict, shaded_as: st
             out[viewer] = None
         elif model.name == shaded_as:
             out[viewer] = {"model": model.name,
-                           "log_rmse_to_table": fidelity["log_rmse_to_table"],
-                           "sphere_colour": fidelity["sphere_colour"]}
+                           **{k: fidelity[k] for k in ("log_rmse_to_table", "sphere_colour",
+                                                       "render_psnr_db")}}
         else:
             out[viewer] = {"model": model.name,
                            "log_rmse_to_table": table_error(measured, model, seen)["log_rmse"],
-                           "sphere_colour": sphere_colour(measured, model, seen)["key"]}
+                           **_sphere_figures(measured, model, seen)}
         if out[viewer] is not None and ignored:
             out[viewer]["ignores"] = ignored
     return out

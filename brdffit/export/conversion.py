@@ -113,10 +113,11 @@ _UNSEEN_PARTS = {"rough_conductor": _UnseenPart(
     "incidence, or weight 1): a diffuse material, whose eta, k and alpha shape nothing")}
 
 
-def bound_warnings(target_model: str, params: dict) -> list[str]:
+def bound_warnings(target_model: str, params: dict, fitted: bool = False) -> list[str]:
     """One line per parameter with a value at the bound of the target's range (its
     channels named together): there the renderer's range, not the data, decided the
-    value. Each says what to do next."""
+    value. Each says what to do next; ``fitted``: the params are a fit of the target
+    model itself (an exact export), whose error already is what the range costs."""
     out, unseen = [], ()
     part = _UNSEEN_PARTS.get(target_model)
     if part is not None and part.when(params):
@@ -137,15 +138,20 @@ def bound_warnings(target_model: str, params: dict) -> list[str]:
                 high.append(shown)
         if low:
             out.append(f"clamp: {spec.name} = {', '.join(low)} is at the lower bound "
-                       f"{spec.lower:g} of {target_model}; next: {_clamp_next(target_model)}")
+                       f"{spec.lower:g} of {target_model}; next: "
+                       f"{_clamp_next(target_model, fitted)}")
         if high:
             out.append(f"clamp: {spec.name} = {', '.join(high)} is at the upper bound {hi:g} "
                        f"of {target_model}: the fit would want more; next: "
-                       f"{_clamp_next(target_model)}")
+                       f"{_clamp_next(target_model, fitted)}")
     return out
 
 
-def _clamp_next(target_model: str) -> str:
+def _clamp_next(target_model: str, fitted: bool) -> str:
+    if fitted:  # told to fit what it already is, a user asked what to do (issue review)
+        return (f"nothing within {target_model}: this fit of it ended there, so its error "
+                "is what the renderer's range costs; a model with a wider range (`brdffit "
+                "models`) may fit the table better, in another renderer")
     return (f"fit {target_model} to the table itself (brdffit fit TABLE --model "
             f"{target_model}): its error is what the renderer's range costs")
 
@@ -192,7 +198,7 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
         params = models.get(result.model).check_params(result.params)
         plain = {k: np.asarray(v).tolist() for k, v in params.items()}
         return Conversion(result.model, plain, True, 0.0,
-                          warnings + bound_warnings(result.model, plain))
+                          warnings + bound_warnings(result.model, plain, fitted=True))
     target_model = target_models[0]
     refit = fit(fit_as_table(result), target_model, samples=samples, seed=seed)
     warnings.append(
