@@ -51,8 +51,10 @@ def _location(loc) -> str:
 
 
 #: The longest message an error echoes: one quoting a 900,000-character model name was
-#: a 1.8 MB answer (the name twice).
-MAX_MESSAGE = 500
+#: a 1.8 MB answer (the name twice). Long enough for the library's own lists (an
+#: unknown model's refusal names every model, ~600 characters: cut at 500 it left the
+#: reader without ggx2); what a request sent is quoted shorter where it is quoted.
+MAX_MESSAGE = 2000
 
 
 def short(text: str) -> str:

@@ -32,7 +32,7 @@ DESCRIPTION = f"""\
 Fit analytic BRDF models to measured MERL tables.
 
 1. `POST /v1/tables` with the `.binary` file as the body: a table id.
-2. `POST /v1/fits` with `{{"table_id": ..., "model": "ggx"}}`: a job id (202).
+2. `POST /v1/fits` with `{{"table_id": ..., "models": "ggx"}}`: a job id (202).
 3. `GET /v1/fits/{{id}}` until `status` is `done` (or `failed`, with a `reason`).
 4. `GET /v1/fits/{{id}}/plots/{{kind}}.png`: {", ".join(PLOT_KINDS)}.
 5. `GET /v1/fits/{{id}}/exports/{{target}}`: the fit as a Mitsuba 3, glTF 2.0 or MaterialX

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from api.store import Store
+from brdffit import models
 from brdffit.io import merl
 from brdffit.request import FitRequest
 from tests.api_fixtures import FAST, Server, header, table, table_bytes, wait_status
@@ -247,7 +248,7 @@ def test_malformed_ids_are_422(http):
 
 
 @pytest.mark.parametrize("model, words", [
-    ("phong2", "unknown model 'phong2'"),
+    ("phong2", "unknown model 'phong2'; choose one of lambert, "),
     (["ggx", "nope"], "unknown model 'nope'"),
     ([], "at least one model"),
     (42, "model"),
@@ -646,5 +647,6 @@ def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
 def test_an_error_quotes_at_most_a_few_hundred_characters_of_the_input(http, table_id):
     """A 900,000-character model name was quoted whole, twice: a 1.8 MB answer."""
     r = http.post("/v1/fits", json={"table_id": table_id, "models": "g" * 900_000})
-    assert_error(r, 422, "characters in all")
+    assert_error(r, 422, "(900,000 characters); choose one of")
     assert len(r.content) < 4000
+    assert all(name in r.json()["detail"] for name in models.names())  # the list is whole

@@ -7,7 +7,7 @@ import signal
 import sys
 import threading
 
-from brdffit.batch.job import run_batch, stop_requested
+from brdffit.batch.job import DIR_SUFFIXES, run_batch, stop_requested
 from brdffit.batch.progress import format_duration
 from brdffit.cli import EXIT_INTERRUPTED
 from brdffit.cli.fit import add_fit_options, add_request_arguments, request_from_args
@@ -19,8 +19,8 @@ def add_arguments(p) -> None:
     p.description = ("Fit every table of INPUTS with every model into an HDF5 file. Run it "
                      "again with the same arguments to resume: finished fits are skipped.")
     p.add_argument("inputs", nargs="+", metavar="INPUT",
-                   help="table or sample files, directories (every *.binary, *.astm, "
-                        "*.csv, *.tsv, *.h5 below) or glob patterns")
+                   help="table or sample files, directories (every "
+                        f"{', '.join('*' + s for s in DIR_SUFFIXES)} below) or glob patterns")
     p.add_argument("--models", required=True, type=_models,
                    help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
                         "for the selection's candidates (batch-report shows the choice; "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from brdffit import jsonout, models
+from brdffit.models.catalogue import MONO_SUFFIX
 
 
 def add_arguments(p) -> None:
@@ -16,9 +17,16 @@ def run(args) -> int:
         return 0
     for m in info:
         print(f"{m['name']}  ({m['n_params']} values)  {m['doc']}")
+        # columns as wide as this model's longest name and range (standard_surface's
+        # specular_roughness pushed a fixed-width column out of line)
+        width = max(6, *(len(p["name"]) for p in m["params"]))
+        span = max(22, *(len(p["range"]) for p in m["params"]))
         for p in m["params"]:
             bounded = p.get("physical_upper")
             note = ("" if bounded is None or bounded == p["upper"]
                     else f"  (<= {bounded:g} in a --physical fit)")
-            print(f"    {p['name']:<6} {p['range']:<22} {p['doc']}{note}")
+            print(f"    {p['name']:<{width}} {p['range']:<{span}} {p['doc']}{note}")
+        if m["mono"]:
+            print(f"    also {m['name']}{MONO_SUFFIX} ({m['mono_n_params']} values): "
+                  "every RGB parameter but kd one grey value")
     return 0

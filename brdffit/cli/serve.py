@@ -18,7 +18,8 @@ def add_arguments(p) -> None:
     # container's health check (python -m api.healthcheck) together.
     p.add_argument("--port", type=int, default=os.environ.get("BRDFFIT_PORT", "8000"),
                    help="port to listen on (default: env BRDFFIT_PORT, else 8000)")
-    p.add_argument("--data-dir", help="tables, jobs database, plots (env BRDFFIT_DATA_DIR)")
+    p.add_argument("--data-dir", help="tables, jobs database, plots (env BRDFFIT_DATA_DIR; default "
+                        "./.brdffit-data)")
     p.add_argument("--workers", type=int, help="fit worker processes (env BRDFFIT_WORKERS)")
     p.add_argument("--log-level", default="info",
                    choices=["critical", "error", "warning", "info", "debug"])

@@ -136,7 +136,21 @@ def check_name(name: str, allow_auto: bool = False) -> str:
     if base is not None and base["mono"]:
         return name
     choices = ", ".join(info) + (f", or {AUTO}" if allow_auto else "")
-    raise UnknownModelError(f"unknown model {name!r}; choose one of {choices}")
+    raise UnknownModelError(f"unknown model {_quoted(name)}; choose one of {choices} "
+                            f"(or a model with a grey ks: NAME{MONO_SUFFIX}, where "
+                            "`brdffit models` lists one)")
+
+
+#: A name longer than this is quoted cut short in a refusal: the list of choices
+#: after it is what the reader needs (a 900,000-character name was quoted whole).
+QUOTED_NAME_CHARS = 60
+
+
+def _quoted(name) -> str:
+    text = repr(name)
+    if len(text) <= QUOTED_NAME_CHARS:
+        return text
+    return f"{text[:QUOTED_NAME_CHARS]}... ({len(str(name)):,} characters)"
 
 
 def n_params(name: str) -> int:
