@@ -177,19 +177,28 @@ def eval_cost_ns(model: models.AbstractBRDFModel, repeats: int = 7) -> float:
 
 def grey_spread(model: models.AbstractBRDFModel, params: dict) -> float | None:
     """(max - min) / max over R, G, B of the specular scales (worst of ks, ks1, ks2);
-    0 for no specular at all; ``None`` for a model without a specular colour."""
+    0 for no specular at all; ``None`` for a model without a specular colour. A scale
+    under :data:`NEGLIGIBLE_SCALE` of the largest one is left out: a collapsed second
+    lobe (ks2 ~ 1e-7 beside a grey ks1 of 886) has no colour anyone sees, and called
+    the highlight 60% off grey."""
     from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 
     specs = specular_colour_specs(model) if not isinstance(model, MonoKs) else ()
     if not specs:
         return None
+    scales = [np.asarray(params[s.name], dtype=np.float64) for s in specs]
+    largest = max(float(v.max()) for v in scales)
     spread = 0.0
-    for s in specs:
-        v = np.asarray(params[s.name], dtype=np.float64)
+    for v in scales:
         top = float(v.max())
-        if top > 1e-12:
+        if top > max(1e-12, NEGLIGIBLE_SCALE * largest):
             spread = max(spread, (top - float(v.min())) / top)
     return spread
+
+
+#: A specular scale below this fraction of the model's largest is left out of
+#: :func:`grey_spread`.
+NEGLIGIBLE_SCALE = 1e-3
 
 
 def bic(log_rmse: float, n_bins: int, n_params: int) -> float:

@@ -324,6 +324,16 @@ def test_grey_ks_is_reported_and_can_be_fitted(ggx_table, ggx_selection):
     assert "ggx_mono" in sel.fits
 
 
+def test_a_collapsed_lobes_colour_is_not_the_highlights():
+    from brdffit.selection import grey_spread
+
+    ggx2 = models.get("ggx2")
+    grey = {"ks1": [886.2] * 3, "ks2": [1e-7, 3e-7, 2e-7]}  # a second lobe at ~0
+    assert grey_spread(ggx2, grey) == 0.0
+    coloured = {"ks1": [886.2] * 3, "ks2": [10.0, 30.0, 20.0]}  # a real second lobe
+    assert grey_spread(ggx2, coloured) == pytest.approx(2 / 3)
+
+
 def test_coloured_ks_is_not_called_grey():
     table, _ = make_table("ggx", {"ks": [0.9, 0.6, 0.3]})
     sel = select(table, ("ggx",), mono_ks=True, **FAST)
