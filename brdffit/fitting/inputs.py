@@ -142,7 +142,7 @@ PARTIAL_SHARE = 0.01
 
 
 def _partly_negative(table: MerlTable) -> list[str]:
-    n, measured = table.n_partial, int(table.mask.sum())
+    n, measured = table.n_partial, table.n_measured
     if n < PARTIAL_SHARE * (n + measured):
         return []
     return [f"{n:,} bins ({n / (n + measured):.0%}) are negative in some channels and not "

@@ -406,16 +406,9 @@ def _start_candidates(source, m, prep, init, polish: bool, again: dict):
         # softplus has no upper tail: a scale of 2000 (a table in other units) is
         # where it is (clipped to 14, the polish ended 80x worse than its start).
         u = np.clip(m.unconstrain(m.check_params(coarse.params)), -14.0,
-                    _upper_clip(m))[None]
+                    np.where(m.unbounded_above(), np.inf, 14.0))[None]
         return u, coarse
     return start_vectors(m, source.start_table(prep), prep.counts.usable, prep.hints), None
-
-
-def _upper_clip(m) -> np.ndarray:
-    """Per coordinate, the largest unconstrained value a polish starts from: 14, the
-    edge of a sigmoid's upper tail, and none for a softplus (an unbounded scale)."""
-    return np.concatenate([np.full(s.size, np.inf if s.upper is None else 14.0)
-                           for s in m.param_specs])
 
 
 def _start_notes(m, starts: int, n_candidates: int, init, coarse, prep) -> list[str]:

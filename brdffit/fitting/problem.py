@@ -192,10 +192,9 @@ def _bound_side(u, args):
 
 
 def _unbounded_above(u, args):
-    """The coordinates on a softplus (a scale with no upper bound; the solver's step
-    cap is relative there: ``brdffit.fitting.solver.RELATIVE_STEP``), a constant."""
-    return jnp.asarray(np.concatenate([np.full(s.size, s.upper is None)
-                                       for s in args[0].param_specs]))
+    """The model's softplus coordinates, a constant (the solver's step cap is relative
+    there: ``brdffit.fitting.solver.RELATIVE_STEP``)."""
+    return jnp.asarray(args[0].unbounded_above())
 
 
 def start_bucket(n: int) -> int:

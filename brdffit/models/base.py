@@ -251,6 +251,12 @@ class AbstractBRDFModel(eqx.Module):
             parts.append(spec.unconstrain(np.broadcast_to(v.reshape(k, -1), (k, spec.size))))
         return np.concatenate(parts, axis=1)
 
+    def unbounded_above(self) -> np.ndarray:
+        """Per coordinate: True on a softplus (a scale with no upper bound, so no
+        upper tail either: the solver's step there is relative, and a polish does not
+        clip it), False on a sigmoid."""
+        return np.concatenate([np.full(s.size, s.upper is None) for s in self.param_specs])
+
     def bound_side(self, u: Float[Array, " n"]) -> Array:
         """Per coordinate of ``u``: -1 / +1 at the lower / upper bound, else 0
         (:meth:`ParamSpec.bound_side`)."""
