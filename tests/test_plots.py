@@ -203,8 +203,8 @@ def test_report_page_lists_parameters_with_errors_and_every_metric(ggx):
     assert "(bound)" in "".join(bound)
     # a long line (three bound RGB values) wraps under its first value, clear of the
     # errors column beside it
-    assert all(len(line) <= plots.PARAM_LINE_CHARS for line in params + bound
-               if not line.startswith("  "))
+    assert all(len(line) <= plots.PARAM_LINE_CHARS for line in params + bound)
+    assert any(line.startswith("  ? ") for line in bound)  # its reasons, wrapped too
     assert plots.wrap_values("kd     ", ["2.215e-09 (bound)"] * 3) == [
         "kd     2.215e-09 (bound),  2.215e-09 (bound),", "       2.215e-09 (bound)"]
 
@@ -253,3 +253,20 @@ def test_the_readme_layout_names_only_paths_that_exist():
     named = {p for p in re.findall(r"`((?:brdffit|api|data_synth|bench|tests)/[\w/.]*)`", layout)}
     assert len(named) > 10
     assert sorted(p for p in named if not (root / p).exists()) == []
+
+
+def test_a_dark_tables_spheres_are_also_drawn_where_the_verdict_judged_them(ggx, tmp_path):
+    """black-fabric's verdict judged its spheres at +6 EV, where spheres.png (one exposure
+    for every material) shows them near black: the pair is drawn again at that exposure."""
+    from data_synth import make_table
+
+    dark = make_table("lambert", {"kd": [0.006, 0.004, 0.003]})[0]
+    r = fit(dark, "lambert", samples=2048)
+    ev = plots.judged_ev(dark, plots.SPHERE_LIGHTS[0][1])
+    assert ev >= plots.JUDGED_APART_EV
+    paths = plots.save_all(dark, r, tmp_path / "dark", kinds=("spheres",))
+    assert [p.rsplit("/", 1)[-1] for p in paths] == ["spheres.png", plots.JUDGED_SPHERES]
+    plain, judged = (imread(p)[..., :3] for p in paths)
+    assert judged.mean() > plain.mean() + 0.05  # the sphere is there to see
+    t, r = ggx  # judged near the picture's own exposure: one file
+    assert len(plots.save_all(t, r, tmp_path / "mid", kinds=("spheres",))) == 1

@@ -69,7 +69,8 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
         uncertainty.exception()
     metrics = measured.metrics
     look = quality(metrics["psnr_db"], measured.colour, model=model, params=params, loss=loss,
-                   converged=result == "successful", physical=physical, basis=measured.basis)
+                   converged=result == "successful", physical=physical, basis=measured.basis,
+                   rel_peak_error=metrics.get("rel_peak_error"))
     look, fitted_input = source.judged(look, measured, found)
     found_notes, found_steps = source.findings(prep)
     if found_steps and look.get("verdict") != "good":  # the data's fault comes first

@@ -30,12 +30,14 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: the subsample fit whose optimum every bin polished (it said 1). Older results read
 #: with no notes. 6: ``quality.displayed_brightness_stops`` (and the grazing light's),
 #: which the verdict judges instead of ``brightness_stops`` (the radiance figure, still
-#: reported); an older result's verdict stays as it was stored.
-SCHEMA = "brdffit.fit/6"
+#: reported); an older result's verdict stays as it was stored. 7: the grazing light's
+#: ``measured_colour_turn`` (how far the table's own colour turns from the key light),
+#: which ``next`` reads; an older result's ``next`` stays as it was stored.
+SCHEMA = "brdffit.fit/7"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2",
+READS = (SCHEMA, "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2",
          "brdffit.fit/1")
 
 

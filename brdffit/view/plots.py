@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import io
 import os
+import textwrap
 import warnings
 from collections.abc import Callable
 
@@ -55,7 +56,7 @@ from brdffit.io.angles import (
 )
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
-from brdffit.view.kinds import KINDS, check_exposure_ev, exposure_refused
+from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, check_exposure_ev, exposure_refused
 
 CHANNELS = (("R", "#d62728"), ("G", "#2ca02c"), ("B", "#1f77b4"))
 #: Rec. 709 luminance weights, for the one-curve-per-angle plots.
@@ -364,20 +365,28 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     return _png(fig)
 
 
+def judged_ev(table: MerlTable, light, exposure_ev: float = 0.0) -> float | None:
+    """At how many stops over a picture exposed at ``exposure_ev`` the verdict judged
+    ``light`` (to a quarter stop; None for a light it did not judge). The verdict
+    exposes each light at the table's own typical lit pixel
+    (``brdffit.fitting.sphere.table_exposure``), the picture at one exposure for every
+    material: what looks alike here may differ there (a highlight blown out in both at
+    the verdict's exposure), and a dark material is near black here."""
+    reference = sphere_reference(table)  # the fit's own, where it fitted this table object
+    exposure = next((e for judged, e in zip(reference.lights, reference.exposures, strict=True)
+                     if np.allclose(judged, light, rtol=0.0, atol=1e-12)), None)
+    if exposure is None:
+        return None
+    return round(4 * np.log2(exposure / (EXPOSURE * 2.0**exposure_ev))) / 4
+
+
 def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dict[int, str]:
     """Per row of a verdict's light: at how many stops over this picture's exposure the
-    verdict judged it. The verdict exposes each light at the table's own typical lit
-    pixel (``brdffit.fitting.sphere.table_exposure``), the picture at one exposure
-    for every material: what looks alike here may differ there (a highlight blown out
-    in both at the verdict's exposure), so the figure says which one was judged."""
-    reference = sphere_reference(table)  # the fit's own, where it fitted this table object
+    verdict judged it (:func:`judged_ev`), so the figure says which one was judged."""
     words = {}
     for row, (_, light) in enumerate(lights):
-        exposure = next((e for judged, e in zip(reference.lights, reference.exposures,
-                                                strict=True)
-                         if np.allclose(judged, light, rtol=0.0, atol=1e-12)), None)
-        if exposure is not None:
-            ev = round(4 * np.log2(exposure / (EXPOSURE * 2.0**exposure_ev))) / 4
+        ev = judged_ev(table, light, exposure_ev)
+        if ev is not None:
             words[row] = f"\nverdict judged at {ev:+g} EV"
     return words
 
@@ -550,7 +559,10 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
             text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
             parts.append(text + (" ?" if f else ""))
         params += wrap_values(f"{name:<7}", parts)
-    params += [f"  ? {k}: {why}" for k, why in u.get("why", {}).items()]
+    # wrapped as the values are: a long reason ran into the errors column beside it
+    params += [line for k, why in u.get("why", {}).items()
+               for line in textwrap.wrap(f"? {k}: {why}", PARAM_LINE_CHARS - 2,
+                                         initial_indent="  ", subsequent_indent="      ")]
     params += [f"  {k} ~ {', '.join(v)} (|corr| > 0.95)"
                for k, v in u.get("strongly_correlated", {}).items()]
     e = result.error
@@ -589,7 +601,7 @@ def _looks_lines(look: dict | None) -> list[str]:
     lines = [f"looks           {look['verdict']}"]
     stops, shift = judged_brightness(look), look.get("colour_shift")
     if isinstance(stops, int | float):
-        shown = " shown" if "displayed_brightness_stops" in look else ""
+        shown = " as displayed" if "displayed_brightness_stops" in look else ""
         lines.append(f"brightness      {stops:+.2f} stops{shown}")
     if isinstance(shift, int | float):
         lines.append(f"colour          CIEDE2000 {shift:.1f}")
@@ -690,7 +702,22 @@ def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.Pat
         path = os.path.join(directory, f"{kind}.png")
         atomic.write_bytes(path, render(kind, table, result), prefix=f".{kind}.")
         paths.append(path)
+    if "spheres" in kinds and (ev := judged_ev(table, SPHERE_LIGHTS[0][1])) is not None \
+            and abs(ev) >= JUDGED_APART_EV:
+        path = os.path.join(directory, JUDGED_SPHERES)
+        ev = float(np.clip(ev, *EXPOSURE_EV_RANGE))  # its rows say where each was judged
+        atomic.write_bytes(path, render("spheres", table, result, exposure_ev=ev),
+                           prefix=".spheres_judged.")
+        paths.append(path)
     return paths
+
+
+#: The spheres at the key light's judged exposure, written beside ``spheres.png``
+#: where that is this many stops or more from it: a dark fabric's, judged at +6 EV,
+#: is near black in ``spheres.png``, and a near-mirror's halo (judged at +7 to +11 EV)
+#: is not there at all, so what the verdict compared could not be seen.
+JUDGED_APART_EV = 2.0
+JUDGED_SPHERES = "spheres_judged.png"
 
 
 # -- auto's ranking ----------------------------------------------------------------------
