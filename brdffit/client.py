@@ -20,6 +20,8 @@ paged listings (filtered), :meth:`Client.cancel` stops a queued or running job,
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 import time
 from collections.abc import Iterator
@@ -59,6 +61,11 @@ class ApiError(ClientError):
 class InvalidRequest(ClientError, ValueError):
     """A request the library refuses before it is sent (an unknown model, a bad option),
     with the message the server would answer with."""
+
+
+class InvalidSetting(ClientError, ValueError):
+    """A :class:`Client` made with a URL or a timeout it cannot use: said when it is
+    made, not as httpx's own error at the first request."""
 
 
 class Unreachable(ClientError):
@@ -139,6 +146,18 @@ class FitJob:
 JobRef = FitJob | str
 
 
+def _check_timeout(timeout) -> None:
+    """Refuses a timeout in seconds that is not > 0 and finite (httpx took -1 and then
+    raised "Timeout value out of range" at the first request). None (wait forever) and
+    an ``httpx.Timeout`` are httpx's own."""
+    if timeout is None or isinstance(timeout, httpx.Timeout):
+        return
+    if (isinstance(timeout, bool) or not isinstance(timeout, numbers.Real)
+            or not math.isfinite(timeout) or timeout <= 0):
+        raise InvalidSetting(f"timeout must be a number of seconds > 0 (or None: no limit), "
+                             f"got {timeout!r}")
+
+
 def _job_id(job: JobRef) -> str:
     return job.id if isinstance(job, FitJob) else job
 
@@ -151,8 +170,13 @@ class Client:
                  timeout: float = 120.0, transport: httpx.BaseTransport | None = None):
         token = token if token is not None else os.environ.get("BRDFFIT_API_TOKEN") or None
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers,
-                                  timeout=timeout, transport=transport)
+        _check_timeout(timeout)
+        try:
+            self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers,
+                                      timeout=timeout, transport=transport)
+        except httpx.InvalidURL as e:  # "http://[::1": a bracket or a port left open
+            raise InvalidSetting(f"{base_url!r} is not a URL ({e}): give the server's, as "
+                                 f"{DEFAULT_URL}") from None
 
     def __enter__(self) -> Client:
         return self

@@ -26,6 +26,7 @@ give the same report through every door.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -49,9 +50,36 @@ _REQUEST_KEYS = ("schema", "models", "options", "scene", "rule")
 ModelProgress = Callable[[int, int, str, dict | None], None]
 
 
+def split_names(text: str, what: str = "models") -> list[str]:
+    """The names of a comma-separated list (``"ggx,beckmann"``, as a command line gives
+    them), each stripped; blank text is no names. An empty item (``"ggx,,lambert"``, a
+    comma at an end) is refused, naming ``what``: a name lost there (a typo, a variable
+    that was empty) was dropped silently, and the fit ran without it."""
+    if not text.strip():
+        return []
+    names = [n.strip() for n in text.split(",")]
+    if not all(names):
+        raise FitInputError(f"{what} {text!r} has an empty item (two commas in a row, or one "
+                            "at an end): separate the names by single commas")
+    return names
+
+
+def _plain(value):
+    """A numpy scalar as the Python number it holds (``np.int64(3)``, a seed from
+    ``rng.integers``, is an integer); anything else as it is, checked by its option.
+    The request's JSON form holds only Python numbers."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Number):
+        return value
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        return float(value)
+    return value
+
+
 def _names(models) -> tuple[str, ...]:
     if isinstance(models, str):
-        models = models.split(",")  # "ggx,beckmann", as a command line gives them
+        models = split_names(models)  # "ggx,beckmann", as a command line gives them
     if not isinstance(models, list | tuple) or not all(isinstance(m, str) for m in models):
         raise FitInputError(f"models must be a model name or a list of them, got {models!r}")
     names = tuple(dict.fromkeys(m.strip() for m in models if m.strip()))  # twice is once
@@ -109,6 +137,7 @@ class FitRequest:
         tolerance=0.01)``. ``model`` is a name, ``"auto"`` or a list of names;
         ``keywords`` are :class:`FitOptions` fields and, for auto,
         :class:`SelectionRule` fields (a rule field with another model is refused)."""
+        keywords = {k: _plain(v) for k, v in keywords.items()}
         rule_names = set(names(SelectionRule))
         rule = {k: v for k, v in keywords.items() if k in rule_names}
         fit_options = {k: v for k, v in keywords.items() if k not in rule_names}

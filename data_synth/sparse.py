@@ -16,7 +16,9 @@ directions of one of :data:`LAYOUTS`:
 
 ``noise``: multiplicative Gaussian, value * max(0, 1 + noise N(0, 1)), as
 ``data_synth.synth`` degrades tables; ``sigma=True`` records noise * value as each
-sample's standard deviation. Write them with ``brdffit.io.writers.write_samples`` (any
+sample's standard deviation (at least noise * :data:`SIGMA_FLOOR`: a value of 0, a real
+material's dark channel, has an instrument's floor, and a sigma of 0 is refused by the
+readers). Write them with ``brdffit.io.writers.write_samples`` (any
 layout, by suffix).
 """
 
@@ -61,13 +63,17 @@ def layout_angles(layout: str, n: int, seed: int = 0) -> tuple[np.ndarray, ...]:
     return theta_i, rng.uniform(0.0, 2 * np.pi, n), theta_o, rng.uniform(0.0, 2 * np.pi, n)
 
 
+#: The least value (1/sr) a recorded sigma is made from (module docstring).
+SIGMA_FLOOR = 1e-6
+
+
 def _degraded(values: np.ndarray, noise: float, sigma: bool, rng):
     if noise < 0:
         raise ValueError(f"noise must be >= 0, got {noise}")
     if sigma and noise == 0:
         raise ValueError("sigma=True records noise * value: give a noise > 0")
     noisy = values * np.maximum(0.0, 1.0 + noise * rng.standard_normal(values.shape))
-    return noisy, (noise * values if sigma else None)
+    return noisy, (noise * np.maximum(values, SIGMA_FLOOR) if sigma else None)
 
 
 @runtime.in_float64

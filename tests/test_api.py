@@ -210,6 +210,48 @@ def test_oversized_body_is_413(http):
     assert_error(r, 413, "BRDFFIT_MAX_UPLOAD_BYTES", f"{CAP:,}")
 
 
+def test_a_compressed_sample_list_is_weighed_as_it_is_stored(http, tmp_path):
+    """A gzip-compressed HDF5 list of one value repeated is a few KB, and is stored as
+    brdffit's HDF5 (float64, uncompressed): a 597 KB body was kept as 224 MB, past the
+    cap. The cap holds for what is stored: 413, weighed from the datasets' declared
+    shapes (before a number is read), saying how many samples fit."""
+    import h5py
+
+    n = CAP // 56 + 1  # 7 float64 a sample: one over the cap
+    bomb = tmp_path / "bomb.h5"
+    with h5py.File(bomb, "w") as f:
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            f.create_dataset(name, data=np.full(n, 0.5), compression="gzip",
+                             chunks=(2**16,)).attrs["units"] = "radians"
+        f.create_dataset("rgb", data=np.full((n, 3), 0.3), compression="gzip",
+                         chunks=(2**16, 3))
+    body = bomb.read_bytes()
+    assert len(body) < CAP // 100
+    r = http.post("/v1/tables", content=body, params={"name": "bomb.h5"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert_error(r, 413, f"bomb.h5: {n:,} samples are stored as {56 * n:,} bytes",
+                 f"over the server's cap of {CAP:,} bytes (BRDFFIT_MAX_UPLOAD_BYTES)",
+                 f"upload at most {CAP // 56:,} samples")
+
+
+def test_a_text_sample_list_stored_over_the_cap_is_refused(tmp_path):
+    """A text list is weighed once read (its rows are ~20 bytes of text, 56 or 80
+    stored); nothing is kept."""
+    from api.services import tables
+    from tests.table_files import SAMPLED, write_astm
+
+    store = Store(tmp_path / "data")
+    lab = write_astm(tmp_path / "lab.astm", "ggx", SAMPLED, n=200)
+    with pytest.raises(tables.StoredTooLarge, match=r"lab.astm: 200 samples are stored as "
+                                                    r"11,200 bytes .* at most 178 samples"):
+        tables.validate_and_store(store, lab, "0" * 64, lab.stat().st_size, "lab.astm",
+                                  cap=10_000)
+    assert store.get_table("0" * 64) is None
+    record, created = tables.validate_and_store(store, lab, "0" * 64, lab.stat().st_size,
+                                                "lab.astm", cap=11_200)
+    assert created and record.summary["input"]["samples"] == 200
+
+
 def test_huge_declared_length_is_refused_before_the_body(server):
     """Content-Length far past the cap: answered before a byte of body is sent
     (what curl sees, with its Expect: 100-continue)."""

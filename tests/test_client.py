@@ -233,6 +233,35 @@ def test_no_server_and_another_server_are_one_line_each():
     assert "answered in text/html, not the brdffit service's JSON" in str(e.value)
 
 
+def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
+    """``http://[::1`` (a bracket left open) raised httpx.InvalidURL, and a timeout of
+    -1 a bare ValueError at the first request: the client's own error, when it is made,
+    saying what it wants. A seed from numpy (np.int64) is sent as the integer it is."""
+    import math
+
+    from brdffit.client import InvalidSetting
+
+    with pytest.raises(InvalidSetting, match=r"'http://\[::1' is not a URL \(.*\): give the "
+                                             r"server's, as http://127.0.0.1:8000"):
+        Client("http://[::1", token="")
+    for timeout in (-1, 0, math.nan, math.inf, True, "10"):
+        with pytest.raises(InvalidSetting, match=r"timeout must be a number of seconds > 0 "
+                                                 r"\(or None: no limit\), got "):
+            Client("http://brdffit.test", token="", timeout=timeout)
+    assert issubclass(InvalidSetting, ClientError) and issubclass(InvalidSetting, ValueError)
+    Client("http://brdffit.test", token="", timeout=None).close()  # no limit: httpx's own
+    sent = []
+
+    def answer(request):
+        sent.append(request.read())
+        return httpx.Response(422, json={"detail": "no such table"})
+
+    with Client("http://brdffit.test", token="", transport=httpx.MockTransport(answer)) as c:
+        with pytest.raises(ApiError):
+            c.fit("0" * 64, "ggx", seed=np.int64(3))
+    assert b'"seed": 3' in sent[0] or b'"seed":3' in sent[0], sent
+
+
 N_CLIENTS = 20
 N_TABLES = 5
 

@@ -117,6 +117,23 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
     assert "__init__" not in r.stderr
 
 
+def test_cli_reads_a_fit_json_with_a_bom_and_names_one_that_is_not_utf8(fit_json, tmp_path):
+    """A fit JSON saved by an editor with a UTF-8 byte-order mark is read; a file of
+    other bytes is named, and said not to be a fit JSON (the codec's message, "'utf-8'
+    codec can't decode byte ...", named no file)."""
+    bom = tmp_path / "bom.json"
+    bom.write_bytes(b"\xef\xbb\xbf" + fit_json.read_bytes())
+    r = run("brdffit.cli", "export", str(bom), "--to", "gltf", "--json")
+    assert r.returncode == 0, r.stderr
+    assert Export.from_dict(json.loads(r.stdout)).target == "gltf"
+    latin = tmp_path / "latin.json"
+    latin.write_bytes(b'{"model": "gr\xfcn"}')
+    r = run("brdffit.cli", "export", str(latin), "--to", "gltf")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert (f"brdffit: error: {latin}: not a brdffit fit JSON (byte 0xfc at offset 13 is not "
+            "UTF-8 text); give the file brdffit fit --json wrote") in r.stderr, r.stderr
+
+
 @pytest.fixture(scope="module")
 def batch_store(tmp_path_factory):
     """A real batch run (``brdffit batch`` in its own process) on two real materials."""

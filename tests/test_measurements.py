@@ -190,6 +190,17 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "10,0,20,0,1,1,1\n", "no header: the first row is numbers: name the columns"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma\n"
               "10,0,20,0,1,1,1,1e200\n", "sigma is above 1e+12 1/sr in 1 row (first: row 2)"),
+    # a sigma of 0 weighed its value as exact, through a floor, silently
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma\n"
+              "10,0,20,0,1,1,1,0.1\n10,0,30,0,1,1,1,0\n10,0,40,0,1,1,1,0\n",
+     "sigma is 0 in 2 rows (first: row 3): a standard deviation is > 0"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma_r,sigma_g,sigma_b\n"
+              "10,0,20,0,1,1,1,0.1,0,0.1\n",
+     "sigma_g is 0 in 1 row (first: row 2): a standard deviation is > 0 (a sigma of 0 would "
+     "weigh its value as exact); drop the sigma columns"),
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma\n"
+              "10,0,20,0,1,1,1,-0.1\n10,0,20,0,1,1,1,nan\n",
+     "sigma is negative or not finite in 2 rows (first: row 2)"),
 ])
 def test_a_malformed_file_gets_one_line_naming_it(tmp_path, name, text, says):
     path = tmp_path / name
@@ -395,6 +406,9 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
      "dataset spectral has shape (4,) and wavelengths (1,): expected (n, k) and (k,)"),
     ({"spectral": np.ones((4, 5)), "wavelengths": np.linspace(400.0, 700.0, 4)},
      "dataset spectral has shape (4, 5) and wavelengths (4,)"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.zeros(4)}, "sigma is 0 in 4 rows (first: row 1)"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.array([[0.1, 0.1, 0.0]] * 4)},
+     "sigma's b channel is 0 in 4 rows"),
 ])
 def test_a_malformed_hdf5_file_gets_one_line_naming_it(tmp_path, datasets, says):
     path = _h5(tmp_path / "s.h5", **datasets)
@@ -624,7 +638,7 @@ def test_radians_said_to_be_degrees_are_refused(tmp_path):
 
 def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path):
     """A dangling or external link is named (it was a KeyError); a dataset declaring
-    10^12 numbers is refused before it is read (numpy was asked for 7 TiB); an
+    10^12 rows or numbers is refused before it is read (numpy was asked for 7 TiB); an
     attribute that is not UTF-8 is named; a provenance attribute that is not
     brdffit's does not replace what was read."""
     link = _h5(tmp_path / "link.h5", rgb=np.ones((4, 3)))
@@ -645,8 +659,13 @@ def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path
         del f["theta_i"]
         f.create_dataset("theta_i", shape=(10**12,), dtype="f8", chunks=(1024,))
         f["theta_i"].attrs["units"] = "degrees"
-    with pytest.raises(MeasurementsError, match=r"theta_i holds 1,000,000,000,000 numbers"):
-        read_measured(huge)
+    with pytest.raises(MeasurementsError, match=r"declare 1,000,000,000,000 samples"):
+        read_measured(huge)  # more rows than a sample list holds: refused by its shape
+    wide = _h5(tmp_path / "wide.h5", spectral=np.ones((4, 5)))
+    with h5py.File(wide, "a") as f:  # a dataset of another shape: by its numbers
+        f.create_dataset("wavelengths", shape=(10**12,), dtype="f8", chunks=(1024,))
+    with pytest.raises(MeasurementsError, match=r"wavelengths holds 1,000,000,000,000 numbers"):
+        read_measured(wide)
     latin = _h5(tmp_path / "latin.h5", rgb=np.ones((4, 3)))
     with h5py.File(latin, "a") as f:
         f["theta_i"].attrs["units"] = np.bytes_(b"radi\xe1ns")
@@ -732,3 +751,51 @@ def test_a_polar_angle_a_rounding_below_zero_is_the_normal():
     m = Measurements.from_angles(*angles, np.ones(2))
     np.testing.assert_array_equal(m.wi[0], [0.0, 0.0, 1.0])
     np.testing.assert_array_equal(m.wo[1], [0.0, 0.0, 1.0])
+
+
+def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, monkeypatch):
+    """A 2.7 MB gzip-compressed HDF5 file declaring 2e7 samples of one value was
+    decompressed whole (GBs) and fitted for minutes: its datasets' declared rows are
+    weighed against MAX_SAMPLES before any is read. A text list's rows are counted
+    before they are parsed."""
+    from brdffit.io import measurements, readers
+
+    n = measurements.MAX_SAMPLES + 1
+    bomb = tmp_path / "bomb.h5"
+    with h5py.File(bomb, "w") as f:  # declared, never written: each reads as 0.5
+        for name in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            f.create_dataset(name, shape=(n,), dtype="f8", fillvalue=0.5, chunks=(2**16,),
+                             compression="gzip").attrs["units"] = "radians"
+        f.create_dataset("rgb", shape=(n, 3), dtype="f8", fillvalue=0.3, chunks=(2**16, 3),
+                         compression="gzip")
+    assert bomb.stat().st_size < 100_000
+
+    def no_reading(*args):
+        raise AssertionError("a dataset was read")
+
+    with monkeypatch.context() as m:
+        m.setattr(readers, "_numeric", no_reading)
+        with pytest.raises(MeasurementsError) as e:
+            read_measured(bomb)
+    assert str(e.value) == (f"{bomb}: its datasets declare {n:,} samples: more than a sample "
+                            f"list read here ({n - 1:,}; a MERL table has 1,458,000 bins); bin "
+                            "it onto the MERL grid or thin it first")
+    assert readers.declared_samples(bomb) == n and readers.declared_samples(bomb, "b.csv") is None
+    # values declaring more rows than the angles: weighed too
+    few = _h5(tmp_path / "few.h5")
+    with h5py.File(few, "a") as f:
+        f.create_dataset("rgb", shape=(n, 3), dtype="f8", chunks=(2**16, 3))
+    with pytest.raises(MeasurementsError, match=f"its datasets declare {n:,} samples"):
+        read_measured(few)
+    monkeypatch.setattr(measurements, "MAX_SAMPLES", 10)
+    rows = tmp_path / "rows.csv"
+    rows.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                    + "".join(f"10,0,{k},0,1,1,1\n" for k in range(11)))
+    with pytest.raises(MeasurementsError, match="rows.csv: 11 samples: more than a sample "
+                                                "list read here \\(10;"):
+        read_measured(rows)
+    with pytest.raises(MeasurementsError, match="11 samples: more than"):
+        Measurements.from_angles(*np.zeros((4, 11)), np.ones(11))
+    rows.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                    + "".join(f"10,0,{k},0,1,1,1\n" for k in range(10)))
+    assert read_measured(rows).n == 10

@@ -51,6 +51,28 @@ def test_a_request_is_checked_when_it_is_built():
         FitRequest.of("ggx", samples=3)
 
 
+def test_a_list_of_names_with_an_empty_item_is_refused_and_numpy_numbers_are_numbers():
+    """``"ggx,,lambert"`` lost a name silently (read as ggx,lambert): refused, as the
+    service's ``models`` string takes it too. A seed from ``rng.integers`` (np.int64)
+    is an integer, and the request's JSON form holds it as one."""
+    import numpy as np
+
+    from brdffit.request import split_names
+
+    assert split_names(" ggx , lambert ") == ["ggx", "lambert"] and split_names(" ") == []
+    for text in ("ggx,,lambert", "ggx,", ",ggx", "ggx, ,lambert"):
+        with pytest.raises(FitInputError, match=f"models {text!r} has an empty item "
+                                                r"\(two commas in a row, or one at an end\)"):
+            FitRequest.of(text)
+    r = FitRequest.of("ggx", seed=np.int64(3), samples=np.int32(4096), starts=np.uint8(2))
+    assert r.options.seed == 3 and type(r.options.seed) is int
+    assert json.loads(json.dumps(r.to_dict()))["options"]["seed"] == 3
+    auto = FitRequest.of("auto", tolerance=np.float32(0.5))
+    assert type(auto.rule.tolerance) is float
+    with pytest.raises(FitInputError, match="seed must be an integer"):
+        FitRequest.of("ggx", seed=np.float64(3.5))
+
+
 @pytest.mark.parametrize("rule", [{"tolerance": 0.01}, {"budget": 0.02},
                                   {"candidates": ["lambert"]}, {"mono_ks": True}])
 def test_a_selection_rule_with_a_fixed_model_is_refused_not_ignored(rule):

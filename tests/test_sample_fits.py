@@ -134,6 +134,49 @@ def test_copies_of_one_direction_count_once_and_stay_in_one_fold():
     assert r.converged and r.input["held_out"]["results"] == ["successful"] * FOLDS
 
 
+def test_too_few_direction_pairs_are_refused_before_the_list_is_prepared(monkeypatch):
+    """A million copies of one direction took seconds of binning and the solver's data
+    before their refusal: the count comes first."""
+    from brdffit.fitting import samples
+
+    def no_preparing(*args):
+        raise AssertionError("prepared before the count")
+
+    monkeypatch.setattr(samples, "prepare_samples", no_preparing)
+    meas, _ = sample_model("ggx", None, "uniform", 40, seed=5)
+    one = Measurements(np.repeat(meas.wi[:1], 200, 0), np.repeat(meas.wo[:1], 200, 0),
+                       np.repeat(meas.rgb[:1], 200, 0), source="one.csv")
+    with pytest.raises(FitInputError, match="the 200 usable samples hold only 1 distinct "
+                                            "direction pair .*ggx needs at least 32"):
+        fit(one, "ggx")
+    with pytest.raises(FitInputError, match="only 12 usable samples"):
+        fit(Measurements(meas.wi[:12], meas.wo[:12], meas.rgb[:12]), "ggx")
+
+
+def test_a_list_in_percent_and_rows_given_twice_are_noted():
+    """A list in percent (100x its BRDF) fitted kd 100x too large, judged good, with no
+    word: it gets the note a MERL table in another unit gets. Rows that repeat another
+    exactly are counted as independent measurements (every standard error narrowed by
+    sqrt(2) here): said, with how many. Repeats of a direction with their own values
+    are measurements, and get no note."""
+    meas, _ = sample_model("ggx", None, "uniform", 300, seed=5)
+    plain = fit(meas, "lambert")
+    assert not any("albedo" in n or "repeat another row" in n for n in plain.notes), plain.notes
+    percent = fit(Measurements(meas.wi, meas.wo, 100 * meas.rgb, source="pct.csv"), "lambert")
+    (note,) = [n for n in percent.notes if "diffuse floor" in n]
+    assert note.startswith("the sample list's diffuse floor is an albedo of ") and (
+        "are its values in 1/sr? Values in percent are 100 times a fraction" in note), note
+    assert note.endswith("fitted as given, so kd and ks are in the sample list's units")
+    pasted = Measurements(np.concatenate([meas.wi, meas.wi]), np.concatenate([meas.wo, meas.wo]),
+                          np.concatenate([meas.rgb, meas.rgb]), source="pasted.csv")
+    r = fit(pasted, "lambert")
+    assert ("300 of the 600 samples repeat another row exactly (the same directions and "
+            "values): they are counted as independent measurements, which narrows the "
+            "standard errors") in " ".join(r.notes), r.notes
+    repeated = fit(_doubled(meas), "lambert")  # measured twice, 1% apart
+    assert not any("repeat another row" in n for n in repeated.notes), repeated.notes
+
+
 def test_a_scene_weights_samples_and_reports_every_sample_beside():
     from brdffit.fitting.scene import Scene, fit_in_scene
 

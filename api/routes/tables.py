@@ -153,7 +153,8 @@ def _too_large(cap: int) -> HTTPException:
             "operationId": "get_table", "parameters": {"table_id": "$response.body#/id"}}}},
         200: {"model": TableOut, "description": "these bytes were uploaded before: same id"},
         400: {"model": ErrorMessage, "description": "malformed multipart body"},
-        413: {"model": ErrorMessage, "description": "body over BRDFFIT_MAX_UPLOAD_BYTES"},
+        413: {"model": ErrorMessage, "description": "body, or the sample list as stored, "
+                                                    "over BRDFFIT_MAX_UPLOAD_BYTES"},
         415: {"model": ErrorMessage, "description": "neither raw bytes nor multipart"},
         422: {"model": ErrorMessage, "description": "not a valid MERL table (the detail says why)"},
     },
@@ -213,8 +214,10 @@ async def upload_table(
             await form.close()
     try:
         record, created = await run_in_threadpool(
-            tables.validate_and_store, store, tmp, digest, size, name or "upload"
+            tables.validate_and_store, store, tmp, digest, size, name or "upload", cap
         )
+    except tables.StoredTooLarge as e:  # the cap holds for what is kept, compressed or not
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(e)) from None
     finally:
         tmp.unlink(missing_ok=True)
     if not created:

@@ -10,11 +10,29 @@ from pathlib import Path
 from api.store import Store, TableRecord
 from brdffit.io import merl, readers
 from brdffit.io.measurements import Measurements
-from brdffit.io.writers import write_hdf5
+from brdffit.io.writers import hdf5_bytes, write_hdf5
+
+
+class StoredTooLarge(Exception):
+    """A sample list whose stored layout (brdffit's HDF5, float64, uncompressed) would
+    be over the upload cap: the routes answer 413 with this message."""
+
+
+def _stored_fits(name: str, samples: int, sigma: bool, cap: int | None) -> None:
+    """Refuses a sample list of ``samples`` rows whose stored HDF5 would be over
+    ``cap`` bytes: the cap holds for what is kept, not only for the body (a 597 KB
+    gzip-compressed upload was stored as 224 MB)."""
+    stored = hdf5_bytes(samples, sigma)
+    if cap is not None and stored > cap:
+        raise StoredTooLarge(
+            f"{name}: {samples:,} samples are stored as {stored:,} bytes (brdffit's HDF5 "
+            f"layout, float64, uncompressed), over the server's cap of {cap:,} bytes "
+            f"(BRDFFIT_MAX_UPLOAD_BYTES): upload at most {cap // hdf5_bytes(1, sigma):,} "
+            "samples (thin the list, or bin it onto the MERL grid)")
 
 
 def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
-                       name: str) -> tuple[TableRecord, bool]:
+                       name: str, cap: int | None = None) -> tuple[TableRecord, bool]:
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
     before. A file of samples (ASTM, CSV, HDF5; ``brdffit.io.readers``, chosen by
@@ -23,13 +41,19 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     own directions; its summary is the summary of the table it bins into (what the
     plots draw), with ``input`` saying what the binning did. The id stays the
     upload's sha256. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for
-    a file no reader takes."""
+    a file no reader takes, and :class:`StoredTooLarge` where the stored sample list
+    would be over ``cap`` bytes (an HDF5 upload's declared rows are weighed before any
+    is read; a text file's once read)."""
     record = store.get_table(digest)
     if record is not None:  # known bytes: already validated
         tmp.unlink(missing_ok=True)
         return record, False
+    declared = readers.declared_samples(tmp, name)
+    if declared is not None:  # at least the angles and rgb: refused without reading
+        _stored_fits(name, declared, False, cap)
     measured = readers.read_measured(tmp, name=name)  # errors name the upload
     if isinstance(measured, Measurements):
+        _stored_fits(name, measured.n, measured.sigma is not None, cap)
         write_hdf5(measured, tmp)  # one layout for the jobs to read, sigma and all
         size = tmp.stat().st_size
     return store.add_table(digest, tmp, size, name, readers.table_summary(measured))

@@ -55,6 +55,22 @@ def output_folder(path: str, flag: str):
     return folder
 
 
+def name_list(flag: str):
+    """An argparse ``type`` for ``flag``'s comma-separated names
+    (``brdffit.request.split_names``): an empty item is refused with the reason, not
+    argparse's "invalid value"."""
+    def parse(text: str) -> list[str]:
+        from brdffit.request import split_names
+
+        try:
+            return split_names(text, flag)
+        except BrdffitError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    parse.__name__ = flag.lstrip("-")  # argparse names the option by it in its messages
+    return parse
+
+
 def build_parser(full: Collection[str] | None = None) -> argparse.ArgumentParser:
     """The ``brdffit`` parser with the arguments of the commands ``full`` (every
     command when None); the others are listed with their summary only."""

@@ -9,7 +9,7 @@ import threading
 
 from brdffit.batch.job import DIR_SUFFIXES, run_batch, stop_requested
 from brdffit.batch.progress import format_duration
-from brdffit.cli import EXIT_INTERRUPTED
+from brdffit.cli import EXIT_INTERRUPTED, name_list
 from brdffit.cli.fit import add_fit_options, add_request_arguments, request_from_args
 
 EXIT_FAILED_TABLES = 1  # the batch ran, but some tables or fits failed
@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
     p.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="table or sample files, directories (every "
                         f"{', '.join('*' + s for s in DIR_SUFFIXES)} below) or glob patterns")
-    p.add_argument("--models", required=True, type=_models,
+    p.add_argument("--models", required=True, type=name_list("--models"),
                    help="comma-separated model names, e.g. ggx,beckmann,lambert; 'auto' "
                         "for the selection's candidates (batch-report shows the choice; "
                         "--candidates names them)")
@@ -57,10 +57,6 @@ def workers_note(workers: int, cores: int) -> str | None:
         return None
     return (f"brdffit: {workers} workers on {cores} cores: the extra workers share cores "
             f"with the others (more memory, no more cores; --workers {cores} uses them all)")
-
-
-def _models(text: str) -> list[str]:
-    return [m.strip() for m in text.split(",") if m.strip()]
 
 
 def _count(n: int, noun: str) -> str:

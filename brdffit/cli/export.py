@@ -56,8 +56,22 @@ def add_arguments(p) -> None:
     store.add_argument("--model", help="the fitted model (default: the table's best fit)")
 
 
+def _result_text(source: str) -> str:
+    """The fit result's text: UTF-8, with or without the byte-order mark an editor on
+    Windows writes (``json`` refuses one); any other bytes are no fit result, said with
+    the file's name (the codec's own message named no file)."""
+    try:
+        if source == "-":
+            return sys.stdin.read().removeprefix("\ufeff")
+        return Path(source).read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise BrdffitError(f"{source}: not a brdffit fit JSON (byte {e.object[e.start]:#04x} "
+                           f"at offset {e.start:,} is not UTF-8 text); give the file brdffit "
+                           "fit --json wrote, or a batch's results file (HDF5)") from None
+
+
 def _read_result(source: str) -> FitResult:
-    text = sys.stdin.read() if source == "-" else Path(source).read_text()
+    text = _result_text(source)
     try:
         data = json.loads(text)
     except json.JSONDecodeError as e:

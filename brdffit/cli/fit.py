@@ -7,7 +7,7 @@ import sys
 import threading
 
 from brdffit import executables, extras, jsonout, runtime
-from brdffit.cli import output_folder
+from brdffit.cli import name_list, output_folder
 from brdffit.fitting import options
 from brdffit.fitting.options import FIT_KEYWORDS, FitOptions, SelectionRule
 from brdffit.fitting.quality import describe
@@ -16,7 +16,7 @@ from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
 from brdffit.io import readers
 from brdffit.io.measurements import Measurements
-from brdffit.request import FitReport, FitRequest
+from brdffit.request import FitReport, FitRequest, split_names
 from brdffit.request import run as fit_request
 from brdffit.selection import format_selection
 
@@ -41,8 +41,8 @@ def add_option_arguments(p, names, of: type = FitOptions) -> None:
                            help=f"{opt.doc} (default off)".replace("%", "%%"))
             continue
         if opt.kind is tuple:  # names, comma-separated
-            p.add_argument(flag, type=lambda t: [c.strip() for c in t.split(",") if c.strip()],
-                           **unset, help=f"{opt.doc}, comma-separated (default "
+            p.add_argument(flag, type=name_list(flag), **unset,
+                           help=f"{opt.doc}, comma-separated (default "
                            f"{','.join(default)})".replace("%", "%%"))
             continue
         shown = opt.cli_none if default is None and opt.cli_none else default
@@ -214,7 +214,7 @@ def request_from_args(args, models=None) -> FitRequest:
     scene = Scene.from_options(args.scene, preset=args.scene_preset, max_theta=args.max_theta,
                                max_theta_i=args.max_theta_i, max_theta_o=args.max_theta_o)
     # --model takes a list too (ggx,beckmann): each is fitted, the best is the result
-    return FitRequest(models=str(args.model) if models is None else models,
+    return FitRequest(models=split_names(str(args.model), "--model") if models is None else models,
                       options=options_from_args(args), scene=scene, rule=rule_from_args(args))
 
 

@@ -62,13 +62,15 @@ def _start_warmup(models: str):
     log. The server answers at once: a job that comes first compiles what it needs
     itself, as without a warm-up."""
     from brdffit.models import catalogue
+    from brdffit.request import split_names
 
     models = models.strip()
     if models.lower() in ("", "0", "off", "none", "false"):
         return None
     argv = ["warmup"]
     if models.lower() not in ("1", "default", "on", "true"):
-        for name in models.split(","):  # an unknown name stops the server, not the warm-up
-            catalogue.check_name(name.strip(), allow_auto=True)
+        # an unknown name, or an empty item, stops the server, not the warm-up
+        for name in split_names(models, "--warmup"):
+            catalogue.check_name(name, allow_auto=True)
         argv += ["--models", models]
     return child_process.start(argv, nice=19)

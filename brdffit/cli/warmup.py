@@ -17,6 +17,7 @@ from __future__ import annotations
 import sys
 import time
 
+from brdffit.cli import name_list
 from brdffit.models.catalogue import AUTO  # no JAX for `brdffit --help`
 
 
@@ -27,7 +28,7 @@ def add_arguments(p) -> None:
     # auto first: it fits its candidates side by side, so their programs compile in
     # parallel (~23 s on 2 cores for all of them, against ~35 s one model after
     # another); the models' own fits after it then load nearly everything
-    p.add_argument("--models", type=lambda t: [m for m in t.split(",") if m],
+    p.add_argument("--models", type=name_list("--models"),
                    default=[AUTO, *DEFAULT_CANDIDATES],
                    help="comma-separated models to compile, 'auto' for the selection "
                         f"itself (default {AUTO},{','.join(DEFAULT_CANDIDATES)})")

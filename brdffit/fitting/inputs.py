@@ -102,6 +102,9 @@ class TableInput:
                                                                                        None]:
         return look, None
 
+    def refuse_too_few(self, model) -> None:
+        """A table is counted once prepared (its bins, the scene's weights)."""
+
     def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
         """What the table holds that the fit's reader should be told of, as notes and
         as next steps (``quality.next_steps``' form): bins the fit used that stand far
@@ -151,16 +154,28 @@ def _partly_negative(table: MerlTable) -> list[str]:
             "out biases the dark channels upward: clip such values to 0 instead"]
 
 
-def _too_bright(prep: Prepared) -> tuple[list[str], list[dict]]:
+#: Why a table's values may not be in 1/sr (:func:`_too_bright`).
+MERL_SCALES = ("MERL's .binary holds values to be scaled by 1/1500, 1.15/1500 and "
+               "1.66/1500 per channel")
+#: Why a sample list's may not be: a reflectance in percent, as many instruments export.
+SAMPLE_SCALES = ("Values in percent are 100 times a fraction (a reflectance factor R in % is "
+                 "a BRDF of R / (100 pi) 1/sr)")
+
+
+def _too_bright(prep: Prepared, what: str = "table",
+                why: str = MERL_SCALES) -> tuple[list[str], list[dict]]:
+    """A note and a next step where ``what``'s diffuse floor (the starts' hint, read
+    from the table, or from a sample list binned) implies an albedo over
+    :data:`SUSPECT_ALBEDO`: values in another unit, which the fit follows silently
+    (a list in percent fitted kd [20, 10, 5], judged good). ``why``: the usual cause."""
     hints = prep.hints
     if hints is None or not np.all(np.isfinite(hints.kd)) or hints.kd.max() <= SUSPECT_ALBEDO:
         return [], []
-    what = (f"the table's diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
+    said = (f"the {what}'s diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
             "mid-angle level; no surface reflects more than it receives, 1): are its values "
-            "in 1/sr? MERL's .binary holds values to be scaled by 1/1500, 1.15/1500 and "
-            "1.66/1500 per channel")
-    return ([f"{what}; fitted as given, so kd and ks are in the table's units"],
-            [{"try": "the table in 1/sr", "why": what, "gain_db": None}])
+            f"in 1/sr? {why}")
+    return ([f"{said}; fitted as given, so kd and ks are in the {what}'s units"],
+            [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
 
 
 class SampleInput:
@@ -196,7 +211,21 @@ class SampleInput:
         return None
 
     def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
-        return [], []  # what the samples hold is reported in the input block
+        """What the list holds that the fit's reader should be told of (its coverage
+        and binning are in the input block): values in another unit than 1/sr, as a
+        table's (:func:`_too_bright`), and rows that repeat another exactly."""
+        notes, steps = _too_bright(prep, "sample list", SAMPLE_SCALES)
+        return notes + self._samples.duplicate_note(self.meas, prep), steps
+
+    def refuse_too_few(self, model) -> None:
+        """Refuses, before the preparation (binning, weights, the solver's data: ~5 s
+        for a million samples), a list with too few usable samples or distinct direction
+        pairs for ``model``: the samples above the horizon, which a scene's weights only
+        thin, so that what is refused here would be refused after it too."""
+        usable = self._samples.on_the_surface(self.meas)
+        _refuse_too_few(self, int(usable.sum()),
+                        lambda: self._samples.distinct_pairs(self.meas, usable), model,
+                        scene=False)
 
     def refuse_bound(self) -> None:
         raise FitInputError(
@@ -249,24 +278,32 @@ def _count(n: int, plural: str) -> str:
     return f"{n:,} {plural[:-1] if n == 1 and plural.endswith('s') else plural}"
 
 
-def check_enough(source: TableInput | SampleInput, prep: Prepared, model,
-                 scene: bool) -> None:
-    """Refuse, with the reason, an input with too little to fit ``model``."""
+def _refuse_too_few(source: TableInput | SampleInput, n_usable: int,
+                    distinct: Callable[[], int], model, scene: bool) -> None:
+    """Refuses ``n_usable`` samples (or bins), or their ``distinct()`` direction pairs,
+    fewer than ``model`` needs: 4 per parameter."""
     what = source.what
     least = model.n_params * 4
-    if prep.n_usable < least:
+    if n_usable < least:
         raise FitInputError(
-            f"{source.source}: only {_count(prep.n_usable, 'usable ' + what)} (measured, finite, "
+            f"{source.source}: only {_count(n_usable, 'usable ' + what)} (measured, finite, "
             f"above the horizon{', weighted by the scene' if scene else ''}); "
             f"{model.name} needs at least {least}")
-    pairs = source.distinct_usable(prep)
+    pairs = distinct()
     if pairs < least:
         # repeated measurements of one direction pair (or rows pasted twice) are one
         # sample of the BRDF's shape: 100 copies of the normal's were fitted and judged good
         raise FitInputError(
-            f"{source.source}: the {_count(prep.n_usable, 'usable ' + what)} hold only "
+            f"{source.source}: the {_count(n_usable, 'usable ' + what)} hold only "
             f"{_count(pairs, 'distinct direction pairs')} (repeats of a pair count once); "
             f"{model.name} needs at least {least}")
+
+
+def check_enough(source: TableInput | SampleInput, prep: Prepared, model,
+                 scene: bool) -> None:
+    """Refuse, with the reason, an input with too little to fit ``model``."""
+    what = source.what
+    _refuse_too_few(source, prep.n_usable, lambda: source.distinct_usable(prep), model, scene)
     if prep.brightest < merl.MIN_PEAK:
         raise FitInputError(
             f"{source.source}: every usable {what[:-1]} is below {merl.MIN_PEAK:g} 1/sr"

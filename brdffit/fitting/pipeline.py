@@ -218,6 +218,7 @@ def solved_fit(
                                                       starts, max_steps, False, seed)
     source = fit_input(table)
     bin_weight = _checked_bin_weight(bin_weight)
+    source.refuse_too_few(m)  # a sample list's count, before its costly preparation
     prep = source.prepare(bin_weight, samples, seed, precision, loss)
     check_enough(source, prep, m, scene=bin_weight is not None)
     again = dict(loss=loss, solver=solver, precision=precision, starts=starts,

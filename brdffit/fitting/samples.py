@@ -143,7 +143,8 @@ def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> 
         cos_i = meas.wi[:, 2][:, None]
         sigma = meas.sigma
         positive = sigma[usable & np.all(sigma > 0, axis=1)]
-        # a sigma of 0 is the most certain, not infinitely so: floored as binning does
+        # a sigma of 0 (the readers refuse one; Measurements built directly may hold it)
+        # is the most certain, not infinitely so: floored as binning does
         floor = float(np.min(positive, initial=1.0)) * 1e-3 if positive.size else 1e-30
         x = meas.rgb * cos_i
         var = np.mean((np.maximum(sigma, floor) * cos_i / (1.0 + x)) ** 2, axis=1)
@@ -280,9 +281,45 @@ def direction_groups(meas: Measurements) -> np.ndarray:
     return cached(meas, "direction-groups", make)
 
 
+def distinct_pairs(meas: Measurements, usable: np.ndarray) -> int:
+    """How many distinct direction pairs the samples ``usable`` (a mask) hold
+    (:func:`direction_groups`)."""
+    return int(np.unique(direction_groups(meas)[usable]).size)
+
+
 def distinct_usable(meas: Measurements, prep: Prepared) -> int:
     """How many distinct direction pairs the usable samples hold (:func:`direction_groups`)."""
-    return int(np.unique(direction_groups(meas)[prep.weight > 0]).size)
+    return distinct_pairs(meas, prep.weight > 0)
+
+
+def duplicate_rows(meas: Measurements, usable: np.ndarray) -> int:
+    """How many of the samples ``usable`` (a mask) repeat an earlier one exactly: the
+    same directions, the same values and the same sigma (a file's rows pasted twice).
+    Repeated measurements at one direction with other values are not counted."""
+    def make() -> np.ndarray:
+        parts = [meas.wi, meas.wo, meas.rgb, *(() if meas.sigma is None else (meas.sigma,))]
+        rows = np.concatenate(parts, axis=1) + 0.0  # -0.0 is 0.0: compared by bytes below
+        _, first = np.unique(rows, axis=0, return_index=True)
+        copy = np.ones(meas.n, bool)
+        copy[first] = False  # each row's first occurrence is the measurement
+        return copy
+
+    return int(np.count_nonzero(cached(meas, "exact-copies", make) & usable))
+
+
+def duplicate_note(meas: Measurements, prep: Prepared) -> list[str]:
+    """A note where usable rows repeat another exactly (:func:`duplicate_rows`): each
+    copy is fitted as one more independent measurement, so every standard error
+    narrows (by sqrt(k) for a list pasted k times), and nothing else says so."""
+    if prep.weight is None:
+        return []
+    copies = duplicate_rows(meas, prep.weight > 0)
+    if not copies:
+        return []
+    return [f"{copies:,} of the {meas.n:,} samples repeat another row exactly (the same "
+            "directions and values): they are counted as independent measurements, which "
+            "narrows the standard errors (by sqrt(k) for a row given k times); if they are "
+            "one measurement written more than once, drop the copies"]
 
 
 def fold_of(groups: np.ndarray, folds: int, seed: int) -> np.ndarray:

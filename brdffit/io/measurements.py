@@ -8,14 +8,14 @@ dense, binned layout of the same thing. :class:`Measurements` holds the list:
   light and the view, both on or above the horizon;
 - ``rgb`` (n, 3): the BRDF f_r (1/sr), linear RGB; a one-channel measurement is grey
   (its three channels equal, ``provenance["channels"] == 1``);
-- ``sigma`` (n, 3) or None: each value's standard deviation (1/sr);
+- ``sigma`` (n, 3) or None: each value's standard deviation (1/sr, > 0);
 - ``source`` and ``provenance``: where the samples came from, in which format, which
   columns and units, and what the reader did to them.
 
 Every reader (:mod:`brdffit.io.readers`) builds one through :meth:`Measurements.from_angles`,
 which refuses what no fit can use, in one line naming the file and the first bad row:
 non-finite angles or values, angles out of range or below the horizon, negative
-values, no rows.
+values, a sigma that is not > 0, no rows, more than :data:`MAX_SAMPLES` rows.
 
 :meth:`Measurements.to_table` bins the samples onto the MERL grid (the mean of the
 samples in each bin, weighted by 1 / sigma^2 where sigma is given; every other bin
@@ -54,6 +54,13 @@ NORMAL_SLACK = float(np.radians(0.01))
 #: The largest |phi| read (radians): two turns, for files that measure the view's
 #: azimuth from the light's in -360..360 degrees.
 MAX_AZIMUTH = 4 * np.pi
+#: The most samples a sample list may hold. The densest layout brdffit reads, a MERL
+#: table, has 1,458,000 bins; a gonioreflectometer's sweep holds thousands to a few
+#: hundred thousand samples. A camera rig's list denser than that is more than the
+#: MERL grid tells apart: bin it first (``Measurements.to_table``) or thin it (the
+#: solver sees at most 16384 samples anyway). A fit of a million samples peaked at
+#: 1.05 GB and 13 s on 2 cores, and grows with the list: 2 million is the cap.
+MAX_SAMPLES = 2_000_000
 
 
 class MeasurementsError(MerlFormatError):
@@ -63,11 +70,42 @@ class MeasurementsError(MerlFormatError):
     file) reports these the same way."""
 
 
+def too_many_samples(n: int) -> str | None:
+    """Why a list of ``n`` samples is refused (:data:`MAX_SAMPLES`), or None."""
+    if n <= MAX_SAMPLES:
+        return None
+    return (f"{n:,} samples: more than a sample list read here ({MAX_SAMPLES:,}; a MERL "
+            "table has 1,458,000 bins); bin it onto the MERL grid or thin it first")
+
+
 def _first_rows(bad: np.ndarray, rows: np.ndarray | None) -> str:
     """'N rows (first: row K)' of a boolean mask, K the file's own row number."""
     idx = np.flatnonzero(bad)
     first = int(idx[0]) if rows is None else int(rows[idx[0]])
     return f"{idx.size} row{'s' if idx.size != 1 else ''} (first: row {first + 1})"
+
+
+def _positive_sigma(sigma: np.ndarray, source: str, rows: np.ndarray | None,
+                    text: bool) -> None:
+    """Refuses a sigma (n, 1) or (n, 3) that is not > 0 and finite, naming its column
+    (``sigma``; a text file's ``sigma_r``, ``_g``, ``_b``, an HDF5 dataset's channel)
+    and its rows. A sigma of 0 says a value is exact: its weight, 1 / sigma^2, was
+    floored and capped, and reweighted the fit silently (a column of zeros weighed as
+    exact)."""
+    names = (["sigma"] if sigma.shape[1] == 1 else
+             [f"sigma_{c}" if text else f"sigma's {c} channel" for c in "rgb"])
+    for name, column in zip(names, sigma.T, strict=True):
+        bad = ~(np.isfinite(column) & (column > 0))
+        if not bad.any():
+            continue
+        kinds = [word for word, hit in (("0", column == 0), ("negative", column < 0),
+                                        ("not finite", ~np.isfinite(column))) if hit.any()]
+        raise MeasurementsError(
+            source, f"{name} is {' or '.join(kinds)} in {_first_rows(bad, rows)}: a "
+                    "standard deviation is > 0 (a sigma of 0 would weigh its value as "
+                    "exact); drop the sigma columns (an HDF5 file's dataset sigma) to "
+                    "weigh every sample the same, or give each value's measured standard "
+                    "deviation (1/sr)")
 
 
 def direction(theta, phi) -> np.ndarray:
@@ -112,6 +150,8 @@ class Measurements:
                                             "(n,) or (n, 3), one per sample")
         values = values.reshape(values.shape[0], -1) if values.ndim else values.reshape(1, 1)
         n = values.shape[0]
+        if (why := too_many_samples(n)) is not None:  # the readers refuse it before reading
+            raise MeasurementsError(source, why)
         if any(a.size != n for a in angles):
             raise MeasurementsError(source, f"{n} values but angles of "
                                             f"{[a.size for a in angles]} rows")
@@ -164,11 +204,9 @@ class Measurements:
                 raise MeasurementsError(source, f"sigma has shape {sigma.shape}: expected "
                                                 f"({n},) or ({n}, 3), one per sample")
             sigma = sigma.reshape(n, -1)
+            _positive_sigma(sigma, source, rows,
+                            text=(provenance or {}).get("format") in ("csv", "astm"))
             sigma = np.repeat(sigma, 3, axis=1) if sigma.shape[1] == 1 else sigma
-            bad = ~np.all(np.isfinite(sigma) & (sigma >= 0), axis=1)
-            if bad.any():
-                raise MeasurementsError(source, "sigma is negative or not finite in "
-                                                f"{_first_rows(bad, rows)}")
             if np.any(sigma > MAX_VALUE):
                 # its weight, 1 / sigma^2, is 0 in float64 from ~1e154: the samples
                 # weighed nothing, and the table was refused as blank

@@ -25,7 +25,9 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   optional ``sigma`` (n, 3) or (n,).
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
-one line naming the file and what was expected.
+one line naming the file and what was expected. A list of more samples than
+``brdffit.io.measurements.MAX_SAMPLES`` is refused before a number is read (an HDF5
+file by its datasets' declared shapes: a few MB compressed may declare GBs).
 """
 
 from __future__ import annotations
@@ -42,7 +44,12 @@ import numpy as np
 
 from brdffit.errors import MerlFormatError
 from brdffit.io import merl, spectra
-from brdffit.io.measurements import HORIZON_SLACK, Measurements, MeasurementsError
+from brdffit.io.measurements import (
+    HORIZON_SLACK,
+    Measurements,
+    MeasurementsError,
+    too_many_samples,
+)
 
 #: HDF5's file signature (its first eight bytes).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -281,6 +288,8 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
     ``comma``: a decimal comma (:func:`_decimal_comma`); ``used``: the columns read as
     numbers (default all; the others, a sample's name or a note, are NaN)."""
     used = list(range(width)) if used is None else used
+    if (why := too_many_samples(len(lines))) is not None:  # before a row is parsed
+        raise MeasurementsError(source, why)
     out = np.full((len(lines), width), np.nan)
     for j, (number, line) in enumerate(lines):
         cells = _cells(line, delimiter, source, number)
@@ -592,6 +601,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                             f"{', '.join(f.keys()) or 'none'})"
                                     + (f": a {kind} file, not a sample list"
                                        if isinstance(kind, str) else ""))
+        _declared_fit(f, [named[a] for a in ANGLES], source)
         raw, scales = [], []
         for canonical in ANGLES:
             name = named[canonical]
@@ -638,6 +648,55 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         del provenance["channels"]  # said of grey values: these are coloured
     return Measurements.from_angles(*angles, values, sigma, source=source,
                                     provenance=provenance)
+
+
+#: The datasets of an HDF5 sample list that hold one row per sample, besides its angles.
+_PER_SAMPLE = ("rgb", "value", "spectral", "sigma")
+
+
+def _declared_samples(f, angles: list[str]) -> int:
+    """The most rows any of the open HDF5 file ``f``'s per-sample datasets declares
+    (the angle datasets ``angles``, the values, sigma), from their shapes alone: no
+    number is read. A group, a link to nothing or a null dataspace counts none (they
+    are refused, or read as empty, where they are read)."""
+    import h5py
+
+    most = 0
+    for name in (*angles, *(k for k in _PER_SAMPLE if k in f)):
+        try:
+            d = f[name]
+        except (KeyError, OSError):
+            continue
+        if isinstance(d, h5py.Dataset) and d.shape:
+            most = max(most, int(d.shape[0]))
+    return most
+
+
+def _declared_fit(f, angles: list[str], source: str) -> None:
+    """Refuses, before a number is read, an HDF5 sample list whose datasets declare
+    more rows than a sample list may hold (``MAX_SAMPLES``): a 2.7 MB gzip-compressed
+    file of 2e7 rows of one value decompressed to GBs, and ran a fit for minutes."""
+    if (why := too_many_samples(_declared_samples(f, angles))) is not None:
+        raise MeasurementsError(source, f"its datasets declare {why}")
+
+
+def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | None:
+    """How many samples an HDF5 sample list declares (its datasets' rows, read from
+    their shapes: no number is read), for a caller that weighs a file before reading
+    it (the service, what it would store); None for any other layout, or an HDF5 file
+    without the four angles (its reader says what is wrong with it)."""
+    import h5py
+
+    if reader_for(path, name) is not read_hdf5:
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            named = _hdf5_angles(f, str(path))
+            if any(a not in named for a in ANGLES):
+                return None
+            return _declared_samples(f, [named[a] for a in ANGLES])
+    except (OSError, MeasurementsError):
+        return None
 
 
 #: The formats a sample list brdffit stored (brdffit.io.writers) was read from.

@@ -62,6 +62,14 @@ def write_csv(meas: Measurements, path: str | os.PathLike) -> Path:
     return path
 
 
+def hdf5_bytes(n: int, sigma: bool) -> int:
+    """The bytes of the datasets :func:`write_hdf5` writes for ``n`` samples (float64,
+    uncompressed: four angles, rgb, and sigma where ``sigma``); HDF5's own headers and
+    the attributes add a few KB. What a service that stores uploads so must budget for:
+    a compressed upload of one value repeated is a few hundred times smaller."""
+    return 8 * n * (4 + 3 + (3 if sigma else 0))
+
+
 def write_hdf5(meas: Measurements, path: str | os.PathLike) -> Path:
     """HDF5 datasets (radians, ``units`` on each angle)."""
     import h5py
