@@ -270,3 +270,26 @@ def test_a_dark_tables_spheres_are_also_drawn_where_the_verdict_judged_them(ggx,
     assert judged.mean() > plain.mean() + 0.05  # the sphere is there to see
     t, r = ggx  # judged near the picture's own exposure: one file
     assert len(plots.save_all(t, r, tmp_path / "mid", kinds=("spheres",))) == 1
+
+
+def test_the_colour_panel_tints_as_far_as_the_colours_look_apart():
+    """A saturated red whose tiny blue channel is a quarter below the measured one (its
+    share 0.4 stop off, tinted 0.2 by the share alone) looks CIEDE2000 ~1.5 off
+    (red-plastic's ggx fit: the whole sphere was tinted orange); twice the green is far
+    off and tinted."""
+    from brdffit.fitting.colour import ciede2000, rgb_to_lab
+
+    measured = np.broadcast_to([0.30, 0.06, 0.012], (4, 4, 3)).copy()
+    on = np.ones((4, 4), bool)
+    for fitted, tinted in (([0.30, 0.06, 0.009], False), ([0.30, 0.12, 0.012], True)):
+        f = np.broadcast_to(fitted, (4, 4, 3)).copy()
+        _, colour = plots.ratio_images(measured, f, on)
+        swing = float(np.max(np.abs(colour - 0.5)))
+        de = ciede2000(rgb_to_lab(np.array(fitted) / (np.array(fitted) @ plots.LUMINANCE)),
+                       rgb_to_lab(measured[0, 0] / (measured[0, 0] @ plots.LUMINANCE)))
+        assert (swing > 0.2 if tinted else swing < 0.1), (swing, de)
+        assert (de > plots.TINT_FULL_DE) is tinted, de
+    # one colour and an image's pixels give the same CIEDE2000
+    lab = rgb_to_lab(np.array([[0.2, 0.1, 0.05], [0.05, 0.1, 0.2]]))
+    from brdffit.fitting.colour import ciede2000_of
+    np.testing.assert_allclose(ciede2000_of(lab[:1], lab[1:]), ciede2000(lab[0], lab[1]))

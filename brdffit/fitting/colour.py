@@ -43,58 +43,58 @@ def luminance(rgb) -> float:
 
 
 def rgb_to_lab(rgb) -> np.ndarray:
-    """CIELAB (L*, a*, b*) of linear RGB, relative to the D65 white of Y = 1."""
-    xyz = RGB_TO_XYZ @ np.maximum(np.asarray(rgb, np.float64), 0.0)
+    """CIELAB (L*, a*, b*) of linear RGB (the last axis), relative to the D65 white of
+    Y = 1: one colour, or an image's pixels."""
+    xyz = np.maximum(np.asarray(rgb, np.float64), 0.0) @ RGB_TO_XYZ.T
     t = xyz / WHITE_D65
     eps = (6.0 / 29.0) ** 3
     f = np.where(t > eps, np.cbrt(t), t / (3 * (6.0 / 29.0) ** 2) + 4.0 / 29.0)
-    return np.array([116.0 * f[1] - 16.0, 500.0 * (f[0] - f[1]), 200.0 * (f[1] - f[2])])
+    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]),
+                     200.0 * (f[..., 1] - f[..., 2])], axis=-1)
 
 
 def ciede2000(lab1, lab2) -> float:
     """CIEDE2000 colour difference (kL = kC = kH = 1), as Sharma, Wu and Dalal (2005)
     give it, hue-angle conventions included (their test data: tests/test_colour.py)."""
-    l1, a1, b1 = (float(x) for x in lab1)
-    l2, a2, b2 = (float(x) for x in lab2)
-    c_bar = (math.hypot(a1, b1) + math.hypot(a2, b2)) / 2.0
-    g = 0.5 * (1.0 - math.sqrt(c_bar**7 / (c_bar**7 + 25.0**7)))
+    return float(ciede2000_of(np.asarray(lab1, np.float64), np.asarray(lab2, np.float64)))
+
+
+def ciede2000_of(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
+    """:func:`ciede2000` of each pair of CIELAB colours (the last axis; an image's
+    pixels, or one colour)."""
+    l1, a1, b1 = np.moveaxis(np.asarray(lab1, np.float64), -1, 0)
+    l2, a2, b2 = np.moveaxis(np.asarray(lab2, np.float64), -1, 0)
+    c_bar = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2.0
+    g = 0.5 * (1.0 - np.sqrt(c_bar**7 / (c_bar**7 + 25.0**7)))
     a1p, a2p = (1.0 + g) * a1, (1.0 + g) * a2
-    c1p, c2p = math.hypot(a1p, b1), math.hypot(a2p, b2)
-    h1p = math.degrees(math.atan2(b1, a1p)) % 360.0 if c1p > 0 else 0.0
-    h2p = math.degrees(math.atan2(b2, a2p)) % 360.0 if c2p > 0 else 0.0
+    c1p, c2p = np.hypot(a1p, b1), np.hypot(a2p, b2)
+    h1p = np.where(c1p > 0, np.degrees(np.arctan2(b1, a1p)) % 360.0, 0.0)
+    h2p = np.where(c2p > 0, np.degrees(np.arctan2(b2, a2p)) % 360.0, 0.0)
     dl = l2 - l1
     dc = c2p - c1p
-    if c1p * c2p == 0:
-        dh = 0.0
-    else:
-        dh = h2p - h1p
-        if dh > 180.0:
-            dh -= 360.0
-        elif dh < -180.0:
-            dh += 360.0
-    d_big_h = 2.0 * math.sqrt(c1p * c2p) * math.sin(math.radians(dh) / 2.0)
+    achromatic = c1p * c2p == 0
+    dh = h2p - h1p
+    dh = np.where(dh > 180.0, dh - 360.0, np.where(dh < -180.0, dh + 360.0, dh))
+    dh = np.where(achromatic, 0.0, dh)
+    d_big_h = 2.0 * np.sqrt(c1p * c2p) * np.sin(np.radians(dh) / 2.0)
     l_bar = (l1 + l2) / 2.0
     cp_bar = (c1p + c2p) / 2.0
-    if c1p * c2p == 0:
-        hp_bar = h1p + h2p
-    elif abs(h1p - h2p) <= 180.0:
-        hp_bar = (h1p + h2p) / 2.0
-    elif h1p + h2p < 360.0:
-        hp_bar = (h1p + h2p + 360.0) / 2.0
-    else:
-        hp_bar = (h1p + h2p - 360.0) / 2.0
-    t = (1.0 - 0.17 * math.cos(math.radians(hp_bar - 30.0))
-         + 0.24 * math.cos(math.radians(2.0 * hp_bar))
-         + 0.32 * math.cos(math.radians(3.0 * hp_bar + 6.0))
-         - 0.20 * math.cos(math.radians(4.0 * hp_bar - 63.0)))
-    d_theta = 30.0 * math.exp(-(((hp_bar - 275.0) / 25.0) ** 2))
-    r_c = 2.0 * math.sqrt(cp_bar**7 / (cp_bar**7 + 25.0**7))
-    s_l = 1.0 + 0.015 * (l_bar - 50.0) ** 2 / math.sqrt(20.0 + (l_bar - 50.0) ** 2)
+    hp_bar = np.where(achromatic, h1p + h2p,
+                      np.where(np.abs(h1p - h2p) <= 180.0, (h1p + h2p) / 2.0,
+                               np.where(h1p + h2p < 360.0, (h1p + h2p + 360.0) / 2.0,
+                                        (h1p + h2p - 360.0) / 2.0)))
+    t = (1.0 - 0.17 * np.cos(np.radians(hp_bar - 30.0))
+         + 0.24 * np.cos(np.radians(2.0 * hp_bar))
+         + 0.32 * np.cos(np.radians(3.0 * hp_bar + 6.0))
+         - 0.20 * np.cos(np.radians(4.0 * hp_bar - 63.0)))
+    d_theta = 30.0 * np.exp(-(((hp_bar - 275.0) / 25.0) ** 2))
+    r_c = 2.0 * np.sqrt(cp_bar**7 / (cp_bar**7 + 25.0**7))
+    s_l = 1.0 + 0.015 * (l_bar - 50.0) ** 2 / np.sqrt(20.0 + (l_bar - 50.0) ** 2)
     s_c = 1.0 + 0.045 * cp_bar
     s_h = 1.0 + 0.015 * cp_bar * t
-    r_t = -math.sin(math.radians(2.0 * d_theta)) * r_c
-    return math.sqrt((dl / s_l) ** 2 + (dc / s_c) ** 2 + (d_big_h / s_h) ** 2
-                     + r_t * (dc / s_c) * (d_big_h / s_h))
+    r_t = -np.sin(np.radians(2.0 * d_theta)) * r_c
+    return np.sqrt((dl / s_l) ** 2 + (dc / s_c) ** 2 + (d_big_h / s_h) ** 2
+                   + r_t * (dc / s_c) * (d_big_h / s_h))
 
 
 def brightness_and_colour(fit_rgb, table_rgb) -> tuple[float | None, float | None]:

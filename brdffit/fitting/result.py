@@ -37,8 +37,8 @@ SCHEMA = "brdffit.fit/7"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2",
-         "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3",
+         "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)

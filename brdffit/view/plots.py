@@ -41,6 +41,7 @@ try:
 except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
+from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
 from brdffit.fitting.problem import sphere_reference
 from brdffit.fitting.quality import judged_brightness
 from brdffit.fitting.result import FitResult
@@ -271,8 +272,15 @@ SPHERE_LIGHTS = (
     ("back light 135° from\nthe camera: Fresnel rim", np.array([0.7071, 0.0, -0.7071])),
 )
 #: The colour panel: 0.5 + COLOUR_GAIN * log2(channel share, fit / measured), so
-#: one stop of a channel's share saturates that channel.
+#: one stop of a channel's share saturates that channel, scaled by how far apart the
+#: two colours look (their CIEDE2000 at equal luminance over TINT_FULL_DE): a
+#: channel that holds little of the light (red-plastic's blue) swings its share by a
+#: stop where the colour is all but the same, and the whole sphere was tinted orange
+#: on a fit whose colour is CIEDE2000 1.1 off.
 COLOUR_GAIN = 0.5
+#: The CIEDE2000 (at equal luminance) at which the tint is full: the poor
+#: verdict's colour (CIEDE2000 6, ``brdffit.fitting.quality.POOR``).
+TINT_FULL_DE = 6.0
 #: One exposure for every table, fit and light: a white Lambertian surface facing the
 #: light has radiance 1 and shows at Reinhard 0.5 (sRGB 0.74). A dark material looks
 #: dark and a bright one bright, as a renderer would show them under the same light.
@@ -320,10 +328,12 @@ def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
 
 def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
     """The brightness ratio, log2(fit / measured) of the luminance, and the colour
-    ratio image of two radiance images: per channel ``0.5 + COLOUR_GAIN *
+    ratio image of two radiance images: per channel ``0.5 + strength * COLOUR_GAIN *
     log2(share_fit / share_measured)`` with ``share`` a channel's part of the
-    luminance, so grey where the hue is right and tinted towards the colour the fit
-    has too much of. NaN off ``on``, where unlit, and (colour) in the darkest 0.5 %."""
+    luminance and ``strength`` the two colours' CIEDE2000 at equal luminance
+    over :data:`TINT_FULL_DE` (at most 1), so grey where the colour looks right and
+    tinted towards the colour the fit has too much of. NaN off ``on``, where unlit,
+    and (colour) in the darkest 0.5 %."""
     lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
     lit = on & (lum_m > 0)
     eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
@@ -331,7 +341,11 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
         ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
         share = ((fitted + eps) / (lum_f[..., None] + eps)) / (
             (measured + eps) / (lum_m[..., None] + eps))
-        colour = np.clip(0.5 + COLOUR_GAIN * np.log2(share), 0.0, 1.0)
+        shown = [DISPLAY_Y * (img + eps) / (lum[..., None] + eps)
+                 for img, lum in ((fitted, lum_f), (measured, lum_m))]
+        apart = ciede2000_of(rgb_to_lab(shown[0]), rgb_to_lab(shown[1]))
+        strength = np.clip(apart / TINT_FULL_DE, 0.0, 1.0)[..., None]
+        colour = np.clip(0.5 + strength * COLOUR_GAIN * np.log2(share), 0.0, 1.0)
     bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
     colour[~bright] = np.nan
     return ratio, colour
@@ -429,8 +443,8 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
     fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
                  label="stops (+1: fit 2× brighter)")
     axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
-                           "(a stop saturates); black: unlit, or\ntoo dark to judge "
-                           "(< 0.5% of the brightest)", fontsize=9)
+                           f"(full at CIEDE2000 {TINT_FULL_DE:g}); black:\nunlit, or too "
+                           "dark to judge (< 0.5% of the brightest)", fontsize=9)
     return axes
 
 
