@@ -3,6 +3,7 @@ reported for every other fit, a warning for every clamp, strict JSON, clear erro
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import xml.etree.ElementTree as ET
 
@@ -328,6 +329,25 @@ def test_a_table_that_is_not_the_fits_own_is_said():
                "mats/gold.binary" in w for w in other.warnings), other.warnings
     moved = export(r, "gltf", table=dataclasses.replace(table, source="/data/gold.binary"))
     assert not any("the fit was made on" in w for w in moved.warnings), moved.warnings
+
+
+def test_a_fits_own_table_file_changed_since_the_fit_is_said(tmp_path):
+    """A result keeps its table's path alone: a file written over since (another
+    material, or the same one rescaled) was measured against without a word."""
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    table, _ = make_table("ggx", GGX, noise=0.01, seed=3)
+    path = tmp_path / "gold.binary"
+    merl.write(path, table)
+    own = dataclasses.replace(result("ggx", GGX), table=str(path),
+                              error=table_error(merl.read(path), "ggx", GGX))
+    assert not any("does not hold" in w for w in export(own, "gltf").warnings)
+    merl.write(path, make_table("ggx", {**GGX, "ks": [0.3, 0.7, 0.9]})[0])
+    changed = export(own, "gltf")
+    assert any(w.startswith(f"fidelity: {path} does not hold the table that was fitted")
+               for w in changed.warnings), changed.warnings
+    assert changed.fidelity["log_rmse_to_table"] is not None  # measured, and said so
 
 
 @pytest.mark.slow

@@ -167,9 +167,10 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[st
     source = result.table
     if source and os.path.isfile(source):
         try:  # the fit's own file, in whichever layout it was read
-            return readers.read_table(source)[0], []
+            own = readers.read_table(source)[0]
         except BrdffitError as e:
             return None, [f"fidelity: log_rmse_to_table not measured: {e}"]
+        return own, _changed_since_the_fit(result, own)
     return None, [f"fidelity: log_rmse_to_table not measured: the fitted table "
                   f"{source or '(unnamed)'} is not at hand (pass the table: "
                   "export(..., table=...), brdffit export --measured PATH)"]
@@ -185,6 +186,34 @@ def _another_table(result: FitResult, table: MerlTable) -> list[str]:
         return []
     return [f"fidelity: measured against {table.source}, but the fit was made on "
             f"{result.table}: log_rmse_to_table is to another table than the fit's"]
+
+
+#: How far (relative) the fit's own log_rmse on the table at hand may differ from the
+#: one it reported before the table is taken for another: the full-table error is
+#: measured in float32 (~1e-6 apart between runs); a file rewritten since the fit, or
+#: another material under its name, is off by far more.
+SAME_TABLE_RTOL = 1e-3
+
+
+def _changed_since_the_fit(result: FitResult, table: MerlTable) -> list[str]:
+    """A warning where ``table``, read from the fit's own file, does not give the fit's
+    reported log_rmse: the file changed since the fit (a result keeps the table's name
+    alone: another material written over it was measured against without a word), and
+    every fidelity figure is to what it holds now. Only a fit of a whole table without
+    a scene reported that figure on every bin."""
+    from brdffit.fitting.problem import table_error
+
+    reported = (result.error or {}).get("log_rmse")
+    on_samples = (result.input or {}).get("fitted_at") == "samples"
+    if (on_samples or result.full_table_error is not None or reported is None
+            or not np.isfinite(reported) or reported <= 0):
+        return []
+    now = table_error(table, result.model, result.params)["log_rmse"]
+    if np.isfinite(now) and abs(now - reported) <= SAME_TABLE_RTOL * reported:
+        return []
+    return [f"fidelity: {table.source} does not hold the table that was fitted: the fit's "
+            f"own log_rmse on it is {now:.4g}, {reported:.4g} when it was fitted (the file "
+            "changed since?); every fidelity figure is to the file as it is now"]
 
 
 def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,
