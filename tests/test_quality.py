@@ -353,3 +353,20 @@ def test_the_batch_report_shows_what_to_try_next():
     assert "what to try next, where the best fit does not look good:" in text
     assert "  chrome [ggx] looks poor: next: --model ggx2 (+2.4 dB): a second lobe" in text
     assert "felt [ggx] looks" not in text
+
+
+def test_a_grazing_light_that_reads_worse_than_the_verdict_is_said_in_the_reason():
+    """light-brown-fabric's ggx fit: good under the key light, +0.22 stops at grazing."""
+    ggx = models.get("ggx")
+    key = {"brightness_stops": 0.0, "displayed_brightness_stops": -0.02, "colour_shift": 2.1,
+           "estimate_error": None}
+    graze = {"brightness_stops": 0.27, "displayed_brightness_stops": 0.22, "colour_shift": 1.7}
+    q = quality.quality(28.6, {"key": key, "grazing": graze}, model=ggx, params={"alpha": 0.3},
+                        loss="log", converged=True)
+    assert q["verdict"] == "good" and q["next"] == []
+    assert q["reason"].endswith("; the grazing light alone reads visible: +0.22 stops in "
+                                "displayed brightness (good within 0.15 stops)")
+    same = quality.quality(28.6, {"key": key, "grazing": {**graze,
+                                                          "displayed_brightness_stops": 0.1}},
+                           model=ggx, params={"alpha": 0.3}, loss="log", converged=True)
+    assert "grazing" not in same["reason"]
