@@ -221,3 +221,30 @@ def test_ctrl_c_on_local_workers_is_one_line(plugin_env, table_dir, tmp_path):
         f"brdffit: interrupted; the finished fits are in {out}, run the same command again "
         "to go on"], r.stderr
     assert json.loads(read_results(out)["attrs"]["models"]) == MODELS.split(",")
+
+
+@pytest.mark.unit
+def test_the_upstream_error_of_a_cancelled_call_that_had_not_started_is_not_shown():
+    """distributed's ``sync`` cancels a client call on Ctrl-C; where the interrupt came
+    before the call's coroutine ran, its ``cancel`` raised a NameError, which tornado
+    logged with a traceback under the batch's one line (a fresh clone's run). Once the
+    batch is stopping, that one record is dropped; any other, and any before, is kept."""
+    import logging
+
+    from brdffit.batch.job import stop_requested
+    from brdffit.cli.batch import _LostSyncCancel
+
+    def record(callback: str) -> logging.LogRecord:
+        return logging.LogRecord("tornado.application", logging.ERROR, __file__, 1,
+                                 "Exception in callback %r", (callback,), None)
+
+    lost = "functools.partial(<function sync.<locals>.cancel at 0x7f9c58da7060>)"
+    keep = _LostSyncCancel()
+    stop_requested.clear()
+    try:
+        assert keep.filter(record(lost))  # not stopping: whatever it is, it is shown
+        stop_requested.set()
+        assert not keep.filter(record(lost))
+        assert keep.filter(record("functools.partial(<function other at 0x1>)"))
+    finally:
+        stop_requested.clear()

@@ -106,17 +106,25 @@ def _doubled(meas: Measurements) -> Measurements:
                         np.concatenate([meas.rgb, 1.01 * meas.rgb]), source="twice")
 
 
+#: The refusal of 200 copies of one direction pair, fitted with ggx.
+ONE_PAIR_REFUSED = ("the 200 usable samples hold only 1 distinct direction pair .*ggx needs "
+                    "at least 32")
+
+
+def _one_pair(meas: Measurements) -> Measurements:
+    """The first sample of ``meas`` 200 times over."""
+    return Measurements(np.repeat(meas.wi[:1], 200, 0), np.repeat(meas.wo[:1], 200, 0),
+                        np.repeat(meas.rgb[:1], 200, 0), source="one.csv")
+
+
 def test_copies_of_one_direction_count_once_and_stay_in_one_fold():
     from brdffit.fitting.samples import FOLDS, direction_groups, fold_of
 
     meas, _ = sample_model("ggx", None, "uniform", 300, seed=5)
     # one direction pair 200 times is one sample of the BRDF's shape: it was fitted, and
     # its held-out folds (copies of each other) judged 100 copies of the normal good
-    one = Measurements(np.repeat(meas.wi[:1], 200, 0), np.repeat(meas.wo[:1], 200, 0),
-                       np.repeat(meas.rgb[:1], 200, 0), source="one.csv")
-    with pytest.raises(FitInputError, match="the 200 usable samples hold only 1 distinct "
-                                            "direction pair .*ggx needs at least 32"):
-        fit(one, "ggx")
+    with pytest.raises(FitInputError, match=ONE_PAIR_REFUSED):
+        fit(_one_pair(meas), "ggx")
     # every pair distinct: sample k is pair k, and the folds are the seeded permutation's
     groups = direction_groups(meas)
     np.testing.assert_array_equal(groups, np.arange(meas.n))
@@ -144,11 +152,8 @@ def test_too_few_direction_pairs_are_refused_before_the_list_is_prepared(monkeyp
 
     monkeypatch.setattr(samples, "prepare_samples", no_preparing)
     meas, _ = sample_model("ggx", None, "uniform", 40, seed=5)
-    one = Measurements(np.repeat(meas.wi[:1], 200, 0), np.repeat(meas.wo[:1], 200, 0),
-                       np.repeat(meas.rgb[:1], 200, 0), source="one.csv")
-    with pytest.raises(FitInputError, match="the 200 usable samples hold only 1 distinct "
-                                            "direction pair .*ggx needs at least 32"):
-        fit(one, "ggx")
+    with pytest.raises(FitInputError, match=ONE_PAIR_REFUSED):
+        fit(_one_pair(meas), "ggx")
     with pytest.raises(FitInputError, match="only 12 usable samples"):
         fit(Measurements(meas.wi[:12], meas.wo[:12], meas.rgb[:12]), "ggx")
 

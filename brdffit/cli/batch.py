@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import sys
@@ -90,6 +91,18 @@ def _quiet_lost_interrupt(unraisable) -> None:
     sys.__unraisablehook__(unraisable)
 
 
+class _LostSyncCancel(logging.Filter):
+    """Drops, once an interrupt stopped the batch, the error tornado logs where Dask's
+    client cancels a call that had not started yet: distributed's ``sync`` (2026.8)
+    schedules ``cancel`` on the interrupt, and where the interrupt came before the call's
+    coroutine ran, ``cancel`` reads its future before it exists (a NameError, with its
+    traceback on stderr, seen in a fresh clone's test run). The call was to be cancelled
+    anyway: the user is told one line (the batch's), not an upstream traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (stop_requested.is_set() and "sync.<locals>.cancel" in record.getMessage())
+
+
 def run(args) -> int:
     request = request_from_args(args, models=args.models)  # refused before any file
     note = None if args.scheduler else workers_note(args.workers, _default_workers())
@@ -100,6 +113,8 @@ def run(args) -> int:
     previous = ({sig: signal.signal(sig, _interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
                 if main_thread else None)
     previous_hook, sys.unraisablehook = sys.unraisablehook, _quiet_lost_interrupt
+    lost_cancel = _LostSyncCancel()
+    logging.getLogger("tornado.application").addFilter(lost_cancel)
     try:
         s = run_batch(args.inputs, request, args.out,
                       workers=args.workers, scheduler=args.scheduler, refit=args.refit,
@@ -111,6 +126,7 @@ def run(args) -> int:
         return EXIT_INTERRUPTED
     finally:
         sys.unraisablehook = previous_hook
+        logging.getLogger("tornado.application").removeFilter(lost_cancel)
         if main_thread:  # an in-process caller (a test) keeps its own handlers
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
