@@ -255,6 +255,7 @@ def test_the_readme_layout_names_only_paths_that_exist():
     assert sorted(p for p in named if not (root / p).exists()) == []
 
 
+@pytest.mark.slow  # a fit and four sphere pictures: ~5 s
 def test_a_dark_tables_spheres_are_also_drawn_where_the_verdict_judged_them(ggx, tmp_path):
     """black-fabric's verdict judged its spheres at +6 EV, where spheres.png (one exposure
     for every material) shows them near black: the pair is drawn again at that exposure."""
