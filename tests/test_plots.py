@@ -294,3 +294,15 @@ def test_the_colour_panel_tints_as_far_as_the_colours_look_apart():
     lab = rgb_to_lab(np.array([[0.2, 0.1, 0.05], [0.05, 0.1, 0.2]]))
     from brdffit.fitting.colour import ciede2000_of
     np.testing.assert_allclose(ciede2000_of(lab[:1], lab[1:]), ciede2000(lab[0], lab[1]))
+
+
+def test_the_colour_panel_judges_a_glossy_materials_diffuse_body():
+    """The demo's ggx table: its diffuse body is 0.47% of its highlight, and the panel
+    called it too dark to judge (black) where the verdict's picture shows it mid-grey."""
+    measured = np.full((1, 3, 3), 0.05)
+    measured[0, 0] = 10.6  # the highlight
+    _, colour = plots.ratio_images(measured, measured.copy(), np.ones((1, 3), bool))
+    np.testing.assert_allclose(colour[0, 1:], 0.5)  # judged, and the right hue
+    measured[0, 2] = 1e-4  # far below: too dark to judge
+    _, colour = plots.ratio_images(measured, measured.copy(), np.ones((1, 3), bool))
+    assert np.isnan(colour[0, 2]).all()

@@ -278,6 +278,12 @@ SPHERE_LIGHTS = (
 #: stop where the colour is all but the same, and the whole sphere was tinted orange
 #: on a fit whose colour is CIEDE2000 1.1 off.
 COLOUR_GAIN = 0.5
+#: The colour panel judges pixels above this share of the brightest measured one. At
+#: 0.5% the diffuse body of a glossy material (the demo's ggx table: 0.47% of its
+#: highlight) was black, "too dark to judge", where a picture at the verdict's exposure
+#: shows it mid-grey; with the tint scaled by CIEDE2000, a dark pixel's noise tints it
+#: as far as it looks off, no more.
+DARKEST_JUDGED = 0.0005
 #: The CIEDE2000 (at equal luminance) at which the tint is full: the poor
 #: verdict's colour (CIEDE2000 6, ``brdffit.fitting.quality.POOR``).
 TINT_FULL_DE = 6.0
@@ -333,7 +339,7 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
     luminance and ``strength`` the two colours' CIEDE2000 at equal luminance
     over :data:`TINT_FULL_DE` (at most 1), so grey where the colour looks right and
     tinted towards the colour the fit has too much of. NaN off ``on``, where unlit,
-    and (colour) in the darkest 0.5 %."""
+    and (colour) below :data:`DARKEST_JUDGED` of the brightest."""
     lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
     lit = on & (lum_m > 0)
     eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
@@ -346,7 +352,7 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
         apart = ciede2000_of(rgb_to_lab(shown[0]), rgb_to_lab(shown[1]))
         strength = np.clip(apart / TINT_FULL_DE, 0.0, 1.0)[..., None]
         colour = np.clip(0.5 + strength * COLOUR_GAIN * np.log2(share), 0.0, 1.0)
-    bright = lit & (lum_m > 0.005 * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
+    bright = lit & (lum_m > DARKEST_JUDGED * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
     colour[~bright] = np.nan
     return ratio, colour
 
@@ -443,8 +449,8 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
     fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
                  label="stops (+1: fit 2× brighter)")
     axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
-                           f"(full at CIEDE2000 {TINT_FULL_DE:g}); black:\nunlit, or too "
-                           "dark to judge (< 0.5% of the brightest)", fontsize=9)
+                           f"(full at CIEDE2000 {TINT_FULL_DE:g}); black: unlit,\nor too dark "
+                           f"to judge (< {DARKEST_JUDGED:.2%} of the brightest)", fontsize=9)
     return axes
 
 
