@@ -82,7 +82,10 @@ def _names(models) -> tuple[str, ...]:
         models = split_names(models)  # "ggx,beckmann", as a command line gives them
     if not isinstance(models, list | tuple) or not all(isinstance(m, str) for m in models):
         raise FitInputError(f"models must be a model name or a list of them, got {models!r}")
-    names = tuple(dict.fromkeys(m.strip() for m in models if m.strip()))  # twice is once
+    if not all(m.strip() for m in models):  # a list's blank name was lost as a string's
+        raise FitInputError(f"models {list(models)!r} has an empty name: give each model's "
+                            "name, or leave the item out")
+    names = tuple(dict.fromkeys(m.strip() for m in models))  # twice is once
     if not names:
         raise FitInputError("give at least one model, or auto")
     if AUTO in names:

@@ -261,6 +261,8 @@ def test_a_colour_that_turns_in_the_table_is_named_where_the_fit_misses_the_key(
     colour, so the fit's figures alone did not show the turn; the table's do."""
     ggx = models.get("ggx")
     graze = {"brightness_stops": 0.0, "colour_shift": 2.3, "measured_colour_turn": 10.4}
+    # (color-changing-paint2's table turns by 5.6, above TABLE_TURN too)
+    assert quality.TABLE_TURN < 5.56
     steps = quality.next_steps(_look(colour_shift=10.8, grazing=graze), model=ggx,
                                params={"alpha": 0.04}, loss="log", converged=True)
     assert steps[0]["try"] == "nothing here: a colour that turns across the highlight"
@@ -370,3 +372,10 @@ def test_a_grazing_light_that_reads_worse_than_the_verdict_is_said_in_the_reason
                                                           "displayed_brightness_stops": 0.1}},
                            model=ggx, params={"alpha": 0.3}, loss="log", converged=True)
     assert "grazing" not in same["reason"]
+    # a table with nothing measured under the grazing light: nothing to judge there
+    unmeasured = {"brightness_stops": 0.0, "displayed_brightness_stops": None,
+                  "colour_shift": 0.0}
+    for psnr in (100.0, 25.0):
+        q = quality.quality(psnr, {"key": key, "grazing": unmeasured}, model=ggx,
+                            params={"alpha": 0.3}, loss="log", converged=True)
+        assert "grazing" not in q["reason"], q["reason"]

@@ -64,6 +64,9 @@ def test_a_list_of_names_with_an_empty_item_is_refused_and_numpy_numbers_are_num
         with pytest.raises(FitInputError, match=f"models {text!r} has an empty item "
                                                 r"\(two commas in a row, or one at an end\)"):
             FitRequest.of(text)
+    for names in (["ggx", ""], ["ggx", "  "]):  # a JSON list, as the service takes it
+        with pytest.raises(FitInputError, match="has an empty name"):
+            FitRequest.of(names)
     r = FitRequest.of("ggx", seed=np.int64(3), samples=np.int32(4096), starts=np.uint8(2))
     assert r.options.seed == 3 and type(r.options.seed) is int
     assert json.loads(json.dumps(r.to_dict()))["options"]["seed"] == 3

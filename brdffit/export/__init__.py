@@ -193,6 +193,9 @@ def _another_table(result: FitResult, table: MerlTable) -> list[str]:
 #: measured in float32 (~1e-6 apart between runs); a file rewritten since the fit, or
 #: another material under its name, is off by far more.
 SAME_TABLE_RTOL = 1e-3
+#: ... and absolutely: a near-exact fit's log_rmse (~1e-8) is float32 noise, which
+#: another machine's run may not repeat.
+SAME_TABLE_ATOL = 1e-5
 
 
 def _changed_since_the_fit(result: FitResult, table: MerlTable) -> list[str]:
@@ -209,7 +212,8 @@ def _changed_since_the_fit(result: FitResult, table: MerlTable) -> list[str]:
             or not np.isfinite(reported) or reported <= 0):
         return []
     now = table_error(table, result.model, result.params)["log_rmse"]
-    if np.isfinite(now) and abs(now - reported) <= SAME_TABLE_RTOL * reported:
+    if np.isfinite(now) and abs(now - reported) <= max(SAME_TABLE_RTOL * reported,
+                                                       SAME_TABLE_ATOL):
         return []
     return [f"fidelity: {table.source} does not hold the table that was fitted: the fit's "
             f"own log_rmse on it is {now:.4g}, {reported:.4g} when it was fitted (the file "

@@ -161,8 +161,8 @@ def _grazing_words(word: str, psnr: float | None, graze: dict | None, basis: str
     (judged under the key light, with the PSNR of both): light-brown-fabric's ggx fit
     was good at +0.22 stops under the grazing light, color-changing-paint2's render fit
     visible at CIEDE2000 9.4 there, and nothing said so but the figures' line."""
-    if not graze:
-        return ""
+    if not graze or not _finite(judged_brightness(graze)):
+        return ""  # not measured there (a table cut at low theta_d): nothing to judge
     there, why = verdict(psnr, judged_brightness(graze), graze.get("colour_shift"), basis)
     if VERDICT_RANK[there] <= VERDICT_RANK[word]:
         return ""
@@ -186,13 +186,18 @@ NARROW_ALPHA = 0.01
 #: A colour that turns by more than this (CIEDE2000) between the key and the grazing
 #: view, and that the fit misses there, is a colour that changes with the angle.
 TURNING_COLOUR = 6.0
+#: A table whose own colour turns by more than this (CIEDE2000, key light to grazing:
+#: ``measured_colour_turn``) changes colour with the angle: MERL's colour-changing
+#: paints turn by 5.6, 10.4 and 16.6, every other MERL material by 4.5 at most
+#: (dark-blue-paint: a white Fresnel rim over a saturated base).
+TABLE_TURN = 5.0
 
 
 def _colour_turning(look: dict) -> str | None:
     """The evidence, in words, that the material's colour turns with the angle and the
     fit misses it there (else None): the fit's colour far off under the grazing light
     where it is not under the key light; or the table's own colour turning from the
-    key light to the grazing one by more than :data:`TURNING_COLOUR` while the fit's is
+    key light to the grazing one by more than :data:`TABLE_TURN` while the fit's is
     off beyond the good verdict's colour under either. (By the first alone,
     color-changing-paint3's ggx fit, 10.8 off under the key light and 2.3 at grazing,
     was told only to add a coat: it matched the grazing colour, and missed the key.)"""
@@ -205,7 +210,7 @@ def _colour_turning(look: dict) -> str | None:
                 f"{key_shift or 0:.1f} under the key light")
     turn = graze.get("measured_colour_turn")
     worst = max((x for x in (key_shift, graze_shift) if _finite(x)), default=None)
-    if _finite(turn) and turn > TURNING_COLOUR and worst is not None and worst > GOOD[2]:
+    if _finite(turn) and turn > TABLE_TURN and worst is not None and worst > GOOD[2]:
         return (f"the colour turns with the angle: the table's own by CIEDE2000 {turn:.0f} "
                 f"from the key light to the grazing one, and the fit's is "
                 f"{_maybe(key_shift, '.1f')} off under the key light, "

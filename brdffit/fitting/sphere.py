@@ -346,8 +346,9 @@ class _TableColour:
             self.measured.append(ok)
             self.sums.append(s.weight * ok @ values.T)  # (2, 3)
         # how far the table's own colour turns from the key light to the grazing one:
-        # a colour-changing paint's by 10-17 (CIEDE2000), every other MERL material's by
-        # 5.6 at most (a white Fresnel rim over a saturated base, dark-blue-paint: 4.5)
+        # MERL's colour-changing paints' by 5.6-17 (CIEDE2000), every other MERL
+        # material's by 4.5 at most (dark-blue-paint: a white Fresnel rim over a
+        # saturated base)
         self.turn = brightness_and_colour(self.sums[1][0], self.sums[0][0])[1]
 
     def split(self, f: np.ndarray) -> list[np.ndarray]:
