@@ -49,7 +49,7 @@ from brdffit.fitting.options import (
     DEFAULT_TOLERANCE,
     FIT_KEYWORDS,
 )
-from brdffit.fitting.quality import describe, radiance_verdict, with_measured_gains
+from brdffit.fitting.quality import VERDICTS, describe, radiance_verdict, with_measured_gains
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
 from brdffit.io.merl import MerlTable
@@ -855,7 +855,7 @@ def _finite_or_none(x: float) -> float | None:
 
 #: The verdicts (``brdffit.fitting.quality``), best first; a row without one (a fit
 #: whose look could not be judged) ranks with "poor".
-VERDICT_ORDER = ("good", "visible", "poor")
+VERDICT_ORDER = VERDICTS
 
 
 #: How much worse (dB) than the best-looking candidate one with a better verdict may

@@ -164,13 +164,13 @@ def _grazing_words(word: str, psnr: float | None, graze: dict | None, basis: str
     if not graze or not _finite(judged_brightness(graze)):
         return ""  # not measured there (a table cut at low theta_d): nothing to judge
     there, why = verdict(psnr, judged_brightness(graze), graze.get("colour_shift"), basis)
-    if VERDICT_RANK[there] <= VERDICT_RANK[word]:
+    if VERDICTS.index(there) <= VERDICTS.index(word):
         return ""
     return f"; the grazing light alone reads {there}: {why}"
 
 
-#: The verdicts, best first.
-VERDICT_RANK = {"good": 0, "visible": 1, "poor": 2}
+#: The verdicts, best first (``brdffit.selection`` ranks candidates by them too).
+VERDICTS = ("good", "visible", "poor")
 
 
 #: The next step of a fit whose solve stopped before its optimality test held.
@@ -346,14 +346,12 @@ def with_measured_gains(look: dict | None, gains: list) -> dict | None:
     # a ranking with layered candidates measured them: theirs is no guess to repeat
     rest = [s for s in look.get("next", []) if s["try"] not in names
             and not (layered and s["try"] == _LAYERS["try"])]
-    if not measured + [s for s in rest if s["try"] != _LAYERS["try"]]:
+    if not measured and all(s["try"] == _LAYERS["try"] for s in rest):
         # every guess was measured, and none rendered closer
         rest = [{"try": "nothing here: no candidate rendered closer",
                  "why": "auto fitted each of its candidates to this table and none renders "
                         "closer than this fit; the verdict's reason says what is off",
-                 "gain_db": None}, *rest]
-        if not layered and not rest[1:]:
-            rest.append(dict(_LAYERS))
+                 "gain_db": None}, *([] if layered else [dict(_LAYERS)])]
     return {**look, "next": measured + rest}
 
 
