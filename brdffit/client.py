@@ -149,13 +149,18 @@ JobRef = FitJob | str
 def _check_timeout(timeout) -> None:
     """Refuses a timeout in seconds that is not > 0 and finite (httpx took -1 and then
     raised "Timeout value out of range" at the first request). None (wait forever) and
-    an ``httpx.Timeout`` are httpx's own."""
+    an ``httpx.Timeout`` are httpx's own, and so is its 4-tuple, whose parts are checked
+    as one timeout each."""
     if timeout is None or isinstance(timeout, httpx.Timeout):
         return
-    if (isinstance(timeout, bool) or not isinstance(timeout, numbers.Real)
-            or not math.isfinite(timeout) or timeout <= 0):
-        raise InvalidSetting(f"timeout must be a number of seconds > 0 (or None: no limit), "
-                             f"got {timeout!r}")
+    # httpx's own (connect, read, write, pool) tuple: each a timeout of its own
+    parts = timeout if isinstance(timeout, tuple) and len(timeout) == 4 else (timeout,)
+    for part in parts:
+        if part is not None and (isinstance(part, bool) or not isinstance(part, numbers.Real)
+                                 or not math.isfinite(part) or part <= 0):
+            raise InvalidSetting(f"timeout must be a number of seconds > 0 (or None: no "
+                                 f"limit), or httpx's (connect, read, write, pool) of them, "
+                                 f"got {timeout!r}")
 
 
 def _job_id(job: JobRef) -> str:

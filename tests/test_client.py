@@ -244,12 +244,15 @@ def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
     with pytest.raises(InvalidSetting, match=r"'http://\[::1' is not a URL \(.*\): give the "
                                              r"server's, as http://127.0.0.1:8000"):
         Client("http://[::1", token="")
-    for timeout in (-1, 0, math.nan, math.inf, True, "10"):
+    for timeout in (-1, 0, math.nan, math.inf, True, "10", (5, -1, 5, 5), (5, 5)):
         with pytest.raises(InvalidSetting, match=r"timeout must be a number of seconds > 0 "
-                                                 r"\(or None: no limit\), got "):
+                                                 r"\(or None: no limit\), or httpx's "
+                                                 r"\(connect, read, write, pool\) of them, got "):
             Client("http://brdffit.test", token="", timeout=timeout)
     assert issubclass(InvalidSetting, ClientError) and issubclass(InvalidSetting, ValueError)
     Client("http://brdffit.test", token="", timeout=None).close()  # no limit: httpx's own
+    # httpx's (connect, read, write, pool), None in a part: no limit on that one
+    Client("http://brdffit.test", token="", timeout=(5, None, 5, 2.5)).close()
     sent = []
 
     def answer(request):

@@ -517,6 +517,13 @@ def test_each_layer_says_whether_the_data_determine_it():
     assert tied["status"] == "identified" and tied["why"].endswith(
         "; clearcoat, clearcoat_gloss correlate beyond 0.95: the data tell them apart only "
         "together")
+    # a shape at its bound is not "determined" alone: the data would take it further
+    # (a weight at its bound is a full layer, which says nothing of the kind)
+    held = _layers(m, names, reasons, lambda s: True,
+                   bounded=["clearcoat", "clearcoat_gloss"])["clearcoat"]
+    assert held["status"] == "identified" and held["why"] == (
+        "clearcoat, clearcoat_gloss each determined by the data; clearcoat_gloss at the model's "
+        "bound: the data would take it further")
     assert _layers(models.get("ggx"), ["kd[0]"], [None], lambda s: True) == {}
 
 

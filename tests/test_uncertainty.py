@@ -100,6 +100,9 @@ def test_fit_text_shows_errors_and_flags():
     table, _ = make_table("lambert", noise=0.05, seed=7)
     text = format_result(fit(table, "ggx", samples=SAMPLES))
     assert "±" in text and "UNDETERMINED" in text and "alpha: no lobe" in text
+    # an absent lobe's shape is printed without a standard error: it measures nothing
+    (alpha,) = [line for line in text.splitlines() if line.strip().startswith("alpha ")]
+    assert "±" not in alpha and alpha.endswith("UNDETERMINED"), alpha
     assert "sphere PSNR" in text and "cube_root_rmse" in text
 
 

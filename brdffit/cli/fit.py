@@ -11,7 +11,7 @@ from brdffit.cli import name_list, output_folder
 from brdffit.fitting import options
 from brdffit.fitting.options import FIT_KEYWORDS, FitOptions, SelectionRule
 from brdffit.fitting.quality import describe
-from brdffit.fitting.result import FitResult
+from brdffit.fitting.result import FitResult, error_measures_nothing
 from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
 from brdffit.io import readers
@@ -134,7 +134,10 @@ def format_result(r: FitResult) -> str:
         errs = errs if isinstance(errs, list) else [errs]
         bounds = at_bound.get(name, [False] * len(vals))
         bounds = bounds if isinstance(bounds, list) else [bounds]
-        shown = ", ".join(_with_error(x, e, b) for x, e, b in zip(vals, errs, bounds, strict=True))
+        keys = [name] if not isinstance(v, list) else [f"{name}[{i}]" for i in range(len(vals))]
+        absent = [error_measures_nothing(u.get("why", {}).get(k)) for k in keys]
+        shown = ", ".join(_with_error(x, None if a else e, b)
+                          for x, e, b, a in zip(vals, errs, bounds, absent, strict=True))
         flags = flag.get(name, False)
         mark = "  UNDETERMINED" if any(flags if isinstance(flags, list) else [flags]) else ""
         lines.append(f"  {name:<6} = {shown}{mark}")

@@ -316,8 +316,9 @@ PEAK_FAR = 0.5
 #: gltf_sheen renders at 33.3 with its sheen identified).
 _LAYERS = {"try": "--model auto --candidates gltf",
            "why": "the glTF materials with their layers (a clear coat over a base: coated "
-                  "paints; a sheen: fabrics, velvets; a thin film), each fitted and ranked by "
-                  "how it renders; gain not measured on this table", "gain_db": None}
+                  "paints; a sheen: fabrics, velvets), each fitted and ranked by how it "
+                  "renders; gain not measured on this table (a thin film is fitted where "
+                  "named: --candidates gltf,gltf_iridescence)", "gain_db": None}
 
 
 def _last_steps(model) -> list[dict]:

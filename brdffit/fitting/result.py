@@ -188,3 +188,11 @@ FIELD_DOCS = {
              "every bin used, fewer start candidates than starts asked, a nested model "
              "whose parent left it nothing to add",
 }
+
+
+def error_measures_nothing(why: str | None) -> bool:
+    """Whether an undetermined reason (``uncertainty["why"]``) says the parameter shapes
+    a lobe or layer the data show none of: its standard error then measures nothing (an
+    absent film's index read "2.5 ± 1.8e+06"), and the text and report print the value
+    without one."""
+    return bool(why) and why.startswith(("no lobe", "no layer"))

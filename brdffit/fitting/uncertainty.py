@@ -257,7 +257,8 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         "at_bound": _grouped(model, [bool(x) for x in at_bound]),
         "why": {names[i]: reasons[i] for i in range(p) if reasons[i] is not None},
         "strongly_correlated": strongly_correlated,
-        "layers": _layers(model, names, reasons, significant, strongly_correlated),
+        "layers": _layers(model, names, reasons, significant, strongly_correlated,
+                          bounded=[names[i] for i in range(p) if at_bound[i]]),
         "residuals": n,
         "jacobian_every": k,
     }
@@ -268,14 +269,18 @@ def _is_rgb(model: AbstractBRDFModel, name: str) -> bool:
 
 
 def _layers(model: AbstractBRDFModel, names: list[str], reasons: list[str | None],
-            significant, strongly_correlated: dict | None = None) -> dict:
+            significant, strongly_correlated: dict | None = None,
+            bounded: list[str] = ()) -> dict:
     """Each of the model's layers (``model.layer_params``) as the data determine it:
     ``identified`` (its weight is above 0 by more than its error and every parameter
     of it is determined), ``absent`` (its weight is within its error of 0: the data show
     no such layer, and what shapes it means nothing), or ``unresolved`` (the layer is
     there, but some of its parameters are not pinned down: which, and why). An
     identified layer whose own parameters correlate beyond 0.95 says so: each is
-    determined, but the data tell them apart only together."""
+    determined, but the data tell them apart only together; one whose shape sits at a
+    bound (``bounded``) says that too: the data would take it further
+    (color-changing-paint3's film ended at the thinnest, least refractive film
+    allowed, and read "each determined by the data")."""
     out = {}
     for layer, (weight, shapes) in model.layer_params.items():
         if not significant((weight,)):
@@ -293,8 +298,11 @@ def _layers(model: AbstractBRDFModel, names: list[str], reasons: list[str | None
         entries = [n for n in names if n.split("[")[0] in own]
         tied = sorted({n for n in entries for other in (strongly_correlated or {}).get(n, ())
                        if other.split("[")[0] in own and other.split("[")[0] != n.split("[")[0]})
+        held = [n for n in entries if n in bounded and n.split("[")[0] != weight]
         out[layer] = {"status": "identified",
                       "why": f"{', '.join(own)} each determined by the data" + (
                           f"; {', '.join(tied)} correlate beyond {STRONG_CORRELATION:g}: the "
-                          "data tell them apart only together" if tied else "")}
+                          "data tell them apart only together" if tied else "") + (
+                          f"; {', '.join(held)} at the model's bound: the data would take "
+                          f"{'it' if len(held) == 1 else 'them'} further" if held else "")}
     return out

@@ -25,7 +25,7 @@ Bad input policy (every case raises :class:`MerlFormatError` naming the source):
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -80,7 +80,6 @@ class MerlTable:
     mask: np.ndarray
     source: str = "<memory>"
     n_nonfinite: int = 0
-    sha256: str | None = field(default=None)
     n_partial: int = 0
 
     def __post_init__(self):

@@ -44,7 +44,7 @@ except ModuleNotFoundError:
 from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
 from brdffit.fitting.problem import sphere_reference
 from brdffit.fitting.quality import judged_brightness
-from brdffit.fitting.result import FitResult
+from brdffit.fitting.result import FitResult, error_measures_nothing
 from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
 from brdffit.io import atomic
 from brdffit.io.angles import (
@@ -573,9 +573,11 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
             x = d.get(name, [default] * n)
             return x if isinstance(x, list) else [x]
 
+        keys = [name] if not isinstance(v, list) else [f"{name}[{i}]" for i in range(len(vals))]
         parts = []
-        for x, e, b, f in zip(vals, listed(se, None), listed(at_bound, False),
-                              listed(flags, False), strict=True):
+        for x, e, b, f, k in zip(vals, listed(se, None), listed(at_bound, False),
+                                 listed(flags, False), keys, strict=True):
+            e = None if error_measures_nothing(u.get("why", {}).get(k)) else e
             text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
             parts.append(text + (" ?" if f else ""))
         params += wrap_values(f"{name:<7}", parts)
