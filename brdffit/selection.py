@@ -1126,18 +1126,20 @@ def format_selection(sel: Selection) -> str:
     scene = sel.scene is not None
     held = any(r.get("log_rmse_basis") == "held_out" for r in sel.ranking)
     views = any(r.get("views_psnr_db") is not None for r in sel.ranking)
-    head = (f"{'model':<14}{'k':>3} {'held-out' if held else 'log_rmse':>10} "
+    # as wide as the longest name (standard_surface_dielectric: 27), no narrower than 14
+    w = max([14, *(len(r["model"]) + 1 for r in sel.ranking)])
+    head = (f"{'model':<{w}}{'k':>3} {'held-out' if held else 'log_rmse':>10} "
             + (f"{'full':>10} " if scene else "")
             + f"{'excess':>9} {'PSNR dB':>8} " + (f"{'8 lights':>8} " if views else "")
             + f"{'looks':>8} {'ns/eval':>8} {'BIC':>12}  status")
     lines = [f"{sel.table}: model selection ({sel.time_s:.1f} s)", head]
     for r in sel.ranking:
         if r["status"] == "failed":
-            lines.append(f"{r['model']:<14}{r['n_params']:>3}  failed: "
+            lines.append(f"{r['model']:<{w}}{r['n_params']:>3}  failed: "
                          f"{r.get('message', r.get('result'))}")
             continue
         lines.append(
-            f"{r['model']:<14}{r['n_params']:>3} {r['log_rmse']:>10.3g} "
+            f"{r['model']:<{w}}{r['n_params']:>3} {r['log_rmse']:>10.3g} "
             + (f"{r['full_log_rmse']:>10.3g} " if scene else "")
             + f"{r['excess']:>9.3g} {r['psnr_db']:>8.1f} "
             + (f"{_views_text(r):>8} " if views else "")

@@ -502,6 +502,24 @@ def test_cli_auto_prints_progress_on_stderr_and_json_on_stdout(tmp_path, capsys)
     assert "auto: [2/2] fitting oren_nayar ... log_rmse" in out.err
 
 
+def test_a_compile_notice_during_autos_progress_goes_on_a_line_of_its_own(capsys):
+    """The first use of a candidate's options compiles while its progress line waits for
+    its figures: the notice had run into it ("fitting gltf_pbr ...brdffit: first use")."""
+    from brdffit.cli.fit import _say_compiling_once, print_progress
+
+    say = _say_compiling_once()
+    print_progress(0, 2, "lambert", None)
+    say("lambert", True)
+    say("lambert", True)  # once per command
+    print_progress(0, 2, "lambert", {"status": "ok", "converged": True, "log_rmse": 0.25,
+                                     "fit_time_s": 1.5, "result": "successful"})
+    say("other", True)  # no progress line open: just the line (said once already)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == "auto: [1/2] fitting lambert ..."
+    assert lines[1].startswith("brdffit: first use of these options on this machine: compiling")
+    assert lines[2:] == ["auto: [1/2] fitting lambert ... log_rmse 0.25 in 1.5 s"]
+
+
 def _auto_job_answers_model_auto_with_its_choice(results: list[dict]) -> None:
     """``?model=auto`` on an auto job is its chosen fit; on another job, or a model it
     did not fit, a 404 that lists the fits it has (not "it has auto")."""

@@ -279,22 +279,39 @@ def _say_compiling_once():
                 return
             said.add(kept)
         if kept:
-            print(f"brdffit: first use of these options on this machine: compiling "
-                  f"(seconds; kept in {runtime.cache_dir()} for the next run)",
-                  file=sys.stderr, flush=True)
+            _say_between_progress(f"brdffit: first use of these options on this machine: "
+                                  f"compiling (seconds; kept in {runtime.cache_dir()} for the "
+                                  f"next run)")
             return
         why = ("BRDFFIT_CACHE_DIR is empty" if runtime.cache_dir() is None
                else "a plugin model's programs are compiled in every run")
-        print(f"brdffit: compiling (seconds; not kept: {why})", file=sys.stderr, flush=True)
+        _say_between_progress(f"brdffit: compiling (seconds; not kept: {why})")
 
     return say
+
+
+#: ``--model auto``'s progress line while its candidate is being fitted (printed without
+#: its end, which the candidate's figures complete), or None: a line said meanwhile (the
+#: compile notice) goes on a line of its own, and the progress line is restated after it
+#: (it read "fitting gltf_pbr ...brdffit: first use ..." then " log_rmse ..." alone).
+_open_progress: list[str] = []
+
+
+def _say_between_progress(line: str) -> None:
+    if _open_progress:
+        print(file=sys.stderr)
+    print(line, file=sys.stderr, flush=True)
+    if _open_progress:
+        print(_open_progress[0], end="", file=sys.stderr, flush=True)
 
 
 def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
     """``--model auto``'s progress, one line per candidate on stderr (stdout stays the
     result, one JSON object with --json)."""
+    _open_progress.clear()
     if row is None:
-        print(f"auto: [{i + 1}/{n}] fitting {model} ...", end="", file=sys.stderr, flush=True)
+        _open_progress.append(f"auto: [{i + 1}/{n}] fitting {model} ...")
+        print(_open_progress[0], end="", file=sys.stderr, flush=True)
     elif row["status"] == "failed":
         print(f" failed: {row.get('message', row.get('result'))}", file=sys.stderr, flush=True)
     else:
