@@ -73,6 +73,11 @@ def test_nonfinite_values_are_masked_and_counted(tmp_path):
     body[[0, 5, N + 7]] = [np.nan, np.inf, -np.inf]
     t = merl.read(_raw_file(tmp_path / "n.binary", body=body))
     assert t.n_nonfinite == 3
+    # a bin with a NaN or infinite channel is non-finite, not "negative in some channels"
+    # (every 7th value +inf read as 43% of the bins partly negative), read or given
+    body[N + 9] = -1.0  # one bin negative in one channel: that one is partial
+    assert merl.read(_raw_file(tmp_path / "p.binary", body=body)).n_partial == 1
+    assert merl.MerlTable.from_values(body.reshape(3, -1)).n_partial == 1
     assert t.n_measured == N - 3
     assert np.all(np.isfinite(t.rgb))
     assert t.summary()["nonfinite_bins"] == 3

@@ -71,7 +71,7 @@ class MerlTable:
 
     ``rgb``: physical values (1/sr), shape (3, 90, 90, 180), 0 where unmeasured.
     ``mask``: True where a bin is measured (all channels finite and >= 0).
-    ``n_partial``: unmeasured bins with some channels finite and >= 0: MERL marks an
+    ``n_partial``: unmeasured bins with some channels >= 0, all finite: MERL marks an
     unmeasured bin negative in every channel, so such bins are more likely noise
     around zero (a dark frame subtracted), left out whole all the same (the fit says so).
     """
@@ -92,7 +92,8 @@ class MerlTable:
         rgb = np.asarray(rgb, dtype=np.float64).reshape(3, *SHAPE)
         channel_ok = np.isfinite(rgb) & (rgb >= 0)
         ok = np.all(channel_ok, axis=0)
-        n_partial = int(np.count_nonzero(~ok & np.any(channel_ok, axis=0)))
+        n_partial = int(np.count_nonzero(~ok & np.any(channel_ok, axis=0)
+                                         & np.all(np.isfinite(rgb), axis=0)))
         n_nonfinite = int(np.count_nonzero(~np.all(np.isfinite(rgb), axis=0)))
         if mask is not None:
             ok &= np.asarray(mask, dtype=bool).reshape(SHAPE)
@@ -251,6 +252,9 @@ def _check_range(rgb: np.ndarray, source: str, raw: np.ndarray | None = None,
 #: The bits of +inf: as unsigned integers, every IEEE double at or above this is
 #: NaN, infinite or negative (sign bit set), and every one below it is finite and >= 0.
 _INF_BITS = np.uint64(0x7FF0000000000000)
+#: The sign bit: without it, a value's bits are at or above ``_INF_BITS`` exactly where it
+#: is NaN or infinite.
+_SIGN_BIT = np.uint64(0x8000000000000000)
 
 
 def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
@@ -268,10 +272,15 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     top = np.maximum(bits[0], bits[1])
     np.maximum(top, bits[2], out=top)
     unmeasured = top >= _INF_BITS
-    # of those, the bins with a channel finite and >= 0 (a few ms: only the
-    # unmeasured bins are looked at again)
+    # of those, the bins with a channel finite and >= 0 and none NaN or infinite (a few
+    # ms: only the unmeasured bins are looked at again); a bin with an infinite channel
+    # is a non-finite one, not "negative in some channels" (every 7th value +inf read as
+    # 43% of the bins partly negative)
     low = np.minimum(bits[0][unmeasured], bits[1][unmeasured])
-    n_partial = int(np.count_nonzero(np.minimum(low, bits[2][unmeasured]) < _INF_BITS))
+    some_ok = np.minimum(low, bits[2][unmeasured]) < _INF_BITS
+    magnitude = [b[unmeasured] & ~_SIGN_BIT for b in bits]
+    all_finite = np.maximum(np.maximum(magnitude[0], magnitude[1]), magnitude[2]) < _INF_BITS
+    n_partial = int(np.count_nonzero(some_ok & all_finite))
     if unmeasured.all():
         # one channel never measured makes every bin unmeasured: say which
         dead = [c for c, b in zip("RGB", bits, strict=True) if bool((b >= _INF_BITS).all())]
