@@ -444,9 +444,12 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         row["ks_grey"] = None if spread is None else bool(spread <= grey_tolerance)
     mono = None
     spread = chosen["ks_grey_spread"]
+    # what the spread is of: ks (ks1, ks2), or MaterialX's specular_color
+    what = "ks" if all(p.name != "specular_color"
+                       for p in models.get(chosen["model"]).param_specs) else "specular_color"
     if spread is not None:
         if chosen["ks_grey"]:
-            reason += (f" Its specular colour is grey (ks spread {100 * spread:.1f}% <= "
+            reason += (f" Its specular colour is grey ({what} spread {100 * spread:.1f}% <= "
                        f"{100 * grey_tolerance:g}%): a monochrome ks would do")
             if mono_ks:
                 mono = _fit_mono(table, models.get(chosen["model"]), fits[chosen["model"]],
@@ -460,7 +463,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
                 reason += f" ({chosen['n_params'] - 2} values instead of {chosen['n_params']}; "
                 reason += "mono_ks=True fits it)."
         else:
-            reason += f" Its specular colour is not grey (ks spread {100 * spread:.1f}%)."
+            reason += f" Its specular colour is not grey ({what} spread {100 * spread:.1f}%)."
     if scene is not None:
         reason = (f"On scene {scene.describe()}: " + reason[0].lower() + reason[1:]
                   + f" Full-table log_rmse of {chosen['model']}: {_fmt(chosen['full_log_rmse'])}.")

@@ -329,6 +329,18 @@ def test_a_table_that_is_not_the_fits_own_is_said():
                "mats/gold.binary" in w for w in other.warnings), other.warnings
     moved = export(r, "gltf", table=dataclasses.replace(table, source="/data/gold.binary"))
     assert not any("the fit was made on" in w for w in moved.warnings), moved.warnings
+    # another table judges the material, and does not make it: a metal fit judged against
+    # a plastic's table had its class weighed on that table, and went out a dielectric
+    from data_synth import make_table
+
+    plastic = make_table("gltf_pbr", {"base_color": [0.5, 0.05, 0.02], "metallic": 0.0,
+                                      "roughness": 0.3})[0]
+    judged = export(r, "gltf", table=dataclasses.replace(plastic, source="other/red.binary"))
+    assert judged.target_params == moved.target_params
+    assert judged.fidelity["material_class"]["chosen"] == "metal mixture"
+    assert "export: the material is made from the ggx fit, not from other/red.binary, which " \
+           "only judges it" in judged.warnings
+    assert judged.fidelity["log_rmse_to_table"] > 10 * moved.fidelity["log_rmse_to_table"]
 
 
 def test_a_fits_own_table_file_changed_since_the_fit_is_said(tmp_path):

@@ -34,6 +34,9 @@ class ModelInfo(BaseModel):
     mono_n_params: int | None = Field(
         None, description="parameters of the model's `_mono` variant (one grey specular "
                           "scale), where it has one")
+    mono_params: list[str] = Field(
+        [], description="what the `_mono` variant makes one grey value (`ks`, `ks1`, `ks2`, "
+                        "`specular_color`): a specular lobe's colour alone")
     least_starts: int = Field(
         1, description="the fewest starts a fit of it refines, whatever `starts` asks (a "
                        "thin film's many modes); its result's notes say so")

@@ -38,7 +38,9 @@ def add_arguments(p) -> None:
                         "sheen)")
     p.add_argument("--measured", metavar="TABLE",
                    help="the measured .binary table the fidelity is judged against "
-                        "(default: the fit's own table file, where it is still there)")
+                        "(default: the fit's own table file, where it is still there); "
+                        "another table than the fit's judges the material and does not "
+                        "make it")
     p.add_argument("--out", "-o", metavar="DIR",
                    help="write the material's files into DIR (created if missing)")
     p.add_argument("--json", action="store_true",

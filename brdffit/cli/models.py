@@ -28,5 +28,6 @@ def run(args) -> int:
             print(f"    {p['name']:<{width}} {p['range']:<{span}} {p['doc']}{note}")
         if m["mono"]:
             print(f"    also {m['name']}{MONO_SUFFIX} ({m['mono_n_params']} values): "
-                  "every RGB parameter but kd one grey value")
+                  f"{', '.join(m['mono_params'])} "
+                  f"{'each ' if len(m['mono_params']) > 1 else ''}one grey value")
     return 0

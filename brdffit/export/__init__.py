@@ -155,25 +155,32 @@ def _material_name(result: FitResult) -> str:
     return f"{stem.removesuffix('.binary')}_{result.model}"
 
 
-def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, list[str]]:
+def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, list[str]]:
     """The measured table the fidelity is judged against: ``table`` (a MerlTable or a
     path), else the file the fit was read from where it is still there; None, with a
-    warning that says so, where neither is at hand."""
+    warning that says so, where neither is at hand. With it, whether it holds the
+    table that was fitted, so that the material may be made from it (the viewers'
+    refits, the metal-or-dielectric weighing): another table only judges."""
     from brdffit.io import readers
 
     if table is not None:
         given = table if isinstance(table, MerlTable) else readers.read_table(table)[0]
-        return given, _another_table(result, given)
+        other = _another_table(result, given)  # by name: all a result keeps of its table
+        if other:
+            other.append(f"export: the material is made from the {result.model} fit, not "
+                         f"from {given.source}, which only judges it")
+        return given, not other, other
     source = result.table
     if source and os.path.isfile(source):
         try:  # the fit's own file, in whichever layout it was read
             own = readers.read_table(source)[0]
         except BrdffitError as e:
-            return None, [f"fidelity: log_rmse_to_table not measured: {e}"]
-        return own, _changed_since_the_fit(result, own)
-    return None, [f"fidelity: log_rmse_to_table not measured: the fitted table "
-                  f"{source or '(unnamed)'} is not at hand (pass the table: "
-                  "export(..., table=...), brdffit export --measured PATH)"]
+            return None, False, [f"fidelity: log_rmse_to_table not measured: {e}"]
+        changed = _changed_since_the_fit(result, own)
+        return own, not changed, changed
+    return None, False, [f"fidelity: log_rmse_to_table not measured: the fitted table "
+                         f"{source or '(unnamed)'} is not at hand (pass the table: "
+                         "export(..., table=...), brdffit export --measured PATH)"]
 
 
 def _another_table(result: FitResult, table: MerlTable) -> list[str]:
@@ -256,19 +263,23 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     models_wanted = ((target_model,) if target_model
                      else _by_layers_kept(spec.target_models, result))
     warnings: list[str] = []
-    measured = None
+    measured, fitted = None, False
     carried = result.model if result.model in models_wanted else models_wanted[0]
     if spec.shaded_as[carried] is not None:  # else nothing can be measured against it
-        measured, missing = _measured_table(result, table)
+        measured, fitted, missing = _measured_table(result, table)
         warnings += missing
+    # the table the material is made from: the fitted one, where it is at hand; a table
+    # given to judge the export against changed the material itself (a gold fit judged
+    # against red-plastic was exported as red-plastic's dielectric)
+    source = measured if fitted else None
     # an export for a viewer is that viewer's optimum on the measured table, where the
     # fit is not already of the viewer's model
-    for_viewer = viewer != "spec" and measured is not None
-    conv = convert(result, models_wanted, measured=measured if for_viewer else None)
+    for_viewer = viewer != "spec" and source is not None
+    conv = convert(result, models_wanted, measured=source if for_viewer else None)
     material_class = None
     if viewer == "spec" and target_model is None:
         # a plastic or a fabric is exported as a dielectric where the evidence says so
-        conv, material_class = dielectric_or_mixture(result, conv, measured)
+        conv, material_class = dielectric_or_mixture(result, conv, source)
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)

@@ -168,10 +168,12 @@ def describe_model(model) -> dict:
     from brdffit.models.mono_ks import MonoKs, specular_colour_specs
 
     doc = sys.modules[type(model).__module__].__doc__ or model.name
-    mono = bool(specular_colour_specs(model))  # it has a `_mono` variant
+    greyed = [s.name for s in specular_colour_specs(model)]
+    mono = bool(greyed)  # it has a `_mono` variant
     return {
         "name": model.name,
-        "doc": doc.strip().splitlines()[0],  # the module docstring's first line: the formula
+        # the module docstring's first line (the formula), without its reST literals' marks
+        "doc": doc.strip().splitlines()[0].replace("``", ""),
         "params": [
             {"name": s.name, "size": s.size, "range": s.describe_range(),
              "lower": s.lower, "upper": s.upper, "doc": s.doc,
@@ -183,6 +185,7 @@ def describe_model(model) -> dict:
         "parent": model.parent,
         "mono": mono,
         "mono_n_params": MonoKs(model).n_params if mono else None,
+        "mono_params": greyed,  # what its `_mono` variant makes one grey value
         "auto": bool(getattr(model, "auto_candidate", False)),
         # the fewest starts its fit refines, whatever is asked (a thin film's many modes)
         "least_starts": int(getattr(model, "least_starts", 1)),

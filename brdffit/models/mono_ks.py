@@ -1,8 +1,9 @@
 """A model's variant with a grey (monochrome) specular scale: ``MonoKs(GGX())``.
 
-Every RGB parameter except ``kd`` (``ks``; ``ks1`` and ``ks2`` of ggx2) becomes
-one value shared by R, G and B; the rest of the model is unchanged. Its name is
-the base's plus ``_mono`` (``"ggx_mono"``), which ``brdffit.models.get`` resolves.
+Every RGB parameter that colours a specular lobe alone (``ks``; ``ks1`` and ``ks2``
+of ggx2; MaterialX's ``specular_color``) becomes one value shared by R, G and B;
+the rest of the model is unchanged. Its name is the base's plus ``_mono``
+(``"ggx_mono"``), which ``brdffit.models.get`` resolves.
 
 | name        | range    | meaning                                   |
 |-------------|----------|-------------------------------------------|
@@ -26,9 +27,18 @@ from .base import AbstractBRDFModel, ParamSpec
 SUFFIX = "_mono"
 
 
+#: The RGB parameters that are a specular lobe's colour and nothing else: a lobe's
+#: scale (``ks``; ggx2's ``ks1``, ``ks2``) and MaterialX's ``specular_color``. A base
+#: colour (glTF, principled, standard_surface) is the diffuse's colour too, a sheen's its
+#: own layer's, a conductor's ``eta`` and ``k`` its optics: "every RGB parameter but kd"
+#: made gltf_pbr_mono a grey material and called gltf_sheen's "ks" not grey.
+SPECULAR_COLOURS = ("ks", "ks1", "ks2", "specular_color")
+
+
 def specular_colour_specs(model: AbstractBRDFModel) -> tuple[ParamSpec, ...]:
-    """The RGB parameters of ``model`` that scale a specular lobe (all but kd)."""
-    return tuple(s for s in model.param_specs if s.rgb and s.name != "kd")
+    """The RGB parameters of ``model`` that colour a specular lobe alone
+    (:data:`SPECULAR_COLOURS`)."""
+    return tuple(s for s in model.param_specs if s.rgb and s.name in SPECULAR_COLOURS)
 
 
 class MonoKs(AbstractBRDFModel):
