@@ -23,7 +23,7 @@ from api.limits import RequestLimits
 from api.routes import docs, exports, fits, health, materials, models, page, tables
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
-from api.store import Store
+from api.store import ServerLock, Store
 from brdffit.view.kinds import KINDS as PLOT_KINDS
 
 log = logging.getLogger("brdffit.api")
@@ -53,20 +53,27 @@ def create_app(settings: Settings | None = None, *,
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        store.clear_tmp()
-        work = runner or make_runner(settings)
-        work.start()
-        queue = JobQueue(store, work, settings)
-        app.state.settings, app.state.store = settings, store
-        app.state.runner, app.state.queue = work, queue
-        await queue.start()
-        log.info("brdffit service: data in %s, %d worker(s)%s", settings.data_dir.resolve(),
-                 settings.workers, ", token required" if settings.api_token else "")
+        # before anything of the directory is touched: another server's running jobs
+        # and uploads are its own (ServerLock; raises DataDirInUse)
+        lock = ServerLock(settings.data_dir).acquire()
         try:
-            yield
+            store.clear_tmp()
+            work = runner or make_runner(settings)
+            work.start()
+            queue = JobQueue(store, work, settings)
+            app.state.settings, app.state.store = settings, store
+            app.state.runner, app.state.queue = work, queue
+            await queue.start()
+            log.info("brdffit service: data in %s, %d worker(s)%s",
+                     settings.data_dir.resolve(), settings.workers,
+                     ", token required" if settings.api_token else "")
+            try:
+                yield
+            finally:
+                await queue.stop()
+                work.close()
         finally:
-            await queue.stop()
-            work.close()
+            lock.release()
 
     app = FastAPI(
         title="brdffit",

@@ -19,6 +19,7 @@ queue's thread hops, and SQLite connections do not cross threads.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -89,6 +90,55 @@ REPAIR = ("stop the service, then restore a backup of {path} (docs/service.md, "
 class DatabaseRefused(BrdffitError):
     """The job database is damaged, emptied or missing beside existing tables: the
     service does not start on it (starting empty would silently drop every job)."""
+
+
+class DataDirInUse(BrdffitError):
+    """Another server holds the data directory (:class:`ServerLock`)."""
+
+
+class ServerLock:
+    """An exclusive lock on a data directory, held by the server that serves it, from
+    before it settles the jobs a stopped server left (:meth:`Store.recover`) until it
+    has put its own back. A second ``brdffit serve`` on the same directory, by mistake,
+    re-queued the first's running job as a stopped server's (spending an attempt, and
+    failing it at the last one), emptied its uploads in progress and, stopping, re-queued
+    them again; it now stops, saying which server holds the directory. The lock is the
+    kernel's (``flock``): a killed server's is released with its process."""
+
+    NAME = "server.lock"
+
+    def __init__(self, data_dir: str | os.PathLike):
+        self.data_dir = Path(data_dir)
+        self._fd: int | None = None
+
+    def acquire(self) -> ServerLock:
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.data_dir / self.NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.read(fd, 64).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            raise DataDirInUse(
+                f"{self.data_dir} is served by another brdffit server (pid {holder}): stop "
+                "it first, or give this one another data directory (--data-dir, "
+                "BRDFFIT_DATA_DIR); two servers on one directory take each other's running "
+                "jobs for a stopped server's") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # the lock goes with the descriptor
+            self._fd = None
+
+    def __enter__(self) -> ServerLock:
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from api.store import Store
 from brdffit import models
 from brdffit.io import merl
 from brdffit.request import FitRequest
-from tests.api_fixtures import FAST, Server, header, table, table_bytes, wait_status
+from tests.api_fixtures import FAST, Server, free_port, header, table, table_bytes, wait_status
 
 pytestmark = pytest.mark.system
 
@@ -515,6 +515,30 @@ def test_recovery_fails_a_job_out_of_attempts(tmp_path):
     assert "BRDFFIT_MAX_ATTEMPTS=1" in job.reason
     assert store.get_job(queued.id).status == "queued"
     assert store.claim_next().id == queued.id and store.claim_next() is None
+
+
+def test_a_second_server_on_a_data_directory_in_use_is_refused(server, http, table_id,
+                                                                tmp_path):
+    """``brdffit serve`` started again on a directory a server is serving (by mistake):
+    it re-queued the first's running job as a stopped server's, spending an attempt,
+    before it failed to bind the port. Now it stops first, in one line; the lock is the
+    kernel's, so a second holder in one process is refused too, and freed on release."""
+    from api.store import DataDirInUse, ServerLock
+
+    job = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
+                                      "options": FAST}).json()
+    r = subprocess.run([sys.executable, "-m", "brdffit.cli", "serve", "--port",
+                        str(free_port()), "--data-dir", str(server.data_dir)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert r.stderr.count("\n") == 1 and "is served by another brdffit server (pid " in r.stderr
+    assert str(server.proc.pid) in r.stderr, r.stderr
+    done = wait_status(http, job["id"], ("done", "failed"))
+    assert done["status"] == "done" and done["attempts"] == 1, done
+    with ServerLock(tmp_path), pytest.raises(DataDirInUse, match=f"pid {os.getpid()}"):
+        ServerLock(tmp_path).acquire()
+    with ServerLock(tmp_path):  # released: free again
+        pass
 
 
 def test_clean_shutdown_requeues_without_spending_an_attempt(tmp_path):

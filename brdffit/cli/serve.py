@@ -44,6 +44,12 @@ def run(args) -> int:
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("workers", args.workers))
                  if v is not None}
     settings = Settings(**overrides)  # a bad value raises ValueError: a one-line CLI error
+    # a directory another server holds: one line, before uvicorn (whose start holds the
+    # lock for good, api.main; a server that takes it in between is refused there)
+    from api.store import ServerLock
+
+    with ServerLock(settings.data_dir):
+        pass
     # The service's own messages (recovered jobs, worker crashes) beside uvicorn's.
     logging.basicConfig(level=args.log_level.upper(), format="%(levelname)s:     %(message)s")
     warmup = _start_warmup(args.warmup)  # an unknown model: a one-line CLI error
