@@ -9,7 +9,7 @@
 never deleted), copies every row of it that SQLite can still read into a new one,
 and registers each table file in ``tables/`` that has no row left (named
 ``recovered-<id>.binary``: the uploader's name was in the lost row). It prints
-what it kept and what it lost.
+what it kept and what it lost; it is refused while a server holds ``DIR``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from api.store import DatabaseRefused, Store
+from api.store import DatabaseRefused, DataDirInUse, ServerLock, Store
 
 #: The database's companions in WAL mode: they move with it.
 SIDE_FILES = ("-wal", "-shm")
@@ -132,7 +132,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.destination is None:
             parser.error("backup needs a destination file")
         return backup(args.data_dir, Path(args.destination))
-    return rebuild(args.data_dir)
+    try:  # a rebuild moves the database a running server holds open: it must be stopped
+        with ServerLock(args.data_dir):
+            return rebuild(args.data_dir)
+    except DataDirInUse as e:
+        print(f"refused: {e}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -192,6 +192,12 @@ def test_rebuild_keeps_the_rows_sqlite_can_read(tmp_path, capsys):
     store = Store(data)
     assert store.get_job(job_id).status == "done"
     assert store.get_table(table_id).name == "mine.binary"
+    # a server serving the directory holds the database open: rebuilding under it is refused
+    from api.store import ServerLock
+
+    with ServerLock(data):
+        assert repair.main(["rebuild", "--data-dir", str(data)]) == 1
+    assert "refused: " in capsys.readouterr().err and store.get_job(job_id).status == "done"
 
 
 def test_backup_is_a_database_the_service_starts_on(tmp_path, capsys):
