@@ -553,6 +553,21 @@ def test_a_refused_out_leaves_no_journal_and_a_damaged_file_is_one_error(tmp_pat
     with open(str(out) + ".journal") as f:
         assert [json.loads(line)["path"] for line in f] == ["/y.binary"]
 
+    # a full disk: HDF5's own words carry no errno ("file write failed: time = ..."),
+    # and were the whole message; the file is whole, the fits in the journal
+    def full(self, group, record):
+        raise OSError("Can't close file (file write failed: time = Sat Dec  5, filename = "
+                      "'r.h5.part-1', file descriptor = 7, errno = 28, error message = 'No "
+                      "space left on device', buf = 0x55a8)")
+
+    monkeypatch.setattr(BatchStore, "_write_table", full)
+    with BatchStore(out) as store:
+        store.add(TableReadRecord(path="/z.binary", status="ok", sha256="3"), [])
+        with pytest.raises(BatchFileError, match=r"r.h5: could not write the results file "
+                                                 r"\(a write failed; a full disk\?\); this "
+                                                 r"run's finished fits are kept in .*journal"):
+            store.checkpoint()
+
 
 def _two_lambert_tables(tmp_path):
     """A folder of two small Lambert tables, m0 and m1, and fast options."""
@@ -564,6 +579,20 @@ def _two_lambert_tables(tmp_path):
     for i, kd in enumerate(([0.5, 0.3, 0.2], [0.2, 0.3, 0.4])):
         merl.write(d / f"m{i}.binary", make_table("lambert", {"kd": kd})[0])
     return d, FitOptions(samples=1024, starts=1)
+
+
+def test_a_table_named_with_dots_alone_gets_a_group_of_its_own(tmp_path):
+    """"..binary" was the group "." (HDF5's name for /tables itself): its attributes went
+    on /tables, its fit beside the tables, and the report read a table "lambert"."""
+    d, opts = _two_lambert_tables(tmp_path)
+    os.rename(d / "m0.binary", d / "..binary")
+    out = tmp_path / "r.h5"
+    # named: a folder's scan leaves dot files out, as a shell's * does
+    assert run_batch([str(d / "..binary"), str(d / "m1.binary")], FitRequest(("lambert",), opts),
+                     out, workers=0, progress=False).ok
+    tables = _tables(out)
+    assert sorted(tables) == ["_", "m1"]
+    assert tables["_"]["path"].endswith("/..binary") and "lambert" in tables["_"]["fits"]
 
 
 def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
@@ -698,6 +727,10 @@ def test_find_tables(table_dir, tmp_path):
     _, record = read_table(str(mixed / "gone.binary"))
     assert record.message.endswith(f"cannot read: a link to {tmp_path / 'moved.binary'}, "
                                    "which does not exist")
+    os.symlink(mixed / "loop2.binary", mixed / "loop1.binary")  # each to the other
+    os.symlink(mixed / "loop1.binary", mixed / "loop2.binary")
+    _, record = read_table(str(mixed / "loop1.binary"))
+    assert record.message.endswith("which leads back round to itself (a loop)"), record.message
     assert find_tables([str(table_dir / "a_*.binary"), str(table_dir / "a_ggx.binary")]) == [
         str(table_dir / "a_ggx.binary")]
     with pytest.raises(BatchInputError, match="no such file"):
@@ -710,6 +743,24 @@ def test_find_tables(table_dir, tmp_path):
     (alone / "r.h5").write_bytes(b"x")
     with pytest.raises(BatchInputError, match="holds no measured file but .*r.h5, the "
                                               "batch's own results file"):
+        find_tables([str(alone)], exclude=[alone / "r.h5"])
+    # a quoted pattern matching the results file (and a crash's journal beside it) leaves
+    # them out: on every run after the first it took the results file in as a table
+    (alone / "t.binary").write_bytes(b"x")
+    (alone / "r.h5.journal").write_bytes(b"x")
+    assert find_tables([str(alone / "*")], exclude=[alone / "r.h5"]) == [
+        str(alone / "t.binary")]
+    with pytest.raises(BatchInputError, match="matches the batch's own results file"):
+        find_tables([str(alone / "r.*")], exclude=[alone / "r.h5"])
+    with pytest.raises(BatchInputError, match="r.h5: the batch's own results file"):
+        find_tables([str(alone / "r.h5")], exclude=[alone / "r.h5"])
+    # a name that is not UTF-8 is named, escaped, before any work (h5py failed on it at
+    # the first checkpoint, naming no file)
+    odd = os.fsdecode(os.fsencode(str(alone)) + b"/bad\xff.binary")
+    with open(os.fsencode(odd), "wb") as f:
+        f.write(b"x")
+    with pytest.raises(BatchInputError, match=r"bad\\xff.binary: a file name that is not "
+                                              "valid UTF-8"):
         find_tables([str(alone)], exclude=[alone / "r.h5"])
 
 

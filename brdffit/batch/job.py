@@ -115,7 +115,9 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     taken (the batch's own results file, an HDF5 file in the folder it fits).
     """
     found: dict[str, None] = {}
-    skip = {os.path.abspath(os.fspath(p)) for p in exclude}
+    # the results file and its journal (a quoted 'g/*' with --out g/r.h5 took the results
+    # file in as a table on every run after the first, failed, and a crash's journal too)
+    skip = {os.path.abspath(os.fspath(p)) + end for p in exclude for end in ("", ".journal")}
 
     skipped: list[str] = []
 
@@ -142,6 +144,9 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
                 raise BatchInputError(f"{text}: directory holds no measured file{but} "
                                       f"({', '.join('*' + s for s in DIR_SUFFIXES)})")
         elif os.path.lexists(text):
+            if os.path.abspath(text) in skip:
+                raise BatchInputError(f"{text}: the batch's own results file (--out), not a "
+                                      "table")
             found.setdefault(os.path.abspath(text))
         elif glob.has_magic(text):
             matches = sorted(glob.glob(text, recursive=True))
@@ -150,13 +155,34 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
             for m in matches:
                 if os.path.isdir(m):
                     add_dir(m)
-                else:
+                elif os.path.abspath(m) not in skip:
                     found.setdefault(os.path.abspath(m))
+            if not any(os.path.abspath(m) not in skip for m in matches):
+                raise BatchInputError(f"{text}: matches the batch's own results file (--out) "
+                                      "alone")
         else:
             raise BatchInputError(f"{text}: no such file or directory")
     if not found:
         raise BatchInputError("no tables to fit")
+    _check_names_storable(found)
     return list(found)
+
+
+def _check_names_storable(paths) -> None:
+    """Refuses paths whose names are not valid UTF-8 (bytes a filesystem keeps and
+    Python reads as surrogates): the results file stores every path as UTF-8 text, and
+    h5py failed on the first checkpoint with "'utf-8' codec can't encode characters",
+    naming no file, after the batch had run. Named here, before any work."""
+    bad = []
+    for p in paths:
+        try:
+            p.encode("utf-8")
+        except UnicodeEncodeError:
+            bad.append(p.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace"))
+    if bad:
+        shown = ", ".join(bad[:5]) + (f" and {len(bad) - 5} more" if len(bad) > 5 else "")
+        raise BatchInputError(f"{shown}: a file name that is not valid UTF-8 (the results "
+                              "file stores names as UTF-8): rename it, or leave it out")
 
 
 def request_of(request) -> FitRequest:

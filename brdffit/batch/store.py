@@ -46,6 +46,7 @@ The journal is also the lock: a second batch on the same file is refused.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import glob
 import json
@@ -306,6 +307,13 @@ class BatchStore:
         except BaseException as e:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+            if _write_failed(e):  # a full disk or quota: the file as it was is whole
+                raise BatchFileError(
+                    f"{self.path}: could not write the results file ("
+                    f"{os.strerror(e.errno) if getattr(e, 'errno', None) else 'a write failed'}"
+                    f"; a full disk?); this run's finished fits are kept in "
+                    f"{self.journal_path}: free some space and run the batch again, which "
+                    "folds them in") from None
             if (existed and isinstance(e, (OSError, KeyError, ValueError, TypeError,
                                            AttributeError, RuntimeError))
                     and getattr(e, "errno", None) is None):  # h5py's, not the disk's
@@ -325,6 +333,9 @@ class BatchStore:
         if path not in self._names:
             stem = os.path.basename(path)
             stem = stem[: -len(".binary")] if stem.endswith(".binary") and len(stem) > 7 else stem
+            # "." and ".." are HDF5's paths to a group itself and its parent: "..binary" put
+            # its table's attributes on /tables and its fits beside the tables
+            stem = "_" * len(stem) if not stem.strip(".") else stem
             name, i = stem, 1
             while name in self._taken:
                 i += 1
@@ -610,6 +621,15 @@ def _find_table(path: str, groups: h5py.Group, table: str) -> str:
 def _failed(fits: dict) -> str:
     failed = [f"{m} ({a.get('message') or a.get('status')})" for m, a in fits.items()]
     return f"; its fits: {', '.join(failed)}" if failed else ""
+
+
+def _write_failed(e: BaseException) -> bool:
+    """Whether writing the results file failed for want of room: the disk's own error,
+    or HDF5's, which carries no errno ("can't close file (file write failed: time =
+    ..., buf = 0x55a8...)", which was the whole message)."""
+    if getattr(e, "errno", None) in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        return True
+    return isinstance(e, OSError) and "write failed" in str(e)
 
 
 def _plain(v):

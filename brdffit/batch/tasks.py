@@ -13,6 +13,7 @@ compiles each (model, options) once and reuses it for every later table.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 import socket
@@ -110,7 +111,9 @@ def read_table(path: str) -> tuple[merl.MerlTable | Measurements | None, TableRe
                     h.update(chunk)
     except OSError as e:
         why = e.strerror or str(e)
-        if os.path.islink(path) and not os.path.exists(path):
+        if e.errno == errno.ELOOP:  # the link's target exists: it leads back to itself
+            why = f"a link to {os.readlink(path)}, which leads back round to itself (a loop)"
+        elif os.path.islink(path) and not os.path.exists(path):
             why = f"a link to {os.readlink(path)}, which does not exist"
         record.message = str(MerlFormatError(path, f"cannot read: {why}"))
         record.finished_at = now()
