@@ -45,7 +45,10 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     would be over ``cap`` bytes (an HDF5 upload's declared rows are weighed before any
     is read; a text file's once read)."""
     record = store.get_table(digest)
-    if record is not None:  # known bytes: already validated
+    # known bytes, already validated, unless the stored file is gone (deleted by hand, a
+    # lost disk): then this upload puts it back (it answered 200 and every fit failed
+    # "cannot read", with no way to repair it)
+    if record is not None and store.table_path(digest).is_file():
         tmp.unlink(missing_ok=True)
         return record, False
     declared = readers.declared_samples(tmp, name)
