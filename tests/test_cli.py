@@ -169,12 +169,13 @@ def test_warmup_keeps_the_fits_for_the_next_process(tmp_path, monkeypatch):
     monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "cache"))
     first = run("brdffit.cli", "warmup", "--models", "lambert")
     assert first.returncode == 0, first.stderr
-    assert f"compiling into {tmp_path / 'cache'}" in first.stderr
+    assert f"brdffit warmup: cache {tmp_path / 'cache'} (what it holds" in first.stderr
     line = next(ln for ln in first.stderr.splitlines() if "lambert" in ln and "compiled" in ln)
     assert int(line.split(" compiled")[0].split()[-1]) > 0, first.stderr
     assert list((tmp_path / "cache" / "executables").glob("*/solve_batch-*.xla"))
     again = run("brdffit.cli", "warmup", "--models", "lambert")
     assert again.returncode == 0, again.stderr
     assert " 0 compiled" in again.stderr, again.stderr
+    assert "(all loaded from the cache: nothing to compile)" in again.stderr, again.stderr
     bad = run("brdffit.cli", "warmup", "--models", "no_such_model")
     assert bad.returncode == 2 and "no_such_model" in bad.stderr

@@ -370,8 +370,8 @@ def test_an_export_of_a_fit_that_does_not_look_good_says_so():
             "next": [{"try": "--model ggx2", "why": "a second lobe", "gain_db": 2.0}]}
     r = result("ggx", GGX, quality=look)
     warned = [w for w in export(r, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
-    assert warned == ["the ggx fit looks poor beside its table (sphere render 12.0 dB from "
-                      "the measurement); next: --model ggx2"]
+    assert warned == ["the ggx fit looks poor beside its table: sphere render 12.0 dB from "
+                      "the measurement; next: --model ggx2"]
     good = result("ggx", GGX, quality={**look, "verdict": "good", "next": []})
     assert not [w for w in export(good, "gltf", table=fit_as_table(r)).warnings if "looks" in w]
 

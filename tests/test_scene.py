@@ -195,6 +195,14 @@ def test_scene_fit_reports_scene_and_full_table_error(fresnel_table):
     # full_table_error of the plain fit is the plain fit's own reported error
     again = full_table_error(fresnel_table, "blinn_phong", everywhere.params)["log_rmse"]
     assert again == pytest.approx(everywhere.log_rmse, rel=1e-6)
+    # the text accounts for every bin of the grid: those the scene leaves out too
+    from brdffit.cli.fit import N_BINS, format_result
+
+    (line,) = [ln for ln in format_result(on_scene).splitlines() if "bins:" in ln]
+    d = on_scene.samples["dropped"]
+    outside = N_BINS - on_scene.samples["usable"] - sum(d.values())
+    assert outside > 0 and line.endswith(f", {outside:,} outside the scene"), line
+    assert "outside the scene" not in format_result(everywhere)
 
 
 def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):

@@ -44,7 +44,7 @@ def test_the_server_answers_while_its_warmup_fills_an_empty_cache(tmp_path):
         _wait_for(lambda: "brdffit warmup: done" in server.log(), 300,
                   "no 'brdffit warmup: done'", server.log)
         log = server.log()
-        assert f"brdffit warmup: compiling into {cache}" in log
+        assert f"brdffit warmup: cache {cache} (what it holds" in log
         line = next(ln for ln in log.splitlines() if ln.strip().startswith("lambert"))
         assert int(line.split("s ")[1].split(" compiled")[0]) > 0, line
         assert sorted(cache.glob("executables/*/solve_batch-*.xla")), log

@@ -16,6 +16,7 @@ from brdffit.fitting.scene import PRESETS as SCENE_PRESETS
 from brdffit.fitting.scene import Scene
 from brdffit.io import readers
 from brdffit.io.measurements import Measurements
+from brdffit.io.merl import SHAPE as GRID
 from brdffit.request import FitReport, FitRequest, split_names
 from brdffit.request import run as fit_request
 from brdffit.selection import format_selection
@@ -120,6 +121,10 @@ def add_request_arguments(p, model_flag: str) -> None:
     scene.add_argument("--max-theta-o", type=float, metavar="DEG", help="largest view angle")
 
 
+#: Bins of the MERL grid.
+N_BINS = GRID[0] * GRID[1] * GRID[2]
+
+
 def format_result(r: FitResult) -> str:
     """A human-readable summary of a fit: parameters with their standard errors and
     undetermined flags (docs/results.md), every metric, the bins used."""
@@ -172,10 +177,13 @@ def format_result(r: FitResult) -> str:
         lines.append(f"  samples: {s['used']:,} fitted of {s['usable']:,} usable; dropped "
                      f"{d['below_horizon']:,} on the horizon")
     else:
+        # a scene's bins are the usable ones: those it leaves out are the rest of the grid
+        outside = N_BINS - s["usable"] - sum(d.values())
         lines.append(
             f"  bins: {s['used']:,} fitted of {s['usable']:,} usable; dropped "
             f"{d['unmeasured']:,} unmeasured, {d['nonfinite']:,} non-finite, "
-            f"{d['below_horizon']:,} below the horizon")
+            f"{d['below_horizon']:,} below the horizon"
+            + (f", {outside:,} outside the scene" if r.scene is not None and outside > 0 else ""))
     lines += [f"  note: {n}" for n in r.notes]  # where the fit did other than asked
     return "\n".join(lines)
 

@@ -49,7 +49,8 @@ def run(args) -> int:
         print("brdffit warmup: caching is off (BRDFFIT_CACHE_DIR is empty): the compiled "
               "programs last only for this process", file=sys.stderr)
     else:
-        print(f"brdffit warmup: compiling into {where}", file=sys.stderr)
+        print(f"brdffit warmup: cache {where} (what it holds is loaded, the rest compiled)",
+              file=sys.stderr)
     # A glossy table with missing bins, as measured ones have: what it holds does not
     # matter (the programs depend on shapes only), but a converging fit runs every
     # program a user's fit runs.
@@ -68,5 +69,8 @@ def run(args) -> int:
             print(f"  {name:<12} {loss:<10} {time.perf_counter() - t0:6.1f} s  "
                   f"{compiled} compiled, {len(done) - compiled} loaded from the cache",
                   file=sys.stderr, flush=True)
-    print(f"brdffit warmup: done in {time.perf_counter() - t_all:.1f} s", file=sys.stderr)
+    made = sum(e.how == "compiled" for e in executables.events)
+    print(f"brdffit warmup: done in {time.perf_counter() - t_all:.1f} s ("
+          + (f"{made} compiled" if made else "all loaded from the cache: nothing to compile")
+          + ")", file=sys.stderr)
     return 0

@@ -340,8 +340,10 @@ def _looks_warning(result: FitResult) -> list[str]:
         return []
     steps = look.get("next") or []
     hint = f"; next: {steps[0]['try']}" if steps else ""
-    return [f"the {result.model} fit looks {look['verdict']} beside its table "
-            f"({look.get('reason', '')}){hint}"]
+    # "looks poor beside its table: ...", not "(... (poor below 20 dB))": a reason has
+    # its own brackets
+    return [f"the {result.model} fit looks {look['verdict']} beside its table: "
+            f"{look.get('reason', '')}{hint}"]
 
 
 def _implied_viewer(target: ExportTarget, viewer: str, target_model: str | None) -> str:

@@ -88,7 +88,7 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
     if render_psnr_db >= GOOD[0] and stops <= GOOD[1] and de <= GOOD[2]:
         return "good", (f"{figure} {render_psnr_db:.1f} dB, displayed brightness "
                         f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f} (good: >= "
-                        f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and {GOOD[2]:g})")
+                        f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and CIEDE2000 {GOOD[2]:g})")
     if render_psnr_db < GOOD[0]:
         return "visible", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                            f"(good from {GOOD[0]:g} dB)")

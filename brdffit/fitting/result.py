@@ -127,7 +127,7 @@ class FitResult:
         schema = d.pop("schema", SCHEMA)
         if schema not in READS:
             raise ValueError(f"result schema {schema!r}; this brdffit reads "
-                             f"{' and '.join(map(repr, READS))}")
+                             f"{', '.join(map(repr, READS[:-1]))} and {READS[-1]!r}")
         if "notes" in d:  # JSON has lists; the result holds a tuple
             d["notes"] = tuple(d["notes"] or ())
         known = {f.name for f in fields(cls)}
