@@ -849,6 +849,12 @@ def test_the_summary_line_counts_in_words():
     assert summary_line(many).endswith("6 fits on 3 tables in 3s; 2 tables were already done")
     fresh = BatchSummary("out.h5", tables=2, fits=4, elapsed_s=3.1)
     assert summary_line(fresh).endswith("; none was done before")
+    # a resume that kept some of a table's fits is not "none was done before"
+    partly = BatchSummary("out.h5", tables=2, skipped=1, kept=3, fits=1, elapsed_s=3.1)
+    assert summary_line(partly).endswith("; 1 table was already done, 3 fits of the others "
+                                         "kept from before")
+    partly.skipped = 0
+    assert summary_line(partly).endswith("; 3 fits kept from before")
 
 
 def test_a_file_of_a_newer_format_is_named_so(tmp_path):

@@ -80,6 +80,7 @@ class BatchSummary:
     out: str
     tables: int = 0
     skipped: int = 0  # tables whose every fit was already in the file
+    kept: int = 0  # fits of the other tables already in the file, not made again
     fits: int = 0  # fits made in this run, failed ones included
     failed_tables: list[tuple[str, str]] = field(default_factory=list)
     failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
@@ -405,6 +406,7 @@ def run_batch(
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
         tasks, summary.skipped = _plan(paths, model_names, request.fit_key(), store, refit)
+        summary.kept = sum(len(t.done_models) for t in tasks)
         bar = progress if isinstance(progress, ProgressLine) else ProgressLine(
             len(tasks), skipped=summary.skipped, enabled=bool(progress))
         bar.draw(force=True)

@@ -67,8 +67,14 @@ def _count(n: int, noun: str) -> str:
 def summary_line(s) -> str:
     """The run's last line: ``out.h5: 4 fits on 2 tables in 3s; 1 table was already
     done``."""
-    done = (f"{_count(s.skipped, 'table')} {'was' if s.skipped == 1 else 'were'} already done"
-            if s.skipped else "none was done before")
+    # a table some of whose fits were in the file is neither done nor new: its kept fits
+    # are said (it read "none was done before" after a resume that kept them)
+    done = [f"{_count(s.skipped, 'table')} {'was' if s.skipped == 1 else 'were'} already done"
+            ] if s.skipped else []
+    if s.kept:
+        done.append(f"{_count(s.kept, 'fit')}{' of the others' if s.skipped else ''} kept "
+                    "from before")
+    done = ", ".join(done) or "none was done before"
     return (f"{s.out}: {_count(s.fits, 'fit')} on {_count(s.tables - s.skipped, 'table')} in "
             f"{format_duration(s.elapsed_s)}; {done}")
 
