@@ -839,6 +839,31 @@ def test_batch_on_a_separately_started_scheduler_and_worker(table_dir, tmp_path)
 
 
 @pytest.mark.unit
+def test_a_log_gets_the_progress_where_the_batch_ended():
+    """In a log (stderr not a terminal) the line is printed at the start, every 30 s and
+    at the end: an interrupted batch printed none since its last 30 s; a finished one's
+    last line is not printed twice."""
+    import io
+
+    from brdffit.batch.progress import ProgressLine
+
+    log = io.StringIO()
+    bar = ProgressLine(10, stream=log)
+    bar.draw(force=True)
+    bar.update(fits=2, failed=False)
+    bar.update(fits=2, failed=True)  # within 30 s: not printed
+    bar.finish()  # interrupted here
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 2 and " 0/10 tables" in lines[0] and " 2/10 tables" in lines[1], lines
+    assert "1 failed" in lines[1]
+    done = io.StringIO()
+    bar = ProgressLine(1, stream=done)
+    bar.update(fits=1, failed=False)  # the last table: printed at once
+    bar.finish()
+    assert len(done.getvalue().splitlines()) == 1, done.getvalue()
+
+
+@pytest.mark.unit
 def test_the_summary_line_counts_in_words():
     from brdffit.batch.job import BatchSummary
     from brdffit.cli.batch import summary_line

@@ -37,6 +37,10 @@ class ProgressLine:
         self.failed_tables = 0
         self.t0 = time.monotonic()
         self._last_draw = float("-inf")
+        self._last_counts: tuple | None = None  # what the last line in a log said
+
+    def _counts(self) -> tuple:
+        return self.tables, self.fits, self.failed_tables
 
     def update(self, *, fits: int, failed: bool, tables: int = 1) -> None:
         """``fits`` more fits; ``tables`` more tables finished (0 while a table's
@@ -72,10 +76,17 @@ class ProgressLine:
         if self.tty:
             self.stream.write("\r\x1b[2K" + self.line())
         else:
+            self._last_counts = self._counts()
             self.stream.write(self.line() + "\n")
         self.stream.flush()
 
     def finish(self) -> None:
-        if self.enabled and self.tty:
+        """The last line: in a log (not a TTY) the count where the batch ended, done or
+        interrupted (an interrupted one printed none since the last 30 s)."""
+        if not self.enabled:
+            return
+        if self.tty:
             self.stream.write("\n")
-            self.stream.flush()
+        elif self._last_counts != self._counts():
+            self.stream.write(self.line() + "\n")
+        self.stream.flush()
