@@ -136,10 +136,10 @@ def test_each_verdict_light_says_at_which_exposure_the_verdict_judged_it():
     assert set(words) == {0, 1}  # the key and grazing lights; the back light is not judged
     ev = np.log2(SphereReference(t).exposures[0] / plots.EXPOSURE)
     assert ev > 3.0
-    assert words[0] == f"\nverdict judged at {round(4 * ev) / 4:+g} EV"
+    assert words[0] == f"\nverdict judged {round(4 * ev) / 4:+g} EV from here"
     # asked at +2 EV, the verdict's exposure is 2 stops nearer the picture's
     shifted = plots._verdict_exposure_words(t, plots.SPHERE_LIGHTS, 2.0)
-    assert shifted[0] == f"\nverdict judged at {round(4 * (ev - 2)) / 4:+g} EV"
+    assert shifted[0] == f"\nverdict judged {round(4 * (ev - 2)) / 4:+g} EV from here"
 
 
 @pytest.mark.slow

@@ -146,6 +146,11 @@ def test_a_peak_note_says_which_way_the_fit_misses():
     assert "is 5.12e+03x the table's there" in over and "outlier" not in over
     assert _peak_missed({"rel_peak_error": 0.5}, visible) == []
     assert _peak_missed({"rel_peak_error": 5123.7}, {"verdict": "poor"}) == []
+    # a model without a lobe has no peak to give: not the table's outlier
+    from brdffit import models
+
+    (flat,) = _peak_missed({"rel_peak_error": 1.0}, visible, models.get("lambert"))
+    assert "lambert has no specular lobe" in flat and "outlier" not in flat
 
 
 def test_nonfinite_and_negative_input_values_never_reach_the_loss():

@@ -72,6 +72,9 @@ class Visit:
         self.page = self.context.new_page()
         self.console_errors: list[str] = []
         self.page.on("pageerror", lambda e: self.console_errors.append(str(e)))
+        # a delete asks first (confirm): the visitor says yes, and what was asked is kept
+        self.dialogs: list[str] = []
+        self.page.on("dialog", lambda d: (self.dialogs.append(d.message), d.accept()))
         shots.mkdir(parents=True, exist_ok=True)
 
     def _route(self, route):
@@ -189,6 +192,16 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         saved = json.loads(Path(d.value.path()).read_text())
         assert saved["id"] == job_id and saved["result"]["model"] == chosen
 
+        # The job is in the address: a reload opens it again, with its table chosen (a
+        # reload lost both, and the form)
+        assert page.evaluate("location.hash") == f"#job={job_id}"
+        page.reload()
+        page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
+        page.wait_for_function("document.querySelector('#table-current').innerText"
+                               ".includes('ggx.binary')", timeout=STEP_MS)
+        assert page.locator("#results-table tbody tr.best").get_attribute(
+            "data-model") == chosen
+
         # A bad file: the page shows the API's own detail.
         detail = http.post("/v1/tables?name=broken.binary", content=bad_file.read_bytes(),
                            headers={"Content-Type": "application/octet-stream"}).json()["detail"]
@@ -224,6 +237,8 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
             page.wait_for_function("document.querySelector('#message').innerText"
                                    f".includes('Deleted job {j['id'][:8]}')", timeout=STEP_MS)
         assert http.get("/v1/fits").json()["total"] == 0
+        assert [m for m in visit.dialogs if m.startswith("Delete job ")] == [
+            f"Delete job {j['id'][:8]} and its results?" for j in jobs]
         page.locator("#jobs-table tbody tr.empty", has_text="no fit jobs yet").wait_for(
             timeout=STEP_MS)
         assert page.locator("#jobs-table tbody tr").count() == 1

@@ -210,8 +210,9 @@ class JobOut(BaseModel):
     status: Literal["queued", "running", "done", "failed", "cancelled"]
     table_id: str
     models: list[str]
-    request: RequestBody = Field(description="the job's request, as it was posted "
-                                 "(brdffit.request.FitRequest.to_dict())")
+    request: RequestBody = Field(description="the job's request in its one form "
+                                 "(brdffit.request.FitRequest.to_dict()): a single model "
+                                 "as a list, every option left out with its default")
     attempts: int = Field(description="runs started so far (a server restart may re-run a job)")
     reason: str | None = Field(None, description="why the job failed or was cancelled")
     progress: Progress | None = Field(None, description="while running: stage and fraction")

@@ -19,7 +19,7 @@ import numpy as np
 from brdffit.fitting.inputs import Refit, SampleInput, TableInput
 from brdffit.fitting.loss import LOSS_METRIC
 from brdffit.fitting.problem import Prepared
-from brdffit.fitting.quality import quality
+from brdffit.fitting.quality import NO_LOBE, quality
 from brdffit.fitting.result import FitResult
 
 
@@ -76,7 +76,8 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     if found_steps and look.get("verdict") != "good":  # the data's fault comes first
         look = {**look, "next": [*found_steps, *look.get("next", [])]}
     # once each: a polish carries its coarse fit's notes, which found the same table
-    notes = tuple(dict.fromkeys((*notes, *_peak_missed(metrics, look), *found_notes)))
+    notes = tuple(dict.fromkeys((*notes, *_peak_missed(metrics, look, model),
+                                 *found_notes)))
     counts = prep.counts
     return FitResult(
         model=model.name,
@@ -113,13 +114,20 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
 PEAK_MISSED = 0.99
 
 
-def _peak_missed(metrics: dict, look: dict) -> list[str]:
+def _peak_missed(metrics: dict, look: dict, model=None) -> list[str]:
     """Where the verdict is not poor but the fit misses the table's brightest bin
     entirely: a note that the verdict judged the look without that peak (a lone hot
-    bin, or a peak in fewer bins than the sphere's pixels see, renders as nothing)."""
+    bin, or a peak in fewer bins than the sphere's pixels see, renders as nothing). A
+    model without a lobe has no peak to give: said so (lambert on red-plastic was told
+    of "a lone hot bin, an outlier?", where ggx is 21% off it)."""
     rel = metrics.get("rel_peak_error")
     if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
         return []
+    if model is not None and model.name in NO_LOBE:
+        return [f"{PEAK_NOTE} misses the table's by {rel:.0%} of its value "
+                f"(rel_peak_error {rel:.3g}): {model.name} has no specular lobe; the "
+                f"'{look.get('verdict')}' verdict judges the look, in which the peak is "
+                "too small to weigh"]
     if rel > 1.0:  # |fit - measured| beyond the measured value: the fit is above it
         return [f"{PEAK_NOTE} is {1.0 + rel:.3g}x the table's there (rel_peak_error "
                 f"{rel:.3g}): a lobe brighter at the peak than anything measured, in too "

@@ -253,7 +253,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
             "across the highlight itself, which no model here follows (on MERL's "
             "colour-changing paints the film gained under 1% of log_rmse: docs/models.md)")
     peak_far = _finite(rel_peak_error) and rel_peak_error >= PEAK_FAR
-    if peak_far and loss != "render" and model.name not in _NO_LOBE:
+    if peak_far and loss != "render" and model.name not in NO_LOBE:
         add("--loss render",
             f"the fit is {rel_peak_error:.0%} off the table's brightest bin (rel_peak_error "
             f"{rel_peak_error:.2f}): the highlight's few peak bins weigh little in the "
@@ -293,7 +293,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
 
 
 #: The models without a specular lobe: a peak is theirs to miss.
-_NO_LOBE = ("lambert", "oren_nayar")
+NO_LOBE = ("lambert", "oren_nayar")
 
 
 def _layered(name: str) -> bool:

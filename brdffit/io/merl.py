@@ -193,7 +193,8 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
                     f"{list(SHAPE)} big-endian: the file was written byte-swapped; swap "
                     "its 4-byte header and 8-byte values to little-endian")
     if any(d <= 0 for d in dims):
-        raise MerlFormatError(source, f"header dims {dims} are not positive")
+        raise MerlFormatError(source, f"header dims {dims} are not positive: not a MERL "
+                                      f"table (it starts with 3 dims, {list(SHAPE)})")
     body = size - HEADER_BYTES
     expected = 3 * 8 * dims[0] * dims[1] * dims[2]  # Python ints: no overflow
     if tuple(dims) != SHAPE:

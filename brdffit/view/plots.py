@@ -407,7 +407,9 @@ def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dic
     for row, (_, light) in enumerate(lights):
         ev = judged_ev(table, light, exposure_ev)
         if ev is not None:
-            words[row] = f"\nverdict judged at {ev:+g} EV"
+            # from this picture's exposure: at the slider's +7 it reads +0 (the page's
+            # hint and a reader took "at +7 EV" for the verdict's own exposure)
+            words[row] = f"\nverdict judged {ev:+g} EV from here"
     return words
 
 

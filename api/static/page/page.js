@@ -69,6 +69,9 @@ function say(text, kind = "error") {
   box.textContent = text;
   box.className = kind;
   box.hidden = false;
+  // an error shows where the reader is: a failed export far down the page was said at
+  // the top, thousands of pixels away, while its line went blank
+  if (kind === "error") box.scrollIntoView({ block: "nearest" });
 }
 
 function clearMessage() {
@@ -90,8 +93,9 @@ function guarded(action) {
   };
 }
 
-function askForToken(detail) {
-  $("token-why").textContent = `The server answered 401: ${detail}`;
+function askForToken(detail, refused = true) {
+  // the button opens it too, where nothing was refused: it said "answered 401" all the same
+  $("token-why").textContent = refused ? `The server answered 401: ${detail}` : detail;
   $("token-form").hidden = false;
   $("token-input").focus();
 }
@@ -208,6 +212,7 @@ async function useMaterial() {
 }
 
 async function deleteTable(table, withFits) {
+  if (withFits && !confirm(`Delete ${table.name} and every fit of it?`)) return;
   await api("DELETE", `/v1/tables/${table.id}${withFits ? "?with_fits=true" : ""}`);
   if (state.table && state.table.id === table.id) {
     state.table = null;
@@ -284,14 +289,20 @@ function showJob(job) {
   stopPolling();
   const changed = !state.job || state.job.id !== job.id || state.job.status !== job.status;
   state.job = job;
+  // in the address: a reload opens it again (it lost the job, its table and its progress)
+  if (location.hash !== `#job=${job.id}`) history.replaceState(null, "", `#job=${job.id}`);
   const box = $("job-state");
   box.hidden = false;
   const progress = $("job-progress");
   $("job-cancel").hidden = !ACTIVE.has(job.status);
   if (job.status === "running") {
     progress.value = job.progress ? job.progress.fraction : 0;
+    // the time it has run: the bar moves between models only, and a one-model fit sat at
+    // 0 for 85 s with no sign of life
+    const ran = job.started_at ? Math.max(0, (Date.now() - Date.parse(job.started_at)) / 1000) : null;
     $("job-stage").textContent = `running: ${job.progress ? job.progress.stage : "starting"}`
-      + ` (job ${job.id.slice(0, 8)}, ${job.models.join(", ")})`;
+      + ` (job ${job.id.slice(0, 8)}, ${job.models.join(", ")}`
+      + `${ran === null ? "" : `, ${Math.round(ran)} s so far`})`;
   } else if (job.status === "queued") {
     progress.removeAttribute("value");
     $("job-stage").textContent = `queued (job ${job.id.slice(0, 8)})`
@@ -323,9 +334,11 @@ async function cancelJob(job) {
 }
 
 async function deleteJob(job) {
+  if (!confirm(`Delete job ${job.id.slice(0, 8)} and its results?`)) return;
   await api("DELETE", `/v1/fits/${job.id}`);
   if (state.job && state.job.id === job.id) {
     state.job = null;
+    history.replaceState(null, "", location.pathname + location.search);
     $("results-panel").hidden = true;
     $("job-state").hidden = true;
   }
@@ -338,6 +351,10 @@ async function openJob(job) {
   const fresh = await api("GET", `/v1/fits/${job.id}`);
   state.job = null; // shown anew, even when it is the job already on screen
   showJob(fresh);
+  // its table becomes the chosen one: "Start the fit" refits it (it said "No table
+  // chosen yet" above the job's results, and refused to start)
+  const table = await api("GET", `/v1/tables/${fresh.table_id}`).catch(() => null);
+  if (table) chooseTable(table);
 }
 
 // -- results -----------------------------------------------------------------------
@@ -649,6 +666,13 @@ async function start() {
   clearMessage();
   await loadChoices();
   await refreshLists();
+  const wanted = /^#job=([0-9a-f]+)$/.exec(location.hash);  // a reload, or a shared link
+  if (wanted) {
+    await openJob({ id: wanted[1] }).catch(() => {
+      history.replaceState(null, "", location.pathname + location.search);
+      say(`Job ${wanted[1].slice(0, 8)} of this address is no longer on the server.`, "info");
+    });
+  }
 }
 
 let exposureTimer = null;
@@ -680,7 +704,8 @@ document.addEventListener("DOMContentLoaded", () => {
     b.addEventListener("click", guarded(showExtraPlot));
   }
   $("exposure").addEventListener("input", setExposure);
-  $("token-open").addEventListener("click", () => askForToken("enter or change the token"));
+  $("token-open").addEventListener("click", () => askForToken(
+    "Enter or change the token (kept for this browser tab).", false));
   $("token-form").addEventListener("submit", guarded(async (event) => {
     event.preventDefault();
     sessionStorage.setItem(TOKEN_KEY, $("token-input").value.trim());
