@@ -909,3 +909,86 @@ def test_batch_report_refuses_a_png_it_would_write_elsewhere(tmp_path):
         with pytest.raises(BrdffitError, match=says):
             _png_path(str(path))
     assert _png_path(str(tmp_path / "s.PNG")) == str(tmp_path / "s.PNG")
+
+
+def test_a_table_rewritten_during_a_cluster_batch_keeps_every_model(tmp_path, monkeypatch):
+    """Each of a table's models is a task that reads the file itself: one rewritten
+    while they run gave them different content, and the results file kept the last
+    content's fits only (the others were dropped, the batch reported them made).
+    Every model must end fitted to what the file holds at the end.
+
+    One worker thread in this process runs the tasks in order, and ggx's task rewrites
+    the table before it reads it: the models before it read the old content."""
+    from distributed import LocalCluster
+
+    from brdffit.batch import job
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    d, opts = _two_lambert_tables(tmp_path)
+    (d / "m1.binary").unlink()
+    table = d / "m0.binary"
+    models_ = ("lambert", "oren_nayar", "phong", "ggx", "beckmann")
+    real_fit_table = job.fit_table
+
+    def rewriting_fit_table(path, request, item, *args):
+        if item == ["ggx"] and not (tmp_path / "rewritten").exists():
+            merl.write(path, make_table("lambert", {"kd": [0.1, 0.2, 0.3]})[0])
+            (tmp_path / "rewritten").touch()
+        return real_fit_table(path, request, item, *args)
+
+    monkeypatch.setattr(job, "fit_table", rewriting_fit_table)
+    out = tmp_path / "r.h5"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address=None) as c:
+        summary = run_batch([str(table)], FitRequest(models_, opts), out,
+                            scheduler=c.scheduler_address, progress=False, timeout_s=600)
+        assert (tmp_path / "rewritten").exists()
+        assert summary.ok, summary
+        # the models before ggx read the old content: fitted again (a fit of content
+        # gone that returns after the change is not stored, nor counted)
+        assert summary.fits > len(models_)
+        t = _tables(out)["m0"]
+        assert t["sha256"] == _sha256(str(table))
+        assert sorted(t["fits"]) == sorted(models_)
+        for model in models_:
+            assert t["fits"][model]["sha256"] == t["sha256"], model
+        assert _close(t["fits"]["lambert"]["params"]["kd"], [0.1, 0.2, 0.3], 0.02)
+        # what the file holds is done: a rerun makes nothing
+        again = run_batch([str(table)], FitRequest(models_, opts), out,
+                          scheduler=c.scheduler_address, progress=False, timeout_s=300)
+        assert again.fits == 0 and again.skipped == 1
+
+
+def test_a_table_rewritten_at_every_read_fails_its_fits_saying_so(tmp_path, monkeypatch):
+    """A file written to all the time is not fitted again and again: after
+    CONTENT_ROUNDS its models fail, saying why."""
+    from distributed import LocalCluster
+
+    from brdffit.batch import job
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    d, opts = _two_lambert_tables(tmp_path)
+    (d / "m1.binary").unlink()
+    table = d / "m0.binary"
+    real_fit_table = job.fit_table
+    reads = tmp_path / "reads"  # a file: the task is a copy of this function
+    reads.mkdir()
+
+    def rewriting_fit_table(path, request, item, *args):
+        n = len(os.listdir(reads))
+        (reads / str(n)).touch()
+        merl.write(path, make_table("lambert", {"kd": [0.1 + 0.01 * n] * 3})[0])
+        return real_fit_table(path, request, item, *args)
+
+    monkeypatch.setattr(job, "fit_table", rewriting_fit_table)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      host="127.0.0.1", dashboard_address=None) as c:
+        summary = run_batch([str(table)], FitRequest(("lambert", "phong"), opts),
+                            tmp_path / "r.h5", scheduler=c.scheduler_address,
+                            progress=False, timeout_s=600)
+    assert len(os.listdir(reads)) == 2 + job.CONTENT_ROUNDS
+    assert not summary.ok and summary.failed_fits
+    assert all("the file changed while the batch fitted it" in why
+               for _, _, why in summary.failed_fits)

@@ -268,15 +268,23 @@ def _run_on_dask(client, tasks: list[_Task], request: FitRequest,
     cannot be stopped, and a whole table's models ran on for minutes after the
     client had gone. A table's tasks are sent to one worker first, which keeps the
     table it read for the next model's task.
+
+    Each task reads the table itself, so a file rewritten during the batch can give
+    its models different content. The store keeps one content per table (the last
+    read), and dropped the fits of the other without a word: where a table's fits
+    disagree, the file is hashed again and every model not fitted to what it holds
+    now is fitted again (:data:`CONTENT_ROUNDS` times at most, then failed, saying why).
     """
     from distributed import as_completed
 
     futures = {}  # future -> (task, its models)
     left: dict[str, int] = {}  # table path -> its fits not yet returned
-    checked: set[str] = set()  # tables whose content was compared with the plan's
     tables_read: dict[str, dict] = {}  # table path -> a worker's record of reading it
+    # table path -> model -> the content (sha256) its fit read; the plan's finished
+    # models count as fits of the content it hashed
+    fitted = {t.path: dict.fromkeys(t.done_models, t.expected_sha256) for t in tasks}
+    rounds: dict[str, int] = {}  # table path -> times its models were refitted for a change
 
-    grouped: set[str] = set()  # tables whose auto candidates went out as one task
     wire, model_names = request.to_dict(), list(request.fitted_models)
     options = request.fit_record()
 
@@ -287,8 +295,6 @@ def _run_on_dask(client, tasks: list[_Task], request: FitRequest,
     home_of = {t.path: homes[i % len(homes)] for i, t in enumerate(tasks)} if homes else {}
 
     def submit(t: _Task, item: list[str]):
-        if request.auto:
-            grouped.add(t.path)
         home = home_of.get(t.path)  # none where no worker had joined yet
         where = {} if home is None else {"workers": [home], "allow_other_workers": True}
         fut = client.submit(fit_table, t.path, wire, item, None, (), pure=False, **where)
@@ -323,21 +329,60 @@ def _run_on_dask(client, tasks: list[_Task], request: FitRequest,
             sha = result["table"]["sha256"]
             if result["table"]["status"] == "ok":
                 tables_read[t.path] = result["table"]
-            if t.path not in checked and sha is not None:
-                checked.add(t.path)
-                if sha != t.expected_sha256:
-                    # The file changed since the plan hashed it: the fits it counted
-                    # as done describe other content, so they are made again.
-                    redo = [m for m in t.done_models
-                            if not request.auto or t.path not in grouped]
-                    for again in work_items(request, redo):
-                        pending.add(submit(t, again))
+            if sha is not None:
+                fitted[t.path].update(dict.fromkeys(item, sha))
+                if len(set(fitted[t.path].values())) > 1:
+                    # The file changed since the plan hashed it, or between two of its
+                    # tasks' reads: what it holds now decides which fits stand.
+                    result = _refit_changed(
+                        t, result, fitted[t.path], rounds, futures,
+                        lambda again, t=t: pending.add(submit(t, again)), request)
             left[t.path] -= 1
+            if result is None:
+                continue  # a fit of content gone: fitted again, or failed, above
             yield {**result, "table_done": left[t.path] == 0}
     finally:
         # Interrupted (Ctrl-C, SIGTERM, an error): nothing of this batch stays on
         # the cluster but the fits already running.
         client.cancel(list(futures))
+
+
+#: How many times a table's models are fitted again for a file rewritten during the
+#: batch, before they are failed: a file written to all the time is not a measurement.
+CONTENT_ROUNDS = 3
+
+
+def _refit_changed(t: _Task, result: dict, fitted: dict[str, str | None],
+                   rounds: dict[str, int], futures: dict, resubmit, request) -> dict | None:
+    """Sends again the models of ``t`` whose fits read other content than its file
+    holds now (those still running are checked as they return). Returns ``result``
+    to store, or None where it is itself a fit of content gone: stored, its table's
+    record would drop the fits of what the file holds now. Past :data:`CONTENT_ROUNDS`
+    the models are not sent again but failed, saying why."""
+    now_sha = file_sha256(t.path)
+    running = {m for fut_t, fut_item in futures.values() if fut_t.path == t.path
+               for m in fut_item}
+    stale = [m for m, sha in fitted.items() if sha != now_sha and m not in running]
+    gone = result["table"]["sha256"] != now_sha
+    if not stale:
+        return None if gone else result
+    rounds[t.path] = rounds.get(t.path, 0) + 1
+    if rounds[t.path] > CONTENT_ROUNDS:
+        why = (f"the file changed while the batch fitted it ({CONTENT_ROUNDS} times "
+               "over): run the batch again once it is written")
+        fits = [f for f in result["fits"] if f["model"] not in stale]
+        fits += [asdict(FitRecord(path=t.path, model=m, sha256=now_sha,
+                                  options=request.fit_record(), status="failed",
+                                  message=why, worker=worker_name(), finished_at=now()))
+                 for m in stale]
+        for m in stale:
+            fitted[m] = now_sha  # failed, for what the file holds now: not sent again
+        return {**result, "table": {**result["table"], "sha256": now_sha}, "fits": fits}
+    for again in work_items(request, stale):
+        for m in again:
+            fitted.pop(m, None)  # running again: decided when it returns
+        resubmit(again)
+    return None if gone else result
 
 
 def run_batch(
