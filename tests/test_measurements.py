@@ -221,6 +221,17 @@ def test_hdf5_needs_its_units(tmp_path):
         f["rgb"] = np.ones((3, 3))
     with pytest.raises(MeasurementsError, match="has no 'units' attribute"):
         read_measured(p)
+    # the file's unit and a dataset's own that disagree: refused, as a CSV's are (the
+    # dataset's won, unsaid); that agree, in other words: read
+    with h5py.File(p, "a") as f:
+        f.attrs["units"] = "degrees"
+        f["theta_i"].attrs["units"] = "radians"
+    with pytest.raises(MeasurementsError, match="dataset theta_i: two units .its own 'units' "
+                                                "'radians', the file's 'degrees'"):
+        read_measured(p)
+    with h5py.File(p, "a") as f:
+        f["theta_i"].attrs["units"] = "deg"
+    assert read_measured(p).n == 3
     with pytest.raises(MerlFormatError, match="No such file"):
         read_measured(tmp_path / "missing.csv")
     binary = tmp_path / "text.binary"
@@ -339,8 +350,23 @@ def test_a_decimal_comma_is_read_where_the_cells_are_split_otherwise(tmp_path, d
     both.write_text("# angles: degrees\n"
                     f"{delimiter.join(COLUMNS.split(','))}{delimiter}r{delimiter}g{delimiter}b\n"
                     + delimiter.join(["10", "0", "1.020,5", "0", "0,5", "0,5", "0,5"]) + "\n")
-    with pytest.raises(MeasurementsError, match="row 3 is not all numbers"):
+    with pytest.raises(MeasurementsError, match="row 3 is not all numbers: .*'1.020,5' has "
+                                                "a decimal comma, and row 3 a point"):
         read_measured(both)
+    # the row named is the first that cannot be read, and the reason is the point elsewhere
+    both.write_text("# angles: degrees\n"
+                    f"{delimiter.join(COLUMNS.split(','))}{delimiter}r{delimiter}g{delimiter}b\n"
+                    + delimiter.join(["10", "0", "20,5", "0", "0,5", "0,5", "0,5"]) + "\n"
+                    + delimiter.join(["10", "0", "1.020,5", "0", "0,5", "0,5", "0,5"]) + "\n")
+    with pytest.raises(MeasurementsError, match="row 3 is not all numbers: .*'20,5' has a "
+                                                "decimal comma, and row 4 a point"):
+        read_measured(both)
+    quoted = tmp_path / "quoted.csv"
+    quoted.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                      '"10","0","20,5","0","0,5","0,5","0,5"\n')
+    with pytest.raises(MeasurementsError, match="'20,5' has a decimal comma in a file whose "
+                                                "cells are split by commas"):
+        read_measured(quoted)
 
 
 def test_an_astm_file_split_by_blanks_or_tabs_reads_as_one_split_by_commas(tmp_path):
@@ -465,6 +491,33 @@ def test_samples_in_one_bin_are_averaged_by_their_sigma():
     assert table.rgb[:, table.mask][0, 0] == pytest.approx(4.0, rel=1e-5)
     plain, _ = Measurements(wi, wi, samples.rgb).to_table()
     assert plain.rgb[:, plain.mask][0, 0] == pytest.approx(7.0 / 3.0)
+
+
+def test_only_sigmas_ratios_weigh_however_small_or_large_they_are():
+    """A uniform sigma of 1e-160, squared, overflowed the weights to inf (a fit of NaNs)
+    and one of 1e-200 underflowed to 0 (sigma silently ignored): weights and binned
+    means depend on sigma's ratios alone."""
+    from brdffit.fitting.samples import sample_weights
+
+    rng = np.random.default_rng(5)
+    wi = np.array([[0.0, 0.0, 1.0]] * 40)
+    wo = np.array([[np.sin(t), 0.0, np.cos(t)] for t in np.linspace(0.0, 1.2, 40)])
+    rgb = rng.uniform(0.05, 2.0, (40, 3))
+    sigma = rng.uniform(0.5, 2.0, (40, 3))
+
+    def weights(scale):
+        w = sample_weights(Measurements(wi, wo, rgb, sigma=sigma * scale))
+        return w / w.sum()
+
+    def binned(scale):
+        table, _ = Measurements(wi, wo, rgb, sigma=sigma * scale).to_table()
+        return table.rgb[:, table.mask]
+
+    for scale in (1e-200, 1e-160, 1e160):
+        np.testing.assert_allclose(weights(scale), weights(1.0), rtol=1e-12)
+        np.testing.assert_allclose(binned(scale), binned(1.0), rtol=1e-12)
+    uniform = sample_weights(Measurements(wi, wo, rgb))
+    assert not np.allclose(weights(1e-200), uniform / uniform.sum())
 
 
 def test_a_fit_of_samples_recovers_their_material(tmp_path):
@@ -634,6 +687,23 @@ def test_radians_said_to_be_degrees_are_refused(tmp_path):
              **dict(zip(("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True)))
     with pytest.raises(MeasurementsError, match="said to be in degrees"):
         read_measured(h5)
+    # polar angles in radians beside azimuths in degrees (a lab's habit): fitted as
+    # degrees and called good; and a short list, fitted with lambert
+    mixed = rows.copy()
+    mixed[:, [1, 3]] = np.degrees(mixed[:, [1, 3]]) + 40.0
+    p.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in mixed) + "\n")
+    with pytest.raises(MeasurementsError, match="polar angles in radians beside azimuths "
+                                                "in degrees"):
+        read_measured(p)
+    p.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in rows[:5]) + "\n")
+    with pytest.raises(MeasurementsError, match="all 5 samples' polar angles"):
+        read_measured(p)
+    # named per column, the same numbers are read
+    p.write_text("theta_i_rad,phi_i_deg,theta_o_rad,phi_o_deg,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in mixed) + "\n")
+    assert read_measured(p).n == 100
 
 
 def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path):

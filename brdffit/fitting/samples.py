@@ -141,11 +141,15 @@ def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> 
     w = np.ones(meas.n)
     if meas.sigma is not None:
         cos_i = meas.wi[:, 2][:, None]
-        sigma = meas.sigma
-        positive = sigma[usable & np.all(sigma > 0, axis=1)]
+        positive = meas.sigma[usable & np.all(meas.sigma > 0, axis=1)]
+        # Only the weights' ratios count (they are normalised), so sigma is taken
+        # relative to its median: squared, a uniform sigma of 1e-160 overflowed the
+        # weights to inf (a fit of NaNs) and one of 1e-170 underflowed to 0 (ignored).
+        scale = float(np.median(positive)) if positive.size else 1.0
+        sigma = meas.sigma / scale
         # a sigma of 0 (the readers refuse one; Measurements built directly may hold it)
         # is the most certain, not infinitely so: floored as binning does
-        floor = float(np.min(positive, initial=1.0)) * 1e-3 if positive.size else 1e-30
+        floor = float(np.min(positive, initial=scale)) / scale * 1e-3
         x = meas.rgb * cos_i
         var = np.mean((np.maximum(sigma, floor) * cos_i / (1.0 + x)) ** 2, axis=1)
         typical = float(np.median(var[usable])) if usable.any() else 0.0

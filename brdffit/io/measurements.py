@@ -233,8 +233,12 @@ class Measurements:
         if self.sigma is None:
             w = np.ones_like(self.rgb)
         else:  # 1 / sigma^2; a sigma of 0 is the most certain in its bin
-            floor = max(float(np.min(self.sigma[self.sigma > 0], initial=1.0)) * 1e-3, 1e-30)
-            w = 1.0 / np.maximum(self.sigma, floor) ** 2
+            # relative to sigma's median (only ratios count in a bin's mean): squared, a
+            # sigma of 1e-160 overflowed to inf (NaN means), one of 1e-170 underflowed
+            positive = self.sigma[self.sigma > 0]
+            scale = float(np.median(positive)) if positive.size else 1.0
+            floor = float(np.min(positive, initial=scale)) / scale * 1e-3
+            w = 1.0 / np.maximum(self.sigma / scale, floor) ** 2
         total = np.stack([np.bincount(flat, w[:, c] * self.rgb[:, c], n_bins) for c in range(3)])
         weight = np.stack([np.bincount(flat, w[:, c], n_bins) for c in range(3)])
         count = np.bincount(flat, minlength=n_bins)

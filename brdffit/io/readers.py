@@ -234,28 +234,31 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
 
 
 #: Fewer samples than this are not judged by :func:`_radians_said_to_be_degrees`.
-_JUDGED_FROM = 20
+_JUDGED_FROM = 3
 
 
 def _radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
                                 source: str) -> None:
-    """Refuses angles in degrees (``scales``) whose numbers all fit radians' ranges:
-    every polar angle within pi/2 and every azimuth within 2 pi. Read as degrees, the
-    whole list sits within 1.6 degrees of the normal, where no lobe can be fitted; the
-    other mistake (degrees said to be radians) is refused by the angles' bounds."""
+    """Refuses polar angles in degrees (``scales``) whose numbers all fit radians' range,
+    pi/2: read as degrees, the whole list sits within 1.6 degrees of the normal, where
+    no lobe can be fitted. The azimuths are not asked: a lab that writes its polar angles
+    in radians and its azimuths in degrees had its fit called good, ks 0.0004 for 0.8.
+    The other mistake (degrees said to be radians) is refused by the angles' bounds."""
     n = raw[0].size
-    if n < _JUDGED_FROM or any(scale == 1.0 for scale in scales):
+    if n < _JUDGED_FROM or any(scale == 1.0 for scale in scales[0::2]):
         return
     polar, azimuth = np.abs(np.concatenate(raw[0::2])), np.abs(np.concatenate(raw[1::2]))
-    if (np.all(polar <= np.pi / 2 + HORIZON_SLACK) and np.all(azimuth <= 2 * np.pi + 1e-6)
-            and np.max(polar) > 0.2):
+    if np.all(polar <= np.pi / 2 + HORIZON_SLACK) and np.max(polar) > 0.2:
+        mixed = ("" if np.all(azimuth <= 2 * np.pi + 1e-6) else
+                 "; the azimuths reach beyond 2 pi, as degrees do: polar angles in radians "
+                 "beside azimuths in degrees?")
         raise MeasurementsError(
             source, f"the angles are said to be in degrees, but all {n} samples' polar "
-                    f"angles are within {np.pi / 2:.4f} and azimuths within "
-                    f"{2 * np.pi:.4f}: radians' ranges (in degrees, every direction "
-                    "within 1.6 degrees of the normal); if they are radians, name the "
-                    "columns _rad (or '# angles: radians', an HDF5 units attribute "
-                    "'radians')")
+                    f"angles are within {np.pi / 2:.4f}, radians' range (as degrees, every "
+                    f"direction would be within 1.6 degrees of the normal){mixed}. If the "
+                    "polar angles are radians, name their columns _rad (theta_i_rad beside "
+                    "phi_i_deg is read), or put '# angles: radians' before the header (HDF5: "
+                    "a units attribute 'radians')")
 
 
 def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
@@ -306,8 +309,26 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
             out[j, used] = [float(c.replace(",", ".") if comma else c) for c in read]
         except ValueError:
             raise MeasurementsError(source, f"row {number + 1} is not all numbers: "
-                                            f"{line.strip()[:80]!r}") from None
+                                            f"{line.strip()[:80]!r}"
+                                    + _comma_why(read, lines, delimiter, comma)) from None
     return out, np.array([n for n, _ in lines])
+
+
+def _comma_why(cells: list[str], lines: list[tuple[int, str]], delimiter: str | None,
+               comma: bool) -> str:
+    """Why a row with a decimal comma was not read (:func:`_decimal_comma`); "" if its
+    cells hold none. The row alone said only that it was not numbers."""
+    bad = next((c for c in cells if "," in c), None)
+    if bad is None or comma:
+        return ""
+    if delimiter in (";", "\t"):
+        k, point = next((k, t) for k, t in lines if "." in t)
+        return (f": {bad.strip()!r} has a decimal comma, and row {k + 1} a point "
+                f"({point.strip()[:40]!r}); with both, a point may be a thousands "
+                "separator, which is not guessed at: write the numbers with one decimal mark")
+    split = {",": "commas", None: "blanks"}.get(delimiter, repr(delimiter))
+    return (f": {bad.strip()!r} has a decimal comma in a file whose cells are split by "
+            f"{split}: split them by semicolons or tabs, or write decimal points")
 
 
 def _cells(line: str, delimiter: str | None, source: str, number: int) -> list[str]:
@@ -605,12 +626,19 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         raw, scales = [], []
         for canonical in ANGLES:
             name = named[canonical]
-            unit = _dataset(f, name, source).attrs.get("units", f.attrs.get("units"))
-            if unit is None:
+            own, shared = _dataset(f, name, source).attrs.get("units"), f.attrs.get("units")
+            if own is None and shared is None:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
                                                 "(degrees or radians), nor has the file")
+            stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
+            scale = _unit_scale(stated[0], source)
+            if len(stated) == 2 and _unit_scale(stated[1], source) != scale:
+                # as a CSV's two statements of one column's unit are: which one the
+                # numbers are in would be a guess (the dataset's won, unsaid)
+                raise MeasurementsError(source, f"dataset {name}: two units (its own 'units' "
+                                                f"{stated[0]!r}, the file's {stated[1]!r})")
             raw.append(_one_per_sample(f, name, source))
-            scales.append(_unit_scale(_attr_text(unit, "units", source), source))
+            scales.append(scale)
         _radians_said_to_be_degrees(raw, scales, source)
         angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
         provenance = _stored_provenance(f.attrs.get("provenance"))
