@@ -7,10 +7,11 @@ import subprocess
 import sys
 
 
-def run(*args: str, timeout: float = 300, cwd=None) -> subprocess.CompletedProcess:
-    """``python -m <args>`` with this interpreter; stdout/stderr captured as text."""
+def run(*args: str, timeout: float = 300, cwd=None, stdin=None) -> subprocess.CompletedProcess:
+    """``python -m <args>`` with this interpreter; stdout/stderr captured as text;
+    ``stdin``: an open file for its standard input."""
     env = dict(os.environ)
     return subprocess.run(
         [sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout,
-        env=env, cwd=cwd,
+        env=env, cwd=cwd, stdin=stdin,
     )

@@ -32,6 +32,12 @@ def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
     assert "fitted at their own directions" in r.stderr  # said before the fit
     assert out["error"]["held_out_log_rmse"] >= 0 and out["quality"]["basis"] == "held_out"
     assert out["params"]["alpha"] == pytest.approx(SAMPLED["alpha"], rel=0.05)
+    # '-': the same file from standard input (it was "-: cannot read: No such file")
+    with open(astm_file, "rb") as f:
+        piped = run("brdffit.cli", "fit", "-", "--model", "ggx", "--samples", "4096",
+                    "--json", stdin=f)
+    assert piped.returncode == 0, piped.stderr
+    assert json.loads(piped.stdout)["params"] == out["params"]
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
     r = run("brdffit.cli", "fit", str(bad), "--model", "ggx")

@@ -152,6 +152,8 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1_0,1,1\n",
      "row 2 is not all numbers"),
     # value and sigma columns that would be guessed at or dropped are refused
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,x,y,z\n10,0,20,0,1,1,1\n",
+     "columns x, y, z: CIE XYZ"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,value\n10,0,20,0,1,1,1\n",
      "value columns of two kinds: r, g (RGB) and value (one channel)"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma_r,sigma_g\n"

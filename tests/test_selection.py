@@ -518,6 +518,13 @@ def test_a_compile_notice_during_autos_progress_goes_on_a_line_of_its_own(capsys
     assert lines[0] == "auto: [1/2] fitting lambert ..."
     assert lines[1].startswith("brdffit: first use of these options on this machine: compiling")
     assert lines[2:] == ["auto: [1/2] fitting lambert ... log_rmse 0.25 in 1.5 s"]
+    # a sample list's candidates are ranked by their held-out error, and say so
+    print_progress(1, 2, "ggx", None)
+    print_progress(1, 2, "ggx", {"status": "ok", "converged": True, "log_rmse": 0.31,
+                                 "log_rmse_basis": "held_out", "fit_time_s": 2.0,
+                                 "result": "successful"})
+    assert capsys.readouterr().err == ("auto: [2/2] fitting ggx ... held-out log_rmse 0.31 "
+                                       "in 2.0 s\n")
 
 
 def _auto_job_answers_model_auto_with_its_choice(results: list[dict]) -> None:

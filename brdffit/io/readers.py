@@ -178,6 +178,13 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out["values"] = rgb
         out["sigma"] = _sigma_columns(seen, source, rgb=True)
     elif len(one) == 1:
+        if "y" in seen and "x" in seen and "z" in seen:
+            # CIE XYZ: y is its luminance, but x and z were dropped unsaid and a coloured
+            # material fitted grey
+            raise MeasurementsError(
+                source, "columns x, y, z: CIE XYZ? A fit reads linear RGB (r, g, b: Rec. "
+                        "709 primaries) or one grey channel: convert XYZ to linear sRGB, or "
+                        "keep y alone (named value) to fit the luminance")
         out["values"] = one
         out["sigma"] = _sigma_columns(seen, source, rgb=False)
     else:
