@@ -125,6 +125,28 @@ def test_a_table_in_other_units_is_fitted_as_given_and_said(tables):
     assert not any("in 1/sr?" in n for n in fit(tables["20% noise"], "ggx").notes)
 
 
+def test_a_table_measured_at_its_peak_alone_is_not_told_its_units_are_wrong():
+    """40 bins at theta_h = theta_d = 0 and nothing else: the diffuse floor was read
+    from the peak ("an albedo of 12.2: are its values in 1/sr?"), and the sphere, none
+    of whose pixels it measures, read "PSNR nan dB"; its verdict says why it is poor."""
+    from brdffit.cli.fit import format_result
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    table = make_table("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6],
+                               "alpha": 0.1, "f0": 0.6})[0]
+    mask = np.zeros(table.mask.shape, bool)
+    mask[0, 0, :40] = True
+    peak = merl.MerlTable.from_values(np.asarray(table.rgb), mask)
+    r = fit(peak, "ggx")
+    assert not any("in 1/sr?" in n for n in r.notes)
+    assert not any("1/sr" in step["try"] for step in r.quality["next"])
+    assert r.quality["verdict"] == "poor"
+    assert "the table measures none of the sphere's pixels" in r.quality["reason"]
+    text = format_result(r)
+    assert "nan" not in text and "sphere PSNR n/a" in text
+
+
 def test_a_metal_is_found_from_the_default_start_count():
     """A near-mirror glTF metal: the best-scored start alone ended in a dark dielectric
     (metallic 1e-8, 11 dB); the best start of each metallic value is refined too, and

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import threading
 
@@ -158,10 +159,11 @@ def format_result(r: FitResult) -> str:
     whole = "every sample" if on_samples else "full table"
     on = "scene" if r.scene is not None else whole
     held = (r.quality or {}).get("basis") == "held_out"
+    psnr = _g(e.get("psnr_db"), ".1f")
     lines.append(f"  error ({on}): log_rmse {e['log_rmse']:.4g}   cube_root_rmse "
                  f"{_g(e.get('cube_root_rmse'))}   rmse_cos {e['rmse_cos']:.4g} 1/sr   "
                  f"rel_peak_error {_g(e.get('rel_peak_error'))}   "
-                 f"{'held-out' if held else 'sphere'} PSNR {_g(e.get('psnr_db'), '.1f')} dB")
+                 f"{'held-out' if held else 'sphere'} PSNR {psnr}{'' if psnr == 'n/a' else ' dB'}")
     if "held_out_log_rmse" in e:
         lines.append(f"  held-out error ({r.input['held_out']['folds']}-fold): log_rmse "
                      f"{e['held_out_log_rmse']:.4g}   cube_root_rmse "
@@ -210,7 +212,9 @@ def describe_coverage(measured_input: dict) -> list[str]:
 
 
 def _g(x, fmt: str = ".4g") -> str:
-    return "n/a" if x is None else format(x, fmt)
+    # a figure not measured: None from a stored result, NaN from a fresh one (it
+    # printed "sphere PSNR nan dB")
+    return "n/a" if x is None or not math.isfinite(x) else format(x, fmt)
 
 
 def _with_error(x: float, se: float | None, at_bound: bool) -> str:

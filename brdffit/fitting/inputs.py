@@ -169,7 +169,10 @@ def _too_bright(prep: Prepared, what: str = "table",
     :data:`SUSPECT_ALBEDO`: values in another unit, which the fit follows silently
     (a list in percent fitted kd [20, 10, 5], judged good). ``why``: the usual cause."""
     hints = prep.hints
-    if hints is None or not np.all(np.isfinite(hints.kd)) or hints.kd.max() <= SUSPECT_ALBEDO:
+    if (hints is None or not hints.kd_from_mid_angles or not np.all(np.isfinite(hints.kd))
+            or hints.kd.max() <= SUSPECT_ALBEDO):
+        # (a floor read from bins near the highlight, where the table has no others, is
+        # the highlight: it told a table measured at its peak alone to divide by 1500)
         return [], []
     said = (f"the {what}'s diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
             "mid-angle level; no surface reflects more than it receives, 1): are its values "

@@ -71,7 +71,11 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
     list's held-out predictions (``brdffit.fitting.samples``), with the same thresholds."""
     figure = FIGURES[basis]
     if not _finite(render_psnr_db):
-        return "poor", f"the fit's {figure} could not be compared (no finite PSNR)"
+        # judged poor: a look nothing measures is not vouched for
+        return "poor", (f"the fit's {figure} could not be compared (no finite PSNR)"
+                        + (": the table measures none of the sphere's pixels (its bins lie "
+                           "elsewhere), so nothing here judges how the fit looks"
+                           if basis == "sphere" else ""))
     if not _finite(brightness_stops):
         return "poor", (f"the fit's {figure} is black where the measurement's is not, or "
                         "the other way round")

@@ -43,11 +43,20 @@ def _diffuse_region() -> np.ndarray:
     return np.flatnonzero(sel)[::3]
 
 
+#: Fewer usable bins far from the highlight than this, and :func:`diffuse_estimate`
+#: reads every usable bin instead.
+MID_ANGLE_BINS = 50
+
+
+def _mid_angle_usable(usable: np.ndarray) -> np.ndarray:
+    idx = _diffuse_region()
+    return idx[usable[idx]]
+
+
 def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
     """kd estimate (3,) from bins far from the highlight."""
-    idx = _diffuse_region()
-    idx = idx[usable[idx]]
-    if idx.size < 50:  # tiny or oddly masked table: use what there is
+    idx = _mid_angle_usable(usable)
+    if idx.size < MID_ANGLE_BINS:  # tiny or oddly masked table: use what there is
         idx = np.flatnonzero(usable)
     values = table.rgb.reshape(3, -1)[:, idx]
     return np.pi * np.percentile(values, 20, axis=1)
@@ -59,10 +68,14 @@ class TableHints(NamedTuple):
 
     kd: np.ndarray  # diffuse_estimate
     peak: int  # brdffit.io.grid.peak_bin
+    # whether kd was read far from the highlight (else from whatever bins there are: a
+    # table measured at its peak alone read its peak as a diffuse floor)
+    kd_from_mid_angles: bool = True
 
 
 def table_hints(table: MerlTable, usable: np.ndarray) -> TableHints:
-    return TableHints(diffuse_estimate(table, usable), peak_bin(table, usable))
+    return TableHints(diffuse_estimate(table, usable), peak_bin(table, usable),
+                      _mid_angle_usable(usable).size >= MID_ANGLE_BINS)
 
 
 def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray,
