@@ -412,7 +412,8 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
                                    b"10\xb0,0,20,0,1,1,1\n"),
                        ("png.csv", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")):
         (tmp_path / name).write_bytes(data)
-        with pytest.raises(MeasurementsError, match=f"{name}: not a text file"):
+        with pytest.raises(MeasurementsError, match=f"{name}: (not a text file|a PNG image, "
+                                                    "not a text sample list)"):
             read_measured(tmp_path / name)
 
 
@@ -672,6 +673,18 @@ def test_text_as_excel_and_numpy_write_it(tmp_path):
     (tmp_path / "nomark.csv").write_bytes("\n".join(lines).encode("utf-16-le"))
     with pytest.raises(MeasurementsError, match="holds NUL bytes: binary, or UTF-16 without"):
         read_measured(tmp_path / "nomark.csv")
+    # a file named as another layout is read as what it is, or named by its first bytes
+    (tmp_path / "astm.csv").write_bytes((tmp_path / "s.astm").read_bytes())
+    np.testing.assert_array_equal(read_measured(tmp_path / "astm.csv").rgb, astm.rgb)
+    (tmp_path / "h5.csv").write_bytes((tmp_path / "s.h5").read_bytes())
+    assert read_measured(tmp_path / "h5.csv").provenance["format"] == "hdf5"
+    table = merl.MerlTable.from_values(np.full((3, 90, 90, 180), 0.1))
+    merl.write(tmp_path / "table.csv", table)
+    assert isinstance(read_measured(tmp_path / "table.csv"), merl.MerlTable)
+    (tmp_path / "book.csv").write_bytes(b"PK\x03\x04" + bytes(60))
+    with pytest.raises(MeasurementsError, match="a zip archive, not a text sample list .by its "
+                                                "first bytes. .an Excel .xlsx workbook"):
+        read_measured(tmp_path / "book.csv")
 
 
 def test_radians_said_to_be_degrees_are_refused(tmp_path):
@@ -852,7 +865,8 @@ def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, mo
     assert str(e.value) == (f"{bomb}: its datasets declare {n:,} samples: more than a sample "
                             f"list read here ({n - 1:,}; a MERL table has 1,458,000 bins); bin "
                             "it onto the MERL grid or thin it first")
-    assert readers.declared_samples(bomb) == n and readers.declared_samples(bomb, "b.csv") is None
+    # named .csv, an HDF5 file is read as one, and so weighed as one
+    assert readers.declared_samples(bomb) == readers.declared_samples(bomb, "b.csv") == n
     # values declaring more rows than the angles: weighed too
     few = _h5(tmp_path / "few.h5")
     with h5py.File(few, "a") as f:

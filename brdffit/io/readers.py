@@ -376,6 +376,12 @@ def _text(path: Path) -> str:
             return data.decode("utf-16")
         except UnicodeDecodeError:
             raise refused from None
+    kind = next((what for magic, what in merl.OTHER_FORMATS if data.startswith(magic)), None)
+    if kind is not None:  # it said "holds NUL bytes: binary, or UTF-16 ..." of a workbook
+        hint = (" (an Excel .xlsx workbook? save the sheet as CSV)" if kind == "a zip archive"
+                else " (decompress it first)" if kind == "a gzip archive" else "")
+        raise MeasurementsError(str(path), f"{kind}, not a text sample list (by its first "
+                                           f"bytes){hint}")
     if b"\x00" in data:
         # binary, or UTF-16 without a mark: no text read here holds a NUL (it decoded
         # as UTF-8, and its header was quoted back with a NUL between every letter)
@@ -534,8 +540,9 @@ def _same_units(names: list[str], units: list[str], stated: str | None, source: 
 
 
 def read_csv(path: str | os.PathLike) -> Measurements:
-    """A CSV or TSV file with a header row (module docstring)."""
-    return _csv_samples(_text(Path(path)), str(path))
+    """A CSV or TSV file with a header row (module docstring); an ASTM file named .csv
+    is read as one (its VARS line was refused as a header without theta_i)."""
+    return read_text_samples(path)
 
 
 def _csv_samples(text: str, source: str) -> Measurements:
@@ -852,11 +859,13 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
     reader = READERS.get(Path(name or path).suffix.lower())
     if reader is None:
         reader = _by_content(path)
-    elif reader is merl.read:
-        with open(path, "rb") as f:  # a sample list named .binary: read as what it is
-            head = f.read(8)
+    else:
+        with open(path, "rb") as f:  # a file named as another layout: read as what it is
+            head = f.read(merl.HEADER_BYTES)
         if head.startswith(HDF5_SIGNATURE):
             return read_hdf5
+        if head == np.asarray(merl.SHAPE, "<i4").tobytes():  # a MERL table named .csv
+            return merl.read
     return reader
 
 
