@@ -224,7 +224,8 @@ def _changed_since_the_fit(result: FitResult, table: MerlTable) -> list[str]:
         return []
     return [f"fidelity: {table.source} does not hold the table that was fitted: the fit's "
             f"own log_rmse on it is {now:.4g}, {reported:.4g} when it was fitted (the file "
-            "changed since?); every fidelity figure is to the file as it is now"]
+            "changed since, or the fit's parameters were edited?); every fidelity figure is "
+            "to the file as it is now"]
 
 
 def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLike | None = None,

@@ -30,7 +30,7 @@ def energy_report(model: str, params: dict) -> tuple[dict, list[str]]:
         where = (f"at {angles[0]:g} deg" if len(angles) == 1
                  else f"from {angles[0]:g} to {angles[-1]:g} deg")
         warnings.append(
-            f"energy: the {model} material reflects up to {a[i].max():.3f} of the light "
+            f"energy: the {model} material reflects up to {a[i].max():.4g} of the light "
             f"arriving at {THETA_I_DEG[i]:g} deg in {'RGB'[int(np.argmax(a[i]))]} "
             f"(directional albedo > 1 in {', '.join(channels)} {where} incidence): a "
             "renderer brightens it with every bounce; a fit with --physical "

@@ -216,9 +216,11 @@ class SampleInput:
     def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
         """What the list holds that the fit's reader should be told of (its coverage
         and binning are in the input block): values in another unit than 1/sr, as a
-        table's (:func:`_too_bright`), and rows that repeat another exactly."""
+        table's (:func:`_too_bright`), rows that repeat another exactly, and an azimuth
+        convention other than brdffit's."""
         notes, steps = _too_bright(prep, "sample list", SAMPLE_SCALES)
-        return notes + self._samples.duplicate_note(self.meas, prep), steps
+        return (notes + self._samples.duplicate_note(self.meas, prep),
+                self._samples.azimuth_convention_step(self.meas, prep) + steps)
 
     def refuse_too_few(self, model) -> None:
         """Refuses, before the preparation (binning, weights, the solver's data: ~5 s

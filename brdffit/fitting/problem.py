@@ -725,10 +725,10 @@ def full_table_metrics_of(
     todo = list(range(len(fits)))
     for dt in (dtype, jnp.float64):
         frame = _device_frames(jnp.dtype(dt).name)
-        totals, rel_peaks = _error_sums_of(
-            tuple(fits[i][0] for i in todo),
-            tuple(jnp.asarray(np.asarray(fits[i][1], dt)) for i in todo),
-            rgb, w, frame, peak)
+        with np.errstate(over="ignore"):  # what overflows dtype is measured again below
+            params = tuple(jnp.asarray(np.asarray(fits[i][1], dt)) for i in todo)
+        totals, rel_peaks = _error_sums_of(tuple(fits[i][0] for i in todo), params, rgb, w,
+                                           frame, peak)
         last = jnp.dtype(dt) == jnp.float64
         for i, total, rel_peak in zip(todo, totals, rel_peaks, strict=True):
             metrics = metrics_from_sums(total, rel_peak)

@@ -326,6 +326,46 @@ def duplicate_note(meas: Measurements, prep: Prepared) -> list[str]:
             "one measurement written more than once, drop the copies"]
 
 
+#: :func:`azimuth_convention_step`: samples lit from at least this far off the normal
+#: (degrees; nearer it the mirror and the back-scatter directions coincide); how many
+#: samples nearest each direction are compared, and how much brighter those at the
+#: back-scatter direction must be.
+CONVENTION_MIN_THETA_I = 15.0
+CONVENTION_NEAREST = 5
+CONVENTION_RATIO = 3.0
+
+
+def azimuth_convention_step(meas: Measurements, prep: Prepared) -> list[dict]:
+    """A next step where a list's samples nearest the back-scatter direction (the view
+    at the light) are far brighter than those nearest the mirror direction, and its
+    brightest lie nearer the first: the shape of a list written with the other azimuth
+    convention (phi_o measured from the specular plane, 180 degrees from brdffit's).
+    Such a list was fitted with every lobe parameter at a bound and told to seek samples
+    near the mirror, which it has. A retroreflector looks so too: the step asks, it does
+    not turn the list."""
+    usable = (prep.weight > 0) & (meas.wi[:, 2] < np.cos(np.radians(CONVENTION_MIN_THETA_I)))
+    if usable.sum() < 10 * CONVENTION_NEAREST:
+        return []
+    wi, wo = meas.wi[usable], meas.wo[usable]
+    f = meas.rgb[usable] @ LUMINANCE
+    to_mirror = np.sum(wo * (wi * np.array([-1.0, -1.0, 1.0])), axis=1)  # cosines
+    to_back = np.sum(wo * wi, axis=1)
+    k = CONVENTION_NEAREST
+    at_mirror = np.median(f[np.argsort(-to_mirror)[:k]])
+    at_back = np.median(f[np.argsort(-to_back)[:k]])
+    top = f >= np.quantile(f, 0.98)
+    if not (at_back > CONVENTION_RATIO * at_mirror
+            and np.median(to_back[top]) > np.median(to_mirror[top])):
+        return []
+    why = (f"the {k} samples nearest the back-scatter direction (the view at the light) are "
+           f"{at_back / max(at_mirror, 1e-300):.3g} times as bright as the {k} nearest the "
+           "mirror direction, and the brightest lie nearer the first: a list whose phi_o "
+           "is measured from the specular plane (180 degrees from brdffit's, where phi_o = "
+           "phi_i + 180 is the mirror) reads so; so does a retroreflector")
+    return [{"try": "check the azimuth convention (add 180 degrees to phi_o where the "
+                    "list measures it from the specular plane)", "why": why, "gain_db": None}]
+
+
 def fold_of(groups: np.ndarray, folds: int, seed: int) -> np.ndarray:
     """Each solver sample's fold: a seeded random split of its direction pairs
     (``groups``, numbered in order of first appearance) into ``folds`` near-equal parts.
