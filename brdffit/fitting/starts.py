@@ -68,14 +68,15 @@ class TableHints(NamedTuple):
 
     kd: np.ndarray  # diffuse_estimate
     peak: int  # brdffit.io.grid.peak_bin
-    # whether kd was read far from the highlight (else from whatever bins there are: a
-    # table measured at its peak alone read its peak as a diffuse floor)
+    # whether kd was read from any bin far from the highlight (theta_h over ~29 deg): a
+    # table measured at its peak alone read its peak as a diffuse floor
     kd_from_mid_angles: bool = True
 
 
 def table_hints(table: MerlTable, usable: np.ndarray) -> TableHints:
-    return TableHints(diffuse_estimate(table, usable), peak_bin(table, usable),
-                      _mid_angle_usable(usable).size >= MID_ANGLE_BINS)
+    away = (_mid_angle_usable(usable).size >= MID_ANGLE_BINS
+            or bool(np.any(bin_grid().theta_h[usable] > 0.5)))  # a sparse list's bins
+    return TableHints(diffuse_estimate(table, usable), peak_bin(table, usable), away)
 
 
 def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray,
