@@ -346,3 +346,22 @@ def test_a_list_in_the_other_azimuth_convention_is_asked_about():
     # a fit of the turned list says it first
     r = fit(turned(glossy), "ggx", samples=4096, starts=1)
     assert r.quality["next"][0]["try"].startswith("check the azimuth convention")
+
+
+def test_rows_of_zeros_are_noted_and_a_list_on_the_horizon_says_so():
+    """A tenth of a list exactly 0 in every channel (a lab's mark of a sample not
+    measured) was fitted as black directions without a word; a list whose every view is
+    at 90 degrees read "only 0 usable samples" alone."""
+    meas, _ = sample_model("ggx", None, "uniform", 300, seed=5)
+    rgb = meas.rgb.copy()
+    rgb[::10] = 0.0
+    r = fit(Measurements(meas.wi, meas.wo, rgb, source="zeros.csv"), "lambert")
+    (note,) = [n for n in r.notes if "exactly 0" in n]
+    assert note.startswith("30 of the 300 usable samples are exactly 0 in every channel")
+    assert not any("exactly 0" in n for n in fit(meas, "lambert").notes)
+    flat = meas.wo.copy()
+    flat[:, 2] = 0.0
+    flat /= np.linalg.norm(flat, axis=1, keepdims=True)
+    with pytest.raises(FitInputError, match=r"only 0 usable samples \(measured, finite, above "
+                                            r"the horizon\): 300 of its 300 lie on the horizon"):
+        fit(Measurements(meas.wi, flat, meas.rgb, source="flat.csv"), "lambert")

@@ -216,10 +216,11 @@ class SampleInput:
     def findings(self, prep: Prepared) -> tuple[list[str], list[dict]]:
         """What the list holds that the fit's reader should be told of (its coverage
         and binning are in the input block): values in another unit than 1/sr, as a
-        table's (:func:`_too_bright`), rows that repeat another exactly, and an azimuth
-        convention other than brdffit's."""
+        table's (:func:`_too_bright`), rows that repeat another exactly, rows of zeros,
+        and an azimuth convention other than brdffit's."""
         notes, steps = _too_bright(prep, "sample list", SAMPLE_SCALES)
-        return (notes + self._samples.duplicate_note(self.meas, prep),
+        return (notes + self._samples.duplicate_note(self.meas, prep)
+                + self._samples.zero_note(self.meas, prep),
                 self._samples.azimuth_convention_step(self.meas, prep) + steps)
 
     def refuse_too_few(self, model) -> None:
@@ -228,9 +229,14 @@ class SampleInput:
         pairs for ``model``: the samples above the horizon, which a scene's weights only
         thin, so that what is refused here would be refused after it too."""
         usable = self._samples.on_the_surface(self.meas)
+        on_horizon = self.meas.n - int(usable.sum())
         _refuse_too_few(self, int(usable.sum()),
                         lambda: self._samples.distinct_pairs(self.meas, usable), model,
-                        scene=False)
+                        scene=False,
+                        # all 500 at theta_o 90 read "only 0 usable samples", no more
+                        dropped=(f"{on_horizon:,} of its {self.meas.n:,} lie on the horizon, "
+                                 "a light or view at 90 degrees, where f cos is 0"
+                                 if on_horizon else ""))
 
     def refuse_bound(self) -> None:
         raise FitInputError(
@@ -284,16 +290,17 @@ def _count(n: int, plural: str) -> str:
 
 
 def _refuse_too_few(source: TableInput | SampleInput, n_usable: int,
-                    distinct: Callable[[], int], model, scene: bool) -> None:
+                    distinct: Callable[[], int], model, scene: bool,
+                    dropped: str = "") -> None:
     """Refuses ``n_usable`` samples (or bins), or their ``distinct()`` direction pairs,
-    fewer than ``model`` needs: 4 per parameter."""
+    fewer than ``model`` needs: 4 per parameter. ``dropped``: what was left out, said."""
     what = source.what
     least = model.n_params * 4
     if n_usable < least:
         raise FitInputError(
             f"{source.source}: only {_count(n_usable, 'usable ' + what)} (measured, finite, "
-            f"above the horizon{', weighted by the scene' if scene else ''}); "
-            f"{model.name} needs at least {least}")
+            f"above the horizon{', weighted by the scene' if scene else ''})"
+            f"{': ' + dropped if dropped else ''}; {model.name} needs at least {least}")
     pairs = distinct()
     if pairs < least:
         # repeated measurements of one direction pair (or rows pasted twice) are one

@@ -366,6 +366,24 @@ def azimuth_convention_step(meas: Measurements, prep: Prepared) -> list[dict]:
                     "list measures it from the specular plane)", "why": why, "gain_db": None}]
 
 
+#: From this share of the usable samples exactly 0 in every channel, they are noted.
+ZERO_SHARE = 0.01
+
+
+def zero_note(meas: Measurements, prep: Prepared) -> list[str]:
+    """A note where many usable samples are exactly 0 in every channel: a lab's mark of a
+    sample not measured, often, which a fit takes for a black direction (a tenth of a
+    list so was fitted without a word); a dark material's noise floor clipped to 0
+    reads so too."""
+    usable = prep.weight > 0
+    zero = int(np.count_nonzero(usable & np.all(meas.rgb == 0.0, axis=1)))
+    if zero < max(2, ZERO_SHARE * np.count_nonzero(usable)):
+        return []
+    return [f"{zero:,} of the {int(np.count_nonzero(usable)):,} usable samples are exactly 0 "
+            "in every channel: fitted as black directions. If 0 marks a sample not "
+            "measured, leave those rows out"]
+
+
 def fold_of(groups: np.ndarray, folds: int, seed: int) -> np.ndarray:
     """Each solver sample's fold: a seeded random split of its direction pairs
     (``groups``, numbered in order of first appearance) into ``folds`` near-equal parts.
