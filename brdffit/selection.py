@@ -1023,10 +1023,17 @@ def _render_gains(chosen: dict, ok: list[dict]) -> list[tuple[str, str, float]]:
     """Every other candidate's render against the chosen one's, as measured gains
     (negative where it renders further off: ``next`` then does not advise it)."""
     here = _psnr(chosen)
-    return [(f"--model {row['model']}",
-             f"it renders {_psnr(row):.1f} dB against {here:.1f} dB on this table "
-             f"(auto's ranking); log_rmse {_fmt(row['log_rmse'])}",
-             _psnr(row) - here)
+
+    def words(row: dict) -> str:
+        held = " held-out" if row.get("log_rmse_basis") == "held_out" else ""
+        # a candidate that stopped short of its optimum renders where it stopped (a
+        # stalled ggx2 was advised for +1.2 dB without a word of it)
+        stopped = "" if row.get("converged", True) else (
+            f"; its fit did not converge ({row.get('result')}): refit it with more steps")
+        return (f"it renders {_psnr(row):.1f} dB against {here:.1f} dB on this table "
+                f"(auto's ranking);{held} log_rmse {_fmt(row['log_rmse'])}{stopped}")
+
+    return [(f"--model {row['model']}", words(row), _psnr(row) - here)
             for row in ok if row is not chosen and math.isfinite(here)
             and math.isfinite(_psnr(row))]
 

@@ -365,3 +365,42 @@ def test_rows_of_zeros_are_noted_and_a_list_on_the_horizon_says_so():
     with pytest.raises(FitInputError, match=r"only 0 usable samples \(measured, finite, above "
                                             r"the horizon\): 300 of its 300 lie on the horizon"):
         fit(Measurements(meas.wi, flat, meas.rgb, source="flat.csv"), "lambert")
+
+
+def test_a_lobe_that_is_all_the_reflectance_is_not_said_absent():
+    """gold-metallic-paint's Cornell samples fit kd 0 in every channel: the lobe is all
+    there is, yet its ks, trading off with f0 (the lights stop short of the Fresnel
+    rise), was within 2 standard errors of 0 and alpha read "no lobe", known to 0.002."""
+    meas = sample_material("gold-metallic-paint", "cornell", 2000, noise=0.02, seed=0)
+    r = fit(meas, "ggx")
+    assert max(r.params["kd"]) < 1e-6
+    seen = r.input["identifiability"]
+    assert not any(str(v).startswith("no lobe") for v in seen.values()), seen
+    assert seen["alpha"] == "determined"
+
+
+def test_a_sample_lists_next_steps_speak_of_samples_and_a_seen_peak_of_its_gap():
+    """A sample list has no bins: it was told its highlight was 'narrower than the
+    table's bins', of 'the table's brightest bin', and 'gain not measured on this
+    table'; its coverage called a peak 'seen' that a broad fitted lobe reached where a
+    sharp one would fall between the samples."""
+    from brdffit import models
+    from brdffit.cli.fit import describe_coverage
+    from brdffit.fitting.quality import next_steps
+
+    look = {"verdict": "poor", "basis": "held_out"}
+    kw = dict(model=models.get("ggx"), params={"alpha": 0.002}, loss="log", converged=True,
+              rel_peak_error=0.9)
+    on_samples = " ".join(s["try"] + s["why"] for s in next_steps(look, **kw))
+    assert "bins" not in on_samples and "table" not in on_samples, on_samples
+    assert "the brightest sample" in on_samples and "on these samples" in on_samples
+    on_table = " ".join(s["try"] + s["why"] for s in next_steps({**look, "basis": "sphere"},
+                                                                 **kw))
+    assert "narrower than the table's bins" in on_table
+    c = {"regions": {"held": 3, "of": 36, "deg": 15}, "theta_i_deg": [4, 85],
+         "theta_o_deg": [4, 85], "in_plane": False, "peak_seen": True, "min_theta_h_deg": 4.4}
+    (line,) = describe_coverage({"coverage": c})
+    assert line.endswith("specular peak seen (the fitted one; the nearest sample is 4.4 deg "
+                         "from a mirror configuration: a narrower highlight would go unseen)")
+    (line,) = describe_coverage({"coverage": {**c, "min_theta_h_deg": 0.3}})
+    assert line.endswith("specular peak seen")

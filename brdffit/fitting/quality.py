@@ -280,7 +280,11 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
     # under the render loss a lobe may narrow to catch a few pixels of a table whose
     # peak is broad (color-changing-paint3's ggx2: alpha1 0.0013, its log-loss ggx
     # 0.040): the table is blamed only where the fit is far off its peak too
-    if widths and min(widths) < NARROW_ALPHA and (loss != "render" or peak_far):
+    on_samples = look.get("basis") == "held_out"
+    # a sample list has no bins: fitted where it was measured, it resolves a lobe of any
+    # width its samples reach (a GGX alpha 0.005 list fits 0.00499, good)
+    if (widths and min(widths) < NARROW_ALPHA and (loss != "render" or peak_far)
+            and not on_samples):
         add("nothing here: the highlight is narrower than the table's bins",
             f"alpha {min(widths):.3g} is resolved by fewer than ~5 theta_h bins: a measured "
             "bin there averages a lobe that changes across it, which no model read at the "
@@ -293,7 +297,28 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
         add(_LAYERS["try"], _LAYERS["why"])
     if not steps:
         steps = _last_steps(model)
-    return with_measured_gains({"verdict": look["verdict"], "next": steps}, gains or [])["next"]
+    return with_measured_gains({"verdict": look["verdict"], "basis": look.get("basis"),
+                                "next": steps}, gains or [])["next"]
+
+
+#: A sample list's words for what :func:`next_steps` says of a table.
+_SAMPLE_WORDS = (("the table's brightest bin", "the brightest sample"),
+                 ("the highlight's few peak bins", "the highlight's few peak samples"),
+                 ("on this table", "on these samples"), ("to this table", "to these samples"))
+
+
+def _worded_for(basis: str | None, steps: list[dict]) -> list[dict]:
+    """``steps`` as said of a sample list where ``basis`` is its held-out render (they
+    spoke of "the table's brightest bin" and "gain not measured on this table")."""
+    if basis != "held_out":
+        return steps
+    out = []
+    for step in steps:
+        why = step["why"]
+        for table_words, sample_words in _SAMPLE_WORDS:
+            why = why.replace(table_words, sample_words)
+        out.append({**step, "why": why})
+    return out
 
 
 #: The models without a specular lobe: a peak is theirs to miss.
@@ -342,8 +367,10 @@ def with_measured_gains(look: dict | None, gains: list) -> dict | None:
     measured replaces the guess of the same ``try``, and one measured without a gain
     is dropped: ``auto`` does not advise a candidate it saw render no closer. A good
     verdict keeps an empty ``next``."""
-    if look is None or look.get("verdict") == "good" or not gains:
+    if look is None or look.get("verdict") == "good":
         return look
+    if not gains:
+        return {**look, "next": _worded_for(look.get("basis"), look.get("next", []))}
     measured = [{"try": t, "why": w, "gain_db": round(float(g), 2)}
                 for t, w, g in sorted(gains, key=lambda x: -x[2]) if g > 0]
     names = {t for t, _, _ in gains}
@@ -357,7 +384,7 @@ def with_measured_gains(look: dict | None, gains: list) -> dict | None:
                  "why": "auto fitted each of its candidates to this table and none renders "
                         "closer than this fit; the verdict's reason says what is off",
                  "gain_db": None}, *([] if layered else [dict(_LAYERS)])]
-    return {**look, "next": measured + rest}
+    return {**look, "next": _worded_for(look.get("basis"), measured + rest)}
 
 
 def describe(look: dict | None, indent: str = "  ") -> list[str]:

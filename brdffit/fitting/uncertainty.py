@@ -200,7 +200,14 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         se_u = se / np.abs(slopes)
     scale = _scale(model, theta)
 
-    def significant(scale_names) -> bool:
+    # a diffuse held at 0 in every channel leaves the lobe all the reflectance there is:
+    # its scale's standard error then measures a trade-off (ks with f0, where the
+    # samples stop short of the Fresnel rise), not whether it is there (a gold paint's
+    # Cornell samples, kd 0, read "alpha: no lobe" with alpha known to 0.002)
+    kd = [j for j, name in enumerate(names) if name.split("[")[0] == "kd"]
+    no_diffuse = bool(kd) and all(bound_side[j] < 0 for j in kd)
+
+    def significant(scale_names, lobe: bool = True) -> bool:
         # a scale held at its upper bound (ks = 1 under the physical bounds) is a lobe
         # at its limit, not a vanished one: its partners are judged as any others; one
         # held at its lower bound (a coat's weight 4e-6, deep in its sigmoid's tail) is 0
@@ -208,6 +215,8 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
             if name.split("[")[0] not in scale_names:
                 continue
             if at_bound[j] and bound_side[j] > 0 and theta[j] > 0:
+                return True
+            if lobe and no_diffuse and bound_side[j] >= 0 and theta[j] > 0:
                 return True
             if not at_bound[j] and np.isfinite(se[j]) and theta[j] > SIGNIFICANT * se[j]:
                 return True
@@ -224,7 +233,7 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
         elif lobe and not significant(lobe):
             reasons.append(f"no lobe: {' and '.join(lobe)} within {SIGNIFICANT:g} standard "
                            "errors of 0 in every channel")
-        elif weight is not None and not significant((weight,)):
+        elif weight is not None and not significant((weight,), lobe=False):
             reasons.append(f"no layer: {weight} within {SIGNIFICANT:g} standard errors of 0"
                            f"{' in every channel' if _is_rgb(model, weight) else ''}")
         elif no_effect[i]:
