@@ -502,6 +502,12 @@ def held_out_look(meas: Measurements, prep: Prepared, held: HeldOut) -> tuple[fl
     cells 46 / 44, 0 / 0, +0.2 / -0.3 dB (bench/results/sample_verdicts_design.md)."""
     n = prep.sample_set.n_used
     idx, w = prep.sample_set.index[:n], np.asarray(prep.sample_set.weight[:n], np.float64)
+    if meas.sigma is not None:
+        # the verdict judges the look, not the fit's statistics: sigma's weights are left
+        # out (a relative sigma weighs a sample by 1 / its value squared, and the dark
+        # samples' render judged nylon good at 31.6 dB, visible at 26.0 on its table)
+        by_sigma = sample_weights(meas)[idx]
+        w = np.where(by_sigma > 0, w / np.where(by_sigma > 0, by_sigma, 1.0), 0.0)
     wi = meas.wi[idx]
     # each sample stands for the sphere pixels of its (theta_h, theta_d) cell: a PSNR of
     # the sphere the verdict is made for, where the samples reach; where they reach
