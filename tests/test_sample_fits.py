@@ -421,3 +421,14 @@ def test_sigma_weighs_the_fit_not_the_verdicts_look():
                                                                       r.params)
     assert r.quality["verdict"] == "visible"
     assert abs(r.quality["render_psnr_db"] - on_table) < 2.5
+
+
+def test_a_held_out_error_over_the_solvers_samples_says_so():
+    """Above --samples the folds split the solver's subsample, the in-sample error is
+    over every sample: the text said neither (a held-out error below the in-sample one)."""
+    from brdffit.cli.fit import format_result
+
+    meas, _ = sample_model("ggx", None, "uniform", 300, seed=5)
+    text = format_result(fit(meas, "lambert", samples=64))
+    assert "held-out error (5-fold, over the solver's 64 samples): log_rmse" in text
+    assert "over the solver's" not in format_result(fit(meas, "lambert"))
