@@ -406,6 +406,7 @@ def test_a_sample_lists_next_steps_speak_of_samples_and_a_seen_peak_of_its_gap()
     assert line.endswith("specular peak seen")
 
 
+@pytest.mark.slow  # a real material's table rebuilt beside the fit: make test runs it
 def test_sigma_weighs_the_fit_not_the_verdicts_look():
     """A relative sigma (2% of each value) weighs a sample by 1 / its value squared: the
     held-out render was weighted so too, and judged nylon's Cornell samples good at
