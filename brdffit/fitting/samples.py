@@ -79,7 +79,7 @@ from brdffit.io.angles import (
     half_diff_to_bins,
 )
 from brdffit.io.grid import bin_grid
-from brdffit.io.measurements import Measurements
+from brdffit.io.measurements import Measurements, relative_sigma
 from brdffit.models.frame import Frame
 
 #: How many folds the held-out error has.
@@ -141,17 +141,11 @@ def sample_weights(meas: Measurements, bin_weight: np.ndarray | None = None) -> 
     w = np.ones(meas.n)
     if meas.sigma is not None:
         cos_i = meas.wi[:, 2][:, None]
-        positive = meas.sigma[usable & np.all(meas.sigma > 0, axis=1)]
-        # Only the weights' ratios count (they are normalised), so sigma is taken
-        # relative to its median: squared, a uniform sigma of 1e-160 overflowed the
-        # weights to inf (a fit of NaNs) and one of 1e-170 underflowed to 0 (ignored).
-        scale = float(np.median(positive)) if positive.size else 1.0
-        sigma = meas.sigma / scale
-        # a sigma of 0 (the readers refuse one; Measurements built directly may hold it)
-        # is the most certain, not infinitely so: floored as binning does
-        floor = float(np.min(positive, initial=scale)) / scale * 1e-3
+        # only the weights' ratios count (they are normalised), as in binning
+        sigma = relative_sigma(meas.sigma,
+                               meas.sigma[usable & np.all(meas.sigma > 0, axis=1)])
         x = meas.rgb * cos_i
-        var = np.mean((np.maximum(sigma, floor) * cos_i / (1.0 + x)) ** 2, axis=1)
+        var = np.mean((sigma * cos_i / (1.0 + x)) ** 2, axis=1)
         typical = float(np.median(var[usable])) if usable.any() else 0.0
         if typical > 0:
             w = 1.0 / np.maximum(var, typical / MAX_WEIGHT_RATIO)

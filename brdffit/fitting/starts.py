@@ -53,9 +53,11 @@ def _mid_angle_usable(usable: np.ndarray) -> np.ndarray:
     return idx[usable[idx]]
 
 
-def diffuse_estimate(table: MerlTable, usable: np.ndarray) -> np.ndarray:
-    """kd estimate (3,) from bins far from the highlight."""
-    idx = _mid_angle_usable(usable)
+def diffuse_estimate(table: MerlTable, usable: np.ndarray,
+                     mid: np.ndarray | None = None) -> np.ndarray:
+    """kd estimate (3,) from bins far from the highlight (``mid``: the usable ones of
+    them, where already found)."""
+    idx = _mid_angle_usable(usable) if mid is None else mid
     if idx.size < MID_ANGLE_BINS:  # tiny or oddly masked table: use what there is
         idx = np.flatnonzero(usable)
     values = table.rgb.reshape(3, -1)[:, idx]
@@ -74,9 +76,10 @@ class TableHints(NamedTuple):
 
 
 def table_hints(table: MerlTable, usable: np.ndarray) -> TableHints:
-    away = (_mid_angle_usable(usable).size >= MID_ANGLE_BINS
-            or bool(np.any(bin_grid().theta_h[usable] > 0.5)))  # a sparse list's bins
-    return TableHints(diffuse_estimate(table, usable), peak_bin(table, usable), away)
+    mid = _mid_angle_usable(usable)
+    # every mid-angle bin lies beyond theta_h 0.5; a sparse list's bins may miss them all
+    away = mid.size > 0 or bool(np.any(bin_grid().theta_h[usable] > 0.5))
+    return TableHints(diffuse_estimate(table, usable, mid), peak_bin(table, usable), away)
 
 
 def candidates(model: AbstractBRDFModel, table: MerlTable, usable: np.ndarray,

@@ -63,6 +63,18 @@ MAX_AZIMUTH = 4 * np.pi
 MAX_SAMPLES = 2_000_000
 
 
+def relative_sigma(sigma: np.ndarray, positive: np.ndarray) -> np.ndarray:
+    """``sigma`` over the median of ``positive`` (the values of it that count), floored
+    at a thousandth of their least: where only sigma's ratios count (a bin's weighted
+    mean, a fit's normalised weights). Squared as it is, a sigma of 1e-160 overflowed
+    to inf (a fit of NaNs) and one of 1e-170 underflowed to 0 (silently ignored); a
+    sigma of 0 (the readers refuse one; Measurements built directly may hold it) is the
+    most certain, not infinitely so."""
+    scale = float(np.median(positive)) if positive.size else 1.0
+    floor = float(np.min(positive, initial=scale)) / scale * 1e-3
+    return np.maximum(sigma / scale, floor)
+
+
 class MeasurementsError(MerlFormatError):
     """Samples that no fit can use: the message names the source and the first bad row.
     A kind of MerlFormatError (a measured file that cannot be read as a table), so
@@ -232,13 +244,8 @@ class Measurements:
         n_bins = N_THETA_H * N_THETA_D * N_PHI_D
         if self.sigma is None:
             w = np.ones_like(self.rgb)
-        else:  # 1 / sigma^2; a sigma of 0 is the most certain in its bin
-            # relative to sigma's median (only ratios count in a bin's mean): squared, a
-            # sigma of 1e-160 overflowed to inf (NaN means), one of 1e-170 underflowed
-            positive = self.sigma[self.sigma > 0]
-            scale = float(np.median(positive)) if positive.size else 1.0
-            floor = float(np.min(positive, initial=scale)) / scale * 1e-3
-            w = 1.0 / np.maximum(self.sigma / scale, floor) ** 2
+        else:  # 1 / sigma^2 (only ratios count in a bin's mean)
+            w = 1.0 / relative_sigma(self.sigma, self.sigma[self.sigma > 0]) ** 2
         total = np.stack([np.bincount(flat, w[:, c] * self.rgb[:, c], n_bins) for c in range(3)])
         weight = np.stack([np.bincount(flat, w[:, c], n_bins) for c in range(3)])
         count = np.bincount(flat, minlength=n_bins)
