@@ -595,6 +595,32 @@ def test_a_table_named_with_dots_alone_gets_a_group_of_its_own(tmp_path):
     assert tables["_"]["path"].endswith("/..binary") and "lambert" in tables["_"]["fits"]
 
 
+def test_a_folder_reached_through_a_link_resumes_its_fits(tmp_path):
+    """The folder a first run fitted, given again through a symbolic link: its tables are
+    the recorded ones (nothing fitted again, one entry each); given both ways in one
+    run, each table is fitted once. A link that reaches another folder since is new."""
+    d, opts = _two_lambert_tables(tmp_path)
+    link = tmp_path / "link"
+    link.symlink_to(d, target_is_directory=True)
+    out = tmp_path / "r.h5"
+    request = FitRequest(("lambert",), opts)
+    assert run_batch([str(d)], request, out, workers=0, progress=False).fits == 2
+    again = run_batch([str(link)], request, out, workers=0, progress=False)
+    assert (again.fits, again.skipped, again.tables) == (0, 2, 2)
+    both = run_batch([str(link / "m0.binary"), str(d)], request, out, workers=0,
+                     progress=False)
+    assert (both.fits, both.skipped, both.tables) == (0, 2, 2)
+    tables = _tables(out)
+    assert sorted(tables) == ["m0", "m1"]
+    assert tables["m0"]["path"] == str(d / "m0.binary")
+    # the link now reaches another folder (of the same content): its tables are new
+    (tmp_path / "other").mkdir()
+    other, _ = _two_lambert_tables(tmp_path / "other")
+    link.unlink()
+    link.symlink_to(other, target_is_directory=True)
+    moved = run_batch([str(link)], request, out, workers=0, progress=False)
+    assert moved.fits == 2
+
 def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     from brdffit.io import merl
     from data_synth import make_table

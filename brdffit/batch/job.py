@@ -448,6 +448,8 @@ def run_batch(
             BatchStore(out) as store:
         summary.recovered = store.recovered
         summary.damaged = len(store.damaged)
+        paths = store.as_known(paths)
+        summary.tables = len(paths)
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
         tasks, summary.skipped = _plan(paths, model_names, request.fit_key(), store, refit)

@@ -208,6 +208,26 @@ class BatchStore:
 
     # -- resume ----------------------------------------------------------------------
 
+    def as_known(self, paths: list[str]) -> list[str]:
+        """``paths`` with each file once: a path that reaches a file a previous run
+        recorded under another path (a folder given once through a symbolic link, once
+        not) is replaced by the recorded one, so that resume finds its fits and the
+        table keeps one entry; two spellings of one file in ``paths`` are one table, the
+        first. A recorded path that reaches another file now (a link since moved) is
+        another table."""
+        recorded: dict[str, str] = {}
+        for known in self._tables:
+            recorded.setdefault(os.path.realpath(known), known)
+        out: dict[str, None] = {}
+        taken: set[str] = set()
+        for p in paths:
+            real = os.path.realpath(p)
+            if real in taken:
+                continue
+            taken.add(real)
+            out.setdefault(p if p in self._tables else recorded.get(real, p))
+        return list(out)
+
     def known_sha256(self, path: str) -> str | None:
         """The content hash a previous run read at ``path`` (None if never read)."""
         t = self._tables.get(path)
