@@ -157,6 +157,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         steps = job["result"]["quality"]["next"]
         assert page.locator("#next-steps").is_visible() == bool(steps)
         assert page.locator("#next-steps li").count() == len(steps)
+        _next_steps_set_up_the_form(page, job["result"])
 
         visit.wait_image("#plot-spheres")
         visit.wait_image("#plot-slices")
@@ -249,6 +250,53 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         visit.close()
         assert http.get("/healthz").status_code == 200
         assert not re.search(r'HTTP/1.1" 5\d\d |Traceback', server.log()), server.log()[-3000:]
+
+
+def _next_steps_set_up_the_form(page, result: dict) -> None:
+    """Each next step the form can make has a button that sets the form as it says (the
+    CLI's flags in the form's terms), and the request the form then makes is that fit;
+    a step of advice has none. Shown on a result of steps of every kind, then put back."""
+    steps = [
+        {"try": "--model ggx2", "why": "a second lobe", "gain_db": 2.5},
+        {"try": "--model auto --candidates gltf,gltf_iridescence", "why": "layers",
+         "gain_db": None},
+        {"try": "--loss render", "why": "the look", "gain_db": None},
+        {"try": "more starts and steps (--starts 8 --max-steps 400)", "why": "converge",
+         "gain_db": None},
+        {"try": "without --physical", "why": "the bounds", "gain_db": None},
+        {"try": "nothing here: the highlight is narrower than the table's bins",
+         "why": "advice", "gain_db": None},
+        {"try": "--model no_such_model", "why": "a model this server lacks", "gain_db": None},
+    ]
+    shown = {**result, "quality": {**result["quality"], "verdict": "poor", "next": steps}}
+    page.evaluate("r => showNextSteps(r)", shown)
+    items = page.locator("#next-steps li")
+    assert items.count() == len(steps)
+    has_button = [items.nth(i).locator("button.set-up").count() == 1 for i in range(len(steps))]
+    assert has_button == [True] * 5 + [False, False]
+
+    def request_after(i: int) -> dict:
+        items.nth(i).locator("button.set-up").click()
+        assert steps[i]["try"] in page.locator("#message").inner_text()
+        return page.evaluate("() => fitRequest()")
+
+    body = request_after(0)
+    assert body["models"] == ["ggx2"] and page.is_checked("#mode-list")
+    body = request_after(1)
+    assert body["models"] == "auto"
+    assert body["rule"]["candidates"] == ["gltf", "gltf_iridescence"]
+    body = request_after(2)
+    assert body["options"]["loss"] == "render" and body["models"] == "auto"
+    body = request_after(3)
+    assert (body["options"]["starts"], body["options"]["max_steps"]) == (8, 400)
+    page.check("#physical-input")
+    body = request_after(4)
+    assert "physical" not in body["options"]
+    # back as the test's own fit had it
+    page.evaluate("r => showNextSteps(r)", result)
+    for selector in ("#candidates-input", "#starts-input", "#max-steps-input"):
+        page.fill(selector, "")
+    page.select_option("#loss-select", result["loss"])
 
 
 def test_with_a_token_on_a_real_material(browser, tmp_path):

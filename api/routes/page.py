@@ -19,6 +19,7 @@ from fastapi.responses import FileResponse
 from api.deps import require_token
 from brdffit.fitting import options
 from brdffit.fitting.scene import PRESETS
+from brdffit.models import catalogue
 
 FILES = Path(__file__).resolve().parent.parent / "static" / "page"
 #: The files the page loads, and what they are: a fixed list, so no path from a
@@ -52,10 +53,15 @@ def page_file(name: str) -> FileResponse:
 
 @choices_router.get("/page/choices.json")
 def choices() -> dict:
-    """The form's lists, from the library: losses (default first) and scene presets."""
+    """The form's lists, from the library: losses (default first), scene presets, the
+    candidate sets auto takes by name, and the defaults the inputs show."""
     default_loss, loss = options.spec("loss")
     return {"losses": list(loss.choices), "default_loss": default_loss,
             "scene_presets": list(PRESETS), "auto": options.AUTO,
+            "candidate_sets": list(catalogue.CANDIDATE_SETS),
             "defaults": {"samples": options.spec("samples")[0],
                          "starts": options.spec("starts")[0],
-                         "tolerance": options.spec("tolerance", options.SelectionRule)[0]}}
+                         "max_steps": options.spec("max_steps")[0],
+                         "tolerance": options.spec("tolerance", options.SelectionRule)[0],
+                         "candidates": list(options.spec("candidates",
+                                                         options.SelectionRule)[0])}}

@@ -234,7 +234,8 @@ function fitRequest() {
   }
   const options = { loss: $("loss-select").value };
   if ($("physical-input").checked) options.physical = true;
-  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")]]) {
+  for (const [key, input] of [["samples", $("samples-input")], ["starts", $("starts-input")],
+                              ["max_steps", $("max-steps-input")]]) {
     if (input.value !== "") options[key] = Number(input.value);
   }
   const preset = $("scene-select").value;
@@ -243,6 +244,8 @@ function fitRequest() {
   const rule = {};
   if ($("tolerance-input").value !== "") rule.tolerance = Number($("tolerance-input").value);
   if ($("mono-input").checked) rule.mono_ks = true;
+  const candidates = $("candidates-input").value.split(",").map((c) => c.trim()).filter(Boolean);
+  if (candidates.length) rule.candidates = candidates;
   const body = { table_id: state.table.id, models, options, scene };
   if (models === "auto" || Object.keys(rule).length) body.rule = rule;
   return body;
@@ -432,8 +435,62 @@ function showNextSteps(best) {
     const gain = s.gain_db == null ? "" : ` (${s.gain_db > 0 ? "+" : ""}${s.gain_db.toFixed(1)} dB)`;
     const item = el("li", null);
     item.append(el("code", s.try), document.createTextNode(`${gain}: ${s.why}`));
+    const settings = stepSettings(s.try);
+    if (settings) {
+      const button = el("button", "Set up this fit", { type: "button", class: "set-up" });
+      button.addEventListener("click", () => applySettings(settings, s.try));
+      item.append(" ", button);
+    }
     list.append(item);
   }
+}
+
+// A next step's `try` in the form's terms, or null where the form cannot make it (a step
+// that is advice, "nothing here: ..."). Steps name brdffit fit's own flags: --model NAME
+// (auto with --candidates LIST), --loss NAME, --starts N, --max-steps N, "without
+// --physical"; a step with any other flag is left as text.
+function stepSettings(text) {
+  const settings = {};
+  if (/^without --physical\b/.test(text)) return { physical: false };
+  const flags = [...text.matchAll(/--([a-z-]+)(?:\s+([^\s()]+))?/g)];
+  if (!flags.length) return null;
+  for (const [, flag, value] of flags) {
+    if (value === undefined) return null;
+    if (flag === "model") settings.model = value;
+    else if (flag === "candidates") settings.candidates = value;
+    else if (flag === "loss") settings.loss = value;
+    else if (flag === "starts") settings.starts = value;
+    else if (flag === "max-steps") settings.max_steps = value;
+    else return null;
+  }
+  if (settings.loss && ![...$("loss-select").options].some((o) => o.value === settings.loss)) {
+    return null;
+  }
+  if (settings.model && settings.model !== "auto"
+      && !document.querySelector(`#model-boxes input[value="${CSS.escape(settings.model)}"]`)) {
+    return null;
+  }
+  return settings;
+}
+
+// The form set as a step says, the rest as it was (the table, the scene, the samples);
+// the user looks at it and starts the fit.
+function applySettings(settings, text) {
+  if (settings.model === "auto") {
+    $("mode-auto").checked = true;
+  } else if (settings.model) {
+    $("mode-list").checked = true;
+    for (const box of document.querySelectorAll("#model-boxes input")) {
+      box.checked = box.value === settings.model;
+    }
+  }
+  if (settings.model) $("candidates-input").value = settings.candidates || "";
+  if (settings.loss) $("loss-select").value = settings.loss;
+  if (settings.starts) $("starts-input").value = settings.starts;
+  if (settings.max_steps) $("max-steps-input").value = settings.max_steps;
+  if (settings.physical === false) $("physical-input").checked = false;
+  $("fit-panel").scrollIntoView({ block: "start" });
+  say(`The form is set up for: ${text}. Start the fit when it reads as you want.`, "info");
 }
 
 // A physically bounded fit: what the bounds cost against the unconstrained fit.
@@ -646,6 +703,10 @@ async function loadChoices() {
   for (const name of choices.scene_presets) scene.append(el("option", name, { value: name }));
   $("samples-input").placeholder = String(choices.defaults.samples);
   $("starts-input").placeholder = String(choices.defaults.starts);
+  $("max-steps-input").placeholder = String(choices.defaults.max_steps);
+  $("candidates-input").placeholder = "default";
+  $("candidates-label").title += ` (${choices.defaults.candidates.join(", ")}); sets: `
+    + choices.candidate_sets.join(", ");
   $("tolerance-input").placeholder = String(choices.defaults.tolerance);
   const boxes = $("model-boxes");
   boxes.textContent = "";
