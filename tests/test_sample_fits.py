@@ -172,6 +172,11 @@ def test_a_list_in_percent_and_rows_given_twice_are_noted():
     assert note.startswith("the sample list's diffuse floor is an albedo of ") and (
         "are its values in 1/sr? Values in percent are 100 times a fraction" in note), note
     assert note.endswith("fitted as given, so kd and ks are in the sample list's units")
+    # and one a fraction of what it should be: taken as percent and divided by 100 twice
+    tiny = fit(Measurements(meas.wi, meas.wo, meas.rgb / 1e4, source="tiny.csv"), "lambert")
+    (note,) = [n for n in tiny.notes if "brightest value" in n]
+    assert note.startswith("the sample list's brightest value is ") and (
+        "below the lowest of the 100 MERL materials' brightest" in note), note
     pasted = Measurements(np.concatenate([meas.wi, meas.wi]), np.concatenate([meas.wo, meas.wo]),
                           np.concatenate([meas.rgb, meas.rgb]), source="pasted.csv")
     r = fit(pasted, "lambert")

@@ -125,6 +125,24 @@ def test_a_table_in_other_units_is_fitted_as_given_and_said(tables):
     assert not any("in 1/sr?" in n for n in fit(tables["20% noise"], "ggx").notes)
 
 
+def test_a_table_far_darker_than_any_material_is_fitted_as_given_and_said():
+    """A matte table scaled by MERL's channel factors once too often (1500x too dark)
+    fits kd 1500x too small and looks good: said, as a unit question, with how far below
+    the darkest MERL material it is; a dark but real one (an albedo of 1.5%) is not."""
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    table = make_table("lambert", {"kd": [0.3, 0.2, 0.1]})[0]
+    dark = merl.MerlTable.from_values(np.asarray(table.rgb) / 1500, table.mask)
+    r = fit(dark, "lambert")
+    (note,) = [n for n in r.notes if "in 1/sr?" in n]
+    assert note.startswith("the table's brightest value is 6.37e-05 1/sr, 4,398x below "
+                           "the lowest of the 100 MERL materials' brightest values"), note
+    assert note.endswith("fitted as given, so kd and ks are in the table's units")
+    black = make_table("lambert", {"kd": [0.015] * 3})[0]
+    assert not any("in 1/sr?" in n for n in fit(black, "lambert").notes)
+
+
 def test_a_table_measured_at_its_peak_alone_is_not_told_its_units_are_wrong():
     """40 bins at theta_h = theta_d = 0 and nothing else: the diffuse floor was read
     from the peak ("an albedo of 12.2: are its values in 1/sr?"), and the sphere, none

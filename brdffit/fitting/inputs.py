@@ -111,6 +111,11 @@ class TableInput:
         above all their neighbours (``MerlTable.isolated_spikes``), corrupt values that a
         least-squares fit follows."""
         notes, steps = _too_bright(prep)
+        # the whole table's brightest (a unit is the table's, whatever a scene weighs),
+        # once per table: auto's candidates share it
+        brightest = cached(self.table, "brightest-value", lambda: _brightest(self.table.rgb))
+        dark_notes, dark_steps = _too_dark(brightest, "table")
+        notes, steps = notes + dark_notes, steps + dark_steps
         notes += _partly_negative(self.table)
         spikes = cached(self.table, "isolated-spikes", self.table.isolated_spikes)
         used = prep.counts.usable.reshape(merl.SHAPE)
@@ -181,6 +186,39 @@ def _too_bright(prep: Prepared, what: str = "table",
             [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
 
 
+#: The brightest value (1/sr) below which a table's or a list's values are read as not in
+#: 1/sr: 280x below the lowest brightest value of the 100 MERL materials (white-fabric2,
+#: 0.28 1/sr; then black-fabric, 0.35 at a grazing peak), and a Lambertian albedo of 0.3%
+#: (black velvets and paints reflect 0.5-2%). A MERL table scaled by its channel factors
+#: twice is ~1500x too dark, a fraction read as percent 100x; the fit follows either
+#: silently and may even look good (its renders are exposed to the table's own level).
+SUSPECT_DARK = 0.001
+#: The lowest brightest value of the 100 MERL materials (white-fabric2), 1/sr.
+MERL_DARKEST = 0.28
+#: Why a table or a list may be too dark (:func:`_too_dark`).
+DARK_SCALES = ("a MERL table scaled by its 1/1500 channel factors twice is ~1500x too "
+               "dark, a reflectance fraction divided by 100 as if in percent 100x")
+
+
+def _too_dark(brightest: float, what: str) -> tuple[list[str], list[dict]]:
+    """A note and a next step where ``what``'s brightest used value (1/sr) is below
+    :data:`SUSPECT_DARK`: values in another unit, as :func:`_too_bright`'s."""
+    if not (np.isfinite(brightest) and 0 < brightest < SUSPECT_DARK):
+        return [], []
+    said = (f"the {what}'s brightest value is {brightest:.3g} 1/sr, "
+            f"{MERL_DARKEST / brightest:,.0f}x below the lowest of the 100 MERL materials' "
+            f"brightest values (white-fabric2: {MERL_DARKEST} 1/sr): are its values in "
+            f"1/sr? {DARK_SCALES}")
+    return ([f"{said}; fitted as given, so kd and ks are in the {what}'s units"],
+            [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
+
+
+def _brightest(values: np.ndarray) -> float:
+    """The largest finite value of ``values`` (NaN where there is none)."""
+    v = values[np.isfinite(values)]
+    return float(v.max()) if v.size else float("nan")
+
+
 class SampleInput:
     """A sample list (``brdffit.io.measurements.Measurements``), fitted at its own
     directions (``brdffit.fitting.samples``)."""
@@ -219,6 +257,9 @@ class SampleInput:
         table's (:func:`_too_bright`), rows that repeat another exactly, rows of zeros,
         and an azimuth convention other than brdffit's."""
         notes, steps = _too_bright(prep, "sample list", SAMPLE_SCALES)
+        usable = self._samples.on_the_surface(self.meas)
+        dark_notes, dark_steps = _too_dark(_brightest(self.meas.rgb[usable]), "sample list")
+        notes, steps = notes + dark_notes, steps + dark_steps
         return (notes + self._samples.duplicate_note(self.meas, prep)
                 + self._samples.zero_note(self.meas, prep),
                 self._samples.azimuth_convention_step(self.meas, prep) + steps)
