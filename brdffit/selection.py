@@ -1130,9 +1130,10 @@ def _gain_words(gain: dict) -> str:
             + (", PSNR " + ("-" if db is None else f"{db:+.1f} dB")))
 
 
-def format_selection(sel: Selection) -> str:
-    """The ranking as a text table, then the reason (what ``brdffit fit --model auto``
-    prints)."""
+def format_selection(sel: Selection, chosen_params: bool = True) -> str:
+    """The ranking as a text table, then the reason; with ``chosen_params``, the chosen
+    fit's parameters and how it looks (``brdffit fit --model auto`` prints the chosen fit
+    in full after it instead: ``brdffit.cli.fit.format_result``)."""
     scene = sel.scene is not None
     held = any(r.get("log_rmse_basis") == "held_out" for r in sel.ranking)
     views = any(r.get("views_psnr_db") is not None for r in sel.ranking)
@@ -1169,12 +1170,12 @@ def format_selection(sel: Selection) -> str:
         lines.append(f"Ranked on the {FOLDS}-fold held-out log_rmse of the samples "
                      "(docs/measurements.md).")
     lines.append(sel.reason)
-    chosen = sel.row
-    lines.append(f"{sel.chosen} params:")
-    for name, v in chosen["params"].items():
-        val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
-        lines.append(f"  {name:<6} = {val}")
-    lines += describe(sel.fits[sel.chosen].quality if sel.chosen in sel.fits else None)
+    if chosen_params:
+        lines.append(f"{sel.chosen} params:")
+        for name, v in sel.row["params"].items():
+            val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
+            lines.append(f"  {name:<6} = {val}")
+        lines += describe(sel.fits[sel.chosen].quality if sel.chosen in sel.fits else None)
     if sel.mono is not None:
         lines.append(f"{sel.mono['model']} params:")
         for name, v in sel.mono["params"].items():

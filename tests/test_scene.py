@@ -213,6 +213,12 @@ def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):
     assert cli.main(args + ["--scene-preset", "camera-normal"]) == 0
     out = capsys.readouterr().out
     assert "blinn_phong" in out and "chosen" in out and "camera-normal" in out
+    # the chosen fit in full after the ranking, as one fit prints: its standard errors,
+    # its error on the scene and on the full table, its bins
+    chosen = out.split("\n\n")[-1]
+    assert " fit (log loss), " in chosen.splitlines()[0] and " ± " in chosen, out
+    assert "  error (scene): log_rmse " in chosen and "(full table)   scene " in chosen, out
+    assert "outside the scene" in chosen and " params:" not in out, out
     assert cli.main(args + ["--json", "--tolerance", "0.001"]) == 0
     d = json.loads(capsys.readouterr().out)
     s = d["selection"]  # the chosen fit, its selection beside it (docs/results.md)

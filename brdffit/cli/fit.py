@@ -273,7 +273,10 @@ def run(args) -> int:
                              progress=print_progress if request.auto else None)
     finally:
         executables.on_compile = previous
-    text = (format_selection(report.selection) if report.selection is not None
+    # auto: the ranking and its reason, then the chosen fit in full, as one fit prints
+    # (its standard errors, every error figure, the bins or the samples' coverage, notes)
+    text = ("\n".join([format_selection(report.selection, chosen_params=False), "",
+                       format_result(report.chosen_fit)]) if report.selection is not None
             else format_result(report.chosen_fit) if len(report.ranking) == 1
             else format_models(report))
     return write_report(args, table, report, text)
