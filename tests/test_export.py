@@ -426,6 +426,7 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
     assert viewers["threejs"]["log_rmse_to_table"] > 1e-3
 
 
+@pytest.mark.slow  # the CLI's export with every viewer's refit: ~6 s
 def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, capsys):
     """A null viewer is said in the CLI's report, not left out (a silent line read as
     a good one)."""

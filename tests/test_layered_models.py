@@ -178,6 +178,7 @@ def test_a_layer_worse_than_its_base_on_the_table_is_put_back_at_the_base():
     assert back.error["log_rmse"] == pytest.approx(base.error["log_rmse"], rel=1e-3)
 
 
+@pytest.mark.slow  # a fit and the glTF validator: ~8-10 s; the quick tier keeps the formulas
 def test_a_coated_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
     table, _ = make_table("gltf_clearcoat", COATED)
     r = fit(table, "gltf_clearcoat", samples=4096)
@@ -405,6 +406,7 @@ def test_an_absent_films_shape_is_held_by_the_solver_and_a_coats_is_not():
     assert not np.any(np.asarray(coat.solver_bound_side(cu)) >= HELD)
 
 
+@pytest.mark.slow  # a film's fit and the glTF validator: ~10 s
 def test_a_filmed_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
     table, _ = make_table("gltf_iridescence", FILMED)
     r = FitResult("gltf_iridescence", FILMED, {"log_rmse": 0.01}, True, "successful", 5,

@@ -390,6 +390,7 @@ def test_render_loss_with_a_scene_uses_the_scene_views(noisy_ggx):
     assert r.converged and r.loss == "render"
 
 
+@pytest.mark.slow  # ~5 s; the quick tier keeps the log loss's trip through every door
 def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     import json
     import subprocess

@@ -284,8 +284,11 @@ def _same_fit(a: dict, b: dict) -> None:
     assert json.loads(json.dumps(a)) == json.loads(json.dumps(b))
 
 
-@pytest.mark.parametrize("model, physical", [("lambert", False), ("auto", False),
-                                             ("lambert", True)])
+# auto and the physical bounds take ~6 s each through every door: the full suite runs
+# them, the quick tier the plain fit
+@pytest.mark.parametrize("model, physical", [
+    ("lambert", False), pytest.param("auto", False, marks=pytest.mark.slow),
+    pytest.param("lambert", True, marks=pytest.mark.slow)])
 def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright_table,
                                                               tmp_path, model, physical):
     """One fit, four ways: the library, ``brdffit fit --json``, the service's job and
