@@ -1171,14 +1171,17 @@ def format_selection(sel: Selection, chosen_params: bool = True) -> str:
                      "(docs/measurements.md).")
     lines.append(sel.reason)
     if chosen_params:
-        lines.append(f"{sel.chosen} params:")
-        for name, v in sel.row["params"].items():
-            val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
-            lines.append(f"  {name:<6} = {val}")
+        lines += _param_lines(sel.chosen, sel.row["params"])
         lines += describe(sel.fits[sel.chosen].quality if sel.chosen in sel.fits else None)
     if sel.mono is not None:
-        lines.append(f"{sel.mono['model']} params:")
-        for name, v in sel.mono["params"].items():
-            val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
-            lines.append(f"  {name:<6} = {val}")
+        lines += _param_lines(sel.mono["model"], sel.mono["params"])
     return "\n".join(lines)
+
+
+def _param_lines(model: str, params: dict) -> list[str]:
+    """"<model> params:", then a line per parameter (5 significant digits)."""
+    lines = [f"{model} params:"]
+    for name, v in params.items():
+        val = ", ".join(f"{x:.5g}" for x in v) if isinstance(v, list) else f"{v:.5g}"
+        lines.append(f"  {name:<6} = {val}")
+    return lines

@@ -621,6 +621,7 @@ def test_a_folder_reached_through_a_link_resumes_its_fits(tmp_path):
     moved = run_batch([str(link)], request, out, workers=0, progress=False)
     assert moved.fits == 2
 
+
 def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     from brdffit.io import merl
     from data_synth import make_table

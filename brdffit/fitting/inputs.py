@@ -179,9 +179,14 @@ def _too_bright(prep: Prepared, what: str = "table",
         # (a floor read from bins near the highlight, where the table has no others, is
         # the highlight: it told a table measured at its peak alone to divide by 1500)
         return [], []
-    said = (f"the {what}'s diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
-            "mid-angle level; no surface reflects more than it receives, 1): are its values "
-            f"in 1/sr? {why}")
+    return _unit_question(
+        f"the {what}'s diffuse floor is an albedo of {hints.kd.max():.3g} (pi times its "
+        "mid-angle level; no surface reflects more than it receives, 1): are its values "
+        f"in 1/sr? {why}", what)
+
+
+def _unit_question(said: str, what: str) -> tuple[list[str], list[dict]]:
+    """The note and the next step of values that ``said`` doubts are in 1/sr."""
     return ([f"{said}; fitted as given, so kd and ks are in the {what}'s units"],
             [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
 
@@ -205,12 +210,11 @@ def _too_dark(brightest: float, what: str) -> tuple[list[str], list[dict]]:
     :data:`SUSPECT_DARK`: values in another unit, as :func:`_too_bright`'s."""
     if not (np.isfinite(brightest) and 0 < brightest < SUSPECT_DARK):
         return [], []
-    said = (f"the {what}'s brightest value is {brightest:.3g} 1/sr, "
-            f"{MERL_DARKEST / brightest:,.0f}x below the lowest of the 100 MERL materials' "
-            f"brightest values (white-fabric2: {MERL_DARKEST} 1/sr): are its values in "
-            f"1/sr? {DARK_SCALES}")
-    return ([f"{said}; fitted as given, so kd and ks are in the {what}'s units"],
-            [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
+    return _unit_question(
+        f"the {what}'s brightest value is {brightest:.3g} 1/sr, "
+        f"{MERL_DARKEST / brightest:,.0f}x below the lowest of the 100 MERL materials' "
+        f"brightest values (white-fabric2: {MERL_DARKEST} 1/sr): are its values in 1/sr? "
+        f"{DARK_SCALES}", what)
 
 
 def _brightest(values: np.ndarray) -> float:
