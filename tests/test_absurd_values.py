@@ -24,7 +24,7 @@ from brdffit.io import merl
 from brdffit.io.merl import MAX_VALUE, MIN_PEAK, SCALE, MerlTable
 from data_synth import make_table
 from data_synth.synth import write_table
-from tests.cli_helpers import run
+from tests.cli_helpers import run_main
 
 pytestmark = pytest.mark.unit
 
@@ -256,7 +256,7 @@ def test_batch_journal_is_strict_and_a_null_metric_is_nan_in_hdf5(tmp_path):
                                               if k not in ("loss", "physical")}
 
 
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):
     hot, blank = tmp_path / "hot.binary", tmp_path / "blank.binary"
     hot.write_bytes(to_bytes(hot_bin(1000.0)))
@@ -291,12 +291,12 @@ def test_batch_report_json_is_strict_with_a_refused_table(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("case", list(REFUSED))
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_refuses_absurd_tables_in_one_line(tmp_path, case):
     make, words = REFUSED[case]
     path = tmp_path / "absurd.binary"
     path.write_bytes(to_bytes(make()))
-    r = run("brdffit.cli", "fit", str(path), "--json")
+    r = run_main("brdffit.cli", "fit", str(path), "--json")
     assert r.returncode == 2, r.stderr
     assert r.stdout == "" and "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
@@ -326,11 +326,11 @@ def test_cli_json_writes_a_missing_metric_as_null(capsys):
 
 
 @pytest.mark.parametrize("model", ["lambert", "auto"])
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_json_of_a_hot_bin_fit_is_strict_and_finite(tmp_path, model):
     path = tmp_path / "hot.binary"
     path.write_bytes(to_bytes(hot_bin(1000.0)))
-    r = run("brdffit.cli", "fit", str(path), "--model", model, "--json", *FAST)
+    r = run_main("brdffit.cli", "fit", str(path), "--model", model, "--json", *FAST)
     assert r.returncode == 0, r.stderr
     d = strict_loads(r.stdout)
     result = d  # fixed or auto: one result schema

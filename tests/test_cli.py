@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from tests.cli_helpers import run
+from tests.cli_helpers import run, run_main
 from tests.truths import FIT_JSON_KEYS, TRUTH, assert_params_close
 
 pytestmark = pytest.mark.system
@@ -22,7 +22,7 @@ def ggx_file(tmp_path_factory):
         f"--param={k}={','.join(map(str, v)) if isinstance(v, list) else v}"
         for k, v in TRUTH["ggx"].items()
     ]
-    r = run("data_synth", str(path), "--model", "ggx", *params)
+    r = run_main("data_synth", str(path), "--model", "ggx", *params)
     assert r.returncode == 0, r.stderr
     return path
 
@@ -41,7 +41,7 @@ def test_fit_json_is_one_object_with_the_schema(ggx_file):
 
 
 def test_fit_human_summary(ggx_file):
-    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "beckmann")
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "beckmann")
     assert r.returncode == 0, r.stderr
     assert "beckmann fit" in r.stdout and "alpha" in r.stdout and "log_rmse" in r.stdout
 
@@ -58,7 +58,7 @@ def test_fit_human_summary(ggx_file):
 def test_malformed_table_is_one_line_no_traceback(tmp_path, content, message):
     p = tmp_path / "bad.binary"
     p.write_bytes(content)
-    r = run("brdffit.cli", "fit", str(p))
+    r = run_main("brdffit.cli", "fit", str(p))
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     err = r.stderr.strip().splitlines()
@@ -66,9 +66,9 @@ def test_malformed_table_is_one_line_no_traceback(tmp_path, content, message):
 
 
 def test_unknown_model_and_missing_file(tmp_path, ggx_file):
-    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "cook_torrance")
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "cook_torrance")
     assert r.returncode == 2 and "unknown model" in r.stderr and "Traceback" not in r.stderr
-    r = run("brdffit.cli", "fit", str(tmp_path / "missing.binary"))
+    r = run_main("brdffit.cli", "fit", str(tmp_path / "missing.binary"))
     assert r.returncode == 2 and "cannot read" in r.stderr
 
 
@@ -102,7 +102,7 @@ def test_an_empty_item_in_a_list_of_models_is_refused_not_dropped(tmp_path, ggx_
 def test_a_plots_folder_that_cannot_be_made_is_refused_before_the_fit(tmp_path, ggx_file):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
-    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--plots",
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--plots",
             str(blocker / "plots"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert f"--plots {blocker / 'plots'}: cannot make the folder (Not a directory)" in r.stderr
@@ -120,7 +120,7 @@ def test_models_lists_every_model_with_ranges():
     # a long parameter name keeps its model's columns in line
     assert "    specular_roughness [0.0316228, 1] (log)   specular_roughness" in r.stdout
     assert "    base_color         [0, 1]" in r.stdout
-    d = json.loads(run("brdffit.cli", "models", "--json").stdout)
+    d = json.loads(run_main("brdffit.cli", "models", "--json").stdout)
     assert {m["name"] for m in d} >= set(TRUTH)
 
 
@@ -135,7 +135,7 @@ def test_a_reader_that_goes_away_is_no_error():
 
 
 def test_a_selection_option_with_a_fixed_model_is_said_not_ignored(ggx_file):
-    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--tolerance", "0.01")
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--tolerance", "0.01")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "tolerance 0.01" in r.stderr and "ignored" in r.stderr and "model auto" in r.stderr
 

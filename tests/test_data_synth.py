@@ -11,7 +11,7 @@ from brdffit.io import merl
 from brdffit.io.grid import bin_grid
 from data_synth import PRESETS, make_table
 from data_synth.synth import make_preset
-from tests.cli_helpers import run
+from tests.cli_helpers import run, run_main
 
 pytestmark = pytest.mark.unit
 
@@ -52,9 +52,9 @@ def test_cli_writes_table_and_truth_sidecar(tmp_path):
         (["--param", "beta=1"], "unknown parameter"),
     ],
 )
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_rejects_bad_params(tmp_path, args, message):
-    r = run("data_synth", str(tmp_path / "x.binary"), "--model", "ggx", *args)
+    r = run_main("data_synth", str(tmp_path / "x.binary"), "--model", "ggx", *args)
     assert r.returncode == 2
     assert message in r.stderr and "Traceback" not in r.stderr
 
@@ -100,10 +100,10 @@ def test_presets_make_valid_tables(name, tmp_path):
     assert np.all(np.isfinite(table.rgb))
 
 
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_preset_applies_noise_missing_and_params(tmp_path):
     out = tmp_path / "p.binary"
-    r = run("data_synth", str(out), "--preset", "near-mirror", "--noise", "0.1",
+    r = run_main("data_synth", str(out), "--preset", "near-mirror", "--noise", "0.1",
             "--missing", "0.3", "--param", "alpha=0.05", "--seed", "2")
     assert r.returncode == 0, r.stderr
     truth = json.loads((tmp_path / "p.binary.json").read_text())
@@ -126,9 +126,9 @@ def test_preset_keeps_its_own_degradations_unless_told():
     assert truth["noise"] == 0.0 and truth["missing"] == 0.5
 
 
-@pytest.mark.system  # a subprocess
+@pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_refuses_a_param_it_cannot_place_in_a_two_lobe_preset(tmp_path):
-    r = run("data_synth", str(tmp_path / "x.binary"), "--preset", "two-lobes",
+    r = run_main("data_synth", str(tmp_path / "x.binary"), "--preset", "two-lobes",
             "--param", "alpha=0.1")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "two-lobes" in r.stderr and "--param" in r.stderr

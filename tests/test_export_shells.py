@@ -15,7 +15,7 @@ from brdffit.fitting.problem import table_error
 from brdffit.fitting.result import FitResult
 from brdffit.io import merl
 from tests.api_fixtures import FAST, Server, table_bytes, write
-from tests.cli_helpers import run
+from tests.cli_helpers import run, run_main
 
 pytestmark = pytest.mark.system
 
@@ -27,7 +27,7 @@ def ggx_file(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def fit_json(ggx_file, tmp_path_factory):
-    r = run("brdffit.cli", "fit", str(ggx_file), "--model", "gltf_pbr", "--samples", "2048",
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "gltf_pbr", "--samples", "2048",
             "--json")
     assert r.returncode == 0, r.stderr
     path = tmp_path_factory.mktemp("fit") / "fit.json"
@@ -48,7 +48,7 @@ def test_cli_writes_the_files_and_reports_fidelity(fit_json, tmp_path):
 
     # another measurement, named: judged against that one instead
     other = write(tmp_path / "other.binary", table_bytes("lambert"))
-    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--json",
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--json",
             "--measured", str(other))
     assert r.returncode == 0, r.stderr
     out = Export.from_dict(json.loads(r.stdout))
@@ -65,17 +65,19 @@ def test_cli_json_with_out_writes_the_files_and_glb_writes_a_binary_gltf(fit_jso
     from brdffit.export import gltf
 
     both = tmp_path / "both"
-    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(both), "--json")
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(both),
+                 "--json")
     assert r.returncode == 0, r.stderr
     out = Export.from_dict(json.loads(r.stdout))  # stdout is the JSON alone
     (written,) = both.iterdir()
     assert json.loads(written.read_text()) == out.material and f"wrote {written}" in r.stderr
     binary = tmp_path / "glb"
-    r = run("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(binary), "--glb")
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "gltf", "--out", str(binary),
+                 "--glb")
     assert r.returncode == 0, r.stderr
     (glb,) = binary.iterdir()
     assert glb.name == "ggx_gltf_pbr.glb" and glb.read_bytes() == gltf.to_glb(out.material)
-    r = run("brdffit.cli", "export", str(fit_json), "--to", "mitsuba", "--glb", "--out",
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "mitsuba", "--glb", "--out",
             str(binary))
     assert r.returncode == 2 and "needs --to gltf and --out DIR" in r.stderr
 
@@ -100,19 +102,19 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(fit_json), "--to", "gltf", "--out", str(bad / "sub")],
          f"--out {bad / 'sub'}: cannot make the folder (Not a directory)"),
     ):
-        r = run("brdffit.cli", "export", *args)
+        r = run_main("brdffit.cli", "export", *args)
         assert r.returncode == 2 and message in r.stderr, r.stderr
         assert "Traceback" not in r.stderr
     other = tmp_path / "other.json"
     other.write_text(json.dumps({"schema": "brdffit.fit/0", "model": "ggx"}))
-    r = run("brdffit.cli", "export", str(other), "--to", "gltf")
+    r = run_main("brdffit.cli", "export", str(other), "--to", "gltf")
     assert r.returncode == 2 and "not a fit result" in r.stderr and "Traceback" not in r.stderr
     # a result without its keys: which ones, not a constructor's complaint
     partial = json.loads(fit_json.read_text())
     for key in ("error", "converged"):
         del partial[key]
     other.write_text(json.dumps(partial))
-    r = run("brdffit.cli", "export", str(other), "--to", "gltf")
+    r = run_main("brdffit.cli", "export", str(other), "--to", "gltf")
     assert r.returncode == 2 and "not a fit result: no error, converged (" in r.stderr, r.stderr
     assert "__init__" not in r.stderr
 
@@ -123,12 +125,12 @@ def test_cli_reads_a_fit_json_with_a_bom_and_names_one_that_is_not_utf8(fit_json
     codec can't decode byte ...", named no file)."""
     bom = tmp_path / "bom.json"
     bom.write_bytes(b"\xef\xbb\xbf" + fit_json.read_bytes())
-    r = run("brdffit.cli", "export", str(bom), "--to", "gltf", "--json")
+    r = run_main("brdffit.cli", "export", str(bom), "--to", "gltf", "--json")
     assert r.returncode == 0, r.stderr
     assert Export.from_dict(json.loads(r.stdout)).target == "gltf"
     latin = tmp_path / "latin.json"
     latin.write_bytes(b'{"model": "gr\xfcn"}')
-    r = run("brdffit.cli", "export", str(latin), "--to", "gltf")
+    r = run_main("brdffit.cli", "export", str(latin), "--to", "gltf")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert (f"brdffit: error: {latin}: not a brdffit fit JSON (byte 0xfc at offset 13 is not "
             "UTF-8 text); give the file brdffit fit --json wrote") in r.stderr, r.stderr
@@ -153,7 +155,7 @@ def test_cli_exports_a_fit_of_a_batch_results_file(batch_store, tmp_path):
 
     stored = {t["name"]: t["fits"] for t in read_results(batch_store)["tables"]}
     gold = FitResult.from_dict(stored["gold-metallic-paint"]["rough_conductor"]["fit"])
-    r = run("brdffit.cli", "export", str(batch_store), "--table", "gold-metallic-paint",
+    r = run_main("brdffit.cli", "export", str(batch_store), "--table", "gold-metallic-paint",
             "--model", "rough_conductor", "--to", "mitsuba", "--json")
     assert r.returncode == 0, r.stderr
     got = Export.from_dict(json.loads(r.stdout))
@@ -161,7 +163,7 @@ def test_cli_exports_a_fit_of_a_batch_results_file(batch_store, tmp_path):
     assert got.fidelity["exact"] and got.source_model == "rough_conductor"
 
     # by file name, the best fit by default, into files
-    r = run("brdffit.cli", "export", str(batch_store), "--table", "pink-felt.binary", "--to",
+    r = run_main("brdffit.cli", "export", str(batch_store), "--table", "pink-felt.binary", "--to",
             "gltf", "--target-model", "gltf_pbr", "--out", str(tmp_path))
     assert r.returncode == 0, r.stderr
     best = min(stored["pink-felt"].values(), key=lambda f: f["fit"]["error"]["log_rmse"])
@@ -181,7 +183,7 @@ def test_cli_store_errors_say_what_the_file_holds(batch_store, fit_json):
         ([str(fit_json), "--table", "pink-felt", "--to", "gltf"],
          "a fit result holds one fit; --table and --model choose a fit of a batch results"),
     ):
-        r = run("brdffit.cli", "export", *args)
+        r = run_main("brdffit.cli", "export", *args)
         assert r.returncode == 2 and message in r.stderr, r.stderr
         assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
 

@@ -12,6 +12,7 @@ from brdffit.fitting import loss, pipeline, sampling
 from brdffit.fitting import problem as fitting
 from brdffit.request import FitRequest
 from data_synth import make_table
+from tests.cli_helpers import run_main
 from tests.compiled_models import check_jit, evaluate
 from tests.truths import TRUTH
 
@@ -209,8 +210,6 @@ def test_the_resume_key_names_the_loss_only_when_it_is_not_the_default():
 def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     """``loss`` is a FitOptions field, so every shell takes it without its own code."""
     import json
-    import subprocess
-    import sys
 
     from api import tasks
     from api.routes.fits import FitResultOut
@@ -222,9 +221,8 @@ def test_the_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35}, noise=0.02, seed=2)
     path = tmp_path / "t.binary"
     merl.write(path, table)
-    r = subprocess.run([sys.executable, "-m", "brdffit.cli", "fit", str(path), "--model", "ggx",
-                        "--loss", "cube_root", "--samples", "2048", "--json"],
-                       capture_output=True, text=True, timeout=300)
+    r = run_main("brdffit.cli", "fit", str(path), "--model", "ggx", "--loss", "cube_root",
+                 "--samples", "2048", "--json")
     assert r.returncode == 0, r.stderr
     cli = json.loads(r.stdout)
     assert cli["loss"] == "cube_root" and "sample_cube_root_rmse" in cli["error"]
@@ -393,8 +391,6 @@ def test_render_loss_with_a_scene_uses_the_scene_views(noisy_ggx):
 @pytest.mark.slow  # ~5 s; the quick tier keeps the log loss's trip through every door
 def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path):
     import json
-    import subprocess
-    import sys
 
     from api import tasks
     from api.routes.fits import FitResultOut
@@ -406,9 +402,8 @@ def test_the_render_loss_reaches_the_cli_the_service_job_and_the_batch(tmp_path)
     table, _ = make_table("ggx", {**TRUTH["ggx"], "alpha": 0.35}, noise=0.02, seed=2)
     path = tmp_path / "t.binary"
     merl.write(path, table)
-    r = subprocess.run([sys.executable, "-m", "brdffit.cli", "fit", str(path), "--model", "ggx",
-                        "--loss", "render", "--samples", "2048", "--json"],
-                       capture_output=True, text=True, timeout=300)
+    r = run_main("brdffit.cli", "fit", str(path), "--model", "ggx", "--loss", "render",
+                 "--samples", "2048", "--json")
     assert r.returncode == 0, r.stderr
     cli = json.loads(r.stdout)
     assert cli["loss"] == "render" and "sample_render_rmse" in cli["error"]

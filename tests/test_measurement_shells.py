@@ -10,7 +10,7 @@ import json
 
 import pytest
 
-from tests.cli_helpers import run
+from tests.cli_helpers import run, run_main
 from tests.table_files import BAD_CSV, SAMPLED, write_astm
 
 pytestmark = pytest.mark.system
@@ -22,7 +22,7 @@ def astm_file(tmp_path_factory):
 
 
 def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
-    r = run("brdffit.cli", "fit", str(astm_file), "--model", "ggx", "--samples", "4096",
+    r = run_main("brdffit.cli", "fit", str(astm_file), "--model", "ggx", "--samples", "4096",
             "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
@@ -40,7 +40,7 @@ def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
     assert json.loads(piped.stdout)["params"] == out["params"]
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
-    r = run("brdffit.cli", "fit", str(bad), "--model", "ggx")
+    r = run_main("brdffit.cli", "fit", str(bad), "--model", "ggx")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "theta_o is below the horizon" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 

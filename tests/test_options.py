@@ -22,7 +22,7 @@ from brdffit.fitting.options import DEFAULT_MODEL, FIT_KEYWORDS, FitOptions, Sel
 from brdffit.io import merl
 from brdffit.models import UnknownModelError
 from brdffit.request import FitRequest
-from tests.cli_helpers import run
+from tests.cli_helpers import run_main
 
 pytestmark = pytest.mark.contract
 
@@ -216,9 +216,9 @@ def test_options_refuse_bad_values_with_a_message():
 
 
 def test_cli_refuses_what_the_options_refuse(tmp_path):
-    r = run("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--starts", "0")
+    r = run_main("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--starts", "0")
     assert r.returncode == 2 and "starts must be an integer in 1 .. 32" in r.stderr
-    r = run("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--samples", "lots")
+    r = run_main("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--samples", "lots")
     assert r.returncode == 2 and "--samples wants an integer or 'all'" in r.stderr
 
 
@@ -323,7 +323,7 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
 
     cli_args = ["--candidates", ",".join(candidates)] if model == "auto" else []
     cli_args += ["--physical"] if physical else []
-    r = run("brdffit.cli", "fit", path, "--model", model, "--json", "--samples", "2048",
+    r = run_main("brdffit.cli", "fit", path, "--model", model, "--json", "--samples", "2048",
             "--seed", "3", *cli_args)
     assert r.returncode == 0, r.stderr
     _same_fit(json.loads(r.stdout), library)
@@ -361,7 +361,7 @@ def test_fit_seed_reaches_the_fit(noisy_table):
     seed3 = fit(merl.read(path), "lambert", **FAST).params["kd"]
     seed0 = fit(merl.read(path), "lambert", samples=2048, seed=0).params["kd"]
     assert not np.allclose(seed3, seed0, rtol=1e-9), "the seed must change the subsample"
-    r = run("brdffit.cli", "fit", path, "--model", "lambert", "--json", "--samples", "2048",
+    r = run_main("brdffit.cli", "fit", path, "--model", "lambert", "--json", "--samples", "2048",
             "--seed", "0")
     assert r.returncode == 0, r.stderr
     np.testing.assert_allclose(json.loads(r.stdout)["params"]["kd"], seed0, rtol=1e-9)

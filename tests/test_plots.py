@@ -92,7 +92,7 @@ def test_error_map_residual_matches_log_rmse(ggx):
     assert rmse == pytest.approx(result.log_rmse, rel=1e-6)
 
 
-@pytest.mark.system  # a subprocess
+@pytest.mark.slow  # a fit and every plot, through the CLI's main(): ~10 s
 def test_cli_fit_writes_plots(tmp_path, capsys):
     path = tmp_path / "lambert.binary"
     merl.write(path, table("lambert"))
