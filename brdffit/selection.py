@@ -49,7 +49,13 @@ from brdffit.fitting.options import (
     DEFAULT_TOLERANCE,
     FIT_KEYWORDS,
 )
-from brdffit.fitting.quality import VERDICTS, describe, radiance_verdict, with_measured_gains
+from brdffit.fitting.quality import (
+    ALIKE_DB,
+    VERDICTS,
+    describe,
+    radiance_verdict,
+    with_measured_gains,
+)
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.scene import Scene, fit_in_scene
 from brdffit.io.merl import MerlTable
@@ -485,7 +491,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     chosen_fit = fits[selection.chosen]
     fits[selection.chosen] = dataclasses.replace(
         chosen_fit, selection=selection.summary(),
-        quality=with_measured_gains(chosen_fit.quality, _render_gains(chosen, ok)))
+        quality=with_measured_gains(chosen_fit.quality,
+                                    _render_gains(chosen, ok, scene is not None)))
     return selection
 
 
@@ -817,7 +824,7 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None,
 #: auto's rule under the render loss: the cheapest candidate whose sphere render is
 #: within this many dB of the best-looking candidate's (the loss measures a picture,
 #: so the choice does too; 0.5 dB is below what a viewer tells apart side by side).
-RENDER_TOLERANCE_DB = 0.5
+RENDER_TOLERANCE_DB = ALIKE_DB
 
 
 def _look_words(row: dict) -> str:
@@ -1019,9 +1026,10 @@ def _all_poor_warning(ok: list[dict]) -> str:
             "the chosen fit's quality.next says what to try.")
 
 
-def _render_gains(chosen: dict, ok: list[dict]) -> list[tuple[str, str, float]]:
+def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[tuple]:
     """Every other candidate's render against the chosen one's, as measured gains
-    (negative where it renders further off: ``next`` then does not advise it)."""
+    with the candidate's size (``next`` advises those worth a step:
+    :func:`brdffit.fitting.quality.with_measured_gains`)."""
     here = _psnr(chosen)
 
     def words(row: dict) -> str:
@@ -1030,10 +1038,17 @@ def _render_gains(chosen: dict, ok: list[dict]) -> list[tuple[str, str, float]]:
         # stalled ggx2 was advised for +1.2 dB without a word of it)
         stopped = "" if row.get("converged", True) else (
             f"; its fit did not converge ({row.get('result')}): refit it with more steps")
-        return (f"it renders {_psnr(row):.1f} dB against {here:.1f} dB on this table "
-                f"(auto's ranking);{held} log_rmse {_fmt(row['log_rmse'])}{stopped}")
+        return (f"it renders {_psnr(row):.1f} dB against {here:.1f} dB {where};{held} "
+                f"log_rmse {_fmt(row['log_rmse'])}{on}{stopped}")
 
-    return [(f"--model {row['model']}", words(row), _psnr(row) - here)
+    # the sphere is rendered whole, where auto on a scene chose by the scene's bins
+    # alone: a step must not read as auto contradicting its own choice
+    where = ("on the whole sphere (auto's ranking; it chose on the scene's directions "
+             "alone, which may not need the difference)" if on_scene
+             else "on this table (auto's ranking)")
+    on = " on the scene" if on_scene else ""
+
+    return [(f"--model {row['model']}", words(row), _psnr(row) - here, row.get("n_params"))
             for row in ok if row is not chosen and math.isfinite(here)
             and math.isfinite(_psnr(row))]
 

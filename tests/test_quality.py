@@ -331,13 +331,40 @@ def test_measured_gains_come_first_and_replace_guesses():
         {"try": "--model ggx2", "why": "a guess", "gain_db": None},
         {"try": "--loss render", "why": "a guess", "gain_db": None}]}
     got = quality.with_measured_gains(look, [
-        ("--model beckmann", "measured", 0.4), ("--model ggx2", "measured", -0.3),
+        ("--model beckmann", "measured", 0.7), ("--model ggx2", "measured", -0.3),
         ("--model phong", "measured", 1.2)])
     assert [s["try"] for s in got["next"]] == ["--model phong", "--model beckmann",
                                                "--loss render"]
     assert got["next"][0]["gain_db"] == 1.2 and look["next"][0]["try"] == "--model ggx2"
     good = {"verdict": "good", "next": []}
     assert quality.with_measured_gains(good, [("--model phong", "m", 1.0)]) is good
+
+
+def test_a_step_is_a_gain_a_viewer_sees_and_no_cheaper_step_gives():
+    """red-fabric's lambert (auto on a scene) was advised six models, oren_nayar among
+    them for "+0.0 dB", and ggx, ggx2, beckmann, blinn_phong and phong for +3.0 to
+    +4.0 dB: a gain under ALIKE_DB is no step, and a step that one of no more
+    parameters matches within it is left out, as auto leaves such a candidate out."""
+    look = {"verdict": "visible", "next": [
+        {"try": "--model ggx", "why": "a guess", "gain_db": None},
+        {"try": "--loss render", "why": "a guess", "gain_db": None}]}
+    measured = [("--model ggx", "m", 4.0, 8), ("--model ggx2", "m", 4.0, 12),
+                ("--model beckmann", "m", 3.5, 8), ("--model blinn_phong", "m", 3.1, 7),
+                ("--model phong", "m", 3.0, 7), ("--model oren_nayar", "m", 0.02, 4)]
+    got = quality.with_measured_gains(look, measured)
+    assert [(s["try"], s["gain_db"]) for s in got["next"]] == [
+        ("--model ggx", 4.0), ("--model blinn_phong", 3.1), ("--loss render", None)]
+    # outdone only by a step kept: a chain of slightly better, slightly larger models
+    # keeps its far end
+    chain = [("--model a", "m", 3.0, 6), ("--model b", "m", 3.4, 7), ("--model c", "m", 3.8, 8)]
+    assert [s["try"] for s in quality.with_measured_gains(look, chain)["next"]] == [
+        "--model c", "--model a", "--model ggx", "--loss render"]
+    # nothing gains a step's worth: said so, with the threshold
+    alike = quality.with_measured_gains(
+        {"verdict": "visible", "next": [{"try": "--model ggx", "why": "g", "gain_db": None}]},
+        [("--model ggx", "m", 0.3, 8)])
+    assert alike["next"][0]["try"] == "nothing here: no candidate rendered closer"
+    assert "by 0.5 dB or more" in alike["next"][0]["why"]
 
 
 def test_the_batch_report_shows_what_to_try_next():

@@ -361,19 +361,49 @@ def _last_steps(model) -> list[dict]:
                     "the angle)", "gain_db": None}]
 
 
+#: A measured gain smaller than this is no step: fits that close render alike to a
+#: viewer side by side, as auto's rule under the render loss takes them to
+#: (``selection.RENDER_TOLERANCE_DB`` is this figure). red-fabric's lambert was advised
+#: oren_nayar for "+0.0 dB".
+ALIKE_DB = 0.5
+
+
+def _worth_a_step(gains: list) -> list[tuple[str, str, float]]:
+    """The measured ``gains`` that are steps: at least :data:`ALIKE_DB`, and not
+    outdone by a cheaper one. A gain may carry its model's size (``(try, why, gain_db,
+    n_params)``): a step whose gain a step of no more parameters reaches within
+    ALIKE_DB (or exceeds, at the same size) is left out, as auto leaves a candidate
+    out that a cheaper one matches. red-fabric's lambert was advised ggx +4.0, ggx2
+    +4.0, beckmann +3.5, blinn_phong +3.1 and phong +3.0 dB: ggx and blinn_phong say
+    all of it. Largest gain first."""
+    steps = [(t, w, float(g), *(rest[:1] or [None])) for t, w, g, *rest in gains
+             if g >= ALIKE_DB]
+    kept: list[tuple] = []
+    # cheapest first, the larger gain first at one size: a step's possible betters
+    # (no more parameters) are judged before it, and it is judged against those kept
+    for step in sorted(steps, key=lambda s: (s[3] is None, s[3] or 0, -s[2])):
+        _, _, g, k = step
+        outdone = k is not None and any(
+            other[3] is not None and other[3] <= k and other[2] >= g - ALIKE_DB
+            and (other[3] < k or other[2] >= g) for other in kept)
+        if not outdone:
+            kept.append(step)
+    return [(t, w, g) for t, w, g, _ in sorted(kept, key=lambda s: -s[2])]
+
+
 def with_measured_gains(look: dict | None, gains: list) -> dict | None:
-    """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]``,
-    measured on the same table) first in its ``next``, largest first. A step that was
+    """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]`` or
+    ``(try, why, gain_db, n_params)``, measured on the same table) first in its
+    ``next``, largest first: those :func:`_worth_a_step` keeps. A step that was
     measured replaces the guess of the same ``try``, and one measured without a gain
-    is dropped: ``auto`` does not advise a candidate it saw render no closer. A good
-    verdict keeps an empty ``next``."""
+    worth a step is dropped: ``auto`` does not advise a candidate it saw render no
+    closer, or no closer than a cheaper one. A good verdict keeps an empty ``next``."""
     if look is None or look.get("verdict") == "good":
         return look
     if not gains:
         return {**look, "next": _worded_for(look.get("basis"), look.get("next", []))}
-    measured = [{"try": t, "why": w, "gain_db": round(float(g), 2)}
-                for t, w, g in sorted(gains, key=lambda x: -x[2]) if g > 0]
-    names = {t for t, _, _ in gains}
+    measured = [{"try": t, "why": w, "gain_db": round(g, 2)} for t, w, g in _worth_a_step(gains)]
+    names = {t for t, *_ in gains}
     layered = any(_layered(t.removeprefix("--model ")) for t in names)
     # a ranking with layered candidates measured them: theirs is no guess to repeat
     rest = [s for s in look.get("next", []) if s["try"] not in names
@@ -382,7 +412,8 @@ def with_measured_gains(look: dict | None, gains: list) -> dict | None:
         # every guess was measured, and none rendered closer
         rest = [{"try": "nothing here: no candidate rendered closer",
                  "why": "auto fitted each of its candidates to this table and none renders "
-                        "closer than this fit; the verdict's reason says what is off",
+                        f"closer than this fit by {ALIKE_DB:g} dB or more; the verdict's "
+                        "reason says what is off",
                  "gain_db": None}, *([] if layered else [dict(_LAYERS)])]
     return {**look, "next": _worded_for(look.get("basis"), measured + rest)}
 
