@@ -492,7 +492,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     fits[selection.chosen] = dataclasses.replace(
         chosen_fit, selection=selection.summary(),
         quality=with_measured_gains(chosen_fit.quality,
-                                    _render_gains(chosen, ok, scene is not None)))
+                                    _render_gains(chosen, ok, _whole_sphere_on_a_scene(
+                                        chosen, scene))))
     return selection
 
 
@@ -1026,6 +1027,13 @@ def _all_poor_warning(ok: list[dict]) -> str:
             "the chosen fit's quality.next says what to try.")
 
 
+def _whole_sphere_on_a_scene(chosen: dict, scene) -> bool:
+    """Whether the verdicts auto ranked are of the whole sphere while it chose on a
+    scene's bins: a table's (its sphere, every direction), not a sample list's (its
+    held-out samples, weighted by the scene as the fit is)."""
+    return scene is not None and chosen.get("log_rmse_basis") != "held_out"
+
+
 def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[tuple]:
     """Every other candidate's render against the chosen one's, as measured gains
     with the candidate's size (``next`` advises those worth a step:
@@ -1038,8 +1046,14 @@ def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[
         # stalled ggx2 was advised for +1.2 dB without a word of it)
         stopped = "" if row.get("converged", True) else (
             f"; its fit did not converge ({row.get('result')}): refit it with more steps")
-        return (f"it renders {_psnr(row):.1f} dB against {here:.1f} dB {where};{held} "
-                f"log_rmse {_fmt(row['log_rmse'])}{on}{stopped}")
+        # the verdicts as auto ranks them: the worse of the picture's and the light's
+        reads = (f"; it reads {VERDICT_ORDER[_verdict_rank(row)]} where this fit reads "
+                 f"{VERDICT_ORDER[_verdict_rank(chosen)]}" if better(row) else "")
+        return (f"it renders {_psnr(row):.1f} dB against {here:.1f} dB {where}{reads};"
+                f"{held} log_rmse {_fmt(row['log_rmse'])}{on}{stopped}")
+
+    def better(row: dict) -> bool:
+        return _verdict_rank(row) < _verdict_rank(chosen)
 
     # the sphere is rendered whole, where auto on a scene chose by the scene's bins
     # alone: a step must not read as auto contradicting its own choice
@@ -1048,7 +1062,8 @@ def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[
              else "on this table (auto's ranking)")
     on = " on the scene" if on_scene else ""
 
-    return [(f"--model {row['model']}", words(row), _psnr(row) - here, row.get("n_params"))
+    return [(f"--model {row['model']}", words(row), _psnr(row) - here, row.get("n_params"),
+             better(row))
             for row in ok if row is not chosen and math.isfinite(here)
             and math.isfinite(_psnr(row))]
 

@@ -359,6 +359,12 @@ def test_a_step_is_a_gain_a_viewer_sees_and_no_cheaper_step_gives():
     chain = [("--model a", "m", 3.0, 6), ("--model b", "m", 3.4, 7), ("--model c", "m", 3.8, 8)]
     assert [s["try"] for s in quality.with_measured_gains(look, chain)["next"]] == [
         "--model c", "--model a", "--model ggx", "--loss render"]
+    # a fit that reads better (a colour the chosen one misses) at a PSNR within ALIKE_DB
+    # is a step, and is not left out for a cheaper one that reads no better
+    reads = quality.with_measured_gains(look, [("--model phong", "m", 0.6, 7, False),
+                                               ("--model ggx", "reads good", 0.1, 8, True)])
+    assert [(s["try"], s["gain_db"]) for s in reads["next"]] == [
+        ("--model phong", 0.6), ("--model ggx", 0.1), ("--loss render", None)]
     # nothing gains a step's worth: said so, with the threshold
     alike = quality.with_measured_gains(
         {"verdict": "visible", "next": [{"try": "--model ggx", "why": "g", "gain_db": None}]},

@@ -710,5 +710,32 @@ def test_a_measured_gain_says_where_its_candidate_stopped_short():
                "result": "nonlinear_max_steps_reached", "log_rmse_basis": "held_out"}
     (gain,) = _render_gains(chosen, [chosen, stalled])
     assert gain[0] == "--model ggx2" and gain[2] == pytest.approx(1.2)
+    assert gain[3:] == (None, False)  # no size given, no verdict either
     assert gain[1].endswith("held-out log_rmse 0.097; its fit did not converge "
                             "(nonlinear_max_steps_reached): refit it with more steps")
+
+
+def test_a_measured_step_says_where_it_reads_better_and_what_a_scene_saw():
+    """A candidate reading a better verdict says so (auto on a scene does not rank by
+    the look: a step may read good at nearly the chosen fit's PSNR); on a scene the
+    render is said to be of the whole sphere, where auto chose by the scene's bins."""
+    from brdffit.fitting.quality import with_measured_gains
+    from brdffit.selection import _render_gains, _whole_sphere_on_a_scene
+
+    chosen = {"model": "lambert", "n_params": 3, "psnr_db": 27.2, "log_rmse": 0.0028,
+              "verdict": "visible"}
+    ggx = {"model": "ggx", "n_params": 8, "psnr_db": 27.5, "log_rmse": 0.0012,
+           "verdict": "good", "radiance_verdict": "good"}
+    (gain,) = _render_gains(chosen, [chosen, ggx], on_scene=True)
+    assert gain[2:] == (pytest.approx(0.3), 8, True)
+    assert gain[1] == ("it renders 27.5 dB against 27.2 dB on the whole sphere (auto's "
+                       "ranking; it chose on the scene's directions alone, which may not "
+                       "need the difference); it reads good where this fit reads visible; "
+                       "log_rmse 0.0012 on the scene")
+    look = {"verdict": "visible", "next": []}
+    assert [s["try"] for s in with_measured_gains(look, [gain])["next"]] == ["--model ggx"]
+    # a sample list's verdict is of its held-out samples, which the scene weights as
+    # it weights the fit: no whole sphere to speak of
+    scene = object()
+    assert _whole_sphere_on_a_scene(chosen, scene) and not _whole_sphere_on_a_scene(chosen, None)
+    assert not _whole_sphere_on_a_scene({**chosen, "log_rmse_basis": "held_out"}, scene)

@@ -283,7 +283,8 @@ def _next_steps_set_up_the_form(page, result: dict) -> None:
     body = request_after(0)
     assert body["models"] == ["ggx2"] and page.is_checked("#mode-list")
     body = request_after(1)
-    assert body["models"] == "auto"
+    assert body["models"] == "auto" and page.is_checked("#mode-auto")
+    assert page.locator("#model-boxes input:checked").count() == 0  # ggx2's tick went
     assert body["rule"]["candidates"] == ["gltf", "gltf_iridescence"]
     body = request_after(2)
     assert body["options"]["loss"] == "render" and body["models"] == "auto"

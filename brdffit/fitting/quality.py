@@ -369,31 +369,38 @@ ALIKE_DB = 0.5
 
 
 def _worth_a_step(gains: list) -> list[tuple[str, str, float]]:
-    """The measured ``gains`` that are steps: at least :data:`ALIKE_DB`, and not
-    outdone by a cheaper one. A gain may carry its model's size (``(try, why, gain_db,
-    n_params)``): a step whose gain a step of no more parameters reaches within
-    ALIKE_DB (or exceeds, at the same size) is left out, as auto leaves a candidate
-    out that a cheaper one matches. red-fabric's lambert was advised ggx +4.0, ggx2
-    +4.0, beckmann +3.5, blinn_phong +3.1 and phong +3.0 dB: ggx and blinn_phong say
-    all of it. Largest gain first."""
-    steps = [(t, w, float(g), *(rest[:1] or [None])) for t, w, g, *rest in gains
-             if g >= ALIKE_DB]
+    """The measured ``gains`` that are steps, largest gain first. A gain is
+    ``(try, why, gain_db)``, or ``(try, why, gain_db, n_params, reads_better)``
+    with its model's size and whether its fit reads a better verdict than the one
+    advised. A step gains at least :data:`ALIKE_DB`, or reads better (a colour or
+    brightness the chosen fit misses, at a PSNR within ALIKE_DB of it); and no step of
+    no more parameters, reading as well, matches it within ALIKE_DB (or exceeds it at
+    the same size), as auto leaves such a candidate out. red-fabric's lambert was
+    advised ggx +4.0, ggx2 +4.0, beckmann +3.5, blinn_phong +3.1 and phong +3.0 dB:
+    ggx and blinn_phong say all of it."""
+    steps = []
+    for t, w, g, *rest in gains:
+        k, better = (list(rest) + [None, False])[:2]
+        if g >= ALIKE_DB or (better and g > -ALIKE_DB):
+            steps.append((t, w, float(g), k, bool(better)))
     kept: list[tuple] = []
     # cheapest first, the larger gain first at one size: a step's possible betters
     # (no more parameters) are judged before it, and it is judged against those kept
     for step in sorted(steps, key=lambda s: (s[3] is None, s[3] or 0, -s[2])):
-        _, _, g, k = step
+        _, _, g, k, better = step
         outdone = k is not None and any(
-            other[3] is not None and other[3] <= k and other[2] >= g - ALIKE_DB
-            and (other[3] < k or other[2] >= g) for other in kept)
+            other[3] is not None and other[3] <= k and other[4] >= better
+            and other[2] >= g - ALIKE_DB and (other[3] < k or other[2] >= g)
+            for other in kept)
         if not outdone:
             kept.append(step)
-    return [(t, w, g) for t, w, g, _ in sorted(kept, key=lambda s: -s[2])]
+    return [s[:3] for s in sorted(kept, key=lambda s: -s[2])]
 
 
 def with_measured_gains(look: dict | None, gains: list) -> dict | None:
-    """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]`` or
-    ``(try, why, gain_db, n_params)``, measured on the same table) first in its
+    """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]``, or
+    with each model's size and whether it reads better: :func:`_worth_a_step`;
+    measured on the same table) first in its
     ``next``, largest first: those :func:`_worth_a_step` keeps. A step that was
     measured replaces the guess of the same ``try``, and one measured without a gain
     worth a step is dropped: ``auto`` does not advise a candidate it saw render no

@@ -478,6 +478,9 @@ function stepSettings(text) {
 function applySettings(settings, text) {
   if (settings.model === "auto") {
     $("mode-auto").checked = true;
+    // auto fits its candidates, not the ticked models: ticks left from an earlier step
+    // read as part of this fit (setting .checked fires no change: the mode stays auto)
+    for (const box of document.querySelectorAll("#model-boxes input")) box.checked = false;
   } else if (settings.model) {
     $("mode-list").checked = true;
     for (const box of document.querySelectorAll("#model-boxes input")) {
