@@ -419,7 +419,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         if loss == "render":
             reason += (" (The budget is a log_rmse figure: given one, it decides even under "
                        "the render loss.)")
-    _layer_gains(ok)
+    _layer_gains(ok, rule)
     chosen, reason = _layer_that_looks_no_worse(chosen, reason, ok)
     if rule == "render_psnr_db":
         chosen, reason = _layer_that_gains_on_the_base_choice(chosen, reason, ok)
@@ -941,11 +941,13 @@ def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
     return c, why + "."
 
 
-def _layer_gains(ok: list[dict]) -> None:
+def _layer_gains(ok: list[dict], rule: str = "log_rmse") -> None:
     """Each fitted row whose model was fitted from another candidate's fit (a layer
     over its base: gltf_clearcoat over gltf_pbr; ggx2's second lobe over ggx) gets
     ``over_parent``: that candidate, the log_rmse ratio and the PSNR gain (dB), what
-    its layer bought."""
+    its layer bought; ``no_gain`` by what the ``rule`` ranks (the render's PSNR under
+    the render loss, which does not minimise log_rmse: color-changing-paint3's ggx2
+    rendered 0.8 dB above ggx at twice its log_rmse, and was said to gain nothing)."""
     by_name = {row["model"]: row for row in ok}
     for row in ok:
         parent = by_name.get(models.get(row["model"]).parent)
@@ -954,15 +956,20 @@ def _layer_gains(ok: list[dict]) -> None:
         ratio = (row["log_rmse"] / parent["log_rmse"] if parent["log_rmse"] > 0
                  else (1.0 if row["log_rmse"] == 0 else None))
         gain = _psnr(row) - _psnr(parent)
+        no_gain = (gain < NO_GAIN_DB if rule == "render_psnr_db" and math.isfinite(gain)
+                   else ratio is not None and ratio > 1.0 - NO_GAIN)
         row["over_parent"] = {"model": parent["model"], "log_rmse_ratio": ratio,
                               "psnr_gain_db": gain if math.isfinite(gain) else None,
-                              "no_gain": ratio is not None and ratio > 1.0 - NO_GAIN}
+                              "no_gain": no_gain}
 
 
 #: A richer candidate whose log_rmse is within this fraction of its base's gained
 #: nothing (``over_parent.no_gain``, printed "nested: no gain"): its lobe or layer
 #: collapsed, or its parent fitted exactly (the fit's ``notes`` then say so).
 NO_GAIN = 1e-3
+#: The same under the render rule, in the render's PSNR: an image error within 0.1% of
+#: its base's (0.0087 dB).
+NO_GAIN_DB = -20.0 * math.log10(1.0 - NO_GAIN)
 
 #: How much worse (dB) than its base a layered candidate may render and still be
 #: chosen: a layer is taken where the rule says it gains and its render agrees.
