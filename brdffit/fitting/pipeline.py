@@ -474,6 +474,12 @@ NEVER_WORSE = 1.001
 
 
 def _worse_than_the_parent(result: FitResult, parent: FitResult) -> bool:
+    """By log_rmse under every loss, the render loss's too, which does not minimise it:
+    the table-wide figure keeps a nested fit from bending to what its loss sees. Judged
+    by the loss's own figure instead (the sphere's PSNR under the render loss), auto
+    with layers changed 5 of the 100 MERL choices under the render loss, 4 of them
+    1.0-2.6 dB worse in bench.render_loss's independent render (alum-bronze's
+    gltf_clearcoat kept at its own optimum: -1.9 dB), its poor count unchanged."""
     mine, theirs = result.error.get("log_rmse"), parent.error.get("log_rmse")
     return mine is not None and theirs is not None and mine > NEVER_WORSE * theirs
 
