@@ -31,7 +31,7 @@ demo: $(STAMP)
 TEST_WORKERS ?= auto
 XDIST := -n $(TEST_WORKERS) --maxprocesses=4 --dist loadgroup
 # bytecode is written (__pycache__, which git ignores) even where the environment sets
-# PYTHONDONTWRITEBYTECODE, as some images do: the suite starts ~260 Python processes (the
+# PYTHONDONTWRITEBYTECODE, as some images do: the suite starts ~230 Python processes (the
 # CLI, servers and their workers), and each compiled brdffit's sources again without it
 # (~0.25 s apiece; a fresh clone's run took 49 s less CPU with it)
 PYTEST := env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest
