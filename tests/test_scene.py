@@ -10,7 +10,14 @@ import pytest
 
 from brdffit import cli
 from brdffit.fitting.sampling import bin_weights
-from brdffit.fitting.scene import Scene, SceneError, fit_in_scene, full_table_error, read_pairs
+from brdffit.fitting.scene import (
+    WHOLE_SPHERE_WORDS,
+    Scene,
+    SceneError,
+    fit_in_scene,
+    full_table_error,
+    read_pairs,
+)
 from brdffit.io import merl
 from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
 from brdffit.io.grid import bin_grid
@@ -203,6 +210,9 @@ def test_scene_fit_reports_scene_and_full_table_error(fresnel_table):
     outside = N_BINS - on_scene.samples["usable"] - sum(d.values())
     assert outside > 0 and line.endswith(f", {outside:,} outside the scene"), line
     assert "outside the scene" not in format_result(everywhere)
+    # the verdict renders every direction, where the fit weighted the scene's: it says so
+    assert on_scene.quality["reason"].endswith("; " + WHOLE_SPHERE_WORDS)
+    assert WHOLE_SPHERE_WORDS not in everywhere.quality["reason"]
 
 
 def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):

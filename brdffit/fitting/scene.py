@@ -447,10 +447,22 @@ def fit_in_scene(table, model, scene: Scene | None, **fit_options):
     if scene is None:
         return fit(table, model, **fit_options)
     result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
+    look = result.quality
     if isinstance(table, MerlTable):
         whole = full_table_error(table, model, result.params)
-    else:  # a sample list: every sample, without the scene's weights
+        if look and look.get("basis", "sphere") == "sphere":
+            # the verdict renders every direction (one figure across losses and
+            # scenes); "visible" on a scene fit read as if of the scene's directions
+            look = {**look, "reason": f"{look['reason']}; {WHOLE_SPHERE_WORDS}"}
+    else:  # a sample list: every sample, without the scene's weights (its verdict is
+        # of its held-out samples, which the scene weights as it weights the fit)
         from brdffit.fitting.samples import sample_error
 
         whole = sample_error(table, model, result.params)
-    return dataclasses.replace(result, scene=scene.to_dict(), full_table_error=whole)
+    return dataclasses.replace(result, scene=scene.to_dict(), full_table_error=whole,
+                               quality=look)
+
+
+#: What a scene fit's verdict says of itself (a table's: its sphere is every direction).
+WHOLE_SPHERE_WORDS = ("judged on the whole sphere, every direction, where the fit weighted "
+                      "the scene's alone")
