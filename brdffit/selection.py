@@ -53,6 +53,7 @@ from brdffit.fitting.quality import (
     ALIKE_DB,
     VERDICTS,
     describe,
+    of_the_whole_sphere,
     radiance_verdict,
     with_measured_gains,
 )
@@ -492,8 +493,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     fits[selection.chosen] = dataclasses.replace(
         chosen_fit, selection=selection.summary(),
         quality=with_measured_gains(chosen_fit.quality,
-                                    _render_gains(chosen, ok, _whole_sphere_on_a_scene(
-                                        chosen, scene))))
+                                    _render_gains(chosen, ok, scene is not None and (
+                                        of_the_whole_sphere(chosen_fit.quality)))))
     return selection
 
 
@@ -1032,13 +1033,6 @@ def _all_poor_warning(ok: list[dict]) -> str:
     return (f" Warning: every candidate looks poor beside the measurement (the best render "
             f"{top['model']}, {_psnr(top):.1f} dB): no model here reproduces this material; "
             "the chosen fit's quality.next says what to try.")
-
-
-def _whole_sphere_on_a_scene(chosen: dict, scene) -> bool:
-    """Whether the verdicts auto ranked are of the whole sphere while it chose on a
-    scene's bins: a table's (its sphere, every direction), not a sample list's (its
-    held-out samples, weighted by the scene as the fit is)."""
-    return scene is not None and chosen.get("log_rmse_basis") != "held_out"
 
 
 def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[tuple]:

@@ -72,18 +72,10 @@ def test_unknown_model_and_missing_file(tmp_path, ggx_file):
     assert r.returncode == 2 and "cannot read" in r.stderr
 
 
-def test_an_empty_item_in_a_list_of_models_is_refused_not_dropped(tmp_path, ggx_file, capsys):
+def test_an_empty_item_in_a_list_of_models_is_refused_not_dropped(tmp_path, ggx_file):
     """``ggx,,lambert`` (a name lost to a typo, or an empty variable) was read as
     ggx,lambert: refused wherever a command line takes a list of models, naming the
     flag, before the table is read."""
-    from brdffit.cli import main
-
-    def exit_code(argv: list[str]) -> int:
-        try:
-            return main(argv)
-        except SystemExit as e:  # argparse's refusal of a flag's value
-            return e.code
-
     for argv, flag in (
             (["fit", str(ggx_file), "--model", "ggx,,lambert"], "--model 'ggx,,lambert'"),
             (["fit", str(ggx_file), "--model", "auto", "--candidates", "ggx,"],
@@ -91,8 +83,8 @@ def test_an_empty_item_in_a_list_of_models_is_refused_not_dropped(tmp_path, ggx_
             (["batch", str(ggx_file), "--models", ",ggx", "--out", str(tmp_path / "b.h5")],
              "--models ',ggx'"),
             (["warmup", "--models", "lambert,,ggx"], "--models 'lambert,,ggx'")):
-        code = exit_code(argv)
-        err = capsys.readouterr().err
+        r = run_main("brdffit.cli", *argv)  # argparse's refusal of a flag's value
+        code, err = r.returncode, r.stderr
         assert code == 2, (argv, err)
         assert (f"{flag} has an empty item (two commas in a row, or one at an end): separate "
                 "the names by single commas") in err, err

@@ -719,8 +719,8 @@ def test_a_measured_step_says_where_it_reads_better_and_what_a_scene_saw():
     """A candidate reading a better verdict says so (auto on a scene does not rank by
     the look: a step may read good at nearly the chosen fit's PSNR); on a scene the
     render is said to be of the whole sphere, where auto chose by the scene's bins."""
-    from brdffit.fitting.quality import with_measured_gains
-    from brdffit.selection import _render_gains, _whole_sphere_on_a_scene
+    from brdffit.fitting.quality import of_the_whole_sphere, with_measured_gains
+    from brdffit.selection import _render_gains
 
     chosen = {"model": "lambert", "n_params": 3, "psnr_db": 27.2, "log_rmse": 0.0028,
               "verdict": "visible"}
@@ -734,11 +734,12 @@ def test_a_measured_step_says_where_it_reads_better_and_what_a_scene_saw():
                        "log_rmse 0.0012 on the scene")
     look = {"verdict": "visible", "next": []}
     assert [s["try"] for s in with_measured_gains(look, [gain])["next"]] == ["--model ggx"]
-    # a sample list's verdict is of its held-out samples, which the scene weights as
-    # it weights the fit: no whole sphere to speak of
-    scene = object()
-    assert _whole_sphere_on_a_scene(chosen, scene) and not _whole_sphere_on_a_scene(chosen, None)
-    assert not _whole_sphere_on_a_scene({**chosen, "log_rmse_basis": "held_out"}, scene)
+    # a verdict of held-out samples (a sparse sample list's, which the scene weights as
+    # it weights the fit) has no whole sphere to speak of; a sphere's, a table's or a
+    # dense sample list's binned table, has (a result before the basis: a table's)
+    assert not of_the_whole_sphere({"verdict": "visible", "basis": "held_out"})
+    assert of_the_whole_sphere({"verdict": "visible", "basis": "sphere"})
+    assert of_the_whole_sphere({"verdict": "visible"}) and not of_the_whole_sphere(None)
 
 
 def test_under_the_render_rule_a_nested_gain_is_the_renders():

@@ -361,6 +361,13 @@ def _last_steps(model) -> list[dict]:
                     "the angle)", "gain_db": None}]
 
 
+def of_the_whole_sphere(look: dict | None) -> bool:
+    """Whether a quality block judged a sphere, every direction (a table's, or a sample
+    list's binned table where its samples cover the sphere), not held-out samples (which
+    a scene weights as it weights the fit): on a scene fit, a verdict beyond the scene."""
+    return bool(look) and look.get("basis", "sphere") == "sphere"
+
+
 #: A measured gain smaller than this is no step: fits that close render alike to a
 #: viewer side by side, as auto's rule under the render loss takes them to
 #: (``selection.RENDER_TOLERANCE_DB`` is this figure). red-fabric's lambert was advised

@@ -45,6 +45,7 @@ import numpy as np
 
 from brdffit import runtime
 from brdffit.errors import FitInputError
+from brdffit.fitting.quality import of_the_whole_sphere
 from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
 from brdffit.io.grid import bin_grid
 from brdffit.io.merl import MerlTable
@@ -448,14 +449,13 @@ def fit_in_scene(table, model, scene: Scene | None, **fit_options):
         return fit(table, model, **fit_options)
     result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
     look = result.quality
+    if of_the_whole_sphere(look):
+        # the verdict renders every direction (one figure across losses and scenes);
+        # "visible" on a scene fit read as if of the scene's directions
+        look = {**look, "reason": f"{look['reason']}; {WHOLE_SPHERE_WORDS}"}
     if isinstance(table, MerlTable):
         whole = full_table_error(table, model, result.params)
-        if look and look.get("basis", "sphere") == "sphere":
-            # the verdict renders every direction (one figure across losses and
-            # scenes); "visible" on a scene fit read as if of the scene's directions
-            look = {**look, "reason": f"{look['reason']}; {WHOLE_SPHERE_WORDS}"}
-    else:  # a sample list: every sample, without the scene's weights (its verdict is
-        # of its held-out samples, which the scene weights as it weights the fit)
+    else:  # a sample list: every sample, without the scene's weights
         from brdffit.fitting.samples import sample_error
 
         whole = sample_error(table, model, result.params)
@@ -463,6 +463,6 @@ def fit_in_scene(table, model, scene: Scene | None, **fit_options):
                                quality=look)
 
 
-#: What a scene fit's verdict says of itself (a table's: its sphere is every direction).
+#: What a scene fit's verdict of a sphere says of itself (``quality.of_the_whole_sphere``).
 WHOLE_SPHERE_WORDS = ("judged on the whole sphere, every direction, where the fit weighted "
                       "the scene's alone")
