@@ -56,11 +56,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .base import Params, ParamSpec
+from .computed_once import computed_once
 from .frame import Frame
 from .gltf_layer import BASE, THREEJS_BASE, GltfLayer
 from .gltf_pbr import BASE_COLOR, DIELECTRIC_F0, METALLIC, ROUGHNESS
@@ -139,18 +139,6 @@ class Film(NamedTuple):
     orders: tuple  # ((3, ...) XYZ of order 1, of order 2), unshifted
 
 
-def _computed_once(fn, x, data):
-    """``fn(x)``, each element computed once and kept. XLA's fusion takes a cosine for
-    cheap and computes it again inside every fused expression that reads it (both
-    bases' films, the double-angle order, each parameter's pass of the solver's
-    Jacobian): the film's cosines were computed dozens of times a sample. The branches of a
-    conditional are not fused with what reads their results, so both of this one's are
-    ``fn``; its predicate reads ``data`` (the light's cosines, the same for every
-    start), so that it stays a conditional where the starts are vectorised (a predicate
-    that varies per start would run both branches)."""
-    return jax.lax.cond(jnp.all(data == data), fn, fn, x)
-
-
 def _sensitivity_orders(opd, cos1):
     """``evalSensitivity`` of an optical path difference ``opd`` (nm, (...)) at orders 1
     and 2 (``evalSensitivity(m * opd, m * shift)``), each (3, ...) XYZ, before the phase
@@ -160,7 +148,7 @@ def _sensitivity_orders(opd, cos1):
     cosine is the same), so it is a sign (:func:`film_fresnel`), and order 2 is order
     1's cosine and Gaussian at twice the phase: ``cos(2x) = 2 cos(x)^2 - 1``,
     ``exp(-4a) = exp(-a)^4``. The extension's text takes each order of each base's film
-    apart, 16 cosines a sample where these are 4 (kept, :func:`_computed_once`): a
+    apart, 16 cosines a sample where these are 4 (kept: ``computed_once``): a
     solver step's normal equations on 16,384 samples cost 13.6 ms where they cost 24.2
     (gltf_pbr's: 1.3), and a film's fit ~35% less. The text itself, line by line, is
     ``brdffit.export.validate``'s; the two agree to 1e-9 (tests/test_layered_models.py)."""
@@ -175,7 +163,7 @@ def _sensitivity_orders(opd, cos1):
         return (jnp.cos(pos * phase), jnp.exp(-(phase * phase) * var), jnp.cos(p * phase),
                 jnp.exp(-v * phase * phase))
 
-    c1, g1, c1_x2, g1_x2 = _computed_once(waves, phase, cos1)
+    c1, g1, c1_x2, g1_x2 = computed_once(waves, phase, cos1)
     c2, c2_x2 = 2.0 * c1 * c1 - 1.0, 2.0 * c1_x2 * c1_x2 - 1.0
     g2, g2_x2 = (g1 * g1) ** 2, (g1_x2 * g1_x2) ** 2
     first, second = amplitude * c1 * g1, amplitude * c2 * g2

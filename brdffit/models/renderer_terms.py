@@ -31,6 +31,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .computed_once import computed_once
 from .guarded import safe_div, safe_sqrt
 
 
@@ -58,7 +59,15 @@ def conductor_fresnel(eta, k, cos_d) -> Float[Array, ...]:
     ``eta``, ``k`` broadcast against ``cos_d``. Both ratios have a denominator
     >= their numerator >= 0; it is 0 only for ``eta = 1, k = 0`` at grazing, where the
     floor returns the limit 0 (no reflection from a medium matched to the outside).
+
+    Computed once and stored (``computed_once``): fused into what reads it, XLA
+    computed it again per tangent of a solver's Jacobian (``standard_surface``'s per
+    parameter's pass: 11.2 -> 6.9 ms on 16,384 samples).
     """
+    return computed_once(lambda a: _conductor_fresnel(*a), (eta, k, cos_d), cos_d)
+
+
+def _conductor_fresnel(eta, k, cos_d):
     c = cos_d
     s2 = 1.0 - c * c
     t1 = eta * eta - k * k - s2
