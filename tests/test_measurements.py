@@ -885,3 +885,84 @@ def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, mo
     rows.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
                     + "".join(f"10,0,{k},0,1,1,1\n" for k in range(10)))
     assert read_measured(rows).n == 10
+
+
+def test_a_unit_suffix_is_read_from_the_end_of_any_name(tmp_path):
+    """A column name's unit suffix (``[deg]``, ``(deg)``, ``/deg``, `` deg``) is read
+    as the one regular expression that read it before did, on every name of up to five
+    characters of a small alphabet; and in time linear in the name: that expression
+    split a run of spaces in cubic many ways (a 16 KB header took 110 s to read)."""
+    import itertools
+
+    from brdffit.io.readers import _unit_suffixed
+
+    def as_before(name: str) -> str:
+        name = name.replace("°", "deg").replace("º", "deg")
+        m = re.fullmatch(r"(.*?)\s*(?:\[\s*(\w+)\s*\]|\(\s*(\w+)\s*\)|/\s*(\w+)|\s+(\w+))",
+                         name)
+        return name if m is None else f"{m[1]}_{next(u for u in m.groups()[1:] if u)}"
+
+    for n in range(6):
+        for name in map("".join, itertools.product("a_ /[(])\t°", repeat=n)):
+            assert _unit_suffixed(name) == as_before(name), repr(name)
+    # a name of 20,000 spaces (hours, as it was) beside the angles: read, and ignored
+    s = _samples(60)
+    lines = _write_all(tmp_path, s)["csv"].read_text().splitlines()
+    long = tmp_path / "long.csv"
+    long.write_text("\n".join([lines[0] + ",note" + " " * 20_000 + "x!",
+                               *(line + ",a" for line in lines[1:])]) + "\n")
+    np.testing.assert_array_equal(read_measured(long).wi, read_measured(tmp_path / "s.csv").wi)
+
+
+def test_azimuths_in_radians_under_a_degrees_header_are_noted_not_refused(tmp_path):
+    """Azimuths said to be degrees that all lie within 2 pi and are mostly not whole
+    numbers are radians under a degrees header, most likely: read (a list measured near
+    its plane of incidence reads so too), with what the fit's note says of them. Real
+    degrees, and whole degrees near the plane, are not."""
+    theta_i, phi_i, theta_o, phi_o, rgb = _samples(200)
+    rows = np.column_stack([np.degrees(theta_i), phi_i, np.degrees(theta_o), phi_o, rgb])
+    path = tmp_path / "rad.csv"
+    path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                    + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
+    said = read_measured(path).provenance
+    assert said["azimuths_within_deg"] == pytest.approx(phi_o.max())
+    assert "azimuths_within_deg" not in read_measured(_write_all(tmp_path, (
+        theta_i, phi_i, theta_o, phi_o, rgb))["csv"]).provenance
+    rows[:, 3] = np.round(rows[:, 3])  # whole degrees, 0 to 6: a plane's neighbourhood
+    path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
+                    + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
+    assert "azimuths_within_deg" not in read_measured(path).provenance
+
+
+def test_spectra_with_thousands_of_wavelengths_project_as_interpolation_does():
+    """Each wavelength's share of the projection's grid is ``np.interp`` of its unit
+    vector (built that way, 6,000 wavelengths took minutes), held at the end values."""
+    from brdffit.io import spectra
+
+    rng = np.random.default_rng(2)
+    for k in (2, 3, 17, 81):
+        lam = np.sort(rng.choice(np.arange(300.0, 900.0, 0.5), k, replace=False))
+        expected = np.stack([np.interp(spectra.GRID, lam, np.eye(k)[j]) for j in range(k)])
+        np.testing.assert_allclose(spectra.interpolation_matrix(lam, spectra.GRID), expected,
+                                   atol=1e-15)
+    lam = np.linspace(380.0, 780.0, 6000)
+    rgb, info = spectra.to_rgb(np.full((4, lam.size), 0.1), lam, "wide.h5")
+    assert info["wavelengths_nm"] == [380.0, 780.0, 6000]
+    np.testing.assert_allclose(rgb, 0.1, rtol=0.02)  # a flat spectrum is grey
+
+
+def test_a_sigma_far_below_the_others_weighs_much_but_finitely():
+    """A sigma of 1e-300 beside others of 0.01: its weight was 1 / 0 (its bin NaN,
+    dropped unsaid, with numpy's warnings); it is floored at a millionth of the median."""
+    import warnings
+
+    wi = np.array([[0.0, 0.0, 1.0]] * 40)
+    wo = np.array([[np.sin(t), 0.0, np.cos(t)] for t in np.linspace(0.0, 1.2, 40)])
+    rgb = np.full((40, 3), 0.3)
+    sigma = np.full((40, 3), 0.01)
+    sigma[0] = 1e-300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        table, _ = Measurements(wi, wo, rgb, sigma=sigma).to_table()
+    assert np.all(np.isfinite(table.rgb[:, table.mask]))
+    np.testing.assert_allclose(table.rgb[:, table.mask], 0.3)

@@ -264,6 +264,13 @@ class SampleInput:
         usable = self._samples.on_the_surface(self.meas)
         dark_notes, dark_steps = _too_dark(_brightest(self.meas.rgb[usable]), "sample list")
         notes, steps = notes + dark_notes, steps + dark_steps
+        within = self.meas.provenance.get("azimuths_within_deg")
+        if within is not None:
+            notes.append(
+                f"every azimuth lies within {within:.3g} degrees (the file says degrees) and "
+                "most are not whole numbers: are they radians? Read as degrees, every "
+                "direction lies within 6.3 degrees of one plane; if they are radians, name "
+                "their columns phi_i_rad and phi_o_rad (HDF5: their units 'radians')")
         return (notes + self._samples.duplicate_note(self.meas, prep)
                 + self._samples.zero_note(self.meas, prep),
                 self._samples.azimuth_convention_step(self.meas, prep) + steps)

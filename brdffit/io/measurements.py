@@ -69,9 +69,11 @@ def relative_sigma(sigma: np.ndarray, positive: np.ndarray) -> np.ndarray:
     mean, a fit's normalised weights). Squared as it is, a sigma of 1e-160 overflowed
     to inf (a fit of NaNs) and one of 1e-170 underflowed to 0 (silently ignored); a
     sigma of 0 (the readers refuse one; Measurements built directly may hold it) is the
-    most certain, not infinitely so."""
+    most certain, not infinitely so. And at a millionth of their median: a sigma of
+    1e-300 beside others of 0.01 made its bin's weight 1 / 0 (a NaN bin, dropped
+    unsaid); no sample here weighs more than 1e12 times the median one."""
     scale = float(np.median(positive)) if positive.size else 1.0
-    floor = float(np.min(positive, initial=scale)) / scale * 1e-3
+    floor = max(float(np.min(positive, initial=scale)) / scale * 1e-3, 1e-6)
     return np.maximum(sigma / scale, floor)
 
 

@@ -88,7 +88,7 @@ def _unit_scale(unit: str, source: str) -> float:
 #: A value column's unit written after its name, which is the BRDF's own (1/sr): read
 #: as the name alone (``r [1/sr]``, ``brdf (sr^-1)``). Any other unit is not stripped,
 #: so that such a column is not read as a BRDF.
-_PER_STERADIAN = re.compile(r"\s*[\[(]\s*(?:1\s*/\s*sr|sr\s*\^?\s*-\s*1|sr⁻¹)\s*[\])]$")
+_PER_STERADIAN = re.compile(r"[\[(]\s*(?:1\s*/\s*sr|sr\s*\^?\s*-\s*1|sr⁻¹)\s*[\])]")
 #: Spelled-out channel names, as some instruments' exports write them.
 _CHANNEL_WORDS = {"red": "r", "green": "g", "blue": "b"}
 
@@ -96,21 +96,43 @@ _CHANNEL_WORDS = {"red": "r", "green": "g", "blue": "b"}
 def _value_name(name: str) -> str:
     """A lower-case column name without a per-steradian unit, its channel spelled
     as brdffit's (``Red [1/sr]`` is ``r``)."""
-    name = _PER_STERADIAN.sub("", name)
+    # from the last bracket on: a pattern searched from the start would try each
+    # space of a long run before it (quadratic in the name)
+    last = max(name.rfind("["), name.rfind("("))
+    if last >= 0 and _PER_STERADIAN.fullmatch(name, last):
+        name = name[:last].rstrip()
     return _CHANNEL_WORDS.get(name, name)
 
 
 def _unit_suffixed(name: str) -> str:
     """An angle column's name with its unit written as a suffix: ``theta_i [deg]``,
     ``theta_i (deg)``, ``theta_i (°)``, ``theta_i deg`` and ``theta_i/rad`` are read as
-    ``theta_i_deg`` and ``theta_i_rad``, as lab software and spreadsheets write them."""
+    ``theta_i_deg`` and ``theta_i_rad``, as lab software and spreadsheets write them.
+
+    Read from the end with string methods, in time linear in the name: one regular
+    expression for all four forms could split a run of spaces between its parts in
+    cubic many ways (a 16 KB header with a long run of spaces in one name took 110 s
+    to read)."""
     name = name.replace("°", "deg").replace("º", "deg")
-    m = re.fullmatch(r"(.*?)\s*(?:\[\s*(\w+)\s*\]|\(\s*(\w+)\s*\)|/\s*(\w+)|\s+(\w+))",
-                     name)
-    if m is None:
-        return name
-    unit = next(u for u in m.groups()[1:] if u is not None)
-    return f"{m[1]}_{unit}"
+    for opening, closing in ("[]", "()"):
+        if name.endswith(closing):
+            head, found, unit = name[:-1].rpartition(opening)
+            unit = unit.strip()
+            if found and _WORD.fullmatch(unit):
+                return f"{head.rstrip()}_{unit}"
+            return name
+    start = len(name)
+    while start > 0 and _WORD.fullmatch(name[start - 1]):
+        start -= 1
+    unit, before = name[start:], name[:start].rstrip()
+    if unit and before.endswith("/"):
+        return f"{before[:-1].rstrip()}_{unit}"
+    if unit and 0 < start and name[start - 1].isspace():
+        return f"{before}_{unit}"
+    return name
+
+
+_WORD = re.compile(r"\w+")
 
 
 def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
@@ -227,8 +249,9 @@ def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | 
 
 def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
                provenance: dict) -> Measurements:
-    _radians_said_to_be_degrees([rows[:, cols[a][0]] for a in ANGLES],
-                                [cols[a][1] for a in ANGLES], source)
+    raw = [rows[:, cols[a][0]] for a in ANGLES]
+    _radians_said_to_be_degrees(raw, [cols[a][1] for a in ANGLES], source)
+    provenance.update(azimuths_within(raw, [cols[a][1] for a in ANGLES]))
     angles = [rows[:, cols[a][0]] * cols[a][1] for a in ANGLES]
     values = rows[:, cols["values"]]
     if "wavelengths" in cols:
@@ -266,6 +289,29 @@ def _radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
                     "polar angles are radians, name their columns _rad (theta_i_rad beside "
                     "phi_i_deg is read), or put '# angles: radians' before the header (HDF5: "
                     "a units attribute 'radians')")
+
+
+#: From this many samples, azimuths are judged by :func:`azimuths_within`.
+_AZIMUTHS_JUDGED_FROM = 20
+
+
+def azimuths_within(raw: list[np.ndarray], scales: list[float]) -> dict:
+    """``{"azimuths_within_deg": x}`` where the azimuths are said to be in degrees yet
+    all lie within 2 pi, reach beyond pi, and are mostly not whole degrees: radians under
+    a degrees header, most likely (every direction then sits within 6.3 degrees of one
+    azimuth, and the fit was made without a word). Only noted (the fit's notes), not
+    refused: a list measured close to its plane of incidence reads so too."""
+    if raw[0].size < _AZIMUTHS_JUDGED_FROM or any(scale == 1.0 for scale in scales[1::2]):
+        return {}
+    azimuth = np.abs(np.concatenate(raw[1::2]))
+    azimuth = azimuth[azimuth != 0]  # phi_i 0, by a common convention, says nothing
+    if azimuth.size < _AZIMUTHS_JUDGED_FROM or not np.all(np.isfinite(azimuth)):
+        return {}
+    largest = float(azimuth.max())
+    whole = np.mean(azimuth == np.round(azimuth))
+    if largest <= 2 * np.pi + 1e-6 and largest > np.pi and whole < 0.5:
+        return {"azimuths_within_deg": largest}
+    return {}
 
 
 def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
@@ -656,6 +702,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         _radians_said_to_be_degrees(raw, scales, source)
         angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
         provenance = _stored_provenance(f.attrs.get("provenance"))
+        provenance.update(azimuths_within(raw, scales))
         kinds = [k for k in ("rgb", "value", "spectral") if k in f]
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
