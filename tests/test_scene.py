@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -157,6 +158,49 @@ def test_bad_scene_files(tmp_path):
     (tmp_path / "points.json").write_text('{"pairs_file": "s.json"}')
     with pytest.raises(SceneError, match="direction pairs are a .npy or .csv file, not .json"):
         Scene.from_file(tmp_path / "points.json")
+    # one line each, not numpy's, json's or Python's own exceptions
+    (tmp_path / "empty.npy").write_bytes(b"")
+    for name, text, says in (
+            ("preset.json", '{"preset": [1]}', "unknown scene preset [1]"),
+            ("file.json", '{"pairs_file": 5}', "scene pairs_file: the path of a .npy or .csv"),
+            ("deep.json", "[" * 100_000 + "]" * 100_000, "deep.json: not a scene: JSON nested"),
+            ("empty.npy", None, "empty.npy: not a numeric .npy array")):
+        if text is not None:
+            (tmp_path / name).write_text(text)
+        with pytest.raises(SceneError, match=re.escape(says)):
+            Scene.from_file(tmp_path / name)
+
+
+def test_a_scene_of_more_pairs_than_binning_needs_is_refused_before_it_is_made(tmp_path):
+    """3,000 lights with 3,000 views (a 142 KB file) made 9M pairs and took 2.3 GB: a
+    scene holds at most MAX_PAIRS, counted before the product or the file is made."""
+    from brdffit.fitting.scene import MAX_PAIRS
+
+    side = int(MAX_PAIRS ** 0.5) + 1
+    ups = np.tile([[0.1, 0.2, 1.0]], (side, 1)).tolist()
+    with pytest.raises(SceneError, match=f"{side * side:,} direction pairs .*at most"):
+        Scene.from_dict({"lights": ups, "views": ups})
+    big = np.lib.format.open_memmap(tmp_path / "big.npy", mode="w+", dtype=np.float64,
+                                    shape=(MAX_PAIRS + 1, 6))
+    del big
+    with pytest.raises(SceneError, match="at most"):
+        Scene.from_file(tmp_path / "big.npy")
+
+
+def test_a_bom_and_huge_numbers_are_directions_all_the_same(tmp_path):
+    """A scene JSON saved with a byte-order mark reads (as a fit JSON does); a direction
+    of 1e308s is a direction (its length overflowed, and the pair was dropped as below
+    the horizon, with numpy's warning)."""
+    import warnings
+
+    (tmp_path / "bom.json").write_bytes(b"\xef\xbb\xbf" + b'{"preset": "camera-normal"}')
+    assert Scene.from_file(tmp_path / "bom.json").max_theta_o == 10.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        huge = Scene(pairs=np.array([[[1e308, 1e308, 1e308], [0.0, 0.0, 1.0]]]))
+        plain = Scene(pairs=np.array([[[1.0, 1.0, 1.0], [0.0, 0.0, 1.0]]]))
+        np.testing.assert_array_equal(huge.bin_weight(), plain.bin_weight())
+    assert huge.dropped_pairs == 0
 
 
 def test_a_scene_name_is_short_text_and_angles_are_numbers():

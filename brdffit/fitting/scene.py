@@ -64,6 +64,11 @@ _MAX_LOOKUPS = 400_000
 #: The longest scene name (a file name's 255, as the service's table names).
 MAX_NAME = 255
 
+#: The most direction pairs a scene may hold (``lights`` x ``views`` counted as their
+#: product). A scene is binned onto the table's 1.46M bins, so more pairs add little
+#: but memory: 9M pairs (3,000 lights with 3,000 views, a 142 KB file) took 2.3 GB.
+MAX_PAIRS = 2_000_000
+
 
 def _is_number(v) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)  # True is not 1 degree
@@ -122,7 +127,7 @@ class Scene:
             raise SceneError(f"unknown scene key(s) {sorted(unknown)}; expected {sorted(known)}")
         kw: dict = {}
         if "preset" in d:
-            if d["preset"] not in PRESETS:
+            if not isinstance(d["preset"], str) or d["preset"] not in PRESETS:
                 raise SceneError(
                     f"unknown scene preset {d['preset']!r}; choose one of {', '.join(PRESETS)}"
                 )
@@ -138,11 +143,17 @@ class Scene:
                 raise SceneError("a scene needs both 'lights' and 'views', or neither")
             lights = _as_dirs(d["lights"], "lights")
             views = _as_dirs(d["views"], "views")
+            _not_too_many(len(lights) * len(views),
+                          f"{len(lights):,} lights with {len(views):,} views")
             parts.append(np.stack(np.broadcast_arrays(lights[:, None], views[None, :]),
                                   axis=2).reshape(-1, 2, 3))
         if "pairs_file" in d:
-            parts.append(read_pairs(os.path.join(base_dir, os.fspath(d["pairs_file"]))))
+            if not isinstance(d["pairs_file"], str) or not d["pairs_file"]:
+                raise SceneError("scene pairs_file: the path of a .npy or .csv file of "
+                                 f"pairs, relative to the scene's file; got {d['pairs_file']!r}")
+            parts.append(read_pairs(os.path.join(base_dir, d["pairs_file"])))
         if parts:
+            _not_too_many(sum(map(len, parts)), "its pairs")
             kw["pairs"] = np.concatenate(parts)
         return cls(**kw)
 
@@ -157,10 +168,14 @@ class Scene:
         if ext == ".json":
             _a_file(path)
             try:
-                with open(path, encoding="utf-8") as f:
+                # a byte-order mark, as Windows editors write one, is read past (as a fit
+                # JSON's is by export)
+                with open(path, encoding="utf-8-sig") as f:
                     d = json.load(f)
             except json.JSONDecodeError as e:
                 raise SceneError(f"{path}: not valid JSON ({e})") from None
+            except RecursionError:
+                raise SceneError(f"{path}: not a scene: JSON nested too deeply") from None
             except UnicodeDecodeError:
                 raise SceneError(f"{path}: not UTF-8 text (a scene's JSON is)") from None
             if isinstance(d, dict) and "name" not in d and "preset" not in d:
@@ -297,15 +312,27 @@ def read_pairs(path: str) -> np.ndarray:
     _a_file(path)
     if ext == ".npy":
         try:
-            a = np.load(path, allow_pickle=False)
-        except ValueError as e:
-            raise SceneError(f"{path}: not a numeric .npy array ({e})") from None
+            # mapped first: its shape is refused before a huge array is read
+            a = np.load(path, allow_pickle=False, mmap_mode="r")
+            _not_too_many(a.shape[0] if a.ndim else 1, f"{path}'s pairs")
+            a = np.array(a)
+        except (ValueError, EOFError, OSError) as e:  # EOFError: an empty file
+            raise SceneError(f"{path}: not a numeric .npy array "
+                             f"({e or type(e).__name__})") from None
     else:
         try:
             a = _read_csv(path)
         except UnicodeDecodeError:
             raise SceneError(f"{path}: not UTF-8 text (a .csv of pairs is)") from None
     return _as_pairs(a, path)
+
+
+def _not_too_many(n: int, what: str) -> None:
+    if n > MAX_PAIRS:
+        raise SceneError(
+            f"scene with {n:,} direction pairs ({what}): at most {MAX_PAIRS:,}. A scene "
+            "is binned onto the table's 1.46M bins, so a subset drawn at random (or every "
+            "k-th pair) weights the fit alike")
 
 
 def _a_file(path: str) -> None:
@@ -323,6 +350,8 @@ def _read_csv(path: str) -> np.ndarray:
             if not line:
                 continue
             cells = [c.strip() for c in line.replace(";", ",").split(",")]
+            if len(rows) == MAX_PAIRS:
+                _not_too_many(MAX_PAIRS + 1, f"{path} has more lines")
             try:
                 rows.append([float(c) for c in cells])
             except ValueError:
@@ -363,9 +392,14 @@ def _as_pairs(a, what: str) -> np.ndarray:
 def _clean_pairs(pairs, scene: Scene) -> np.ndarray:
     """Unit pairs above the horizon; records how many were dropped."""
     a = _as_pairs(pairs, "pairs")
-    norm = np.linalg.norm(a, axis=-1, keepdims=True)
+    _not_too_many(len(a), "its pairs")
     if not np.all(np.isfinite(a)):
         raise SceneError("scene pairs contain non-finite numbers")
+    # each direction scaled by its largest component first: its length then cannot
+    # overflow (a direction of 1e308s is as good a direction as any)
+    largest = np.max(np.abs(a), axis=-1, keepdims=True)
+    a = a / np.where(largest > 0, largest, 1.0)
+    norm = np.linalg.norm(a, axis=-1, keepdims=True)
     ok = np.all(norm[..., 0] > 0, axis=1)
     a = a / np.where(norm > 0, norm, 1.0)
     ok &= np.all(a[..., 2] > 0, axis=1)
