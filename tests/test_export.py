@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -360,6 +361,63 @@ def test_a_fits_own_table_file_changed_since_the_fit_is_said(tmp_path):
     assert any(w.startswith(f"fidelity: {path} does not hold the table that was fitted")
                for w in changed.warnings), changed.warnings
     assert changed.fidelity["log_rmse_to_table"] is not None  # measured, and said so
+
+
+def test_a_sample_lists_file_changed_since_the_fit_is_said(tmp_path):
+    """A fit at a sample list's own directions is checked on the file's samples as
+    they are now, by its log_rmse on every usable sample: another material written over
+    the list was exported, refitted from it, without a word."""
+    from brdffit.fitting.samples import sample_error
+    from brdffit.io.readers import read_measured
+    from brdffit.io.writers import write_csv
+    from data_synth.sparse import sample_model
+
+    path = tmp_path / "lab.csv"
+    write_csv(sample_model("ggx", GGX, n=300, seed=4)[0], path)
+    fitted = read_measured(path)
+    own = dataclasses.replace(result("ggx", GGX), table=str(path),
+                              input={"fitted_at": "samples"},
+                              error=sample_error(fitted, "ggx", GGX))
+    assert not any("does not hold" in w for w in export(own, "gltf").warnings)
+    write_csv(sample_model("ggx", {**GGX, "ks": [0.1, 0.1, 0.1], "alpha": 0.5}, n=300,
+                           seed=4)[0], path)
+    changed = export(own, "gltf")
+    assert any(w.startswith(f"fidelity: {path} does not hold the samples that were fitted")
+               for w in changed.warnings), changed.warnings
+
+
+def test_a_fit_json_of_the_wrong_types_is_refused_by_its_key():
+    """A result edited by hand or written by another tool: each key of the wrong JSON
+    type is named (they failed deep in an export: "unhashable type: 'list'",
+    "'NoneType' object has no attribute 'get'", ...); a metric that is null, as the
+    schema allows, exports."""
+    good = result("ggx", GGX, quality={"verdict": "poor", "reason": "r",
+                                       "next": [{"try": "x", "why": "y"}]}).to_dict()
+    for key, value, says in (
+            ("model", ["ggx"], "'model' is a list, where a fit result has text"),
+            ("error", None, "'error' is null, where a fit result has an object"),
+            ("table", 5, "'table' is a whole number, where a fit result has text or null"),
+            ("input", "x", "'input' is text, where a fit result has an object or null"),
+            ("steps", True, "'steps' is true or false, where a fit result has a whole number"),
+            ("error", {"log_rmse": "x"}, "error.log_rmse is text, where a fit result has a "
+                                         "number or null"),
+            ("quality", {"verdict": "poor", "next": ["x"]}, "quality.next is not a list of"),
+            ("notes", [1], "notes is not a list of text")):
+        with pytest.raises(ValueError, match=re.escape(says)):
+            FitResult.from_dict({**good, key: value})
+    unmeasured = FitResult.from_dict({**good, "error": {"log_rmse": None}})
+    e = export(unmeasured, "mitsuba", target_model="principled")
+    assert any("(the fit's own log_rmse to its table: not measured)" in w
+               for w in e.warnings), e.warnings
+
+
+def test_a_mitsuba_scene_file_names_any_material_in_well_formed_xml():
+    """The material's id is an XML attribute: a table named R&D.csv wrote ``id="R&D..."``,
+    a file no XML reader (Mitsuba's included) opens."""
+    from brdffit.export import mitsuba
+
+    text = mitsuba.scene_xml({"type": "diffuse"}, 'R&D "<lab>"_lambert')
+    assert ET.fromstring(text).find("bsdf").get("id") == 'R&D "<lab>"_lambert'
 
 
 @pytest.mark.slow

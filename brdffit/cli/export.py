@@ -79,6 +79,8 @@ def _read_result(source: str) -> FitResult:
     except json.JSONDecodeError as e:
         raise BrdffitError(f"{source}: neither a fit result (JSON, as brdffit fit --json "
                            f"writes; {e}) nor a batch's results file (HDF5)") from None
+    except RecursionError:
+        raise BrdffitError(f"{source}: not a fit result: JSON nested too deeply") from None
     if isinstance(data, dict) and "results" in data and "schema" not in data:
         raise BrdffitError(f"{source}: holds several fits; export one of them "
                            "(brdffit fit --json writes one result)")
@@ -149,7 +151,7 @@ def run(args) -> int:
     if fid.get("log_rmse_to_table") is not None:
         colour = fid.get("sphere_colour") or {}
         line += (f"; to the table: log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
-                 f"{fid['fit_log_rmse']:.4g}), lit sphere "
+                 f"{_figure(fid.get('fit_log_rmse'), '.4g')}), lit sphere "
                  f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
                  f"{_figure(colour.get('colour_shift'), '.1f')}")
     print(line, file=sys.stderr)

@@ -173,10 +173,12 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, l
     source = result.table
     if source and os.path.isfile(source):
         try:  # the fit's own file, in whichever layout it was read
-            own = readers.read_table(source)[0]
+            got = readers.read_measured(source)
+            own = got if isinstance(got, MerlTable) else got.to_table()[0]
         except BrdffitError as e:
             return None, False, [f"fidelity: log_rmse_to_table not measured: {e}"]
-        changed = _changed_since_the_fit(result, own)
+        changed = _changed_since_the_fit(result, own,
+                                         None if isinstance(got, MerlTable) else got)
         return own, not changed, changed
     return None, False, [f"fidelity: log_rmse_to_table not measured: the fitted table "
                          f"{source or '(unnamed)'} is not at hand (pass the table: "
@@ -205,24 +207,34 @@ SAME_TABLE_RTOL = 1e-3
 SAME_TABLE_ATOL = 1e-5
 
 
-def _changed_since_the_fit(result: FitResult, table: MerlTable) -> list[str]:
+def _changed_since_the_fit(result: FitResult, table: MerlTable,
+                           samples=None) -> list[str]:
     """A warning where ``table``, read from the fit's own file, does not give the fit's
     reported log_rmse: the file changed since the fit (a result keeps the table's name
     alone: another material written over it was measured against without a word), and
-    every fidelity figure is to what it holds now. Only a fit of a whole table without
-    a scene reported that figure on every bin."""
+    every fidelity figure is to what it holds now. A fit at a sample list's own
+    directions (``samples``: that file's samples as read now) is checked on them, by
+    its log_rmse on every usable sample; a table's fit, on every bin, where it was made
+    without a scene (only then did it report that figure)."""
     from brdffit.fitting.problem import table_error
+    from brdffit.fitting.samples import sample_error
 
-    reported = (result.error or {}).get("log_rmse")
     on_samples = (result.input or {}).get("fitted_at") == "samples"
-    if (on_samples or result.full_table_error is not None or reported is None
-            or not np.isfinite(reported) or reported <= 0):
+    if on_samples != (samples is not None):
         return []
-    now = table_error(table, result.model, result.params)["log_rmse"]
+    # a sample fit in a scene reports its error on every sample apart
+    everywhere = result.error if not on_samples else (result.full_table_error or result.error)
+    reported = (everywhere or {}).get("log_rmse")
+    if (not isinstance(reported, (int, float)) or not np.isfinite(reported) or reported <= 0
+            or (not on_samples and result.full_table_error is not None)):
+        return []
+    now = (sample_error(samples, result.model, result.params) if on_samples
+           else table_error(table, result.model, result.params))["log_rmse"]
     if np.isfinite(now) and abs(now - reported) <= max(SAME_TABLE_RTOL * reported,
                                                        SAME_TABLE_ATOL):
         return []
-    return [f"fidelity: {table.source} does not hold the table that was fitted: the fit's "
+    what = "samples that were" if on_samples else "table that was"
+    return [f"fidelity: {table.source} does not hold the {what} fitted: the fit's "
             f"own log_rmse on it is {now:.4g}, {reported:.4g} when it was fitted (the file "
             "changed since, or the fit's parameters were edited?); every fidelity figure is "
             "to the file as it is now"]

@@ -264,7 +264,7 @@ def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
     ``scene_xml(load_dict(params, spectral=True))`` for spectral ones."""
     lines = _xml(material, None, "    ")
     lines[0] = lines[0].replace(f'<bsdf type="{material["type"]}"',
-                                f'<bsdf type="{material["type"]}" id="{material_id}"', 1)
+                                f'<bsdf type="{material["type"]}" id={quoteattr(material_id)}', 1)
     return '<scene version="3.0.0">\n' + "\n".join(lines) + "\n</scene>\n"
 
 

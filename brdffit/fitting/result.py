@@ -11,6 +11,7 @@ key, ``schema``, names the version; a change of a key's meaning is a new version
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import MISSING, asdict, dataclass, fields
 
 from brdffit import jsonout
@@ -139,6 +140,7 @@ class FitResult:
         if missing:
             raise ValueError(f"no {', '.join(missing)} (a fit result has "
                              f"{', '.join(f.name for f in fields(cls))})")
+        _check_types(d)
         return cls(**d)
 
     @classmethod
@@ -152,6 +154,54 @@ class FitResult:
         import numpy as np
 
         return {k: np.asarray(v, dtype=np.float64) for k, v in self.params.items()}
+
+
+_NUMBER = (numbers.Real,)  # numpy's scalars too: a result made in-process may hold them
+#: The JSON type of each key a result reads (None: may be null). A file edited by hand
+#: or written by another tool is refused by its key's name, rather than failing deep in
+#: an export with a message about Python's types.
+_TYPES: dict[str, tuple] = {
+    "model": (str,), "params": (dict,), "error": (dict,), "converged": (bool,),
+    "result": (str,), "steps": (numbers.Integral,), "time_s": _NUMBER, "samples": (dict,),
+    "solver": (str,), "precision": (str,), "loss": (str,), "starts": (numbers.Integral,),
+    "table": (str, None), "scene": (dict, None), "full_table_error": (dict, None),
+    "selection": (dict, None), "uncertainty": (dict, None), "physical": (dict, None),
+    "quality": (dict, None), "input": (dict, None), "notes": (tuple, list),
+}
+_WORDS = {str: "text", dict: "an object", bool: "true or false", int: "a whole number",
+          float: "a number", numbers.Integral: "a whole number", numbers.Real: "a number",
+          tuple: "a list", list: "a list", None: "null"}
+
+
+def _check_types(d: dict) -> None:
+    def a(v) -> str:
+        return "null" if v is None else _WORDS.get(type(v), type(v).__name__)
+
+    for key, types in _TYPES.items():
+        if key not in d:
+            continue
+        v = d[key]
+        ok = (v is None and None in types) or (
+            isinstance(v, tuple(t for t in types if t is not None))
+            and not (isinstance(v, bool) and bool not in types))
+        if not ok:
+            want = " or ".join(dict.fromkeys(_WORDS[t] for t in types))
+            raise ValueError(f"{key!r} is {a(v)}, where a fit result has {want}")
+    for key in ("error", "full_table_error"):
+        for name, v in (d.get(key) or {}).items():
+            if v is not None and (not isinstance(v, _NUMBER) or isinstance(v, bool)):
+                raise ValueError(f"{key}.{name} is {a(v)}, where a fit result has a "
+                                 "number or null")
+    quality = d.get("quality") or {}
+    if not isinstance(quality.get("verdict", ""), (str, type(None))):
+        raise ValueError(f"quality.verdict is {a(quality['verdict'])}, where a fit result "
+                         "has text")
+    steps = quality.get("next")
+    if steps is not None and (not isinstance(steps, list) or not all(
+            isinstance(step, dict) and isinstance(step.get("try", ""), str) for step in steps)):
+        raise ValueError("quality.next is not a list of steps (objects with 'try' text)")
+    if not all(isinstance(n, str) for n in d.get("notes", ())):
+        raise ValueError("notes is not a list of text")
 
 
 #: What each key of the result schema means, in a line (docs/results.md says more).
