@@ -306,3 +306,22 @@ def test_the_colour_panel_judges_a_glossy_materials_diffuse_body():
     measured[0, 2] = 1e-4  # far below: too dark to judge
     _, colour = plots.ratio_images(measured, measured.copy(), np.ones((1, 3), bool))
     assert np.isnan(colour[0, 2]).all()
+
+
+@pytest.mark.parametrize("errors, tolerance", [((0.0, 3e-13, 7.5e-12), 0.005),
+                                               ((0.0191, 0.0542, 0.03), 10.0)])
+def test_the_ranking_draws_exact_fits_and_a_tolerance_far_beyond_them(errors, tolerance):
+    """Every candidate exact to rounding (an axis 1e-11 wide, and the tolerance's label
+    drawn at 0.005 beyond it: a picture too wide for matplotlib to make), or a
+    tolerance far beyond every candidate (--tolerance 10: its label at x = 10 made the
+    picture 25,875 px wide): a picture of the usual size, saying where the tolerance
+    is."""
+    from brdffit.view import plots
+
+    rows = [{"model": m, "n_params": k, "log_rmse": e, "psnr_db": 30.0, "verdict": "good",
+             "status": "chosen" if i == 0 else "within tolerance", "converged": True}
+            for i, (m, k, e) in enumerate(zip(("lambert", "ggx", "ggx2"), (3, 8, 12), errors))]
+    png = plots.ranking({"ranking": rows, "tolerance": tolerance, "chosen": "lambert",
+                         "reason": "Chose lambert.", "table": "t.csv"})
+    height, width = imread(io.BytesIO(png)).shape[:2]
+    assert width < 1500 and height < 800, (width, height)

@@ -787,13 +787,23 @@ def ranking(selection: dict) -> bytes:
     if fitted:
         best = min(r["log_rmse"] for r in fitted)
         limit = float(np.hypot(best, selection["tolerance"]))
+        worst = max(r["log_rmse"] for r in fitted)
+        # the axis holds the bars, and the tolerance line where it is near them: a
+        # tolerance far beyond every candidate (--tolerance 10) is said at the edge, as
+        # is one where every candidate fits exactly (log_rmse 0, an axis of width 0)
+        right = 1.3 * (max(worst, min(limit, 3 * worst)) if worst > 0 else limit) or 1.0
+        ax_err.set_xlim(0, right)
         ax_err.axvline(best, color="#333333", linewidth=1)
-        ax_err.axvline(limit, color="#333333", linewidth=1, linestyle="--")
-        ax_err.text(limit, -0.6, f" best + tolerance {selection['tolerance']:g} (in quadrature)",
-                    fontsize=7, va="center", ha="left")
+        words = f"best + tolerance {selection['tolerance']:g} (in quadrature)"
+        if limit <= right:
+            ax_err.axvline(limit, color="#333333", linewidth=1, linestyle="--")
+            ax_err.text(limit, -0.6, f" {words}", fontsize=7, va="center", ha="left")
+        else:
+            ax_err.text(1.0, -0.6, f"{words}: {limit:.3g}, beyond the axis \u2192 ",
+                        fontsize=7, va="center", ha="right",
+                        transform=ax_err.get_yaxis_transform())
         if selection.get("budget") is not None:
             ax_err.axvline(selection["budget"], color="#1f77b4", linewidth=1, linestyle=":")
-        ax_err.set_xlim(0, 1.3 * max(r["log_rmse"] for r in fitted))
         top = max((r.get("psnr_db") or 0.0) for r in fitted)
         ax_psnr.set_xlim(0, max(1.35 * top, 1.0))
     ax_err.set_yticks(y, [f"{r['model']} ({r['n_params']})" for r in rows])
