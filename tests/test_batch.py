@@ -541,6 +541,21 @@ def test_a_refused_out_leaves_no_journal_and_a_damaged_file_is_one_error(tmp_pat
         f["tables"]["x"].create_group("ggx").attrs["fit_json"] = "null"
     with pytest.raises(BatchFileError, match=r"r.h5: a damaged batch results file \(Attribute"):
         read_looks(out)
+    # a table's group that is a dataset; a version that is no number
+    from brdffit.batch.store import read_fit
+
+    with h5py.File(out, "r+") as f:
+        del f["tables"]["x"]
+        f["tables"]["x"] = [1]
+    with pytest.raises(BatchFileError, match=r"r.h5: a damaged batch results file \(Index"):
+        read_fit(out, "x")
+    with h5py.File(out, "r+") as f:
+        version, f.attrs["format_version"] = f.attrs["format_version"], "abc"
+    with pytest.raises(BatchFileError, match=r"damaged .*\(format_version 'abc', not a number"):
+        read_looks(out)
+    with h5py.File(out, "r+") as f:
+        f.attrs["format_version"] = version
+        del f["tables"]["x"]
 
     def unreadable(self, group, record):
         raise KeyError("Unable to synchronously open object (incorrect metadata checksum)")

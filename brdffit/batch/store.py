@@ -469,7 +469,13 @@ def _open(path: str) -> h5py.File:
     if f.attrs.get("format") != FORMAT:
         f.close()
         raise BatchFileError(f"{path}: an HDF5 file, but not a brdffit batch results file")
-    version = int(f.attrs.get("format_version", 0))
+    stated = f.attrs.get("format_version", 0)
+    try:
+        version = int(stated)
+    except (TypeError, ValueError):
+        f.close()
+        raise BatchFileError(f"{path}: a damaged batch results file (format_version "
+                             f"{_plain(stated)!r}, not a number)") from None
     if version > FORMAT_VERSION:
         f.close()  # the version is read before: a closed file's attributes are gone
         raise BatchFileError(f"{path}: written by a newer brdffit (format version "
@@ -487,7 +493,8 @@ def _reading(path: str):
             yield f
         except BatchFileError:
             raise
-        except (OSError, KeyError, ValueError, TypeError, AttributeError, RuntimeError) as e:
+        except (OSError, KeyError, IndexError, ValueError, TypeError, AttributeError,
+                RuntimeError) as e:  # IndexError: a table's group made a dataset
             raise BatchFileError(f"{path}: a damaged batch results file ({type(e).__name__}: "
                                  f"{' '.join(str(e).split())})") from None
 
