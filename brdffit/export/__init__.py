@@ -151,8 +151,13 @@ class Export:
 
 
 def _material_name(result: FitResult) -> str:
+    """The table's file name without its layout's suffix, and the model: a sample list's
+    material was ``lab.csv_ggx`` (files ``lab.csv_ggx.gltf``), a MERL table's ``gold_ggx``."""
+    from brdffit.io.readers import READERS
+
     stem = (result.table or "material").replace("\\", "/").rsplit("/", 1)[-1]
-    return f"{stem.removesuffix('.binary')}_{result.model}"
+    base, suffix = os.path.splitext(stem)
+    return f"{base if base and suffix.lower() in READERS else stem}_{result.model}"
 
 
 def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, list[str]]:
