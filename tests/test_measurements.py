@@ -737,7 +737,7 @@ def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path
     with h5py.File(ext, "a") as f:
         del f["rgb"]
         f["rgb"] = h5py.ExternalLink("missing.h5", "/rgb")
-    with pytest.raises(MeasurementsError, match="rgb is a link to an object"):
+    with pytest.raises(MeasurementsError, match="rgb is an external link to another file"):
         read_measured(ext)
     huge = _h5(tmp_path / "huge.h5", rgb=np.ones((4, 3)))
     with h5py.File(huge, "a") as f:
@@ -966,3 +966,44 @@ def test_a_sigma_far_below_the_others_weighs_much_but_finitely():
         table, _ = Measurements(wi, wo, rgb, sigma=sigma).to_table()
     assert np.all(np.isfinite(table.rgb[:, table.mask]))
     np.testing.assert_allclose(table.rgb[:, table.mask], 0.3)
+
+
+def test_an_hdf5_list_is_read_from_its_own_file_alone(tmp_path):
+    """An uploaded HDF5 file whose values live elsewhere (external storage, an external
+    link, a virtual dataset) made the service read files on the server (a FIFO there
+    hung the upload); a soft link to itself was a RuntimeError: each is refused, named."""
+    import os
+
+    n = 50
+    np.full((n, 3), 0.123456789).tofile(tmp_path / "secret.bin")
+    with h5py.File(tmp_path / "target.h5", "w") as f:
+        f["rgb"] = np.full((n, 3), 0.2)
+    os.mkfifo(tmp_path / "fifo")
+
+    def listed(name, values):
+        s = _samples(n)
+        with h5py.File(tmp_path / name, "w") as f:
+            for key, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True):
+                f[key] = np.degrees(a)
+            f.attrs["units"] = "degrees"
+            values(f)
+        return tmp_path / name
+
+    layout = h5py.VirtualLayout(shape=(n, 3), dtype="f8")
+    layout[:] = h5py.VirtualSource(str(tmp_path / "target.h5"), "rgb", shape=(n, 3))
+    for name, values, says in (
+            ("file.h5", lambda f: f.create_dataset("rgb", (n, 3), "f8", external=[(
+                str(tmp_path / "secret.bin"), 0, n * 24)]), "keeps its values in other files"),
+            ("fifo.h5", lambda f: f.create_dataset("rgb", (n, 3), "f8", external=[(
+                str(tmp_path / "fifo"), 0, n * 24)]), "keeps its values in other files"),
+            ("virtual.h5", lambda f: f.create_virtual_dataset("rgb", layout),
+             "keeps its values in other files"),
+            ("link.h5", lambda f: f.__setitem__("rgb", h5py.ExternalLink(
+                str(tmp_path / "target.h5"), "rgb")), "rgb is an external link"),
+            ("angle.h5", lambda f: (f.__delitem__("theta_i"), f.__setitem__(
+                "theta_i", h5py.ExternalLink(str(tmp_path / "target.h5"), "rgb")),
+                f.__setitem__("rgb", np.full((n, 3), 0.2))), "theta_i is an external link"),
+            ("loop.h5", lambda f: f.__setitem__("rgb", h5py.SoftLink("/rgb")),
+             "rgb is a link to an object that cannot be opened")):
+        with pytest.raises(MeasurementsError, match=says):
+            read_measured(listed(name, values))

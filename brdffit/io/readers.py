@@ -703,22 +703,22 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
         provenance = _stored_provenance(f.attrs.get("provenance"))
         provenance.update(azimuths_within(raw, scales))
-        kinds = [k for k in ("rgb", "value", "spectral") if k in f]
+        kinds = [k for k in ("rgb", "value", "spectral") if _linked(f, k)]
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
                                             "than one kind, keep one")
-        if "rgb" in f:
+        if _linked(f, "rgb"):
             values = _numeric(f, "rgb", source)
             if values.ndim != 2 or values.shape[1] != 3:
                 raise MeasurementsError(source, f"dataset rgb has shape {values.shape}, "
                                                 "not (n, 3)")
-        elif "value" in f:
+        elif _linked(f, "value"):
             values = _one_per_sample(f, "value", source)
-        elif "spectral" in f:
-            if "wavelengths" not in f:
+        elif _linked(f, "spectral"):
+            if not _linked(f, "wavelengths"):
                 raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
                                                 "(nm)")
-            if "sigma" in f:
+            if _linked(f, "sigma"):
                 raise MeasurementsError(source, "sigma of spectral samples is not read yet")
             spectral = _numeric(f, "spectral", source)
             wavelengths = _numeric(f, "wavelengths", source)
@@ -731,7 +731,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         else:
             raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
                                             "spectral (n, k) with wavelengths (k,)")
-        sigma = _numeric(f, "sigma", source) if "sigma" in f else None
+        sigma = _numeric(f, "sigma", source) if _linked(f, "sigma") else None
     if provenance.get("channels") == 1 and not (
             values.ndim == 1 or np.all(values == values[:, :1])):
         del provenance["channels"]  # said of grey values: these are coloured
@@ -743,6 +743,12 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
 _PER_SAMPLE = ("rgb", "value", "spectral", "sigma")
 
 
+def _linked(f, name: str) -> bool:
+    """Whether the open HDF5 file ``f`` has a link ``name``, without following it
+    (``name in f`` opens what it points to: another file, for an external link)."""
+    return f.get(name, getlink=True) is not None
+
+
 def _declared_samples(f, angles: list[str]) -> int:
     """The most rows any of the open HDF5 file ``f``'s per-sample datasets declares
     (the angle datasets ``angles``, the values, sigma), from their shapes alone: no
@@ -751,10 +757,12 @@ def _declared_samples(f, angles: list[str]) -> int:
     import h5py
 
     most = 0
-    for name in (*angles, *(k for k in _PER_SAMPLE if k in f)):
+    for name in (*angles, *(k for k in _PER_SAMPLE if _linked(f, k))):
+        if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
+            continue  # not followed: refused where it is read (_dataset)
         try:
             d = f[name]
-        except (KeyError, OSError):
+        except (KeyError, OSError, RuntimeError):  # RuntimeError: a soft link loop
             continue
         if isinstance(d, h5py.Dataset) and d.shape:
             most = max(most, int(d.shape[0]))
@@ -822,13 +830,26 @@ def _attr_text(value, what: str, source: str) -> str | None:
 
 def _dataset(f, name: str, source: str):
     """Object ``name`` of the open HDF5 file ``f``; refused, with its name, where it is
-    a link to nothing (a soft link whose target is gone, an external link to a missing
-    file): h5py lists such a link and raises KeyError when it is opened."""
+    a link to nothing (a soft link whose target is gone, or that points to itself:
+    h5py lists such a link and raises when it is opened), and where its values live in
+    another file: an external link, external storage or a virtual dataset. A sample
+    list is read from its own bytes alone: the service reads uploads, and such a file
+    made it read any file on the server (a FIFO there hung the upload)."""
+    import h5py
+
+    if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
+        raise MeasurementsError(source, f"{name} is an external link to another file: a "
+                                        "sample list is read from its own file alone")
     try:
-        return f[name]
-    except (KeyError, OSError) as e:
+        d = f[name]
+    except (KeyError, OSError, RuntimeError) as e:
         raise MeasurementsError(source, f"{name} is a link to an object that cannot be "
-                                        f"opened ({e})") from None
+                                        f"opened ({' '.join(str(e).split())})") from None
+    if isinstance(d, h5py.Dataset) and (d.external or d.is_virtual):
+        raise MeasurementsError(source, f"dataset {name} keeps its values in other files "
+                                        "(external storage or a virtual dataset): a sample "
+                                        "list is read from its own file alone")
+    return d
 
 
 def _numeric(f, name: str, source: str) -> np.ndarray:
