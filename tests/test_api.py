@@ -252,6 +252,23 @@ def test_a_compressed_sample_list_is_weighed_as_it_is_stored(http, tmp_path):
                  f"upload at most {CAP // 56:,} samples")
 
 
+def test_a_sample_list_named_with_a_nul_is_stored_under_a_name_it_can_hold(http):
+    """A NUL in a sample list's name was a 500 (its HDF5 attributes cannot hold one):
+    replaced, as an unpaired surrogate in ?name= is. A physical fit of it is a 422."""
+    rows = "\n".join(f"{10 + k % 70},0,{5 + k % 80},{k * 7 % 360},0.2,0.1,0.05"
+                      for k in range(200))
+    body = f"theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n{rows}\n".encode()
+    r = http.post("/v1/tables", content=body, params={"name": "a\x00b.csv"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code in (200, 201), r.text
+    assert r.json()["name"] == "a\ufffdb.csv"
+    # and the physical bounds, which a sample list has not yet, are refused before a job
+    # is queued (it was accepted, then failed)
+    r = http.post("/v1/fits", json={"table_id": r.json()["id"], "models": "lambert",
+                                    "options": {"physical": True}})
+    assert_error(r, 422, "is a sample list: the physical bounds are not available")
+
+
 def test_a_text_sample_list_stored_over_the_cap_is_refused(tmp_path):
     """A text list is weighed once read (its rows are ~20 bytes of text, 56 or 80
     stored); nothing is kept."""
@@ -338,6 +355,10 @@ def test_a_value_that_fits_no_member_of_a_union_is_one_message(http, table_id):
     ({"init": {"alpha": 0.1}}, "options.init"),  # not an allowed key
     ({"bin_weight": [1, 2]}, "options.bin_weight"),
     ([1, 2], "options"),
+    # optimistix's solvers mix float32 residuals with float64 operators: the job was
+    # accepted, then failed
+    ({"precision": "float32", "solver": "dogleg"}, "solves in float64 only"),
+    ({"precision": "float32", "solver": "optx-lm"}, "solves in float64 only"),
 ])
 def test_bad_options_are_422_before_queueing(http, table_id, options, words):
     r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert", "options": options})
@@ -369,7 +390,30 @@ def test_malformed_fit_bodies_are_422(http):
         assert_error(r, 422, "finite number")
 
 
-def test_fit_runs_and_plots_wait_for_it(http, table_id):
+def test_a_request_that_would_store_what_breaks_the_service_is_422(http, table_id):
+    """Each answered 5xx, or was stored and then broke the listings: a scene of 1,000
+    lights and 1,000 views (a 53 KB body) made a job record of 1M pairs, 124 MB; a scene
+    named with an unpaired surrogate was a 500 beside a stored job that no listing could
+    show; a cursor past int64 an OverflowError."""
+    up = [[0.1, 0.0, 1.0]] * 200
+    r = http.post("/v1/fits", json={"table_id": table_id, "models": "lambert",
+                                    "scene": {"lights": up, "views": up}})
+    assert_error(r, 422, "40,000 direction pairs", "at most 20,000")
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",  # the old form
+                                    "options": {"scene": {"lights": up, "views": up}}})
+    assert_error(r, 422, "40,000 direction pairs", "at most 20,000")
+    before = http.get("/v1/fits", params={"limit": 500}).json()
+    r = http.post("/v1/fits", content=(f'{{"table_id": "{table_id}", "models": "lambert", '
+                                       '"scene": {"name": "\\ud800"}}').encode(),
+                  headers={"Content-Type": "application/json"})
+    assert_error(r, 422, "unpaired surrogate")
+    assert http.get("/v1/fits", params={"limit": 500}).json() == before
+    for route in ("/v1/fits", "/v1/tables"):
+        assert_error(http.get(route, params={"cursor": "9" * 19}), 422, "cursor")
+    assert http.get("/v1/tables", params={"cursor": "9" * 18}).status_code == 200
+
+
+def test_fit_runs_and_plots_wait_for_it(server, http, table_id):
     r = http.post("/v1/fits", json={"table_id": table_id, "model": ["lambert", "lambert"],
                                     "options": FAST})
     assert r.status_code == 202, r.text
@@ -400,6 +444,13 @@ def test_fit_runs_and_plots_wait_for_it(http, table_id):
     for bad in (0.3, 12.25, -6.25, "nan"):
         assert http.get(f"/v1/fits/{job['id']}/plots/spheres.png",
                         params={"exposure_ev": bad}).status_code == 422
+    # within multiple_of's tolerance of the grid: the grid's own plot, not a new file
+    # (1e-10 and 2.000000000000001 were each a render and a cached file of their own)
+    plots = len(list(Path(server.data_dir).rglob("spheres*.png")))
+    for near in (1e-10, 1e-300):
+        r = http.get(f"/v1/fits/{job['id']}/plots/spheres.png", params={"exposure_ev": near})
+        assert r.status_code == 200 and r.content == plain.content
+    assert len(list(Path(server.data_dir).rglob("spheres*.png"))) == plots
 
 
 def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_id):

@@ -70,6 +70,7 @@ async def get_export(
     runner: RunnerDep,
     model: FitModel = None,
     target_model: Annotated[str | None, Query(
+        max_length=64,  # a model's name; a 5,000-character one was echoed whole in the 422
         description="which of the renderer's models the file carries: "
                     + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())
                     + " (default: the first)")] = None,

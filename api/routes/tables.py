@@ -212,9 +212,12 @@ async def upload_table(
     finally:
         if form is not None:
             await form.close()
+    # a NUL is replaced, as an unpaired surrogate is: a sample list is stored as HDF5,
+    # whose attributes cannot hold one (a 500), and a MERL table's name could
+    name = (name or "upload").replace("\x00", "\ufffd")
     try:
         record, created = await run_in_threadpool(
-            tables.validate_and_store, store, tmp, digest, size, name or "upload", cap
+            tables.validate_and_store, store, tmp, digest, size, name, cap
         )
     except tables.StoredTooLarge as e:  # the cap holds for what is kept, compressed or not
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(e)) from None
@@ -246,7 +249,7 @@ class TablePage(BaseModel):
 def list_tables(
     store: StoreDep,
     limit: Annotated[int, Query(ge=1, le=500, description="tables per page")] = 50,
-    cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,19}$",
+    cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,18}$",
                                         description="next_cursor of the previous page")] = None,
     name: Annotated[str | None, Query(max_length=MAX_NAME,
                                       description="only tables whose name contains this "

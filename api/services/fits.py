@@ -12,6 +12,7 @@ from __future__ import annotations
 from api.estimate import Estimate, estimate
 from api.settings import Settings
 from api.store import JobRecord, Store
+from brdffit.errors import FitInputError
 from brdffit.request import FitRequest
 
 
@@ -47,6 +48,11 @@ def create(store: Store, settings: Settings, table_id: str, request: dict) -> Jo
     if table is None:
         raise TableNotFound(f"no table {table_id}; upload it with POST /v1/tables")
     request = FitRequest.from_dict(request)
+    if request.options.physical and table.summary.get("input") is not None:
+        # known now, as the fit would find it: the job was accepted, then failed
+        raise FitInputError(f"table {table_id} is a sample list: the physical bounds are not "
+                            "available for a sample list yet (their albedo check reads a "
+                            "table); fit it without them")
     cost = estimate(request, table.summary["measured_bins"])
     if (why := over_limits(cost, settings)) is not None:
         # Refused before anything is queued or allocated: say by how much, and why.

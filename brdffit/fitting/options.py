@@ -50,6 +50,19 @@ DEFAULT_LOSS = "log"
 #: "optx-lm" is optimistix's own, kept for comparison.
 SOLVERS = ("lm", "optx-lm", "dogleg", "bfgs")
 DEFAULT_SOLVER = "lm"
+#: The solvers that solve in float32 too: optimistix's LM and dogleg mix the float32
+#: residuals with float64 operators (a job accepted, then failed with "Vector and
+#: operator structures do not match", or a JAX traceback on the command line).
+FLOAT32_SOLVERS = ("lm", "bfgs")
+
+
+def check_solver_precision(solver: str, precision: str) -> None:
+    """Refuses a solver that cannot solve in ``precision``, before anything runs."""
+    if precision == "float32" and solver not in FLOAT32_SOLVERS:
+        raise FitInputError(f"solver {solver!r} solves in float64 only; float32 is solved by "
+                            f"{' and '.join(FLOAT32_SOLVERS)}")
+
+
 #: Floating point precisions of the solve (``brdffit.fitting.problem.DTYPES``).
 PRECISIONS = ("float64", "float32")
 DEFAULT_PRECISION = "float64"
@@ -193,6 +206,7 @@ class FitOptions:
             "reflectances <= 1; the result's `physical` reports the cost (docs/fitting.md)")
     def __post_init__(self):
         _check_fields(self)
+        check_solver_precision(self.solver, self.precision)
 
     # -- what the shells and the library take -------------------------------------
 

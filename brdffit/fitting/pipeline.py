@@ -51,6 +51,7 @@ from brdffit.fitting.options import (
     DEFAULT_SOLVER,
     DEFAULT_STARTS,
     PRECISIONS,
+    check_solver_precision,
 )
 from brdffit.fitting.physical import bound
 from brdffit.fitting.problem import (
@@ -341,6 +342,7 @@ def _check_options(loss, solver, precision, samples, starts, max_steps, physical
     get_solver(solver)
     if precision not in PRECISIONS:
         raise FitInputError(f"unknown precision {precision!r}; choose float64 or float32")
+    check_solver_precision(solver, precision)
     if samples is not None and (not _integer(samples) or samples < 64):
         raise FitInputError(f"samples must be an integer >= 64 or None, got {samples!r}")
     if not _integer(starts) or starts < 1:

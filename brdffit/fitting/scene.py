@@ -104,6 +104,12 @@ class Scene:
                      else repr(self.name)[:80])
             raise SceneError(f"a scene name is text of 1 to {MAX_NAME} characters, "
                              f"got {shown}")
+        # stored as UTF-8 (SQLite, JSON, HDF5 attributes): an unpaired surrogate was a job
+        # stored beside a 500, whose record broke the service's job list; a NUL, an HDF5
+        # attribute it cannot hold
+        if "\0" in self.name or not self.name.isprintable() and _not_utf8(self.name):
+            raise SceneError("a scene name is UTF-8 text without NUL characters (it holds an "
+                             "unpaired surrogate or a NUL)")
         if self.pairs is not None:
             object.__setattr__(self, "pairs", _clean_pairs(self.pairs, self))
 
@@ -325,6 +331,14 @@ def read_pairs(path: str) -> np.ndarray:
         except UnicodeDecodeError:
             raise SceneError(f"{path}: not UTF-8 text (a .csv of pairs is)") from None
     return _as_pairs(a, path)
+
+
+def _not_utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return True
+    return False
 
 
 def _not_too_many(n: int, what: str) -> None:
