@@ -174,6 +174,11 @@ class Client:
     def __init__(self, base_url: str = DEFAULT_URL, *, token: str | None = None,
                  timeout: float = 120.0, transport: httpx.BaseTransport | None = None):
         token = token if token is not None else os.environ.get("BRDFFIT_API_TOKEN") or None
+        if token and not (token.isascii() and token.isprintable()):
+            # a header holds ASCII alone: said here, not as httpx's error at the first
+            # request (a UnicodeEncodeError, or "cannot reach the server" for a newline)
+            raise InvalidSetting("the token must be printable ASCII text (the service's "
+                                 "BRDFFIT_API_TOKEN, as it was set)")
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         _check_timeout(timeout)
         try:
@@ -194,7 +199,12 @@ class Client:
 
     # -- plumbing ---------------------------------------------------------------------
 
-    def _request(self, method: str, url: str, **kw) -> httpx.Response:
+    def _request(self, method: str, url: str, expect: str | None = "application/json",
+                 **kw) -> httpx.Response:
+        """The service's answer to ``method url``, of media type ``expect`` (None: any,
+        a DELETE's empty one); what is not the service's answer is an :class:`ApiError`
+        (another server's HTML page, a redirect: they were a ``JSONDecodeError``, or HTML
+        returned by :meth:`plot` as if it were a PNG)."""
         base = str(self._http.base_url).rstrip("/")
         try:
             response = self._http.request(method, url, **kw)
@@ -206,8 +216,20 @@ class Client:
         except httpx.TransportError as e:
             raise Unreachable(f"cannot reach the brdffit server at {base} "
                               f"({' '.join(str(e).split()) or type(e).__name__})") from None
+        except httpx.DecodingError as e:  # a body its Content-Encoding does not decode
+            raise ApiError(0, f"an answer that does not decode ({e}): is {base} a brdffit "
+                              "server?", method, f"{base}{url}") from None
         if response.is_error:
             raise ApiError(response.status_code, _detail(response), method,
+                           str(response.request.url))
+        if response.is_redirect:
+            raise ApiError(response.status_code, f"redirected to "
+                           f"{response.headers.get('location', 'nowhere')}: give the client "
+                           "the server's own URL", method, str(response.request.url))
+        media = response.headers.get("content-type", "").split(";")[0].strip().lower()
+        if expect is not None and media != expect:
+            raise ApiError(response.status_code, f"answered in {media or 'no content type'}, "
+                           f"not {expect}: is {base} a brdffit server?", method,
                            str(response.request.url))
         return response
 
@@ -337,12 +359,12 @@ class Client:
     def delete_fit(self, job: JobRef) -> None:
         """Delete a finished job with its results and plots (a queued or running one:
         ApiError 409, cancel it first)."""
-        self._request("DELETE", f"/v1/fits/{_job_id(job)}")
+        self._request("DELETE", f"/v1/fits/{_job_id(job)}", expect=None)
 
     def delete_table(self, table_id: str, *, with_fits: bool = False) -> None:
         """Delete a table; ``with_fits``: its finished fit jobs too (without it, a
         table that has fit jobs is an ApiError 409)."""
-        self._request("DELETE", f"/v1/tables/{table_id}",
+        self._request("DELETE", f"/v1/tables/{table_id}", expect=None,
                       params={"with_fits": "true"} if with_fits else None)
 
     def plot(self, job: JobRef, kind: str, model: str | None = None,
@@ -355,7 +377,7 @@ class Client:
         if exposure_ev:
             params["exposure_ev"] = exposure_ev
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
-                             params=params).content
+                             expect="image/png", params=params).content
 
     def export(self, job: JobRef, target: str, model: str | None = None,
                target_model: str | None = None, viewer: str = "spec") -> Export:

@@ -233,6 +233,34 @@ def test_no_server_and_another_server_are_one_line_each():
     assert "answered in text/html, not the brdffit service's JSON" in str(e.value)
 
 
+def test_an_answer_that_is_not_the_services_is_an_api_error():
+    """Another server's 200 HTML page was a JSONDecodeError (and HTML bytes returned by
+    plot() as a PNG), a redirect a JSONDecodeError, a body its encoding does not decode
+    an httpx.DecodingError; a token a header cannot carry failed at the first request
+    (a newline as "cannot reach the server")."""
+    from brdffit.client import InvalidSetting
+
+    html = httpx.MockTransport(lambda r: httpx.Response(
+        200, text="<html>welcome</html>", headers={"content-type": "text/html"}))
+    moved = httpx.MockTransport(lambda r: httpx.Response(
+        302, headers={"location": "https://brdffit.test/v1/models"}))
+    garbled = httpx.MockTransport(lambda r: httpx.Response(
+        200, content=b"not gzip", headers={"content-type": "application/json",
+                                           "content-encoding": "gzip"}))
+    for transport, says in ((html, "answered in text/html, not application/json"),
+                            (moved, "redirected to https://brdffit.test/v1/models"),
+                            (garbled, "an answer that does not decode")):
+        with Client("http://brdffit.test", token="", transport=transport) as c:
+            with pytest.raises(ApiError, match=says):
+                c.models()
+    with Client("http://brdffit.test", token="", transport=html) as c:
+        with pytest.raises(ApiError, match="answered in text/html, not image/png"):
+            c.plot("0" * 32, "spheres")
+    for token in ("tökén", "line\nbreak"):
+        with pytest.raises(InvalidSetting, match="the token must be printable ASCII"):
+            Client("http://brdffit.test", token=token)
+
+
 def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
     """``http://[::1`` (a bracket left open) raised httpx.InvalidURL, and a timeout of
     -1 a bare ValueError at the first request: the client's own error, when it is made,
