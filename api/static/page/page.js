@@ -624,8 +624,10 @@ function emptyRow(columns, text) {
   return row;
 }
 
-//: Rows per page of each list (?page_size=N in the address changes it).
-const PAGE = Math.max(1, Number(new URLSearchParams(location.search).get("page_size")) || 100);
+//: Rows per page of each list (?page_size=N in the address changes it): a whole number in
+//: 1 .. 500, as the lists' `limit` takes (1000 or 2.5 made both lists fail with a 422).
+const PAGE = Math.min(500, Math.max(1, Math.round(
+  Number(new URLSearchParams(location.search).get("page_size")) || 100)));
 
 function tableRow(t) {
   const row = el("tr", null, { "data-table": t.id });
