@@ -516,7 +516,10 @@ class Store:
             cur = con.execute("DELETE FROM jobs WHERE id = ? AND status IN "
                               "('done', 'failed', 'cancelled')", (job_id,))
             if cur.rowcount != 1:
-                return row["status"]
+                # read again: a DELETE beside this one may have taken it since (this one
+                # answered 409 "cancelled; cancel it first" for a job already gone)
+                now = con.execute("SELECT status FROM jobs WHERE id = ?", (job_id,)).fetchone()
+                return "gone" if now is None else now["status"]
         shutil.rmtree(self.plots_dir / job_id, ignore_errors=True)
         return None
 

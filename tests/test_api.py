@@ -748,6 +748,15 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     # stored in the library's one form, and read back as it
     assert FitRequest.from_dict(store.get_job(job.id).request) == FitRequest.of(
         ["ggx", "lambert"], samples=4096)
+    # the table deleted while the request was checked: its foreign key was a 503 ("try
+    # again later"), where the table is simply gone
+    merl.write(tmp, table("lambert"))
+    store.add_table("c" * 64, tmp, 1, "t.binary", {"measured_bins": 1_000_000})
+    record = store.get_table("c" * 64)
+    assert store.delete_table("c" * 64, with_fits=False) == (None, 0)
+    store.get_table = lambda table_id: record  # the check saw it; the insert does not
+    with pytest.raises(fits.TableNotFound, match="deleted while this fit was being checked"):
+        fits.create(store, settings, "c" * 64, {"models": "ggx"})
 
 
 def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):

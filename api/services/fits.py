@@ -9,6 +9,8 @@ result among its fits is the library's one rule (``brdffit.selection.chosen_resu
 
 from __future__ import annotations
 
+import sqlite3
+
 from api.estimate import Estimate, estimate
 from api.settings import Settings
 from api.store import JobRecord, Store
@@ -57,4 +59,10 @@ def create(store: Store, settings: Settings, table_id: str, request: dict) -> Jo
     if (why := over_limits(cost, settings)) is not None:
         # Refused before anything is queued or allocated: say by how much, and why.
         raise OverLimits(why)
-    return store.create_job(table_id, request.to_dict())
+    try:
+        return store.create_job(table_id, request.to_dict())
+    except sqlite3.IntegrityError:
+        # the table's foreign key: it was deleted while the request was checked (a 503,
+        # "storage failed, try again later", which no retry could mend)
+        raise TableNotFound(f"no table {table_id}: it was deleted while this fit was being "
+                            "checked") from None
