@@ -745,7 +745,7 @@ def test_a_lost_interrupt_still_stops_the_batch(tmp_path, capsys):
 # -- arguments, exit codes ---------------------------------------------------------------------
 
 
-def test_find_tables(table_dir, tmp_path):
+def test_find_tables(table_dir, tmp_path, monkeypatch):
     every = find_tables([str(table_dir)])
     assert [os.path.basename(p) for p in every] == sorted(
         f"{n}.binary" for n in [*TRUTHS, *BAD])  # sidecars (.json) are not tables
@@ -779,6 +779,19 @@ def test_find_tables(table_dir, tmp_path):
         find_tables([str(table_dir / "nope.binary")])
     with pytest.raises(BatchInputError, match="no file matches"):
         find_tables([str(table_dir / "zz*.binary")])
+    # a folder below that cannot be read (chmod 000; simulated: the tests may run as
+    # root, whom permissions do not stop): its files were left out unsaid
+    real_walk = os.walk
+
+    def walk_denied(top, onerror=None, **kw):
+        yield from real_walk(top, onerror=onerror, **kw)
+        onerror(PermissionError(13, "Permission denied", str(mixed / "locked")))
+
+    monkeypatch.setattr(os, "walk", walk_denied)
+    with pytest.raises(BatchInputError, match=r"locked: cannot be read \(Permission denied\): "
+                                              "its files would be left out"):
+        find_tables([str(mixed)])
+    monkeypatch.setattr(os, "walk", real_walk)
     # a folder whose one file is the results file: said, not "holds no measured file"
     alone = tmp_path / "alone"
     alone.mkdir()

@@ -123,6 +123,17 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     skipped: list[str] = []
 
     def add_dir(d: str) -> int:
+        # glob passes over a folder it cannot read without a word: its files were left
+        # out of the batch unsaid (and a folder named itself "held no measured file")
+        unreadable: list[OSError] = []
+        for _ in os.walk(d, onerror=unreadable.append):
+            pass
+        if unreadable:
+            e = unreadable[0]
+            more = f" (and {len(unreadable) - 1} more)" if len(unreadable) > 1 else ""
+            raise BatchInputError(f"{e.filename}: cannot be read ({e.strerror}){more}: its "
+                                  "files would be left out of the batch; make it readable, "
+                                  "or name the folders to fit")
         files = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
             os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
         n = 0
