@@ -233,14 +233,28 @@ class Client:
                            str(response.request.url))
         return response
 
+    def _json(self, method: str, url: str, make=None, **kw):
+        """The service's JSON answer to ``method url``, made into what ``make`` makes of
+        it; JSON of another shape (another server, another version: a KeyError or a
+        TypeError deep in a constructor) is an :class:`ApiError` saying so."""
+        response = self._request(method, url, **kw)
+        try:
+            body = response.json()
+            return body if make is None else make(body)
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as e:
+            raise ApiError(response.status_code, f"an answer of another shape than the brdffit "
+                           f"service's ({type(e).__name__}: {e}): is {self._http.base_url} "
+                           "a brdffit server of this version?", method,
+                           str(response.request.url)) from None
+
     # -- the service ------------------------------------------------------------------
 
     def health(self) -> dict:
-        return self._request("GET", "/healthz").json()
+        return self._json("GET", "/healthz")
 
     def models(self) -> list[dict]:
         """The models the server fits, with their parameters (``GET /v1/models``)."""
-        return self._request("GET", "/v1/models").json()
+        return self._json("GET", "/v1/models")
 
     def upload(self, path: str | os.PathLike) -> str:
         """Upload a MERL ``.binary`` file; returns its table id (its sha256).
@@ -252,15 +266,14 @@ class Client:
     def upload_table(self, path: str | os.PathLike) -> TableInfo:
         """As :meth:`upload`, returning the table's summary too."""
         with open(path, "rb") as f:  # httpx streams a file in chunks, with its length
-            response = self._request(
-                "POST", "/v1/tables", content=f,
+            return self._json(
+                "POST", "/v1/tables", TableInfo.from_json, content=f,
                 params={"name": os.path.basename(os.fspath(path))},
                 headers={"Content-Type": "application/octet-stream"},
             )
-        return TableInfo.from_json(response.json())
 
     def table(self, table_id: str) -> TableInfo:
-        return TableInfo.from_json(self._request("GET", f"/v1/tables/{table_id}").json())
+        return self._json("GET", f"/v1/tables/{table_id}", TableInfo.from_json)
 
     def fit(self, table_id: str, model: str | list[str] | FitRequest | None = None,
             **keywords) -> FitJob:
@@ -283,11 +296,11 @@ class Client:
             except BrdffitError as e:  # the library's own check, as the server makes it
                 raise InvalidRequest(str(e)) from None
         body = {"table_id": table_id, **request.to_dict()}
-        return FitJob.from_json(self._request("POST", "/v1/fits", json=body).json())
+        return self._json("POST", "/v1/fits", FitJob.from_json, json=body)
 
     def job(self, job: JobRef) -> FitJob:
         """The job's current state."""
-        return FitJob.from_json(self._request("GET", f"/v1/fits/{_job_id(job)}").json())
+        return self._json("GET", f"/v1/fits/{_job_id(job)}", FitJob.from_json)
 
     def wait(self, job: JobRef, timeout: float = 600.0, *, poll: float = 0.25) -> FitJob:
         """Poll until the job is done or failed; returns it either way.
@@ -329,14 +342,15 @@ class Client:
 
     # -- job control --------------------------------------------------------------------
 
-    def _pages(self, url: str, params: dict, page_size: int) -> Iterator[dict]:
+    def _pages(self, url: str, params: dict, page_size: int, make) -> Iterator:
         params = {k: v for k, v in params.items() if v is not None} | {"limit": page_size}
         while True:
-            page = self._request("GET", url, params=params).json()
-            yield from page["items"]
-            if page["next_cursor"] is None:
+            items, cursor = self._json("GET", url, lambda page: (
+                [make(d) for d in page["items"]], page["next_cursor"]), params=params)
+            yield from items
+            if cursor is None:
                 return
-            params["cursor"] = page["next_cursor"]
+            params["cursor"] = cursor
 
     def fits(self, *, status: str | None = None, table_id: str | None = None,
              model: str | None = None, page_size: int = 200) -> Iterator[FitJob]:
@@ -344,17 +358,16 @@ class Client:
         ``page_size`` at a time as the iteration goes), filtered by ``status``
         (queued, running, done, failed, cancelled), ``table_id`` and ``model``."""
         params = {"status": status, "table_id": table_id, "model": model}
-        return (FitJob.from_json(d) for d in self._pages("/v1/fits", params, page_size))
+        return self._pages("/v1/fits", params, page_size, FitJob.from_json)
 
     def tables(self, *, name: str | None = None, page_size: int = 200) -> Iterator[TableInfo]:
         """Every uploaded table, newest first; ``name``: those whose name contains it."""
-        return (TableInfo.from_json(d)
-                for d in self._pages("/v1/tables", {"name": name}, page_size))
+        return self._pages("/v1/tables", {"name": name}, page_size, TableInfo.from_json)
 
     def cancel(self, job: JobRef) -> FitJob:
         """Cancel a queued or running job; returns it (``cancelled`` once its worker
         is stopped, within a second or two). An already finished job: ApiError 409."""
-        return FitJob.from_json(self._request("POST", f"/v1/fits/{_job_id(job)}/cancel").json())
+        return self._json("POST", f"/v1/fits/{_job_id(job)}/cancel", FitJob.from_json)
 
     def delete_fit(self, job: JobRef) -> None:
         """Delete a finished job with its results and plots (a queued or running one:
@@ -389,8 +402,8 @@ class Client:
         params = {k: v for k, v in (("model", model), ("target_model", target_model),
                                     ("viewer", None if viewer == "spec" else viewer)) if v}
         params = params or None
-        return Export.from_dict(self._request(
-            "GET", f"/v1/fits/{_job_id(job)}/exports/{target}", params=params).json())
+        return self._json("GET", f"/v1/fits/{_job_id(job)}/exports/{target}",
+                          Export.from_dict, params=params)
 
 
 def _detail(response: httpx.Response) -> str:

@@ -236,7 +236,7 @@ def test_no_server_and_another_server_are_one_line_each():
 def test_an_answer_that_is_not_the_services_is_an_api_error():
     """Another server's 200 HTML page was a JSONDecodeError (and HTML bytes returned by
     plot() as a PNG), a redirect a JSONDecodeError, a body its encoding does not decode
-    an httpx.DecodingError; a token a header cannot carry failed at the first request
+    an httpx.DecodingError, JSON of another shape a KeyError; a token a header cannot carry failed at the first request
     (a newline as "cannot reach the server")."""
     from brdffit.client import InvalidSetting
 
@@ -256,6 +256,14 @@ def test_an_answer_that_is_not_the_services_is_an_api_error():
     with Client("http://brdffit.test", token="", transport=html) as c:
         with pytest.raises(ApiError, match="answered in text/html, not image/png"):
             c.plot("0" * 32, "spheres")
+    # JSON of another shape (another version, another server): was a KeyError
+    shaped = httpx.MockTransport(lambda r: httpx.Response(200, json={"x": 1}))
+    with Client("http://brdffit.test", token="", transport=shaped) as c:
+        for call in (lambda: c.table("0" * 64), lambda: c.job("0" * 32),
+                     lambda: list(c.fits()), lambda: c.export("0" * 32, "gltf")):
+            with pytest.raises(ApiError, match="an answer of another shape than the brdffit "
+                                               "service's"):
+                call()
     for token in ("tökén", "line\nbreak"):
         with pytest.raises(InvalidSetting, match="the token must be printable ASCII"):
             Client("http://brdffit.test", token=token)
