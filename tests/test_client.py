@@ -236,8 +236,8 @@ def test_no_server_and_another_server_are_one_line_each():
 def test_an_answer_that_is_not_the_services_is_an_api_error():
     """Another server's 200 HTML page was a JSONDecodeError (and HTML bytes returned by
     plot() as a PNG), a redirect a JSONDecodeError, a body its encoding does not decode
-    an httpx.DecodingError, JSON of another shape a KeyError; a token a header cannot carry failed at the first request
-    (a newline as "cannot reach the server")."""
+    an httpx.DecodingError, JSON of another shape a KeyError; a token a header cannot
+    carry failed at the first request (a newline as "cannot reach the server")."""
     from brdffit.client import InvalidSetting
 
     html = httpx.MockTransport(lambda r: httpx.Response(

@@ -164,6 +164,8 @@ def test_bad_scene_files(tmp_path):
             ("preset.json", '{"preset": [1]}', "unknown scene preset [1]"),
             ("file.json", '{"pairs_file": 5}', "scene pairs_file: the path of a .npy or .csv"),
             ("deep.json", "[" * 100_000 + "]" * 100_000, "deep.json: not a scene: JSON nested"),
+            ("truth.json", '{"lights": [[true, 0, 1]], "views": [[0, 0, 1]]}',
+             "scene lights: numbers, not true or false"),
             ("empty.npy", None, "empty.npy: not a numeric .npy array")):
         if text is not None:
             (tmp_path / name).write_text(text)

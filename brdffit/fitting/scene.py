@@ -379,7 +379,20 @@ def _read_csv(path: str) -> np.ndarray:
     return np.asarray(rows)
 
 
+def _no_truth_values(a, what: str) -> None:
+    """Refuses true or false among a JSON list's numbers (numpy reads them as 1 and 0;
+    ``max_theta_i: true`` is refused as no number too)."""
+    if isinstance(a, list | tuple):
+        try:
+            flat = np.asarray(a, dtype=object).ravel()
+        except ValueError:  # ragged: refused by its shape below
+            return
+        if any(type(x) is bool for x in flat):
+            raise SceneError(f"scene {what}: numbers, not true or false")
+
+
 def _as_dirs(a, what: str) -> np.ndarray:
+    _no_truth_values(a, what)
     try:
         a = np.asarray(a, dtype=np.float64)
     except (TypeError, ValueError):
@@ -390,6 +403,7 @@ def _as_dirs(a, what: str) -> np.ndarray:
 
 
 def _as_pairs(a, what: str) -> np.ndarray:
+    _no_truth_values(a, what)
     try:
         a = np.asarray(a, dtype=np.float64)
     except (TypeError, ValueError):
