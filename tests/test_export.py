@@ -363,6 +363,7 @@ def test_a_fits_own_table_file_changed_since_the_fit_is_said(tmp_path):
     assert changed.fidelity["log_rmse_to_table"] is not None  # measured, and said so
 
 
+@pytest.mark.slow  # two exports, each a refit: ~5 s
 def test_a_sample_lists_file_changed_since_the_fit_is_said(tmp_path):
     """A fit at a sample list's own directions is checked on the file's samples as
     they are now, by its log_rmse on every usable sample: another material written over
