@@ -11,6 +11,7 @@ import asyncio
 import dataclasses
 import logging
 import os
+import shutil
 import typing
 from datetime import UTC, datetime
 from enum import Enum
@@ -451,6 +452,12 @@ async def get_plot(
             raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                                 f"rendering the {kind.value} plot failed: {outcome.reason}")
         await run_in_threadpool(_write_atomic, path, outcome.value)
+        if await run_in_threadpool(store.get_job, job_id) is None:
+            # deleted while it was drawn: its plots' folder went before this file came,
+            # and the file stayed on disk for good (a delete after this look removes it)
+            await run_in_threadpool(shutil.rmtree, store.plots_dir / job_id, True)
+            raise HTTPException(status.HTTP_404_NOT_FOUND,
+                                f"no fit job {job_id}: deleted while its plot was drawn")
         return Response(outcome.value, media_type="image/png")
     return Response(await run_in_threadpool(path.read_bytes), media_type="image/png")
 
