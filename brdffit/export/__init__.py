@@ -227,11 +227,13 @@ def _changed_since_the_fit(result: FitResult, table: MerlTable,
     on_samples = (result.input or {}).get("fitted_at") == "samples"
     if on_samples != (samples is not None):
         return []
-    # a sample fit in a scene reports its error on every sample apart
-    everywhere = result.error if not on_samples else (result.full_table_error or result.error)
-    reported = (everywhere or {}).get("log_rmse")
-    if (not isinstance(reported, (int, float)) or not np.isfinite(reported) or reported <= 0
-            or (not on_samples and result.full_table_error is not None)):
+    if on_samples:  # in a scene, its error on every sample is reported apart
+        reported = (result.full_table_error or result.error or {}).get("log_rmse")
+    elif result.full_table_error is None:
+        reported = (result.error or {}).get("log_rmse")
+    else:  # a table's fit in a scene: no figure on every bin to compare with
+        return []
+    if not isinstance(reported, (int, float)) or not np.isfinite(reported) or reported <= 0:
         return []
     now = (sample_error(samples, result.model, result.params) if on_samples
            else table_error(table, result.model, result.params))["log_rmse"]

@@ -107,7 +107,7 @@ class Scene:
         # stored as UTF-8 (SQLite, JSON, HDF5 attributes): an unpaired surrogate was a job
         # stored beside a 500, whose record broke the service's job list; a NUL, an HDF5
         # attribute it cannot hold
-        if "\0" in self.name or not self.name.isprintable() and _not_utf8(self.name):
+        if "\0" in self.name or _not_utf8(self.name):
             raise SceneError("a scene name is UTF-8 text without NUL characters (it holds an "
                              "unpaired surrogate or a NUL)")
         if self.pairs is not None:

@@ -250,9 +250,10 @@ def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | 
 def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
                provenance: dict) -> Measurements:
     raw = [rows[:, cols[a][0]] for a in ANGLES]
-    _radians_said_to_be_degrees(raw, [cols[a][1] for a in ANGLES], source)
-    provenance.update(azimuths_within(raw, [cols[a][1] for a in ANGLES]))
-    angles = [rows[:, cols[a][0]] * cols[a][1] for a in ANGLES]
+    scales = [cols[a][1] for a in ANGLES]
+    _radians_said_to_be_degrees(raw, scales, source)
+    provenance.update(azimuths_within(raw, scales))
+    angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     values = rows[:, cols["values"]]
     if "wavelengths" in cols:
         values, provenance["spectral"] = _projected(values, cols["wavelengths"], source,
@@ -749,6 +750,13 @@ def _linked(f, name: str) -> bool:
     return f.get(name, getlink=True) is not None
 
 
+def _external_link(f, name: str) -> bool:
+    """Whether link ``name`` of ``f`` points into another file (not followed)."""
+    import h5py
+
+    return isinstance(f.get(name, getlink=True), h5py.ExternalLink)
+
+
 def _declared_samples(f, angles: list[str]) -> int:
     """The most rows any of the open HDF5 file ``f``'s per-sample datasets declares
     (the angle datasets ``angles``, the values, sigma), from their shapes alone: no
@@ -758,7 +766,7 @@ def _declared_samples(f, angles: list[str]) -> int:
 
     most = 0
     for name in (*angles, *(k for k in _PER_SAMPLE if _linked(f, k))):
-        if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
+        if _external_link(f, name):
             continue  # not followed: refused where it is read (_dataset)
         try:
             d = f[name]
@@ -837,7 +845,7 @@ def _dataset(f, name: str, source: str):
     made it read any file on the server (a FIFO there hung the upload)."""
     import h5py
 
-    if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
+    if _external_link(f, name):
         raise MeasurementsError(source, f"{name} is an external link to another file: a "
                                         "sample list is read from its own file alone")
     try:

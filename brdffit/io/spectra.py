@@ -76,8 +76,8 @@ def interpolation_matrix(lam: np.ndarray, grid: np.ndarray) -> np.ndarray:
     t = (at - lam[lo]) / (lam[hi] - lam[lo])
     out = np.zeros((lam.size, grid.size))
     columns = np.arange(grid.size)
-    np.add.at(out, (lo, columns), 1.0 - t)
-    np.add.at(out, (hi, columns), t)
+    out[lo, columns] = 1.0 - t  # lo and hi are two rows of each column: no sum needed
+    out[hi, columns] = t
     return out
 
 
