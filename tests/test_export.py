@@ -531,7 +531,8 @@ def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     assert three["log_rmse_to_table"] == pytest.approx(
         table_error(measured, "gltf_threejs", e.target_params)["log_rmse"], rel=1e-12)
     assert set(three["sphere_colour"]) == {"brightness_stops", "displayed_brightness_stops",
-                                           "colour_shift", "estimate_error"}
+                                           "colour_shift", "displayed_colour_shift",
+                                           "estimate_error"}
     assert three["render_psnr_db"] > 20
     for_three = export(r, "gltf", table=measured, viewer="threejs")
     assert for_three.fidelity["target_model"] == "gltf_threejs"

@@ -151,6 +151,9 @@ def test_one_channel_and_sigma(tmp_path):
     # Python's float() reads 1_0 as 10
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1_0,1,1\n",
      "row 2 is not all numbers"),
+    # ... and an Arabic-Indic one as 1
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,\u0661,1,1\n",
+     "row 2 is not all numbers"),
     # value and sigma columns that would be guessed at or dropped are refused
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,x,y,z\n10,0,20,0,1,1,1\n",
      "columns x, y, z: CIE XYZ"),

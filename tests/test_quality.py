@@ -39,12 +39,14 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
     r = fitting.fit(table, "ggx", samples=2048)
     q = r.quality
     assert set(q) == {"render_psnr_db", "displayed_brightness_stops", "brightness_stops",
-                      "colour_shift", "estimate_error", "grazing", "basis", "verdict",
-                      "reason", "next"}
+                      "displayed_colour_shift", "colour_shift", "estimate_error", "grazing",
+                      "basis", "verdict", "reason", "next"}
     assert set(q["grazing"]) == {"displayed_brightness_stops", "brightness_stops",
-                                 "colour_shift", "measured_colour_turn"}
+                                 "displayed_colour_shift", "colour_shift",
+                                 "measured_colour_turn"}
     assert q["render_psnr_db"] == r.error["psnr_db"] and q["verdict"] == "good"
     assert abs(q["brightness_stops"]) < 0.03 and q["colour_shift"] < 0.5 and q["next"] == []
+    assert q["displayed_colour_shift"] < 0.5
     assert FitResult.from_dict(r.to_dict()).quality == q
     old = r.to_dict()
     del old["quality"]  # a result stored before the block existed still reads

@@ -160,7 +160,11 @@ def test_bad_scene_files(tmp_path):
         Scene.from_file(tmp_path / "points.json")
     # one line each, not numpy's, json's or Python's own exceptions
     (tmp_path / "empty.npy").write_bytes(b"")
+    # a complex array: numpy would drop the imaginary parts with a warning of its own
+    np.save(tmp_path / "complex.npy", np.array([[[0, 0, 1], [0.1, 0, 1]]], complex))
     for name, text, says in (
+            ("complex.npy", None, "complex.npy: not a numeric .npy array (its values are "
+                                  "complex128, not real numbers)"),
             ("preset.json", '{"preset": [1]}', "unknown scene preset [1]"),
             ("file.json", '{"pairs_file": 5}', "scene pairs_file: the path of a .npy or .csv"),
             ("deep.json", "[" * 100_000 + "]" * 100_000, "deep.json: not a scene: JSON nested"),

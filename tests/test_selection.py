@@ -471,6 +471,13 @@ def test_an_unconverged_candidate_is_refitted_and_the_reason_says_so(monkeypatch
     assert not ggx["converged"] and ggx["result"] == "nonlinear_max_steps_reached"
     assert ("ggx", 8, 4) in calls  # refitted with 4x the steps and 4 starts
     assert "ggx did not converge (nonlinear_max_steps_reached)" in sel.reason
+    # the refit (lower after 8 steps than after 2) is the result, and its notes say
+    # why its starts and steps are not the ones asked
+    fit = sel.fits["ggx"]
+    assert fit.starts == 4 and fit.steps > 2
+    assert any(n.startswith("auto refitted it with 4 starts and up to 8 steps per start: "
+                            "as asked (1 start(s), 2 steps) it ended "
+                            "nonlinear_max_steps_reached") for n in fit.notes), fit.notes
 
 
 # -- progress (issue 13) ----------------------------------------------------------------

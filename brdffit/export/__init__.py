@@ -101,7 +101,8 @@ class Export:
     shades with, ``log_rmse_to_fit`` (what the conversion lost; 0 when exact), the
     fit's own ``fit_log_rmse`` to its table, ``sphere_colour``: the exported material's
     lit sphere against the table's (``brightness_stops``, ``displayed_brightness_stops``
-    (the one a verdict judges), ``colour_shift`` as CIEDE2000, ``estimate_error``:
+    (the one a verdict judges), ``colour_shift`` and ``displayed_colour_shift`` as
+    CIEDE2000 (a verdict judges the worse), ``estimate_error``:
     ``brdffit.fitting.sphere.sphere_colour``'s key light), ``render_psnr_db``: its sphere
     renders' PSNR against the table's (a fit's ``quality.render_psnr_db``), and the
     material's largest directional albedo ``albedo_max`` (RGB) at

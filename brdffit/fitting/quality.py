@@ -2,8 +2,8 @@
 block of every result.
 
     quality = {"render_psnr_db": ..., "displayed_brightness_stops": ...,
-               "brightness_stops": ..., "colour_shift": ...,
-               "estimate_error": {...}, "grazing": {...},
+               "brightness_stops": ..., "displayed_colour_shift": ...,
+               "colour_shift": ..., "estimate_error": {...}, "grazing": {...},
                "verdict": ..., "reason": ..., "next": [...]}
 
 - ``render_psnr_db``: the PSNR of the fit's tone-mapped sphere renders against the
@@ -19,9 +19,14 @@ block of every result.
   render-loss fits the two differed by up to 0.85 stops where the pictures looked
   alike (silver-metallic-paint -0.84 in radiance, +0.01 displayed; a broader highlight),
   and agreed within 0.03 where nothing saturates (``bench.verdict_levels``);
-- ``colour_shift``: CIEDE2000 between the two mean colours at equal luminance, hue
-  and saturation alone (``brdffit.fitting.colour``; ~1 is at the threshold of
-  seeing it side by side, 10 is another colour);
+- ``displayed_colour_shift``: CIEDE2000 between the two key-light pictures' mean
+  displayed colours at equal luminance (``sphere.displayed_colour_shift``: each
+  pixel as the screen shows it, a blown-out highlight white, the body as the
+  exposure brings it up);
+- ``colour_shift``: CIEDE2000 between the two mean colours (radiance) at equal
+  luminance, hue and saturation alone (``brdffit.fitting.colour``; ~1 is at the
+  threshold of seeing it side by side, 10 is another colour); the verdict judges the
+  worse of the two colour figures (:func:`judged_colour`);
 - ``estimate_error``: the integral's own error in the radiance figures (their change
   from a coarser quadrature); ``grazing``: the same figures under the grazing light, the
   rim;
@@ -64,11 +69,13 @@ FIGURES = {"sphere": "sphere render",
 
 
 def verdict(render_psnr_db: float | None, brightness_stops: float | None,
-            colour_shift: float | None, basis: str = "sphere") -> tuple[str, str]:
+            colour_shift: float | None, basis: str = "sphere",
+            colour_where: str = "") -> tuple[str, str]:
     """(verdict, reason) of a PSNR (dB), a brightness error (stops) and a CIEDE2000
     colour shift; None for a figure that could not be measured. ``basis``: what they
     were measured on (:data:`FIGURES`): a sphere rendered from the table, or a sample
-    list's held-out predictions (``brdffit.fitting.samples``), with the same thresholds."""
+    list's held-out predictions (``brdffit.fitting.samples``), with the same thresholds.
+    ``colour_where``: which colour figure that is, in words (:func:`judged_colour`)."""
     figure = FIGURES[basis]
     if not _finite(render_psnr_db):
         # judged poor: a look nothing measures is not vouched for
@@ -81,6 +88,7 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
                         "the other way round")
     stops = abs(brightness_stops)
     de = colour_shift if _finite(colour_shift) else 0.0
+    where = f" {colour_where}" if colour_where else ""
     if render_psnr_db < POOR[0]:
         return "poor", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
                         f"(poor below {POOR[0]:g} dB)")
@@ -88,10 +96,10 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
         return "poor", (f"{_stops(brightness_stops)} in displayed brightness (poor beyond "
                         f"{POOR[1]:g} stops)")
     if de > POOR[2]:
-        return "poor", f"colour off by CIEDE2000 {de:.1f} (poor beyond {POOR[2]:g})"
+        return "poor", f"colour off by CIEDE2000 {de:.1f}{where} (poor beyond {POOR[2]:g})"
     if render_psnr_db >= GOOD[0] and stops <= GOOD[1] and de <= GOOD[2]:
         return "good", (f"{figure} {render_psnr_db:.1f} dB, displayed brightness "
-                        f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f} (good: >= "
+                        f"{_stops(brightness_stops)}, colour CIEDE2000 {de:.1f}{where} (good: >= "
                         f"{GOOD[0]:g} dB, within {GOOD[1]:g} stops and CIEDE2000 {GOOD[2]:g})")
     if render_psnr_db < GOOD[0]:
         return "visible", (f"{figure} {render_psnr_db:.1f} dB from the measurement "
@@ -99,7 +107,7 @@ def verdict(render_psnr_db: float | None, brightness_stops: float | None,
     if stops > GOOD[1]:
         return "visible", (f"{_stops(brightness_stops)} in displayed brightness (good within "
                            f"{GOOD[1]:g} stops)")
-    return "visible", f"colour off by CIEDE2000 {de:.1f} (good within {GOOD[2]:g})"
+    return "visible", f"colour off by CIEDE2000 {de:.1f}{where} (good within {GOOD[2]:g})"
 
 
 def judged_brightness(figures: dict) -> float | None:
@@ -108,6 +116,25 @@ def judged_brightness(figures: dict) -> float | None:
     if "displayed_brightness_stops" in figures:
         return figures["displayed_brightness_stops"]
     return figures.get("brightness_stops")
+
+
+def judged_colour(figures: dict) -> tuple[float | None, str]:
+    """The colour figure the verdict judges in a light's ``figures``, and which it is in
+    words: the worse of the displayed one (``displayed_colour_shift``: the picture at the
+    verdict's exposure, where a glossy material's highlight is blown out and its body
+    shows) and the radiance one (``colour_shift``: the sphere's mean light, which the
+    highlight holds, and whose hue a dimmer exposure shows). Each misses what the other
+    sees: black-obsidian's ggx2 fit was CIEDE2000 1.9 off in radiance (a grey highlight
+    in both) and 15.6 as displayed (the measured body red, the fit's grey);
+    color-changing-paint3's ggx fit 10.8 in radiance (the highlight's hue) and 0.5 as
+    displayed. A result stored before the displayed figure was reported: the radiance
+    one."""
+    radiance = figures.get("colour_shift")
+    if "displayed_colour_shift" not in figures:
+        return radiance, ""
+    both = [(v, words) for v, words in ((figures["displayed_colour_shift"], "as displayed"),
+                                         (radiance, "in radiance")) if _finite(v)]
+    return max(both, key=lambda b: b[0]) if both else (None, "")
 
 
 def radiance_verdict(look: dict | None) -> str | None:
@@ -138,17 +165,19 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     ``basis``: :func:`verdict`'s."""
     psnr = float(render_psnr_db) if _finite(render_psnr_db) else None
     key = colour["key"]
-    word, reason = verdict(psnr, judged_brightness(key), key["colour_shift"], basis)
+    word, reason = _judged(psnr, key, basis)
     graze = colour.get("grazing")
     reason += _grazing_words(word, psnr, graze, basis)
     block = {"render_psnr_db": psnr,
              "displayed_brightness_stops": key.get("displayed_brightness_stops"),
              "brightness_stops": key["brightness_stops"],
+             "displayed_colour_shift": key.get("displayed_colour_shift"),
              "colour_shift": key["colour_shift"],
              "estimate_error": key["estimate_error"],
              "grazing": None if graze is None else {
                  k: graze.get(k) for k in ("displayed_brightness_stops", "brightness_stops",
-                                           "colour_shift", "measured_colour_turn")},
+                                           "displayed_colour_shift", "colour_shift",
+                                           "measured_colour_turn")},
              "basis": basis,
              "verdict": word, "reason": reason, "next": []}
     if word != "good":
@@ -160,6 +189,13 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     return block
 
 
+def _judged(psnr: float | None, figures: dict, basis: str) -> tuple[str, str]:
+    """:func:`verdict` of one light's ``figures``, by the brightness and colour it judges
+    (:func:`judged_brightness`, :func:`judged_colour`)."""
+    shift, where = judged_colour(figures)
+    return verdict(psnr, judged_brightness(figures), shift, basis, where)
+
+
 def _grazing_words(word: str, psnr: float | None, graze: dict | None, basis: str) -> str:
     """What the reason adds where the grazing light alone reads worse than the verdict
     (judged under the key light, with the PSNR of both): light-brown-fabric's ggx fit
@@ -167,7 +203,7 @@ def _grazing_words(word: str, psnr: float | None, graze: dict | None, basis: str
     visible at CIEDE2000 9.4 there, and nothing said so but the figures' line."""
     if not graze or not _finite(judged_brightness(graze)):
         return ""  # not measured there (a table cut at low theta_d): nothing to judge
-    there, why = verdict(psnr, judged_brightness(graze), graze.get("colour_shift"), basis)
+    there, why = _judged(psnr, graze, basis)
     if VERDICTS.index(there) <= VERDICTS.index(word):
         return ""
     return f"; the grazing light alone reads {there}: {why}"
@@ -439,12 +475,11 @@ def describe(look: dict | None, indent: str = "  ") -> list[str]:
         return []
     lines = [f"{indent}looks {look['verdict']}: {look['reason']}"]
     if "brightness_stops" in look:  # not in results stored before brdffit.fit/2
-        figures = [_brightness_words(look),
-                   f"colour CIEDE2000 {_maybe(look['colour_shift'], '.1f')} (key light)"]
+        figures = [_brightness_words(look), f"{_colour_words(look)} (key light)"]
         graze = look.get("grazing") or {}
         if graze:
             figures.append(f"grazing light {_brightness_words(graze)}, "
-                           f"{_maybe(graze.get('colour_shift'), '.1f')}")
+                           f"{_colour_words(graze)}")
         lines.append(f"{indent}  " + "; ".join(figures))
     for i, step in enumerate(look.get("next") or [], 1):
         gain = "" if step.get("gain_db") is None else f" ({step['gain_db']:+.1f} dB)"
@@ -460,6 +495,16 @@ def _brightness_words(figures: dict) -> str:
         return f"brightness {radiance} stops"
     return (f"brightness {_maybe(figures['displayed_brightness_stops'], '+.2f')} stops "
             f"as displayed (radiance {radiance})")
+
+
+def _colour_words(figures: dict) -> str:
+    """"colour CIEDE2000 15.6 as displayed (radiance 1.9)", or the radiance figure alone
+    in a result stored before the displayed one was reported."""
+    radiance = _maybe(figures.get("colour_shift"), ".1f")
+    if "displayed_colour_shift" not in figures:
+        return f"colour CIEDE2000 {radiance}"
+    return (f"colour CIEDE2000 {_maybe(figures['displayed_colour_shift'], '.1f')} as "
+            f"displayed (radiance {radiance})")
 
 
 def _maybe(x, fmt: str) -> str:

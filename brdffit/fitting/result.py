@@ -33,13 +33,16 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: which the verdict judges instead of ``brightness_stops`` (the radiance figure, still
 #: reported); an older result's verdict stays as it was stored. 7: the grazing light's
 #: ``measured_colour_turn`` (how far the table's own colour turns from the key light),
-#: which ``next`` reads; an older result's ``next`` stays as it was stored.
-SCHEMA = "brdffit.fit/7"
+#: which ``next`` reads; an older result's ``next`` stays as it was stored. 8:
+#: ``quality.displayed_colour_shift`` (and the grazing light's): the colour of the
+#: picture the verdict judges, which it weighs with ``colour_shift`` (the worse of the
+#: two); an older result's verdict stays as it was stored.
+SCHEMA = "brdffit.fit/8"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4", "brdffit.fit/3",
-         "brdffit.fit/2", "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/7", "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4",
+         "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)
@@ -230,7 +233,8 @@ FIELD_DOCS = {
                 "relative cost, the largest albedo before and after, the active constraints",
     "quality": "how the fit looks next to the measurement: render_psnr_db, "
                "displayed_brightness_stops (judged), brightness_stops (radiance), "
-               "colour_shift (CIEDE2000), estimate_error, grazing, verdict "
+               "displayed_colour_shift and colour_shift (CIEDE2000, as displayed and in "
+               "radiance: the worse is judged), estimate_error, grazing, verdict "
                "(good, visible or poor), reason and next (what to try, best first)",
     "input": "on a fit of samples (ASTM, CSV, HDF5): their format, count and what binning "
              "them onto the MERL grid moved, or null for a MERL table",

@@ -321,6 +321,8 @@ def read_pairs(path: str) -> np.ndarray:
             # mapped first: its shape is refused before a huge array is read
             a = np.load(path, allow_pickle=False, mmap_mode="r")
             _not_too_many(a.shape[0] if a.ndim else 1, f"{path}'s pairs")
+            if a.dtype.kind not in "iuf":  # a complex array's imaginary part was dropped
+                raise ValueError(f"its values are {a.dtype}, not real numbers")
             a = np.array(a)
         except (ValueError, EOFError, OSError) as e:  # EOFError: an empty file
             raise SceneError(f"{path}: not a numeric .npy array "

@@ -116,11 +116,17 @@ def psnr_of(mse: float) -> float:
     return PSNR_CAP_DB if mse <= 10 ** (-PSNR_CAP_DB / 10) else float(-10 * np.log10(mse))
 
 
-def displayed_level(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
-    """Per pixel, the displayed luminance before the sRGB curve: the luminance of the
-    Reinhard-mapped channels of :func:`tonemap` (``rad`` (..., 3) -> (...)), in [0, 1)."""
+def displayed_rgb(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
+    """Per pixel, the displayed colour before the sRGB curve: the Reinhard-mapped
+    channels of :func:`tonemap` (``rad`` (..., 3) -> (..., 3)), in [0, 1)."""
     x = xp.maximum(rad * exposure, 0.0)
-    return (x / (1.0 + x)) @ xp.asarray(LUMINANCE)
+    return x / (1.0 + x)
+
+
+def displayed_level(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
+    """Per pixel, the displayed luminance before the sRGB curve: the luminance of
+    :func:`displayed_rgb` (``rad`` (..., 3) -> (...)), in [0, 1)."""
+    return displayed_rgb(rad, exposure, xp) @ xp.asarray(LUMINANCE)
 
 
 def displayed_stops(fit_level: float, table_level: float) -> float | None:
@@ -146,6 +152,22 @@ def displayed_stops(fit_level: float, table_level: float) -> float | None:
 
 #: A picture whose mean exposed level is below this is black (~1/1000 of mid grey).
 DISPLAY_BLACK = 3.5e-4
+
+
+def displayed_colour_shift(fit_rgb: np.ndarray, table_rgb: np.ndarray) -> float | None:
+    """The colour difference between two pictures whose mean displayed colours
+    (:func:`displayed_rgb`, averaged over the same pixels) are ``fit_rgb`` and
+    ``table_rgb``: CIEDE2000 at equal luminance, as ``brightness_and_colour`` takes it.
+    A picture's mean colour weighs each pixel as the screen shows it: a highlight blown
+    out to white in both counts for its area, and the body the exposure brings up
+    counts for what it is. None where either picture is black and the other is not;
+    0 where both are."""
+    levels = [float(np.asarray(c, np.float64) @ LUMINANCE) for c in (fit_rgb, table_rgb)]
+    if not all(np.isfinite(levels)):
+        return None
+    if min(levels) <= DISPLAY_BLACK:
+        return 0.0 if max(levels) <= DISPLAY_BLACK else None
+    return brightness_and_colour(fit_rgb, table_rgb)[1]
 
 
 def tonemap(rad: np.ndarray, exposure, xp=np) -> np.ndarray:
@@ -424,7 +446,9 @@ class SphereReference:
         self.size = size
         self.lights = [light for _, light in lights]
         self.images, self.masks, self.exposures = [], [], []
-        self.levels = []  # the table's mean displayed level per light (displayed_stops)
+        # the table's mean displayed colour per light (displayed_stops, its luminance;
+        # displayed_colour_shift)
+        self.shown = []
         for light in self.lights:
             rad, lit = render_table(table, light, size)
             ok = lit & np.all(np.isfinite(rad), axis=-1)
@@ -432,8 +456,8 @@ class SphereReference:
             self.images.append(tonemap(np.nan_to_num(rad), exposure))
             self.masks.append(ok)
             self.exposures.append(exposure)
-            self.levels.append(float(np.mean(displayed_level(rad[ok], exposure)))
-                               if ok.any() else float("nan"))
+            self.shown.append(np.mean(displayed_rgb(rad[ok], exposure), axis=0)
+                              if ok.any() else np.full(3, np.nan))
         self._scored = None  # made on the first psnr
         # the colour's integrals (no reference to the table itself is kept: a
         # reference is cached per table, weakly)
@@ -473,17 +497,26 @@ class SphereReference:
         return psnr, colour
 
     def _add_displayed(self, colour: dict, shown: np.ndarray) -> None:
-        """Each light's ``displayed_brightness_stops`` (:func:`displayed_stops`) into
-        ``colour``, from the fit's displayed level at every scored pixel."""
+        """Each light's ``displayed_brightness_stops`` (:func:`displayed_stops`) and
+        ``displayed_colour_shift`` (:func:`displayed_colour_shift`) into ``colour``,
+        from the fit's displayed colour at every scored pixel."""
         scored = self._scored[4] > 0
         for i, name in enumerate(COLOUR_LIGHTS):
             # a reference made with other lights than LIGHTS has no picture of this one
             at = scored & (self._light_of == i)
-            fit = float(np.mean(shown[at])) if at.any() else float("nan")
-            table = self.levels[i] if i < len(self.levels) else float("nan")
-            colour[name]["displayed_brightness_stops"] = (
-                displayed_stops(fit, table) if np.isfinite(fit) and np.isfinite(table)
-                else None)
+            fit = np.mean(shown[at], axis=0) if at.any() else np.full(3, np.nan)
+            table = self.shown[i] if i < len(self.shown) else np.full(3, np.nan)
+            colour[name].update(displayed_figures(fit, table))
+
+
+def displayed_figures(fit_rgb: np.ndarray, table_rgb: np.ndarray) -> dict:
+    """``displayed_brightness_stops`` and ``displayed_colour_shift`` of two pictures'
+    mean displayed colours (:func:`displayed_rgb`); None where either is not finite."""
+    if not (np.all(np.isfinite(fit_rgb)) and np.all(np.isfinite(table_rgb))):
+        return {"displayed_brightness_stops": None, "displayed_colour_shift": None}
+    return {"displayed_brightness_stops": displayed_stops(fit_rgb @ LUMINANCE,
+                                                          table_rgb @ LUMINANCE),
+            "displayed_colour_shift": displayed_colour_shift(fit_rgb, table_rgb)}
 
 
 @executables.jit
@@ -492,7 +525,7 @@ def _sphere_measures(model, params, wi, wo, wi_pixel, ref, scored, exposure, wi_
     over the ``scored`` pixels (weight 1; 0 elsewhere), the model evaluated at
     ``(wi, wo)`` (each pixel's bin) and lit from ``wi_pixel`` (the pixel's own); whether
     every scored one is finite; and the model's values at ``(wi_c, wo_c)`` (the colour
-    integrals' bins); and each pixel's :func:`displayed_level`: one compiled call, the
+    integrals' bins); and each pixel's :func:`displayed_rgb`: one compiled call, the
     model evaluated once over both sets of directions."""
     n = wi.shape[0]
     f = model(params, jnp.concatenate([wi, wi_c]), jnp.concatenate([wo, wo_c]))
@@ -500,7 +533,7 @@ def _sphere_measures(model, params, wi, wo, wi_pixel, ref, scored, exposure, wi_
     mapped = tonemap(rad, exposure[:, None], jnp)
     d = jnp.where(scored[:, None] > 0, mapped - ref, 0.0)
     return (jnp.sum(d * d), jnp.all(jnp.isfinite(d)), f[n:],
-            displayed_level(rad, exposure[:, None], jnp))
+            displayed_rgb(rad, exposure[:, None], jnp))
 
 
 def sphere_psnr(table: MerlTable, model: AbstractBRDFModel, params: dict, size: int = 128) -> float:

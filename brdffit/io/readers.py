@@ -357,8 +357,9 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
                                             f"header names {width} columns")
         try:
             read = [cells[k] for k in used]
-            # Python's float() also reads 1_0 as 10: no data file means that
-            if any("_" in c for c in read):
+            # Python's float() also reads 1_0 as 10, and any script's digits (Arabic-
+            # Indic "١" as 1): no data file means either
+            if any("_" in c or not c.strip().isascii() for c in read):
                 raise ValueError
             out[j, used] = [float(c.replace(",", ".") if comma else c) for c in read]
         except ValueError:

@@ -41,9 +41,10 @@ from .frame import Frame, shading_frame
 from .ggx import GGX
 from .microfacet import ALPHA_GRID, F0, schlick_fresnel
 
-KS1 = ParamSpec("ks1", "scale of the first (sharper) lobe (RGB)", 0.0, None, rgb=True)
+KS1 = ParamSpec("ks1", "scale of the first lobe (RGB; it starts as the sharper lobe, and may "
+                       "end as the broader)", 0.0, None, rgb=True)
 ALPHA1 = ParamSpec("alpha1", "roughness of the first lobe", 1e-3, 2.0, scale="log")
-KS2 = ParamSpec("ks2", "scale of the second (broader) lobe (RGB)", 0.0, None, rgb=True)
+KS2 = ParamSpec("ks2", "scale of the second lobe (RGB)", 0.0, None, rgb=True)
 ALPHA2 = ParamSpec("alpha2", "roughness of the second lobe", 1e-3, 2.0, scale="log")
 
 _GGX = GGX()

@@ -34,7 +34,7 @@ import numpy as np
 from brdffit import extras, models, runtime
 
 try:
-    from matplotlib.colors import to_rgb
+    from matplotlib.colors import LogNorm, to_rgb
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle
@@ -42,10 +42,18 @@ except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
 from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
+from brdffit.fitting.options import DEFAULT_LOSS
 from brdffit.fitting.problem import sphere_reference
-from brdffit.fitting.quality import judged_brightness
+from brdffit.fitting.quality import judged_brightness, judged_colour
 from brdffit.fitting.result import FitResult, error_measures_nothing
-from brdffit.fitting.sphere import LIGHTS, radiance, sphere_disc, tonemap
+from brdffit.fitting.sphere import (
+    LIGHTS,
+    displayed_level,
+    radiance,
+    sphere_disc,
+    table_exposure,
+    tonemap,
+)
 from brdffit.io import atomic
 from brdffit.io.angles import (
     N_PHI_D,
@@ -100,7 +108,11 @@ def _title(table: MerlTable, result: FitResult) -> str:
     # math, and fail on an unbalanced one. An escaped dollar is a literal dollar.
     name = name.replace("$", r"\$")
     e = result.error.get("log_rmse")
-    return f"{name}: {result.model} fit, log_rmse " + ("n/a" if e is None else f"{e:.3g}")
+    # the loss it minimised, where not the default: a render-loss fit's pictures were
+    # told from a log-loss one's by the log_rmse figure alone
+    loss = "" if result.loss == DEFAULT_LOSS else f" ({result.loss} loss)"
+    return (f"{name}: {result.model} fit{loss}, log_rmse "
+            + ("n/a" if e is None else f"{e:.3g}"))
 
 
 def _png(fig: Figure) -> bytes:
@@ -145,9 +157,19 @@ def slices(
     phi_d_deg = tuple(np.atleast_1d(phi_d_deg).tolist())
     fig = Figure(figsize=(13.0, 2.0 + 2.9 * len(phi_d_deg)), layout="constrained")
     _draw_slices(fig, table, result, theta_d_deg, phi_d_deg)
-    shown = ", ".join(f"{p:g}°" for p in phi_d_deg)
+    # the bins' centres, as the rows give them (asked 90, shown 90.5)
+    shown = ", ".join(f"{p:.1f}°" for p in _phi_d_centres(phi_d_deg))
     fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}", fontsize=12)
     return _png(fig)
+
+
+def _phi_d_centres(phi_d_deg) -> list[float]:
+    """The centre (degrees) of the phi_d bin each of ``phi_d_deg`` falls in."""
+    out = []
+    for phi in phi_d_deg:
+        _, _, i_pd = half_diff_to_bins(0.0, 0.0, np.radians(phi))
+        out.append(float(np.degrees(bin_centres(0, 0, int(np.ravel(i_pd)[0]))[2])))
+    return out
 
 
 def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
@@ -155,6 +177,7 @@ def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
                                       sharex=True, squeeze=False))
     i_th = np.arange(N_THETA_H)
     lo, hi = np.inf, 0.0
+    zeros = []  # (axis, theta_h, colour) of bins measured 0: no point on a log axis
     for row, phi in enumerate(phi_d_deg):
         _, i_tds, i_pd = half_diff_to_bins(
             np.zeros(len(theta_d_deg)), np.radians(theta_d_deg), np.radians(phi))
@@ -171,6 +194,9 @@ def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
             for c, (_, colour) in enumerate(CHANNELS):
                 ax.plot(x, measured[:, c], "o", ms=3.0, color=colour, alpha=0.55, mec="none")
                 ax.plot(x, fitted[:, c], "-", lw=1.5, color=colour)
+                zero = measured[:, c] <= 0
+                if zero.any():
+                    zeros.append((ax, x[zero], colour))
             for v in (measured, fitted):
                 v = v[np.isfinite(v) & (v > 0)]
                 if v.size:
@@ -185,8 +211,16 @@ def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
         axes[row, 0].set_ylabel(f"φd = {np.degrees(phi_d[0, 0]):.1f}°\nf_r (1/sr, log)")
     if hi > 0:
         axes[0, 0].set_ylim(lo / 2, hi * 2)
+    # a measured 0 (chrome-steel: 14% of its bins) drawn on the axis's floor: left out,
+    # the dots stopped where the fit's line went on, as if nothing were measured there
+    floor = axes[0, 0].get_ylim()[0] * 1.4
+    for ax, x, colour in zeros:
+        ax.plot(x, np.full(x.shape, floor), "v", ms=3.5, mfc="none", mec=colour, alpha=0.7,
+                mew=0.8)
     fig.legend(
         handles=[Line2D([], [], ls="none", marker="o", color="0.3", label="measured"),
+                 *([Line2D([], [], ls="none", marker="v", mfc="none", mec="0.3",
+                          label="measured 0")] if zeros else []),
                  Line2D([], [], color="0.3", label="fit")]
         + [Line2D([], [], color=col, lw=4, label=name) for name, col in CHANNELS],
         loc="outside right upper", fontsize=9,
@@ -231,13 +265,20 @@ def _draw_error_map(fig, table: MerlTable, result: FitResult):
     x = _theta_h_edges_deg()
     y = np.linspace(0.0, 90.0, N_THETA_D + 1)
     ax_rms, ax_bias = fig.subplots(1, 2, sharey=True)
-    finite_rms = rms[np.isfinite(rms)]
-    vmax = float(np.percentile(finite_rms, 99.5)) if finite_rms.size else 1.0
-    cmap = _with_bad("magma")
-    m = ax_rms.pcolormesh(x, y, rms.T, cmap=cmap, vmin=0.0, vmax=max(vmax, 1e-6),
-                          shading="flat", rasterized=True)
-    fig.colorbar(m, ax=ax_rms, label="RMS residual of log(1 + f_r cos θi)", extend="max")
-    ax_rms.set_title("|error| per bin (what log_rmse averages)", fontsize=11)
+    finite_rms = rms[np.isfinite(rms) & (rms > 0)]
+    # log-scaled: the residuals span decades, and the grazing strip (theta_d > 80 deg)
+    # set a linear scale that left ~90% of the bins black (white-diffuse-bball: a bar
+    # to 1.0, every bin below 75 deg under 0.073)
+    vmax = max(float(finite_rms.max()) if finite_rms.size else 1.0, 1e-9)
+    vmin = max(float(np.percentile(finite_rms, 1.0)) if finite_rms.size else 0.0,
+               vmax / ERROR_MAP_DECADES_RANGE)
+    shown = np.where(np.isfinite(rms), np.maximum(rms, vmin), np.nan)  # NaN: no bin, grey
+    m = ax_rms.pcolormesh(x, y, shown.T, cmap=_with_bad("magma"),
+                          norm=LogNorm(vmin=min(vmin, vmax / 10), vmax=vmax), shading="flat",
+                          rasterized=True)
+    fig.colorbar(m, ax=ax_rms, label="RMS residual of log(1 + f_r cos θi)", extend="min")
+    ax_rms.set_title("|error| per bin (log_rmse's terms, before its solid-angle weights)",
+                     fontsize=11)
 
     finite_bias = np.abs(bias[np.isfinite(bias)])
     bmax = float(np.percentile(finite_bias, 99.5)) if finite_bias.size else 1.0
@@ -252,6 +293,10 @@ def _draw_error_map(fig, table: MerlTable, result: FitResult):
         ax.set_xlabel("θh (degrees, √ scale)")
     ax_rms.set_ylabel("θd (degrees)")
     ax_rms.set_yticks([0, 15, 30, 45, 60, 75, 90])
+
+
+#: The |error| map's colour scale spans at most this factor below its largest bin.
+ERROR_MAP_DECADES_RANGE = 1e4
 
 
 def _with_bad(name: str):
@@ -278,12 +323,14 @@ SPHERE_LIGHTS = (
 #: stop where the colour is all but the same, and the whole sphere was tinted orange
 #: on a fit whose colour is CIEDE2000 1.1 off.
 COLOUR_GAIN = 0.5
-#: The colour panel judges pixels above this share of the brightest measured one. At
-#: 0.5% the diffuse body of a glossy material (the demo's ggx table: 0.47% of its
-#: highlight) was black, "too dark to judge", where a picture at the verdict's exposure
-#: shows it mid-grey; with the tint scaled by CIEDE2000, a dark pixel's noise tints it
-#: as far as it looks off, no more.
-DARKEST_JUDGED = 0.0005
+#: The colour panel judges the pixels whose measured picture, at the exposure the
+#: verdict judged that light at, shows above this displayed level (Reinhard luminance
+#: before the sRGB curve: ~10% on screen, a dark grey whose hue can still be told).
+#: A share of the brightest pixel (it was 0.05%) left black, "too dark to judge", the
+#: body a dark glossy material's picture shows: black-obsidian's red body under its
+#: grey highlight (~1e-4 of it), which the verdict's picture shows mid-red against the
+#: fit's grey.
+DARKEST_SHOWN = 0.01
 #: The CIEDE2000 (at equal luminance) at which the tint is full: the poor
 #: verdict's colour (CIEDE2000 6, ``brdffit.fitting.quality.POOR``).
 TINT_FULL_DE = 6.0
@@ -332,16 +379,21 @@ def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
             unmeasured)
 
 
-def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
+def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray,
+                 exposure: float | None = None):
     """The brightness ratio, log2(fit / measured) of the luminance, and the colour
     ratio image of two radiance images: per channel ``0.5 + strength * COLOUR_GAIN *
     log2(share_fit / share_measured)`` with ``share`` a channel's part of the
     luminance and ``strength`` the two colours' CIEDE2000 at equal luminance
     over :data:`TINT_FULL_DE` (at most 1), so grey where the colour looks right and
-    tinted towards the colour the fit has too much of. NaN off ``on``, where unlit,
-    and (colour) below :data:`DARKEST_JUDGED` of the brightest."""
+    tinted towards the colour the fit has too much of. NaN off ``on`` and where both
+    are black; the colour also where the measured picture, at ``exposure`` (the
+    verdict's; by default the table's own, as the verdict takes it), shows darker
+    than :data:`DARKEST_SHOWN`. A measured 0 under a lit fit is the fit too bright
+    (chrome-steel: 14% of its bins are 0, and the fit's grey body there was black,
+    "unlit", in the panel)."""
     lum_m, lum_f = measured @ LUMINANCE, fitted @ LUMINANCE
-    lit = on & (lum_m > 0)
+    lit = on & ((lum_m > 0) | (lum_f > 0))
     eps = 1e-3 * max(float(np.median(lum_m[lit])) if lit.any() else 1.0, 1e-9)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.where(lit, np.log2((lum_f + eps) / (lum_m + eps)), np.nan)
@@ -352,7 +404,9 @@ def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray):
         apart = ciede2000_of(rgb_to_lab(shown[0]), rgb_to_lab(shown[1]))
         strength = np.clip(apart / TINT_FULL_DE, 0.0, 1.0)[..., None]
         colour = np.clip(0.5 + strength * COLOUR_GAIN * np.log2(share), 0.0, 1.0)
-    bright = lit & (lum_m > DARKEST_JUDGED * np.max(np.where(lit, lum_m, 0.0), initial=0.0))
+    if exposure is None:
+        exposure = table_exposure(lum_m[lit]) if lit.any() else 1.0
+    bright = lit & (displayed_level(np.nan_to_num(measured), exposure) > DARKEST_SHOWN)
     colour[~bright] = np.nan
     return ratio, colour
 
@@ -392,12 +446,18 @@ def judged_ev(table: MerlTable, light, exposure_ev: float = 0.0) -> float | None
     (``brdffit.fitting.sphere.table_exposure``), the picture at one exposure for every
     material: what looks alike here may differ there (a highlight blown out in both at
     the verdict's exposure), and a dark material is near black here."""
-    reference = sphere_reference(table)  # the fit's own, where it fitted this table object
-    exposure = next((e for judged, e in zip(reference.lights, reference.exposures, strict=True)
-                     if np.allclose(judged, light, rtol=0.0, atol=1e-12)), None)
+    exposure = verdict_exposure(table, light)
     if exposure is None:
         return None
     return round(4 * np.log2(exposure / (EXPOSURE * 2.0**exposure_ev))) / 4
+
+
+def verdict_exposure(table: MerlTable, light) -> float | None:
+    """The exposure the verdict judged ``light`` at (None for a light it did not judge):
+    the table's own typical lit pixel (``brdffit.fitting.sphere.table_exposure``)."""
+    reference = sphere_reference(table)  # the fit's own, where it fitted this table object
+    return next((e for judged, e in zip(reference.lights, reference.exposures, strict=True)
+                 if np.allclose(judged, light, rtol=0.0, atol=1e-12)), None)
 
 
 def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dict[int, str]:
@@ -414,7 +474,7 @@ def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dic
 
 
 def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS,
-                  exposure_ev: float = 0.0):
+                  exposure_ev: float = 0.0, label_size: float = 10):
     axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = np.array(to_rgb(NO_DATA))
@@ -426,7 +486,7 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
                   _composite(fitted, coverage, background, exposure_ev)]
         images[0][unmeasured] = no_data
         on = (coverage > 0.5) & ~unmeasured
-        ratio, colour = ratio_images(measured, fitted, on)
+        ratio, colour = ratio_images(measured, fitted, on, verdict_exposure(table, light))
         for col, img in enumerate(images):
             axes[row, col].imshow(img, interpolation="bilinear")
         base = np.where(on[..., None], 0.0, background)
@@ -437,7 +497,7 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         axes[row, 3].imshow(base, interpolation="nearest")
         colour_img = np.where(np.isnan(colour), base, colour)
         axes[row, 3].imshow(colour_img, interpolation="nearest")
-        axes[row, 0].set_ylabel(label + verdict_ev.get(row, ""), fontsize=10)
+        axes[row, 0].set_ylabel(label + verdict_ev.get(row, ""), fontsize=label_size)
         for ax in axes[row]:  # the unlit part is black: outline the sphere
             ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False,
                                 lw=0.8, ec="0.65"))
@@ -451,8 +511,8 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
     fig.colorbar(ratio_img, ax=axes[:, 2], shrink=0.6, extend="both", location="bottom",
                  label="stops (+1: fit 2× brighter)")
     axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
-                           f"(full at CIEDE2000 {TINT_FULL_DE:g}); black: unlit,\nor too dark "
-                           f"to judge (< {DARKEST_JUDGED:.2%} of the brightest)", fontsize=9)
+                           f"(full at CIEDE2000 {TINT_FULL_DE:g}); black: unlit, or\ntoo dark "
+                           "to judge at the verdict's exposure", fontsize=9)
     return axes
 
 
@@ -542,16 +602,20 @@ def _discrete_colours(name: str, n: int):
 # -- one page per fit -----------------------------------------------------------------
 
 
-def report(table: MerlTable, result: FitResult | dict, *, exposure_ev: float = 0.0) -> bytes:
+def report(table: MerlTable, result: FitResult | dict, *,
+           exposure_ev: float | None = None) -> bytes:
     """One page: the parameters with their standard errors and undetermined flags,
-    every error metric, the spheres (at ``exposure_ev``), the phi_d = 90 deg slices
-    and the error map."""
+    every error metric, the spheres (at ``exposure_ev``; by default where the verdict
+    judged the key light, :func:`page_exposure_ev`), the phi_d = 90 deg slices and the
+    error map."""
     result = _as_result(result)
-    exposure_ev = check_exposure_ev(exposure_ev)
+    exposure_ev = check_exposure_ev(page_exposure_ev(table) if exposure_ev is None
+                                    else exposure_ev)
     fig = Figure(figsize=(14.0, 19.5), layout="constrained")
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[2.6, 9.0, 3.6, 4.2])
     _draw_summary(head, result)
-    _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev)
+    # smaller row labels: three lines of 10 pt ran into the next row's at this size
+    _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev, label_size=8.5)
     sph.suptitle(f"sphere renders, one exposure for table and fit"
                  f"{_exposure_words(exposure_ev)}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
@@ -568,6 +632,8 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
     se, flags = u.get("std_error", {}), u.get("undetermined", {})
     at_bound = u.get("at_bound", {})
     params = []
+    # every name then its values in one column: "clearcoat_roughness0.1284" ran together
+    width = max([6, *(len(n) for n in result.params)])
     for name, v in result.params.items():
         vals = v if isinstance(v, list) else [v]
 
@@ -582,7 +648,7 @@ def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
             e = None if error_measures_nothing(u.get("why", {}).get(k)) else e
             text = f"{x:.4g}" + (" (bound)" if b else "" if e is None else f" ± {e:.2g}")
             parts.append(text + (" ?" if f else ""))
-        params += wrap_values(f"{name:<7}", parts)
+        params += wrap_values(f"{name:<{width}} ", parts)
     # wrapped as the values are: a long reason ran into the errors column beside it
     params += [line for k, why in u.get("why", {}).items()
                for line in textwrap.wrap(f"? {k}: {why}", PARAM_LINE_CHARS - 2,
@@ -623,17 +689,18 @@ def _looks_lines(look: dict | None) -> list[str]:
     if not look:
         return []
     lines = [f"looks           {look['verdict']}"]
-    stops, shift = judged_brightness(look), look.get("colour_shift")
+    stops, (shift, where) = judged_brightness(look), judged_colour(look)
     if isinstance(stops, int | float):
         shown = " as displayed" if "displayed_brightness_stops" in look else ""
         lines.append(f"brightness      {stops:+.2f} stops{shown}")
     if isinstance(shift, int | float):
-        lines.append(f"colour          CIEDE2000 {shift:.1f}")
+        lines.append(f"colour          CIEDE2000 {shift:.1f}{' ' + where if where else ''}")
     steps = look.get("next") or []
     if steps:
         gain = "" if steps[0].get("gain_db") is None else f" ({steps[0]['gain_db']:+.1f} dB)"
-        text = f"next: {steps[0]['try']}{gain}"
-        lines.append(text if len(text) <= 44 else text[:43] + "…")
+        # wrapped, not cut: "--starts 8 --m…" could not be copied from the page
+        lines += textwrap.wrap(f"next: {steps[0]['try']}{gain}", 44, subsequent_indent="      ",
+                               break_on_hyphens=False, break_long_words=False)
     return lines
 
 
@@ -726,14 +793,23 @@ def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.Pat
         path = os.path.join(directory, f"{kind}.png")
         atomic.write_bytes(path, render(kind, table, result), prefix=f".{kind}.")
         paths.append(path)
-    if "spheres" in kinds and (ev := judged_ev(table, SPHERE_LIGHTS[0][1])) is not None \
-            and abs(ev) >= JUDGED_APART_EV:
-        path = os.path.join(directory, JUDGED_SPHERES)
-        ev = float(np.clip(ev, *EXPOSURE_EV_RANGE))  # its rows say where each was judged
+    if "spheres" in kinds and (ev := page_exposure_ev(table)) != 0.0:
+        path = os.path.join(directory, JUDGED_SPHERES)  # its rows say where each was judged
         atomic.write_bytes(path, render("spheres", table, result, exposure_ev=ev),
                            prefix=".spheres_judged.")
         paths.append(path)
     return paths
+
+
+def page_exposure_ev(table: MerlTable) -> float:
+    """The exposure (stops) of a one-page report's spheres: where the verdict judged the
+    key light, when that is :data:`JUDGED_APART_EV` or more from the one exposure for
+    every material (0). A dark or near-mirror material's report showed two black
+    spheres with a dot each, and what the verdict compared was in another file."""
+    ev = judged_ev(table, SPHERE_LIGHTS[0][1])
+    if ev is None or abs(ev) < JUDGED_APART_EV:
+        return 0.0
+    return float(np.clip(ev, *EXPOSURE_EV_RANGE))
 
 
 #: The spheres at the key light's judged exposure, written beside ``spheres.png``
