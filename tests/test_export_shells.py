@@ -44,7 +44,8 @@ def test_cli_writes_the_files_and_reports_fidelity(fit_json, tmp_path):
     assert json.loads(written.read_text()) == want.material
     # the fit's own table is still there: the export is judged against it
     assert "gltf_pbr fit as gltf_pbr (exact); to the table: log_rmse" in r.stderr
-    assert "lit sphere " in r.stderr and " stops, colour CIEDE2000 " in r.stderr
+    assert "lit sphere brightness " in r.stderr and " as displayed (radiance " in r.stderr
+    assert ", colour CIEDE2000 " in r.stderr
 
     # another measurement, named: judged against that one instead
     other = write(tmp_path / "other.binary", table_bytes("lambert"))
@@ -208,6 +209,7 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
             expected["log_rmse"], rel=1e-9)
         assert set(got.fidelity["sphere_colour"]) == {"brightness_stops", "colour_shift",
                                                       "displayed_brightness_stops",
+                                                      "displayed_colour_shift",
                                                       "estimate_error"}
         best = c.export(job, "gltf")  # default: the best fit of the job
         assert best.source_model == c.result(job).model

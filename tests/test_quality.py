@@ -40,7 +40,7 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
     q = r.quality
     assert set(q) == {"render_psnr_db", "displayed_brightness_stops", "brightness_stops",
                       "displayed_colour_shift", "colour_shift", "estimate_error", "grazing",
-                      "basis", "verdict", "reason", "next"}
+                      "basis", "sphere_measured", "verdict", "reason", "next"}
     assert set(q["grazing"]) == {"displayed_brightness_stops", "brightness_stops",
                                  "displayed_colour_shift", "colour_shift",
                                  "measured_colour_turn"}
@@ -414,3 +414,26 @@ def test_a_grazing_light_that_reads_worse_than_the_verdict_is_said_in_the_reason
         q = quality.quality(psnr, {"key": key, "grazing": unmeasured}, model=ggx,
                             params={"alpha": 0.3}, loss="log", converged=True)
         assert "grazing" not in q["reason"], q["reason"]
+
+
+def test_a_table_measured_on_part_of_the_sphere_is_not_vouched_good():
+    """A GGX table cut to its bins at theta_h >= 40 deg measures half of the verdict's
+    sphere: lambert read good there (34.4 dB) and 19.9 dB against the whole table. A
+    fit judged on half a sphere is at best visible, and the reason says why."""
+    from brdffit.io.angles import bin_centres
+    from brdffit.io.merl import MerlTable
+
+    table = make_table("ggx", TRUTH["ggx"], seed=1)[0]
+    whole = fitting.fit(table, "ggx", samples=2048)
+    assert whole.quality["sphere_measured"] > 0.99 and whole.quality["verdict"] == "good"
+    mask = table.mask.copy()
+    mask[np.degrees(bin_centres(np.arange(90), 0, 0)[0]) < 40] = False
+    cut = MerlTable.from_values(np.where(mask[None], table.rgb, -1.0).reshape(3, -1),
+                                mask.ravel(), source="cut")
+    exact = fitting.fit(cut, "ggx", samples=2048)
+    q = exact.quality
+    assert exact.error["log_rmse"] < 1e-6 and q["render_psnr_db"] > 60  # on what it has
+    assert 0.4 < q["sphere_measured"] < 0.6
+    assert q["verdict"] == "visible" and q["reason"].startswith(
+        f"only {q['sphere_measured']:.0%} of the sphere's lit pixels have a measured bin")
+    assert q["next"][0]["try"] == "a measurement of the directions the table lacks"

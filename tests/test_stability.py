@@ -165,6 +165,25 @@ def test_a_table_measured_at_its_peak_alone_is_not_told_its_units_are_wrong():
     assert "nan" not in text and "sphere PSNR n/a" in text
 
 
+def test_a_table_measured_at_grazing_alone_is_not_told_its_units_are_wrong():
+    """Every bin at theta_d >= 70 deg and none else: the diffuse floor was read from the
+    Fresnel rise there (an albedo of 5.4 on an exact GGX fit: "are its values in 1/sr?")."""
+    from brdffit.io import merl
+    from brdffit.io.angles import bin_centres
+    from data_synth import make_table
+
+    table = make_table("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.8, 0.8],
+                               "alpha": 0.1, "f0": 0.6})[0]
+    theta_d = np.degrees(bin_centres(0, np.arange(90), 0)[1])
+    mask = np.asarray(table.mask).copy()
+    mask[:, theta_d < 70, :] = False
+    grazing = merl.MerlTable.from_values(np.asarray(table.rgb), mask)
+    r = fit(grazing, "ggx")
+    assert r.log_rmse < 1e-6, r.params
+    assert not any("in 1/sr?" in n for n in r.notes), r.notes
+    assert not any("1/sr" in step["try"] for step in r.quality["next"])
+
+
 def test_a_metal_is_found_from_the_default_start_count():
     """A near-mirror glTF metal: the best-scored start alone ended in a dark dielectric
     (metallic 1e-8, 11 dB); the best start of each metallic value is refined too, and

@@ -18,6 +18,7 @@ from pathlib import Path
 from brdffit.cli import output_folder
 from brdffit.errors import BrdffitError
 from brdffit.export import TARGETS, export
+from brdffit.fitting.quality import figure_words
 from brdffit.fitting.result import FitResult
 
 #: The first bytes of every HDF5 file (a batch results file is one).
@@ -152,8 +153,7 @@ def run(args) -> int:
         colour = fid.get("sphere_colour") or {}
         line += (f"; to the table: log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
                  f"{_figure(fid.get('fit_log_rmse'), '.4g')}), lit sphere "
-                 f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
-                 f"{_figure(colour.get('colour_shift'), '.1f')}")
+                 f"{figure_words(colour)}")
     print(line, file=sys.stderr)
     for viewer, v in (fid.get("viewers") or {}).items():
         if v is None:  # said, so that a silent viewer is not read as a good one
@@ -164,9 +164,8 @@ def run(args) -> int:
             ignored = (f" (it ignores {', '.join(v['ignores'])}: shades the rest)"
                        if v.get("ignores") else "")
             print(f"  in {viewer} ({v['model']}): log_rmse to the table "
-                  f"{v['log_rmse_to_table']:.4g}, lit sphere "
-                  f"{_figure(colour.get('brightness_stops'), '+.2f')} stops, colour CIEDE2000 "
-                  f"{_figure(colour.get('colour_shift'), '.1f')}{ignored}", file=sys.stderr)
+                  f"{v['log_rmse_to_table']:.4g}, lit sphere {figure_words(colour)}{ignored}",
+                  file=sys.stderr)
     for w in out.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -29,6 +29,7 @@ from brdffit.fitting.problem import (
     ready_report_once,
     sphere_reference,
 )
+from brdffit.fitting.quality import on_part_of_the_sphere
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
 from brdffit.io import merl
 from brdffit.io.measurements import Measurements
@@ -100,7 +101,8 @@ class TableInput:
 
     def judged(self, look: dict, measured: Measured, uncertainty: dict | None) -> tuple[dict,
                                                                                        None]:
-        return look, None
+        """The verdict with the share of its sphere the table measures."""
+        return on_part_of_the_sphere(look, sphere_reference(self.table).measured_share), None
 
     def refuse_too_few(self, model) -> None:
         """A table is counted once prepared (its bins, the scene's weights)."""

@@ -397,6 +397,36 @@ def _last_steps(model) -> list[dict]:
                     "the angle)", "gain_db": None}]
 
 
+#: A table's verdict is good only where this share of its sphere's lit pixels (both
+#: lights) are measured: every MERL table's are to 99.2%. A GGX table cut to its bins at
+#: theta_h > 40 deg (55% of the pixels measured) had lambert "good" at 34.4 dB, which
+#: judged against the whole table is 19.9 dB: the highlight was not compared.
+SPHERE_MEASURED = 0.9
+
+
+def on_part_of_the_sphere(look: dict | None, share: float) -> dict | None:
+    """A table fit's quality block with ``sphere_measured``, the share of the verdict's
+    sphere pixels whose bin is measured (``SphereReference.measured_share``); below
+    :data:`SPHERE_MEASURED` the figures compare only those, which the reason says, and
+    a good verdict reads visible: what the fit shows elsewhere was not compared."""
+    if look is None:
+        return None
+    look = {**look, "sphere_measured": round(float(share), 4)}
+    if share >= SPHERE_MEASURED or look.get("render_psnr_db") is None:
+        return look  # (nothing compared: the reason says so already)
+    said = (f"only {share:.0%} of the sphere's lit pixels have a measured bin (the rest "
+            "are not compared)")
+    if look["verdict"] != "good":
+        return {**look, "reason": f"{look['reason']}; {said}"}
+    step = {"try": "a measurement of the directions the table lacks",
+            "why": f"the figures compare {share:.0%} of the sphere, where the table is "
+                   "measured: the fit may look otherwise where it is not",
+            "gain_db": None}
+    return {**look, "verdict": "visible",
+            "reason": f"{said}, good needs {SPHERE_MEASURED:.0%}; there: {look['reason']}",
+            "next": [step]}
+
+
 def of_the_whole_sphere(look: dict | None) -> bool:
     """Whether a quality block judged a sphere, every direction (a table's, or a sample
     list's binned table where its samples cover the sphere), not held-out samples (which
@@ -485,6 +515,14 @@ def describe(look: dict | None, indent: str = "  ") -> list[str]:
         gain = "" if step.get("gain_db") is None else f" ({step['gain_db']:+.1f} dB)"
         lines.append(f"{indent}  next {i}: {step['try']}{gain}: {step['why']}")
     return lines
+
+
+def figure_words(figures: dict) -> str:
+    """A light's brightness and colour figures in words, as the fit's own lines say them
+    ("brightness +1.58 stops as displayed (radiance -0.12), colour CIEDE2000 ..."): an
+    export's fidelity printed its radiance brightness alone beside a fit that said the
+    displayed one, the figure its verdict judged."""
+    return f"{_brightness_words(figures)}, {_colour_words(figures)}"
 
 
 def _brightness_words(figures: dict) -> str:

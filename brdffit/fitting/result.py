@@ -36,7 +36,8 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: which ``next`` reads; an older result's ``next`` stays as it was stored. 8:
 #: ``quality.displayed_colour_shift`` (and the grazing light's): the colour of the
 #: picture the verdict judges, which it weighs with ``colour_shift`` (the worse of the
-#: two); an older result's verdict stays as it was stored.
+#: two), and a table fit's ``quality.sphere_measured`` (below 0.9 a good verdict reads
+#: visible); an older result's verdict stays as it was stored.
 SCHEMA = "brdffit.fit/8"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of

@@ -458,6 +458,12 @@ class SphereReference:
             self.exposures.append(exposure)
             self.shown.append(np.mean(displayed_rgb(rad[ok], exposure), axis=0)
                               if ok.any() else np.full(3, np.nan))
+        # the share of the lit pixels (both lights) whose bin is measured: what the
+        # verdict's figures compare (``quality.on_part_of_the_sphere``)
+        lit_pixels = sum(int(_sphere_directions(size, tuple(float(c) for c in np.ravel(light)))[2]
+                             .sum()) for light in self.lights)
+        self.measured_share = (sum(int(ok.sum()) for ok in self.masks) / lit_pixels
+                               if lit_pixels else 0.0)
         self._scored = None  # made on the first psnr
         # the colour's integrals (no reference to the table itself is kept: a
         # reference is cached per table, weakly)

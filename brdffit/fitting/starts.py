@@ -70,15 +70,19 @@ class TableHints(NamedTuple):
 
     kd: np.ndarray  # diffuse_estimate
     peak: int  # brdffit.io.grid.peak_bin
-    # whether kd was read from any bin far from the highlight (theta_h over ~29 deg): a
-    # table measured at its peak alone read its peak as a diffuse floor
+    # whether kd was read from any bin far from the highlight (theta_h over ~29 deg) and
+    # from grazing Fresnel (theta_d under ~52 deg): a table measured at its peak alone
+    # read its peak as a diffuse floor, and one measured at theta_d >= 70 deg alone its
+    # Fresnel rise (an albedo of 5.4 on an exact GGX fit, asked whether it was in 1/sr)
     kd_from_mid_angles: bool = True
 
 
 def table_hints(table: MerlTable, usable: np.ndarray) -> TableHints:
     mid = _mid_angle_usable(usable)
-    # every mid-angle bin lies beyond theta_h 0.5; a sparse list's bins may miss them all
-    away = mid.size > 0 or bool(np.any(bin_grid().theta_h[usable] > 0.5))
+    # every mid-angle bin lies beyond theta_h 0.5 and below theta_d 0.9; a sparse list's
+    # bins may miss the every-third ones that ``mid`` keeps
+    g = bin_grid()
+    away = mid.size > 0 or bool(np.any((g.theta_h[usable] > 0.5) & (g.theta_d[usable] < 0.9)))
     return TableHints(diffuse_estimate(table, usable, mid), peak_bin(table, usable), away)
 
 

@@ -37,7 +37,7 @@ try:
     from matplotlib.colors import LogNorm, to_rgb
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle
+    from matplotlib.patches import Circle, Patch
 except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
@@ -435,7 +435,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\nsphere renders at "
                  "one exposure for table and fit (white diffuse facing the light = mid-grey"
                  f"{' at 0 EV' if exposure_ev else ''}); camera along the normal at the "
-                 "centre; grey: unmeasured bin", fontsize=12)
+                 "centre; checkered: unmeasured bin", fontsize=12)
     return _png(fig)
 
 
@@ -473,24 +473,33 @@ def _verdict_exposure_words(table: MerlTable, lights, exposure_ev: float) -> dic
     return words
 
 
+def _checker(size: int, cell: int = 4) -> np.ndarray:
+    """A (size, size, 3) checkerboard of two light greys: where a sphere's bin is not
+    measured. One flat grey read as "right hue" in the colour panel, whose grey is
+    that, and as a match (0 stops) in the brightness panel."""
+    i, j = np.indices((size, size)) // cell
+    light = np.array(to_rgb(NO_DATA))
+    return np.where(((i + j) % 2 == 0)[..., None], light, light * 0.8)
+
+
 def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS,
                   exposure_ev: float = 0.0, label_size: float = 10):
     axes = np.atleast_2d(fig.subplots(len(lights), 4))
     background = np.array(to_rgb(SPHERE_BACKGROUND))
-    no_data = np.array(to_rgb(NO_DATA))
+    no_data = _checker(size)
     ratio_img = colour_img = None
     verdict_ev = _verdict_exposure_words(table, lights, exposure_ev)
     for row, (label, light) in enumerate(lights):
         measured, fitted, coverage, unmeasured = sphere_images(table, result, light, size)
         images = [_composite(measured, coverage, background, exposure_ev),
                   _composite(fitted, coverage, background, exposure_ev)]
-        images[0][unmeasured] = no_data
+        images[0][unmeasured] = no_data[unmeasured]
         on = (coverage > 0.5) & ~unmeasured
         ratio, colour = ratio_images(measured, fitted, on, verdict_exposure(table, light))
         for col, img in enumerate(images):
             axes[row, col].imshow(img, interpolation="bilinear")
         base = np.where(on[..., None], 0.0, background)
-        base[unmeasured] = no_data
+        base[unmeasured] = no_data[unmeasured]
         axes[row, 2].imshow(base, interpolation="nearest")
         ratio_img = axes[row, 2].imshow(np.ma.masked_invalid(ratio), cmap="RdBu_r",
                                         vmin=-2, vmax=2, interpolation="nearest")
@@ -611,13 +620,17 @@ def report(table: MerlTable, result: FitResult | dict, *,
     result = _as_result(result)
     exposure_ev = check_exposure_ev(page_exposure_ev(table) if exposure_ev is None
                                     else exposure_ev)
-    fig = Figure(figsize=(14.0, 19.5), layout="constrained")
-    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[2.6, 9.0, 3.6, 4.2])
+    # the head as tall as its longest column of text (10.5 pt lines, ~0.19 in each):
+    # a layered model's parameters and their reasons ran into the spheres' title
+    params, metrics = summary_lines(result)
+    head_in = max(2.6, 0.19 * max(len(params), len(metrics)) + 0.6)
+    fig = Figure(figsize=(14.0, 16.9 + head_in), layout="constrained")
+    head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[head_in, 9.0, 3.6, 4.2])
     _draw_summary(head, result)
     # smaller row labels: three lines of 10 pt ran into the next row's at this size
     _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev, label_size=8.5)
     sph.suptitle(f"sphere renders, one exposure for table and fit"
-                 f"{_exposure_words(exposure_ev)}", fontsize=11)
+                 f"{_exposure_words(exposure_ev)}; checkered: unmeasured bin", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
     sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
@@ -750,9 +763,11 @@ def _draw_correlation(fig, ax, result: FitResult) -> None:
     m = ax.imshow(np.ma.masked_invalid(c), cmap=_with_bad("RdBu_r"), vmin=-1, vmax=1,
                   interpolation="nearest")
     ticks = range(len(names))
-    ax.set_xticks(ticks, names, rotation=90, fontsize=7)
-    ax.set_yticks(ticks, names, fontsize=7)
-    ax.set_title("parameter correlation", fontsize=10)
+    # smaller labels for more entries: 14 of standard_surface_sheen's overlapped at 7 pt
+    size = 7.0 if len(names) <= 10 else max(4.5, 70.0 / len(names))
+    ax.set_xticks(ticks, names, rotation=90, fontsize=size)
+    ax.set_yticks(ticks, names, fontsize=size)
+    ax.set_title("parameter correlation\n(grey: bound or undetermined)", fontsize=8)
     fig.colorbar(m, ax=ax, shrink=0.8, ticks=[-1, 0, 1])
 
 
@@ -824,7 +839,7 @@ JUDGED_SPHERES = "spheres_judged.png"
 
 #: Bar colours of :func:`ranking` by the row's status in the selection.
 RANKING_COLOURS = {"chosen": "#2ca02c", "within tolerance": "#98df8a",
-                   "under budget": "#98df8a", "too far": "#c7c7c7"}
+                   "under budget": "#98df8a", "looks worse": "#fdd0a2", "too far": "#c7c7c7"}
 
 
 def ranking(selection: dict) -> bytes:
@@ -887,7 +902,15 @@ def ranking(selection: dict) -> bytes:
     ax_err.set_xlabel("log_rmse (lower is better)")
     ax_psnr.set_xlabel("sphere PSNR, dB (higher is better)")
     ax_err.set_title("candidates, cheapest first (parameter count)", fontsize=10)
-    ax_psnr.set_title("how each looks", fontsize=10)
+    # the verdict weighs brightness and colour too: 30.0 dB "visible" beside 28.2 dB
+    # "good" is a brightness the PSNR does not show (each fit's quality says which)
+    ax_psnr.set_title("how each looks: PSNR, and the verdict\n(which also judges brightness "
+                      "and colour)", fontsize=9)
+    shown = dict.fromkeys(r["status"] for r in fitted if r["status"] in RANKING_COLOURS)
+    if shown:
+        ax_err.legend(handles=[Patch(facecolor=RANKING_COLOURS[s], edgecolor="#333333",
+                                     linewidth=0.5, label=s) for s in shown],
+                      loc="lower right", fontsize=7, framealpha=0.9)
     table = str(selection.get("table") or "table").replace("$", r"\$")
     fig.suptitle(f"{os.path.basename(table)}: auto chose {selection['chosen']}", fontsize=12)
     reason = selection["reason"].replace("$", r"\$")
