@@ -114,6 +114,16 @@ def test_sample_fit_refusals_are_one_line():
         fit(meas, "ggx2")
     with pytest.raises(FitInputError, match="physical bounds are not available for a sample"):
         fit(meas, "lambert", physical=True)
+    # a list of nothing is said of samples, not in a binned table's words ("bin", "table")
+    from dataclasses import replace
+
+    from brdffit.io.measurements import MeasurementsError
+
+    dark, _ = sample_model("ggx", None, "cornell", 200, seed=2)
+    dark = replace(dark, rgb=dark.rgb * 1e-7)
+    with pytest.raises(MeasurementsError, match=r"the brightest sample is \S+ 1/sr, below "
+                                                r"1e-05 1/sr .*a blank list"):
+        fit(dark, "ggx")
 
 
 def _doubled(meas: Measurements) -> Measurements:
@@ -187,7 +197,8 @@ def test_a_list_in_percent_and_rows_given_twice_are_noted():
     (note,) = [n for n in percent.notes if "diffuse floor" in n]
     assert note.startswith("the sample list's diffuse floor is an albedo of ") and (
         "are its values in 1/sr? Values in percent are 100 times a fraction" in note), note
-    assert note.endswith("fitted as given, so kd and ks are in the sample list's units")
+    assert note.endswith("fitted as given, so the fit's reflectances are in the sample "
+                         "list's units (or at their bound, where the model caps them at 1)")
     # and one a fraction of what it should be: taken as percent and divided by 100 twice
     tiny = fit(Measurements(meas.wi, meas.wo, meas.rgb / 1e4, source="tiny.csv"), "lambert")
     (note,) = [n for n in tiny.notes if "brightest value" in n]

@@ -138,7 +138,8 @@ def test_a_table_far_darker_than_any_material_is_fitted_as_given_and_said():
     (note,) = [n for n in r.notes if "in 1/sr?" in n]
     assert note.startswith("the table's brightest value is 6.37e-05 1/sr, 4,398x below "
                            "the lowest of the 100 MERL materials' brightest values"), note
-    assert note.endswith("fitted as given, so kd and ks are in the table's units")
+    assert note.endswith("fitted as given, so the fit's reflectances are in the table's units "
+                         "(or at their bound, where the model caps them at 1)")
     black = make_table("lambert", {"kd": [0.015] * 3})[0]
     assert not any("in 1/sr?" in n for n in fit(black, "lambert").notes)
 

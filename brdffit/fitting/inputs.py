@@ -189,7 +189,8 @@ def _too_bright(prep: Prepared, what: str = "table",
 
 def _unit_question(said: str, what: str) -> tuple[list[str], list[dict]]:
     """The note and the next step of values that ``said`` doubts are in 1/sr."""
-    return ([f"{said}; fitted as given, so kd and ks are in the {what}'s units"],
+    return ([f"{said}; fitted as given, so the fit's reflectances are in the {what}'s units "
+             "(or at their bound, where the model caps them at 1)"],
             [{"try": f"the {what} in 1/sr", "why": said, "gain_db": None}])
 
 
