@@ -95,6 +95,9 @@ def test_an_unphysical_fit_is_bounded_and_says_what_it_cost():
     assert p["log_rmse"] == r.error["log_rmse"] > p["unconstrained_log_rmse"]
     assert p["relative_cost"] == pytest.approx(p["log_rmse"] / p["unconstrained_log_rmse"] - 1)
     assert r.uncertainty is not None
+    # its steps add up two solves, each under the limit: said, as the limit is per solve
+    assert ("steps counts the bounded step's 2 barrier solves, each of at most 256; the "
+            "result is the last one's") in r.notes
 
 
 @pytest.mark.slow

@@ -182,7 +182,10 @@ def test_a_table_measured_at_grazing_alone_is_not_told_its_units_are_wrong():
     r = fit(grazing, "ggx")
     assert r.log_rmse < 1e-6, r.params
     assert not any("in 1/sr?" in n for n in r.notes), r.notes
-    assert not any("1/sr" in step["try"] for step in r.quality["next"])
+    # none of the verdict's sphere is measured: no model or loss would be judged on more
+    assert r.quality["render_psnr_db"] is None and r.quality["verdict"] == "poor"
+    assert [s["try"] for s in r.quality["next"]] == [
+        "a measurement of the directions a picture shows"], r.quality["next"]
 
 
 def test_a_metal_is_found_from_the_default_start_count():

@@ -430,7 +430,12 @@ def bound(table, free: FitResult, *, model: AbstractBRDFModel | None = None,
         loss=loss, solver=solver, precision=precision, t0=t0,
         uncertainty=Later(lambda: parameter_uncertainty(bounded, u, prep.data)),
         physical=bool(active), notes=(*free.notes, "the bounded step started from the "
-                                     "free fit's optimum, one start"))
+                                     "free fit's optimum, one start",
+                                     # a limit per solve: 331 steps under --max-steps 256
+                                     # read as a limit broken
+                                     f"steps counts the bounded step's {len(BARRIERS)} "
+                                     f"barrier solves, each of at most {max_steps}; the "
+                                     "result is the last one's"))
     return dataclasses.replace(
         bounded_fit, time_s=free.time_s + time.perf_counter() - t0,
         physical=report(free, bounded_fit.error, before, after, active, scale))

@@ -284,6 +284,15 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
 
     if not converged:
         add(_CONVERGE["try"], _CONVERGE["why"])
+    if ("render_psnr_db" in look and look["render_psnr_db"] is None
+            and look.get("basis", "sphere") == "sphere"):
+        # nothing compared: another model or loss would be judged on nothing again (a
+        # table measured at grazing alone, fitted exactly, was advised ggx2 and the
+        # render loss)
+        add("a measurement of the directions a picture shows",
+            "the table measures none of the verdict's sphere pixels, so no fit of it can be "
+            "judged by how it looks; its log_rmse is still its error on the bins it has")
+        return steps
     turning = _colour_turning(look)
     if turning:
         add("nothing here: a colour that turns across the highlight",
