@@ -449,8 +449,10 @@ class SphereReference:
         # the table's mean displayed colour per light (displayed_stops, its luminance;
         # displayed_colour_shift)
         self.shown = []
+        lit_pixels = 0
         for light in self.lights:
             rad, lit = render_table(table, light, size)
+            lit_pixels += int(lit.sum())
             ok = lit & np.all(np.isfinite(rad), axis=-1)
             exposure = table_exposure(rad[ok] @ LUMINANCE)
             self.images.append(tonemap(np.nan_to_num(rad), exposure))
@@ -460,8 +462,6 @@ class SphereReference:
                               if ok.any() else np.full(3, np.nan))
         # the share of the lit pixels (both lights) whose bin is measured: what the
         # verdict's figures compare (``quality.on_part_of_the_sphere``)
-        lit_pixels = sum(int(_sphere_directions(size, tuple(float(c) for c in np.ravel(light)))[2]
-                             .sum()) for light in self.lights)
         self.measured_share = (sum(int(ok.sum()) for ok in self.masks) / lit_pixels
                                if lit_pixels else 0.0)
         self._scored = None  # made on the first psnr

@@ -238,14 +238,12 @@ class Measurements:
     def to_table(self):
         """The samples binned onto the MERL grid: ``(MerlTable, Binning)`` (module
         docstring). Bins no sample falls in are unmeasured."""
-        from brdffit.io.merl import MIN_PEAK, MerlTable
+        from brdffit.io.merl import MIN_PEAK, MerlTable, too_dark
 
         brightest = float(self.rgb[np.isfinite(self.rgb)].max(initial=0.0))
         if not brightest >= MIN_PEAK:  # said of samples, not in a binned table's words
-            raise MeasurementsError(
-                self.source, f"the brightest sample is {brightest:.3g} 1/sr, below "
-                f"{MIN_PEAK:g} 1/sr and darker than any material: a blank list (zeros, "
-                "denormals) or values in another unit; there is no reflectance to fit")
+            raise MeasurementsError(self.source, too_dark(f"sample is {brightest:.3g} 1/sr",
+                                                          "list"))
         theta_h, theta_d, phi_d = dirs_to_half_diff(self.wi, self.wo)
         bins = half_diff_to_bins(theta_h, theta_d, phi_d)
         flat = flat_index(*bins)

@@ -242,12 +242,16 @@ def _check_range(rgb: np.ndarray, source: str, raw: np.ndarray | None = None,
         raw_peak = ""
         if raw is not None:
             raw_peak = f" (largest raw value {float(raw[:, measured].max()):.3g})"
-        raise MerlFormatError(
-            source,
-            f"the brightest measured bin is {peak:.3g} 1/sr{raw_peak}, below {MIN_PEAK:g} 1/sr "
-            "and darker than any material: a blank table (zeros, denormals) or values in "
-            "another unit; there is no reflectance to fit",
-        )
+        raise MerlFormatError(source, too_dark(f"measured bin is {peak:.3g} 1/sr{raw_peak}",
+                                               "table"))
+
+
+def too_dark(brightest: str, blank: str) -> str:
+    """Why values whose brightest (``brightest``: "measured bin is 0 1/sr") is below
+    :data:`MIN_PEAK` are refused; ``blank``: what they are, a "table" or a "list"."""
+    return (f"the brightest {brightest}, below {MIN_PEAK:g} 1/sr and darker than any "
+            f"material: a blank {blank} (zeros, denormals) or values in another unit; there "
+            "is no reflectance to fit")
 
 
 #: The bits of +inf: as unsigned integers, every IEEE double at or above this is

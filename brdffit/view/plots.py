@@ -626,7 +626,7 @@ def report(table: MerlTable, result: FitResult | dict, *,
     head_in = max(2.6, 0.19 * max(len(params), len(metrics)) + 0.6)
     fig = Figure(figsize=(14.0, 16.9 + head_in), layout="constrained")
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[head_in, 9.0, 3.6, 4.2])
-    _draw_summary(head, result)
+    _draw_summary(head, result, params, metrics)
     # smaller row labels: three lines of 10 pt ran into the next row's at this size
     _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev, label_size=8.5)
     sph.suptitle(f"sphere renders, one exposure for table and fit"
@@ -736,8 +736,9 @@ def wrap_values(label: str, parts: list[str]) -> list[str]:
     return lines + [line]
 
 
-def _draw_summary(fig, result: FitResult) -> None:
-    params, metrics = summary_lines(result)
+def _draw_summary(fig, result: FitResult, params: list[str], metrics: list[str]) -> None:
+    """The report's head: ``params`` and ``metrics`` (:func:`summary_lines`), and the
+    correlation matrix."""
     ax_p, ax_m, ax_c = fig.subplots(1, 3, width_ratios=[1.7, 1.0, 0.9])
     for ax, title, lines in ((ax_p, "parameters ± standard error   (? = undetermined)", params),
                              (ax_m, "errors (every sample)" if _on_samples(result)
