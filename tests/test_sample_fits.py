@@ -465,3 +465,32 @@ def test_a_held_out_error_over_the_solvers_samples_says_so():
     text = format_result(fit(meas, "lambert", samples=64))
     assert "held-out error (5-fold, over the solver's 64 samples): log_rmse" in text
     assert "over the solver's" not in format_result(fit(meas, "lambert"))
+
+
+def test_a_lone_corrupt_sample_is_named_and_a_sharp_real_peak_is_not():
+    """One row of 9e11 among 2,000 moved a ggx's kd and f0 with no note naming it (a
+    table's spikes had one); a sparse list's true peak, 1000x and more above its nearest
+    samples degrees away, is not called corrupt."""
+    from brdffit.fitting.samples import isolated_spikes, on_the_surface
+
+    meas = sample_material("gold-metallic-paint", "cornell", 2000, seed=3)
+    rgb = meas.rgb.copy()
+    usable = np.flatnonzero(on_the_surface(meas))
+    row = int(usable[777])
+    rgb[row] = 9e11
+    corrupt = Measurements(meas.wi, meas.wo, rgb, source="spike.csv")
+    np.testing.assert_array_equal(isolated_spikes(corrupt, on_the_surface(corrupt)), [row])
+    r = fit(corrupt, "ggx", samples=4096, starts=1)
+    (note,) = [n for n in r.notes if "corrupt" in n]
+    assert note.startswith("1 sample over 1,000x each of its 6 nearest samples (the "
+                           "brightest: 9e+11 1/sr at theta_i "), note
+    assert "leave its row out" in note
+    assert r.quality["next"][0]["try"] == "the list without its spikes (leave their rows out)"
+    assert not any("corrupt" in n for n in fit(meas, "ggx", samples=4096, starts=1).notes)
+    # real peaks far above their sparse neighbours: a near-mirror, a sharp phong, chrome,
+    # and a black material whose channels read 0 around a faint 1e-4
+    for m in (sample_model("ggx", {"alpha": 0.002, "kd": [0.001] * 3}, "in_plane", 400)[0],
+              sample_model("phong", {"n": 50000.0}, "cornell", 60)[0],
+              sample_material("chrome-steel", "uniform", 3000, seed=1),
+              sample_material("black-obsidian", "cornell", 60, seed=60)):
+        assert isolated_spikes(m, on_the_surface(m)).size == 0, m.source

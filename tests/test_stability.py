@@ -214,6 +214,10 @@ def test_a_peak_note_says_which_way_the_fit_misses():
 
     (flat,) = _peak_missed({"rel_peak_error": 1.0}, visible, models.get("lambert"))
     assert "lambert has no specular lobe" in flat and "outlier" not in flat
+    # a sample list's note speaks of its samples, not of a table it does not have
+    (sample,) = _peak_missed({"rel_peak_error": 0.995}, visible, what="samples")
+    assert sample.startswith("at the brightest sample the fit misses its value by 100%")
+    assert "table" not in sample and "bin" not in sample and "a lone hot sample" in sample
 
 
 def test_nonfinite_and_negative_input_values_never_reach_the_loss():

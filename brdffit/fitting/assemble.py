@@ -76,7 +76,7 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
     if found_steps and look.get("verdict") != "good":  # the data's fault comes first
         look = {**look, "next": [*found_steps, *look.get("next", [])]}
     # once each: a polish carries its coarse fit's notes, which found the same table
-    notes = tuple(dict.fromkeys((*notes, *_peak_missed(metrics, look, model),
+    notes = tuple(dict.fromkeys((*notes, *_peak_missed(metrics, look, model, source.what),
                                  *found_notes)))
     counts = prep.counts
     return FitResult(
@@ -114,32 +114,42 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
 PEAK_MISSED = 0.99
 
 
-def _peak_missed(metrics: dict, look: dict, model=None) -> list[str]:
+def _peak_missed(metrics: dict, look: dict, model=None, what: str = "bins") -> list[str]:
     """Where the verdict is not poor but the fit misses the table's brightest bin
     entirely: a note that the verdict judged the look without that peak (a lone hot
     bin, or a peak in fewer bins than the sphere's pixels see, renders as nothing). A
     model without a lobe has no peak to give: said so (lambert on red-plastic was told
-    of "a lone hot bin, an outlier?", where ggx is 21% off it)."""
+    of "a lone hot bin, an outlier?", where ggx is 21% off it). ``what``: the input's
+    unit (``TableInput.what``, "bins", or "samples": a sample list's notes speak of its
+    brightest sample)."""
     rel = metrics.get("rel_peak_error")
     if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
         return []
+    at, its, few, lone = PEAK_WORDS[what]
     if model is not None and model.name in NO_LOBE:
-        return [f"{PEAK_NOTE} misses the table's by {rel:.0%} of its value "
+        return [f"{at} misses {its} by {rel:.0%} of its value "
                 f"(rel_peak_error {rel:.3g}): {model.name} has no specular lobe; the "
                 f"'{look.get('verdict')}' verdict judges the look, in which the peak is "
                 "too small to weigh"]
     if rel > 1.0:  # |fit - measured| beyond the measured value: the fit is above it
-        return [f"{PEAK_NOTE} is {1.0 + rel:.3g}x the table's there (rel_peak_error "
-                f"{rel:.3g}): a lobe brighter at the peak than anything measured, in too "
-                f"few bins for the sphere render to see; the '{look.get('verdict')}' "
-                "verdict judges the look without it"]
-    return [f"{PEAK_NOTE} misses the table's by {rel:.0%} of its value "
-            f"(rel_peak_error {rel:.3g}): a peak in too few bins for the sphere render to "
-            f"see (a lone hot bin, an outlier?); the '{look.get('verdict')}' verdict judges "
-            "the look without it"]
+        return [f"{at} is {1.0 + rel:.3g}x {its} there (rel_peak_error "
+                f"{rel:.3g}): a lobe brighter at the peak than anything measured, in {few}; "
+                f"the '{look.get('verdict')}' verdict judges the look without it"]
+    return [f"{at} misses {its} by {rel:.0%} of its value "
+            f"(rel_peak_error {rel:.3g}): a peak in {few} ({lone}); the "
+            f"'{look.get('verdict')}' verdict judges the look without it"]
 
 
 #: How :func:`_peak_missed`'s notes begin: a polish over every bin drops its coarse
 #: fit's (whose figures they were) and says its own.
 PEAK_NOTE = "at the table's brightest bin the fit"
+#: :func:`_peak_missed`'s words for each kind of input: where, whose value, how few, and
+#: what a lone one may be.
+PEAK_WORDS = {
+    "bins": (PEAK_NOTE, "the table's", "too few bins for the sphere render to see",
+             "a lone hot bin, an outlier?"),
+    "samples": ("at the brightest sample the fit", "its value",
+                "too few samples for the verdict's render to weigh",
+                "a lone hot sample, an outlier?"),
+}
 

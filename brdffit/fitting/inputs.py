@@ -262,7 +262,8 @@ class SampleInput:
         """What the list holds that the fit's reader should be told of (its coverage
         and binning are in the input block): values in another unit than 1/sr, as a
         table's (:func:`_too_bright`), rows that repeat another exactly, rows of zeros,
-        and an azimuth convention other than brdffit's."""
+        lone samples far brighter than their nearest (``samples.isolated_spikes``) and
+        an azimuth convention other than brdffit's."""
         notes, steps = _too_bright(prep, "sample list", SAMPLE_SCALES)
         usable = self._samples.on_the_surface(self.meas)
         dark_notes, dark_steps = _too_dark(_brightest(self.meas.rgb[usable]), "sample list")
@@ -274,9 +275,10 @@ class SampleInput:
                 "most are not whole numbers: are they radians? Read as degrees, every "
                 "direction lies within 6.3 degrees of one plane; if they are radians, name "
                 "their columns phi_i_rad and phi_o_rad (HDF5: their units 'radians')")
+        spike_notes, spike_steps = self._samples.spike_finding(self.meas, prep)
         return (notes + self._samples.duplicate_note(self.meas, prep)
-                + self._samples.zero_note(self.meas, prep),
-                self._samples.azimuth_convention_step(self.meas, prep) + steps)
+                + self._samples.zero_note(self.meas, prep) + spike_notes,
+                self._samples.azimuth_convention_step(self.meas, prep) + steps + spike_steps)
 
     def refuse_too_few(self, model) -> None:
         """Refuses, before the preparation (binning, weights, the solver's data: ~5 s

@@ -80,6 +80,7 @@ from brdffit.io.angles import (
 )
 from brdffit.io.grid import bin_grid
 from brdffit.io.measurements import Measurements, relative_sigma
+from brdffit.io.merl import SPIKE_FACTOR
 from brdffit.models.frame import Frame
 
 #: How many folds the held-out error has.
@@ -358,6 +359,91 @@ def azimuth_convention_step(meas: Measurements, prep: Prepared) -> list[dict]:
            "phi_i + 180 is the mirror) reads so; so does a retroreflector")
     return [{"try": "check the azimuth convention (add 180 degrees to phi_o where the "
                     "list measures it from the specular plane)", "why": why, "gain_db": None}]
+
+
+#: :func:`isolated_spikes`: how many nearest samples a sample is compared with (a
+#: table's bin has 6 grid neighbours), and the most candidates (samples over
+#: ``merl.SPIKE_FACTOR`` times the list's typical value) it looks at: more are a bright
+#: region (a mirror's peak in a dense list), not a few corrupt values.
+SPIKE_NEAREST = 6
+MAX_SPIKE_CANDIDATES = 64
+
+
+def _neighbour_coordinates(meas: Measurements, index: np.ndarray) -> np.ndarray:
+    """(theta_h, theta_d cos phi, theta_d sin phi) of samples, phi = phi_d folded onto
+    [0, 90] degrees: an isotropic, reciprocal BRDF is the same at phi_d, phi_d + 180 and
+    -phi_d, and the difference angle's azimuth means nothing at theta_d = 0. Euclidean
+    distances here are about the angles between direction pairs."""
+    theta_h, theta_d, phi_d = dirs_to_half_diff(meas.wi[index], meas.wo[index])
+    phi = np.mod(phi_d, np.pi)
+    phi = np.minimum(phi, np.pi - phi)
+    return np.stack([theta_h, theta_d * np.cos(phi), theta_d * np.sin(phi)], axis=1)
+
+
+def isolated_spikes(meas: Measurements, usable: np.ndarray) -> np.ndarray:
+    """Usable samples over ``merl.SPIKE_FACTOR`` times each of their
+    :data:`SPIKE_NEAREST` nearest usable samples in some channel (a sample list's
+    ``MerlTable.isolated_spikes``): their indices, brightest first. A corrupt row (a
+    9e11 among values of ~0.1) was fitted without a word, and moved a ggx's kd from
+    0.05 to 0.11.
+
+    A sparse list's nearest samples can lie degrees away, across which a real lobe does
+    fall by that much. Such a sample is the one nearest its peak, where a specular lobe
+    peaks at theta_h = 0 and a retroreflector at theta_d = 0: a sample is counted only
+    where some of its nearest lie nearer both peaks than it does. Only samples over
+    SPIKE_FACTOR times the list's typical value (the median of its positive values: a
+    list of a black material read 0 in most of its channels, and then a faint 1e-4 was
+    1000x everything) are looked at, at most :data:`MAX_SPIKE_CANDIDATES` of them."""
+    idx = np.flatnonzero(usable)
+    if idx.size <= SPIKE_NEAREST:
+        return np.zeros(0, np.int64)
+    rgb = meas.rgb[idx]
+    positive = rgb[rgb > 0]  # a black channel's zeros are no scale: every value is over 0
+    if positive.size == 0:
+        return np.zeros(0, np.int64)
+    bright = rgb.max(axis=1) > SPIKE_FACTOR * float(np.median(positive))
+    cand = np.flatnonzero(bright)
+    if cand.size == 0 or cand.size > MAX_SPIKE_CANDIDATES:
+        return np.zeros(0, np.int64)
+    every = _neighbour_coordinates(meas, idx)
+    spikes = []
+    for c in cand:
+        d = np.sum((every - every[c]) ** 2, axis=1)
+        d[c] = np.inf
+        near = np.argpartition(d, SPIKE_NEAREST)[:SPIKE_NEAREST]
+        nearer_peaks = (np.any(every[near, 0] <= every[c, 0])
+                        and np.any(np.hypot(every[near, 1], every[near, 2])
+                                   <= np.hypot(every[c, 1], every[c, 2])))
+        over = rgb[c] > SPIKE_FACTOR * np.maximum(rgb[near].max(axis=0), 0.0)
+        if nearer_peaks and np.any(over):
+            spikes.append(idx[c])
+    spikes = np.asarray(spikes, np.int64)
+    return spikes[np.argsort(-meas.rgb[spikes].max(axis=1), kind="stable")]
+
+
+def spike_finding(meas: Measurements, prep: Prepared) -> tuple[list[str], list[dict]]:
+    """A note and a next step where usable samples are :func:`isolated_spikes`, as a
+    table's bins are (``brdffit.fitting.inputs``): a least-squares fit follows them."""
+    if prep.weight is None:
+        return [], []
+    spikes = cached(meas, "isolated-spikes", lambda: isolated_spikes(meas, prep.weight > 0))
+    if spikes.size == 0:
+        return [], []
+    first = int(spikes[0])
+    angles = [np.degrees(np.arccos(np.clip(w[2], -1.0, 1.0))) for w in (meas.wi[first],
+                                                                          meas.wo[first])]
+    phis = [np.degrees(np.arctan2(w[1], w[0])) % 360.0 for w in (meas.wi[first],
+                                                                  meas.wo[first])]
+    what = (f"{spikes.size:,} sample{'s' if spikes.size != 1 else ''} over "
+            f"{SPIKE_FACTOR:,.0f}x each of {'their' if spikes.size != 1 else 'its'} "
+            f"{SPIKE_NEAREST} nearest samples (the brightest: "
+            f"{float(meas.rgb[first].max()):.3g} 1/sr at theta_i {angles[0]:.4g}, phi_i "
+            f"{phis[0]:.4g}, theta_o {angles[1]:.4g}, phi_o {phis[1]:.4g} deg)")
+    return ([f"{what}: a corrupt value? A least-squares fit follows such a sample; leave "
+             "its row out"],
+            [{"try": "the list without its spikes (leave their rows out)",
+              "why": f"{what}: no reflectance changes so between neighbouring directions, "
+                     "and the fit follows them", "gain_db": None}])
 
 
 #: From this share of the usable samples exactly 0 in every channel, they are noted.
