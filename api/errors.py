@@ -14,9 +14,11 @@ import re
 import sqlite3
 
 from fastapi import FastAPI, Request, status
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
+from starlette.exceptions import HTTPException  # what FastAPI's body parsing raises
 
 from brdffit.errors import BrdffitError
 from brdffit.models import UnknownModelError
@@ -109,6 +111,21 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
                         status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
 
 
+async def _http_error(request: Request, exc: HTTPException):
+    """FastAPI's own errors as it sends them, but for a JSON body that is not UTF-8:
+    it answered that with a bare 400 "There was an error parsing the body"; it is a
+    body that is not valid JSON (RFC 8259: JSON is UTF-8), said where and as every
+    other such body is (422, with ``errors``)."""
+    cause = exc.__cause__
+    if exc.status_code == 400 and isinstance(cause, UnicodeDecodeError):
+        msg = (f"not valid JSON: not UTF-8 (byte 0x{cause.object[cause.start]:02x} at "
+               f"byte {cause.start}); send JSON encoded as UTF-8")
+        return JSONResponse({"detail": f"body: {msg}", "errors": [{"loc": ["body"],
+                                                                   "msg": msg}]},
+                            status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
+    return await http_exception_handler(request, exc)
+
+
 async def _input_error(request: Request, exc: Exception) -> JSONResponse:
     return JSONResponse({"detail": short(str(exc))},
                         status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)
@@ -138,6 +155,7 @@ async def _body_timeout(request: Request, exc: Exception) -> JSONResponse:
 def install(app: FastAPI) -> None:
 
     app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(HTTPException, _http_error)
     app.add_exception_handler(BrdffitError, _input_error)
     app.add_exception_handler(UnknownModelError, _input_error)
     app.add_exception_handler(sqlite3.Error, _storage_error)

@@ -23,7 +23,9 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import re
 import time
+import urllib.parse
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
@@ -64,8 +66,9 @@ class InvalidRequest(ClientError, ValueError):
 
 
 class InvalidSetting(ClientError, ValueError):
-    """A :class:`Client` made with a URL or a timeout it cannot use: said when it is
-    made, not as httpx's own error at the first request."""
+    """A :class:`Client` made with a URL or a timeout it cannot use, or a :meth:`Client.
+    wait` given a timeout or a poll interval it cannot use: said at once, not as
+    httpx's or ``time.sleep``'s own error (or a wait that never ends, for a NaN)."""
 
 
 class Unreachable(ClientError):
@@ -163,8 +166,46 @@ def _check_timeout(timeout) -> None:
                                  f"got {timeout!r}")
 
 
+#: The ids the service gives (``api/routes``): a job's, a table's (its file's sha256).
+JOB_ID = re.compile(r"[0-9a-f]{32}")
+TABLE_ID = re.compile(r"[0-9a-f]{64}")
+
+
 def _job_id(job: JobRef) -> str:
-    return job.id if isinstance(job, FitJob) else job
+    """A job's id, checked: it goes into a URL's path, where "../tables/<id>" made
+    ``delete_fit`` delete a table, and "" was answered by a redirect."""
+    job_id = job.id if isinstance(job, FitJob) else job
+    if not (isinstance(job_id, str) and JOB_ID.fullmatch(job_id)):
+        raise InvalidRequest(f"a fit job is a FitJob or its id, the 32 hex digits POST "
+                             f"/v1/fits gave (FitJob.id), not {job_id!r}")
+    return job_id
+
+
+def _table_id(table_id: str) -> str:
+    """A table's id, checked as :func:`_job_id` checks a job's."""
+    if not (isinstance(table_id, str) and TABLE_ID.fullmatch(table_id)):
+        raise InvalidRequest(f"a table id is the 64 hex digits upload() gave (the file's "
+                             f"sha256), not {table_id!r}")
+    return table_id
+
+
+def _segment(name: str) -> str:
+    """A name (a plot's kind, an export's target) as one URL path segment: the server
+    names what it has; a "/" or "?" in it reaches no other route."""
+    return urllib.parse.quote(str(name), safe="")
+
+
+def _check_wait(timeout, poll) -> None:
+    """:meth:`Client.wait`'s timeout (seconds > 0, or None: no limit) and poll interval
+    (seconds > 0): a NaN timeout never ran out, and a poll of 0 sent hundreds of
+    requests a second."""
+    for name, value, none in (("timeout", timeout, True), ("poll", poll, False)):
+        if value is None and none:
+            continue
+        if (isinstance(value, bool) or not isinstance(value, numbers.Real)
+                or not math.isfinite(value) or value <= 0):
+            raise InvalidSetting(f"wait's {name} must be a number of seconds > 0"
+                                 f"{' (or None: no limit)' if none else ''}, got {value!r}")
 
 
 class Client:
@@ -273,7 +314,7 @@ class Client:
             )
 
     def table(self, table_id: str) -> TableInfo:
-        return self._json("GET", f"/v1/tables/{table_id}", TableInfo.from_json)
+        return self._json("GET", f"/v1/tables/{_table_id(table_id)}", TableInfo.from_json)
 
     def fit(self, table_id: str, model: str | list[str] | FitRequest | None = None,
             **keywords) -> FitJob:
@@ -286,6 +327,7 @@ class Client:
         JSON object, docs/selection.md) and, with auto, the rule's (``tolerance``,
         ``budget``, ``candidates``, ``mono_ks``). The request is checked here, by the
         library the server runs, and sent in its one form (``FitRequest.to_dict()``)."""
+        _table_id(table_id)
         if isinstance(model, FitRequest):
             if keywords:
                 raise TypeError("give a FitRequest or keywords, not both")
@@ -302,12 +344,15 @@ class Client:
         """The job's current state."""
         return self._json("GET", f"/v1/fits/{_job_id(job)}", FitJob.from_json)
 
-    def wait(self, job: JobRef, timeout: float = 600.0, *, poll: float = 0.25) -> FitJob:
+    def wait(self, job: JobRef, timeout: float | None = 600.0, *,
+             poll: float = 0.25) -> FitJob:
         """Poll until the job is done or failed; returns it either way.
 
-        Raises ``TimeoutError`` after ``timeout`` seconds.
+        Raises ``TimeoutError`` after ``timeout`` seconds (None: no limit); ``poll``:
+        the longest pause between two polls, in seconds (the first ones are quicker).
         """
-        deadline = time.monotonic() + timeout
+        _check_wait(timeout, poll)
+        deadline = math.inf if timeout is None else time.monotonic() + timeout
         delay = min(poll, 0.1)
         while True:
             current = self.job(job)
@@ -377,7 +422,7 @@ class Client:
     def delete_table(self, table_id: str, *, with_fits: bool = False) -> None:
         """Delete a table; ``with_fits``: its finished fit jobs too (without it, a
         table that has fit jobs is an ApiError 409)."""
-        self._request("DELETE", f"/v1/tables/{table_id}", expect=None,
+        self._request("DELETE", f"/v1/tables/{_table_id(table_id)}", expect=None,
                       params={"with_fits": "true"} if with_fits else None)
 
     def plot(self, job: JobRef, kind: str, model: str | None = None,
@@ -389,7 +434,7 @@ class Client:
         params = {"model": model} if model else {}
         if exposure_ev:
             params["exposure_ev"] = exposure_ev
-        return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{kind}.png",
+        return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{_segment(kind)}.png",
                              expect="image/png", params=params).content
 
     def export(self, job: JobRef, target: str, model: str | None = None,
@@ -402,7 +447,7 @@ class Client:
         params = {k: v for k, v in (("model", model), ("target_model", target_model),
                                     ("viewer", None if viewer == "spec" else viewer)) if v}
         params = params or None
-        return self._json("GET", f"/v1/fits/{_job_id(job)}/exports/{target}",
+        return self._json("GET", f"/v1/fits/{_job_id(job)}/exports/{_segment(target)}",
                           Export.from_dict, params=params)
 
 

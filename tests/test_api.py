@@ -262,6 +262,7 @@ def test_a_sample_list_named_with_a_nul_is_stored_under_a_name_it_can_hold(http)
                   headers={"Content-Type": "application/octet-stream"})
     assert r.status_code in (200, 201), r.text
     assert r.json()["name"] == "a\ufffdb.csv"
+    assert r.json()["size_bytes"] == len(body)  # the upload's, not the stored HDF5's
     # and the physical bounds, which a sample list has not yet, are refused before a job
     # is queued (it was accepted, then failed)
     r = http.post("/v1/fits", json={"table_id": r.json()["id"], "models": "lambert",
@@ -369,6 +370,13 @@ def test_malformed_fit_bodies_are_422(http):
     r = http.post("/v1/fits", content=b"{not json", headers={"Content-Type": "application/json"})
     assert_error(r, 422, "json")
     assert r.json()["detail"].startswith("body: not valid JSON at character 1: Expecting")
+    # Latin-1 where JSON is UTF-8: it was a bare 400 "There was an error parsing the body"
+    r = http.post("/v1/fits", content=b'{"table_id": "caf\xe9"}',
+                  headers={"Content-Type": "application/json"})
+    assert_error(r, 422)
+    assert r.json()["detail"] == ("body: not valid JSON: not UTF-8 (byte 0xe9 at byte 17); "
+                                  "send JSON encoded as UTF-8")
+    assert r.json()["errors"] == [{"loc": ["body"], "msg": r.json()["detail"][6:]}]
     for body in ({"models": []}, {"model": []}):  # the request's form, and the earlier one
         r = http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, **body})
         assert_error(r, 422)

@@ -301,6 +301,50 @@ def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
     assert b'"seed": 3' in sent[0] or b'"seed":3' in sent[0], sent
 
 
+
+def test_ids_go_into_a_path_checked_and_waits_refuse_what_they_cannot_do():
+    """``delete_fit("../tables/<id>")`` deleted a table, ``job("")`` was answered by a
+    redirect; ``wait(timeout=None)`` was a TypeError, ``timeout=nan`` never returned
+    and ``poll=0`` polled hundreds of times a second."""
+    import math
+
+    from brdffit.client import InvalidRequest, InvalidSetting
+
+    sent = []
+
+    def answer(request):
+        sent.append((request.method, request.url.raw_path))
+        return httpx.Response(404, json={"detail": "no such job"})
+
+    table = "ab" * 32
+    with Client("http://brdffit.test", token="", transport=httpx.MockTransport(answer)) as c:
+        for call, what in ((lambda: c.delete_fit(f"../tables/{table}"), "a fit job"),
+                           (lambda: c.job(""), "a fit job"),
+                           (lambda: c.cancel("x?y"), "a fit job"),
+                           (lambda: c.wait(None), "a fit job"),
+                           (lambda: c.table(table[:-1]), "a table id"),
+                           (lambda: c.delete_table("../fits"), "a table id"),
+                           (lambda: c.fit(table.upper(), "ggx"), "a table id")):
+            with pytest.raises(InvalidRequest, match=what):
+                call()
+        assert sent == []  # refused before anything was sent
+        for timeout, poll in ((math.nan, 0.25), (-1, 0.25), ("10", 0.25), (10, 0),
+                              (10, -1), (10, math.nan), (10, None)):
+            with pytest.raises(InvalidSetting, match=r"wait's (timeout|poll) must be a "
+                                                     r"number of seconds > 0"):
+                c.wait("0" * 32, timeout=timeout, poll=poll)
+        assert sent == []
+        # a kind or a target is one path segment: the server names what it has
+        for call in (lambda: c.plot("0" * 32, "../../tables"),
+                     lambda: c.export("0" * 32, "gltf/../x")):
+            with pytest.raises(ApiError):
+                call()
+        assert [p for _, p in sent] == [b"/v1/fits/" + b"0" * 32 + b"/plots/..%2F..%2Ftables.png",
+                                        b"/v1/fits/" + b"0" * 32 + b"/exports/gltf%2F..%2Fx"]
+        with pytest.raises(ApiError, match="no such job"):  # no limit: it asks the server
+            c.wait("0" * 32, timeout=None)
+
+
 N_CLIENTS = 20
 N_TABLES = 5
 

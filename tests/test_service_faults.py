@@ -278,6 +278,10 @@ def test_a_running_fit_is_cancelled_and_its_worker_replaced(bounded, http, table
     r = http.post(f"/v1/fits/{job['id']}/cancel")
     assert r.status_code == 200 and r.json()["status"] == "cancelled", r.text
     assert http.post(f"/v1/fits/{job['id']}/cancel").status_code == 409
+    # a cancelled job will never be done: it has no plots, not "not yet" ones
+    plot = http.get(f"/v1/fits/{job['id']}/plots/spheres.png")
+    assert plot.status_code == 409 and plot.json()["detail"].endswith(
+        "it has no plots: they exist for a fit that is done"), plot.text
     # The service goes on: the next fit runs.
     again = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
                                         "options": FAST}).json()

@@ -276,8 +276,11 @@ async def finished_fit(store: Store, job_id: str, model: str | None,
     job = await run_in_threadpool(_job_or_404, store, job_id)
     if job.status != "done":
         why = f": {job.reason}" if job.reason else ""
-        raise HTTPException(status.HTTP_409_CONFLICT,
-                            f"fit job {job_id} is {job.status}{why}; {what} exist once it is done")
+        # a failed or cancelled job will never be done: it has none, rather than not yet
+        when = (f"{what} exist once it is done" if job.status in ("queued", "running")
+                else f"it has no {what}: they exist for a fit that is done")
+        raise HTTPException(status.HTTP_409_CONFLICT, f"fit job {job_id} is {job.status}{why}; "
+                                                      f"{when}")
     fitted = ", ".join(r["model"] for r in job.results)
     if model is None or (model == options.AUTO and options.AUTO in job.models):
         return job, chosen_result(job.results)  # an auto job's: the chosen fit
