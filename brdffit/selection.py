@@ -444,7 +444,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
                 by_look and row["excess"] <= tolerance_used))
                 and _verdict_rank(row) > _verdict_rank(chosen) else
                 "within tolerance" if row["excess"] <= tolerance_used else "too far")
-    reason += _all_poor_warning(ok)
+    reason += _all_poor_warning(ok, loss)
 
     for row in ok:
         spread = row["ks_grey_spread"]
@@ -852,6 +852,15 @@ def _look_words(row: dict) -> str:
     return str(shown)
 
 
+def _look_mark(row: dict) -> str:
+    """A row's verdict in the ranking's column, starred where its radiance verdict is
+    worse (:func:`_look_words`): alum-bronze's beckmann read "good" there, passed over
+    for a "visible" ggx, and nothing in the table said why."""
+    words = _look_words(row)
+    return f"{row.get('verdict')}*" if words != str(row.get("verdict")) else (
+        row.get("verdict") or "-")
+
+
 def _psnr(row: dict) -> float:
     """What the render rule ranks a row by: its sphere under the render loss's eight
     lights (``views_psnr_db``) where measured, else its own ``psnr_db`` (two lights).
@@ -1039,14 +1048,22 @@ def _layer_that_gains_on_the_base_choice(chosen: dict, reason: str,
     return base, reason
 
 
-def _all_poor_warning(ok: list[dict]) -> str:
-    """A sentence for the reason when every candidate looks poor (else empty)."""
+def _all_poor_warning(ok: list[dict], loss: str = "render") -> str:
+    """A sentence for the reason when every candidate looks poor (else empty). Under a
+    loss other than the render loss, it does not say that no model here reproduces the
+    material: each was fitted to that loss, not to the look (chrome: every candidate
+    poor under the log loss, ggx2 good at 30.2 dB under the render loss)."""
     if not ok or any(row.get("verdict") != "poor" for row in ok):
         return ""
     top = max(ok, key=_psnr)
-    return (f" Warning: every candidate looks poor beside the measurement (the best render "
-            f"{top['model']}, {_psnr(top):.1f} dB): no model here reproduces this material; "
-            "the chosen fit's quality.next says what to try.")
+    said = (f" Warning: every candidate looks poor beside the measurement (the best render "
+            f"{top['model']}, {_psnr(top):.1f} dB)")
+    if loss != "render":
+        return (f"{said}, each fitted to the {loss} loss, not to the light a picture "
+                "shows: the render loss (--loss render) fits the look; the chosen fit's "
+                "quality.next says what to try.")
+    return f"{said}: no model here reproduces this material; the chosen fit's quality.next " \
+        "says what to try."
 
 
 def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[tuple]:
@@ -1199,7 +1216,7 @@ def format_selection(sel: Selection, chosen_params: bool = True) -> str:
             + (f"{r['full_log_rmse']:>10.3g} " if scene else "")
             + f"{r['excess']:>9.3g} {r['psnr_db']:>8.1f} "
             + (f"{_views_text(r):>8} " if views else "")
-            + f"{r.get('verdict') or '-':>8} "
+            + f"{_look_mark(r):>8} "
             + f"{r['cost_ns']:>8.1f} {r['bic']:>12.4g}"
             + f"  {r['status']}" + ("" if r["converged"] else " (not converged)")
         )
@@ -1208,6 +1225,11 @@ def format_selection(sel: Selection, chosen_params: bool = True) -> str:
         lines.append("over their base: " + "; ".join(
             f"{r['model']} over {r['over_parent']['model']} "
             + _gain_words(r["over_parent"]) for r in layers))
+    starred = [r for r in sel.ranking if r["status"] != "failed" and _look_mark(r).endswith("*")]
+    if starred:
+        lines.append("* reads " + "; ".join(f"{r['model']} {_look_words(r)}" for r in starred)
+                     + ": the light its highlight holds is further off than the picture "
+                     "shows (the row's radiance_verdict), and it ranks as the worse")
     lines.append("")
     if held:
         from brdffit.fitting.samples import FOLDS

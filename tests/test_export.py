@@ -220,6 +220,14 @@ def test_every_clamp_is_a_warning():
     # a fit of the target model itself is not told to fit that model again
     assert "next: nothing within gltf_pbr: this fit of it ended there" in line
     assert "to the table itself" not in line
+    # principled's specular at 1 (F0 0.08) and its sharpest coat are its range, not a
+    # weight: said (a refit of a gold coat ended there without a word)
+    from brdffit.export.conversion import bound_warnings
+
+    top = bound_warnings("principled_clearcoat", {
+        "base_color": [0.9, 0.6, 0.2], "roughness": 0.3, "specular": 0.99999998, "sheen": 0.0,
+        "sheen_tint": 0.0, "clearcoat": 1.0, "clearcoat_gloss": 0.99999999})
+    assert [w.split(" =")[0] for w in top] == ["clamp: specular", "clamp: clearcoat_gloss"]
 
 
 def test_an_index_of_one_is_a_matte_surface_not_a_clamp():
@@ -414,6 +422,27 @@ def test_a_fit_json_of_the_wrong_types_is_refused_by_its_key():
                for w in e.warnings), e.warnings
 
 
+def test_a_failed_fit_or_params_that_are_no_material_are_refused_naming_the_file(tmp_path):
+    """A fit whose solve diverged (``result`` nonfinite) was exported with every fidelity
+    figure under one warning; params out of range or missing were refused as
+    "ggx: kd=[-1.0, 5.0, 1e+30] outside [0, inf]", naming neither the file nor the fit."""
+    from brdffit import cli
+
+    diverged = result("ggx", GGX, converged=False, status="nonfinite")
+    with pytest.raises(ExportError, match=r"the ggx fit failed \(result nonfinite: its solve "
+                                          r"diverged\): nothing to export"):
+        export(diverged, "gltf")
+    absurd = result("ggx", {**GGX, "kd": [-1.0, 5.0, 1e30]}, converged=False, status="stalled")
+    with pytest.raises(ExportError, match=r"the ggx fit's parameters are not a ggx material "
+                                          r"\(ggx: kd=.* outside"):
+        export(absurd, "mitsuba")
+    path = tmp_path / "diverged.json"
+    path.write_text(json.dumps(diverged.to_dict()))
+    assert cli.main(["export", str(path), "--to", "gltf"]) == 2
+    stalled = result("ggx", GGX, converged=False, status="stalled")  # its last point: exported
+    assert any("did not converge (stalled)" in w for w in export(stalled, "gltf").warnings)
+
+
 def test_a_mitsuba_scene_file_names_any_material_in_well_formed_xml():
     """The material's id is an XML attribute: a table named R&D.csv wrote ``id="R&D..."``,
     a file no XML reader (Mitsuba's included) opens."""
@@ -477,8 +506,13 @@ def test_a_layered_gltf_file_is_judged_by_the_viewers_whose_shading_is_modelled(
                 {k: v for k, v in params.items() if k not in ignored})["log_rmse"], rel=1e-12)
     r = result("gltf_sheen", sheened)
     measured = fit_as_table(r)
-    viewers = export(r, "gltf", table=measured).fidelity["viewers"]
+    sheen = export(r, "gltf", table=measured).fidelity
+    viewers = sheen["viewers"]
     assert viewers["spec"] is None
+    # the file carries the fit's own parameters, but no renderer's shading of it is
+    # gltf_sheen: not exact (it was, with the headline figures no viewer shows)
+    assert not sheen["exact"] and sheen["log_rmse_to_fit"] == 0.0
+    assert all(e.fidelity["exact"] for e in (export(result("gltf_clearcoat", coated), "gltf"),))
     assert viewers["blender"]["model"] == "gltf_blender_sheen"
     assert viewers["threejs"]["model"] == "gltf_threejs_sheen"
     assert viewers["threejs"]["log_rmse_to_table"] == pytest.approx(

@@ -304,7 +304,9 @@ def test_a_sheened_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa
     e = export(r, "gltf")
     report = check.gltf_validate(e.material, gltf_validator)  # the Khronos validator
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, report
-    assert e.fidelity["exact"]
+    # the fit's own factors, in a file whose sheen each viewer shades its own way (the
+    # extension leaves the BRDF to them): not exact, and nothing lost in the conversion
+    assert not e.fidelity["exact"] and e.fidelity["log_rmse_to_fit"] == 0.0
     (material,) = e.material["materials"]
     assert material["extensions"][SHEEN_EXTENSION] == {
         "sheenColorFactor": pytest.approx(SHEENED["sheen_color"]),

@@ -291,6 +291,46 @@ def test_the_turn_of_a_tables_own_colour_is_measured_on_it():
     assert 0.1 < turn["grazing"]["measured_colour_turn"]
 
 
+def test_a_lobe_fitted_to_another_loss_is_told_the_render_loss_first():
+    """On 11 real materials that did not look good under the log loss, the render loss
+    was the best single step on 10; ggx2, advised first, gained 0.0 dB on
+    blue-metallic-paint (its second lobe collapsed), the render loss 6.1. The glTF
+    candidates ranked by log_rmse rendered worse than the ggx fit on 5 (20.0 -> 14.6 dB):
+    from another loss they are advised with the render loss, which ranks by the look."""
+    ggx = models.get("ggx")
+    steps = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="log",
+                               converged=True, rel_peak_error=0.1)
+    assert [s["try"] for s in steps] == ["--loss render", "--model ggx2",
+                                         "--model auto --candidates gltf --loss render"]
+    rendered = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="render",
+                                  converged=True, rel_peak_error=0.1)
+    assert [s["try"] for s in rendered] == ["--model ggx2", "--model auto --candidates gltf"]
+    # a narrow lobe under the log loss: the render loss first, not "nothing here" (chrome's
+    # ggx, alpha 0.007, reads good as ggx2 under the render loss, its lobe as narrow)
+    chrome = quality.next_steps(_look(), model=ggx, params={"alpha": 0.007}, loss="log",
+                                converged=True, rel_peak_error=0.79)
+    assert not any(s["try"].startswith("nothing here") for s in chrome)
+    # a narrow lobe beside the highlight (blue-metallic-paint's ggx2: its second at the
+    # bound, small) is the fit's: the table's bins are not blamed; where the narrow lobe
+    # is the highlight (chrome-steel's, 26x the table's brightest bin), they are
+    ggx2 = models.get("ggx2")
+    beside = quality.next_steps(_look(), model=ggx2, converged=True, rel_peak_error=1.75,
+                                params={"alpha1": 0.23, "ks1": [0.32, 0.27, 0.63],
+                                        "alpha2": 0.001, "ks2": [0.03, 0.05, 0.09]},
+                                loss="render")
+    assert not any("narrower" in s["try"] for s in beside)
+    highlight = quality.next_steps(_look(), model=ggx2, converged=True, rel_peak_error=26.3,
+                                   params={"alpha1": 0.001, "ks1": [0.29, 0.25, 0.29],
+                                           "alpha2": 0.079, "ks2": [0.07, 0.06, 0.06]},
+                                   loss="render")
+    assert any("narrower than the table's bins" in s["try"] for s in highlight)
+    # a measured gain still comes first; the layered step once, whichever form it has
+    got = quality.with_measured_gains({"verdict": "poor", "next": steps},
+                                      [("--model gltf_clearcoat", "m", 1.0, 15)])
+    assert [s["try"] for s in got["next"]] == ["--model gltf_clearcoat", "--loss render",
+                                               "--model ggx2"]
+
+
 def test_a_fit_far_off_the_tables_peak_is_told_the_render_loss_first():
     ggx = models.get("ggx")
     steps = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="log",
@@ -310,9 +350,14 @@ def test_a_verdict_that_is_not_good_never_has_an_empty_next():
     own = quality.next_steps(_look(), model=ggx2, params={"alpha1": 0.2, "alpha2": 0.5},
                              loss="render", converged=True)
     assert [s["try"] for s in own] == ["--model auto --candidates gltf"]
+    sheen = quality.next_steps(_look(), model=models.get("gltf_sheen"),
+                               params={"roughness": 0.3}, loss="render", converged=True)
+    assert [s["try"].split(":")[0] for s in sheen] == ["nothing here"]
+    # a coat is a sharp lobe over a base, which two free lobes follow closer where the
+    # coat is not a renderer's (chrome: gltf_clearcoat 24.4 dB, ggx2 30.2, good)
     coat = quality.next_steps(_look(), model=models.get("gltf_clearcoat"),
                               params={"roughness": 0.3}, loss="render", converged=True)
-    assert [s["try"].split(":")[0] for s in coat] == ["nothing here"]
+    assert [s["try"] for s in coat] == ["--model ggx2"] and "30.2" in coat[0]["why"]
     look = {"verdict": "poor", "next": [{"try": "--model ggx2", "why": "g", "gain_db": None}]}
     got = quality.with_measured_gains(look, [("--model ggx2", "m", -0.4),
                                              ("--model ggx", "m", -1.0)])

@@ -427,7 +427,7 @@ def test_a_sample_lists_next_steps_speak_of_samples_and_a_seen_peak_of_its_gap()
     assert "bins" not in on_samples and "table" not in on_samples, on_samples
     assert "the brightest sample" in on_samples and "on these samples" in on_samples
     on_table = " ".join(s["try"] + s["why"] for s in next_steps({**look, "basis": "sphere"},
-                                                                 **kw))
+                                                                 **{**kw, "loss": "render"}))
     assert "narrower than the table's bins" in on_table
     c = {"regions": {"held": 3, "of": 36, "deg": 15}, "theta_i_deg": [4, 85],
          "theta_o_deg": [4, 85], "in_plane": False, "peak_seen": True, "min_theta_h_deg": 4.4}

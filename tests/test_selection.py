@@ -588,6 +588,24 @@ def _rows(*spec):
             for m, k, e, p, v in spec]
 
 
+def test_a_row_whose_radiance_reads_worse_is_starred_in_the_ranking():
+    """alum-bronze under auto --loss render: beckmann's column read "good" (its picture)
+    and ggx, "visible", was chosen; beckmann's highlight holds too little light (its
+    radiance verdict), which ranks it as visible, and nothing in the table said so."""
+    from brdffit.selection import Selection, format_selection
+
+    rows = _rows(("beckmann", 8, 0.0498, 29.2, "good"), ("ggx", 8, 0.0354, 26.7, "visible"))
+    for row, radiance in zip(rows, ("visible", "visible"), strict=True):
+        row.update(radiance_verdict=radiance, status="fitted", converged=True, excess=0.0,
+                   cost_ns=1.0, bic=0.0)
+    rows[1]["status"] = "chosen"
+    text = format_selection(Selection("ggx", "r", rows, "render_psnr_db", 0.0, None, None,
+                                      None, 1.0, "t"), chosen_params=False)
+    beckmann, ggx = (line for line in text.splitlines() if line.startswith(("beckmann", "ggx ")))
+    assert "good*" in beckmann and "visible*" not in ggx and " visible " in ggx
+    assert "* reads beckmann good, visible in radiance: the light its highlight holds" in text
+
+
 def test_the_render_rule_ranks_by_the_picture():
     """Under the render loss the choice is the cheapest candidate within 0.5 dB of the
     best-looking one, whatever the log_rmse says (gold-metallic-paint: phong had the
@@ -689,8 +707,13 @@ def test_a_warning_when_every_candidate_looks_poor():
     poor = _rows(("lambert", 3, 0.1, 5.0, "poor"), ("ggx", 8, 0.05, 7.2, "poor"))
     said = _all_poor_warning(poor)
     assert "every candidate looks poor" in said and "ggx, 7.2 dB" in said
-    assert "quality.next" in said
+    assert "quality.next" in said and "no model here reproduces this material" in said
     assert _all_poor_warning([*poor, *_rows(("ggx2", 12, 0.04, 21.0, "visible"))]) == ""
+    # under another loss each candidate was fitted to that loss, not to the look: chrome,
+    # poor under every candidate by the log loss, reads good as ggx2 by the render loss
+    log = _all_poor_warning(poor, "log")
+    assert "each fitted to the log loss" in log and "--loss render" in log
+    assert "no model here reproduces" not in log
 
 
 def test_a_reason_every_candidate_fails_for_is_said_once():

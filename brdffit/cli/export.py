@@ -16,10 +16,11 @@ import sys
 from pathlib import Path
 
 from brdffit.cli import output_folder
-from brdffit.errors import BrdffitError
+from brdffit.errors import BrdffitError, ExportError
 from brdffit.export import TARGETS, export
 from brdffit.fitting.quality import figure_words
 from brdffit.fitting.result import FitResult
+from brdffit.models.catalogue import UnknownModelError
 
 #: The first bytes of every HDF5 file (a batch results file is one).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -105,8 +106,12 @@ def _export(args):
         if args.table is not None or args.model is not None:
             raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
                                "--model choose a fit of a batch results file (brdffit batch)")
-        return export(_read_result(args.result), args.target, table=args.measured,
-                      target_model=args.target_model, viewer=args.viewer)
+        result = _read_result(args.result)
+        try:
+            return export(result, args.target, table=args.measured,
+                          target_model=args.target_model, viewer=args.viewer)
+        except (ExportError, UnknownModelError) as e:  # the fit's: said with its file's name
+            raise ExportError(f"{args.result}: {e}") from None
     if args.table is None:
         from brdffit.batch.store import read_attrs, read_index
 
@@ -147,7 +152,9 @@ def run(args) -> int:
             sys.stdout.write(text if text.endswith("\n") else text + "\n")
     fid = out.fidelity
     how = ("exact" if fid["exact"]
-           else f"approximated, log_rmse to the fit {fid['log_rmse_to_fit']:.4g}")
+           else f"approximated, log_rmse to the fit {fid['log_rmse_to_fit']:.4g}"
+           if fid["log_rmse_to_fit"] else "its own parameters, in a file whose shading each "
+           "viewer chooses: see each viewer's figures")
     line = f"{args.target}: {out.source_model} fit as {fid['target_model']} ({how})"
     if fid.get("log_rmse_to_table") is not None:
         colour = fid.get("sphere_colour") or {}

@@ -276,6 +276,18 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     spec = get_target(target)
     if not result.params:
         raise ExportError(f"the {result.model} fit has no parameters to export ({result.result})")
+    if result.result == "nonfinite":
+        # the solve diverged: its last point is no material (it was exported, with every
+        # fidelity figure, under one warning)
+        raise ExportError(f"the {result.model} fit failed (result nonfinite: its solve "
+                          "diverged): nothing to export; refit the table")
+    try:
+        models.get(result.model).check_params(result.params)
+    except models.UnknownModelError:
+        pass  # refused below, in the target's words
+    except ValueError as e:  # params another tool or a hand edited: said as the fit's
+        raise ExportError(f"the {result.model} fit's parameters are not a {result.model} "
+                          f"material ({e})") from None
     module = spec.module
     viewer = _implied_viewer(spec, viewer, target_model)
     target_model = _viewer_model(spec, viewer, target_model, result)
@@ -307,8 +319,13 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     shaded_as = spec.shaded_as[conv.target_model]
     warnings = list(conv.warnings) + warnings
     fidelity = conv.fidelity(result)
-    fidelity.update(exact=conv.exact and shaded_as == conv.target_model, renderer_model=shaded_as,
-                    log_rmse_to_table=None, sphere_colour=None, render_psnr_db=None)
+    # exact: the file's shading is the model, in a renderer's own evaluation; a glTF
+    # file's is its spec's, where the spec defines the BRDF (KHR_materials_sheen leaves
+    # it to the viewers: a gltf_sheen file was called exact, and no viewer shades it so)
+    defined = not spec.viewers or shaded_as in module.VIEWER_MODELS["spec"]
+    fidelity.update(exact=conv.exact and shaded_as == conv.target_model and defined,
+                    renderer_model=shaded_as, log_rmse_to_table=None, sphere_colour=None,
+                    render_psnr_db=None)
     if material_class is not None:
         fidelity["material_class"] = material_class
     if shaded_as is None:  # no table to read: nothing could be measured against it

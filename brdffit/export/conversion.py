@@ -156,9 +156,13 @@ def _clamp_next(target_model: str, fitted: bool) -> str:
             f"{target_model}): its error is what the renderer's range costs")
 
 
-#: Parameters whose upper bound is a physical limit the data can push against (a
-#: metallic of 1 or a weight of 1 is a legitimate material, not a clamp).
-_CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha"}
+#: Parameters whose upper bound is a limit the data can push against (a metallic of 1
+#: or a weight of 1 is a legitimate material, not a clamp): principled's ``specular``
+#: of 1 is its F0 0.08, its ``clearcoat_gloss`` of 1 the sharpest coat it has, and
+#: MaterialX's ``specular_IOR`` stops at 50 (a refit of two-layer-gold's coat ended at
+#: specular 0.99999998 and clearcoat_gloss 0.99999999, and said nothing).
+_CLAMP_UPPER = {"base_color", "kd", "eta", "k", "roughness", "alpha", "specular",
+                "clearcoat_gloss", "specular_IOR"}
 #: Indices whose lower bound 1 is a surface that reflects nothing (F0 = 0, as a ggx
 #: ``f0`` of 0, which is not flagged either): a material the data can ask for, a matte
 #: one, not a value the renderer's range imposed (a lambert fit's MaterialX refit ends

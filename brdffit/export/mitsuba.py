@@ -270,7 +270,8 @@ def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
 
 #: Which of Mitsuba's variants each of an export's dictionaries is for
 #: (``Export.variants``; ``material`` is the RGB one).
-VARIANTS = {"rgb": "scalar_rgb, llvm_ad_rgb, cuda_ad_rgb (and their _mono, _polarized kin)",
+VARIANTS = {"rgb": "scalar_rgb, llvm_ad_rgb, cuda_ad_rgb (and their _polarized kin; "
+                   "a _mono variant is refused: variant())",
             "spectral": "scalar_spectral, llvm_ad_spectral, cuda_ad_spectral (and their "
                         "_polarized kin)"}
 VARIANTS_NOTE = ("material is the load_dict dictionary for Mitsuba's RGB variants; in a "

@@ -116,16 +116,18 @@ PEAK_MISSED = 0.99
 
 def _peak_missed(metrics: dict, look: dict, model=None, what: str = "bins") -> list[str]:
     """Where the verdict is not poor but the fit misses the table's brightest bin
-    entirely: a note that the verdict judged the look without that peak (a lone hot
-    bin, or a peak in fewer bins than the sphere's pixels see, renders as nothing). A
-    model without a lobe has no peak to give: said so (lambert on red-plastic was told
-    of "a lone hot bin, an outlier?", where ggx is 21% off it). ``what``: the input's
+    entirely: a note that the verdict judged the look without that peak (a peak in
+    fewer bins than the sphere's pixels see renders as nothing). A model without a lobe
+    has no peak to give: said so. It asked "a lone hot bin, an outlier?" of ordinary
+    tables (white-paint's and alum-bronze's render-loss fits): a bin far above its
+    neighbours is named by the table's own note (``MerlTable.isolated_spikes``, a sample
+    list's ``samples.isolated_spikes``), where there is one. ``what``: the input's
     unit (``TableInput.what``, "bins", or "samples": a sample list's notes speak of its
     brightest sample)."""
     rel = metrics.get("rel_peak_error")
     if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
         return []
-    at, its, few, lone = PEAK_WORDS[what]
+    at, its, few = PEAK_WORDS[what]
     if model is not None and model.name in NO_LOBE:
         return [f"{at} misses {its} by {rel:.0%} of its value "
                 f"(rel_peak_error {rel:.3g}): {model.name} has no specular lobe; the "
@@ -136,20 +138,17 @@ def _peak_missed(metrics: dict, look: dict, model=None, what: str = "bins") -> l
                 f"{rel:.3g}): a lobe brighter at the peak than anything measured, in {few}; "
                 f"the '{look.get('verdict')}' verdict judges the look without it"]
     return [f"{at} misses {its} by {rel:.0%} of its value "
-            f"(rel_peak_error {rel:.3g}): a peak in {few} ({lone}); the "
+            f"(rel_peak_error {rel:.3g}): a peak in {few}; the "
             f"'{look.get('verdict')}' verdict judges the look without it"]
 
 
 #: How :func:`_peak_missed`'s notes begin: a polish over every bin drops its coarse
 #: fit's (whose figures they were) and says its own.
 PEAK_NOTE = "at the table's brightest bin the fit"
-#: :func:`_peak_missed`'s words for each kind of input: where, whose value, how few, and
-#: what a lone one may be.
+#: :func:`_peak_missed`'s words for each kind of input: where, whose value, how few.
 PEAK_WORDS = {
-    "bins": (PEAK_NOTE, "the table's", "too few bins for the sphere render to see",
-             "a lone hot bin, an outlier?"),
+    "bins": (PEAK_NOTE, "the table's", "too few bins for the sphere render to see"),
     "samples": ("at the brightest sample the fit", "its value",
-                "too few samples for the verdict's render to weigh",
-                "a lone hot sample, an outlier?"),
+                "too few samples for the verdict's render to weigh"),
 }
 
