@@ -1010,3 +1010,63 @@ def test_an_hdf5_list_is_read_from_its_own_file_alone(tmp_path):
              "rgb is a link to an object that cannot be opened")):
         with pytest.raises(MeasurementsError, match=says):
             read_measured(listed(name, values))
+
+
+def test_files_as_lab_tools_write_them(tmp_path):
+    """What a review of files written by other tools found (/tmp/h32d in session 32): a
+    long layout (one row per direction and channel) was fitted as grey samples without
+    a word; an HDF5 rgb in percent was fitted as 1/sr and one packed as CF's uint16 with
+    scale_factor as kd 4000; a date in a column not read had a German export refused;
+    a Cornell ASTM header's second COMMENT was refused; pandas' and R's row index
+    column was refused as a column without a name."""
+    s = _samples(60)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    deg = [np.degrees(a) for a in s[:4]]
+    # one row per (direction, channel): refused, naming the column
+    long = tmp_path / "long.csv"
+    long.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,channel,value\n" + "".join(
+        f"{deg[0][k]},{deg[1][k]},{deg[2][k]},{deg[3][k]},{c},{s[4][k, j]}\n"
+        for k in range(60) for j, c in enumerate("RGB")))
+    with pytest.raises(MeasurementsError, match="column 'channel' says which channel, "
+                                                "wavelength or polarisation each row holds"):
+        read_measured(long)
+    astm = tmp_path / "long.astm"
+    astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,wavelength,BRDF\n0.1,0,0.2,0,450,0.3\n")
+    with pytest.raises(MeasurementsError, match="column 'wavelength' says"):
+        read_measured(astm)
+    # HDF5: values in percent refused, CF packing applied
+    for name, write, says in (
+            ("percent.h5", lambda f: f["rgb"].attrs.__setitem__("units", "%"),
+             "dataset rgb has units '%': a sample list's values are a BRDF, in 1/sr"),
+            ("packed.h5", None, None)):
+        path = tmp_path / name
+        with h5py.File(path, "w") as f:
+            for a, v in zip(("theta_i", "phi_i", "theta_o", "phi_o"), deg, strict=True):
+                f.create_dataset(a, data=v).attrs["units"] = "degrees"
+            if write is None:
+                packed = f.create_dataset("rgb", data=np.round(s[4] / 1e-4).astype(np.uint16))
+                packed.attrs["scale_factor"] = 1e-4
+            else:
+                f["rgb"] = s[4]
+                write(f)
+            f.attrs["units"] = "1/sr"  # the file's, meant for its values: not an angle unit
+        if says is not None:
+            with pytest.raises(MeasurementsError, match=re.escape(says)):
+                read_measured(path)
+        else:
+            np.testing.assert_allclose(read_measured(path).rgb, plain.rgb, atol=6e-5)
+    # German Excel with a date column, and pandas' index column
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    de = tmp_path / "de.csv"
+    de.write_text("Datum;" + lines[0].replace(",", ";") + "\n" + "".join(
+        "05.05.2024;" + line.replace(",", ";").replace(".", ",") + "\n" for line in lines[1:]))
+    np.testing.assert_allclose(read_measured(de).rgb, plain.rgb, rtol=1e-15)
+    indexed = tmp_path / "indexed.csv"
+    indexed.write_text("," + lines[0] + "\n" + "".join(f"{k},{line}\n"
+                                                        for k, line in enumerate(lines[1:])))
+    np.testing.assert_allclose(read_measured(indexed).rgb, plain.rgb, rtol=1e-15)
+    cornell = tmp_path / "cornell.astm"
+    text = (tmp_path / "s.astm").read_text()
+    cornell.write_text("COMMENT Measured with the gonioreflectometer\nCOMMENT RGB from 31 "
+                       "spectral samples\n" + text)
+    assert read_measured(cornell).provenance["header"]["COMMENT"].count("\n") == 1

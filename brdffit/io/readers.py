@@ -73,6 +73,13 @@ ANGLE_ALIASES = {
 }
 CHANNELS = ("r", "g", "b")
 ONE_CHANNEL = ("value", "brdf", "y")
+#: Columns that say which channel, wavelength or polarisation a row holds: a file of
+#: one row per (direction, channel), a "long" layout. Such a column is not read, so
+#: every row was fitted as a grey sample of its direction (a coloured GGX, kd 0.4,
+#: 0.15, 0.05, fitted to kd 0.197 in each channel, without a word).
+LONG_LAYOUT_COLUMNS = ("channel", "band", "wavelength", "wavelength_nm", "lambda",
+                       "lambda_nm", "wl", "polarization", "polarisation", "polarizer",
+                       "polariser", "pol")
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
 
 
@@ -141,12 +148,15 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     seen: dict[str, int] = {}
     for k, raw in enumerate(names):
         name = _value_name(raw.strip().lower())
+        if not name and k == 0 and len(names) > 1:
+            continue  # a row index, as pandas' to_csv and R's write.csv write it: not read
         if not name:
             raise MeasurementsError(source, f"column {k + 1} of the header has no name")
         if name in seen:
             raise MeasurementsError(source, f"column {raw.strip()[:80]!r} appears twice in "
                                             "the header")
         seen[name] = k
+    _refuse_long_layout(names, seen, source)
     out: dict = {}
     for name, k in seen.items():
         m = _angle_name(name)
@@ -218,6 +228,23 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                     + ("" if len(one) < 2 else "; more than one single-channel column")
                     + _other_units(seen))
     return out
+
+
+def _refuse_long_layout(names: list[str], seen: dict[str, int], source: str) -> None:
+    """Refuses a column of :data:`LONG_LAYOUT_COLUMNS` (its name, less a unit:
+    ``wavelength [nm]``), which no reader takes."""
+    for name, k in seen.items():
+        word = re.match(r"[^\s\[(/]+", name)
+        if word is None or word[0] not in LONG_LAYOUT_COLUMNS:
+            continue
+        said = names[k].strip()[:40]
+        raise MeasurementsError(
+            source, f"column {said!r} says which channel, wavelength or polarisation each "
+                    "row holds: a file of one row per (direction, channel) is not read (its "
+                    "rows would be fitted as grey samples of the same directions). Write one "
+                    "row per direction pair, with r, g, b, or spectral columns named by "
+                    f"wavelength (450nm, ...); if every row has the same {said}, drop the "
+                    "column")
 
 
 def _other_units(seen: dict[str, int]) -> str:
@@ -327,15 +354,31 @@ def _projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
     return spectra.to_rgb(values, wavelengths, source)
 
 
-def _decimal_comma(lines: list[tuple[int, str]], delimiter: str | None) -> bool:
+def _decimal_comma(lines: list[tuple[int, str]], delimiter: str | None,
+                   used: list[int] | None = None, source: str = "") -> bool:
     """Whether the numbers are written with a decimal comma, as spreadsheets in many
     locales export them (``0,25;0;45;180;0,0937``): cells split by a semicolon or a
-    tab, commas in them, and no point anywhere (a point beside a comma could be a
-    thousands separator: such a file is refused, row by row, not guessed at)."""
+    tab, commas in them, and no point anywhere in the columns read, ``used`` (a point
+    beside a comma could be a thousands separator: such a file is refused, row by row,
+    not guessed at). A date or a sample's name in a column not read (``05.05.2024``)
+    had a German export refused."""
     if delimiter not in (";", "\t"):
         return False
-    text = [line for _, line in lines]
+    text = _read_cells(lines, delimiter, used, source)
     return any("," in t for t in text) and not any("." in t for t in text)
+
+
+def _read_cells(lines: list[tuple[int, str]], delimiter: str | None,
+                used: list[int] | None, source: str) -> list[str]:
+    """Each line's cells in the columns ``used`` (all of each line where None), joined
+    by a blank: what :func:`_decimal_comma` judges."""
+    if used is None:
+        return [line for _, line in lines]
+    out = []
+    for number, line in lines:
+        cells = _cells(line, delimiter, source, number)
+        out.append(" ".join(cells[k] for k in used if k < len(cells)))
+    return out
 
 
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
@@ -377,7 +420,7 @@ def _comma_why(cells: list[str], lines: list[tuple[int, str]], delimiter: str | 
     if bad is None or comma:
         return ""
     if delimiter in (";", "\t"):
-        k, point = next((k, t) for k, t in lines if "." in t)
+        k, point = next(((k, t) for k, t in lines if "." in t), (lines[0][0], lines[0][1]))
         return (f": {bad.strip()!r} has a decimal comma, and row {k + 1} a point "
                 f"({point.strip()[:40]!r}); with both, a point may be a thousands "
                 "separator, which is not guessed at: write the numbers with one decimal mark")
@@ -476,6 +519,10 @@ def _astm_samples(text: str, source: str) -> Measurements:
         key, value = (re.split(r"\s+", stripped, maxsplit=1) + [""])[:2]  # a tab too
         key, value = key.upper(), value.strip()
         if key in header and header[key] != value:
+            if key not in ("VARS", "NUM_POINTS"):
+                # free text (COMMENT, as Cornell's files have several): kept, in order
+                header[key] = f"{header[key]}\n{value}"
+                continue
             # which one the rows follow would be a guess (a second VARS that swaps two
             # columns within their ranges would be fitted, silently)
             raise MeasurementsError(source, f"{key} is given twice: {header[key]!r} and "
@@ -639,9 +686,9 @@ def _csv_samples(text: str, source: str) -> Measurements:
                  for n, u in zip(names, units, strict=True)]
         lines = [lines[0], *lines[2:]]
     cols = _columns(names, source, default_unit=unit)
-    comma = _decimal_comma(lines[1:], delimiter)
     # only the columns read are numbers: a column of sample names or notes is left
     used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ()))
+    comma = _decimal_comma(lines[1:], delimiter, used, source)
     rows, numbers = _numbers(lines[1:], split_at, len(names), source, comma=comma, used=used)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
@@ -693,6 +740,8 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
                                                 "(degrees or radians), nor has the file")
             stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
+            if own is not None and len(stated) == 2 and not _an_angle_unit(stated[1]):
+                stated = stated[:1]  # the file's units are its values' (1/sr), not angles'
             scale = _unit_scale(stated[0], source)
             if len(stated) == 2 and _unit_scale(stated[1], source) != scale:
                 # as a CSV's two statements of one column's unit are: which one the
@@ -709,6 +758,9 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
                                             "than one kind, keep one")
+        for kind in ("rgb", "value", "spectral", "sigma"):
+            if _linked(f, kind):
+                _per_steradian(f, kind, source)
         if _linked(f, "rgb"):
             values = _numeric(f, "rgb", source)
             if values.ndim != 2 or values.shape[1] != 3:
@@ -861,6 +913,25 @@ def _dataset(f, name: str, source: str):
     return d
 
 
+def _unpacked(d, a: np.ndarray, name: str, source: str) -> np.ndarray:
+    """``a`` with the CF packing of dataset ``d`` applied (``a * scale_factor +
+    add_offset``, as netCDF readers do and h5py does not): a uint16 rgb of
+    scale_factor 1e-4 was fitted as kd 4000."""
+    packing = []
+    for key, default in (("scale_factor", 1.0), ("add_offset", 0.0)):
+        v = d.attrs.get(key)
+        if v is None:
+            packing.append(default)
+            continue
+        v = np.asarray(v, float).ravel()
+        if v.size != 1 or not np.isfinite(v[0]):
+            raise MeasurementsError(source, f"dataset {name}: {key} {v.tolist()[:3]} is not "
+                                            "one finite number")
+        packing.append(float(v[0]))
+    scale, offset = packing
+    return a if (scale, offset) == (1.0, 0.0) else a * scale + offset
+
+
 def _numeric(f, name: str, source: str) -> np.ndarray:
     """Dataset ``name`` of the open HDF5 file ``f`` as float64; refused, with its
     name, where it is a group or holds no numbers (strings, compounds)."""
@@ -878,13 +949,33 @@ def _numeric(f, name: str, source: str) -> np.ndarray:
                                         f"{d.shape}): more than a sample list read here "
                                         f"({MAX_NUMBERS:,}); bin or thin it first")
     try:
-        return np.asarray(d, float)
+        return _unpacked(d, np.asarray(d, float), name, source)
     except MemoryError:
         raise MeasurementsError(source, f"dataset {name} ({d.size:,} numbers) does not fit "
                                         "in memory") from None
     except (TypeError, ValueError, OSError) as e:
         raise MeasurementsError(source, f"dataset {name} cannot be read as numbers "
                                         f"({e})") from None
+
+
+def _an_angle_unit(unit: str | None) -> bool:
+    try:
+        return unit is not None and _unit_scale(unit, "") > 0
+    except MeasurementsError:
+        return False
+
+
+def _per_steradian(f, name: str, source: str) -> None:
+    """Refuses a values dataset whose ``units`` attribute is not a BRDF's (1/sr), as a
+    CSV's ``r [%]`` is: one in percent was fitted as 1/sr (kd 40), said only by the
+    albedo note."""
+    unit = _attr_text(_dataset(f, name, source).attrs.get("units"), "units", source)
+    if unit is None or _PER_STERADIAN.fullmatch(f"[{unit.strip()}]"):
+        return
+    raise MeasurementsError(source, f"dataset {name} has units {unit[:40]!r}: a sample list's "
+                                    "values are a BRDF, in 1/sr (a reflectance in % or a "
+                                    "radiance is not one); convert them, and set its units "
+                                    "to 1/sr or drop the attribute")
 
 
 def _one_per_sample(f, name: str, source: str) -> np.ndarray:
