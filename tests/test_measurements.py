@@ -1070,3 +1070,17 @@ def test_files_as_lab_tools_write_them(tmp_path):
     cornell.write_text("COMMENT Measured with the gonioreflectometer\nCOMMENT RGB from 31 "
                        "spectral samples\n" + text)
     assert read_measured(cornell).provenance["header"]["COMMENT"].count("\n") == 1
+    # an ASTM file in degrees is said to be so, in its own columns' names (it read "phi_o
+    # is beyond +-720 degrees" of a phi_s of 295); a units row of "degree" is read
+    deg_astm = tmp_path / "deg.astm"
+    deg_astm.write_text(text.replace("\n".join(text.splitlines()[3:]), "\n".join(
+        ",".join(repr(float(x)) for x in (*[d[k] for d in deg], *s[4][k])) for k in range(60))))
+    with pytest.raises(MeasurementsError, match=r"an ASTM E1392 file's angles are radians, "
+                                                r"and theta_i, phi_i, theta_s, phi_s hold "
+                                                r"polar angles up to [\d.]+: degrees\?"):
+        read_measured(deg_astm)
+    singular = tmp_path / "singular.csv"
+    singular.write_text("theta_i,phi_i,theta_o,phi_o,r,g,b\n"
+                        "degree,degree,degree,degree,1/sr,1/sr,1/sr\n"
+                        + "\n".join(lines[1:]) + "\n")
+    np.testing.assert_allclose(read_measured(singular).rgb, plain.rgb, rtol=1e-15)

@@ -536,6 +536,7 @@ def _astm_samples(text: str, source: str) -> Measurements:
     # rows split by commas, as the standard's examples; by blanks where a file has none
     commas = not data or "," in data[0][1]
     rows, numbers = _numbers(data, "," if commas else None, len(names), source)
+    _degrees_in_astm(rows, cols, names, source)
     if "NUM_POINTS" in header:
         try:
             promised = int(header["NUM_POINTS"])
@@ -548,6 +549,26 @@ def _astm_samples(text: str, source: str) -> Measurements:
     return _from_rows(rows, numbers, cols, source,
                       {"format": "astm", "columns": names, "angle_unit": "radians",
                        "header": header})
+
+
+def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str) -> None:
+    """Refuses an ASTM file whose angles are degrees (the standard's are radians), said
+    as that, with the file's own column names: it read "phi_o is beyond +-720 degrees"
+    of a file whose phi_s held 295, or "theta_i is below the horizon" of 30."""
+    theta = [rows[:, cols[a][0]] for a in ("theta_i", "theta_o")]
+    phi = [rows[:, cols[a][0]] for a in ("phi_i", "phi_o")]
+    if not rows.size or not all(np.all(np.isfinite(a)) for a in (*theta, *phi)):
+        return
+    top = max(float(np.max(np.abs(a))) for a in theta)
+    if top <= 2 * np.pi or top > 90.0 + 1e-3:
+        # radians (a polar angle past the horizon in radians is refused as such, row by
+        # row), or angles of neither unit
+        return
+    shown = ", ".join(names[cols[a][0]] for a in ANGLES)
+    raise MeasurementsError(source, f"an ASTM E1392 file's angles are radians, and {shown} "
+                                    f"hold polar angles up to {top:.4g}: degrees? Convert "
+                                    "them to radians (or write the list as a CSV, whose "
+                                    "columns name their unit: theta_i_deg, ...)")
 
 
 #: What a units row under the header may hold, cell by cell.
@@ -606,7 +627,9 @@ def _numbers_for_a_header(names: list[str], comments: list[tuple[int, str]],
 def _angle_name(name: str) -> re.Match | None:
     """An angle column's name read (``theta_i_deg``, ``Theta_S [rad]``, ``phi_o``):
     groups the angle's name and its unit, if any; None for any other column."""
-    m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees|radians))?",
+    # every spelling _unit_scale reads: a units row of "degree" was accepted, then its
+    # columns (theta_i [degree]) found no angle
+    m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees?|radians?))?",
                      _unit_suffixed(_value_name(name.strip().lower())))
     return m if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES else None
 
