@@ -1084,3 +1084,14 @@ def test_files_as_lab_tools_write_them(tmp_path):
                         "degree,degree,degree,degree,1/sr,1/sr,1/sr\n"
                         + "\n".join(lines[1:]) + "\n")
     np.testing.assert_allclose(read_measured(singular).rgb, plain.rgb, rtol=1e-15)
+    # a thousands separator is said as one; an HDF5 unit stored as a one-element array
+    grouped = tmp_path / "grouped.csv"
+    grouped.write_text(lines[0] + "\n" + lines[1] + "\n" + '10,0,20,0,"1,069.5",0.5,0.5\n')
+    with pytest.raises(MeasurementsError, match="'1,069.5' has a thousands separator"):
+        read_measured(grouped)
+    arrayed = tmp_path / "arrayed.h5"
+    with h5py.File(arrayed, "w") as f:
+        for a, v in zip(("theta_i", "phi_i", "theta_o", "phi_o"), deg, strict=True):
+            f.create_dataset(a, data=v).attrs["units"] = np.array([b"degrees"])
+        f["rgb"] = s[4]
+    np.testing.assert_allclose(read_measured(arrayed).rgb, plain.rgb, rtol=1e-15)

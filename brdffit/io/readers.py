@@ -425,6 +425,10 @@ def _comma_why(cells: list[str], lines: list[tuple[int, str]], delimiter: str | 
                 f"({point.strip()[:40]!r}); with both, a point may be a thousands "
                 "separator, which is not guessed at: write the numbers with one decimal mark")
     split = {",": "commas", None: "blanks"}.get(delimiter, repr(delimiter))
+    if re.fullmatch(r"[-+]?\d{1,3}(,\d{3})+(\.\d*)?", bad.strip()):
+        # "1,069.548", as a spreadsheet formats a number with digit grouping
+        return (f": {bad.strip()!r} has a thousands separator: write the numbers without "
+                "one (a spreadsheet's number format with digit grouping writes them so)")
     return (f": {bad.strip()!r} has a decimal comma in a file whose cells are split by "
             f"{split}: split them by semicolons or tabs, or write decimal points")
 
@@ -900,9 +904,13 @@ def _stored_provenance(stored) -> dict:
 
 
 def _attr_text(value, what: str, source: str) -> str | None:
-    """An HDF5 attribute's text (bytes decoded as UTF-8); None where it is absent."""
+    """An HDF5 attribute's text (bytes decoded as UTF-8); None where it is absent. A
+    one-element array of text (as some writers store a string) is that text: it read
+    as the unit "[b'degrees']"."""
     if value is None:
         return None
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "SUO":
+        value = value.ravel()[0]
     if isinstance(value, bytes):
         try:
             return value.decode()
