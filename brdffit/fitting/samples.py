@@ -81,6 +81,7 @@ from brdffit.io.angles import (
 from brdffit.io.grid import bin_grid
 from brdffit.io.measurements import Measurements, relative_sigma
 from brdffit.io.merl import SPIKE_FACTOR
+from brdffit.io.writers import angles_of
 from brdffit.models.frame import Frame
 
 #: How many folds the held-out error has.
@@ -430,15 +431,12 @@ def spike_finding(meas: Measurements, prep: Prepared) -> tuple[list[str], list[d
     if spikes.size == 0:
         return [], []
     first = int(spikes[0])
-    angles = [np.degrees(np.arccos(np.clip(w[2], -1.0, 1.0))) for w in (meas.wi[first],
-                                                                          meas.wo[first])]
-    phis = [np.degrees(np.arctan2(w[1], w[0])) % 360.0 for w in (meas.wi[first],
-                                                                  meas.wo[first])]
+    theta_i, phi_i, theta_o, phi_o = (float(np.degrees(a[first])) for a in angles_of(meas))
     what = (f"{spikes.size:,} sample{'s' if spikes.size != 1 else ''} over "
             f"{SPIKE_FACTOR:,.0f}x each of {'their' if spikes.size != 1 else 'its'} "
             f"{SPIKE_NEAREST} nearest samples (the brightest: "
-            f"{float(meas.rgb[first].max()):.3g} 1/sr at theta_i {angles[0]:.4g}, phi_i "
-            f"{phis[0]:.4g}, theta_o {angles[1]:.4g}, phi_o {phis[1]:.4g} deg)")
+            f"{float(meas.rgb[first].max()):.3g} 1/sr at theta_i {theta_i:.4g}, phi_i "
+            f"{phi_i:.4g}, theta_o {theta_o:.4g}, phi_o {phi_o:.4g} deg)")
     return ([f"{what}: a corrupt value? A least-squares fit follows such a sample; leave "
              "its row out"],
             [{"try": "the list without its spikes (leave their rows out)",
