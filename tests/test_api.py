@@ -793,7 +793,7 @@ def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
     with pytest.raises(ApiError) as e:
         c.upload(bad)
     assert e.value.status_code == 422
-    assert "bad.csv: theta_o is below the horizon" in e.value.detail
+    assert "bad.csv: theta_o_deg is below the horizon" in e.value.detail
 
 
 def test_an_error_quotes_at_most_a_few_hundred_characters_of_the_input(http, table_id):

@@ -16,7 +16,7 @@ from brdffit.errors import MerlFormatError
 from brdffit.io import merl
 from brdffit.io.angles import bin_centres, half_diff_to_dirs
 from brdffit.io.measurements import Measurements, MeasurementsError
-from brdffit.io.readers import read_measured, read_table
+from brdffit.io.readers import declared_samples, read_measured, read_table
 
 pytestmark = pytest.mark.unit
 
@@ -118,13 +118,17 @@ def test_one_channel_and_sigma(tmp_path):
      "only r, g of r, g, b"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,1,1\n"
               "10,0,95,0,1,1,1\n",
-     "theta_o is below the horizon (more than 90 degrees from the normal) in 1 row (first: row 3)"),
+     "theta_o_deg is below the horizon (more than 90 degrees from the normal) in 1 row "
+     "(first: row 3)"),
+    # an angle is named as the file names it
+    ("a.astm", "VARS theta_i,phi_i,theta_s,phi_s,R,G,B\n0.1,0,1.9,0,1,1,1\n",
+     "theta_s (read as theta_o) is below the horizon"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n-10,0,20,0,1,1,1\n",
-     "theta_i is negative"),
+     "theta_i_deg is negative"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n-0.02,0,20,0,1,1,1\n",
-     "theta_i is negative"),
+     "theta_i_deg is negative"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,nan,0,1,1,1\n",
-     "theta_o is not finite in 1 row (first: row 2)"),
+     "theta_o_deg is not finite in 1 row (first: row 2)"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,inf,1\n",
      "a value is not finite"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,1,-1,1\n",
@@ -144,7 +148,7 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "# angles: furlongs\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n1,2,3,4,1,1,1\n",
      "unknown angle unit 'furlongs'"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,1e300,20,0,1,1,1\n",
-     "phi_i is beyond +-720 degrees in 1 row (first: row 2)"),
+     "phi_i_deg is beyond +-720 degrees in 1 row (first: row 2)"),
     # the last unit line won, and a file in degrees was read in radians
     ("a.csv", "# angles: degrees\n# angles: radians\ntheta_i,phi_i,theta_o,phi_o,r,g,b\n"
               "1,2,3,4,1,1,1\n", "two angle units: 'degrees' (line 1) and 'radians' (line 2)"),
@@ -263,6 +267,67 @@ def test_hdf5_angles_may_have_the_names_a_csv_column_has(tmp_path):
         f["theta_o"] = f["Theta_S"][()]
     with pytest.raises(MeasurementsError, match="two datasets give theta_o"):
         read_measured(other)
+
+
+def _matlab_73(path, s, names=("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg"),
+               user_block=True):
+    """A .mat file as MATLAB's ``save -v7.3`` writes one: HDF5 after a 512-byte header
+    of its own, each variable column-major (an n x 3 matrix stored (3, n), a column
+    vector (1, n)), tagged ``MATLAB_class``, and no other attribute."""
+    theta_i, phi_i, theta_o, phi_o, rgb = s
+    columns = [np.degrees(a) for a in (theta_i, phi_i, theta_o, phi_o)]
+    with h5py.File(path, "w", **({"userblock_size": 512} if user_block else {})) as f:
+        for name, a in (*zip(names, columns, strict=True), ("rgb", rgb)):
+            f[name] = np.asarray(a).reshape(len(theta_i), -1).T
+            f[name].attrs["MATLAB_class"] = np.bytes_("double")
+    if user_block:
+        with open(path, "r+b") as f:
+            f.write(b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Sun Dec  6 "
+                    b"00:00:00 2026 HDF5 schema 1.00 .".ljust(116) + bytes(8) + b"\x00\x02IM")
+    return path
+
+
+def test_a_matlab_v73_file_reads_as_matlab_holds_it(tmp_path):
+    """``save('s.mat', ..., '-v7.3')`` writes HDF5 behind a 512-byte header, with
+    MATLAB's column-major matrices and no attributes: read by content whatever its
+    name, transposed back, the angles' units from their names (it was read as a MERL
+    table, "not a text file"). A (3, n) dataset of another writer is refused with what
+    to do, as a v5 .mat file is."""
+    s = _samples(40)
+    want = read_measured(_write_all(tmp_path, s)["csv"])
+    for path in (_matlab_73(tmp_path / "s.mat", s), _matlab_73(tmp_path / "s_mat", s),
+                 _matlab_73(tmp_path / "s.h5", s, user_block=False)):
+        got = read_measured(path)
+        np.testing.assert_allclose(got.rgb, want.rgb, rtol=1e-12)
+        np.testing.assert_allclose(got.wi, want.wi, atol=1e-12)
+        np.testing.assert_allclose(got.wo, want.wo, atol=1e-12)
+        assert declared_samples(path) == 40  # what the service weighs an upload by
+    bare = _matlab_73(tmp_path / "bare.mat", s, names=("theta_i", "phi_i", "theta_o", "phi_o"))
+    with pytest.raises(MeasurementsError, match="name it theta_i_deg or theta_i_rad .MATLAB's "
+                                                "save writes no attributes"):
+        read_measured(bare)
+    with h5py.File(tmp_path / "s.h5", "a") as f:
+        f["theta_i_deg"].attrs["units"] = "radians"
+    with pytest.raises(MeasurementsError, match="theta_i_deg: two units .its name's 'deg', "
+                                                "its 'units' 'radians'"):
+        read_measured(tmp_path / "s.h5")
+    other = tmp_path / "colmajor.h5"
+    with h5py.File(other, "w") as f:
+        for name, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True):
+            f[name] = a[None, :]  # a row: one number per sample all the same
+        f.attrs["units"] = "radians"
+        f["rgb"] = s[4].T
+    with pytest.raises(MeasurementsError, match=r"rgb has shape \(3, 40\), not \(n, 3\); "
+                                                r"\(3, n\) is how a column-major writer"):
+        read_measured(other)
+    v5 = tmp_path / "v5.mat"
+    v5.write_bytes(b"MATLAB 5.0 MAT-file, Platform: GLNXA64".ljust(116) + bytes(8)
+                   + b"\x00\x01IM" + bytes(64))
+    (tmp_path / "v5").write_bytes(v5.read_bytes())  # by content, unnamed
+    for path in (v5, tmp_path / "v5"):
+        with pytest.raises(MerlFormatError, match="a MATLAB .mat file of version 5 .save -v7.3 "
+                                                  "writes one brdffit reads"):
+            read_measured(path)
 
 
 def _h5(path, n=4, **datasets):
@@ -415,8 +480,10 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
                                    b"10\xb0,0,20,0,1,1,1\n"),
                        ("png.csv", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")):
         (tmp_path / name).write_bytes(data)
-        with pytest.raises(MeasurementsError, match=f"{name}: (not a text file|a PNG image, "
-                                                    "not a text sample list)"):
+        with pytest.raises(MeasurementsError, match=f"{name}: (line 2 is a row of numbers "
+                                                    "with a character that is not UTF-8 "
+                                                    "..°. as Windows-1252: '10°,0,20|a PNG "
+                                                    "image, not a text sample list)"):
             read_measured(tmp_path / name)
 
 
@@ -1030,6 +1097,33 @@ def test_files_as_lab_tools_write_them(tmp_path):
     with pytest.raises(MeasurementsError, match="column 'channel' says which channel, "
                                                 "wavelength or polarisation each row holds"):
         read_measured(long)
+    # an uncertainty by another name than sigma_r: refused, saying what to name it (the
+    # fit weighed every sample alike, without a word)
+    for header, said in (("r,g,b,r_std,g_std,b_std", "r_std"),
+                         ("R,G,B,R_err,G_err,B_err", "R_err"), ("value,uncertainty", "uncertainty"),
+                         ("r,g,b,sigma_red,sigma_green,sigma_blue", "sigma_red"),
+                         ("Red,Green,Blue,Std Red", "Std Red")):
+        odd = tmp_path / "odd.csv"
+        width = header.count(",") + 1
+        odd.write_text(f"theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,{header}\n"
+                       + "10,0,20,180," + ",".join(["0.5"] * width) + "\n")
+        with pytest.raises(MeasurementsError, match=f"column {said!r} looks like each value's "
+                                                    "uncertainty.*Rename it so"):
+            read_measured(odd)
+    # a title above the header, and a units row in arbitrary units: said as such (the
+    # title's words were named as the columns, the angles called unitless)
+    titled = tmp_path / "titled.csv"
+    titled.write_text("Gonio run 12, 2024-05-05\n"
+                      "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,180,1,1,1\n")
+    with pytest.raises(MeasurementsError, match="line 1 .'Gonio run 12, 2024-05-05'. is read "
+                                                "as the header, and line 2 names the columns"):
+        read_measured(titled)
+    au = tmp_path / "au.csv"
+    au.write_text("theta_i,phi_i,theta_o,phi_o,r,g,b\ndeg,deg,deg,deg,a.u.,a.u.,a.u.\n"
+                  "10,0,20,180,1,1,1\n")
+    with pytest.raises(MeasurementsError, match=r"no value columns.*'r \[a.u.\]', 'g \[a.u.\]'"
+                                                r", 'b \[a.u.\]': a unit that is not 1/sr"):
+        read_measured(au)
     astm = tmp_path / "long.astm"
     astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,wavelength,BRDF\n0.1,0,0.2,0,450,0.3\n")
     with pytest.raises(MeasurementsError, match="column 'wavelength' says"):

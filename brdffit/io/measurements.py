@@ -147,11 +147,17 @@ class Measurements:
     @classmethod
     def from_angles(cls, theta_i, phi_i, theta_o, phi_o, values, sigma=None, *,
                     source: str = "<memory>", provenance: dict | None = None,
-                    rows: np.ndarray | None = None) -> Measurements:
+                    rows: np.ndarray | None = None,
+                    names: dict[str, str] | None = None) -> Measurements:
         """Samples from polar angles (radians; light ``_i``, view ``_o``) and values
         (n,) or (n, 3); ``sigma`` likewise. ``rows``: each sample's row number in its
-        file (0-based), for the messages. Raises :class:`MeasurementsError` on what no
+        file (0-based), and ``names``: each angle's name in it (``theta_s`` for
+        ``theta_o``), for the messages. Raises :class:`MeasurementsError` on what no
         fit can use (module docstring)."""
+        def named(angle: str) -> str:  # as the file names it
+            said = (names or {}).get(angle, angle)
+            return said if said.lower().startswith(angle) else f"{said} (read as {angle})"
+
         if values is None:
             raise MeasurementsError(source, "no values: (n,) or (n, 3), one per sample")
         angles = [np.asarray(a, float).ravel() for a in (theta_i, phi_i, theta_o, phi_o)]
@@ -171,7 +177,7 @@ class Measurements:
                                             f"{[a.size for a in angles]} rows")
         for name, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), angles, strict=True):
             if not np.all(np.isfinite(a)):
-                raise MeasurementsError(source, f"{name} is not finite in "
+                raise MeasurementsError(source, f"{named(name)} is not finite in "
                                                 f"{_first_rows(~np.isfinite(a), rows)}")
         for name, a in (("phi_i", angles[1]), ("phi_o", angles[3])):
             # any azimuth is within a turn of 0; one of 1e300 degrees has lost every
@@ -179,20 +185,20 @@ class Measurements:
             beyond = np.abs(a) > MAX_AZIMUTH
             if beyond.any():
                 raise MeasurementsError(
-                    source, f"{name} is beyond +-{np.degrees(MAX_AZIMUTH):.0f} degrees in "
+                    source, f"{named(name)} is beyond +-{np.degrees(MAX_AZIMUTH):.0f} degrees in "
                             f"{_first_rows(beyond, rows)}: an azimuth is within a turn or "
                             "two of 0 (angles in another unit?)")
         for name, a in (("theta_i", angles[0]), ("theta_o", angles[2])):
             below = a > np.pi / 2 + HORIZON_SLACK
             if below.any():
                 raise MeasurementsError(
-                    source, f"{name} is below the horizon (more than 90 degrees from the "
+                    source, f"{named(name)} is below the horizon (more than 90 degrees from the "
                             f"normal) in {_first_rows(below, rows)}: a reflectance sample "
                             "has both directions above the surface")
             negative = a < -NORMAL_SLACK
             if negative.any():
                 raise MeasurementsError(
-                    source, f"{name} is negative in {_first_rows(negative, rows)}: polar "
+                    source, f"{named(name)} is negative in {_first_rows(negative, rows)}: polar "
                             "angles are measured from the normal, 0 to 90 degrees (an "
                             "in-plane file's signed angle is theta = |angle|, with phi "
                             "turned by 180 degrees on the negative side)")

@@ -172,6 +172,9 @@ OTHER_FORMATS = (
     (b"\x76\x2f\x31\x01", "an OpenEXR image"), (b"\x1f\x8b", "a gzip archive"),
     (b"PK\x03\x04", "a zip archive"), (b"%PDF", "a PDF document"),
     (b"\x93NUMPY", "a numpy .npy array"), (b"\x89HDF", "an HDF5 file"),
+    # 11 bytes: the magic is held within the 12-byte header it is judged by
+    (b"MATLAB 5.0 ", "a MATLAB .mat file of version 5 (save -v7.3 writes one brdffit "
+                             "reads)"),
 )
 
 
@@ -181,11 +184,11 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
         raise MerlFormatError(source, "empty file; a MERL table is 34,992,012 bytes")
     if size < HEADER_BYTES:
         raise MerlFormatError(source, f"only {size} bytes, shorter than the 12-byte header")
+    kind = next((what for magic, what in OTHER_FORMATS if header.startswith(magic)), None)
+    if kind is not None:  # before the text test: a PDF's and a .mat file's start is text
+        raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
     if _looks_like_text(header):
         raise MerlFormatError(source, "looks like a text file, not a binary MERL table")
-    kind = next((what for magic, what in OTHER_FORMATS if header.startswith(magic)), None)
-    if kind is not None:
-        raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
     dims = [int(d) for d in np.frombuffer(header, dtype="<i4", count=3)]
     if tuple(int(d) for d in np.frombuffer(header, dtype=">i4", count=3)) == SHAPE:
         raise MerlFormatError(

@@ -20,9 +20,12 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   :mod:`brdffit.io.spectra`); optional ``sigma_r, sigma_g, sigma_b`` or ``sigma``.
   Lines starting with ``#`` are comments.
 - **HDF5** (``.h5``, ``.hdf5``): datasets ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
-  (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file),
-  ``rgb`` (n, 3), ``value`` (n,) or ``spectral`` (n, k) with ``wavelengths`` (k,, nm),
-  optional ``sigma`` (n, 3) or (n,).
+  (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file, or
+  the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``value`` (n,) or ``spectral``
+  (n, k) with ``wavelengths`` (k,, nm), optional ``sigma`` (n, 3) or (n,).
+- **MATLAB** ``.mat`` files saved with ``-v7.3`` are HDF5 and read as such, their
+  matrices as MATLAB holds them (it stores an n x 3 matrix column-major, (3, n) to
+  HDF5); ``save`` writes no attributes, so the angles' names carry their unit.
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
 one line naming the file and what was expected. A list of more samples than
@@ -53,6 +56,12 @@ from brdffit.io.measurements import (
 
 #: HDF5's file signature (its first eight bytes).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: Where HDF5's signature may stand: at 0, or after a user block of 512, 1024 or 2048
+#: bytes, as MATLAB's ``save -v7.3`` writes its own 512-byte header first (such a
+#: .mat file was read as a MERL table, or called not text).
+HDF5_OFFSETS = (0, 512, 1024, 2048)
+#: The first bytes of a MATLAB -v7.3 .mat file's user block.
+MATLAB_73 = b"MATLAB 7.3 MAT-file"
 #: UTF-16's byte-order marks (little- and big-endian), as Excel's "Unicode text" starts.
 UTF16_MARKS = (b"\xff\xfe", b"\xfe\xff")
 #: The most numbers one HDF5 dataset may hold: 10^8 float64 (800 MB), ten million
@@ -157,6 +166,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                                             "the header")
         seen[name] = k
     _refuse_long_layout(names, seen, source)
+    _unread_uncertainty(seen, names, source)
     out: dict = {}
     for name, k in seen.items():
         m = _angle_name(name)
@@ -174,6 +184,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                         f"{canonical}_rad, or put '# angles: degrees' (or radians) before "
                         "the header")
         out[canonical] = (k, _unit_scale(unit, source))
+        out.setdefault("names", {})[canonical] = names[k].strip()[:40]
     missing = [a for a in ANGLES if a not in out]
     if missing:
         # in-plane data often leaves the azimuths out, and which side a signed theta is
@@ -257,6 +268,30 @@ def _other_units(seen: dict[str, int]) -> str:
             "a reflectance in % or a radiance is not one)" if other else "")
 
 
+#: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:
+#: ``r_std``, ``std_r``, ``R_err``, ``uncertainty``. It was dropped unsaid, and the fit
+#: weighted every sample alike.
+_UNCERTAINTY = re.compile(
+    r"(?:(?:r|g|b|red|green|blue|value|brdf|y)[\s_.-]*)?"
+    r"(?:std|stdev|stddev|std_dev|sd|sigma|err|error|unc|uncertainty)"
+    r"(?:[\s_.-]*(?:r|g|b|red|green|blue|value|brdf|y))?")
+
+
+def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> None:
+    """Refuses a column of :data:`_UNCERTAINTY` that is not a sigma column read here,
+    saying what to name it."""
+    for name, k in seen.items():
+        if name.startswith("sigma") and name in ("sigma", "sigma_r", "sigma_g", "sigma_b"):
+            continue
+        if name in (*CHANNELS, *ONE_CHANNEL) or not _UNCERTAINTY.fullmatch(name):
+            continue
+        said = names[k].strip()[:40]
+        raise MeasurementsError(
+            source, f"column {said!r} looks like each value's uncertainty, which is read "
+                    "from columns sigma_r, sigma_g, sigma_b (or one sigma): their standard "
+                    "deviation, in 1/sr. Rename it so to weigh the fit by it, or drop it")
+
+
 def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | None:
     """The sigma columns' indices: none, one ``sigma`` for every channel, or (RGB
     values) ``sigma_r, sigma_g, sigma_b``. Any other mix is refused: a fit without the
@@ -288,7 +323,7 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
     return Measurements.from_angles(*angles, values[:, 0] if values.shape[1] == 1 else values,
                                     sigma, source=source, provenance=provenance,
-                                    rows=row_numbers)
+                                    rows=row_numbers, names=cols["names"])
 
 
 #: Fewer samples than this are not judged by :func:`_radians_said_to_be_degrees`.
@@ -489,8 +524,15 @@ def _text(path: Path) -> str:
     except UnicodeDecodeError:
         pass
     text = data.removeprefix(b"\xef\xbb\xbf").decode("cp1252", errors="replace")
-    if any(not line.isascii() and re.match(r"\s*[-+.\d]", line) for line in _lines(text)):
-        raise refused  # in a row of numbers: not text of a kind read here
+    row = next(((k, line) for k, line in enumerate(_lines(text))
+                if not line.isascii() and re.match(r"\s*[-+.\d]", line)), None)
+    if row is not None:  # in a row of numbers: not text of a kind read here
+        k, line = row
+        odd = next(c for c in line if not c.isascii())
+        raise MeasurementsError(str(path), f"line {k + 1} is a row of numbers with a "
+                                           f"character that is not UTF-8 ({odd!r} as "
+                                           f"Windows-1252: {line.strip()[:60]!r}): save the "
+                                           "file as UTF-8, or take the character out")
     return text
 
 
@@ -576,7 +618,10 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
 
 
 #: What a units row under the header may hold, cell by cell.
-_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|)",
+_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|"
+                        # arbitrary units: read as a row of units, so that the values'
+                        # columns are refused as not a BRDF's, not the angles' as unitless
+                        r"a\.?\s*u\.?|arb\.?(\s*units?)?|)",
                         re.IGNORECASE)
 
 
@@ -712,7 +757,11 @@ def _csv_samples(text: str, source: str) -> Measurements:
         names = [f"{n.strip()} [{u}]" if u and not _names_a_unit(n) else n
                  for n, u in zip(names, units, strict=True)]
         lines = [lines[0], *lines[2:]]
-    cols = _columns(names, source, default_unit=unit)
+    try:
+        cols = _columns(names, source, default_unit=unit)
+    except MeasurementsError:
+        _header_below(lines, source)
+        raise
     # only the columns read are numbers: a column of sample names or notes is left
     used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ()))
     comma = _decimal_comma(lines[1:], delimiter, used, source)
@@ -723,20 +772,54 @@ def _csv_samples(text: str, source: str) -> Measurements:
                        **({"decimal_comma": True} if comma else {})})
 
 
-def _hdf5_angles(f, source: str) -> dict[str, str]:
-    """Canonical angle -> the file's dataset that holds it: ``theta_i``, or any name a
-    CSV column may have (``theta_in``, ``Theta_S``, ...); two datasets for one angle
-    are refused."""
-    named: dict[str, str] = {}
+def _header_below(lines: list[tuple[int, str]], source: str) -> None:
+    """Refuses a file whose header is not its first line but a later one, before any
+    row of numbers: a title or a note above the header (``Measured 2024-05-05``) was
+    read as the header, and the message named that line's words as columns."""
+    for number, line in lines[1:20]:
+        if _a_number(line):
+            return
+        if len(re.findall(r"\b(?:theta|phi)", line, re.IGNORECASE)) >= 2:
+            raise MeasurementsError(
+                source, f"line {lines[0][0] + 1} ({lines[0][1][:60]!r}) is read as the "
+                        f"header, and line {number + 1} names the columns: make the lines "
+                        "above it comments ('# ...') or take them out")
+
+
+def _hdf5_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
+    """Canonical angle -> the file's dataset that holds it and the unit its name says:
+    ``theta_i``, any name a CSV column may have (``theta_in``, ``Theta_S``, ...), with
+    its unit (``theta_i_deg``: a MATLAB ``save`` writes no attribute); two datasets for
+    one angle are refused."""
+    named: dict[str, tuple[str, str | None]] = {}
     for key in f.keys():
-        canonical = ANGLE_ALIASES.get(key.strip().lower())
-        if canonical is None:
+        m = _angle_name(key)
+        if m is None:
             continue
+        canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
         if canonical in named:
-            raise MeasurementsError(source, f"two datasets give {canonical} ({named[canonical]!r}"
-                                            f" and {key!r})")
-        named[canonical] = key
+            raise MeasurementsError(source, f"two datasets give {canonical} "
+                                            f"({named[canonical][0]!r} and {key!r})")
+        named[canonical] = (key, m[3])
     return named
+
+
+def _written_by_matlab(f, path) -> bool:
+    """Whether the open HDF5 file ``f`` is a MATLAB -v7.3 .mat file: its user block
+    says so, or its datasets carry MATLAB's ``MATLAB_class`` attribute."""
+    if f.userblock_size:
+        with open(path, "rb") as raw:
+            if raw.read(len(MATLAB_73)) == MATLAB_73:
+                return True
+    for name in f.keys():
+        if _external_link(f, name):
+            continue  # not followed (_dataset)
+        try:
+            if "MATLAB_class" in f[name].attrs:
+                return True
+        except (KeyError, OSError, RuntimeError):  # a link to nothing: refused where read
+            continue
+    return False
 
 
 def read_hdf5(path: str | os.PathLike) -> Measurements:
@@ -747,8 +830,14 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise MeasurementsError(source, f"not a readable HDF5 file ({e})") from None
+        with open(path, "rb") as raw:
+            head = raw.read(64)
+        kind = next((what for magic, what in merl.OTHER_FORMATS if head.startswith(magic)),
+                    None)
+        raise MeasurementsError(source, f"{kind}, not HDF5 (by its first bytes)" if kind
+                                else f"not a readable HDF5 file ({e})") from None
     with f:
+        matlab = _written_by_matlab(f, path)
         named = _hdf5_angles(f, source)
         missing = [a for a in ANGLES if a not in named]
         if missing:
@@ -758,14 +847,24 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                             f"{', '.join(f.keys()) or 'none'})"
                                     + (f": a {kind} file, not a sample list"
                                        if isinstance(kind, str) else ""))
-        _declared_fit(f, [named[a] for a in ANGLES], source)
+        _declared_fit(f, [named[a][0] for a in ANGLES], source)
         raw, scales = [], []
         for canonical in ANGLES:
-            name = named[canonical]
+            name, in_name = named[canonical]
             own, shared = _dataset(f, name, source).attrs.get("units"), f.attrs.get("units")
+            if in_name is not None:
+                said = _attr_text(own, "units", source)
+                if said is not None and _unit_scale(said, source) != _unit_scale(in_name,
+                                                                                  source):
+                    raise MeasurementsError(source, f"dataset {name}: two units (its name's "
+                                                    f"{in_name!r}, its 'units' {said!r})")
+                own = in_name
             if own is None and shared is None:
-                raise MeasurementsError(source, f"dataset {name} has no 'units' attribute "
-                                                "(degrees or radians), nor has the file")
+                raise MeasurementsError(
+                    source, f"dataset {name} has no 'units' attribute (degrees or radians), "
+                            f"nor has the file; or name it {canonical}_deg or "
+                            f"{canonical}_rad" + (" (MATLAB's save writes no attributes)"
+                                                  if matlab else ""))
             stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
             if own is not None and len(stated) == 2 and not _an_angle_unit(stated[1]):
                 stated = stated[:1]  # the file's units are its values' (1/sr), not angles'
@@ -775,7 +874,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 # numbers are in would be a guess (the dataset's won, unsaid)
                 raise MeasurementsError(source, f"dataset {name}: two units (its own 'units' "
                                                 f"{stated[0]!r}, the file's {stated[1]!r})")
-            raw.append(_one_per_sample(f, name, source))
+            raw.append(_one_per_sample(f, name, source, matlab))
             scales.append(scale)
         _radians_said_to_be_degrees(raw, scales, source)
         angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
@@ -789,20 +888,24 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
             if _linked(f, kind):
                 _per_steradian(f, kind, source)
         if _linked(f, "rgb"):
-            values = _numeric(f, "rgb", source)
+            values = _numeric(f, "rgb", source, matlab)
             if values.ndim != 2 or values.shape[1] != 3:
-                raise MeasurementsError(source, f"dataset rgb has shape {values.shape}, "
-                                                "not (n, 3)")
+                stored = (values.shape[::-1] if matlab and values.ndim == 2
+                          else values.shape)
+                raise MeasurementsError(source, f"dataset rgb has shape {stored}, not "
+                                                f"(n, 3){_transposed_hint(values, matlab)}")
         elif _linked(f, "value"):
-            values = _one_per_sample(f, "value", source)
+            values = _one_per_sample(f, "value", source, matlab)
         elif _linked(f, "spectral"):
             if not _linked(f, "wavelengths"):
                 raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
                                                 "(nm)")
             if _linked(f, "sigma"):
                 raise MeasurementsError(source, "sigma of spectral samples is not read yet")
-            spectral = _numeric(f, "spectral", source)
-            wavelengths = _numeric(f, "wavelengths", source)
+            spectral = _numeric(f, "spectral", source, matlab)
+            wavelengths = _numeric(f, "wavelengths", source, matlab)
+            if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
+                wavelengths = wavelengths.ravel()
             if (spectral.ndim != 2 or wavelengths.ndim != 1
                     or spectral.shape[1] != wavelengths.size):
                 raise MeasurementsError(
@@ -812,12 +915,15 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         else:
             raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
                                             "spectral (n, k) with wavelengths (k,)")
-        sigma = _numeric(f, "sigma", source) if _linked(f, "sigma") else None
+        sigma = _numeric(f, "sigma", source, matlab) if _linked(f, "sigma") else None
+        if sigma is not None and sigma.ndim == 2 and sigma.shape[1] == 1:
+            sigma = sigma.ravel()
     if provenance.get("channels") == 1 and not (
             values.ndim == 1 or np.all(values == values[:, :1])):
         del provenance["channels"]  # said of grey values: these are coloured
     return Measurements.from_angles(*angles, values, sigma, source=source,
-                                    provenance=provenance)
+                                    provenance=provenance,
+                                    names={a: named[a][0] for a in ANGLES})
 
 
 #: The datasets of an HDF5 sample list that hold one row per sample, besides its angles.
@@ -853,7 +959,8 @@ def _declared_samples(f, angles: list[str]) -> int:
         except (KeyError, OSError, RuntimeError):  # RuntimeError: a soft link loop
             continue
         if isinstance(d, h5py.Dataset) and d.shape:
-            most = max(most, int(d.shape[0]))
+            # any axis: a column-major writer (MATLAB) stores n samples as (3, n)
+            most = max(most, max(int(k) for k in d.shape))
     return most
 
 
@@ -879,7 +986,7 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
             named = _hdf5_angles(f, str(path))
             if any(a not in named for a in ANGLES):
                 return None
-            return _declared_samples(f, [named[a] for a in ANGLES])
+            return _declared_samples(f, [named[a][0] for a in ANGLES])
     except (OSError, MeasurementsError):
         return None
 
@@ -963,9 +1070,11 @@ def _unpacked(d, a: np.ndarray, name: str, source: str) -> np.ndarray:
     return a if (scale, offset) == (1.0, 0.0) else a * scale + offset
 
 
-def _numeric(f, name: str, source: str) -> np.ndarray:
+def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
     """Dataset ``name`` of the open HDF5 file ``f`` as float64; refused, with its
-    name, where it is a group or holds no numbers (strings, compounds)."""
+    name, where it is a group or holds no numbers (strings, compounds). A matrix of a
+    MATLAB file (``matlab``) is transposed back to MATLAB's own rows: MATLAB writes
+    column-major, so its n x 3 matrix is a (3, n) dataset."""
     import h5py
 
     d = _dataset(f, name, source)
@@ -980,7 +1089,8 @@ def _numeric(f, name: str, source: str) -> np.ndarray:
                                         f"{d.shape}): more than a sample list read here "
                                         f"({MAX_NUMBERS:,}); bin or thin it first")
     try:
-        return _unpacked(d, np.asarray(d, float), name, source)
+        a = _unpacked(d, np.asarray(d, float), name, source)
+        return a.T if matlab and a.ndim == 2 else a
     except MemoryError:
         raise MeasurementsError(source, f"dataset {name} ({d.size:,} numbers) does not fit "
                                         "in memory") from None
@@ -1009,21 +1119,39 @@ def _per_steradian(f, name: str, source: str) -> None:
                                     "to 1/sr or drop the attribute")
 
 
-def _one_per_sample(f, name: str, source: str) -> np.ndarray:
-    """Dataset ``name``, one number per sample: (n,), or (n, 1). Any other shape is
-    refused with it: a (2, 250) angle array flattened would pair one sample's angle
-    with another's values, silently."""
-    a = _numeric(f, name, source)
-    if a.ndim == 1 or (a.ndim == 2 and a.shape[1] == 1):
+def _one_per_sample(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
+    """Dataset ``name``, one number per sample: (n,), (n, 1) or (1, n) (a column or a
+    row, as MATLAB, R or Fortran write a vector). Any other shape is refused with it: a
+    (2, 250) angle array flattened would pair one sample's angle with another's
+    values, silently."""
+    a = _numeric(f, name, source, matlab)
+    if a.ndim == 1 or (a.ndim == 2 and 1 in a.shape):
         return a.ravel()
-    raise MeasurementsError(source, f"dataset {name} has shape {a.shape}: expected (n,), one "
+    stored = a.shape[::-1] if matlab and a.ndim == 2 else a.shape
+    raise MeasurementsError(source, f"dataset {name} has shape {stored}: expected (n,), one "
                                     "number per sample")
+
+
+def _transposed_hint(values: np.ndarray, matlab: bool) -> str:
+    """What to do with an RGB dataset stored the other way round: (3, n), as a
+    column-major writer (Fortran, R, Julia, MATLAB's own h5write) stores an n x 3
+    matrix. Not guessed: a (3, 3) dataset reads either way."""
+    if not matlab and values.ndim == 2 and values.shape[0] == 3:
+        return ("; (3, n) is how a column-major writer (MATLAB's h5write, R, Julia, "
+                "Fortran) stores an n x 3 matrix: write its transpose")
+    return ""
+
+
+def _hdf5(head: bytes) -> bool:
+    """Whether a file's first bytes (at least 2,056 of them) are HDF5's: its
+    signature at 0 or after a user block (:data:`HDF5_OFFSETS`)."""
+    return any(head[k:k + len(HDF5_SIGNATURE)] == HDF5_SIGNATURE for k in HDF5_OFFSETS)
 
 
 def _by_content(path: Path) -> Callable:
     with open(path, "rb") as f:
         head = f.read(4096)
-    if head.startswith(HDF5_SIGNATURE):
+    if _hdf5(head):
         return read_hdf5
     # binary: the MERL reader says what is wrong with it
     return read_text_samples if _looks_like_text(head) else merl.read
@@ -1047,7 +1175,7 @@ def read_text_samples(path: str | os.PathLike) -> Measurements:
 #: suffix -> reader; a MERL table is read as a table.
 READERS: dict[str, Callable] = {
     ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
-    ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5,
+    ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5, ".mat": read_hdf5,
 }
 
 
@@ -1060,10 +1188,11 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
         reader = _by_content(path)
     else:
         with open(path, "rb") as f:  # a file named as another layout: read as what it is
-            head = f.read(merl.HEADER_BYTES)
-        if head.startswith(HDF5_SIGNATURE):
+            head = f.read(HDF5_OFFSETS[-1] + len(HDF5_SIGNATURE))
+        if _hdf5(head):
             return read_hdf5
-        if head == np.asarray(merl.SHAPE, "<i4").tobytes():  # a MERL table named .csv
+        if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
+            # a MERL table named .csv
             return merl.read
     return reader
 
