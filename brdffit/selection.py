@@ -494,7 +494,8 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         chosen_fit, selection=selection.summary(),
         quality=with_measured_gains(chosen_fit.quality,
                                     _render_gains(chosen, ok, scene is not None and (
-                                        of_the_whole_sphere(chosen_fit.quality)))))
+                                        of_the_whole_sphere(chosen_fit.quality))),
+                                    loss=chosen_fit.loss))
     return selection
 
 

@@ -248,13 +248,14 @@ def test_next_names_what_nothing_here_can_fit():
     narrow = quality.next_steps(_look(), model=ggx, params={"alpha": 0.004}, loss="render",
                                 converged=False, rel_peak_error=0.8)
     assert [s["try"].split(":")[0] for s in narrow] == [
-        "more starts and steps (--starts 8 --max-steps 400)", "--model ggx2", "nothing here",
-        "--model auto --candidates gltf"]
+        "more starts and steps (--starts 8 --max-steps 400)", "--model ggx2 --loss render",
+        "nothing here", "--model auto --candidates gltf --loss render"]
     assert "averages a lobe" in narrow[-2]["why"]  # already the render loss: not advised
     # a render-loss lobe narrowed on a table whose peak it meets: the table is not blamed
     met = quality.next_steps(_look(), model=ggx, params={"alpha": 0.004}, loss="render",
                              converged=True, rel_peak_error=0.1)
-    assert [s["try"] for s in met] == ["--model ggx2", "--model auto --candidates gltf"]
+    assert [s["try"] for s in met] == ["--model ggx2 --loss render",
+                                       "--model auto --candidates gltf --loss render"]
 
 
 def test_a_colour_that_turns_in_the_table_is_named_where_the_fit_misses_the_key():
@@ -304,7 +305,20 @@ def test_a_lobe_fitted_to_another_loss_is_told_the_render_loss_first():
                                          "--model auto --candidates gltf --loss render"]
     rendered = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="render",
                                   converged=True, rel_peak_error=0.1)
-    assert [s["try"] for s in rendered] == ["--model ggx2", "--model auto --candidates gltf"]
+    # each step to another model keeps the fit's own loss: taken as a whole command
+    # without it, chrome's ggx2 fell from 24.4 dB to 18.4 (the log loss)
+    assert [s["try"] for s in rendered] == ["--model ggx2 --loss render",
+                                            "--model auto --candidates gltf --loss render"]
+    cube = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="cube_root",
+                              converged=True, rel_peak_error=0.1)
+    assert [s["try"] for s in cube] == ["--loss render", "--model ggx2 --loss cube_root",
+                                        "--model auto --candidates gltf --loss render"]
+    # auto's measured gains too, once each (a measured step replaces the same guess)
+    again = quality.with_measured_gains({"verdict": "poor", "next": rendered},
+                                        [("--model ggx2", "m", 1.5, 12)], loss="render")
+    assert [s["try"] for s in again["next"]] == [
+        "--model ggx2 --loss render", "--model auto --candidates gltf --loss render"]
+    assert again["next"][0]["gain_db"] == 1.5
     # a narrow lobe under the log loss: the render loss first, not "nothing here" (chrome's
     # ggx, alpha 0.007, reads good as ggx2 under the render loss, its lobe as narrow)
     chrome = quality.next_steps(_look(), model=ggx, params={"alpha": 0.007}, loss="log",
@@ -349,7 +363,7 @@ def test_a_verdict_that_is_not_good_never_has_an_empty_next():
     ggx2 = models.get("ggx2")
     own = quality.next_steps(_look(), model=ggx2, params={"alpha1": 0.2, "alpha2": 0.5},
                              loss="render", converged=True)
-    assert [s["try"] for s in own] == ["--model auto --candidates gltf"]
+    assert [s["try"] for s in own] == ["--model auto --candidates gltf --loss render"]
     sheen = quality.next_steps(_look(), model=models.get("gltf_sheen"),
                                params={"roughness": 0.3}, loss="render", converged=True)
     assert [s["try"].split(":")[0] for s in sheen] == ["nothing here"]
@@ -357,7 +371,8 @@ def test_a_verdict_that_is_not_good_never_has_an_empty_next():
     # coat is not a renderer's (chrome: gltf_clearcoat 24.4 dB, ggx2 30.2, good)
     coat = quality.next_steps(_look(), model=models.get("gltf_clearcoat"),
                               params={"roughness": 0.3}, loss="render", converged=True)
-    assert [s["try"] for s in coat] == ["--model ggx2"] and "30.2" in coat[0]["why"]
+    assert [s["try"] for s in coat] == ["--model ggx2 --loss render"]
+    assert "30.2" in coat[0]["why"]
     look = {"verdict": "poor", "next": [{"try": "--model ggx2", "why": "g", "gain_db": None}]}
     got = quality.with_measured_gains(look, [("--model ggx2", "m", -0.4),
                                              ("--model ggx", "m", -1.0)])
@@ -365,9 +380,9 @@ def test_a_verdict_that_is_not_good_never_has_an_empty_next():
                                                "--model auto --candidates gltf"]
     # as next_steps now ends a fit without layers: the layered step is kept, once
     own_look = {"verdict": "poor", "next": own}
-    got = quality.with_measured_gains(own_look, [("--model ggx", "m", -1.0)])
+    got = quality.with_measured_gains(own_look, [("--model ggx", "m", -1.0)], loss="render")
     assert [s["try"] for s in got["next"]] == ["nothing here: no candidate rendered closer",
-                                               "--model auto --candidates gltf"]
+                                               "--model auto --candidates gltf --loss render"]
     layered = quality.with_measured_gains(look, [("--model gltf_sheen", "m", -0.4),
                                                  ("--model ggx2", "m", -0.1)])
     assert [s["try"] for s in layered["next"]] == ["nothing here: no candidate rendered closer"]

@@ -386,7 +386,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
     if not steps:
         steps = _last_steps(model)
     return with_measured_gains({"verdict": look["verdict"], "basis": look.get("basis"),
-                                "next": steps}, gains or [])["next"]
+                                "next": steps}, gains or [], loss=loss)["next"]
 
 
 #: A sample list's words for what :func:`next_steps` says of a table.
@@ -417,8 +417,8 @@ def _layered(name: str) -> bool:
     """Whether the model ``name`` has layers (False for a name that is not a model's)."""
     from brdffit import models
 
-    try:
-        return bool(models.get(name.strip()).layers)
+    try:  # the model's name: the step's first word (a loss may follow it)
+        return bool(models.get((name.split() or [""])[0]).layers)
     except (KeyError, ValueError):
         return False
 
@@ -531,32 +531,60 @@ def _worth_a_step(gains: list) -> list[tuple[str, str, float]]:
     return [s[:3] for s in sorted(kept, key=lambda s: -s[2])]
 
 
-def with_measured_gains(look: dict | None, gains: list) -> dict | None:
+def with_measured_gains(look: dict | None, gains: list, loss: str | None = None) -> dict | None:
     """``look`` (a quality block) with ``gains`` (``[(try, why, gain_db), ...]``, or
     with each model's size and whether it reads better: :func:`_worth_a_step`;
     measured on the same table) first in its
     ``next``, largest first: those :func:`_worth_a_step` keeps. A step that was
     measured replaces the guess of the same ``try``, and one measured without a gain
     worth a step is dropped: ``auto`` does not advise a candidate it saw render no
-    closer, or no closer than a cheaper one. A good verdict keeps an empty ``next``."""
+    closer, or no closer than a cheaper one. A good verdict keeps an empty ``next``.
+    ``loss``: the fit's own, which each step of another model then names
+    (:func:`_with_the_loss`)."""
     if look is None or look.get("verdict") == "good":
         return look
+    own = _own_loss(loss)
     if not gains:
-        return {**look, "next": _worded_for(look.get("basis"), look.get("next", []))}
+        return {**look, "next": _with_the_loss(
+            _worded_for(look.get("basis"), look.get("next", [])), own)}
     measured = [{"try": t, "why": w, "gain_db": round(g, 2)} for t, w, g in _worth_a_step(gains)]
-    names = {t for t, *_ in gains}
+
+    def bare(t: str) -> str:  # a step as measured: without the loss this fit names
+        return t.removesuffix(own) if own else t
+
+    names = {bare(t) for t, *_ in gains}
     layered = any(_layered(t.removeprefix("--model ")) for t in names)
     # a ranking with layered candidates measured them: theirs is no guess to repeat
-    rest = [s for s in look.get("next", []) if s["try"] not in names
+    rest = [s for s in look.get("next", []) if bare(s["try"]) not in names
             and not (layered and s["try"].startswith(_LAYERS["try"]))]
-    if not measured and all(s["try"] == _LAYERS["try"] for s in rest):
+    if not measured and all(bare(s["try"]) == _LAYERS["try"] for s in rest):
         # every guess was measured, and none rendered closer
         rest = [{"try": "nothing here: no candidate rendered closer",
                  "why": "auto fitted each of its candidates to this table and none renders "
                         f"closer than this fit by {ALIKE_DB:g} dB or more; the verdict's "
                         "reason says what is off",
                  "gain_db": None}, *([] if layered else [dict(_LAYERS)])]
-    return {**look, "next": _worded_for(look.get("basis"), measured + rest)}
+    return {**look, "next": _with_the_loss(_worded_for(look.get("basis"), measured + rest),
+                                           own)}
+
+
+def _own_loss(loss: str | None) -> str:
+    """`` --loss NAME`` of a fit's own loss where it is not the default, else ""."""
+    from brdffit.fitting.options import DEFAULT_LOSS  # here: the API's front imports this
+
+    return f" --loss {loss}" if loss and loss != DEFAULT_LOSS else ""
+
+
+def _with_the_loss(steps: list[dict], own: str) -> list[dict]:
+    """Each step to another model (``--model ggx2``) with the fit's own loss (``own``,
+    :func:`_own_loss`) where it names none: a step is what to add to the fit's
+    command, but one taken as a whole command left a render-loss fit's loss behind
+    (chrome's ggx2: 24.4 dB under the render loss, 18.4 under the default log loss)."""
+    if not own:
+        return steps
+    return [{**s, "try": s["try"] + own}
+            if s["try"].startswith("--model ") and "--loss" not in s["try"] else s
+            for s in steps]
 
 
 def describe(look: dict | None, indent: str = "  ") -> list[str]:
