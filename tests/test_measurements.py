@@ -330,6 +330,32 @@ def test_a_matlab_v73_file_reads_as_matlab_holds_it(tmp_path):
             read_measured(path)
 
 
+def test_hdf5_values_may_have_the_names_a_csv_column_has(tmp_path):
+    """``RGB``, ``BRDF``, ``Value``: the names a CSV's value columns may have, in any
+    case (a MATLAB variable ``BRDF`` was "no values"); a ``brdf`` of (n, 3) is RGB; two
+    datasets of one kind are refused."""
+    s = _samples(30)
+    want = read_measured(_write_all(tmp_path, s)["hdf5"])
+    for name, data, rgb in (("RGB", s[4], s[4]), ("BRDF", s[4], s[4]),
+                            ("Value", s[4][:, 1], np.repeat(s[4][:, 1:2], 3, 1)),
+                            ("y", s[4][:, 2:3], np.repeat(s[4][:, 2:3], 3, 1))):
+        other = tmp_path / f"{name}.h5"
+        with h5py.File(tmp_path / "s.h5", "r") as src, h5py.File(other, "w") as f:
+            for a in ("theta_i", "phi_i", "theta_o", "phi_o"):
+                f[a] = src[a][()]
+                f[a].attrs.update(src[a].attrs)
+            f[name] = data
+        got = read_measured(other)
+        np.testing.assert_array_equal(got.rgb, rgb)
+        np.testing.assert_array_equal(got.wo, want.wo)
+        assert declared_samples(other) == 30
+    with h5py.File(other, "a") as f:
+        f["brdf"] = s[4][:, 0]
+    with pytest.raises(MeasurementsError, match="two datasets give value .'brdf' and 'y'.: "
+                                                "keep one"):
+        read_measured(other)
+
+
 def _h5(path, n=4, **datasets):
     with h5py.File(path, "w") as f:
         for name in ("theta_i", "phi_i", "theta_o", "phi_o"):

@@ -21,8 +21,9 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   Lines starting with ``#`` are comments.
 - **HDF5** (``.h5``, ``.hdf5``): datasets ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
   (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file, or
-  the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``value`` (n,) or ``spectral``
-  (n, k) with ``wavelengths`` (k,, nm), optional ``sigma`` (n, 3) or (n,).
+  the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``value`` (n,; also ``brdf``,
+  ``y``; any case) or ``spectral`` (n, k) with ``wavelengths`` (k,, nm), optional
+  ``sigma`` (n, 3) or (n,).
 - **MATLAB** ``.mat`` files saved with ``-v7.3`` are HDF5 and read as such, their
   matrices as MATLAB holds them (it stores an n x 3 matrix column-major, (3, n) to
   HDF5); ``save`` writes no attributes, so the angles' names carry their unit.
@@ -880,42 +881,46 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
         provenance = _stored_provenance(f.attrs.get("provenance"))
         provenance.update(azimuths_within(raw, scales))
-        kinds = [k for k in ("rgb", "value", "spectral") if _linked(f, k)]
+        v = _value_names(f, source)
+        kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v]
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
                                             "than one kind, keep one")
-        for kind in ("rgb", "value", "spectral", "sigma"):
-            if _linked(f, kind):
-                _per_steradian(f, kind, source)
-        if _linked(f, "rgb"):
-            values = _numeric(f, "rgb", source, matlab)
+        for name in v.values():
+            if name != v.get("wavelengths"):
+                _per_steradian(f, name, source)
+        if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
+            v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
+        if "rgb" in v:
+            values = _numeric(f, v["rgb"], source, matlab)
             if values.ndim != 2 or values.shape[1] != 3:
                 stored = (values.shape[::-1] if matlab and values.ndim == 2
                           else values.shape)
-                raise MeasurementsError(source, f"dataset rgb has shape {stored}, not "
+                raise MeasurementsError(source, f"dataset {v['rgb']} has shape {stored}, not "
                                                 f"(n, 3){_transposed_hint(values, matlab)}")
-        elif _linked(f, "value"):
-            values = _one_per_sample(f, "value", source, matlab)
-        elif _linked(f, "spectral"):
-            if not _linked(f, "wavelengths"):
-                raise MeasurementsError(source, "dataset spectral needs a dataset wavelengths "
-                                                "(nm)")
-            if _linked(f, "sigma"):
+        elif "value" in v:
+            values = _one_per_sample(f, v["value"], source, matlab)
+        elif "spectral" in v:
+            if "wavelengths" not in v:
+                raise MeasurementsError(source, f"dataset {v['spectral']} needs a dataset "
+                                                "wavelengths (nm)")
+            if "sigma" in v:
                 raise MeasurementsError(source, "sigma of spectral samples is not read yet")
-            spectral = _numeric(f, "spectral", source, matlab)
-            wavelengths = _numeric(f, "wavelengths", source, matlab)
+            spectral = _numeric(f, v["spectral"], source, matlab)
+            wavelengths = _numeric(f, v["wavelengths"], source, matlab)
             if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
                 wavelengths = wavelengths.ravel()
             if (spectral.ndim != 2 or wavelengths.ndim != 1
                     or spectral.shape[1] != wavelengths.size):
                 raise MeasurementsError(
-                    source, f"dataset spectral has shape {spectral.shape} and wavelengths "
-                            f"{wavelengths.shape}: expected (n, k) and (k,)")
+                    source, f"dataset {v['spectral']} has shape {spectral.shape} and "
+                            f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
             values, provenance["spectral"] = _projected(spectral, wavelengths, source)
         else:
-            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,), or "
-                                            "spectral (n, k) with wavelengths (k,)")
-        sigma = _numeric(f, "sigma", source, matlab) if _linked(f, "sigma") else None
+            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,; also "
+                                            "brdf or y), or spectral (n, k) with wavelengths "
+                                            "(k,)")
+        sigma = _numeric(f, v["sigma"], source, matlab) if "sigma" in v else None
         if sigma is not None and sigma.ndim == 2 and sigma.shape[1] == 1:
             sigma = sigma.ravel()
     if provenance.get("channels") == 1 and not (
@@ -926,8 +931,42 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                                     names={a: named[a][0] for a in ANGLES})
 
 
-#: The datasets of an HDF5 sample list that hold one row per sample, besides its angles.
+#: The datasets of an HDF5 sample list besides its angles: kind -> the names it may have
+#: (case does not matter), as a CSV's columns may (``value``, ``brdf``, ``y``).
+_VALUE_DATASETS = {"rgb": ("rgb",), "value": ONE_CHANNEL, "spectral": ("spectral",),
+                   "sigma": ("sigma",), "wavelengths": ("wavelengths",)}
+#: Those that hold one row per sample.
 _PER_SAMPLE = ("rgb", "value", "spectral", "sigma")
+
+
+def _value_names(f, source: str) -> dict[str, str]:
+    """Kind (:data:`_VALUE_DATASETS`) -> the name of the open HDF5 file ``f``'s dataset
+    of it (``RGB``, ``BRDF``: a MATLAB variable's case was "no values"); two for one
+    kind are refused."""
+    out: dict[str, str] = {}
+    for key in f.keys():
+        kind = next((k for k, names in _VALUE_DATASETS.items()
+                     if key.strip().lower() in names), None)
+        if kind is None:
+            continue
+        if kind in out:
+            raise MeasurementsError(source, f"two datasets give {kind} ({out[kind]!r} and "
+                                            f"{key!r}): keep one")
+        out[kind] = key
+    return out
+
+
+def _stored_shape(f, name: str, matlab: bool) -> tuple:
+    """Dataset ``name``'s shape as it is read (a MATLAB matrix's transposed), from its
+    declaration alone; () where it is no dataset (refused where it is read)."""
+    import h5py
+
+    try:
+        d = f[name]
+    except (KeyError, OSError, RuntimeError):
+        return ()
+    shape = tuple(d.shape or ()) if isinstance(d, h5py.Dataset) else ()
+    return shape[::-1] if matlab and len(shape) == 2 else shape
 
 
 def _linked(f, name: str) -> bool:
@@ -951,7 +990,11 @@ def _declared_samples(f, angles: list[str]) -> int:
     import h5py
 
     most = 0
-    for name in (*angles, *(k for k in _PER_SAMPLE if _linked(f, k))):
+    try:
+        values = _value_names(f, "")
+    except MeasurementsError:  # two of one kind: refused where they are read
+        values = {}
+    for name in (*angles, *(values[k] for k in _PER_SAMPLE if k in values)):
         if _external_link(f, name):
             continue  # not followed: refused where it is read (_dataset)
         try:
