@@ -1057,8 +1057,12 @@ def _all_poor_warning(ok: list[dict], loss: str = "render") -> str:
     if not ok or any(row.get("verdict") != "poor" for row in ok):
         return ""
     top = max(ok, key=_psnr)
+    # the eight lights named: the chosen fit's verdict quotes its two-light sphere, and
+    # black-obsidian read "the best render ggx2, 14.0 dB" above "sphere render 14.5 dB"
+    lights = (" under the render loss's eight lights" if top.get("views_psnr_db") is not None
+              else "")
     said = (f" Warning: every candidate looks poor beside the measurement (the best render "
-            f"{top['model']}, {_psnr(top):.1f} dB)")
+            f"{top['model']}, {_psnr(top):.1f} dB{lights})")
     if loss != "render":
         return (f"{said}, each fitted to the {loss} loss, not to the light a picture "
                 "shows: the render loss (--loss render) fits the look; the chosen fit's "
