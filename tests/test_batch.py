@@ -995,7 +995,7 @@ def test_a_table_rewritten_during_a_cluster_batch_keeps_every_model(tmp_path, mo
     monkeypatch.setattr(job, "fit_table", rewriting_fit_table)
     out = tmp_path / "r.h5"
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
-                      host="127.0.0.1", dashboard_address=None) as c:
+                      host="127.0.0.1", dashboard_address="127.0.0.1:0") as c:
         summary = run_batch([str(table)], FitRequest(models_, opts), out,
                             scheduler=c.scheduler_address, progress=False, timeout_s=600)
         assert (tmp_path / "rewritten").exists()
@@ -1039,7 +1039,7 @@ def test_a_table_rewritten_at_every_read_fails_its_fits_saying_so(tmp_path, monk
 
     monkeypatch.setattr(job, "fit_table", rewriting_fit_table)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
-                      host="127.0.0.1", dashboard_address=None) as c:
+                      host="127.0.0.1", dashboard_address="127.0.0.1:0") as c:
         summary = run_batch([str(table)], FitRequest(("lambert", "phong"), opts),
                             tmp_path / "r.h5", scheduler=c.scheduler_address,
                             progress=False, timeout_s=600)
