@@ -248,7 +248,7 @@ def test_next_names_what_nothing_here_can_fit():
     narrow = quality.next_steps(_look(), model=ggx, params={"alpha": 0.004}, loss="render",
                                 converged=False, rel_peak_error=0.8)
     assert [s["try"].split(":")[0] for s in narrow] == [
-        "more starts and steps (--starts 8 --max-steps 400)", "--model ggx2 --loss render",
+        "--starts 8 --max-steps 400", "--model ggx2 --loss render",
         "nothing here", "--model auto --candidates gltf --loss render"]
     assert "averages a lobe" in narrow[-2]["why"]  # already the render loss: not advised
     # a render-loss lobe narrowed on a table whose peak it meets: the table is not blamed

@@ -109,7 +109,7 @@ def test_step_limit_is_reported_truthfully(tables):
     assert not r.converged and r.result == "nonlinear_max_steps_reached"
     assert _finite(r)
     # whatever the verdict (a good look is no optimum), the first next step says so
-    assert r.quality["next"][0]["try"].startswith("more starts and steps"), r.quality
+    assert r.quality["next"][0]["try"] == "--starts 8 --max-steps 400", r.quality
 
 
 def test_a_table_in_other_units_is_fitted_as_given_and_said(tables):

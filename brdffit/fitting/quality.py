@@ -238,9 +238,12 @@ VERDICTS = ("good", "visible", "poor")
 
 
 #: The next step of a fit whose solve stopped before its optimality test held.
-_CONVERGE = {"try": "more starts and steps (--starts 8 --max-steps 400)",
-             "why": "the solve stopped before its optimality test held: the figures are "
-                    "those of a point short of the optimum", "gain_db": None}
+#: The step of a solve that did not converge: flags, as every step to run is (it read
+#: "more starts and steps (--starts 8 --max-steps 400)", which a script had to parse).
+_CONVERGE = {"try": "--starts 8 --max-steps 400",
+             "why": "more starts and steps, as the solve stopped before its optimality "
+                    "test held: the figures are those of a point short of the optimum",
+             "gain_db": None}
 
 
 #: A lobe this narrow (GGX or Beckmann alpha, in radians of slope) is resolved by
