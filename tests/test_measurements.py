@@ -354,6 +354,24 @@ def test_hdf5_values_may_have_the_names_a_csv_column_has(tmp_path):
     with pytest.raises(MeasurementsError, match="two datasets give value .'brdf' and 'y'.: "
                                                 "keep one"):
         read_measured(other)
+    # r, g and b as datasets of their own (MATLAB variables R, G, B), as a CSV's columns
+    channels = tmp_path / "channels.h5"
+    with h5py.File(tmp_path / "s.h5", "r") as src, h5py.File(channels, "w") as f:
+        for a in ("theta_i", "phi_i", "theta_o", "phi_o"):
+            f[a] = src[a][()]
+            f[a].attrs.update(src[a].attrs)
+        for k, name in enumerate(("R", "Green", "b")):
+            f[name] = s[4][:, k]
+    np.testing.assert_array_equal(read_measured(channels).rgb, want.rgb)
+    with h5py.File(channels, "a") as f:
+        del f["b"]
+    with pytest.raises(MeasurementsError, match="datasets R, Green: only 2 of r, g, b"):
+        read_measured(channels)
+    with h5py.File(channels, "a") as f:
+        f["b"], f["rgb"] = s[4][:, 2], s[4]
+    with pytest.raises(MeasurementsError, match="datasets rgb and R, Green, b: values of more "
+                                                "than one kind"):
+        read_measured(channels)
 
 
 def _h5(path, n=4, **datasets):

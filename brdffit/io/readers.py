@@ -21,9 +21,9 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   Lines starting with ``#`` are comments.
 - **HDF5** (``.h5``, ``.hdf5``): datasets ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
   (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file, or
-  the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``value`` (n,; also ``brdf``,
-  ``y``; any case) or ``spectral`` (n, k) with ``wavelengths`` (k,, nm), optional
-  ``sigma`` (n, 3) or (n,).
+  the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``r``, ``g`` and ``b`` (n,)
+  each, ``value`` (n,; also ``brdf``, ``y``), as a CSV's columns in any case, or
+  ``spectral`` (n, k) with ``wavelengths`` (k,, nm); optional ``sigma`` (n, 3) or (n,).
 - **MATLAB** ``.mat`` files saved with ``-v7.3`` are HDF5 and read as such, their
   matrices as MATLAB holds them (it stores an n x 3 matrix column-major, (3, n) to
   HDF5); ``save`` writes no attributes, so the angles' names carry their unit.
@@ -882,7 +882,9 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         provenance = _stored_provenance(f.attrs.get("provenance"))
         provenance.update(azimuths_within(raw, scales))
         v = _value_names(f, source)
-        kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v]
+        channels = [v[c] for c in CHANNELS if c in v]
+        kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
+            [", ".join(channels)] if channels else [])
         if len(kinds) > 1:
             raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
                                             "than one kind, keep one")
@@ -891,7 +893,13 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                 _per_steradian(f, name, source)
         if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
             v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
-        if "rgb" in v:
+        if channels:  # r, g and b each a dataset of its own, as a CSV's columns
+            if len(channels) < len(CHANNELS):
+                raise MeasurementsError(source, f"datasets {', '.join(channels)}: only "
+                                                f"{len(channels)} of r, g, b")
+            values = np.column_stack([_one_per_sample(f, name, source, matlab)
+                                      for name in channels])
+        elif "rgb" in v:
             values = _numeric(f, v["rgb"], source, matlab)
             if values.ndim != 2 or values.shape[1] != 3:
                 stored = (values.shape[::-1] if matlab and values.ndim == 2
@@ -917,9 +925,9 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
                             f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
             values, provenance["spectral"] = _projected(spectral, wavelengths, source)
         else:
-            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), value (n,; also "
-                                            "brdf or y), or spectral (n, k) with wavelengths "
-                                            "(k,)")
+            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
+                                            "(n,) each, value (n,; also brdf or y), or "
+                                            "spectral (n, k) with wavelengths (k,)")
         sigma = _numeric(f, v["sigma"], source, matlab) if "sigma" in v else None
         if sigma is not None and sigma.ndim == 2 and sigma.shape[1] == 1:
             sigma = sigma.ravel()
@@ -934,9 +942,11 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
 #: The datasets of an HDF5 sample list besides its angles: kind -> the names it may have
 #: (case does not matter), as a CSV's columns may (``value``, ``brdf``, ``y``).
 _VALUE_DATASETS = {"rgb": ("rgb",), "value": ONE_CHANNEL, "spectral": ("spectral",),
-                   "sigma": ("sigma",), "wavelengths": ("wavelengths",)}
+                   "sigma": ("sigma",), "wavelengths": ("wavelengths",),
+                   **{c: (c, *(w for w, cc in _CHANNEL_WORDS.items() if cc == c))
+                      for c in CHANNELS}}
 #: Those that hold one row per sample.
-_PER_SAMPLE = ("rgb", "value", "spectral", "sigma")
+_PER_SAMPLE = ("rgb", "value", "spectral", "sigma", *CHANNELS)
 
 
 def _value_names(f, source: str) -> dict[str, str]:
