@@ -237,7 +237,6 @@ def _grazing_words(word: str, psnr: float | None, graze: dict | None, basis: str
 VERDICTS = ("good", "visible", "poor")
 
 
-#: The next step of a fit whose solve stopped before its optimality test held.
 #: The step of a solve that did not converge: flags, as every step to run is (it read
 #: "more starts and steps (--starts 8 --max-steps 400)", which a script had to parse).
 _CONVERGE = {"try": "--starts 8 --max-steps 400",
@@ -420,8 +419,8 @@ def _layered(name: str) -> bool:
     """Whether the model ``name`` has layers (False for a name that is not a model's)."""
     from brdffit import models
 
-    try:  # the model's name: the step's first word (a loss may follow it)
-        return bool(models.get((name.split() or [""])[0]).layers)
+    try:
+        return bool(models.get(name.strip()).layers)
     except (KeyError, ValueError):
         return False
 
@@ -552,10 +551,10 @@ def with_measured_gains(look: dict | None, gains: list, loss: str | None = None)
             _worded_for(look.get("basis"), look.get("next", [])), own)}
     measured = [{"try": t, "why": w, "gain_db": round(g, 2)} for t, w, g in _worth_a_step(gains)]
 
-    def bare(t: str) -> str:  # a step as measured: without the loss this fit names
+    def bare(t: str) -> str:  # a guess as auto measures it: without the loss it names
         return t.removesuffix(own) if own else t
 
-    names = {bare(t) for t, *_ in gains}
+    names = {t for t, *_ in gains}
     layered = any(_layered(t.removeprefix("--model ")) for t in names)
     # a ranking with layered candidates measured them: theirs is no guess to repeat
     rest = [s for s in look.get("next", []) if bare(s["try"]) not in names

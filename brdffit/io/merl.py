@@ -178,13 +178,19 @@ OTHER_FORMATS = (
 )
 
 
+def other_format(head: bytes) -> str | None:
+    """What a file of these first bytes is, where :data:`OTHER_FORMATS` knows it (a
+    PNG image, a zip archive, ...), else None."""
+    return next((what for magic, what in OTHER_FORMATS if head.startswith(magic)), None)
+
+
 def _check_layout(header: bytes, size: int, source: str) -> None:
     """Validate header and total size; raises before anything large is allocated."""
     if size == 0:
         raise MerlFormatError(source, "empty file; a MERL table is 34,992,012 bytes")
     if size < HEADER_BYTES:
         raise MerlFormatError(source, f"only {size} bytes, shorter than the 12-byte header")
-    kind = next((what for magic, what in OTHER_FORMATS if header.startswith(magic)), None)
+    kind = other_format(header)
     if kind is not None:  # before the text test: a PDF's and a .mat file's start is text
         raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
     if _looks_like_text(header):

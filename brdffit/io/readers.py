@@ -272,20 +272,20 @@ def _other_units(seen: dict[str, int]) -> str:
 #: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:
 #: ``r_std``, ``std_r``, ``R_err``, ``uncertainty``. It was dropped unsaid, and the fit
 #: weighted every sample alike.
+_VALUE_WORDS = "|".join((*CHANNELS, *_CHANNEL_WORDS, *ONE_CHANNEL))
 _UNCERTAINTY = re.compile(
-    r"(?:(?:r|g|b|red|green|blue|value|brdf|y)[\s_.-]*)?"
+    rf"(?:(?:{_VALUE_WORDS})[\s_.-]*)?"
     r"(?:std|stdev|stddev|std_dev|sd|sigma|err|error|unc|uncertainty)"
-    r"(?:[\s_.-]*(?:r|g|b|red|green|blue|value|brdf|y))?")
+    rf"(?:[\s_.-]*(?:{_VALUE_WORDS}))?")
 
 
 def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> None:
     """Refuses a column of :data:`_UNCERTAINTY` that is not a sigma column read here,
     saying what to name it."""
     for name, k in seen.items():
-        if name.startswith("sigma") and name in ("sigma", "sigma_r", "sigma_g", "sigma_b"):
-            continue
-        if name in (*CHANNELS, *ONE_CHANNEL) or not _UNCERTAINTY.fullmatch(name):
-            continue
+        if (name in ("sigma", *(f"sigma_{c}" for c in CHANNELS), *CHANNELS, *ONE_CHANNEL)
+                or not _UNCERTAINTY.fullmatch(name)):
+            continue  # read as sigma or as values, or no uncertainty
         said = names[k].strip()[:40]
         raise MeasurementsError(
             source, f"column {said!r} looks like each value's uncertainty, which is read "
@@ -507,7 +507,7 @@ def _text(path: Path) -> str:
             return data.decode("utf-16")
         except UnicodeDecodeError:
             raise refused from None
-    kind = next((what for magic, what in merl.OTHER_FORMATS if data.startswith(magic)), None)
+    kind = merl.other_format(data)
     if kind is not None:  # it said "holds NUL bytes: binary, or UTF-16 ..." of a workbook
         hint = (" (an Excel .xlsx workbook? save the sheet as CSV)" if kind == "a zip archive"
                 else " (decompress it first)" if kind == "a gzip archive" else "")
@@ -812,15 +812,8 @@ def _written_by_matlab(f, path) -> bool:
         with open(path, "rb") as raw:
             if raw.read(len(MATLAB_73)) == MATLAB_73:
                 return True
-    for name in f.keys():
-        if _external_link(f, name):
-            continue  # not followed (_dataset)
-        try:
-            if "MATLAB_class" in f[name].attrs:
-                return True
-        except (KeyError, OSError, RuntimeError):  # a link to nothing: refused where read
-            continue
-    return False
+    return any(d is not None and "MATLAB_class" in d.attrs
+               for d in (_opened(f, name) for name in f.keys()))
 
 
 def read_hdf5(path: str | os.PathLike) -> Measurements:
@@ -833,8 +826,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     except OSError as e:
         with open(path, "rb") as raw:
             head = raw.read(64)
-        kind = next((what for magic, what in merl.OTHER_FORMATS if head.startswith(magic)),
-                    None)
+        kind = merl.other_format(head)
         raise MeasurementsError(source, f"{kind}, not HDF5 (by its first bytes)" if kind
                                 else f"not a readable HDF5 file ({e})") from None
     with f:
@@ -971,12 +963,22 @@ def _stored_shape(f, name: str, matlab: bool) -> tuple:
     declaration alone; () where it is no dataset (refused where it is read)."""
     import h5py
 
-    try:
-        d = f[name]
-    except (KeyError, OSError, RuntimeError):
-        return ()
+    d = _opened(f, name)
     shape = tuple(d.shape or ()) if isinstance(d, h5py.Dataset) else ()
     return shape[::-1] if matlab and len(shape) == 2 else shape
+
+
+def _opened(f, name: str):
+    """Object ``name`` of the open HDF5 file ``f``, or None where it is not opened
+    here: an external link (not followed; :func:`_dataset` refuses it) or a link to
+    nothing (RuntimeError: a soft link loop; refused where it is read). For a look at
+    what a file declares, before or beside its reading."""
+    if _external_link(f, name):
+        return None
+    try:
+        return f[name]
+    except (KeyError, OSError, RuntimeError):
+        return None
 
 
 def _linked(f, name: str) -> bool:
@@ -1005,12 +1007,7 @@ def _declared_samples(f, angles: list[str]) -> int:
     except MeasurementsError:  # two of one kind: refused where they are read
         values = {}
     for name in (*angles, *(values[k] for k in _PER_SAMPLE if k in values)):
-        if _external_link(f, name):
-            continue  # not followed: refused where it is read (_dataset)
-        try:
-            d = f[name]
-        except (KeyError, OSError, RuntimeError):  # RuntimeError: a soft link loop
-            continue
+        d = _opened(f, name)
         if isinstance(d, h5py.Dataset) and d.shape:
             # any axis: a column-major writer (MATLAB) stores n samples as (3, n)
             most = max(most, max(int(k) for k in d.shape))
