@@ -292,7 +292,7 @@ def test_a_matlab_v73_file_reads_as_matlab_holds_it(tmp_path):
     MATLAB's column-major matrices and no attributes: read by content whatever its
     name, transposed back, the angles' units from their names (it was read as a MERL
     table, "not a text file"). A (3, n) dataset of another writer is refused with what
-    to do, as a v5 .mat file is."""
+    to do, and a MATLAB matrix of the wrong shape is named as MATLAB names it."""
     s = _samples(40)
     want = read_measured(_write_all(tmp_path, s)["csv"])
     for path in (_matlab_73(tmp_path / "s.mat", s), _matlab_73(tmp_path / "s_mat", s),
@@ -320,14 +320,89 @@ def test_a_matlab_v73_file_reads_as_matlab_holds_it(tmp_path):
     with pytest.raises(MeasurementsError, match=r"rgb has shape \(3, 40\), not \(n, 3\); "
                                                 r"\(3, n\) is how a column-major writer"):
         read_measured(other)
-    v5 = tmp_path / "v5.mat"
-    v5.write_bytes(b"MATLAB 5.0 MAT-file, Platform: GLNXA64".ljust(116) + bytes(8)
-                   + b"\x00\x01IM" + bytes(64))
-    (tmp_path / "v5").write_bytes(v5.read_bytes())  # by content, unnamed
-    for path in (v5, tmp_path / "v5"):
-        with pytest.raises(MerlFormatError, match="a MATLAB .mat file of version 5 .save -v7.3 "
-                                                  "writes one brdffit reads"):
-            read_measured(path)
+    wrong_way = _matlab_73(tmp_path / "wrong_way.mat", (*s[:4], np.zeros((3, 40))))
+    with h5py.File(wrong_way, "a") as f:  # a 3 x 40 matrix in MATLAB: stored (40, 3)
+        del f["rgb"]
+        f["rgb"] = s[4]
+        f["rgb"].attrs["MATLAB_class"] = np.bytes_("double")
+    # it read "dataset rgb has shape (40, 3), not (n, 3)": its HDF5 storage's shape
+    with pytest.raises(MeasurementsError, match=r"MATLAB variable rgb is 3 x 40, not n x 3: "
+                                                r"save its transpose \(rgb'\)"):
+        read_measured(wrong_way)
+
+
+def _matlab_v5(path, s, *, compressed=False, **more):
+    """A .mat file as MATLAB's ``save`` writes one by default (version 5; ``-v7`` is
+    compressed), written by scipy.io.savemat: the angles in degrees as column vectors,
+    ``rgb`` n x 3, and ``more`` variables."""
+    from scipy import io
+
+    theta_i, phi_i, theta_o, phi_o, rgb = s
+    names = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg")
+    io.savemat(path, {**{k: np.degrees(a)[:, None] for k, a in
+                         zip(names, (theta_i, phi_i, theta_o, phi_o), strict=True)},
+                      "rgb": rgb, **more}, do_compression=compressed)
+    return path
+
+
+def test_a_matlab_v5_file_reads_as_its_variables_saved_v73_do(tmp_path):
+    """``save``'s default (version 5, and -v7 compressed): read through scipy.io as
+    the same variables of a -v7.3 file are (it was refused), whatever its name, with
+    the same figures and MATLAB's words: a variable, 3 x 40. What it declares is
+    weighed before a number is read."""
+    s = _samples(40)
+    want = read_measured(_matlab_73(tmp_path / "s73.mat", s))
+    plain = _matlab_v5(tmp_path / "s.mat", s, note="gonio run 12")  # text: a note, not read
+    paths = [plain, _matlab_v5(tmp_path / "z.mat", s, compressed=True)]
+    for name in ("s_mat", "s.binary", "s.csv"):  # by content, unnamed or misnamed
+        paths.append(tmp_path / name)
+        paths[-1].write_bytes(plain.read_bytes())
+    for path in paths:
+        got = read_measured(path)
+        np.testing.assert_array_equal(got.rgb, want.rgb)
+        np.testing.assert_array_equal(got.wi, want.wi)
+        np.testing.assert_array_equal(got.wo, want.wo)
+        assert got.provenance["format"] == "mat"
+        assert declared_samples(path) == 40  # what the service weighs an upload by
+    theta_i, phi_i, theta_o, phi_o, rgb = s
+    for variables, said in (
+            ({"rgb": rgb.T}, r"MATLAB variable rgb is 3 x 40, not n x 3: save its transpose "
+                             r"\(rgb'\)"),
+            ({"m": {"theta_i_deg": theta_i}}, r"m is a MATLAB struct: save its fields as "
+                                              r"variables, save\('file.mat', '-struct', 'm'\)"),
+            ({"RGB": rgb}, "variables rgb and RGB: keep one|two variables give rgb"),
+            ({"sigma": np.array([[1, 2]], dtype=object)}, "sigma is a struct or cell, not a "
+                                                            "matrix")):
+        bad = tmp_path / "bad.mat"
+        from scipy import io
+
+        io.savemat(bad, {k: v for k, v in io.loadmat(plain).items()
+                         if not k.startswith("__") and k not in ("rgb", "note")}
+                   | ({} if "rgb" in variables or "m" in variables else {"rgb": rgb})
+                   | variables)
+        if "m" in variables:  # the angles inside a struct, none outside
+            io.savemat(bad, variables)
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(bad)
+    data = plain.read_bytes()
+    (tmp_path / "cut.mat").write_bytes(data[:len(data) - 100])
+    with pytest.raises(MeasurementsError, match="a MATLAB .mat file whose variables cannot be "
+                                                "read"):
+        read_measured(tmp_path / "cut.mat")
+    (tmp_path / "other.mat").write_bytes(b"theta_i,phi_i\n")
+    with pytest.raises(MeasurementsError, match="not a MATLAB .mat file of version 5, 7 or 7.3"):
+        read_measured(tmp_path / "other.mat")
+    # dimensions declared in a variable's header, far more than the file holds: refused
+    # from the headers alone (scipy would read, or allocate, them all)
+    rows = np.array([5, 8, 40, 1], "<i4").tobytes()  # miINT32, 8 bytes: 40 x 1
+    assert data.count(rows) == 4
+    for declared, said in ((3_000_000, "its variables declare 3,000,000 samples"),
+                           (200_000_000, "variable theta_i_deg is 200000000 x 1: more "
+                                         "numbers than a sample list read here")):
+        huge = tmp_path / f"huge{declared}.mat"
+        huge.write_bytes(data.replace(rows, np.array([5, 8, declared, 1], "<i4").tobytes(), 1))
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(huge)
 
 
 def test_hdf5_values_may_have_the_names_a_csv_column_has(tmp_path):
@@ -552,6 +627,18 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
     ({"rgb": np.ones((4, 3)), "sigma": np.zeros(4)}, "sigma is 0 in 4 rows (first: row 1)"),
     ({"rgb": np.ones((4, 3)), "sigma": np.array([[0.1, 0.1, 0.0]] * 4)},
      "sigma's b channel is 0 in 4 rows"),
+    # an uncertainty by another name than sigma was dropped unsaid, as a CSV column was
+    ({"rgb": np.ones((4, 3)), "rgb_std": np.ones((4, 3))},
+     "dataset 'rgb_std' looks like each value's uncertainty, which is read from a dataset "
+     "sigma ((n, 3) or (n,)) or sigma_r, sigma_g, sigma_b"),
+    ({"rgb": np.ones((4, 3)), "R_err": np.ones(4)}, "dataset 'R_err' looks like"),
+    ({"value": np.ones(4), "Uncertainty": np.ones(4)}, "dataset 'Uncertainty' looks like"),
+    ({"rgb": np.ones((4, 3)), "sigma_r": np.ones(4), "sigma_g": np.ones(4)},
+     "datasets sigma_r, sigma_g: expected sigma, or sigma_r, sigma_g and sigma_b"),
+    ({"value": np.ones(4), **{f"sigma_{c}": np.ones(4) for c in "rgb"}},
+     "datasets sigma_r, sigma_g, sigma_b: expected one dataset sigma"),
+    ({"spectral": np.ones((4, 2)), "wavelengths": np.array([500.0, 600.0]),
+      "sigma": np.ones(4)}, "sigma of spectral samples: not read yet"),
 ])
 def test_a_malformed_hdf5_file_gets_one_line_naming_it(tmp_path, datasets, says):
     path = _h5(tmp_path / "s.h5", **datasets)
@@ -577,6 +664,10 @@ def test_hdf5_sigma_per_sample_or_per_value(tmp_path):
                                                               axis=1))
     per_value = np.arange(12.0).reshape(4, 3) + 1
     got = read_measured(_h5(tmp_path / "b.h5", rgb=rgb, sigma=per_value))
+    np.testing.assert_array_equal(got.sigma, per_value)
+    # one dataset per channel, as a CSV's sigma_r, sigma_g, sigma_b (they were dropped)
+    got = read_measured(_h5(tmp_path / "c.h5", rgb=rgb,
+                            **{f"sigma_{c}": per_value[:, k] for k, c in enumerate("rgb")}))
     np.testing.assert_array_equal(got.sigma, per_value)
 
 

@@ -173,8 +173,7 @@ OTHER_FORMATS = (
     (b"PK\x03\x04", "a zip archive"), (b"%PDF", "a PDF document"),
     (b"\x93NUMPY", "a numpy .npy array"), (b"\x89HDF", "an HDF5 file"),
     # 11 bytes: the magic is held within the 12-byte header it is judged by
-    (b"MATLAB 5.0 ", "a MATLAB .mat file of version 5 (save -v7.3 writes one brdffit "
-                             "reads)"),
+    (b"MATLAB 5.0 ", "a MATLAB .mat file (a sample list: brdffit fit reads it)"),
 )
 
 

@@ -23,10 +23,13 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   (1-d, an attribute ``units`` of ``degrees`` or ``radians``, on each or on the file, or
   the unit in the name: ``theta_i_deg``), ``rgb`` (n, 3), ``r``, ``g`` and ``b`` (n,)
   each, ``value`` (n,; also ``brdf``, ``y``), as a CSV's columns in any case, or
-  ``spectral`` (n, k) with ``wavelengths`` (k,, nm); optional ``sigma`` (n, 3) or (n,).
-- **MATLAB** ``.mat`` files saved with ``-v7.3`` are HDF5 and read as such, their
-  matrices as MATLAB holds them (it stores an n x 3 matrix column-major, (3, n) to
-  HDF5); ``save`` writes no attributes, so the angles' names carry their unit.
+  ``spectral`` (n, k) with ``wavelengths`` (k,, nm); optional ``sigma`` (n, 3) or (n,), or
+  ``sigma_r``, ``sigma_g``, ``sigma_b`` (n,) each.
+- **MATLAB** ``.mat`` files: ``-v7.3`` is HDF5 and read as such, its matrices as
+  MATLAB holds them (it stores an n x 3 matrix column-major, (3, n) to HDF5); version
+  5 and ``-v7`` (``save``'s default) through :mod:`brdffit.io.matlab`, as the same
+  variables saved ``-v7.3``. ``save`` writes no attributes, so the angles' names carry
+  their unit.
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
 one line naming the file and what was expected. A list of more samples than
@@ -36,6 +39,7 @@ file by its datasets' declared shapes: a few MB compressed may declare GBs).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import json
@@ -47,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.errors import MerlFormatError
-from brdffit.io import merl, spectra
+from brdffit.io import matlab, merl, spectra
 from brdffit.io.measurements import (
     HORIZON_SLACK,
     Measurements,
@@ -272,7 +276,7 @@ def _other_units(seen: dict[str, int]) -> str:
 #: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:
 #: ``r_std``, ``std_r``, ``R_err``, ``uncertainty``. It was dropped unsaid, and the fit
 #: weighted every sample alike.
-_VALUE_WORDS = "|".join((*CHANNELS, *_CHANNEL_WORDS, *ONE_CHANNEL))
+_VALUE_WORDS = "|".join((*CHANNELS, *_CHANNEL_WORDS, *ONE_CHANNEL, "rgb"))
 _UNCERTAINTY = re.compile(
     rf"(?:(?:{_VALUE_WORDS})[\s_.-]*)?"
     r"(?:std|stdev|stddev|std_dev|sd|sigma|err|error|unc|uncertainty)"
@@ -830,99 +834,137 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         raise MeasurementsError(source, f"{kind}, not HDF5 (by its first bytes)" if kind
                                 else f"not a readable HDF5 file ({e})") from None
     with f:
-        matlab = _written_by_matlab(f, path)
-        named = _hdf5_angles(f, source)
-        missing = [a for a in ANGLES if a not in named]
-        if missing:
-            # a file that says what it is (a batch's results)
-            kind = _attr_text(f.attrs.get("format"), "format", source)
-            raise MeasurementsError(source, f"no dataset {', '.join(missing)} (the file has "
-                                            f"{', '.join(f.keys()) or 'none'})"
-                                    + (f": a {kind} file, not a sample list"
-                                       if isinstance(kind, str) else ""))
-        _declared_fit(f, [named[a][0] for a in ANGLES], source)
-        raw, scales = [], []
-        for canonical in ANGLES:
-            name, in_name = named[canonical]
-            own, shared = _dataset(f, name, source).attrs.get("units"), f.attrs.get("units")
-            if in_name is not None:
-                said = _attr_text(own, "units", source)
-                if said is not None and _unit_scale(said, source) != _unit_scale(in_name,
-                                                                                  source):
-                    raise MeasurementsError(source, f"dataset {name}: two units (its name's "
-                                                    f"{in_name!r}, its 'units' {said!r})")
-                own = in_name
-            if own is None and shared is None:
-                raise MeasurementsError(
-                    source, f"dataset {name} has no 'units' attribute (degrees or radians), "
-                            f"nor has the file; or name it {canonical}_deg or "
-                            f"{canonical}_rad" + (" (MATLAB's save writes no attributes)"
-                                                  if matlab else ""))
-            stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
-            if own is not None and len(stated) == 2 and not _an_angle_unit(stated[1]):
-                stated = stated[:1]  # the file's units are its values' (1/sr), not angles'
-            scale = _unit_scale(stated[0], source)
-            if len(stated) == 2 and _unit_scale(stated[1], source) != scale:
-                # as a CSV's two statements of one column's unit are: which one the
-                # numbers are in would be a guess (the dataset's won, unsaid)
-                raise MeasurementsError(source, f"dataset {name}: two units (its own 'units' "
-                                                f"{stated[0]!r}, the file's {stated[1]!r})")
-            raw.append(_one_per_sample(f, name, source, matlab))
-            scales.append(scale)
-        _radians_said_to_be_degrees(raw, scales, source)
-        angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
-        provenance = _stored_provenance(f.attrs.get("provenance"))
-        provenance.update(azimuths_within(raw, scales))
-        v = _value_names(f, source)
-        channels = [v[c] for c in CHANNELS if c in v]
-        kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
-            [", ".join(channels)] if channels else [])
-        if len(kinds) > 1:
-            raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
-                                            "than one kind, keep one")
-        for name in v.values():
-            if name != v.get("wavelengths"):
-                _per_steradian(f, name, source)
-        if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
-            v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
-        if channels:  # r, g and b each a dataset of its own, as a CSV's columns
-            if len(channels) < len(CHANNELS):
-                raise MeasurementsError(source, f"datasets {', '.join(channels)}: only "
-                                                f"{len(channels)} of r, g, b")
-            values = np.column_stack([_one_per_sample(f, name, source, matlab)
-                                      for name in channels])
-        elif "rgb" in v:
-            values = _numeric(f, v["rgb"], source, matlab)
-            if values.ndim != 2 or values.shape[1] != 3:
-                stored = (values.shape[::-1] if matlab and values.ndim == 2
-                          else values.shape)
-                raise MeasurementsError(source, f"dataset {v['rgb']} has shape {stored}, not "
-                                                f"(n, 3){_transposed_hint(values, matlab)}")
-        elif "value" in v:
-            values = _one_per_sample(f, v["value"], source, matlab)
-        elif "spectral" in v:
-            if "wavelengths" not in v:
-                raise MeasurementsError(source, f"dataset {v['spectral']} needs a dataset "
-                                                "wavelengths (nm)")
-            if "sigma" in v:
-                raise MeasurementsError(source, "sigma of spectral samples is not read yet")
-            spectral = _numeric(f, v["spectral"], source, matlab)
-            wavelengths = _numeric(f, v["wavelengths"], source, matlab)
-            if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
-                wavelengths = wavelengths.ravel()
-            if (spectral.ndim != 2 or wavelengths.ndim != 1
-                    or spectral.shape[1] != wavelengths.size):
-                raise MeasurementsError(
-                    source, f"dataset {v['spectral']} has shape {spectral.shape} and "
-                            f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
-            values, provenance["spectral"] = _projected(spectral, wavelengths, source)
-        else:
-            raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
-                                            "(n,) each, value (n,; also brdf or y), or "
-                                            "spectral (n, k) with wavelengths (k,)")
-        sigma = _numeric(f, v["sigma"], source, matlab) if "sigma" in v else None
-        if sigma is not None and sigma.ndim == 2 and sigma.shape[1] == 1:
-            sigma = sigma.ravel()
+        if not _written_by_matlab(f, path):
+            return _hdf5_samples(f, source, False)
+        with _in_matlab_words():
+            return _hdf5_samples(f, source, True)
+
+
+def read_mat(path: str | os.PathLike) -> Measurements:
+    """A MATLAB ``.mat`` file: ``-v7.3`` (HDF5, :func:`read_hdf5`) or version 5
+    (``save``'s default and ``-v7``: its variables, through :mod:`brdffit.io.matlab`,
+    read as the same variables of a ``-v7.3`` file are)."""
+    source = str(path)
+    with open(path, "rb") as raw:
+        head = raw.read(HDF5_OFFSETS[-1] + len(HDF5_SIGNATURE))
+    if _hdf5(head):
+        return read_hdf5(path)
+    if not matlab.is_v5(head):
+        kind = merl.other_format(head)
+        raise MeasurementsError(source, (f"{kind}, not" if kind else "not") + " a MATLAB "
+                                        ".mat file of version 5, 7 or 7.3 (by its first "
+                                        "bytes; save's default and -v7.3 are read)")
+    with _in_matlab_words():
+        with matlab.as_hdf5(path, source, max_numbers=MAX_NUMBERS, values=False) as f:
+            _declared_angles(f, source)  # refused before a number is read
+        with matlab.as_hdf5(path, source, max_numbers=MAX_NUMBERS) as f:
+            return _hdf5_samples(f, source, True, file_format="mat")
+
+
+#: The HDF5 reader's words, as a MATLAB user says them (a -v7.3 file's datasets are its
+#: variables): "no dataset theta_i" of a .mat file sent its user looking for HDF5.
+_MATLAB_WORDS = (
+    (re.compile(r"\bis an HDF5 group, not a dataset"), "is a struct or cell, not a matrix"),
+    (re.compile(r"\bdatasets\b"), "variables"), (re.compile(r"\bdataset\b"), "variable"))
+
+
+@contextlib.contextmanager
+def _in_matlab_words():
+    """Refusals raised within, said in :data:`_MATLAB_WORDS`."""
+    try:
+        yield
+    except MeasurementsError as e:
+        problem = e.problem
+        for pattern, words in _MATLAB_WORDS:
+            problem = pattern.sub(words, problem)
+        raise MeasurementsError(e.source, problem) from None
+
+
+def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Measurements:
+    """The sample list of the open HDF5 file ``f`` (``matlab``: a MATLAB file's,
+    matrices transposed back to MATLAB's rows; ``file_format``: the file's format, as
+    ``input.format`` reports it)."""
+    named = _declared_angles(f, source)
+    raw, scales = [], []
+    for canonical in ANGLES:
+        name, in_name = named[canonical]
+        own, shared = _dataset(f, name, source).attrs.get("units"), f.attrs.get("units")
+        if in_name is not None:
+            said = _attr_text(own, "units", source)
+            if said is not None and _unit_scale(said, source) != _unit_scale(in_name,
+                                                                              source):
+                raise MeasurementsError(source, f"dataset {name}: two units (its name's "
+                                                f"{in_name!r}, its 'units' {said!r})")
+            own = in_name
+        if own is None and shared is None:
+            raise MeasurementsError(
+                source, f"dataset {name} has no unit: name it {canonical}_deg or "
+                        f"{canonical}_rad (MATLAB's save writes no attributes)" if matlab
+                else f"dataset {name} has no 'units' attribute (degrees or radians), nor "
+                     f"has the file; or name it {canonical}_deg or {canonical}_rad")
+        stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
+        if own is not None and len(stated) == 2 and not _an_angle_unit(stated[1]):
+            stated = stated[:1]  # the file's units are its values' (1/sr), not angles'
+        scale = _unit_scale(stated[0], source)
+        if len(stated) == 2 and _unit_scale(stated[1], source) != scale:
+            # as a CSV's two statements of one column's unit are: which one the
+            # numbers are in would be a guess (the dataset's won, unsaid)
+            raise MeasurementsError(source, f"dataset {name}: two units (its own 'units' "
+                                            f"{stated[0]!r}, the file's {stated[1]!r})")
+        raw.append(_one_per_sample(f, name, source, matlab))
+        scales.append(scale)
+    _radians_said_to_be_degrees(raw, scales, source)
+    angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
+    provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
+    provenance.update(azimuths_within(raw, scales))
+    v = _value_names(f, source)
+    channels = [v[c] for c in CHANNELS if c in v]
+    kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
+        [", ".join(channels)] if channels else [])
+    if len(kinds) > 1:
+        raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
+                                        "than one kind, keep one")
+    for name in v.values():
+        if name != v.get("wavelengths"):
+            _per_steradian(f, name, source)
+    if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
+        v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
+    if channels:  # r, g and b each a dataset of its own, as a CSV's columns
+        if len(channels) < len(CHANNELS):
+            raise MeasurementsError(source, f"datasets {', '.join(channels)}: only "
+                                            f"{len(channels)} of r, g, b")
+        values = np.column_stack([_one_per_sample(f, name, source, matlab)
+                                  for name in channels])
+    elif "rgb" in v:
+        values = _numeric(f, v["rgb"], source, matlab)
+        if values.ndim != 2 or values.shape[1] != 3:
+            raise MeasurementsError(source, f"{_shape_said(v['rgb'], values, matlab)}, not "
+                                            + ("n x 3" if matlab else "(n, 3)")
+                                            + _transposed_hint(v["rgb"], values, matlab))
+    elif "value" in v:
+        values = _one_per_sample(f, v["value"], source, matlab)
+    elif "spectral" in v:
+        if "wavelengths" not in v:
+            raise MeasurementsError(source, f"dataset {v['spectral']} needs a dataset "
+                                            "wavelengths (nm)")
+        if sigmas := [v[k] for k in _SIGMAS if k in v]:
+            raise MeasurementsError(source, f"{', '.join(sigmas)} of spectral samples: not "
+                                            "read yet")
+        spectral = _numeric(f, v["spectral"], source, matlab)
+        wavelengths = _numeric(f, v["wavelengths"], source, matlab)
+        if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
+            wavelengths = wavelengths.ravel()
+        if (spectral.ndim != 2 or wavelengths.ndim != 1
+                or spectral.shape[1] != wavelengths.size):
+            raise MeasurementsError(
+                source, f"dataset {v['spectral']} has shape {spectral.shape} and "
+                        f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
+        values, provenance["spectral"] = _projected(spectral, wavelengths, source)
+    else:
+        raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
+                                        "(n,) each, value (n,; also brdf or y), or "
+                                        "spectral (n, k) with wavelengths (k,)")
+    sigma = _hdf5_sigma(f, v, source, matlab, rgb=values.ndim == 2)
     if provenance.get("channels") == 1 and not (
             values.ndim == 1 or np.all(values == values[:, :1])):
         del provenance["channels"]  # said of grey values: these are coloured
@@ -936,9 +978,40 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
 _VALUE_DATASETS = {"rgb": ("rgb",), "value": ONE_CHANNEL, "spectral": ("spectral",),
                    "sigma": ("sigma",), "wavelengths": ("wavelengths",),
                    **{c: (c, *(w for w, cc in _CHANNEL_WORDS.items() if cc == c))
-                      for c in CHANNELS}}
+                      for c in CHANNELS},
+                   **{f"sigma_{c}": (f"sigma_{c}",) for c in CHANNELS}}
+#: The kinds that are a value's standard deviation, as a CSV's sigma columns.
+_SIGMAS = ("sigma", *(f"sigma_{c}" for c in CHANNELS))
 #: Those that hold one row per sample.
-_PER_SAMPLE = ("rgb", "value", "spectral", "sigma", *CHANNELS)
+_PER_SAMPLE = ("rgb", "value", "spectral", *_SIGMAS, *CHANNELS)
+
+
+def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool,
+                rgb: bool) -> np.ndarray | None:
+    """The values' standard deviations: a dataset ``sigma`` ((n, 3) or (n,)), or
+    ``sigma_r``, ``sigma_g``, ``sigma_b`` (n,) each, as a CSV's sigma columns (RGB
+    values only), or None. Any other dataset named as an uncertainty (``rgb_std``,
+    ``R_err``, ``uncertainty``) is refused, as such a CSV column is: it was dropped
+    unsaid, and the fit weighed every sample alike."""
+    read = set(v.values())
+    for key in f.keys():
+        if key not in read and _UNCERTAINTY.fullmatch(key.strip().lower()):
+            raise MeasurementsError(
+                source, f"dataset {key!r} looks like each value's uncertainty, which is "
+                        "read from a dataset sigma ((n, 3) or (n,)) or sigma_r, sigma_g, "
+                        "sigma_b: their standard deviation, in 1/sr. Rename it so to weigh "
+                        "the fit by it, or drop it")
+    given = [v[k] for k in _SIGMAS if k in v]
+    if not given:
+        return None
+    if given == [v.get("sigma")]:
+        sigma = _numeric(f, v["sigma"], source, matlab)
+        return sigma.ravel() if sigma.ndim == 2 and sigma.shape[1] == 1 else sigma
+    if rgb and "sigma" not in v and len(given) == len(CHANNELS):
+        return np.column_stack([_one_per_sample(f, name, source, matlab) for name in given])
+    expected = "sigma, or sigma_r, sigma_g and sigma_b" if rgb else "one dataset sigma"
+    raise MeasurementsError(source, f"datasets {', '.join(given)}: expected {expected} "
+                                    "(each value's standard deviation, 1/sr)")
 
 
 def _value_names(f, source: str) -> dict[str, str]:
@@ -1014,12 +1087,30 @@ def _declared_samples(f, angles: list[str]) -> int:
     return most
 
 
-def _declared_fit(f, angles: list[str], source: str) -> None:
-    """Refuses, before a number is read, an HDF5 sample list whose datasets declare
-    more rows than a sample list may hold (``MAX_SAMPLES``): a 2.7 MB gzip-compressed
-    file of 2e7 rows of one value decompressed to GBs, and ran a fit for minutes."""
-    if (why := too_many_samples(_declared_samples(f, angles))) is not None:
+def _declared_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
+    """The open HDF5 file ``f``'s angle datasets (:func:`_hdf5_angles`), refused where
+    one is missing or where the datasets declare more rows than a sample list may hold
+    (``MAX_SAMPLES``), before a number is read: a 2.7 MB gzip-compressed file of 2e7
+    rows of one value decompressed to GBs, and ran a fit for minutes."""
+    import h5py
+
+    named = _hdf5_angles(f, source)
+    missing = [a for a in ANGLES if a not in named]
+    if missing:
+        # a file that says what it is (a batch's results), or a MATLAB struct of them
+        kind = _attr_text(f.attrs.get("format"), "format", source)
+        structs = [k for k in f.keys() if isinstance(d := _opened(f, k), h5py.Group)
+                   and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source)
+                   == "struct"]
+        raise MeasurementsError(
+            source, f"no dataset {', '.join(missing)} (the file has "
+                    f"{', '.join(f.keys()) or 'none'})"
+            + (f": a {kind} file, not a sample list" if isinstance(kind, str) else "")
+            + (f"; {structs[0]} is a MATLAB struct: save its fields as variables, "
+               f"save('file.mat', '-struct', '{structs[0]}')" if structs else ""))
+    if (why := too_many_samples(_declared_samples(f, [named[a][0] for a in ANGLES]))):
         raise MeasurementsError(source, f"its datasets declare {why}")
+    return named
 
 
 def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | None:
@@ -1029,10 +1120,14 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
     without the four angles (its reader says what is wrong with it)."""
     import h5py
 
-    if reader_for(path, name) is not read_hdf5:
+    reader = reader_for(path, name)
+    if reader not in (read_hdf5, read_mat):
         return None
     try:
-        with h5py.File(path, "r") as f:
+        with open(path, "rb") as raw:
+            v5 = matlab.is_v5(raw.read(len(matlab.V5_MAGIC)))
+        with (matlab.as_hdf5(path, str(path), max_numbers=MAX_NUMBERS, values=False) if v5
+              else h5py.File(path, "r")) as f:
             named = _hdf5_angles(f, str(path))
             if any(a not in named for a in ANGLES):
                 return None
@@ -1045,7 +1140,7 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
 _STORED_FORMATS = ("astm", "csv", "hdf5")
 
 
-def _stored_provenance(stored) -> dict:
+def _stored_provenance(stored, file_format: str) -> dict:
     """What a sample list's file says of where it came from: where brdffit stored it
     (brdffit.io.writers), the provenance it wrote, read from which format; any other
     file's attribute of that name (a lab's own JSON, of its instrument and operator) is
@@ -1056,8 +1151,8 @@ def _stored_provenance(stored) -> dict:
     except (TypeError, ValueError):
         said = None
     if isinstance(said, dict) and said.get("format") in _STORED_FORMATS:
-        return {**said, "stored_as": "hdf5"}
-    return {"format": "hdf5"}
+        return {**said, "stored_as": file_format}
+    return {"format": file_format}
 
 
 def _attr_text(value, what: str, source: str) -> str | None:
@@ -1177,19 +1272,31 @@ def _one_per_sample(f, name: str, source: str, matlab: bool = False) -> np.ndarr
     a = _numeric(f, name, source, matlab)
     if a.ndim == 1 or (a.ndim == 2 and 1 in a.shape):
         return a.ravel()
-    stored = a.shape[::-1] if matlab and a.ndim == 2 else a.shape
-    raise MeasurementsError(source, f"dataset {name} has shape {stored}: expected (n,), one "
-                                    "number per sample")
+    raise MeasurementsError(source, f"{_shape_said(name, a, matlab)}: expected "
+                                    + ("a vector" if matlab else "(n,)")
+                                    + ", one number per sample")
 
 
-def _transposed_hint(values: np.ndarray, matlab: bool) -> str:
-    """What to do with an RGB dataset stored the other way round: (3, n), as a
-    column-major writer (Fortran, R, Julia, MATLAB's own h5write) stores an n x 3
-    matrix. Not guessed: a (3, 3) dataset reads either way."""
-    if not matlab and values.ndim == 2 and values.shape[0] == 3:
-        return ("; (3, n) is how a column-major writer (MATLAB's h5write, R, Julia, "
-                "Fortran) stores an n x 3 matrix: write its transpose")
-    return ""
+def _shape_said(name: str, values: np.ndarray, matlab: bool) -> str:
+    """A dataset's shape as its writer knows it: a MATLAB variable's size as MATLAB
+    writes it (3 x 50, not the transposed (50, 3) of its HDF5 storage, which read
+    "has shape (50, 3), not (n, 3)" of a 3 x 50 matrix)."""
+    if not matlab:
+        return f"dataset {name} has shape {values.shape}"
+    dims = values.shape if values.ndim == 2 else values.shape[::-1]  # see _numeric
+    return f"MATLAB variable {name} is {' x '.join(str(k) for k in dims)}"
+
+
+def _transposed_hint(name: str, values: np.ndarray, matlab: bool) -> str:
+    """What to do with RGB values the other way round, 3 x n: a MATLAB matrix of that
+    size, or an n x 3 matrix as a column-major writer (Fortran, R, Julia, MATLAB's own
+    h5write) stores it, (3, n). Not guessed: a (3, 3) dataset reads either way."""
+    if values.ndim != 2 or values.shape[0] != 3:
+        return ""
+    if matlab:
+        return f": save its transpose ({name}')"
+    return ("; (3, n) is how a column-major writer (MATLAB's h5write, R, Julia, "
+            "Fortran) stores an n x 3 matrix: write its transpose")
 
 
 def _hdf5(head: bytes) -> bool:
@@ -1203,6 +1310,8 @@ def _by_content(path: Path) -> Callable:
         head = f.read(4096)
     if _hdf5(head):
         return read_hdf5
+    if matlab.is_v5(head):
+        return read_mat
     # binary: the MERL reader says what is wrong with it
     return read_text_samples if _looks_like_text(head) else merl.read
 
@@ -1225,7 +1334,7 @@ def read_text_samples(path: str | os.PathLike) -> Measurements:
 #: suffix -> reader; a MERL table is read as a table.
 READERS: dict[str, Callable] = {
     ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
-    ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5, ".mat": read_hdf5,
+    ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5, ".mat": read_mat,
 }
 
 
@@ -1241,6 +1350,8 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
             head = f.read(HDF5_OFFSETS[-1] + len(HDF5_SIGNATURE))
         if _hdf5(head):
             return read_hdf5
+        if matlab.is_v5(head):
+            return read_mat
         if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
             # a MERL table named .csv
             return merl.read
