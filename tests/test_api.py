@@ -250,6 +250,18 @@ def test_a_compressed_sample_list_is_weighed_as_it_is_stored(http, tmp_path):
     assert_error(r, 413, f"bomb.h5: {n:,} samples are stored as {56 * n:,} bytes",
                  f"over the server's cap of {CAP:,} bytes (BRDFFIT_MAX_UPLOAD_BYTES)",
                  f"upload at most {CAP // 56:,} samples")
+    # MATLAB's default .mat (version 5, -v7 compressed): weighed from its variables'
+    # headers as well
+    from scipy import io
+
+    io.savemat(tmp_path / "bomb.mat", {**{f"{a}_rad": np.full((n, 1), 0.5) for a in (
+        "theta_i", "phi_i", "theta_o", "phi_o")}, "rgb": np.full((n, 3), 0.3)},
+               do_compression=True)
+    body = (tmp_path / "bomb.mat").read_bytes()
+    assert len(body) < CAP // 100
+    r = http.post("/v1/tables", content=body, params={"name": "bomb.mat"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert_error(r, 413, f"bomb.mat: {n:,} samples are stored as {56 * n:,} bytes")
 
 
 def test_a_sample_list_named_with_a_nul_is_stored_under_a_name_it_can_hold(http):

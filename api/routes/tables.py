@@ -1,4 +1,4 @@
-"""``/v1/tables``: upload a measured table (MERL, or samples: ASTM, CSV, HDF5), read its
+"""``/v1/tables``: upload a measured table (MERL, or samples: ASTM, CSV, HDF5, MATLAB), read its
 summary.
 
 An upload is streamed to a temporary file in the data dir while it is hashed and
