@@ -262,6 +262,14 @@ def test_a_compressed_sample_list_is_weighed_as_it_is_stored(http, tmp_path):
     r = http.post("/v1/tables", content=body, params={"name": "bomb.mat"},
                   headers={"Content-Type": "application/octet-stream"})
     assert_error(r, 413, f"bomb.mat: {n:,} samples are stored as {56 * n:,} bytes")
+    # and NumPy's compressed archive, from its arrays' headers
+    np.savez_compressed(tmp_path / "bomb.npz", rgb=np.full((n, 3), 0.3), **{
+        f"{a}_rad": np.full(n, 0.5) for a in ("theta_i", "phi_i", "theta_o", "phi_o")})
+    body = (tmp_path / "bomb.npz").read_bytes()
+    assert len(body) < CAP // 100
+    r = http.post("/v1/tables", content=body, params={"name": "bomb.npz"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert_error(r, 413, f"bomb.npz: {n:,} samples are stored as {56 * n:,} bytes")
 
 
 def test_a_sample_list_named_with_a_nul_is_stored_under_a_name_it_can_hold(http):

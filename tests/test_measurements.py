@@ -405,6 +405,60 @@ def test_a_matlab_v5_file_reads_as_its_variables_saved_v73_do(tmp_path):
             read_measured(huge)
 
 
+def test_a_numpy_npz_archive_reads_as_hdf5_datasets_of_its_names(tmp_path):
+    """``np.savez(..., theta_i_deg=..., rgb=...)``, compressed or not: read as an HDF5
+    file of the same datasets is, whatever its name, with the same figures, in numpy's
+    words (an array). Pickled objects are refused, never unpickled; what it declares is
+    weighed before a number is read; a lone .npy says to name its arrays."""
+    s = _samples(40)
+    want = read_measured(_write_all(tmp_path, s)["hdf5"])
+    theta_i, phi_i, theta_o, phi_o, rgb = s
+    arrays = {"theta_i_rad": theta_i, "phi_i_rad": phi_i, "theta_o_rad": theta_o,
+              "phi_o_rad": phi_o, "rgb": rgb}
+    np.savez(tmp_path / "s.npz", **arrays, note=np.array("gonio run 12"))
+    np.savez_compressed(tmp_path / "z.npz", **arrays)
+    (tmp_path / "s.csv").write_bytes((tmp_path / "s.npz").read_bytes())  # misnamed
+    for name in ("s.npz", "z.npz", "s.csv"):
+        got = read_measured(tmp_path / name)
+        np.testing.assert_array_equal(got.rgb, want.rgb)
+        np.testing.assert_array_equal(got.wi, want.wi)
+        assert got.provenance["format"] == "npz"
+        assert declared_samples(tmp_path / name) == 40
+    for changed, said in (
+            ({"rgb": np.array([{}] * 40, dtype=object)}, "array rgb holds Python objects "
+                                                          r"\(pickled\), which are not read"),
+            ({"rgb": rgb.T}, r"array rgb has shape \(3, 40\), not \(n, 3\)"),
+            ({"theta_i": theta_i, "theta_i_rad": None},
+             r"array theta_i has no unit: name it theta_i_deg or theta_i_rad \(an .npz "
+             r"archive holds no attributes\)"),
+            ({"rgb": None, "r": rgb[:, 0]}, "arrays r: only 1 of r, g, b")):
+        bad = {k: v for k, v in {**arrays, **changed}.items() if v is not None}
+        np.savez(tmp_path / "bad.npz", **bad)
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / "bad.npz")
+    data = (tmp_path / "s.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[:len(data) // 2])
+    with pytest.raises(MeasurementsError, match="not a NumPy .npz archive|not a readable .npz"):
+        read_measured(tmp_path / "cut.npz")
+    np.save(tmp_path / "one.npy", rgb)
+    with pytest.raises(MerlFormatError, match="a numpy .npy array .one array, unnamed: np.savez "
+                                              "names them."):
+        read_measured(tmp_path / "one.npy")
+    # a shape declared in an array's header, far beyond what the file holds
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "huge.npz", "w") as z:
+        for name, a in arrays.items():
+            member = io.BytesIO()
+            np.lib.format.write_array_header_1_0(member, {
+                "descr": "<f8", "fortran_order": False,
+                "shape": (3_000_000,) if name == "theta_i_rad" else a.shape})
+            z.writestr(f"{name}.npy", member.getvalue() + np.ascontiguousarray(a).tobytes())
+    with pytest.raises(MeasurementsError, match="declare 3,000,000 samples"):
+        read_measured(tmp_path / "huge.npz")
+
+
 def test_hdf5_values_may_have_the_names_a_csv_column_has(tmp_path):
     """``RGB``, ``BRDF``, ``Value``: the names a CSV's value columns may have, in any
     case (a MATLAB variable ``BRDF`` was "no values"); a ``brdf`` of (n, 3) is RGB; two

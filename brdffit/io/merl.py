@@ -171,7 +171,8 @@ OTHER_FORMATS = (
     (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
     (b"\x76\x2f\x31\x01", "an OpenEXR image"), (b"\x1f\x8b", "a gzip archive"),
     (b"PK\x03\x04", "a zip archive"), (b"%PDF", "a PDF document"),
-    (b"\x93NUMPY", "a numpy .npy array"), (b"\x89HDF", "an HDF5 file"),
+    (b"\x93NUMPY", "a numpy .npy array (one array, unnamed: np.savez names them)"),
+    (b"\x89HDF", "an HDF5 file"),
     # 11 bytes: the magic is held within the 12-byte header it is judged by
     (b"MATLAB 5.0 ", "a MATLAB .mat file (a sample list: brdffit fit reads it)"),
 )

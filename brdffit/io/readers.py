@@ -30,6 +30,8 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   5 and ``-v7`` (``save``'s default) through :mod:`brdffit.io.matlab`, as the same
   variables saved ``-v7.3``. ``save`` writes no attributes, so the angles' names carry
   their unit.
+- **NumPy** ``.npz`` archives (``np.savez``): their arrays as the HDF5 datasets of the
+  same names (:mod:`brdffit.io.npz`).
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
 one line naming the file and what was expected. A list of more samples than
@@ -51,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.errors import MerlFormatError
-from brdffit.io import matlab, merl, spectra
+from brdffit.io import matlab, merl, npz, spectra
 from brdffit.io.measurements import (
     HORIZON_SLACK,
     Measurements,
@@ -836,7 +838,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     with f:
         if not _written_by_matlab(f, path):
             return _hdf5_samples(f, source, False)
-        with _in_matlab_words():
+        with _in_words("variable"):
             return _hdf5_samples(f, source, True)
 
 
@@ -854,29 +856,48 @@ def read_mat(path: str | os.PathLike) -> Measurements:
         raise MeasurementsError(source, (f"{kind}, not" if kind else "not") + " a MATLAB "
                                         ".mat file of version 5, 7 or 7.3 (by its first "
                                         "bytes; save's default and -v7.3 are read)")
-    with _in_matlab_words():
-        with matlab.as_hdf5(path, source, max_numbers=MAX_NUMBERS, values=False) as f:
-            _declared_angles(f, source)  # refused before a number is read
-        with matlab.as_hdf5(path, source, max_numbers=MAX_NUMBERS) as f:
-            return _hdf5_samples(f, source, True, file_format="mat")
+    return _named_arrays(path, matlab.as_hdf5, matlab=True, file_format="mat")
 
 
-#: The HDF5 reader's words, as a MATLAB user says them (a -v7.3 file's datasets are its
-#: variables): "no dataset theta_i" of a .mat file sent its user looking for HDF5.
-_MATLAB_WORDS = (
-    (re.compile(r"\bis an HDF5 group, not a dataset"), "is a struct or cell, not a matrix"),
-    (re.compile(r"\bdatasets\b"), "variables"), (re.compile(r"\bdataset\b"), "variable"))
+def read_npz(path: str | os.PathLike) -> Measurements:
+    """A NumPy ``.npz`` archive of named arrays (:mod:`brdffit.io.npz`), read as an
+    HDF5 file of the same datasets is."""
+    if not npz.is_npz(path):
+        with open(path, "rb") as raw:
+            kind = merl.other_format(raw.read(64))
+        raise MeasurementsError(str(path), (f"{kind}, not" if kind else "not") + " a NumPy "
+                                           ".npz archive of .npy arrays (by its content)")
+    return _named_arrays(path, npz.as_hdf5, matlab=False, file_format="npz")
+
+
+def _named_arrays(path, as_hdf5: Callable, *, matlab: bool, file_format: str) -> Measurements:
+    """The sample list of a file of named arrays (a MATLAB file's variables, an
+    archive's arrays) that ``as_hdf5`` gives as an in-memory HDF5 file: what it declares
+    weighed first, before a number is read, then read as HDF5 datasets are."""
+    source = str(path)
+    with _in_words("variable" if matlab else "array"):
+        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, values=False) as f:
+            _declared_angles(f, source)
+        with as_hdf5(path, source, max_numbers=MAX_NUMBERS) as f:
+            return _hdf5_samples(f, source, matlab, file_format=file_format)
+
+
+#: The HDF5 reader's words, as a MATLAB or NumPy user says them (a -v7.3 file's
+#: datasets are its variables): "no dataset theta_i" of a .mat file sent its user
+#: looking for HDF5.
+_GROUP_SAID = (re.compile(r"\bis an HDF5 group, not a dataset"),
+               "is a struct or cell, not a matrix")
+_DATASETS, _DATASET = re.compile(r"\bdatasets\b"), re.compile(r"\bdataset\b")
 
 
 @contextlib.contextmanager
-def _in_matlab_words():
-    """Refusals raised within, said in :data:`_MATLAB_WORDS`."""
+def _in_words(noun: str):
+    """Refusals raised within, with ``noun`` (``variable``, ``array``) for dataset."""
     try:
         yield
     except MeasurementsError as e:
-        problem = e.problem
-        for pattern, words in _MATLAB_WORDS:
-            problem = pattern.sub(words, problem)
+        pattern, words = _GROUP_SAID
+        problem = _DATASET.sub(noun, _DATASETS.sub(f"{noun}s", pattern.sub(words, e.problem)))
         raise MeasurementsError(e.source, problem) from None
 
 
@@ -897,9 +918,12 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
                                                 f"{in_name!r}, its 'units' {said!r})")
             own = in_name
         if own is None and shared is None:
+            no_attributes = ("MATLAB's save writes no attributes" if matlab
+                             else "an .npz archive holds no attributes"
+                             if file_format == "npz" else None)
             raise MeasurementsError(
                 source, f"dataset {name} has no unit: name it {canonical}_deg or "
-                        f"{canonical}_rad (MATLAB's save writes no attributes)" if matlab
+                        f"{canonical}_rad ({no_attributes})" if no_attributes
                 else f"dataset {name} has no 'units' attribute (degrees or radians), nor "
                      f"has the file; or name it {canonical}_deg or {canonical}_rad")
         stated = [_attr_text(u, "units", source) for u in (own, shared) if u is not None]
@@ -1121,12 +1145,13 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
     import h5py
 
     reader = reader_for(path, name)
-    if reader not in (read_hdf5, read_mat):
+    if reader not in (read_hdf5, read_mat, read_npz):
         return None
     try:
         with open(path, "rb") as raw:
             v5 = matlab.is_v5(raw.read(len(matlab.V5_MAGIC)))
-        with (matlab.as_hdf5(path, str(path), max_numbers=MAX_NUMBERS, values=False) if v5
+        declared = (npz.as_hdf5 if reader is read_npz else matlab.as_hdf5 if v5 else None)
+        with (declared(path, str(path), max_numbers=MAX_NUMBERS, values=False) if declared
               else h5py.File(path, "r")) as f:
             named = _hdf5_angles(f, str(path))
             if any(a not in named for a in ANGLES):
@@ -1312,6 +1337,8 @@ def _by_content(path: Path) -> Callable:
         return read_hdf5
     if matlab.is_v5(head):
         return read_mat
+    if head.startswith(npz.ZIP_MAGIC) and npz.is_npz(path):
+        return read_npz
     # binary: the MERL reader says what is wrong with it
     return read_text_samples if _looks_like_text(head) else merl.read
 
@@ -1335,6 +1362,7 @@ def read_text_samples(path: str | os.PathLike) -> Measurements:
 READERS: dict[str, Callable] = {
     ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
     ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5, ".mat": read_mat,
+    ".npz": read_npz,
 }
 
 
@@ -1352,6 +1380,8 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
             return read_hdf5
         if matlab.is_v5(head):
             return read_mat
+        if head.startswith(npz.ZIP_MAGIC) and npz.is_npz(path):
+            return read_npz
         if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
             # a MERL table named .csv
             return merl.read

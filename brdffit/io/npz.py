@@ -1,0 +1,114 @@
+"""NumPy ``.npz`` archives of named arrays (``np.savez``, ``np.savez_compressed``), read
+as an HDF5 file of the same datasets is.
+
+``np.savez("s.npz", theta_i_deg=..., phi_i_deg=..., theta_o_deg=..., phi_o_deg=...,
+rgb=...)`` is how a Python user keeps a sample list. :func:`as_hdf5` writes its arrays
+to an HDF5 file in memory, each a dataset of its name, so that the one HDF5 sample
+reader (:func:`brdffit.io.readers.read_hdf5`'s) reads them and says the same of them:
+names, units in the names, shapes, sizes. numpy stores row-major, as HDF5 does: an
+(n, 3) ``rgb`` is (n, 3).
+
+Each array's shape and type are read from its own header, before a number is read:
+a compressed archive of a few KB may declare GBs. An array of Python objects
+(pickled) is refused, never unpickled: a file may be an upload.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import zipfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from brdffit.io.measurements import MeasurementsError
+
+#: A zip archive's first bytes: an .npz file is one, of .npy members.
+ZIP_MAGIC = b"PK\x03\x04"
+_files = itertools.count()  # names of the in-memory files, unique within the process
+
+
+def is_npz(path: str | Path) -> bool:
+    """Whether ``path`` is a zip archive whose members are all ``.npy`` arrays (an
+    Excel workbook is a zip archive too)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+    return bool(names) and all(n.endswith(".npy") for n in names)
+
+
+def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtype]]:
+    """(name, shape, dtype) of every array, from its .npy header alone."""
+    out = []
+    for member in z.namelist():
+        name = member[:-len(".npy")]
+        try:
+            with z.open(member) as f:
+                version = np.lib.format.read_magic(f)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+                elif version == (2, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+                else:
+                    raise ValueError(f"an .npy of format version {version[0]}.{version[1]}")
+        except Exception as e:  # noqa: BLE001 - zipfile and numpy raise many kinds on a damaged file
+            raise MeasurementsError(source, f"array {name}: not a readable .npy header "
+                                            f"({_said(e)})") from None
+        if dtype.hasobject:
+            raise MeasurementsError(source, f"array {name} holds Python objects (pickled), "
+                                            "which are not read: save numbers")
+        out.append((name, tuple(int(k) for k in shape), dtype))
+    return out
+
+
+def _said(e: Exception) -> str:
+    return " ".join(str(e).split())[:200] or type(e).__name__
+
+
+@contextlib.contextmanager
+def as_hdf5(path: str | Path, source: str, *, max_numbers: int,
+            values: bool = True) -> Iterator:
+    """The .npz archive ``path`` as an open HDF5 file in memory, each array a dataset
+    of its name. ``values=False``: the datasets declared, of their shapes, and nothing
+    read (a look at what the file declares). An array of more than ``max_numbers``
+    numbers is refused before any is read."""
+    import h5py
+
+    try:
+        z = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile, ValueError) as e:
+        raise MeasurementsError(source, f"not a readable .npz archive ({_said(e)})") from None
+    with z:
+        declared = _declared(z, source)
+        for name, shape, _ in declared:
+            if int(np.prod(shape, dtype=object)) > max_numbers:
+                raise MeasurementsError(source, f"array {name} has shape {shape}: more "
+                                                "numbers than a sample list read here "
+                                                f"({max_numbers:,}); bin or thin it first")
+        f = h5py.File(f"brdffit-npz-{next(_files)}.h5", "w", driver="core",
+                      backing_store=False)
+        try:
+            for name, shape, dtype in declared:
+                if dtype.kind in "US":  # text (a note): left out, as a MATLAB file's is
+                    continue
+                if values:
+                    f.create_dataset(name, data=_array(z, name, source))
+                else:  # declared only: HDF5 allocates a dataset when written
+                    f.create_dataset(name, shape=shape, dtype="f8")
+            yield f
+        finally:
+            f.close()
+
+
+def _array(z: zipfile.ZipFile, name: str, source: str) -> np.ndarray:
+    try:
+        with z.open(f"{name}.npy") as member:
+            return np.lib.format.read_array(member, allow_pickle=False)
+    except MemoryError:
+        raise MeasurementsError(source, f"array {name} does not fit in memory") from None
+    except Exception as e:  # noqa: BLE001 - zipfile and numpy raise many kinds on a damaged file
+        raise MeasurementsError(source, f"array {name} cannot be read ({_said(e)})") from None
