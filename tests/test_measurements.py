@@ -385,10 +385,11 @@ def test_a_matlab_v5_file_reads_as_its_variables_saved_v73_do(tmp_path):
         with pytest.raises(MeasurementsError, match=said):
             read_measured(bad)
     data = plain.read_bytes()
-    (tmp_path / "cut.mat").write_bytes(data[:len(data) - 100])
-    with pytest.raises(MeasurementsError, match="a MATLAB .mat file whose variables cannot be "
-                                                "read"):
-        read_measured(tmp_path / "cut.mat")
+    for cut in (100, len(data) - 1000):  # in its last variable, or before the others
+        (tmp_path / "cut.mat").write_bytes(data[:len(data) - cut])
+        with pytest.raises(MeasurementsError, match="a MATLAB .mat file cut short: its last "
+                                                    "variable runs past the end of the file"):
+            read_measured(tmp_path / "cut.mat")
     (tmp_path / "other.mat").write_bytes(b"theta_i,phi_i\n")
     with pytest.raises(MeasurementsError, match="not a MATLAB .mat file of version 5, 7 or 7.3"):
         read_measured(tmp_path / "other.mat")
@@ -397,12 +398,76 @@ def test_a_matlab_v5_file_reads_as_its_variables_saved_v73_do(tmp_path):
     rows = np.array([5, 8, 40, 1], "<i4").tobytes()  # miINT32, 8 bytes: 40 x 1
     assert data.count(rows) == 4
     for declared, said in ((3_000_000, "its variables declare 3,000,000 samples"),
-                           (200_000_000, "variable theta_i_deg is 200000000 x 1: more "
-                                         "numbers than a sample list read here")):
+                           (200_000_000, "variable theta_i_deg holds 200,000,000 numbers: "
+                                         "more than a sample list read here")):
         huge = tmp_path / f"huge{declared}.mat"
         huge.write_bytes(data.replace(rows, np.array([5, 8, declared, 1], "<i4").tobytes(), 1))
         with pytest.raises(MeasurementsError, match=said):
             read_measured(huge)
+
+
+def test_a_mat_file_reads_only_what_a_sample_list_holds(tmp_path, monkeypatch):
+    """What the fuzzing of version-5 files found (stop 74): variables no fit reads are
+    never read (a 23 KB file of empty sparse matrices took 4.9 GB, densified); a name or
+    size that no HDF5 file holds is one line, not h5py's traceback or message; CIE XYZ,
+    a long layout and an uncertainty by another name are refused as in a CSV; a MATLAB
+    row vector of sigma is read as its angles are; text, complex and logical values are
+    named so."""
+    import scipy.sparse
+    from scipy import io
+
+    from brdffit.io import matlab
+
+    loaded = matlab._loaded
+    s = _samples(40)
+    plain = _matlab_v5(tmp_path / "s.mat", s)
+    arrays = {k: v for k, v in io.loadmat(plain).items() if not k.startswith("__")}
+    n = 40
+    io.savemat(tmp_path / "junk.mat", {**arrays, **{f"junk{k}": scipy.sparse.csc_matrix(
+        (10**8, 1)) for k in range(3)}})
+    read_names = []
+    monkeypatch.setattr(matlab, "_loaded", lambda path, source, names: read_names.extend(
+        names) or loaded(path, source, names))
+    assert read_measured(tmp_path / "junk.mat").n == n
+    assert sorted(read_names) == sorted(arrays)  # the junk was never read
+    monkeypatch.undo()
+    grey = arrays["rgb"][:, 1]
+    for variables, said in (
+            ({"rgb": None, "X": grey, "Y": grey, "Z": grey},
+             "variables X, Y, Z: CIE XYZ\\? A fit reads linear RGB"),
+            ({"channel": np.ones(n)}, "variable 'channel' says which channel, wavelength or "
+                                      "polarisation each row holds"),
+            ({"wavelengths": np.full(n, 550.0)}, "variable 'wavelengths' says which"),
+            ({"rgb_stderr": np.ones((n, 3))}, "variable 'rgb_stderr' looks like each "
+                                              "value's uncertainty"),
+            ({"variance": np.ones((n, 3))}, "variable 'variance' looks like"),
+            ({"theta_i_deg": "30 40 50"}, "variable theta_i_deg holds text, not numbers"),
+            ({"rgb": arrays["rgb"] + 0j}, "variable rgb holds complex numbers"),
+            ({"rgb": arrays["rgb"] > 0}, "variable rgb holds booleans .a mask\\?.")):
+        io.savemat(tmp_path / "bad.mat", {k: v for k, v in {**arrays, **variables}.items()
+                                          if v is not None})
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / "bad.mat")
+    # sigma as MATLAB's row vector (numpy's 1-d arrays are saved so): read, as angles are
+    io.savemat(tmp_path / "row.mat", {**arrays, "sigma": np.full(n, 0.01)})
+    np.testing.assert_array_equal(read_measured(tmp_path / "row.mat").sigma, np.full((n, 3),
+                                                                                      0.01))
+    # hand-made headers: a name HDF5 cannot hold, a name twice, a negative size
+    io.savemat(tmp_path / "named.mat", {**arrays, "zzzz": np.ones((2, 2)), "rgc": np.ones(2)})
+    data = (tmp_path / "named.mat").read_bytes()
+    dims = np.array([5, 8, 40, 3], "<i4").tobytes()  # rgb's: miINT32, 8 bytes, 40 x 3
+    for changed, said in ((data.replace(b"zzzz", b"rgb/"), "a variable named 'rgb/'"),
+                          (data.replace(b"rgc", b"rgb"), "variable rgb appears twice"),
+                          (data.replace(dims, np.array([5, 8, -40, 3], "<i4").tobytes()),
+                           r"variable rgb declares dimensions \[-40, 3\]")):
+        (tmp_path / "bad.mat").write_bytes(changed)
+        with pytest.raises(MeasurementsError, match="not a readable MATLAB .mat file .*" + said):
+            read_measured(tmp_path / "bad.mat")
+    io.savemat(tmp_path / "many.mat", {**arrays, **{f"v{k}": np.zeros((1, 1))
+                                                    for k in range(1001)}})
+    with pytest.raises(MeasurementsError, match="1,006 variables: more than a sample list "
+                                                "holds"):
+        read_measured(tmp_path / "many.mat")
 
 
 def test_a_numpy_npz_archive_reads_as_hdf5_datasets_of_its_names(tmp_path):
@@ -666,8 +731,8 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
      "sigma has shape (3, 4): expected (4,) or (4, 3), one per sample"),
     ({"rgb": np.ones((4, 3)), "sigma": np.ones(8)}, "sigma has shape (8,)"),
     ({"rgb": np.ones((4, 3)), "sigma": np.ones(5)}, "sigma has shape (5,)"),
-    ({"rgb": np.array([[b"x"] * 3] * 4)}, "dataset rgb holds |S1, not numbers"),
-    ({"rgb": np.ones((4, 3)), "sigma": np.array([b"x"] * 4)}, "dataset sigma holds |S1"),
+    ({"rgb": np.array([[b"x"] * 3] * 4)}, "dataset rgb holds text, not numbers"),
+    ({"rgb": np.ones((4, 3)), "sigma": np.array([b"x"] * 4)}, "dataset sigma holds text"),
     ({"rgb": None}, "rgb is an HDF5 group, not a dataset"),
     ({"rgb": np.ones((4, 3)), "value": np.ones(4)}, "datasets rgb and value"),
     # flattened, a (2, n) angle array paired one sample's angle with another's values
@@ -1286,12 +1351,20 @@ def test_files_as_lab_tools_write_them(tmp_path):
     with pytest.raises(MeasurementsError, match="column 'channel' says which channel, "
                                                 "wavelength or polarisation each row holds"):
         read_measured(long)
+    for other in ("color", "nm"):  # fitted grey, unsaid, until stop 74's fuzzing
+        long.write_text(long.read_text().replace("channel", other, 1))
+        with pytest.raises(MeasurementsError, match=f"column '{other}' says which channel"):
+            read_measured(long)
+        long.write_text(long.read_text().replace(other, "channel", 1))
     # an uncertainty by another name than sigma_r: refused, saying what to name it (the
     # fit weighed every sample alike, without a word)
     for header, said in (("r,g,b,r_std,g_std,b_std", "r_std"),
                          ("R,G,B,R_err,G_err,B_err", "R_err"), ("value,uncertainty", "uncertainty"),
                          ("r,g,b,sigma_red,sigma_green,sigma_blue", "sigma_red"),
-                         ("Red,Green,Blue,Std Red", "Std Red")):
+                         ("Red,Green,Blue,Std Red", "Std Red"),
+                         ("r,g,b,stderr_r,stderr_g,stderr_b", "stderr_r"),
+                         ("r,g,b,r_sem", "r_sem"), ("value,variance", "variance"),
+                         ("value,ci95", "ci95")):
         odd = tmp_path / "odd.csv"
         width = header.count(",") + 1
         odd.write_text(f"theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,{header}\n"

@@ -15,12 +15,12 @@ weighed before a number is read: a compressed file of a few MB may hold GBs.
 from __future__ import annotations
 
 import contextlib
-import itertools
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from brdffit.io import variables
 from brdffit.io.measurements import MeasurementsError
 
 #: The first bytes of a version-5 (and -v7) MAT-file: its 116-byte text header's start.
@@ -28,11 +28,6 @@ V5_MAGIC = b"MATLAB 5.0 MAT-file"
 #: MATLAB classes of numbers, as ``whos`` names them: written to HDF5 as datasets.
 NUMERIC_CLASSES = frozenset({"double", "single", "int8", "uint8", "int16", "uint16",
                              "int32", "uint32", "int64", "uint64", "logical", "sparse"})
-#: Classes written as HDF5 groups (so the sample reader can name them): ``-v7.3``
-#: stores a struct as a group too.
-GROUP_CLASSES = frozenset({"struct", "cell", "object"})
-
-_files = itertools.count()  # names of the in-memory files, unique within the process
 
 
 def is_v5(head: bytes) -> bool:
@@ -40,10 +35,31 @@ def is_v5(head: bytes) -> bool:
     return head.startswith(V5_MAGIC)
 
 
+def _cut_short(path: Path) -> bool:
+    """Whether the file ends inside a variable: each top-level element's tag gives its
+    length, and the last runs past the end (scipy's list of variables stops there
+    without a word, and a cut-off upload read as "no variable phi_i")."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        header = f.read(128)
+        if len(header) < 128:
+            return True
+        order = "<" if header[126:128] == b"IM" else ">"
+        position = 128
+        while position + 8 <= size:
+            f.seek(position)
+            _, nbytes = np.frombuffer(f.read(8), f"{order}u4")
+            position += 8 + int(nbytes)  # a top-level element is never padded
+        return position > size
+
+
 def _declared(path: Path, source: str) -> list[tuple[str, tuple, str]]:
     """(name, MATLAB dimensions, class) of every variable, read from their headers."""
     from scipy import io
 
+    if _cut_short(path):
+        raise MeasurementsError(source, "a MATLAB .mat file cut short: its last variable "
+                                        "runs past the end of the file")
     try:
         return [(name, tuple(int(k) for k in shape), cls)
                 for name, shape, cls in io.whosmat(str(path))]
@@ -59,37 +75,38 @@ def _said(e: Exception) -> str:
 
 
 @contextlib.contextmanager
-def as_hdf5(path: str | Path, source: str, *, max_numbers: int,
+def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda name: True,
             values: bool = True) -> Iterator:
     """The version-5 MAT-file ``path`` as an open HDF5 file in memory, each variable
     of numbers a dataset as ``save -v7.3`` stores it (an n x 3 matrix as (3, n), with
-    its ``MATLAB_class``); a struct, cell or object an empty group (named, not read);
-    text (``char``) left out, as a note. ``values=False``: the datasets declared, of
-    their shapes, and nothing read (for a look at what the file declares). A variable
-    of more than ``max_numbers`` numbers is refused before any is read."""
-    import h5py
-
+    its ``MATLAB_class``; a logical one of booleans); text (``char``) a dataset of text
+    (refused where it is read); a struct, cell or object an empty group (named, not
+    read). Only the variables
+    ``wanted(name)`` are read (:mod:`brdffit.io.variables`); ``values=False``: none is,
+    for a look at what the file declares."""
     declared = _declared(Path(path), source)
-    numeric = [(name, shape, cls) for name, shape, cls in declared if cls in NUMERIC_CLASSES]
-    for name, shape, _ in numeric:
-        if int(np.prod(shape, dtype=object)) > max_numbers:
-            raise MeasurementsError(source, f"variable {name} is {_dims(shape)}: more numbers "
-                                            f"than a sample list read here ({max_numbers:,}); "
-                                            "bin or thin it first")
-    read = _loaded(Path(path), source, [n for n, _, _ in numeric]) if values and numeric else {}
-    f = h5py.File(f"brdffit-mat-{next(_files)}.h5", "w", driver="core", backing_store=False)
+    variables.checked([(n, shape) for n, shape, _ in declared], source, noun="variable",
+                      file="MATLAB .mat file", max_numbers=max_numbers, wanted=wanted)
+    read = (_loaded(Path(path), source, [n for n, _, cls in declared if wanted(n)
+                                         and cls in NUMERIC_CLASSES])
+            if values else {})
+    f = variables.in_memory("mat")
     try:
         for name, shape, cls in declared:
-            if cls in GROUP_CLASSES:
+            if cls not in NUMERIC_CLASSES and cls != "char":  # a struct, cell, object, ...
                 f.create_group(name).attrs["MATLAB_class"] = np.bytes_(cls)
-            elif cls in NUMERIC_CLASSES:
-                if values:
-                    a = read[name]
-                    a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)  # sparse
-                    d = f.create_dataset(name, data=a.T)
-                else:  # declared only: HDF5 allocates a contiguous dataset when written
-                    d = f.create_dataset(name, shape=shape[::-1], dtype="f8")
-                d.attrs["MATLAB_class"] = np.bytes_(cls)
+                continue
+            if cls == "char":  # its text is not read: refused as text where it is wanted
+                d = f.create_dataset(name, data=np.bytes_(b""))
+            elif name not in read:
+                d = variables.declare(f, name, shape[::-1])
+            else:
+                a = read[name]
+                a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)  # sparse
+                if cls == "logical":  # scipy reads it as uint8: a mask, not numbers
+                    a = a.astype(bool)
+                d = f.create_dataset(name, data=a.T)
+            d.attrs["MATLAB_class"] = np.bytes_(cls)
         yield f
     finally:
         f.close()
@@ -107,8 +124,3 @@ def _loaded(path: Path, source: str, names: list[str]) -> dict:
     except Exception as e:  # noqa: BLE001 - scipy's reader raises many kinds on a damaged file
         raise MeasurementsError(source, f"a MATLAB .mat file whose variables cannot be read "
                                         f"({_said(e)})") from None
-
-
-def _dims(shape: tuple) -> str:
-    """MATLAB's way of writing a size: 3 x 1000."""
-    return " x ".join(str(k) for k in shape)

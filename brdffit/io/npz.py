@@ -16,18 +16,17 @@ a compressed archive of a few KB may declare GBs. An array of Python objects
 from __future__ import annotations
 
 import contextlib
-import itertools
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from brdffit.io import variables
 from brdffit.io.measurements import MeasurementsError
 
 #: A zip archive's first bytes: an .npz file is one, of .npy members.
 ZIP_MAGIC = b"PK\x03\x04"
-_files = itertools.count()  # names of the in-memory files, unique within the process
 
 
 def is_npz(path: str | Path) -> bool:
@@ -70,35 +69,29 @@ def _said(e: Exception) -> str:
 
 
 @contextlib.contextmanager
-def as_hdf5(path: str | Path, source: str, *, max_numbers: int,
+def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda name: True,
             values: bool = True) -> Iterator:
     """The .npz archive ``path`` as an open HDF5 file in memory, each array a dataset
-    of its name. ``values=False``: the datasets declared, of their shapes, and nothing
-    read (a look at what the file declares). An array of more than ``max_numbers``
-    numbers is refused before any is read."""
-    import h5py
-
+    of its name (text a dataset of text, refused where it is read). Only the arrays
+    ``wanted(name)`` are read (:mod:`brdffit.io.variables`); ``values=False``: none is,
+    for a look at what the file declares."""
     try:
         z = zipfile.ZipFile(path)
     except (OSError, zipfile.BadZipFile, ValueError) as e:
         raise MeasurementsError(source, f"not a readable .npz archive ({_said(e)})") from None
     with z:
         declared = _declared(z, source)
-        for name, shape, _ in declared:
-            if int(np.prod(shape, dtype=object)) > max_numbers:
-                raise MeasurementsError(source, f"array {name} has shape {shape}: more "
-                                                "numbers than a sample list read here "
-                                                f"({max_numbers:,}); bin or thin it first")
-        f = h5py.File(f"brdffit-npz-{next(_files)}.h5", "w", driver="core",
-                      backing_store=False)
+        variables.checked([(n, shape) for n, shape, _ in declared], source, noun="array",
+                          file=".npz archive", max_numbers=max_numbers, wanted=wanted)
+        f = variables.in_memory("npz")
         try:
             for name, shape, dtype in declared:
-                if dtype.kind in "US":  # text (a note): left out, as a MATLAB file's is
-                    continue
-                if values:
+                if dtype.kind in "US":  # text (a note): not read
+                    f.create_dataset(name, data=np.bytes_(b""))
+                elif values and wanted(name):
                     f.create_dataset(name, data=_array(z, name, source))
-                else:  # declared only: HDF5 allocates a dataset when written
-                    f.create_dataset(name, shape=shape, dtype="f8")
+                else:
+                    variables.declare(f, name, shape)
             yield f
         finally:
             f.close()

@@ -94,8 +94,8 @@ ONE_CHANNEL = ("value", "brdf", "y")
 #: every row was fitted as a grey sample of its direction (a coloured GGX, kd 0.4,
 #: 0.15, 0.05, fitted to kd 0.197 in each channel, without a word).
 LONG_LAYOUT_COLUMNS = ("channel", "band", "wavelength", "wavelength_nm", "lambda",
-                       "lambda_nm", "wl", "polarization", "polarisation", "polarizer",
-                       "polariser", "pol")
+                       "lambda_nm", "wl", "nm", "color", "colour", "filter",
+                       "polarization", "polarisation", "polarizer", "polariser", "pol")
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
 
 
@@ -231,10 +231,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         if "y" in seen and "x" in seen and "z" in seen:
             # CIE XYZ: y is its luminance, but x and z were dropped unsaid and a coloured
             # material fitted grey
-            raise MeasurementsError(
-                source, "columns x, y, z: CIE XYZ? A fit reads linear RGB (r, g, b: Rec. "
-                        "709 primaries) or one grey channel: convert XYZ to linear sRGB, or "
-                        "keep y alone (named value) to fit the luminance")
+            raise MeasurementsError(source, "columns x, y, z: " + _XYZ_WHY)
         out["values"] = one
         out["sigma"] = _sigma_columns(seen, source, rgb=False)
     else:
@@ -248,6 +245,16 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     return out
 
 
+#: Why CIE XYZ values are refused (a CSV's x, y, z columns; HDF5's X, Y, Z datasets).
+_XYZ_WHY = ("CIE XYZ? A fit reads linear RGB (r, g, b: Rec. 709 primaries) or one grey "
+            "channel: convert XYZ to linear sRGB, or keep y alone (named value) to fit the "
+            "luminance")
+#: Why a file of one row per (direction, channel) is refused.
+_LONG_WHY = ("a file of one row per (direction, channel) is not read (its rows would be "
+             "fitted as grey samples of the same directions). Write one row per direction "
+             "pair, with r, g, b, or spectral values named by wavelength (450nm, ...)")
+
+
 def _refuse_long_layout(names: list[str], seen: dict[str, int], source: str) -> None:
     """Refuses a column of :data:`LONG_LAYOUT_COLUMNS` (its name, less a unit:
     ``wavelength [nm]``), which no reader takes."""
@@ -258,10 +265,7 @@ def _refuse_long_layout(names: list[str], seen: dict[str, int], source: str) -> 
         said = names[k].strip()[:40]
         raise MeasurementsError(
             source, f"column {said!r} says which channel, wavelength or polarisation each "
-                    "row holds: a file of one row per (direction, channel) is not read (its "
-                    "rows would be fitted as grey samples of the same directions). Write one "
-                    "row per direction pair, with r, g, b, or spectral columns named by "
-                    f"wavelength (450nm, ...); if every row has the same {said}, drop the "
+                    f"row holds: {_LONG_WHY}; if every row has the same {said}, drop the "
                     "column")
 
 
@@ -281,7 +285,8 @@ def _other_units(seen: dict[str, int]) -> str:
 _VALUE_WORDS = "|".join((*CHANNELS, *_CHANNEL_WORDS, *ONE_CHANNEL, "rgb"))
 _UNCERTAINTY = re.compile(
     rf"(?:(?:{_VALUE_WORDS})[\s_.-]*)?"
-    r"(?:std|stdev|stddev|std_dev|sd|sigma|err|error|unc|uncertainty)"
+    r"(?:std|stdev|stddev|std_dev|sd|se|sem|stderr|std_err|sigma|err|error|unc|uncertainty"
+    r"|var|variance|ci|ci95|ci_95|conf)"
     rf"(?:[\s_.-]*(?:{_VALUE_WORDS}))?")
 
 
@@ -839,7 +844,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
         if not _written_by_matlab(f, path):
             return _hdf5_samples(f, source, False)
         with _in_words("variable"):
-            return _hdf5_samples(f, source, True)
+            return _hdf5_samples(f, source, True, file_format="mat")
 
 
 def read_mat(path: str | os.PathLike) -> Measurements:
@@ -876,10 +881,19 @@ def _named_arrays(path, as_hdf5: Callable, *, matlab: bool, file_format: str) ->
     weighed first, before a number is read, then read as HDF5 datasets are."""
     source = str(path)
     with _in_words("variable" if matlab else "array"):
-        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, values=False) as f:
+        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, wanted=_read_here,
+                     values=False) as f:
             _declared_angles(f, source)
-        with as_hdf5(path, source, max_numbers=MAX_NUMBERS) as f:
+        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, wanted=_read_here) as f:
             return _hdf5_samples(f, source, matlab, file_format=file_format)
+
+
+def _read_here(name: str) -> bool:
+    """Whether the sample reader reads a dataset of this name's numbers (an angle, the
+    values, their sigma, wavelengths): a file of named arrays reads only these."""
+    key = name.strip().lower()
+    return (_angle_name(name) is not None
+            or any(key in names for names in _VALUE_DATASETS.values()))
 
 
 #: The HDF5 reader's words, as a MATLAB or NumPy user says them (a -v7.3 file's
@@ -942,6 +956,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
     provenance.update(azimuths_within(raw, scales))
     v = _value_names(f, source)
+    _refuse_other_layouts(f, v, source)
     channels = [v[c] for c in CHANNELS if c in v]
     kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
         [", ".join(channels)] if channels else [])
@@ -988,7 +1003,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
         raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
                                         "(n,) each, value (n,; also brdf or y), or "
                                         "spectral (n, k) with wavelengths (k,)")
-    sigma = _hdf5_sigma(f, v, source, matlab, rgb=values.ndim == 2)
+    sigma = _hdf5_sigma(f, v, source, matlab, rgb=values.ndim == 2, n=len(values))
     if provenance.get("channels") == 1 and not (
             values.ndim == 1 or np.all(values == values[:, :1])):
         del provenance["channels"]  # said of grey values: these are coloured
@@ -1010,9 +1025,30 @@ _SIGMAS = ("sigma", *(f"sigma_{c}" for c in CHANNELS))
 _PER_SAMPLE = ("rgb", "value", "spectral", *_SIGMAS, *CHANNELS)
 
 
-def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool,
-                rgb: bool) -> np.ndarray | None:
-    """The values' standard deviations: a dataset ``sigma`` ((n, 3) or (n,)), or
+def _refuse_other_layouts(f, v: dict[str, str], source: str) -> None:
+    """Refuses the HDF5 (MATLAB, .npz) files a CSV of the same columns is refused as:
+    CIE XYZ (``X``, ``Y``, ``Z``: Y was read as a grey value and X and Z dropped), and a
+    "long" layout, one row per (direction, channel), said by a dataset of
+    :data:`LONG_LAYOUT_COLUMNS` or by ``wavelengths`` beside no ``spectral`` (its rows
+    were fitted as grey samples of the same directions)."""
+    keys = {k.strip().lower(): k for k in f.keys()}
+    if "value" in v and v["value"].strip().lower() == "y" and "x" in keys and "z" in keys:
+        raise MeasurementsError(source, f"datasets {keys['x']}, {v['value']}, {keys['z']}: "
+                                        + _XYZ_WHY)
+    long = next((k for key, k in keys.items() if re.sub(r"[\s_]*[\[(].*$", "", key)
+                 in LONG_LAYOUT_COLUMNS and np.prod(_stored_shape(f, k, False)) > 1), None)
+    if long is None and "wavelengths" in v and "spectral" not in v:
+        long = v["wavelengths"]
+    if long is not None:
+        raise MeasurementsError(source, f"dataset {long!r} says which channel, wavelength or "
+                                        "polarisation each row holds: " + _LONG_WHY
+                                        + f"; if every row has the same {long}, drop it")
+
+
+def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,
+                n: int) -> np.ndarray | None:
+    """The values' standard deviations (``n`` samples): a dataset ``sigma`` ((n, 3) or
+    (n,); a MATLAB file's 1 x n too), or
     ``sigma_r``, ``sigma_g``, ``sigma_b`` (n,) each, as a CSV's sigma columns (RGB
     values only), or None. Any other dataset named as an uncertainty (``rgb_std``,
     ``R_err``, ``uncertainty``) is refused, as such a CSV column is: it was dropped
@@ -1030,7 +1066,8 @@ def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool,
         return None
     if given == [v.get("sigma")]:
         sigma = _numeric(f, v["sigma"], source, matlab)
-        return sigma.ravel() if sigma.ndim == 2 and sigma.shape[1] == 1 else sigma
+        row = matlab and sigma.shape == (1, n) and n > 1  # a MATLAB row vector, as angles
+        return sigma.ravel() if row or (sigma.ndim == 2 and sigma.shape[1] == 1) else sigma
     if rgb and "sigma" not in v and len(given) == len(CHANNELS):
         return np.column_stack([_one_per_sample(f, name, source, matlab) for name in given])
     expected = "sigma, or sigma_r, sigma_g and sigma_b" if rgb else "one dataset sigma"
@@ -1251,7 +1288,10 @@ def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
     if not isinstance(d, h5py.Dataset):
         raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset")
     if d.dtype.kind not in "iuf":
-        raise MeasurementsError(source, f"dataset {name} holds {d.dtype}, not numbers")
+        held = ("text" if d.dtype.kind in "SUO" else "complex numbers (a BRDF is real: keep "
+                "the real part)" if d.dtype.kind == "c" else "booleans (a mask?)"
+                if d.dtype.kind == "b" else d.dtype)
+        raise MeasurementsError(source, f"dataset {name} holds {held}, not numbers")
     if (d.size or 0) > MAX_NUMBERS:  # None: a null dataspace, read below as empty
         # the declared shape, before anything is read: a file of a few KB may declare
         # 10^12 numbers never written (it asked numpy for 7 TiB)

@@ -1,0 +1,68 @@
+"""Files of named arrays, a MATLAB file's variables or an ``.npz`` archive's arrays,
+given to the HDF5 sample reader as an HDF5 file in memory (:mod:`brdffit.io.matlab`,
+:mod:`brdffit.io.npz`): what such a file declares is checked here, before a dataset is
+made or a number read.
+
+Every variable is made a dataset (the sample reader names them, and refuses an
+uncertainty or a channel index by its name), but only those it reads (``wanted``) are
+read; the others are declared, of their shapes, which HDF5 does not allocate: a file of
+a few KB may declare GBs in variables no fit needs (a 23 KB .mat of empty sparse
+matrices took 4.9 GB when every variable was read).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from brdffit.io.measurements import MeasurementsError
+
+#: The most variables one file may hold: a sample list has a handful; a MATLAB
+#: workspace saved whole, hundreds. (160,000 empty ones took a minute to read.)
+MAX_VARIABLES = 1000
+_files = itertools.count()  # names of the in-memory files, unique within the process
+
+
+def checked(declared: list[tuple[str, tuple]], source: str, *, noun: str, file: str,
+            max_numbers: int, wanted) -> None:
+    """Refuses, with one line, a file whose ``declared`` (name, shape) pairs no HDF5
+    file can hold, or that would read too much: more than :data:`MAX_VARIABLES`, a name
+    twice, a name HDF5 cannot take (empty, ``.``, with ``/`` or NUL; MATLAB writes none
+    of them), a negative dimension, or a variable the reader reads (``wanted(name)``)
+    of more than ``max_numbers`` numbers."""
+    if len(declared) > MAX_VARIABLES:
+        raise MeasurementsError(source, f"{len(declared):,} {noun}s: more than a sample list "
+                                        f"holds ({MAX_VARIABLES:,} are read); save the "
+                                        f"angles and values alone")
+    seen: set[str] = set()
+    for name, shape in declared:
+        if not name or name in (".", "..") or "/" in name or "\x00" in name:
+            raise MeasurementsError(source, f"not a readable {file} (a {noun} named "
+                                            f"{name!r})")
+        if name in seen:
+            raise MeasurementsError(source, f"not a readable {file} ({noun} {name} appears "
+                                            "twice)")
+        seen.add(name)
+        if any(k < 0 for k in shape):
+            raise MeasurementsError(source, f"not a readable {file} ({noun} {name} declares "
+                                            f"dimensions {list(shape)})")
+        numbers = int(np.prod(shape, dtype=object))
+        if wanted(name) and numbers > max_numbers:
+            raise MeasurementsError(source, f"{noun} {name} holds {numbers:,} numbers: more "
+                                            f"than a sample list read here ({max_numbers:,}); "
+                                            "bin or thin it first")
+
+
+def in_memory(kind: str):
+    """A new, empty HDF5 file in memory (never written to disk)."""
+    import h5py
+
+    return h5py.File(f"brdffit-{kind}-{next(_files)}.h5", "w", driver="core",
+                     backing_store=False)
+
+
+def declare(f, name: str, shape: tuple):
+    """Dataset ``name`` of ``shape`` (float64), its values never written: HDF5 keeps
+    no storage for it."""
+    return f.create_dataset(name, shape=shape, dtype="f8")
