@@ -329,6 +329,20 @@ def test_a_matlab_v73_file_reads_as_matlab_holds_it(tmp_path):
     with pytest.raises(MeasurementsError, match=r"MATLAB variable rgb is 3 x 40, not n x 3: "
                                                 r"save its transpose \(rgb'\)"):
         read_measured(wrong_way)
+    # text is stored as its uint16 codes (they were read as numbers), a sparse matrix as
+    # a group (said to be a struct or cell)
+    for name, store, said in (
+            ("theta_i_deg", lambda f: f.create_dataset("theta_i_deg", data=np.frombuffer(
+                b"3\x000\x00", "<u2")[None, :]), "variable theta_i_deg holds text"),
+            ("rgb", lambda f: f.create_group("rgb").attrs.update({"MATLAB_sparse": 40}),
+             r"rgb is a sparse matrix: save full\(rgb\)")):
+        with h5py.File(wrong_way, "a") as f:
+            del f[name]
+            store(f)
+            f[name].attrs["MATLAB_class"] = np.bytes_("char" if name != "rgb" else "double")
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(wrong_way)
+        _matlab_73(wrong_way, s)
 
 
 def _matlab_v5(path, s, *, compressed=False, **more):

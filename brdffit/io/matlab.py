@@ -67,7 +67,10 @@ def _declared(path: Path, source: str) -> list[tuple[str, tuple, str]]:
         raise MeasurementsError(source, "a MATLAB .mat file whose variables do not fit in "
                                         "memory") from None
     except Exception as e:  # noqa: BLE001 - scipy's reader raises many kinds on a damaged file
-        raise MeasurementsError(source, f"not a readable MATLAB .mat file ({_said(e)})") from None
+        # scipy takes a version field it does not know for -v7.3 and says to use h5py,
+        # which brdffit does by itself: the header is damaged
+        why = "its header's version field is damaged" if "v7.3" in str(e) else _said(e)
+        raise MeasurementsError(source, f"not a readable MATLAB .mat file ({why})") from None
 
 
 def _said(e: Exception) -> str:

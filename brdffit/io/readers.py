@@ -1285,8 +1285,16 @@ def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
     import h5py
 
     d = _dataset(f, name, source)
+    stored_as = (_attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source)
+                 if matlab else None)
     if not isinstance(d, h5py.Dataset):
+        if matlab and "MATLAB_sparse" in d.attrs:  # -v7.3's sparse matrix: a group
+            raise MeasurementsError(source, f"{name} is a sparse matrix: save full({name})")
         raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset")
+    if stored_as == "char":  # -v7.3 stores text as uint16 codes: read, they were numbers
+        raise MeasurementsError(source, f"dataset {name} holds text, not numbers")
+    if matlab and d.attrs.get("MATLAB_empty"):  # [] is stored as its dimensions
+        return np.zeros((0, 0))
     if d.dtype.kind not in "iuf":
         held = ("text" if d.dtype.kind in "SUO" else "complex numbers (a BRDF is real: keep "
                 "the real part)" if d.dtype.kind == "c" else "booleans (a mask?)"
