@@ -158,6 +158,10 @@ def test_one_channel_and_sigma(tmp_path):
     # ... and an Arabic-Indic one as 1
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,\u0661,1,1\n",
      "row 2 is not all numbers"),
+    # rows split by another delimiter than the header's: said (it read "1 values" alone)
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10;0;20;0;1;1;1\n",
+     "row 2 has 1 values, the header names 7 columns (this row is split by semicolons, the "
+     "header by commas: use one delimiter for both)"),
     # value and sigma columns that would be guessed at or dropped are refused
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,x,y,z\n10,0,20,0,1,1,1\n",
      "columns x, y, z: CIE XYZ"),

@@ -428,6 +428,18 @@ def _read_cells(lines: list[tuple[int, str]], delimiter: str | None,
     return out
 
 
+def _other_delimiter(line: str, delimiter: str | None, width: int) -> str:
+    """Where a row splits into the header's columns by another delimiter than the
+    header's (a comma header over semicolon rows, as pasted from two exports): said,
+    as a row "of 1 values" left its reader to guess why."""
+    said = {",": "commas", ";": "semicolons", "\t": "tabs", None: "spaces"}
+    for other in (",", ";", "\t", None):
+        if other != delimiter and len(line.split(other)) == width:
+            return (f" (this row is split by {said[other]}, the header by "
+                    f"{said.get(delimiter, repr(delimiter))}: use one delimiter for both)")
+    return ""
+
+
 def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
              source: str, comma: bool = False,
              used: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -444,7 +456,8 @@ def _numbers(lines: list[tuple[int, str]], delimiter: str | None, width: int,
             cells = cells[:width]  # empty cells after the last column, as Excel leaves
         if len(cells) != width:
             raise MeasurementsError(source, f"row {number + 1} has {len(cells)} values, the "
-                                            f"header names {width} columns")
+                                            f"header names {width} columns"
+                                            + _other_delimiter(line, delimiter, width))
         try:
             read = [cells[k] for k in used]
             # Python's float() also reads 1_0 as 10, and any script's digits (Arabic-
