@@ -165,6 +165,9 @@ def test_one_channel_and_sigma(tmp_path):
     # value and sigma columns that would be guessed at or dropped are refused
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,x,y,z\n10,0,20,0,1,1,1\n",
      "columns x, y, z: CIE XYZ"),
+    # named as CIE's beside a Y: the Y was read alone, as grey (stop 74's fuzzing)
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,CIE_X,CIE_Y,CIE_Z,Y\n"
+              "10,0,20,0,1,1,1,1\n", "columns CIE_X, CIE_Y, CIE_Z, Y: CIE XYZ"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,value\n10,0,20,0,1,1,1\n",
      "value columns of two kinds: r, g (RGB) and value (one channel)"),
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,sigma_r,sigma_g\n"

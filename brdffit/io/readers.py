@@ -228,10 +228,12 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out["values"] = rgb
         out["sigma"] = _sigma_columns(seen, source, rgb=True)
     elif len(one) == 1:
-        if "y" in seen and "x" in seen and "z" in seen:
+        if _cie_xyz(seen):
             # CIE XYZ: y is its luminance, but x and z were dropped unsaid and a coloured
             # material fitted grey
-            raise MeasurementsError(source, "columns x, y, z: " + _XYZ_WHY)
+            said = [names[k].strip() for n, k in seen.items()
+                    if n in ("x", "y", "z") or _CIE_NAME.fullmatch(n)]
+            raise MeasurementsError(source, f"columns {', '.join(said)}: " + _XYZ_WHY)
         out["values"] = one
         out["sigma"] = _sigma_columns(seen, source, rgb=False)
     else:
@@ -243,6 +245,17 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
                     + ("" if len(one) < 2 else "; more than one single-channel column")
                     + _other_units(seen))
     return out
+
+
+#: A column of CIE XYZ by its name: ``CIE_X``, ``X (CIE)``, ``xyz_z``.
+_CIE_NAME = re.compile(r"(?:cie|xyz)[\s_.-]*[xyz]|[xyz][\s_.-]*[\[(]?cie[\])]?")
+
+
+def _cie_xyz(names) -> bool:
+    """Whether lower-case column or dataset ``names`` hold CIE XYZ: ``x``, ``y`` and
+    ``z``, or any named as CIE's (``CIE_X`` beside a ``Y`` read ``Y`` alone as grey)."""
+    return ({"x", "y", "z"} <= set(names)
+            or any(_CIE_NAME.fullmatch(n.strip()) for n in names))
 
 
 #: Why CIE XYZ values are refused (a CSV's x, y, z columns; HDF5's X, Y, Z datasets).
@@ -1045,9 +1058,9 @@ def _refuse_other_layouts(f, v: dict[str, str], source: str) -> None:
     :data:`LONG_LAYOUT_COLUMNS` or by ``wavelengths`` beside no ``spectral`` (its rows
     were fitted as grey samples of the same directions)."""
     keys = {k.strip().lower(): k for k in f.keys()}
-    if "value" in v and v["value"].strip().lower() == "y" and "x" in keys and "z" in keys:
-        raise MeasurementsError(source, f"datasets {keys['x']}, {v['value']}, {keys['z']}: "
-                                        + _XYZ_WHY)
+    if "value" in v and _cie_xyz(keys):
+        said = [k for key, k in keys.items() if key in ("x", "y", "z") or _CIE_NAME.fullmatch(key)]
+        raise MeasurementsError(source, f"datasets {', '.join(said)}: " + _XYZ_WHY)
     long = next((k for key, k in keys.items() if re.sub(r"[\s_]*[\[(].*$", "", key)
                  in LONG_LAYOUT_COLUMNS and np.prod(_stored_shape(f, k, False)) > 1), None)
     if long is None and "wavelengths" in v and "spectral" not in v:
