@@ -69,47 +69,46 @@ def _declared(path: Path, source: str) -> list[tuple[str, tuple, str]]:
     except Exception as e:  # noqa: BLE001 - scipy's reader raises many kinds on a damaged file
         # scipy takes a version field it does not know for -v7.3 and says to use h5py,
         # which brdffit does by itself: the header is damaged
-        why = "its header's version field is damaged" if "v7.3" in str(e) else _said(e)
+        why = "its header's version field is damaged" if "v7.3" in str(e) else variables.said(e)
         raise MeasurementsError(source, f"not a readable MATLAB .mat file ({why})") from None
-
-
-def _said(e: Exception) -> str:
-    return " ".join(str(e).split())[:200] or type(e).__name__
 
 
 @contextlib.contextmanager
 def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda name: True,
-            values: bool = True) -> Iterator:
+            values: bool = True, before_reading=None) -> Iterator:
     """The version-5 MAT-file ``path`` as an open HDF5 file in memory, each variable
     of numbers a dataset as ``save -v7.3`` stores it (an n x 3 matrix as (3, n), with
     its ``MATLAB_class``; a logical one of booleans); text (``char``) a dataset of text
     (refused where it is read); a struct, cell or object an empty group (named, not
-    read). Only the variables
-    ``wanted(name)`` are read (:mod:`brdffit.io.variables`); ``values=False``: none is,
-    for a look at what the file declares."""
+    read). Every variable is declared first and ``before_reading(f)`` called (it may
+    refuse the file), then only the variables ``wanted(name)`` are read
+    (:mod:`brdffit.io.variables`); ``values=False``: none is, for a look at what the
+    file declares."""
     declared = _declared(Path(path), source)
     variables.checked([(n, shape) for n, shape, _ in declared], source, noun="variable",
                       file="MATLAB .mat file", max_numbers=max_numbers, wanted=wanted)
-    read = (_loaded(Path(path), source, [n for n, _, cls in declared if wanted(n)
-                                         and cls in NUMERIC_CLASSES])
-            if values else {})
     f = variables.in_memory("mat")
     try:
         for name, shape, cls in declared:
             if cls not in NUMERIC_CLASSES and cls != "char":  # a struct, cell, object, ...
-                f.create_group(name).attrs["MATLAB_class"] = np.bytes_(cls)
-                continue
-            if cls == "char":  # its text is not read: refused as text where it is wanted
+                d = f.create_group(name)
+            elif cls == "char":  # its text is not read: refused as text where it is wanted
                 d = f.create_dataset(name, data=np.bytes_(b""))
-            elif name not in read:
-                d = variables.declare(f, name, shape[::-1])
             else:
+                d = variables.declare(f, name, shape[::-1])
+            d.attrs["MATLAB_class"] = np.bytes_(cls)
+        if before_reading is not None:
+            before_reading(f)
+        if values:
+            classes = {name: cls for name, _, cls in declared}
+            read = _loaded(Path(path), source, [n for n, cls in classes.items()
+                                                if wanted(n) and cls in NUMERIC_CLASSES])
+            for name in read.keys() & classes.keys():
                 a = read[name]
                 a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)  # sparse
-                if cls == "logical":  # scipy reads it as uint8: a mask, not numbers
+                if classes[name] == "logical":  # scipy reads it as uint8: a mask
                     a = a.astype(bool)
-                d = f.create_dataset(name, data=a.T)
-            d.attrs["MATLAB_class"] = np.bytes_(cls)
+                variables.fill(f, name, a.T)
         yield f
     finally:
         f.close()
@@ -126,4 +125,4 @@ def _loaded(path: Path, source: str, names: list[str]) -> dict:
                                         "memory") from None
     except Exception as e:  # noqa: BLE001 - scipy's reader raises many kinds on a damaged file
         raise MeasurementsError(source, f"a MATLAB .mat file whose variables cannot be read "
-                                        f"({_said(e)})") from None
+                                        f"({variables.said(e)})") from None

@@ -56,7 +56,7 @@ def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtyp
                     raise ValueError(f"an .npy of format version {version[0]}.{version[1]}")
         except Exception as e:  # noqa: BLE001 - zipfile and numpy raise many kinds on a damaged file
             raise MeasurementsError(source, f"array {name}: not a readable .npy header "
-                                            f"({_said(e)})") from None
+                                            f"({variables.said(e)})") from None
         if dtype.hasobject:
             raise MeasurementsError(source, f"array {name} holds Python objects (pickled), "
                                             "which are not read: save numbers")
@@ -64,21 +64,19 @@ def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtyp
     return out
 
 
-def _said(e: Exception) -> str:
-    return " ".join(str(e).split())[:200] or type(e).__name__
-
-
 @contextlib.contextmanager
 def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda name: True,
-            values: bool = True) -> Iterator:
+            values: bool = True, before_reading=None) -> Iterator:
     """The .npz archive ``path`` as an open HDF5 file in memory, each array a dataset
-    of its name (text a dataset of text, refused where it is read). Only the arrays
-    ``wanted(name)`` are read (:mod:`brdffit.io.variables`); ``values=False``: none is,
-    for a look at what the file declares."""
+    of its name (text a dataset of text, refused where it is read). Every array is
+    declared first and ``before_reading(f)`` called (it may refuse the file), then only
+    the arrays ``wanted(name)`` are read (:mod:`brdffit.io.variables`);
+    ``values=False``: none is, for a look at what the file declares."""
     try:
         z = zipfile.ZipFile(path)
     except (OSError, zipfile.BadZipFile, ValueError) as e:
-        raise MeasurementsError(source, f"not a readable .npz archive ({_said(e)})") from None
+        raise MeasurementsError(source, f"not a readable .npz archive "
+                                        f"({variables.said(e)})") from None
     with z:
         declared = _declared(z, source)
         variables.checked([(n, shape) for n, shape, _ in declared], source, noun="array",
@@ -88,10 +86,13 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
             for name, shape, dtype in declared:
                 if dtype.kind in "US":  # text (a note): not read
                     f.create_dataset(name, data=np.bytes_(b""))
-                elif values and wanted(name):
-                    f.create_dataset(name, data=_array(z, name, source))
                 else:
                     variables.declare(f, name, shape)
+            if before_reading is not None:
+                before_reading(f)
+            for name, _, dtype in declared:
+                if values and wanted(name) and dtype.kind not in "US":
+                    variables.fill(f, name, _array(z, name, source))
             yield f
         finally:
             f.close()
@@ -104,4 +105,5 @@ def _array(z: zipfile.ZipFile, name: str, source: str) -> np.ndarray:
     except MemoryError:
         raise MeasurementsError(source, f"array {name} does not fit in memory") from None
     except Exception as e:  # noqa: BLE001 - zipfile and numpy raise many kinds on a damaged file
-        raise MeasurementsError(source, f"array {name} cannot be read ({_said(e)})") from None
+        raise MeasurementsError(source, f"array {name} cannot be read "
+                                        f"({variables.said(e)})") from None

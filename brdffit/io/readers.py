@@ -228,12 +228,11 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out["values"] = rgb
         out["sigma"] = _sigma_columns(seen, source, rgb=True)
     elif len(one) == 1:
-        if _cie_xyz(seen):
+        if xyz := _cie_xyz(seen):
             # CIE XYZ: y is its luminance, but x and z were dropped unsaid and a coloured
             # material fitted grey
-            said = [names[k].strip() for n, k in seen.items()
-                    if n in ("x", "y", "z") or _CIE_NAME.fullmatch(n)]
-            raise MeasurementsError(source, f"columns {', '.join(said)}: " + _XYZ_WHY)
+            said = ", ".join(names[seen[n]].strip() for n in xyz)
+            raise MeasurementsError(source, f"columns {said}: " + _XYZ_WHY)
         out["values"] = one
         out["sigma"] = _sigma_columns(seen, source, rgb=False)
     else:
@@ -251,11 +250,13 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
 _CIE_NAME = re.compile(r"(?:cie|xyz)[\s_.-]*[xyz]|[xyz][\s_.-]*[\[(]?cie[\])]?")
 
 
-def _cie_xyz(names) -> bool:
-    """Whether lower-case column or dataset ``names`` hold CIE XYZ: ``x``, ``y`` and
-    ``z``, or any named as CIE's (``CIE_X`` beside a ``Y`` read ``Y`` alone as grey)."""
-    return ({"x", "y", "z"} <= set(names)
-            or any(_CIE_NAME.fullmatch(n.strip()) for n in names))
+def _cie_xyz(names) -> list[str]:
+    """Those of the lower-case column or dataset ``names`` that hold CIE XYZ, where
+    they do: ``x``, ``y`` and ``z``, or any named as CIE's (``CIE_X`` beside a ``Y``
+    read ``Y`` alone as grey); else none."""
+    bare = {"x", "y", "z"} & set(names)
+    xyz = [n for n in names if n in bare or _CIE_NAME.fullmatch(n)]
+    return xyz if len(bare) == 3 or len(xyz) > len(bare) else []
 
 
 #: Why CIE XYZ values are refused (a CSV's x, y, z columns; HDF5's X, Y, Z datasets).
@@ -303,6 +304,11 @@ _UNCERTAINTY = re.compile(
     rf"(?:[\s_.-]*(?:{_VALUE_WORDS}))?")
 
 
+#: What a refused uncertainty column or dataset is told: what sigma is, what to do.
+_SIGMA_IS = ("their standard deviation, in 1/sr. Rename it so to weigh the fit by it, or "
+             "drop it")
+
+
 def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> None:
     """Refuses a column of :data:`_UNCERTAINTY` that is not a sigma column read here,
     saying what to name it."""
@@ -313,8 +319,7 @@ def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> 
         said = names[k].strip()[:40]
         raise MeasurementsError(
             source, f"column {said!r} looks like each value's uncertainty, which is read "
-                    "from columns sigma_r, sigma_g, sigma_b (or one sigma): their standard "
-                    "deviation, in 1/sr. Rename it so to weigh the fit by it, or drop it")
+                    f"from columns sigma_r, sigma_g, sigma_b (or one sigma): {_SIGMA_IS}")
 
 
 def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | None:
@@ -904,14 +909,13 @@ def read_npz(path: str | os.PathLike) -> Measurements:
 def _named_arrays(path, as_hdf5: Callable, *, matlab: bool, file_format: str) -> Measurements:
     """The sample list of a file of named arrays (a MATLAB file's variables, an
     archive's arrays) that ``as_hdf5`` gives as an in-memory HDF5 file: what it declares
-    weighed first, before a number is read, then read as HDF5 datasets are."""
+    weighed first, before a number is read (``before_reading``), then read as HDF5
+    datasets are."""
     source = str(path)
-    with _in_words("variable" if matlab else "array"):
-        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, wanted=_read_here,
-                     values=False) as f:
-            _declared_angles(f, source)
-        with as_hdf5(path, source, max_numbers=MAX_NUMBERS, wanted=_read_here) as f:
-            return _hdf5_samples(f, source, matlab, file_format=file_format)
+    with _in_words("variable" if matlab else "array"), as_hdf5(
+            path, source, max_numbers=MAX_NUMBERS, wanted=_read_here,
+            before_reading=lambda declared: _declared_angles(declared, source)) as f:
+        return _hdf5_samples(f, source, matlab, file_format=file_format)
 
 
 def _read_here(name: str) -> bool:
@@ -1058,9 +1062,9 @@ def _refuse_other_layouts(f, v: dict[str, str], source: str) -> None:
     :data:`LONG_LAYOUT_COLUMNS` or by ``wavelengths`` beside no ``spectral`` (its rows
     were fitted as grey samples of the same directions)."""
     keys = {k.strip().lower(): k for k in f.keys()}
-    if "value" in v and _cie_xyz(keys):
-        said = [k for key, k in keys.items() if key in ("x", "y", "z") or _CIE_NAME.fullmatch(key)]
-        raise MeasurementsError(source, f"datasets {', '.join(said)}: " + _XYZ_WHY)
+    if "value" in v and (xyz := _cie_xyz(keys)):
+        raise MeasurementsError(source, f"datasets {', '.join(keys[n] for n in xyz)}: "
+                                        + _XYZ_WHY)
     long = next((k for key, k in keys.items() if re.sub(r"[\s_]*[\[(].*$", "", key)
                  in LONG_LAYOUT_COLUMNS and np.prod(_stored_shape(f, k, False)) > 1), None)
     if long is None and "wavelengths" in v and "spectral" not in v:
@@ -1085,8 +1089,7 @@ def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,
             raise MeasurementsError(
                 source, f"dataset {key!r} looks like each value's uncertainty, which is "
                         "read from a dataset sigma ((n, 3) or (n,)) or sigma_r, sigma_g, "
-                        "sigma_b: their standard deviation, in 1/sr. Rename it so to weigh "
-                        "the fit by it, or drop it")
+                        f"sigma_b: {_SIGMA_IS}")
     given = [v[k] for k in _SIGMAS if k in v]
     if not given:
         return None
@@ -1210,12 +1213,11 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
     reader = reader_for(path, name)
     if reader not in (read_hdf5, read_mat, read_npz):
         return None
+    # reader_for gives read_mat to a version-5 file alone (a -v7.3 one is read_hdf5's)
+    declared = {read_mat: matlab.as_hdf5, read_npz: npz.as_hdf5}.get(reader)
     try:
-        with open(path, "rb") as raw:
-            v5 = matlab.is_v5(raw.read(len(matlab.V5_MAGIC)))
-        declared = (npz.as_hdf5 if reader is read_npz else matlab.as_hdf5 if v5 else None)
-        with (declared(path, str(path), max_numbers=MAX_NUMBERS, values=False) if declared
-              else h5py.File(path, "r")) as f:
+        with (declared(path, str(path), max_numbers=MAX_NUMBERS, wanted=_read_here,
+                       values=False) if declared else h5py.File(path, "r")) as f:
             named = _hdf5_angles(f, str(path))
             if any(a not in named for a in ANGLES):
                 return None
@@ -1404,15 +1406,24 @@ def _hdf5(head: bytes) -> bool:
     return any(head[k:k + len(HDF5_SIGNATURE)] == HDF5_SIGNATURE for k in HDF5_OFFSETS)
 
 
-def _by_content(path: Path) -> Callable:
-    with open(path, "rb") as f:
-        head = f.read(4096)
+def _container_reader(path: Path, head: bytes) -> Callable | None:
+    """The reader of a file whose first bytes (``head``, at least 2,056 of them) say
+    it is a container of named arrays, whatever its name: HDF5 (a MATLAB -v7.3 file
+    too), a MATLAB version-5 file, an .npz archive; else None."""
     if _hdf5(head):
         return read_hdf5
     if matlab.is_v5(head):
         return read_mat
     if head.startswith(npz.ZIP_MAGIC) and npz.is_npz(path):
         return read_npz
+    return None
+
+
+def _by_content(path: Path) -> Callable:
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if (reader := _container_reader(path, head)) is not None:
+        return reader
     # binary: the MERL reader says what is wrong with it
     return read_text_samples if _looks_like_text(head) else merl.read
 
@@ -1450,12 +1461,8 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
     else:
         with open(path, "rb") as f:  # a file named as another layout: read as what it is
             head = f.read(HDF5_OFFSETS[-1] + len(HDF5_SIGNATURE))
-        if _hdf5(head):
-            return read_hdf5
-        if matlab.is_v5(head):
-            return read_mat
-        if head.startswith(npz.ZIP_MAGIC) and npz.is_npz(path):
-            return read_npz
+        if (container := _container_reader(path, head)) is not None:
+            return container
         if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
             # a MERL table named .csv
             return merl.read

@@ -3,11 +3,12 @@ given to the HDF5 sample reader as an HDF5 file in memory (:mod:`brdffit.io.matl
 :mod:`brdffit.io.npz`): what such a file declares is checked here, before a dataset is
 made or a number read.
 
-Every variable is made a dataset (the sample reader names them, and refuses an
-uncertainty or a channel index by its name), but only those it reads (``wanted``) are
-read; the others are declared, of their shapes, which HDF5 does not allocate: a file of
-a few KB may declare GBs in variables no fit needs (a 23 KB .mat of empty sparse
-matrices took 4.9 GB when every variable was read).
+Every variable is first declared, a dataset of its shape that HDF5 does not allocate
+(the sample reader names them, and refuses an uncertainty or a channel index by its
+name), and what the file declares is weighed; then only those the reader reads
+(``wanted``) are filled with their values: a file of a few KB may declare GBs in
+variables no fit needs (a 23 KB .mat of empty sparse matrices took 4.9 GB when every
+variable was read).
 """
 
 from __future__ import annotations
@@ -66,3 +67,16 @@ def declare(f, name: str, shape: tuple):
     """Dataset ``name`` of ``shape`` (float64), its values never written: HDF5 keeps
     no storage for it."""
     return f.create_dataset(name, shape=shape, dtype="f8")
+
+
+def fill(f, name: str, data) -> None:
+    """Declared dataset ``name`` given its values (made again: a dataset's type and
+    storage are fixed when it is made), its attributes kept."""
+    attrs = dict(f[name].attrs)
+    del f[name]
+    f.create_dataset(name, data=data).attrs.update(attrs)
+
+
+def said(e: Exception) -> str:
+    """A reader library's exception in one line, for a refusal's parentheses."""
+    return " ".join(str(e).split())[:200] or type(e).__name__
