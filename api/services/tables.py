@@ -35,7 +35,7 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
                        name: str, cap: int | None = None) -> tuple[TableRecord, bool]:
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
-    before. A file of samples (ASTM, CSV, HDF5, MATLAB; ``brdffit.io.readers``, chosen by
+    before. A file of samples (ASTM, CSV, HDF5, MATLAB, .npz; ``brdffit.io.readers``, chosen by
     ``name``'s suffix or the content) is stored as brdffit's HDF5 sample list (read
     back by its content whatever the stored file is called), which the jobs fit at its
     own directions; its summary is the summary of the table it bins into (what the
