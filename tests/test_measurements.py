@@ -961,7 +961,7 @@ def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all
     the header's first SNIFF_CHARS, and the refusal quotes the header shortened."""
     import csv
 
-    from brdffit.io import readers
+    from brdffit.io import text_samples
 
     sniffed = []
     sniff = csv.Sniffer.sniff
@@ -973,7 +973,7 @@ def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all
                                  for k in range(12000)) + "]")
     with pytest.raises(MeasurementsError, match="no column for theta_i") as e:
         read_measured(p)
-    assert sniffed == [readers.SNIFF_CHARS]
+    assert sniffed == [text_samples.SNIFF_CHARS]
     assert len(str(e.value)) < 600 and "(36000 columns)" in str(e.value)
 
 
@@ -1188,7 +1188,7 @@ def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, mo
     decompressed whole (GBs) and fitted for minutes: its datasets' declared rows are
     weighed against MAX_SAMPLES before any is read. A text list's rows are counted
     before they are parsed."""
-    from brdffit.io import measurements, readers
+    from brdffit.io import measurements, named_arrays, readers
 
     n = measurements.MAX_SAMPLES + 1
     bomb = tmp_path / "bomb.h5"
@@ -1204,7 +1204,7 @@ def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, mo
         raise AssertionError("a dataset was read")
 
     with monkeypatch.context() as m:
-        m.setattr(readers, "_numeric", no_reading)
+        m.setattr(named_arrays, "_numeric", no_reading)
         with pytest.raises(MeasurementsError) as e:
             read_measured(bomb)
     assert str(e.value) == (f"{bomb}: its datasets declare {n:,} samples: more than a sample "
@@ -1239,7 +1239,7 @@ def test_a_unit_suffix_is_read_from_the_end_of_any_name(tmp_path):
     split a run of spaces in cubic many ways (a 16 KB header took 110 s to read)."""
     import itertools
 
-    from brdffit.io.readers import _unit_suffixed
+    from brdffit.io.columns import unit_suffixed as _unit_suffixed
 
     def as_before(name: str) -> str:
         name = name.replace("°", "deg").replace("º", "deg")

@@ -1,7 +1,7 @@
 """MATLAB ``.mat`` files of version 5: what ``save`` writes by default (and ``-v7``,
 compressed), read through ``scipy.io`` (JAX's own dependency).
 
-``save -v7.3`` writes HDF5, which :func:`brdffit.io.readers.read_hdf5` reads. A
+``save -v7.3`` writes HDF5, which :func:`brdffit.io.named_arrays.read_hdf5` reads. A
 version-5 file is MATLAB's own container of variables. :func:`as_hdf5` writes its
 variables to an HDF5 file in memory, laid out as ``save -v7.3`` would lay them out
 (column-major, each with its ``MATLAB_class``), so that the one HDF5 sample reader

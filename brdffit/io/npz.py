@@ -4,7 +4,7 @@ as an HDF5 file of the same datasets is.
 ``np.savez("s.npz", theta_i_deg=..., phi_i_deg=..., theta_o_deg=..., phi_o_deg=...,
 rgb=...)`` is how a Python user keeps a sample list. :func:`as_hdf5` writes its arrays
 to an HDF5 file in memory, each a dataset of its name, so that the one HDF5 sample
-reader (:func:`brdffit.io.readers.read_hdf5`'s) reads them and says the same of them:
+reader (:func:`brdffit.io.named_arrays.read_hdf5`'s) reads them and says the same of them:
 names, units in the names, shapes, sizes. numpy stores row-major, as HDF5 does: an
 (n, 3) ``rgb`` is (n, 3).
 

@@ -91,3 +91,16 @@ def wavelength_of(name: str) -> float | None:
     if m is None:
         return None
     return float(m[1] or m[2])
+
+
+def projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):
+    """Spectra (n, k) of a sample list, checked as any value is (finite, >= 0; the first
+    bad one named by its row, ``row_numbers`` where the file's rows are not the
+    samples'), then :func:`to_rgb`."""
+    bad = ~np.all(np.isfinite(values), axis=1) | np.any(values < 0, axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        row = first if row_numbers is None else int(row_numbers[first])
+        raise MeasurementsError(source, f"a spectral value is negative or not finite in "
+                                        f"{int(bad.sum())} rows (first: row {row + 1})")
+    return to_rgb(values, wavelengths, source)

@@ -84,7 +84,7 @@ def write_hdf5(meas: Measurements, path: str | os.PathLike) -> Path:
             f.create_dataset("sigma", data=meas.sigma)
         f.attrs["source"] = str(meas.source)
         # what the list was before it was stored here (its format, columns, spectral
-        # projection): read back by brdffit.io.readers.read_hdf5
+        # projection): read back by brdffit.io.named_arrays.read_hdf5
         f.attrs["provenance"] = json.dumps(meas.provenance)
     return path
 

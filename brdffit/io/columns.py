@@ -1,0 +1,207 @@
+"""What a sample list's columns and datasets are called, and what they say of their
+units: one vocabulary for every layout, a CSV's or ASTM file's columns
+(:mod:`brdffit.io.text_samples`) and an HDF5, MATLAB or .npz file's datasets
+(:mod:`brdffit.io.named_arrays`).
+
+The names brdffit reads (``theta_i``, ``phi_o``, ``r``, ``value``, ``sigma_g``), their
+aliases (``theta_s``, ``Red [1/sr]``, ``theta_i (deg)``), the names it refuses with a
+reason (CIE XYZ, one row per channel, an uncertainty by another name than sigma), and
+the judgements of units made on the numbers themselves (radians said to be degrees).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from brdffit.io.measurements import HORIZON_SLACK, MeasurementsError
+
+#: Column name -> the canonical name (light ``_i``, view ``_o``).
+ANGLE_ALIASES = {
+    "theta_i": "theta_i", "phi_i": "phi_i", "theta_in": "theta_i", "phi_in": "phi_i",
+    "theta_l": "theta_i", "phi_l": "phi_i",
+    "theta_o": "theta_o", "phi_o": "phi_o", "theta_out": "theta_o", "phi_out": "phi_o",
+    "theta_r": "theta_o", "phi_r": "phi_o", "theta_s": "theta_o", "phi_s": "phi_o",
+    "theta_v": "theta_o", "phi_v": "phi_o",
+}
+#: The value columns of RGB samples, and the names one grey channel may have.
+CHANNELS = ("r", "g", "b")
+ONE_CHANNEL = ("value", "brdf", "y")
+#: Columns that say which channel, wavelength or polarisation a row holds: a file of
+#: one row per (direction, channel), a "long" layout. Such a column is not read, so
+#: every row was fitted as a grey sample of its direction (a coloured GGX, kd 0.4,
+#: 0.15, 0.05, fitted to kd 0.197 in each channel, without a word).
+LONG_LAYOUT_COLUMNS = ("channel", "band", "wavelength", "wavelength_nm", "lambda",
+                       "lambda_nm", "wl", "nm", "color", "colour", "filter",
+                       "polarization", "polarisation", "polarizer", "polariser", "pol")
+ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
+
+
+def unit_scale(unit: str, source: str) -> float:
+    """Radians per ``unit``: degrees or radians, in any of their spellings (``deg``,
+    ``radian``); any other unit is refused."""
+    unit = unit.strip().lower()
+    if unit in ("deg", "degree", "degrees"):
+        return np.pi / 180.0
+    if unit in ("rad", "radian", "radians"):
+        return 1.0
+    raise MeasurementsError(source, f"unknown angle unit {unit!r}: degrees or radians")
+
+
+#: A value column's unit written after its name, which is the BRDF's own (1/sr): read
+#: as the name alone (``r [1/sr]``, ``brdf (sr^-1)``). Any other unit is not stripped,
+#: so that such a column is not read as a BRDF.
+PER_STERADIAN = re.compile(r"[\[(]\s*(?:1\s*/\s*sr|sr\s*\^?\s*-\s*1|sr⁻¹)\s*[\])]")
+#: Spelled-out channel names, as some instruments' exports write them.
+CHANNEL_WORDS = {"red": "r", "green": "g", "blue": "b"}
+
+
+def value_name(name: str) -> str:
+    """A lower-case column name without a per-steradian unit, its channel spelled
+    as brdffit's (``Red [1/sr]`` is ``r``)."""
+    # from the last bracket on: a pattern searched from the start would try each
+    # space of a long run before it (quadratic in the name)
+    last = max(name.rfind("["), name.rfind("("))
+    if last >= 0 and PER_STERADIAN.fullmatch(name, last):
+        name = name[:last].rstrip()
+    return CHANNEL_WORDS.get(name, name)
+
+
+def unit_suffixed(name: str) -> str:
+    """An angle column's name with its unit written as a suffix: ``theta_i [deg]``,
+    ``theta_i (deg)``, ``theta_i (°)``, ``theta_i deg`` and ``theta_i/rad`` are read as
+    ``theta_i_deg`` and ``theta_i_rad``, as lab software and spreadsheets write them.
+
+    Read from the end with string methods, in time linear in the name: one regular
+    expression for all four forms could split a run of spaces between its parts in
+    cubic many ways (a 16 KB header with a long run of spaces in one name took 110 s
+    to read)."""
+    name = name.replace("°", "deg").replace("º", "deg")
+    for opening, closing in ("[]", "()"):
+        if name.endswith(closing):
+            head, found, unit = name[:-1].rpartition(opening)
+            unit = unit.strip()
+            if found and _WORD.fullmatch(unit):
+                return f"{head.rstrip()}_{unit}"
+            return name
+    start = len(name)
+    while start > 0 and _WORD.fullmatch(name[start - 1]):
+        start -= 1
+    unit, before = name[start:], name[:start].rstrip()
+    if unit and before.endswith("/"):
+        return f"{before[:-1].rstrip()}_{unit}"
+    if unit and 0 < start and name[start - 1].isspace():
+        return f"{before}_{unit}"
+    return name
+
+
+_WORD = re.compile(r"\w+")
+
+
+#: A column of CIE XYZ by its name: ``CIE_X``, ``X (CIE)``, ``xyz_z``.
+_CIE_NAME = re.compile(r"(?:cie|xyz)[\s_.-]*[xyz]|[xyz][\s_.-]*[\[(]?cie[\])]?")
+
+
+def cie_xyz(names) -> list[str]:
+    """Those of the lower-case column or dataset ``names`` that hold CIE XYZ, where
+    they do: ``x``, ``y`` and ``z``, or any named as CIE's (``CIE_X`` beside a ``Y``
+    read ``Y`` alone as grey); else none."""
+    bare = {"x", "y", "z"} & set(names)
+    xyz = [n for n in names if n in bare or _CIE_NAME.fullmatch(n)]
+    return xyz if len(bare) == 3 or len(xyz) > len(bare) else []
+
+
+#: Why CIE XYZ values are refused (a CSV's x, y, z columns; HDF5's X, Y, Z datasets).
+XYZ_WHY = ("CIE XYZ? A fit reads linear RGB (r, g, b: Rec. 709 primaries) or one grey "
+            "channel: convert XYZ to linear sRGB, or keep y alone (named value) to fit the "
+            "luminance")
+#: Why a file of one row per (direction, channel) is refused.
+LONG_WHY = ("a file of one row per (direction, channel) is not read (its rows would be "
+             "fitted as grey samples of the same directions). Write one row per direction "
+             "pair, with r, g, b, or spectral values named by wavelength (450nm, ...)")
+
+
+#: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:
+#: ``r_std``, ``std_r``, ``R_err``, ``uncertainty``. It was dropped unsaid, and the fit
+#: weighted every sample alike.
+_VALUE_WORDS = "|".join((*CHANNELS, *CHANNEL_WORDS, *ONE_CHANNEL, "rgb"))
+UNCERTAINTY = re.compile(
+    rf"(?:(?:{_VALUE_WORDS})[\s_.-]*)?"
+    r"(?:std|stdev|stddev|std_dev|sd|se|sem|stderr|std_err|sigma|err|error|unc|uncertainty"
+    r"|var|variance|ci|ci95|ci_95|conf)"
+    rf"(?:[\s_.-]*(?:{_VALUE_WORDS}))?")
+
+
+#: What a refused uncertainty column or dataset is told: what sigma is, what to do.
+SIGMA_IS = ("their standard deviation, in 1/sr. Rename it so to weigh the fit by it, or "
+             "drop it")
+
+
+#: Fewer samples than this are not judged by :func:`radians_said_to_be_degrees`.
+_JUDGED_FROM = 3
+
+
+def radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
+                                source: str) -> None:
+    """Refuses polar angles in degrees (``scales``) whose numbers all fit radians' range,
+    pi/2: read as degrees, the whole list sits within 1.6 degrees of the normal, where
+    no lobe can be fitted. The azimuths are not asked: a lab that writes its polar angles
+    in radians and its azimuths in degrees had its fit called good, ks 0.0004 for 0.8.
+    The other mistake (degrees said to be radians) is refused by the angles' bounds."""
+    n = raw[0].size
+    if n < _JUDGED_FROM or any(scale == 1.0 for scale in scales[0::2]):
+        return
+    polar, azimuth = np.abs(np.concatenate(raw[0::2])), np.abs(np.concatenate(raw[1::2]))
+    if np.all(polar <= np.pi / 2 + HORIZON_SLACK) and np.max(polar) > 0.2:
+        mixed = ("" if np.all(azimuth <= 2 * np.pi + 1e-6) else
+                 "; the azimuths reach beyond 2 pi, as degrees do: polar angles in radians "
+                 "beside azimuths in degrees?")
+        raise MeasurementsError(
+            source, f"the angles are said to be in degrees, but all {n} samples' polar "
+                    f"angles are within {np.pi / 2:.4f}, radians' range (as degrees, every "
+                    f"direction would be within 1.6 degrees of the normal){mixed}. If the "
+                    "polar angles are radians, name their columns _rad (theta_i_rad beside "
+                    "phi_i_deg is read), or put '# angles: radians' before the header (HDF5: "
+                    "a units attribute 'radians')")
+
+
+#: From this many samples, azimuths are judged by :func:`azimuths_within`.
+_AZIMUTHS_JUDGED_FROM = 20
+
+
+def azimuths_within(raw: list[np.ndarray], scales: list[float]) -> dict:
+    """``{"azimuths_within_deg": x}`` where the azimuths are said to be in degrees yet
+    all lie within 2 pi, reach beyond pi, and are mostly not whole degrees: radians under
+    a degrees header, most likely (every direction then sits within 6.3 degrees of one
+    azimuth, and the fit was made without a word). Only noted (the fit's notes), not
+    refused: a list measured close to its plane of incidence reads so too."""
+    if raw[0].size < _AZIMUTHS_JUDGED_FROM or any(scale == 1.0 for scale in scales[1::2]):
+        return {}
+    azimuth = np.abs(np.concatenate(raw[1::2]))
+    azimuth = azimuth[azimuth != 0]  # phi_i 0, by a common convention, says nothing
+    if azimuth.size < _AZIMUTHS_JUDGED_FROM or not np.all(np.isfinite(azimuth)):
+        return {}
+    largest = float(azimuth.max())
+    whole = np.mean(azimuth == np.round(azimuth))
+    if largest <= 2 * np.pi + 1e-6 and largest > np.pi and whole < 0.5:
+        return {"azimuths_within_deg": largest}
+    return {}
+
+
+def angle_name(name: str) -> re.Match | None:
+    """An angle column's name read (``theta_i_deg``, ``Theta_S [rad]``, ``phi_o``):
+    groups the angle's name and its unit, if any; None for any other column."""
+    # every spelling unit_scale reads: a units row of "degree" was accepted, then its
+    # columns (theta_i [degree]) found no angle
+    m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees?|radians?))?",
+                     unit_suffixed(value_name(name.strip().lower())))
+    return m if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES else None
+
+
+def an_angle_unit(unit: str | None) -> bool:
+    """Whether ``unit`` is an angle's (:func:`unit_scale` reads it)."""
+    try:
+        return unit is not None and unit_scale(unit, "") > 0
+    except MeasurementsError:
+        return False
