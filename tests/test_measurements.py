@@ -456,8 +456,11 @@ def test_a_mat_file_reads_only_what_a_sample_list_holds(tmp_path, monkeypatch):
     for variables, said in (
             ({"rgb": None, "X": grey, "Y": grey, "Z": grey},
              "variables X, Y, Z: CIE XYZ\\? A fit reads linear RGB"),
-            ({"channel": np.ones(n)}, "variable 'channel' says which channel, wavelength or "
-                                      "polarisation each row holds"),
+            # a long layout's channel beside wide values (read where its value is one
+            # variable: test_a_long_layout_of_named_arrays_is_pivoted_as_a_csvs_is)
+            ({"channel": np.ones(n)}, "variable 'channel' says which channel or wavelength "
+                                      "each row holds .one row per direction and channel, a "
+                                      "long layout.: each row's value is then one variable"),
             ({"wavelengths": np.full(n, 550.0)}, "variable 'wavelengths' says which"),
             ({"rgb_stderr": np.ones((n, 3))}, "variable 'rgb_stderr' looks like each "
                                               "value's uncertainty"),
@@ -1354,6 +1357,152 @@ def test_an_hdf5_list_is_read_from_its_own_file_alone(tmp_path):
             read_measured(listed(name, values))
 
 
+def test_a_long_layout_is_pivoted_to_the_wide_files_samples(tmp_path):
+    """One row per (direction pair, channel), as pandas' melt writes it and a spectral
+    gonioreflectometer exports a run: read as the wide file of the same samples (it was
+    refused; before stop 74, fitted as grey samples). Each pair must give each channel
+    once, a row that lacks one or gives one twice is named; a polarisation column is
+    refused, not averaged."""
+    from brdffit.io.readers import input_summary
+
+    s = _samples(40)
+    wide = read_measured(_write_all(tmp_path, s)["csv"])
+    deg = [np.degrees(a) for a in s[:4]]
+    head = "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg"
+
+    def long(name, column, cells, values, order=None, sep=","):
+        rows = [f"{deg[0][k]},{deg[1][k]},{deg[2][k]},{deg[3][k]},{c},{float(values[k, j])!r}"
+                for k in range(40) for j, c in enumerate(cells)]
+        rows = rows if order is None else [rows[i] for i in order]
+        path = tmp_path / name
+        path.write_text(f"{head},{column},value\n".replace(",", sep)
+                        + "".join(r.replace(",", sep) + "\n" for r in rows))
+        return path
+
+    # R, G, B in any words, rows in any order: the wide file's samples exactly (in the
+    # order their pairs first appear)
+    def samples(m):
+        return np.unique(np.column_stack([m.wi, m.wo, m.rgb]), axis=0)
+
+    shuffled = np.random.default_rng(1).permutation(120)
+    for cells, order in (("rgb", None), (("Red", "Green", "Blue"), shuffled)):
+        m = read_measured(long("rgb.csv", "channel", cells, s[4], order))
+        assert m.n == 40
+        np.testing.assert_array_equal(samples(m), samples(wide))
+        assert input_summary(m)["long_layout"] == {"rows": 120, "column": "channel",
+                                                   "per_sample": "r, g, b"}
+    np.testing.assert_array_equal(m.wi[0], wide.wi[shuffled[0] // 3])
+    # semicolons and decimal commas, as a spreadsheet of such a locale exports it
+    text = long("rgb.csv", "channel", "rgb", s[4]).read_text()
+    comma = tmp_path / "comma.csv"
+    comma.write_text(text.replace(",", ";").replace(".", ","))
+    np.testing.assert_allclose(read_measured(comma).rgb, wide.rgb, rtol=1e-12)
+    # spectra: by a wavelength column in nm, or by a channel column of 450nm cells, or
+    # in an ASTM file: projected as the wide file's spectral columns are
+    lam = np.arange(380.0, 781.0, 20.0)
+    spectra = np.outer(s[4][:, 0], np.ones(lam.size)) + np.outer(s[4][:, 2], lam / 780.0)
+    wide_spectral = tmp_path / "wide_spectral.csv"
+    wide_spectral.write_text(f"{head}," + ",".join(f"{x:g}nm" for x in lam) + "\n" + "".join(
+        ",".join(repr(float(x)) for x in (*(d[k] for d in deg), *spectra[k])) + "\n"
+        for k in range(40)))
+    expected = read_measured(wide_spectral)
+    for path in (long("nm.csv", "wavelength [nm]", [f"{x:g}" for x in lam], spectra),
+                 long("band.csv", "band", [f"{x:g}nm" for x in lam], spectra)):
+        m = read_measured(path)
+        np.testing.assert_allclose(m.rgb, expected.rgb, rtol=1e-14)  # one matrix product
+        assert m.provenance["spectral"]["wavelengths_nm"] == [380.0, 780.0, lam.size]
+    astm = tmp_path / "long.astm"
+    astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,channel,BRDF\n" + "".join(
+        ",".join(repr(float(a[k])) for a in s[:4]) + f",{c},{float(s[4][k, j])!r}\n"
+        for k in range(40) for j, c in enumerate("rgb")))
+    np.testing.assert_allclose(read_measured(astm).rgb, wide.rgb, rtol=1e-15)
+    # what cannot be pivoted is named, with its row
+    lines = long("rgb.csv", "channel", "rgb", s[4]).read_text().splitlines()
+    for name, rows, said in (
+            ("missing.csv", lines[:5] + lines[6:], "the direction pair of row 5 has no row "
+                                                   "for channel g .2 of the 3"),
+            ("twice.csv", [*lines, lines[3]], "rows 4 and 122 both give channel b of one "
+                                              "direction pair: keep one"),
+            ("green.csv", [lines[0], *(r for r in lines if r.endswith(tuple(
+                f",g,{float(s[4][k, 1])!r}" for k in range(40))))],
+             "names channel.s. g alone: every direction needs a row for each of r, g, b; if "
+             "every row holds the same channel, drop the column"),
+            ("odd.csv", [lines[0], lines[1].replace(",r,", ",IR,"), *lines[2:]],
+             "row 2: column 'channel' holds 'IR', which names no channel"),
+            ("mixed.csv", [lines[0], lines[1].replace(",r,", ",450nm,"), *lines[2:]],
+             "names both RGB channels and wavelengths"),
+            ("wide_too.csv", [lines[0].replace("value", "r,g,b")]
+             + [r + ",1,1" for r in lines[1:]],
+             "each row's value is then one column, value .also brdf, y.; the file's value "
+             "columns: r, g, b"),
+            ("two.csv", [lines[0].replace("channel", "channel,wavelength")]
+             + [r.replace(",r,", ",r,1,").replace(",g,", ",g,1,").replace(",b,", ",b,1,")
+                for r in lines[1:]], "columns 'channel' and 'wavelength' both say"),
+            ("polarised.csv", [lines[0].replace("channel", "polarization"), *lines[1:]],
+             "column 'polarization' says which polarisation each row holds: a "
+             "polarisation-resolved list is not read")):
+        (tmp_path / name).write_text("\n".join(rows) + "\n")
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / name)
+
+
+def test_a_long_layout_of_named_arrays_is_pivoted_as_a_csvs_is(tmp_path):
+    """HDF5 datasets, .npz arrays and MATLAB variables of one row per (direction pair,
+    channel): the channel as text (h5py's strings, numpy's, a MATLAB char column or cell
+    of strings, a -v7.3 char matrix) or wavelengths in nm; read as the wide file's
+    samples. A text channel was left out of an .npz or .mat file unread, and its rows
+    fitted as grey samples without a word."""
+    from scipy import io
+
+    s = _samples(30)
+    wide = read_measured(_write_all(tmp_path, s)["hdf5"])
+    deg = {f"{a}_deg": np.repeat(np.degrees(x), 3) for a, x in zip(
+        ("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True)}
+    channel = np.array(list("rgb" * 30))
+    long = {**deg, "value": s[4].ravel(), "channel": channel}
+    np.savez(tmp_path / "long.npz", **long)
+    io.savemat(tmp_path / "char.mat", long)  # a char column, channel = ['r'; 'g'; ...]
+    io.savemat(tmp_path / "cell.mat", {**long, "channel": np.array([[c] for c in channel],
+                                                                    dtype=object)})
+    with h5py.File(tmp_path / "long.h5", "w") as f:
+        for k, a in long.items():
+            f[k] = np.array(["Red", "Green", "Blue"] * 30, dtype=object) if k == "channel" else a
+    with h5py.File(tmp_path / "v73.mat", "w", userblock_size=512) as f:  # save -v7.3's way
+        for k, a in long.items():
+            stored = np.array([[ord(c)] for c in a], np.uint16).T if k == "channel" else a[None]
+            f.create_dataset(k, data=stored).attrs["MATLAB_class"] = np.bytes_(
+                "char" if k == "channel" else "double")
+    with open(tmp_path / "v73.mat", "r+b") as raw:
+        raw.write(b"MATLAB 7.3 MAT-file")
+    for name in ("long.npz", "char.mat", "cell.mat", "long.h5", "v73.mat"):
+        m = read_measured(tmp_path / name)
+        np.testing.assert_array_equal(m.rgb, wide.rgb, err_msg=name)
+        np.testing.assert_allclose(m.wi, wide.wi, rtol=0, atol=1e-15, err_msg=name)
+        assert m.provenance["long_layout"] == {"rows": 90, "column": "channel",
+                                               "per_sample": "r, g, b"}, name
+    # a spectrum by wavelength, the wavelengths beside no spectral array
+    lam = np.arange(400.0, 701.0, 50.0)
+    spectra = np.outer(s[4][:, 1], np.linspace(0.5, 1.5, lam.size))
+    np.savez(tmp_path / "wide_spectral.npz", **{k: a[::3] for k, a in deg.items()},
+             spectral=spectra, wavelengths=lam)
+    np.savez(tmp_path / "long_spectral.npz", **{k: np.repeat(a[::3], lam.size)
+                                                for k, a in deg.items()},
+             brdf=spectra.ravel(), wavelengths=np.tile(lam, 30))
+    np.testing.assert_allclose(read_measured(tmp_path / "long_spectral.npz").rgb,
+                               read_measured(tmp_path / "wide_spectral.npz").rgb, rtol=1e-14)
+    for change, said in (
+            ({"channel": channel[:-1]}, "array channel holds 89 value.s., not one per row .90."),
+            ({"channel": np.array(["IR"] * 90)}, "row 1: array 'channel' holds 'IR', which "
+                                                 "names no channel"),
+            ({"polarization": np.ones(90)}, "array 'polarization' says which polarisation "
+                                            "each row holds: a polarisation-resolved list is "
+                                            "not read"),
+            ({"wavelength": np.ones(90)}, "arrays 'channel' and 'wavelength' both say")):
+        np.savez(tmp_path / "bad.npz", **{**long, **change})
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / "bad.npz")
+
+
 def test_files_as_lab_tools_write_them(tmp_path):
     """What a review of files written by other tools found (/tmp/h32d in session 32): a
     long layout (one row per direction and channel) was fitted as grey samples without
@@ -1364,19 +1513,12 @@ def test_files_as_lab_tools_write_them(tmp_path):
     s = _samples(60)
     plain = read_measured(_write_all(tmp_path, s)["csv"])
     deg = [np.degrees(a) for a in s[:4]]
-    # one row per (direction, channel): refused, naming the column
+    # one row per (direction, channel): read as the wide file (test_a_long_layout_...)
     long = tmp_path / "long.csv"
     long.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,channel,value\n" + "".join(
         f"{deg[0][k]},{deg[1][k]},{deg[2][k]},{deg[3][k]},{c},{s[4][k, j]}\n"
         for k in range(60) for j, c in enumerate("RGB")))
-    with pytest.raises(MeasurementsError, match="column 'channel' says which channel, "
-                                                "wavelength or polarisation each row holds"):
-        read_measured(long)
-    for other in ("color", "nm"):  # fitted grey, unsaid, until stop 74's fuzzing
-        long.write_text(long.read_text().replace("channel", other, 1))
-        with pytest.raises(MeasurementsError, match=f"column '{other}' says which channel"):
-            read_measured(long)
-        long.write_text(long.read_text().replace(other, "channel", 1))
+    np.testing.assert_array_equal(read_measured(long).rgb, plain.rgb)
     # an uncertainty by another name than sigma_r: refused, saying what to name it (the
     # fit weighed every sample alike, without a word)
     for header, said in (("r,g,b,r_std,g_std,b_std", "r_std"),
@@ -1409,7 +1551,8 @@ def test_files_as_lab_tools_write_them(tmp_path):
         read_measured(au)
     astm = tmp_path / "long.astm"
     astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,wavelength,BRDF\n0.1,0,0.2,0,450,0.3\n")
-    with pytest.raises(MeasurementsError, match="column 'wavelength' says"):
+    with pytest.raises(MeasurementsError, match="column 'wavelength' holds one wavelength "
+                                                ".450 nm. alone: a spectrum needs several"):
         read_measured(astm)
     # HDF5: values in percent refused, CF packing applied
     for name, write, says in (

@@ -262,6 +262,9 @@ def run(args) -> int:
         from brdffit.fitting.samples import binned
 
         comma = ", decimal commas" if measured.provenance.get("decimal_comma") else ""
+        if long := measured.provenance.get("long_layout"):
+            comma += (f", {long['rows']} rows of one channel each, by {long['column']}: "
+                      f"{long['per_sample']} per sample")
         print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "
               f"({measured.provenance.get('format')}{comma}), to be fitted at their own "
               "directions, with a held-out error", file=sys.stderr)

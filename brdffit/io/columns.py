@@ -29,13 +29,27 @@ ANGLE_ALIASES = {
 CHANNELS = ("r", "g", "b")
 ONE_CHANNEL = ("value", "brdf", "y")
 #: Columns that say which channel, wavelength or polarisation a row holds: a file of
-#: one row per (direction, channel), a "long" layout. Such a column is not read, so
-#: every row was fitted as a grey sample of its direction (a coloured GGX, kd 0.4,
-#: 0.15, 0.05, fitted to kd 0.197 in each channel, without a word).
-LONG_LAYOUT_COLUMNS = ("channel", "band", "wavelength", "wavelength_nm", "lambda",
-                       "lambda_nm", "wl", "nm", "color", "colour", "filter",
-                       "polarization", "polarisation", "polarizer", "polariser", "pol")
+#: one row per (direction, channel), a "long" layout (:mod:`brdffit.io.long_layout`).
+#: A channel column's cells name R, G, B (``r``, ``Red``) or a wavelength (``450nm``);
+CHANNEL_COLUMNS = ("channel", "band", "color", "colour", "filter")
+#: a wavelength column's are nanometres;
+WAVELENGTH_COLUMNS = ("wavelength", "wavelength_nm", "lambda", "lambda_nm", "wl", "nm")
+#: a polarisation state is not read (which average of two states the measurement stands
+#: for depends on the instrument).
+POLARISATION_COLUMNS = ("polarization", "polarisation", "polarizer", "polariser", "pol")
+LONG_LAYOUT_COLUMNS = (*CHANNEL_COLUMNS, *WAVELENGTH_COLUMNS, *POLARISATION_COLUMNS)
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
+
+
+def long_column_kind(name: str) -> str | None:
+    """``"channel"``, ``"wavelength"`` or ``"polarisation"`` where a lower-case column
+    or dataset name, less a unit (``wavelength [nm]``), is one of
+    :data:`LONG_LAYOUT_COLUMNS`; else None."""
+    word = re.match(r"[^\s\[(/]+", name)
+    word = "" if word is None else word[0]
+    return ("channel" if word in CHANNEL_COLUMNS else "wavelength"
+            if word in WAVELENGTH_COLUMNS else "polarisation"
+            if word in POLARISATION_COLUMNS else None)
 
 
 def unit_scale(unit: str, source: str) -> float:
@@ -114,12 +128,8 @@ def cie_xyz(names) -> list[str]:
 
 #: Why CIE XYZ values are refused (a CSV's x, y, z columns; HDF5's X, Y, Z datasets).
 XYZ_WHY = ("CIE XYZ? A fit reads linear RGB (r, g, b: Rec. 709 primaries) or one grey "
-            "channel: convert XYZ to linear sRGB, or keep y alone (named value) to fit the "
-            "luminance")
-#: Why a file of one row per (direction, channel) is refused.
-LONG_WHY = ("a file of one row per (direction, channel) is not read (its rows would be "
-             "fitted as grey samples of the same directions). Write one row per direction "
-             "pair, with r, g, b, or spectral values named by wavelength (450nm, ...)")
+           "channel: convert XYZ to linear sRGB, or keep y alone (named value) to fit the "
+           "luminance")
 
 
 #: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:

@@ -30,6 +30,10 @@ NUMERIC_CLASSES = frozenset({"double", "single", "int8", "uint8", "int16", "uint
                              "int32", "uint32", "int64", "uint64", "logical", "sparse"})
 
 
+#: Classes a variable of text may have: a char matrix, a cell array (of strings).
+TEXT_CLASSES = frozenset({"char", "cell"})
+
+
 def is_v5(head: bytes) -> bool:
     """Whether a file's first bytes are a version-5 MAT-file's."""
     return head.startswith(V5_MAGIC)
@@ -79,11 +83,12 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
     """The version-5 MAT-file ``path`` as an open HDF5 file in memory, each variable
     of numbers a dataset as ``save -v7.3`` stores it (an n x 3 matrix as (3, n), with
     its ``MATLAB_class``; a logical one of booleans); text (``char``) a dataset of text
-    (refused where it is read); a struct, cell or object an empty group (named, not
-    read). Every variable is declared first and ``before_reading(f)`` called (it may
-    refuse the file), then only the variables ``wanted(name)`` are read
-    (:mod:`brdffit.io.variables`); ``values=False``: none is, for a look at what the
-    file declares."""
+    (read where it is wanted, a long layout's channel names, one per row; else left
+    empty and refused where it is read); a struct, cell or object an empty group (named,
+    not read; a wanted cell of strings is read as text). Every variable is declared
+    first and ``before_reading(f)`` called (it may refuse the file), then only the
+    variables ``wanted(name)`` are read (:mod:`brdffit.io.variables`); ``values=False``:
+    none is, for a look at what the file declares."""
     declared = _declared(Path(path), source)
     variables.checked([(n, shape) for n, shape, _ in declared], source, noun="variable",
                       file="MATLAB .mat file", max_numbers=max_numbers, wanted=wanted)
@@ -102,9 +107,14 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
         if values:
             classes = {name: cls for name, _, cls in declared}
             read = _loaded(Path(path), source, [n for n, cls in classes.items()
-                                                if wanted(n) and cls in NUMERIC_CLASSES])
+                                                if wanted(n) and (cls in NUMERIC_CLASSES
+                                                                  or cls in TEXT_CLASSES)])
             for name in read.keys() & classes.keys():
                 a = read[name]
+                if classes[name] in TEXT_CLASSES:  # a long layout's channel names
+                    if (texts := _texts(a)) is not None:
+                        variables.fill_text(f, name, texts)
+                    continue
                 a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)  # sparse
                 if classes[name] == "logical":  # scipy reads it as uint8: a mask
                     a = a.astype(bool)
@@ -112,6 +122,21 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
         yield f
     finally:
         f.close()
+
+
+def _texts(a: np.ndarray) -> list[str] | None:
+    """A char matrix's rows (scipy joins each row into one string) or a cell array of
+    strings (``{'r'; 'g'; 'b'}``) as a list of strings, column-major as MATLAB orders a
+    cell; None for a cell of anything else (it stays a group: "a struct or cell")."""
+    if a.dtype.kind == "U":
+        return [t.rstrip() for t in a.ravel()]
+    texts = []
+    for cell in a.ravel(order="F"):
+        cell = np.asarray(cell)
+        if cell.dtype.kind != "U" or cell.size != 1:
+            return None
+        texts.append(str(cell.ravel()[0]).rstrip())
+    return texts
 
 
 def _loaded(path: Path, source: str, names: list[str]) -> dict:

@@ -23,14 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.io import matlab, merl, npz, spectra
+from brdffit.io import long_layout, matlab, merl, npz, spectra
 from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
     CHANNEL_WORDS,
     CHANNELS,
-    LONG_LAYOUT_COLUMNS,
-    LONG_WHY,
     ONE_CHANNEL,
     PER_STERADIAN,
     SIGMA_IS,
@@ -40,6 +38,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    long_column_kind,
     radians_said_to_be_degrees,
     unit_scale,
 )
@@ -150,10 +149,11 @@ def _named_arrays(path, as_hdf5: Callable, *, matlab: bool, file_format: str) ->
 
 
 def _read_here(name: str) -> bool:
-    """Whether the sample reader reads a dataset of this name's numbers (an angle, the
-    values, their sigma, wavelengths): a file of named arrays reads only these."""
+    """Whether the sample reader reads a dataset of this name (an angle, the values,
+    their sigma, wavelengths, a long layout's channel): a file of named arrays reads
+    only these."""
     key = name.strip().lower()
-    return (angle_name(name) is not None
+    return (angle_name(name) is not None or long_column_kind(key) is not None
             or any(key in names for names in _VALUE_DATASETS.values()))
 
 
@@ -181,6 +181,89 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     matrices transposed back to MATLAB's rows; ``file_format``: the file's format, as
     ``input.format`` reports it)."""
     named = _declared_angles(f, source)
+    raw, scales = _raw_angles(f, named, source, matlab, file_format)
+    provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
+    v = _value_names(f, source)
+    long = _long_dataset(f, v, source)
+    channels = [v[c] for c in CHANNELS if c in v]
+    kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
+        [", ".join(channels)] if channels else [])
+    if len(kinds) > 1:
+        raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
+                                        "than one kind, keep one")
+    for name in v.values():
+        if name != v.get("wavelengths"):
+            _per_steradian(f, name, source)
+    if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
+        v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
+    if long is not None and (v.keys() & {"rgb", "spectral", *CHANNELS} or "value" not in v):
+        given = [v[k] for k in ("value", "rgb", "spectral", *CHANNELS) if k in v]
+        raise MeasurementsError(
+            source, f"dataset {long[0]!r} says which channel or wavelength each row holds "
+                    "(one row per direction and channel, a long layout): each row's value is "
+                    "then one dataset, value (also brdf, y), one number per row; the file's "
+                    "values: " + (", ".join(given) or "none"))
+    if channels:  # r, g and b each a dataset of its own, as a CSV's columns
+        if len(channels) < len(CHANNELS):
+            raise MeasurementsError(source, f"datasets {', '.join(channels)}: only "
+                                            f"{len(channels)} of r, g, b")
+        values = np.column_stack([_one_per_sample(f, name, source, matlab)
+                                  for name in channels])
+    elif "rgb" in v:
+        values = _numeric(f, v["rgb"], source, matlab)
+        if values.ndim != 2 or values.shape[1] != 3:
+            raise MeasurementsError(source, f"{_shape_said(v['rgb'], values, matlab)}, not "
+                                            + ("n x 3" if matlab else "(n, 3)")
+                                            + _transposed_hint(v["rgb"], values, matlab))
+    elif "value" in v:
+        values = _one_per_sample(f, v["value"], source, matlab)
+    elif "spectral" in v and long is None:
+        if "wavelengths" not in v:
+            raise MeasurementsError(source, f"dataset {v['spectral']} needs a dataset "
+                                            "wavelengths (nm)")
+        if sigmas := [v[k] for k in _SIGMAS if k in v]:
+            raise MeasurementsError(source, f"{', '.join(sigmas)} of spectral samples: not "
+                                            "read yet")
+        spectral = _numeric(f, v["spectral"], source, matlab)
+        wavelengths = _numeric(f, v["wavelengths"], source, matlab)
+        if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
+            wavelengths = wavelengths.ravel()
+        if (spectral.ndim != 2 or wavelengths.ndim != 1
+                or spectral.shape[1] != wavelengths.size):
+            raise MeasurementsError(
+                source, f"dataset {v['spectral']} has shape {spectral.shape} and "
+                        f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
+        values, provenance["spectral"] = spectra.projected(spectral, wavelengths, source)
+    else:
+        raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
+                                        "(n,) each, value (n,; also brdf or y), or "
+                                        "spectral (n, k) with wavelengths (k,)")
+    sigma = _hdf5_sigma(f, v, source, matlab, rgb=values.ndim == 2, n=len(values))
+    wavelengths = None
+    if long is not None:  # one row per (direction, channel): pivoted first
+        raw, values, sigma, wavelengths, provenance["long_layout"] = _pivoted(
+            f, long, raw, values, sigma, source, matlab)
+    radians_said_to_be_degrees(raw, scales, source)
+    angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
+    provenance.update(azimuths_within(raw, scales))
+    if wavelengths is not None:
+        if sigma is not None:
+            raise MeasurementsError(source, "sigma of spectral samples is not read yet: drop "
+                                            "the sigma dataset (or project to RGB with it)")
+        values, provenance["spectral"] = spectra.projected(values, wavelengths, source)
+    if provenance.get("channels") == 1 and not (
+            values.ndim == 1 or np.all(values == values[:, :1])):
+        del provenance["channels"]  # said of grey values: these are coloured
+    return Measurements.from_angles(*angles, values, sigma, source=source,
+                                    provenance=provenance,
+                                    names={a: named[a][0] for a in ANGLES})
+
+
+def _raw_angles(f, named: dict, source: str, matlab: bool,
+                file_format: str) -> tuple[list[np.ndarray], list[float]]:
+    """The four angle datasets' numbers as stored (``named``: :func:`_declared_angles`),
+    and the radians per unit of each, from its name or its ``units`` attribute (or the
+    file's), which must agree where both say it."""
     raw, scales = [], []
     for canonical in ANGLES:
         name, in_name = named[canonical]
@@ -212,65 +295,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
                                             f"{stated[0]!r}, the file's {stated[1]!r})")
         raw.append(_one_per_sample(f, name, source, matlab))
         scales.append(scale)
-    radians_said_to_be_degrees(raw, scales, source)
-    angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
-    provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
-    provenance.update(azimuths_within(raw, scales))
-    v = _value_names(f, source)
-    _refuse_other_layouts(f, v, source)
-    channels = [v[c] for c in CHANNELS if c in v]
-    kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
-        [", ".join(channels)] if channels else [])
-    if len(kinds) > 1:
-        raise MeasurementsError(source, f"datasets {' and '.join(kinds)}: values of more "
-                                        "than one kind, keep one")
-    for name in v.values():
-        if name != v.get("wavelengths"):
-            _per_steradian(f, name, source)
-    if "value" in v and _stored_shape(f, v["value"], matlab)[1:] == (3,):
-        v["rgb"] = v.pop("value")  # brdf (n, 3): a MATLAB user's RGB by another name
-    if channels:  # r, g and b each a dataset of its own, as a CSV's columns
-        if len(channels) < len(CHANNELS):
-            raise MeasurementsError(source, f"datasets {', '.join(channels)}: only "
-                                            f"{len(channels)} of r, g, b")
-        values = np.column_stack([_one_per_sample(f, name, source, matlab)
-                                  for name in channels])
-    elif "rgb" in v:
-        values = _numeric(f, v["rgb"], source, matlab)
-        if values.ndim != 2 or values.shape[1] != 3:
-            raise MeasurementsError(source, f"{_shape_said(v['rgb'], values, matlab)}, not "
-                                            + ("n x 3" if matlab else "(n, 3)")
-                                            + _transposed_hint(v["rgb"], values, matlab))
-    elif "value" in v:
-        values = _one_per_sample(f, v["value"], source, matlab)
-    elif "spectral" in v:
-        if "wavelengths" not in v:
-            raise MeasurementsError(source, f"dataset {v['spectral']} needs a dataset "
-                                            "wavelengths (nm)")
-        if sigmas := [v[k] for k in _SIGMAS if k in v]:
-            raise MeasurementsError(source, f"{', '.join(sigmas)} of spectral samples: not "
-                                            "read yet")
-        spectral = _numeric(f, v["spectral"], source, matlab)
-        wavelengths = _numeric(f, v["wavelengths"], source, matlab)
-        if wavelengths.ndim == 2 and 1 in wavelengths.shape:  # a row or a column
-            wavelengths = wavelengths.ravel()
-        if (spectral.ndim != 2 or wavelengths.ndim != 1
-                or spectral.shape[1] != wavelengths.size):
-            raise MeasurementsError(
-                source, f"dataset {v['spectral']} has shape {spectral.shape} and "
-                        f"{v['wavelengths']} {wavelengths.shape}: expected (n, k) and (k,)")
-        values, provenance["spectral"] = spectra.projected(spectral, wavelengths, source)
-    else:
-        raise MeasurementsError(source, "no values: a dataset rgb (n, 3), r, g and b "
-                                        "(n,) each, value (n,; also brdf or y), or "
-                                        "spectral (n, k) with wavelengths (k,)")
-    sigma = _hdf5_sigma(f, v, source, matlab, rgb=values.ndim == 2, n=len(values))
-    if provenance.get("channels") == 1 and not (
-            values.ndim == 1 or np.all(values == values[:, :1])):
-        del provenance["channels"]  # said of grey values: these are coloured
-    return Measurements.from_angles(*angles, values, sigma, source=source,
-                                    provenance=provenance,
-                                    names={a: named[a][0] for a in ANGLES})
+    return raw, scales
 
 
 #: The datasets of an HDF5 sample list besides its angles: kind -> the names it may have
@@ -286,24 +311,83 @@ _SIGMAS = ("sigma", *(f"sigma_{c}" for c in CHANNELS))
 _PER_SAMPLE = ("rgb", "value", "spectral", *_SIGMAS, *CHANNELS)
 
 
-def _refuse_other_layouts(f, v: dict[str, str], source: str) -> None:
-    """Refuses the HDF5 (MATLAB, .npz) files a CSV of the same columns is refused as:
-    CIE XYZ (``X``, ``Y``, ``Z``: Y was read as a grey value and X and Z dropped), and a
-    "long" layout, one row per (direction, channel), said by a dataset of
-    :data:`LONG_LAYOUT_COLUMNS` or by ``wavelengths`` beside no ``spectral`` (its rows
-    were fitted as grey samples of the same directions)."""
+def _long_dataset(f, v: dict[str, str], source: str) -> tuple[str, str] | None:
+    """The dataset that says which channel or wavelength each row holds, where the file
+    has one row per (direction, channel) (:mod:`brdffit.io.long_layout`), and its kind
+    (``"channel"``, ``"wavelength"``); None for a wide file. Such a dataset is named as
+    a CSV's column is (:data:`LONG_LAYOUT_COLUMNS`), or it is ``wavelengths`` beside no
+    ``spectral``; one number so named says nothing of the rows (it is not read). A
+    polarisation is refused, as are two such datasets, and CIE XYZ (``X``, ``Y``, ``Z``:
+    Y was read as a grey value and X and Z dropped), as a CSV of the same columns is."""
+    import h5py
+
     keys = {k.strip().lower(): k for k in f.keys()}
     if "value" in v and (xyz := cie_xyz(keys)):
         raise MeasurementsError(source, f"datasets {', '.join(keys[n] for n in xyz)}: "
                                         + XYZ_WHY)
-    long = next((k for key, k in keys.items() if re.sub(r"[\s_]*[\[(].*$", "", key)
-                 in LONG_LAYOUT_COLUMNS and np.prod(_stored_shape(f, k, False)) > 1), None)
-    if long is None and "wavelengths" in v and "spectral" not in v:
-        long = v["wavelengths"]
-    if long is not None:
-        raise MeasurementsError(source, f"dataset {long!r} says which channel, wavelength or "
-                                        "polarisation each row holds: " + LONG_WHY
-                                        + f"; if every row has the same {long}, drop it")
+    found = []
+    for key, k in keys.items():
+        kind = long_column_kind(key)
+        d = None if kind is None else _opened(f, k)
+        if d is None or (isinstance(d, h5py.Dataset) and d.dtype.kind in "iuf"
+                         and (d.size or 0) <= 1 and "MATLAB_class" not in d.attrs):
+            continue
+        if kind == "polarisation":
+            raise MeasurementsError(
+                source, f"dataset {k!r} says which polarisation each row holds: a "
+                        "polarisation-resolved list is not read (which average of its states "
+                        "the reflectance is depends on the instrument); write the unpolarised "
+                        f"values, one row per direction pair, or if every row has the same "
+                        f"{k}, drop it")
+        found.append((k, kind))
+    if not found and "wavelengths" in v and "spectral" not in v:
+        found.append((v["wavelengths"], "wavelength"))
+    if len(found) > 1:
+        raise MeasurementsError(source, f"datasets {found[0][0]!r} and {found[1][0]!r} both say "
+                                        "which channel or wavelength a row holds: keep one")
+    return found[0] if found else None
+
+
+def _pivoted(f, long: tuple[str, str], raw: list[np.ndarray], values: np.ndarray,
+             sigma: np.ndarray | None, source: str, matlab: bool):
+    """A long layout's rows (:func:`_long_dataset`) pivoted to one per direction pair:
+    the angles, values, sigma, wavelengths (None for RGB) and what the pivot did."""
+    name, kind = long
+    rows = np.arange(len(values))
+    if kind == "wavelength":
+        keys = _one_per_sample(f, name, source, matlab)
+    else:
+        kind, keys = long_layout.channel_keys(_texts(f, name, source, matlab), name, source,
+                                              rows, noun="dataset")
+    if len(keys) != len(values):
+        raise MeasurementsError(source, f"dataset {name} holds {len(keys)} value(s), not one "
+                                        f"per row ({len(values)}): a long layout names each "
+                                        f"row's {long[1]}; if every row has the same one, "
+                                        "drop it")
+    p = long_layout.pivot(raw, keys, kind, name, values, sigma, rows, source, noun="dataset")
+    return p.raw, p.values, p.sigma, p.wavelengths, p.summary
+
+
+def _texts(f, name: str, source: str, matlab: bool) -> list[str]:
+    """Dataset ``name`` as text, one string per row: strings (h5py's, an .npz's text,
+    a MATLAB version-5 char matrix's rows or cell of strings), a MATLAB -v7.3 char
+    matrix (stored as UTF-16 codes, one column per row), or numbers (said as written,
+    for the refusal of a channel that is a number)."""
+    import h5py
+
+    d = _dataset(f, name, source)
+    if not isinstance(d, h5py.Dataset):
+        raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset"
+                                + (f": save it as a char matrix, char({name})" if matlab
+                                   else ""))
+    if matlab and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source) == "char" \
+            and d.dtype.kind in "iu":
+        codes = np.atleast_2d(np.asarray(d))  # (characters, rows), column-major
+        return ["".join(map(chr, column)).rstrip("\x00 ") for column in codes.T]
+    if d.dtype.kind in "SO" or h5py.check_string_dtype(d.dtype) is not None:
+        return [t.decode("utf-8", "replace") if isinstance(t, bytes) else str(t)
+                for t in np.ravel(d.asstr()[()] if d.shape != () else [d[()]])]
+    return [f"{x:g}" for x in _one_per_sample(f, name, source, matlab)]
 
 
 def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,

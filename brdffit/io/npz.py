@@ -68,7 +68,8 @@ def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtyp
 def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda name: True,
             values: bool = True, before_reading=None) -> Iterator:
     """The .npz archive ``path`` as an open HDF5 file in memory, each array a dataset
-    of its name (text a dataset of text, refused where it is read). Every array is
+    of its name (text a dataset of text: read where it is wanted, a long layout's
+    channels, else left empty and refused where it is read). Every array is
     declared first and ``before_reading(f)`` called (it may refuse the file), then only
     the arrays ``wanted(name)`` are read (:mod:`brdffit.io.variables`);
     ``values=False``: none is, for a look at what the file declares."""
@@ -91,7 +92,11 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
             if before_reading is not None:
                 before_reading(f)
             for name, _, dtype in declared:
-                if values and wanted(name) and dtype.kind not in "US":
+                if not (values and wanted(name)):
+                    continue
+                if dtype.kind in "US":  # text the reader reads: a long layout's channels
+                    variables.fill_text(f, name, _array(z, name, source))
+                else:
                     variables.fill(f, name, _array(z, name, source))
             yield f
         finally:

@@ -32,6 +32,9 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   their unit.
 - **NumPy** ``.npz`` archives (``np.savez``): their arrays as the HDF5 datasets of the
   same names (:mod:`brdffit.io.npz`).
+- In every sample layout, one row per (direction pair, channel) too, a "long" layout: a
+  ``channel`` column (``r``, ``g``, ``b``, or ``450nm``) or a ``wavelength`` one (nm) beside
+  one ``value``, pivoted to one sample per pair (:mod:`brdffit.io.long_layout`).
 
 A file that is not what its suffix says, or whose content no reader recognises, gets
 one line naming the file and what was expected. A list of more samples than
@@ -171,6 +174,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
         out["spectral"] = samples.provenance["spectral"]
     if samples.provenance.get("decimal_comma"):  # read as 0.25 from 0,25: said, not silent
         out["decimal_comma"] = True
+    if "long_layout" in samples.provenance:  # one row per (direction, channel), pivoted
+        out["long_layout"] = samples.provenance["long_layout"]
     if binning is not None:
         out.update(binning=binning.summary(), note=binning.describe())
     return out

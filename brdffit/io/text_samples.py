@@ -17,13 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.io import merl, spectra
+from brdffit.io import long_layout, merl, spectra
 from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
     CHANNELS,
-    LONG_LAYOUT_COLUMNS,
-    LONG_WHY,
     ONE_CHANNEL,
     SIGMA_IS,
     UNCERTAINTY,
@@ -31,6 +29,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    long_column_kind,
     radians_said_to_be_degrees,
     unit_scale,
     value_name,
@@ -55,7 +54,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
             raise MeasurementsError(source, f"column {raw.strip()[:80]!r} appears twice in "
                                             "the header")
         seen[name] = k
-    _refuse_long_layout(names, seen, source)
+    long = _long_column(names, seen, source)
     _unread_uncertainty(seen, names, source)
     out: dict = {}
     for name, k in seen.items():
@@ -90,7 +89,19 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     one = [seen[c] for c in ONE_CHANNEL if c in seen]
     spectral = sorted((lam, k) for name, k in seen.items()
                       if (lam := spectra.wavelength_of(name)) is not None)
-    if spectral and (all(k is not None for k in rgb) or one):
+    if long is not None:
+        if len(one) != 1 or any(k is not None for k in rgb) or spectral:
+            given = [names[k].strip() for k in (*one, *(k for k in rgb if k is not None),
+                                                *(k for _, k in spectral))]
+            raise MeasurementsError(
+                source, f"column {long[2]!r} says which channel or wavelength each row holds "
+                        "(one row per direction and channel, a long layout): each row's value "
+                        "is then one column, value (also brdf, y); the file's value columns: "
+                        + (", ".join(given[:6]) or "none"))
+        out["values"] = one
+        out["sigma"] = _sigma_columns(seen, source, rgb=False)
+        out["long"] = long
+    elif spectral and (all(k is not None for k in rgb) or one):
         raise MeasurementsError(source, "both RGB (or one-channel) and spectral value "
                                         "columns: keep one kind")
     if spectral:
@@ -129,18 +140,31 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     return out
 
 
-def _refuse_long_layout(names: list[str], seen: dict[str, int], source: str) -> None:
-    """Refuses a column of :data:`LONG_LAYOUT_COLUMNS` (its name, less a unit:
-    ``wavelength [nm]``), which no reader takes."""
+def _long_column(names: list[str], seen: dict[str, int],
+                 source: str) -> tuple[int, str, str] | None:
+    """The column that says which channel or wavelength a row holds, where the file has
+    one row per (direction, channel) (:mod:`brdffit.io.long_layout`): its index, its kind
+    (``"channel"``: its cells name r, g, b or wavelengths; ``"wavelength"``: nm) and its
+    name, matched less a unit (``wavelength [nm]``); None for a wide file. A
+    polarisation column is refused, as are two such columns."""
+    found = []
     for name, k in seen.items():
-        word = re.match(r"[^\s\[(/]+", name)
-        if word is None or word[0] not in LONG_LAYOUT_COLUMNS:
+        kind = long_column_kind(name)
+        if kind is None:
             continue
         said = names[k].strip()[:40]
-        raise MeasurementsError(
-            source, f"column {said!r} says which channel, wavelength or polarisation each "
-                    f"row holds: {LONG_WHY}; if every row has the same {said}, drop the "
-                    "column")
+        if kind == "polarisation":
+            raise MeasurementsError(
+                source, f"column {said!r} says which polarisation each row holds: a "
+                        "polarisation-resolved list is not read (which average of its states "
+                        "the reflectance is depends on the instrument); write the "
+                        "unpolarised values, one row per direction pair, or if every row "
+                        f"has the same {said}, drop the column")
+        found.append((k, kind, said))
+    if len(found) > 1:
+        raise MeasurementsError(source, f"columns {found[0][2]!r} and {found[1][2]!r} both say "
+                                        "which channel or wavelength a row holds: keep one")
+    return found[0] if found else None
 
 
 def _other_units(seen: dict[str, int]) -> str:
@@ -184,17 +208,35 @@ def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | 
 
 
 def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: str,
-               provenance: dict) -> Measurements:
+               provenance: dict, lines: list[tuple[int, str]] | None = None,
+               delimiter: str | None = None) -> Measurements:
+    """The samples of the data rows (``rows`` as numbers, ``row_numbers`` their lines);
+    ``lines`` and ``delimiter``: the rows as text, where a long layout's channel column
+    is read from its cells."""
     raw = [rows[:, cols[a][0]] for a in ANGLES]
     scales = [cols[a][1] for a in ANGLES]
+    values = rows[:, cols["values"]]
+    sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
+    wavelengths = cols.get("wavelengths")
+    if "long" in cols and len(rows):  # one row per (direction, channel): pivoted first
+        k, kind, name = cols["long"]
+        kind, keys = (("wavelength", rows[:, k]) if kind == "wavelength" else
+                      long_layout.channel_keys([_cells(line, delimiter, source, number)[k]
+                                                for number, line in lines],
+                                               name, source, row_numbers))
+        p = long_layout.pivot(raw, keys, kind, name, values[:, 0],
+                              None if sigma is None else sigma[:, 0], row_numbers, source)
+        raw, values, sigma, row_numbers = p.raw, p.values, p.sigma, p.rows
+        wavelengths, provenance["long_layout"] = p.wavelengths, p.summary
     radians_said_to_be_degrees(raw, scales, source)
     provenance.update(azimuths_within(raw, scales))
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
-    values = rows[:, cols["values"]]
-    if "wavelengths" in cols:
-        values, provenance["spectral"] = spectra.projected(values, cols["wavelengths"], source,
-                                                    row_numbers)
-    sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
+    if wavelengths is not None:
+        if sigma is not None:
+            raise MeasurementsError(source, "sigma of spectral samples is not read yet: drop "
+                                            "the sigma column (or project to RGB with it)")
+        values, provenance["spectral"] = spectra.projected(values, wavelengths, source,
+                                                           row_numbers)
     return Measurements.from_angles(*angles, values[:, 0] if values.shape[1] == 1 else values,
                                     sigma, source=source, provenance=provenance,
                                     rows=row_numbers, names=cols["names"])
@@ -405,7 +447,9 @@ def _astm_samples(text: str, source: str) -> Measurements:
     cols = _columns(names, source, default_unit="radians")
     # rows split by commas, as the standard's examples; by blanks where a file has none
     commas = not data or "," in data[0][1]
-    rows, numbers = _numbers(data, "," if commas else None, len(names), source)
+    text_column = cols["long"][0] if cols.get("long", (0, ""))[1] == "channel" else None
+    rows, numbers = _numbers(data, "," if commas else None, len(names), source,
+                             used=[k for k in range(len(names)) if k != text_column])
     _degrees_in_astm(rows, cols, names, source)
     if "NUM_POINTS" in header:
         try:
@@ -418,7 +462,7 @@ def _astm_samples(text: str, source: str) -> Measurements:
                                             f"{len(rows)} (truncated?)")
     return _from_rows(rows, numbers, cols, source,
                       {"format": "astm", "columns": names, "angle_unit": "radians",
-                       "header": header})
+                       "header": header}, data, "," if commas else None)
 
 
 def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str) -> None:
@@ -577,13 +621,14 @@ def _csv_samples(text: str, source: str) -> Measurements:
         _header_below(lines, source)
         raise
     # only the columns read are numbers: a column of sample names or notes is left
-    used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ()))
+    used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ())
+                  | ({cols["long"][0]} if cols.get("long", (0, ""))[1] == "wavelength" else set()))
     comma = _decimal_comma(lines[1:], delimiter, used, source)
     rows, numbers = _numbers(lines[1:], split_at, len(names), source, comma=comma, used=used)
     return _from_rows(rows, numbers, cols, source,
                       {"format": "csv", "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column",
-                       **({"decimal_comma": True} if comma else {})})
+                       **({"decimal_comma": True} if comma else {})}, lines[1:], split_at)
 
 
 def _header_below(lines: list[tuple[int, str]], source: str) -> None:

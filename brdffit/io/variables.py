@@ -77,6 +77,17 @@ def fill(f, name: str, data) -> None:
     f.create_dataset(name, data=data).attrs.update(attrs)
 
 
+def fill_text(f, name: str, texts) -> None:
+    """Dataset ``name`` made a dataset of text, one string per element of ``texts`` (a
+    long layout's channel names), its attributes kept."""
+    import h5py
+
+    attrs = dict(f[name].attrs)
+    del f[name]
+    f.create_dataset(name, data=np.array([str(t) for t in np.ravel(texts)], dtype=object),
+                     dtype=h5py.string_dtype()).attrs.update(attrs)
+
+
 def said(e: Exception) -> str:
     """A reader library's exception in one line, for a refusal's parentheses."""
     return " ".join(str(e).split())[:200] or type(e).__name__

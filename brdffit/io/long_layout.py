@@ -1,0 +1,135 @@
+"""Sample lists of one row per (direction pair, channel), pivoted to one row per pair.
+
+Tidy data, as pandas' ``melt`` and R's ``pivot_longer`` write it, and as a spectral
+gonioreflectometer exports a run: the four angles, a column that says which channel or
+wavelength the row holds, and its value (and sigma)::
+
+    theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,wavelength_nm,value
+    30,0,30,180,400,0.081
+    30,0,30,180,410,0.083
+    ...
+
+A **channel** column (``channel``, ``band``, ``color``, ``colour``, ``filter``) names R,
+G and B in its cells (``r``, ``Red``, ...), or wavelengths (``450nm``); a **wavelength**
+column (``wavelength``, ``wavelength_nm``, ``lambda``, ``lambda_nm``, ``wl``, ``nm``)
+holds nanometres. The rows of one direction pair are those whose four angles are the
+same numbers as written: every pair must give every channel (every wavelength) once,
+as a wide file's row does, else the file is refused naming a row that lacks one. Only
+the pivot is made here; the projection of spectra to RGB and every check of a sample
+list's values and directions are the wide layout's own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from brdffit.io import spectra
+from brdffit.io.measurements import MeasurementsError
+
+#: A channel cell's words for R, G and B (any case).
+RGB_CELLS = {"r": 0, "red": 0, "g": 1, "green": 1, "b": 2, "blue": 2}
+
+
+@dataclass(frozen=True)
+class Pivoted:
+    """A long list's rows as one row per direction pair: ``raw`` the four angles as
+    written (each (n,)), ``values`` (n, k) in the channels' order (R, G, B, or
+    ``wavelengths``, increasing), ``sigma`` likewise or None, ``rows`` each pair's first
+    row (its number in the file, for the wide layout's messages)."""
+
+    raw: list[np.ndarray]
+    values: np.ndarray
+    sigma: np.ndarray | None
+    rows: np.ndarray
+    wavelengths: list[float] | None
+    summary: dict
+
+
+def channel_keys(cells: list[str], column: str, source: str, rows: np.ndarray,
+                 noun: str = "column") -> tuple[str, np.ndarray]:
+    """A channel column's cells as ``("rgb", indices)`` (0, 1, 2 for R, G, B) or, where
+    every cell names a wavelength (``450nm``), ``("wavelength", nm)``: refused where a
+    cell is neither, or where the cells mix the two. ``noun``: what the refusals call
+    the column (``dataset``)."""
+    rgb, nm = [], []
+    for k, cell in enumerate(cells):
+        word = cell.strip().lower()
+        if word in RGB_CELLS:
+            rgb.append(RGB_CELLS[word])
+        elif (lam := spectra.wavelength_of(word)) is not None:
+            nm.append(lam)
+        else:
+            raise MeasurementsError(source, f"row {int(rows[k]) + 1}: {noun} {column!r} holds "
+                                            f"{cell.strip()[:20]!r}, which names no channel "
+                                            "(r, g, b, red, green, blue) nor a wavelength "
+                                            "(450nm)")
+        if rgb and nm:
+            raise MeasurementsError(source, f"{noun} {column!r} names both RGB channels and "
+                                            "wavelengths: keep one kind")
+    return ("wavelength", np.array(nm, float)) if nm else ("rgb", np.array(rgb, float))
+
+
+def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarray,
+          sigma: np.ndarray | None, rows: np.ndarray, source: str,
+          noun: str = "column") -> Pivoted:
+    """The rows (angles ``raw``, each (N,); one channel's ``values`` and ``sigma`` (N,)
+    each; ``rows`` their numbers in the file) pivoted by ``keys``: channel indices
+    (``kind`` ``"rgb"``) or wavelengths in nm (``kind`` ``"wavelength"``), from the
+    column named ``column`` (``noun``: what the refusals call it)."""
+    keys = np.asarray(keys, float)
+    if not np.all(np.isfinite(keys)):
+        bad = int(np.flatnonzero(~np.isfinite(keys))[0])
+        raise MeasurementsError(source, f"row {int(rows[bad]) + 1}: {noun} {column!r} is not "
+                                        "a number")
+    channels, channel = np.unique(keys, return_inverse=True)
+    if kind == "rgb" and channels.size != 3:
+        named = ", ".join("rgb"[int(c)] for c in channels)
+        raise MeasurementsError(source, f"{noun} {column!r} names channel(s) {named} alone: "
+                                        "every direction needs a row for each of r, g, b"
+                                        + ("; if every row holds the same channel, drop the "
+                                           "column to read the values as grey"
+                                           if channels.size == 1 else ""))
+    if kind == "wavelength" and channels.size < 2:
+        raise MeasurementsError(source, f"{noun} {column!r} holds one wavelength "
+                                        f"({channels[0]:g} nm) alone: a spectrum needs "
+                                        "several; if every row has the same one, drop the "
+                                        "column to read the values as grey")
+    # a direction pair: the same four numbers, as written; in the order first seen
+    pairs = np.column_stack(raw)
+    _, first, pair = np.unique(pairs, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    pair = rank[np.ravel(pair)]
+    n, k = order.size, channels.size
+    seen = np.full((n, k), -1)
+    for row, (p, c) in enumerate(zip(pair, channel, strict=True)):
+        if seen[p, c] >= 0:
+            raise MeasurementsError(
+                source, f"rows {int(rows[seen[p, c]]) + 1} and {int(rows[row]) + 1} both give "
+                        f"{_said(kind, channels[c])} of one direction pair: keep one")
+        seen[p, c] = row
+    if (seen < 0).any():
+        p, c = np.argwhere(seen < 0)[0]
+        at = int(rows[seen[p][seen[p] >= 0][0]]) + 1
+        raise MeasurementsError(
+            source, f"the direction pair of row {at} has no row for {_said(kind, channels[c])}"
+                    f" ({int((seen[p] >= 0).sum())} of the {k} the file holds): every pair "
+                    "needs one row per " + ("channel" if kind == "rgb" else "wavelength")
+                    + ", with the same four angles")
+    take = seen  # (n, k): the row of each pair's each channel
+    first_rows = take.min(axis=1)
+    return Pivoted(
+        raw=[a[first_rows] for a in raw],
+        values=values[take],
+        sigma=None if sigma is None else sigma[take],
+        rows=rows[first_rows],
+        wavelengths=None if kind == "rgb" else [float(x) for x in channels],
+        summary={"rows": int(keys.size), "column": column,
+                 "per_sample": "r, g, b" if kind == "rgb" else f"{k} wavelengths"})
+
+
+def _said(kind: str, key: float) -> str:
+    return f"channel {'rgb'[int(key)]}" if kind == "rgb" else f"{key:g} nm"
