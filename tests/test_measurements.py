@@ -431,9 +431,9 @@ def test_a_mat_file_reads_only_what_a_sample_list_holds(tmp_path, monkeypatch):
     """What the fuzzing of version-5 files found (stop 74): variables no fit reads are
     never read (a 23 KB file of empty sparse matrices took 4.9 GB, densified); a name or
     size that no HDF5 file holds is one line, not h5py's traceback or message; CIE XYZ,
-    a long layout and an uncertainty by another name are refused as in a CSV; a MATLAB
-    row vector of sigma is read as its angles are; text, complex and logical values are
-    named so."""
+    a long layout's channel beside wide values and an uncertainty by another name are
+    refused as in a CSV; a MATLAB row vector of sigma is read as its angles are, an empty
+    one as none; text, complex and logical values are named so."""
     import scipy.sparse
     from scipy import io
 
@@ -476,6 +476,9 @@ def test_a_mat_file_reads_only_what_a_sample_list_holds(tmp_path, monkeypatch):
     io.savemat(tmp_path / "row.mat", {**arrays, "sigma": np.full(n, 0.01)})
     np.testing.assert_array_equal(read_measured(tmp_path / "row.mat").sigma, np.full((n, 3),
                                                                                       0.01))
+    # sigma = [], MATLAB's empty matrix: no sigma (it was refused as of shape (0, 0))
+    io.savemat(tmp_path / "empty.mat", {**arrays, "sigma": np.zeros((0, 0))})
+    assert read_measured(tmp_path / "empty.mat").sigma is None
     # hand-made headers: a name HDF5 cannot hold, a name twice, a negative size
     io.savemat(tmp_path / "named.mat", {**arrays, "zzzz": np.ones((2, 2)), "rgc": np.ones(2)})
     data = (tmp_path / "named.mat").read_bytes()

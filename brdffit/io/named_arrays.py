@@ -410,6 +410,8 @@ def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,
         return None
     if given == [v.get("sigma")]:
         sigma = _numeric(f, v["sigma"], source, matlab)
+        if sigma.size == 0 and n > 0:  # MATLAB's sigma = [], an empty array: none given
+            return None
         row = matlab and sigma.shape == (1, n) and n > 1  # a MATLAB row vector, as angles
         return sigma.ravel() if row or (sigma.ndim == 2 and sigma.shape[1] == 1) else sigma
     if rgb and "sigma" not in v and len(given) == len(CHANNELS):
