@@ -263,8 +263,8 @@ def run(args) -> int:
 
         comma = ", decimal commas" if measured.provenance.get("decimal_comma") else ""
         if long := measured.provenance.get("long_layout"):
-            comma += (f", {long['rows']} rows of one channel each, by {long['column']}: "
-                      f"{long['per_sample']} per sample")
+            comma += (f", pivoted from {long['rows']:,} rows, one per sample and "
+                      f"{long['column']}: {long['per_sample']} per sample")
         print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "
               f"({measured.provenance.get('format')}{comma}), to be fitted at their own "
               "directions, with a held-out error", file=sys.stderr)

@@ -181,7 +181,11 @@ function chooseTable(table) {
   const what = s.input
     // a sample list (docs/measurements.md): fitted at its own directions, not binned
     ? ` (${count(s.input.samples)} samples, ${s.input.format}${s.input.sigma ? ", with sigma" : ""}`
-      + `${s.input.spectral ? `, spectral under ${s.input.spectral.illuminant}` : ""}: `
+      + `${s.input.spectral ? `, spectral under ${s.input.spectral.illuminant}` : ""}`
+      // one row per (direction, channel), pivoted: said, as the CLI says it
+      + `${s.input.long_layout ? `, pivoted from ${count(s.input.long_layout.rows)} rows, one `
+        + `per sample and ${s.input.long_layout.column}` : ""}`
+      + `${s.input.decimal_comma ? ", decimal commas" : ""}: `
       + `fitted at their own directions; ${count(s.measured_bins)} MERL bins hold one) `
     : ` (${count(s.measured_bins)} measured bins, ${count(s.unmeasured_bins)} unmeasured, `
       + `${count(s.nonfinite_bins)} non-finite) `;
