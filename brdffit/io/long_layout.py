@@ -84,6 +84,7 @@ def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarra
         raise MeasurementsError(source, f"row {int(rows[bad]) + 1}: {noun} {column!r} is not "
                                         "a number")
     channels, channel = np.unique(keys, return_inverse=True)
+    channel = np.ravel(channel)
     if kind == "rgb" and channels.size != 3:
         named = ", ".join("rgb"[int(c)] for c in channels)
         raise MeasurementsError(source, f"{noun} {column!r} names channel(s) {named} alone: "
@@ -104,16 +105,20 @@ def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarra
     rank[order] = np.arange(order.size)
     pair = rank[np.ravel(pair)]
     n, k = order.size, channels.size
-    seen = np.full((n, k), -1)
-    for row, (p, c) in enumerate(zip(pair, channel, strict=True)):
-        if seen[p, c] >= 0:
-            raise MeasurementsError(
-                source, f"rows {int(rows[seen[p, c]]) + 1} and {int(rows[row]) + 1} both give "
-                        f"{_said(kind, channels[c])} of one direction pair: keep one")
-        seen[p, c] = row
+    cell = pair * k + channel  # each row's (pair, channel), flat
+    count = np.bincount(cell, minlength=n * k)
+    if (count > 1).any():
+        twice = np.flatnonzero(cell == np.flatnonzero(count > 1)[0])[:2]
+        raise MeasurementsError(
+            source, f"rows {int(rows[twice[0]]) + 1} and {int(rows[twice[1]]) + 1} both give "
+                    f"{_said(kind, channels[channel[twice[0]]])} of one direction pair: keep "
+                    "one")
+    seen = np.full(n * k, -1)
+    seen[cell] = np.arange(cell.size)
+    seen = seen.reshape(n, k)
     if (seen < 0).any():
         p, c = np.argwhere(seen < 0)[0]
-        at = int(rows[seen[p][seen[p] >= 0][0]]) + 1
+        at = int(rows[seen[p][seen[p] >= 0].min()]) + 1
         raise MeasurementsError(
             source, f"the direction pair of row {at} has no row for {_said(kind, channels[c])}"
                     f" ({int((seen[p] >= 0).sum())} of the {k} the file holds): every pair "
