@@ -1414,11 +1414,30 @@ def test_a_long_layout_is_pivoted_to_the_wide_files_samples(tmp_path):
         m = read_measured(path)
         np.testing.assert_allclose(m.rgb, expected.rgb, rtol=1e-14)  # one matrix product
         assert m.provenance["spectral"]["wavelengths_nm"] == [380.0, 780.0, lam.size]
+    for cells, said in (([f"{x / 1000:g}" for x in lam], "holds wavelengths up to 0.78: "
+                                                           "micrometres. Write them in nm"),
+                        ([f"{x - 400:g}" for x in lam], "holds a wavelength of -20 nm")):
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(long("odd_nm.csv", "wavelength", cells, spectra))
     astm = tmp_path / "long.astm"
     astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,channel,BRDF\n" + "".join(
         ",".join(repr(float(a[k])) for a in s[:4]) + f",{c},{float(s[4][k, j])!r}\n"
         for k in range(40) for j, c in enumerate("rgb")))
     np.testing.assert_allclose(read_measured(astm).rgb, wide.rgb, rtol=1e-15)
+    # a channel or wavelength column is known by a word of its name (under a name
+    # outside a short list its rows were read as grey samples of repeated directions),
+    # a units row may say nm
+    for column in ("rgb_channel", "Channel_ID", "ch"):
+        np.testing.assert_array_equal(samples(read_measured(long("named.csv", column, "rgb",
+                                                                 s[4]))), samples(wide))
+    for column in ("WL_nm", "wave_length", "lambda (nm)"):
+        m = read_measured(long("nm2.csv", column, [f"{x:g}" for x in lam], spectra))
+        np.testing.assert_allclose(m.rgb, expected.rgb, rtol=1e-14)
+    units_row = long("units.csv", "wavelength", [f"{x:g}" for x in lam], spectra).read_text()
+    units_row = units_row.replace("\n", "\n,,,,nm,\n", 1)
+    (tmp_path / "units.csv").write_text(units_row)
+    np.testing.assert_allclose(read_measured(tmp_path / "units.csv").rgb, expected.rgb,
+                               rtol=1e-14)
     # what cannot be pivoted is named, with its row
     lines = long("rgb.csv", "channel", "rgb", s[4]).read_text().splitlines()
     for name, rows, said in (
@@ -1443,7 +1462,13 @@ def test_a_long_layout_is_pivoted_to_the_wide_files_samples(tmp_path):
                 for r in lines[1:]], "columns 'channel' and 'wavelength' both say"),
             ("polarised.csv", [lines[0].replace("channel", "polarization"), *lines[1:]],
              "column 'polarization' says which polarisation each row holds: a "
-             "polarisation-resolved list is not read")):
+             "polarisation-resolved list is not read"),
+            # each row checked as a wide file's sample is, named by its own row (the
+            # pair's first row after the pivot was named, and a channel's sigma_g)
+            ("nan.csv", [lines[0], lines[1], "nan" + lines[2][lines[2].index(","):],
+                         *lines[3:]], "theta_i_deg is not finite in 1 row .first: row 3."),
+            ("micrometres.csv", [lines[0].replace("channel", "wavelength [um]"), *lines[1:]],
+             "column 'wavelength .um.' gives wavelengths in 'um': write them in nm")):
         (tmp_path / name).write_text("\n".join(rows) + "\n")
         with pytest.raises(MeasurementsError, match=said):
             read_measured(tmp_path / name)
@@ -1493,8 +1518,27 @@ def test_a_long_layout_of_named_arrays_is_pivoted_as_a_csvs_is(tmp_path):
              brdf=spectra.ravel(), wavelengths=np.tile(lam, 30))
     np.testing.assert_allclose(read_measured(tmp_path / "long_spectral.npz").rgb,
                                read_measured(tmp_path / "wide_spectral.npz").rgb, rtol=1e-14)
+    # wide files' metadata of those names are not read (one element, or not one per row)
+    wide_arrays = {k: a[::3] for k, a in deg.items()}
+    for note in ({"lambda": 0.1, "color": "red", "filter": {"type": "ND"}},
+                 {"wavelengths": np.array([[610.0, 550.0, 465.0]])}):
+        io.savemat(tmp_path / "wide.mat", {**wide_arrays, "rgb": s[4], **note})
+        np.testing.assert_array_equal(read_measured(tmp_path / "wide.mat").rgb, wide.rgb)
     for change, said in (
             ({"channel": channel[:-1]}, "array channel holds 89 value.s., not one per row .90."),
+            ({"channel": np.array(list(channel[:-1]) + ["x"] * 3)},
+             "array channel holds 92 value.s., not one per row"),
+            ({"channel": np.zeros(0)}, "array channel holds 0 value.s."),
+            ({"channel": channel.reshape(30, 3)}, "array channel has shape .30, 3.: expected "
+                                                  ".n,., one per row"),
+            ({"Channel": channel}, "arrays '.hannel' and '.hannel' both say"),
+            ({"sigma": np.full(91, 0.1)}, "sigma has shape .91,.: expected .90,."),
+            ({"theta_i_deg": deg["theta_i_deg"][:-3]}, "90 values but angles of .87, 90, 90, "
+                                                       "90. rows"),
+            ({"channel": np.array([b"r", b"g", b"b"] * 30)}, None),  # bytes: decoded
+            ({"channel": np.array(["r", "g", "b\x00x"] * 30)}, "row 3: array 'channel' holds "
+                                                              "'b.{1,2}x00x'"),
+            ({"channel": np.array(["r" * 5000] * 90)}, "holds texts of 20,000 bytes each"),
             ({"channel": np.array(["IR"] * 90)}, "row 1: array 'channel' holds 'IR', which "
                                                  "names no channel"),
             ({"polarization": np.ones(90)}, "array 'polarization' says which polarisation "
@@ -1502,8 +1546,38 @@ def test_a_long_layout_of_named_arrays_is_pivoted_as_a_csvs_is(tmp_path):
                                             "not read"),
             ({"wavelength": np.ones(90)}, "arrays 'channel' and 'wavelength' both say")):
         np.savez(tmp_path / "bad.npz", **{**long, **change})
+        if said is None:
+            np.testing.assert_array_equal(read_measured(tmp_path / "bad.npz").rgb, wide.rgb)
+            continue
         with pytest.raises(MeasurementsError, match=said):
             read_measured(tmp_path / "bad.npz")
+    # MATLAB: a 1 x n char is one text; a cell with an empty text names its row
+    cell = np.array([[c] for c in channel], dtype=object)
+    cell[4, 0] = ""
+    for name, variable, said in (
+            ("row.mat", "".join(channel), "variable channel holds 1 value.s., not one per row "
+                                          ".90.: .*a char row vector is one text: save a "
+                                          "column, channel.:."),
+            ("empty_cell.mat", cell, "row 5: variable 'channel' holds ''")):
+        io.savemat(tmp_path / name, {**long, "channel": variable})
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / name)
+    # HDF5: text that is not UTF-8, references (MATLAB -v7.3's cell), a null dataspace
+    for name, make, said in (
+            ("latin.h5", lambda f: f.create_dataset("channel", data=np.array(
+                [b"r", b"\xff", b"b"] * 30)), "dataset channel holds text that is not UTF-8"),
+            ("refs.h5", lambda f: f.create_dataset("channel", shape=(90,),
+                                                   dtype=h5py.ref_dtype),
+             "dataset channel holds neither text nor numbers"),
+            ("null.h5", lambda f: f.create_dataset("channel", data=h5py.Empty("S1")),
+             "dataset channel holds 0 value.s., not one per row .90.")):
+        with h5py.File(tmp_path / name, "w") as f:
+            for k, a in long.items():
+                if k != "channel":
+                    f[k] = a
+            make(f)
+        with pytest.raises(MeasurementsError, match=said):
+            read_measured(tmp_path / name)
 
 
 def test_files_as_lab_tools_write_them(tmp_path):

@@ -30,26 +30,49 @@ CHANNELS = ("r", "g", "b")
 ONE_CHANNEL = ("value", "brdf", "y")
 #: Columns that say which channel, wavelength or polarisation a row holds: a file of
 #: one row per (direction, channel), a "long" layout (:mod:`brdffit.io.long_layout`).
-#: A channel column's cells name R, G, B (``r``, ``Red``) or a wavelength (``450nm``);
-CHANNEL_COLUMNS = ("channel", "band", "color", "colour", "filter")
+#: They are known by a word of their name (``rgb_channel``, ``Channel_ID``, ``WL_nm``,
+#: ``wave_length``: a channel column under a name outside a short list was not seen,
+#: and its rows were read as grey samples of the same directions). A channel column's
+#: cells name R, G, B (``r``, ``Red``) or a wavelength (``450nm``);
+CHANNEL_WORDS_IN_NAMES = frozenset({"channel", "channels", "chan", "ch", "band", "bands",
+                                    "color", "colors", "colour", "colours", "filter",
+                                    "filters"})
 #: a wavelength column's are nanometres;
-WAVELENGTH_COLUMNS = ("wavelength", "wavelength_nm", "lambda", "lambda_nm", "wl", "nm")
+WAVELENGTH_WORDS = frozenset({"wavelength", "wavelengths", "lambda", "λ", "wl", "lam"})
 #: a polarisation state is not read (which average of two states the measurement stands
 #: for depends on the instrument).
-POLARISATION_COLUMNS = ("polarization", "polarisation", "polarizer", "polariser", "pol")
-LONG_LAYOUT_COLUMNS = (*CHANNEL_COLUMNS, *WAVELENGTH_COLUMNS, *POLARISATION_COLUMNS)
+POLARISATION_WORDS = frozenset({"polarization", "polarisation", "polarizer", "polariser",
+                                "pol"})
 ANGLES = ("theta_i", "phi_i", "theta_o", "phi_o")
 
 
 def long_column_kind(name: str) -> str | None:
     """``"channel"``, ``"wavelength"`` or ``"polarisation"`` where a lower-case column
-    or dataset name, less a unit (``wavelength [nm]``), is one of
-    :data:`LONG_LAYOUT_COLUMNS`; else None."""
-    word = re.match(r"[^\s\[(/]+", name)
-    word = "" if word is None else word[0]
-    return ("channel" if word in CHANNEL_COLUMNS else "wavelength"
-            if word in WAVELENGTH_COLUMNS else "polarisation"
-            if word in POLARISATION_COLUMNS else None)
+    or dataset name, less a unit (``wavelength [nm]``), holds one of their words
+    (:data:`CHANNEL_WORDS_IN_NAMES`, :data:`WAVELENGTH_WORDS`, :data:`POLARISATION_WORDS`;
+    ``wave_length``; ``nm`` alone); else None. A spectral value column named by its
+    wavelength (``450nm``) is none of them."""
+    from brdffit.io.spectra import wavelength_of
+
+    if wavelength_of(name) is not None or angle_name(name) is not None:
+        return None
+    words = set(re.findall(r"[a-zλ]+", re.split(r"[\[(/]", name, maxsplit=1)[0]))
+    if words & POLARISATION_WORDS:
+        return "polarisation"
+    if words & WAVELENGTH_WORDS or {"wave", "length"} <= words or words == {"nm"}:
+        return "wavelength"
+    return "channel" if words & CHANNEL_WORDS_IN_NAMES else None
+
+
+def stated_unit(name: str) -> str | None:
+    """The unit a column's name states after it (``wavelength [um]``, ``lambda (µm)``,
+    ``wl/nm``) or as its last word (``wavelength_um``, ``WL_nm``), lower-case; None."""
+    m = re.search(r"[\[(/]\s*([^\])]*?)\s*[\])]?\s*$", name)
+    if m:
+        return m[1].strip().lower() or None
+    last = re.findall(r"[a-zµμ]+", name.lower())
+    return last[-1] if len(last) > 1 and last[-1] in ("nm", "um", "µm", "μm", "micron",
+                                                      "microns", "m", "mm", "a") else None
 
 
 def unit_scale(unit: str, source: str) -> float:

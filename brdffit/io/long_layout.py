@@ -47,6 +47,18 @@ class Pivoted:
     summary: dict
 
 
+#: How a wavelength's unit may be written: nanometres.
+NANOMETRES = ("nm", "nanometre", "nanometres", "nanometer", "nanometers")
+
+
+def refuse_other_units(unit: str | None, what: str, source: str) -> None:
+    """Refuses wavelengths said to be in another unit than nm (``wavelength [um]``, an
+    HDF5 ``units`` of ``um``): they were read as nm."""
+    if unit is not None and unit.strip().lower() not in NANOMETRES:
+        raise MeasurementsError(source, f"{what} gives wavelengths in {unit.strip()[:20]!r}: "
+                                        "write them in nm")
+
+
 def channel_keys(cells: list[str], column: str, source: str, rows: np.ndarray,
                  noun: str = "column") -> tuple[str, np.ndarray]:
     """A channel column's cells as ``("rgb", indices)`` (0, 1, 2 for R, G, B) or, where
@@ -92,6 +104,12 @@ def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarra
                                         + ("; if every row holds the same channel, drop the "
                                            "column to read the values as grey"
                                            if channels.size == 1 else ""))
+    if kind == "wavelength" and channels[0] <= 0:
+        raise MeasurementsError(source, f"{noun} {column!r} holds a wavelength of "
+                                        f"{channels[0]:g} nm: a wavelength is > 0")
+    if kind == "wavelength" and channels[-1] < 100:
+        raise MeasurementsError(source, f"{noun} {column!r} holds wavelengths up to "
+                                        f"{channels[-1]:g}: micrometres? Write them in nm")
     if kind == "wavelength" and channels.size < 2:
         raise MeasurementsError(source, f"{noun} {column!r} holds one wavelength "
                                         f"({channels[0]:g} nm) alone: a spectrum needs "

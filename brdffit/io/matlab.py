@@ -97,6 +97,7 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
         for name, shape, cls in declared:
             if cls not in NUMERIC_CLASSES and cls != "char":  # a struct, cell, object, ...
                 d = f.create_group(name)
+                d.attrs["MATLAB_dims"] = np.asarray(shape, np.int64)  # what it holds
             elif cls == "char":  # its text is not read: refused as text where it is wanted
                 d = f.create_dataset(name, data=np.bytes_(b""))
             else:
@@ -104,6 +105,11 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
             d.attrs["MATLAB_class"] = np.bytes_(cls)
         if before_reading is not None:
             before_reading(f)
+        for name, shape, cls in declared:
+            if cls == "char" and wanted(name) and len(shape) == 2 and shape[1] > variables.MAX_TEXT:
+                raise MeasurementsError(source, f"variable {name} is a char matrix of rows of "
+                                                f"{shape[1]:,} characters: a channel's name is "
+                                                "short")
         if values:
             classes = {name: cls for name, _, cls in declared}
             read = _loaded(Path(path), source, [n for n, cls in classes.items()
@@ -114,6 +120,10 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
                 if classes[name] in TEXT_CLASSES:  # a long layout's channel names
                     if (texts := _texts(a)) is not None:
                         variables.fill_text(f, name, texts)
+                        # rows and characters (scipy's header gives the rows alone): a
+                        # 1 x n char of n channels' letters is one text, not one element
+                        f[name].attrs["MATLAB_dims"] = np.asarray(
+                            [len(texts), max(map(len, texts), default=0)], np.int64)
                     continue
                 a = a.toarray() if hasattr(a, "toarray") else np.asarray(a)  # sparse
                 if classes[name] == "logical":  # scipy reads it as uint8: a mask
@@ -133,9 +143,9 @@ def _texts(a: np.ndarray) -> list[str] | None:
     texts = []
     for cell in a.ravel(order="F"):
         cell = np.asarray(cell)
-        if cell.dtype.kind != "U" or cell.size != 1:
+        if cell.dtype.kind != "U" or cell.size > 1:  # numbers, or a char matrix of rows
             return None
-        texts.append(str(cell.ravel()[0]).rstrip())
+        texts.append(str(cell.ravel()[0]).rstrip() if cell.size else "")  # '' is empty
     return texts
 
 

@@ -40,6 +40,7 @@ from brdffit.io.columns import (
     cie_xyz,
     long_column_kind,
     radians_said_to_be_degrees,
+    stated_unit,
     unit_scale,
 )
 from brdffit.io.measurements import Measurements, MeasurementsError, too_many_samples
@@ -184,7 +185,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     raw, scales = _raw_angles(f, named, source, matlab, file_format)
     provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
     v = _value_names(f, source)
-    long = _long_dataset(f, v, source)
+    long = _long_dataset(f, v, source, len(raw[0]))
     channels = [v[c] for c in CHANNELS if c in v]
     kinds = [v[k] for k in ("rgb", "value", "spectral") if k in v] + (
         [", ".join(channels)] if channels else [])
@@ -242,7 +243,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     wavelengths = None
     if long is not None:  # one row per (direction, channel): pivoted first
         raw, values, sigma, wavelengths, provenance["long_layout"] = _pivoted(
-            f, long, raw, values, sigma, source, matlab)
+            f, long, raw, scales, values, sigma, source, matlab)
     radians_said_to_be_degrees(raw, scales, source)
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     provenance.update(azimuths_within(raw, scales))
@@ -311,26 +312,30 @@ _SIGMAS = ("sigma", *(f"sigma_{c}" for c in CHANNELS))
 _PER_SAMPLE = ("rgb", "value", "spectral", *_SIGMAS, *CHANNELS)
 
 
-def _long_dataset(f, v: dict[str, str], source: str) -> tuple[str, str] | None:
+def _long_dataset(f, v: dict[str, str], source: str, rows: int) -> tuple[str, str] | None:
     """The dataset that says which channel or wavelength each row holds, where the file
     has one row per (direction, channel) (:mod:`brdffit.io.long_layout`), and its kind
     (``"channel"``, ``"wavelength"``); None for a wide file. Such a dataset is named as
-    a CSV's column is (:data:`LONG_LAYOUT_COLUMNS`), or it is ``wavelengths`` beside no
-    ``spectral``; one number so named says nothing of the rows (it is not read). A
-    polarisation is refused, as are two such datasets, and CIE XYZ (``X``, ``Y``, ``Z``:
-    Y was read as a grey value and X and Z dropped), as a CSV of the same columns is."""
-    import h5py
-
+    a CSV's column is (:func:`brdffit.io.columns.long_column_kind`), or it is
+    ``wavelengths`` beside no ``spectral``. One element so named (a MATLAB workspace's
+    ``lambda = 0.1``, an HDF5 group of settings) says nothing of the rows: it is not
+    read; nor is one beside values of one row per sample (``rgb``, ``spectral``) that
+    does not hold one element per row (``rows``; the RGB's nominal wavelengths, say).
+    A polarisation is refused, as are two such datasets (names that differ in
+    case too), wavelengths said to be in another unit than nm, and CIE XYZ (``X``,
+    ``Y``, ``Z``: Y was read as a grey value and X and Z dropped), as a CSV of the same
+    columns is."""
     keys = {k.strip().lower(): k for k in f.keys()}
     if "value" in v and (xyz := cie_xyz(keys)):
         raise MeasurementsError(source, f"datasets {', '.join(keys[n] for n in xyz)}: "
                                         + XYZ_WHY)
+    wide = bool(v.keys() & {"rgb", "spectral", *CHANNELS})
     found = []
-    for key, k in keys.items():
-        kind = long_column_kind(key)
-        d = None if kind is None else _opened(f, k)
-        if d is None or (isinstance(d, h5py.Dataset) and d.dtype.kind in "iuf"
-                         and (d.size or 0) <= 1 and "MATLAB_class" not in d.attrs):
+    for k in f.keys():
+        kind = long_column_kind(k.strip().lower())
+        elements = None if kind is None else _declared_elements(f, k)
+        if (kind is None or elements == 1 or (wide and elements != rows)
+                or (k == v.get("wavelengths") and "spectral" in v)):  # a spectrum's grid
             continue
         if kind == "polarisation":
             raise MeasurementsError(
@@ -340,39 +345,91 @@ def _long_dataset(f, v: dict[str, str], source: str) -> tuple[str, str] | None:
                         f"values, one row per direction pair, or if every row has the same "
                         f"{k}, drop it")
         found.append((k, kind))
-    if not found and "wavelengths" in v and "spectral" not in v:
-        found.append((v["wavelengths"], "wavelength"))
     if len(found) > 1:
         raise MeasurementsError(source, f"datasets {found[0][0]!r} and {found[1][0]!r} both say "
                                         "which channel or wavelength a row holds: keep one")
+    if found and found[0][1] == "wavelength" and (d := _opened(f, found[0][0])) is not None:
+        unit = _attr_text(d.attrs.get("units"), "units", source)
+        long_layout.refuse_other_units(unit or stated_unit(found[0][0].lower()),
+                                       f"dataset {found[0][0]}", source)
     return found[0] if found else None
 
 
-def _pivoted(f, long: tuple[str, str], raw: list[np.ndarray], values: np.ndarray,
-             sigma: np.ndarray | None, source: str, matlab: bool):
+def _declared_elements(f, name: str) -> int:
+    """How many elements object ``name`` of ``f`` declares, from its declaration alone:
+    a dataset's size (0 where it is empty or null), a MATLAB struct's, cell's or char
+    matrix's from its dimensions (``MATLAB_dims``, as :mod:`brdffit.io.matlab` keeps
+    them: a char's characters); 1 for any other group (no column of rows); -1 for what
+    cannot be opened here (an external link: refused where it is read)."""
+    import h5py
+
+    if _external_link(f, name):
+        return -1
+    d = _opened(f, name)
+    if d is None:
+        return -1
+    dims = d.attrs.get("MATLAB_dims")  # a version-5 file's struct, cell or char
+    if dims is not None:
+        return int(np.prod(dims))
+    return int(d.size or 0) if isinstance(d, h5py.Dataset) else 1
+
+
+def _pivoted(f, long: tuple[str, str], raw: list[np.ndarray], scales: list[float],
+             values: np.ndarray, sigma: np.ndarray | None, source: str, matlab: bool):
     """A long layout's rows (:func:`_long_dataset`) pivoted to one per direction pair:
-    the angles, values, sigma, wavelengths (None for RGB) and what the pivot did."""
+    the angles, values, sigma, wavelengths (None for RGB) and what the pivot did. Each
+    row is checked first as a wide list's sample is (:meth:`Measurements.from_angles`:
+    the angles' and sigma's lengths, what is not finite, a sigma of 0), so that a
+    refusal names the row it is in; the channel's length is weighed before it is read."""
     name, kind = long
-    rows = np.arange(len(values))
+    n = len(values)
+    rows = _declared_rows(f, name, source, matlab)
+    if rows != n:
+        column = (f"; a char row vector is one text: save a column, {name}(:)"
+                  if matlab and rows == 1 else "")
+        raise MeasurementsError(source, f"dataset {name} holds {rows:,} value(s), not one per "
+                                        f"row ({n}): a long layout names each row's {kind}; if "
+                                        f"every row has the same one, drop it{column}")
+    # checks alone (see above); the angles in radians, as they are checked
+    Measurements.from_angles(*(a * scale for a, scale in zip(raw, scales, strict=True)),
+                             values, sigma, source=source)
+    numbers = np.arange(n)
     if kind == "wavelength":
         keys = _one_per_sample(f, name, source, matlab)
     else:
         kind, keys = long_layout.channel_keys(_texts(f, name, source, matlab), name, source,
-                                              rows, noun="dataset")
-    if len(keys) != len(values):
-        raise MeasurementsError(source, f"dataset {name} holds {len(keys)} value(s), not one "
-                                        f"per row ({len(values)}): a long layout names each "
-                                        f"row's {long[1]}; if every row has the same one, "
-                                        "drop it")
-    p = long_layout.pivot(raw, keys, kind, name, values, sigma, rows, source, noun="dataset")
+                                              numbers, noun="dataset")
+    p = long_layout.pivot(raw, keys, kind, name, values, sigma, numbers, source,
+                          noun="dataset")
     return p.raw, p.values, p.sigma, p.wavelengths, p.summary
+
+
+def _declared_rows(f, name: str, source: str, matlab: bool) -> int:
+    """How many rows dataset ``name`` gives one element each, from its declared shape
+    ((n,), a row or a column; a MATLAB char matrix's rows; 0 where it is empty);
+    another shape is refused with it."""
+    import h5py
+
+    d = _dataset(f, name, source)
+    if not isinstance(d, h5py.Dataset):
+        return _declared_elements(f, name)
+    shape = _stored_shape(f, name, matlab)
+    if matlab and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source) == "char" \
+            and len(shape) == 2:
+        return shape[0]  # one text per row of the char matrix
+    if d.shape is None or len(shape) <= 1 or 1 in shape:
+        return int(d.size or 0)
+    raise MeasurementsError(source, f"{_shape_said(name, np.empty(shape), matlab)}: expected "
+                                    + ("a vector" if matlab else "(n,)")
+                                    + ", one per row")
 
 
 def _texts(f, name: str, source: str, matlab: bool) -> list[str]:
     """Dataset ``name`` as text, one string per row: strings (h5py's, an .npz's text,
     a MATLAB version-5 char matrix's rows or cell of strings), a MATLAB -v7.3 char
     matrix (stored as UTF-16 codes, one column per row), or numbers (said as written,
-    for the refusal of a channel that is a number)."""
+    for the refusal of a channel that is a number). Its length is weighed before
+    (:func:`_declared_rows`)."""
     import h5py
 
     d = _dataset(f, name, source)
@@ -380,14 +437,26 @@ def _texts(f, name: str, source: str, matlab: bool) -> list[str]:
         raise MeasurementsError(source, f"{name} is an HDF5 group, not a dataset"
                                 + (f": save it as a char matrix, char({name})" if matlab
                                    else ""))
-    if matlab and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source) == "char" \
-            and d.dtype.kind in "iu":
+    cls = _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source) if matlab else None
+    if cls == "cell" and h5py.check_string_dtype(d.dtype) is None:
+        # -v7.3 stores a cell as references to its elements (a version-5 file's cell of
+        # strings is read as text: brdffit.io.matlab)
+        raise MeasurementsError(source, f"{name} is a cell array: save it as a char matrix, "
+                                        f"char({name})")
+    if d.shape is None:
+        return []
+    if cls == "char" and d.dtype.kind in "iu":
         codes = np.atleast_2d(np.asarray(d))  # (characters, rows), column-major
         return ["".join(map(chr, column)).rstrip("\x00 ") for column in codes.T]
-    if d.dtype.kind in "SO" or h5py.check_string_dtype(d.dtype) is not None:
-        return [t.decode("utf-8", "replace") if isinstance(t, bytes) else str(t)
-                for t in np.ravel(d.asstr()[()] if d.shape != () else [d[()]])]
-    return [f"{x:g}" for x in _one_per_sample(f, name, source, matlab)]
+    if d.dtype.kind in "iuf":
+        return [f"{x:g}" for x in _one_per_sample(f, name, source, matlab)]
+    try:
+        return [str(t) for t in np.ravel(d.asstr()[()])]
+    except UnicodeDecodeError:
+        raise MeasurementsError(source, f"dataset {name} holds text that is not UTF-8") from None
+    except (TypeError, ValueError):  # references, numbers of variable length, ...
+        raise MeasurementsError(source, f"dataset {name} holds neither text nor numbers "
+                                        f"({d.dtype})") from None
 
 
 def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,

@@ -95,6 +95,10 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
                 if not (values and wanted(name)):
                     continue
                 if dtype.kind in "US":  # text the reader reads: a long layout's channels
+                    if dtype.itemsize > 4 * variables.MAX_TEXT:  # before it is read
+                        raise MeasurementsError(source, f"array {name} holds texts of "
+                                                        f"{dtype.itemsize:,} bytes each: a "
+                                                        "channel's name is short")
                     variables.fill_text(f, name, _array(z, name, source))
                 else:
                     variables.fill(f, name, _array(z, name, source))

@@ -31,6 +31,7 @@ from brdffit.io.columns import (
     cie_xyz,
     long_column_kind,
     radians_said_to_be_degrees,
+    stated_unit,
     unit_scale,
     value_name,
 )
@@ -145,8 +146,9 @@ def _long_column(names: list[str], seen: dict[str, int],
     """The column that says which channel or wavelength a row holds, where the file has
     one row per (direction, channel) (:mod:`brdffit.io.long_layout`): its index, its kind
     (``"channel"``: its cells name r, g, b or wavelengths; ``"wavelength"``: nm) and its
-    name, matched less a unit (``wavelength [nm]``); None for a wide file. A
-    polarisation column is refused, as are two such columns."""
+    name, known by a word of it (:func:`brdffit.io.columns.long_column_kind`); None for a
+    wide file. A polarisation column is refused, as are two such columns and wavelengths
+    said to be in another unit than nm."""
     found = []
     for name, k in seen.items():
         kind = long_column_kind(name)
@@ -160,6 +162,8 @@ def _long_column(names: list[str], seen: dict[str, int],
                         "the reflectance is depends on the instrument); write the "
                         "unpolarised values, one row per direction pair, or if every row "
                         f"has the same {said}, drop the column")
+        if kind == "wavelength":
+            long_layout.refuse_other_units(stated_unit(name), f"column {said!r}", source)
         found.append((k, kind, said))
     if len(found) > 1:
         raise MeasurementsError(source, f"columns {found[0][2]!r} and {found[1][2]!r} both say "
@@ -224,6 +228,11 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
                       long_layout.channel_keys([_cells(line, delimiter, source, number)[k]
                                                 for number, line in lines],
                                                name, source, row_numbers))
+        # every check a wide list's samples get, on the rows themselves: a refusal names
+        # the file's row and column, not the pair's first row after the pivot
+        Measurements.from_angles(*(a * scale for a, scale in zip(raw, scales, strict=True)),
+                                 values[:, 0], None if sigma is None else sigma[:, 0],
+                                 source=source, rows=row_numbers, names=cols["names"])
         p = long_layout.pivot(raw, keys, kind, name, values[:, 0],
                               None if sigma is None else sigma[:, 0], row_numbers, source)
         raw, values, sigma, row_numbers = p.raw, p.values, p.sigma, p.rows
@@ -486,7 +495,7 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
 
 
 #: What a units row under the header may hold, cell by cell.
-_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|"
+_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|nm|-|"
                         # arbitrary units: read as a row of units, so that the values'
                         # columns are refused as not a BRDF's, not the angles' as unitless
                         r"a\.?\s*u\.?|arb\.?(\s*units?)?|)",

@@ -77,15 +77,24 @@ def fill(f, name: str, data) -> None:
     f.create_dataset(name, data=data).attrs.update(attrs)
 
 
+#: The most characters of one text read (a long layout's channel names: ``r``, ``450nm``).
+MAX_TEXT = 256
+
+
 def fill_text(f, name: str, texts) -> None:
-    """Dataset ``name`` made a dataset of text, one string per element of ``texts`` (a
-    long layout's channel names), its attributes kept."""
+    """Dataset ``name`` made a dataset of text, one string per element of ``texts``, of
+    its shape (a long layout's channel names; bytes as UTF-8, a NUL shown as ``\\x00``: HDF5's
+    strings hold none), its attributes kept."""
     import h5py
+
+    def text(t) -> str:
+        t = t.decode("utf-8", "replace") if isinstance(t, bytes) else str(t)
+        return t.replace("\x00", "\\x00")
 
     attrs = dict(f[name].attrs)
     del f[name]
-    f.create_dataset(name, data=np.array([str(t) for t in np.ravel(texts)], dtype=object),
-                     dtype=h5py.string_dtype()).attrs.update(attrs)
+    data = np.array([text(t) for t in np.ravel(texts)], dtype=object).reshape(np.shape(texts))
+    f.create_dataset(name, data=data, dtype=h5py.string_dtype()).attrs.update(attrs)
 
 
 def said(e: Exception) -> str:
