@@ -1032,9 +1032,10 @@ def test_text_as_excel_and_numpy_write_it(tmp_path):
     table = merl.MerlTable.from_values(np.full((3, 90, 90, 180), 0.1))
     merl.write(tmp_path / "table.csv", table)
     assert isinstance(read_measured(tmp_path / "table.csv"), merl.MerlTable)
+    # a zip archive that is no workbook (test_an_excel_sheet_... reads one named .csv)
     (tmp_path / "book.csv").write_bytes(b"PK\x03\x04" + bytes(60))
     with pytest.raises(MeasurementsError, match="a zip archive, not a text sample list .by its "
-                                                "first bytes. .an Excel .xlsx workbook"):
+                                                "first bytes.$"):
         read_measured(tmp_path / "book.csv")
 
 
@@ -1578,6 +1579,77 @@ def test_a_long_layout_of_named_arrays_is_pivoted_as_a_csvs_is(tmp_path):
             make(f)
         with pytest.raises(MeasurementsError, match=said):
             read_measured(tmp_path / name)
+
+
+def test_an_excel_sheet_is_read_as_the_csv_it_would_be_saved_as(tmp_path, monkeypatch):
+    """An .xlsx workbook (it was refused: "save the sheet as CSV"): its first sheet with
+    a cell, every digit of its numbers, a row index, a units row, numbers Excel holds as
+    text with a decimal comma, a long layout; a workbook by content whatever its name;
+    one that expands too far, an .xls, a formula without a value: one line each."""
+    import openpyxl
+
+    from brdffit.io import workbook
+    from brdffit.io.readers import input_summary
+
+    s = _samples(30)
+    wide = read_measured(_write_all(tmp_path, s)["csv"])
+    head = ["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"]
+    rows = [[float(x) for x in (*(np.degrees(a[k]) for a in s[:4]), *s[4][k])]
+            for k in range(30)]
+
+    def book(name, sheet_rows, first_sheet=None):
+        wb = openpyxl.Workbook()
+        wb.active.title = "Messung"
+        for row in sheet_rows:
+            wb.active.append(row)
+        if first_sheet is not None:
+            wb.create_sheet(first_sheet, 0)  # an empty sheet before it
+        wb.save(tmp_path / name)
+        return tmp_path / name
+
+    for name, sheet_rows, first in (
+            ("plain.xlsx", [head, *rows], None),
+            ("noted.xlsx", [["# gonio run 12", None, "2024-05-05"], head, *rows], "Notes"),
+            ("index.xlsx", [[None, *head], *([k, *r] for k, r in enumerate(rows))], None),
+            ("units.xlsx", [[h.removesuffix("_deg") for h in head], ["deg"] * 4 + ["1/sr"] * 3,
+                            *rows], None),
+            ("text.xlsx", [head, *([repr(x).replace(".", ",") for x in r] for r in rows)],
+             None)):
+        m = read_measured(book(name, sheet_rows, first))
+        np.testing.assert_allclose(m.rgb, wide.rgb, rtol=1e-15, err_msg=name)
+        np.testing.assert_allclose(m.wi, wide.wi, rtol=0, atol=1e-15, err_msg=name)
+        summary = input_summary(m)
+        assert (summary["format"], summary["sheet"]) == ("xlsx", "Messung"), name
+        assert summary["sheets"] == (1 if first is None else 2), name
+        assert summary.get("decimal_comma", False) == (name == "text.xlsx"), name
+    long = book("long.xlsx", [[*head[:4], "channel", "value"], *(
+        [*r[:4], c, r[4 + j]] for r in rows for j, c in enumerate("RGB"))])
+    np.testing.assert_allclose(read_measured(long).rgb, wide.rgb, rtol=1e-15)
+    for other in ("workbook.csv", "workbook"):  # by content, whatever its name
+        (tmp_path / other).write_bytes((tmp_path / "plain.xlsx").read_bytes())
+        assert read_measured(tmp_path / other).provenance["format"] == "xlsx"
+    # refused, one line each
+    (tmp_path / "old.xls").write_bytes(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(600))
+    formula = openpyxl.Workbook()
+    formula.active.append(head)
+    formula.active.append([*rows[0][:6], "=E1*2"])  # openpyxl computes no value
+    formula.save(tmp_path / "formula.xlsx")
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "archive.xlsx", "w") as z:  # a zip of no workbook
+        z.writestr("notes.txt", "nothing")
+    for name, said in (("old.xls", "an OLE2 document .an Excel 97-2003 .xls workbook\\? save "
+                                   "it as .xlsx or CSV."),
+                       ("formula.xlsx", "row 2 has 6 values, the header names 7 columns; "
+                                        "cell G2 .=E1\\*2. holds a formula whose value was "
+                                        "never computed"),
+                       ("archive.xlsx", "not a readable Excel workbook")):
+        with pytest.raises(MerlFormatError, match=said):  # MeasurementsError is one
+            read_measured(tmp_path / name)
+    monkeypatch.setattr(workbook, "MAX_EXPANDED", 10_000)
+    with pytest.raises(MeasurementsError, match="an Excel workbook whose parts expand to "
+                                                "[0-9,]+ bytes: more than a sample list's"):
+        read_measured(tmp_path / "plain.xlsx")
 
 
 def test_files_as_lab_tools_write_them(tmp_path):

@@ -1,5 +1,5 @@
 """``/v1/tables``: upload a measured table (MERL, or samples: ASTM, CSV, HDF5, MATLAB,
-.npz), read its summary.
+.npz, Excel .xlsx), read its summary.
 
 An upload is streamed to a temporary file in the data dir while it is hashed and
 counted (a 35 MB table never sits whole in the server's memory, and a body over

@@ -35,12 +35,12 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
                        name: str, cap: int | None = None) -> tuple[TableRecord, bool]:
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
-    before. A file of samples (ASTM, CSV, HDF5, MATLAB, .npz; ``brdffit.io.readers``, chosen by
-    ``name``'s suffix or the content) is stored as brdffit's HDF5 sample list (read
-    back by its content whatever the stored file is called), which the jobs fit at its
-    own directions; its summary is the summary of the table it bins into (what the
-    plots draw), with ``input`` saying what the binning did. The id stays the
-    upload's sha256. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for
+    before. A file of samples (ASTM, CSV, Excel, HDF5, MATLAB, .npz;
+    ``brdffit.io.readers``, chosen by ``name``'s suffix or the content) is stored as
+    brdffit's HDF5 sample list (read back by its content whatever the stored file is
+    called), which the jobs fit at its own directions; its summary is the summary of
+    the table it bins into (what the plots draw), with ``input`` saying what the
+    binning did. The id stays the upload's sha256. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for
     a file no reader takes, and :class:`StoredTooLarge` where the stored sample list
     would be over ``cap`` bytes (an HDF5 upload's declared rows are weighed before any
     is read; a text file's once read)."""

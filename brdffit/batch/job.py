@@ -59,7 +59,8 @@ __all__ = ["BatchInputError", "BatchSummary", "DaskRunner", "find_tables", "requ
 TABLE_SUFFIX = ".binary"
 #: What a directory given to a batch yields: MERL tables and sample lists by suffix
 #: (brdffit.io.readers; ``.txt``, which notes share, only when named).
-DIR_SUFFIXES = (TABLE_SUFFIX, ".astm", ".csv", ".tsv", ".h5", ".hdf5", ".mat", ".npz")
+DIR_SUFFIXES = (TABLE_SUFFIX, ".astm", ".csv", ".tsv", ".h5", ".hdf5", ".mat", ".npz",
+                ".xlsx")
 
 
 #: Set by the shell's SIGINT/SIGTERM handler (``brdffit batch``) with the

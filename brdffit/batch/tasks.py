@@ -121,7 +121,7 @@ def read_table(path: str) -> tuple[merl.MerlTable | Measurements | None, TableRe
     record.sha256 = h.hexdigest()
     try:
         if data is None:
-            # samples in another layout (ASTM, CSV, HDF5, MATLAB, .npz: fitted at their own
+            # samples in another layout (ASTM, CSV, Excel, HDF5, MATLAB, .npz: fitted at their own
             # directions), or a MERL file of the wrong size, which the reader names
             # the problem of
             table = readers.read_measured(path)

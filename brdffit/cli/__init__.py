@@ -27,7 +27,7 @@ COMMANDS = {
     "batch-report": "rank the models of a batch results file",
     "export": "write a fit as a Mitsuba 3, glTF 2.0 or MaterialX material",
     "fit": "fit a model to a measured file (MERL .binary table, ASTM, CSV, HDF5, MATLAB "
-           ".mat or NumPy .npz samples)",
+           ".mat, NumPy .npz or Excel .xlsx samples)",
     "models": "list the models with their parameters and ranges",
     "serve": "run the REST API (fits in worker processes)",
     "warmup": "compile the default models' fits into the cache, before a first user waits",

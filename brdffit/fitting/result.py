@@ -237,7 +237,7 @@ FIELD_DOCS = {
                "displayed_colour_shift and colour_shift (CIEDE2000, as displayed and in "
                "radiance: the worse is judged), estimate_error, grazing, verdict "
                "(good, visible or poor), reason and next (what to try, best first)",
-    "input": "on a fit of samples (ASTM, CSV, HDF5, MATLAB, .npz): their format, count and "
+    "input": "on a fit of samples (ASTM, CSV, Excel, HDF5, MATLAB, .npz): their format, count and "
              "what binning them onto the MERL grid moved, or null for a MERL table",
     "notes": "where the fit did other than the request says, and why: the starts a fit of "
              "every bin used, fewer start candidates than starts asked, a nested model "

@@ -173,6 +173,8 @@ OTHER_FORMATS = (
     (b"PK\x03\x04", "a zip archive"), (b"%PDF", "a PDF document"),
     (b"\x93NUMPY", "a numpy .npy array (one array, unnamed: np.savez names them)"),
     (b"\x89HDF", "an HDF5 file"),
+    (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE2 document (an Excel 97-2003 .xls workbook? "
+                                         "save it as .xlsx or CSV)"),
     # 11 bytes: the magic is held within the 12-byte header it is judged by
     (b"MATLAB 5.0 ", "a MATLAB .mat file (a sample list: brdffit fit reads it)"),
 )

@@ -32,6 +32,8 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   their unit.
 - **NumPy** ``.npz`` archives (``np.savez``): their arrays as the HDF5 datasets of the
   same names (:mod:`brdffit.io.npz`).
+- **Excel** workbooks (``.xlsx``, ``.xlsm``): the first sheet with a cell, read as the
+  CSV it would be saved as (:mod:`brdffit.io.workbook`).
 - In every sample layout, one row per (direction pair, channel) too, a "long" layout: a
   ``channel`` column (``r``, ``g``, ``b``, or ``450nm``) or a ``wavelength`` one (nm) beside
   one ``value``, pivoted to one sample per pair (:mod:`brdffit.io.long_layout`).
@@ -52,10 +54,10 @@ from pathlib import Path
 import numpy as np
 
 from brdffit.errors import MerlFormatError
-from brdffit.io import merl, named_arrays, text_samples
+from brdffit.io import merl, named_arrays, npz, text_samples, workbook
 from brdffit.io.measurements import Measurements
 from brdffit.io.named_arrays import read_hdf5, read_mat, read_npz
-from brdffit.io.text_samples import read_astm, read_csv, read_text_samples
+from brdffit.io.text_samples import read_astm, read_csv, read_text_samples, read_xlsx
 
 #: The most bytes read from a stream (a pipe, /dev/stdin), which is copied to a file
 #: first: a MERL table is 35 MB, a sample list of ten million rows about 1 GB; an
@@ -63,10 +65,20 @@ from brdffit.io.text_samples import read_astm, read_csv, read_text_samples
 MAX_STREAM_BYTES = 2 * 2**30
 
 
+def _container(path: Path, head: bytes) -> Callable | None:
+    """The reader of a file whose first bytes (``head``) say it is a container, whatever
+    its name: of named arrays (HDF5, MATLAB, .npz) or an Excel workbook; else None."""
+    if (reader := named_arrays.container_reader(path, head)) is not None:
+        return reader
+    if head.startswith(npz.ZIP_MAGIC) and workbook.is_xlsx(path):
+        return read_xlsx
+    return None
+
+
 def _by_content(path: Path) -> Callable:
     with open(path, "rb") as f:
         head = f.read(4096)
-    if (reader := named_arrays.container_reader(path, head)) is not None:
+    if (reader := _container(path, head)) is not None:
         return reader
     # binary: the MERL reader says what is wrong with it
     return read_text_samples if text_samples.looks_like_text(head) else merl.read
@@ -76,7 +88,7 @@ def _by_content(path: Path) -> Callable:
 READERS: dict[str, Callable] = {
     ".binary": merl.read, ".astm": read_astm, ".csv": read_csv, ".tsv": read_csv,
     ".txt": read_text_samples, ".h5": read_hdf5, ".hdf5": read_hdf5, ".mat": read_mat,
-    ".npz": read_npz,
+    ".npz": read_npz, ".xlsx": read_xlsx, ".xlsm": read_xlsx,
 }
 
 
@@ -90,7 +102,7 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
     else:
         with open(path, "rb") as f:  # a file named as another layout: read as what it is
             head = f.read(named_arrays.HEAD_BYTES)
-        if (container := named_arrays.container_reader(path, head)) is not None:
+        if (container := _container(path, head)) is not None:
             return container
         if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
             # a MERL table named .csv
@@ -176,6 +188,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
         out["decimal_comma"] = True
     if "long_layout" in samples.provenance:  # one row per (direction, channel), pivoted
         out["long_layout"] = samples.provenance["long_layout"]
+    if "sheet" in samples.provenance:  # an Excel workbook's: which sheet, of how many
+        out.update(sheet=samples.provenance["sheet"], sheets=samples.provenance["sheets"])
     if binning is not None:
         out.update(binning=binning.summary(), note=binning.describe())
     return out

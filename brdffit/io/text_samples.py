@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.io import long_layout, merl, spectra
+from brdffit.io import long_layout, merl, spectra, workbook
 from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
@@ -383,8 +383,7 @@ def _text(path: Path) -> str:
             raise refused from None
     kind = merl.other_format(data)
     if kind is not None:  # it said "holds NUL bytes: binary, or UTF-16 ..." of a workbook
-        hint = (" (an Excel .xlsx workbook? save the sheet as CSV)" if kind == "a zip archive"
-                else " (decompress it first)" if kind == "a gzip archive" else "")
+        hint = " (decompress it first)" if kind == "a gzip archive" else ""
         raise MeasurementsError(str(path), f"{kind}, not a text sample list (by its first "
                                            f"bytes){hint}")
     if b"\x00" in data:
@@ -579,12 +578,34 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     return read_text_samples(path)
 
 
-def _csv_samples(text: str, source: str) -> Measurements:
+def read_xlsx(path: str | os.PathLike) -> Measurements:
+    """An Excel workbook's first sheet with a cell, read as the CSV it would be saved as
+    (:mod:`brdffit.io.workbook`)."""
+    source = str(path)
+    text, sheet = workbook.sheet_text(path, source)
+    try:
+        m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
+    except MeasurementsError as e:
+        if (cell := workbook.uncomputed_formula(path, sheet["sheet"])) is None:
+            raise
+        raise MeasurementsError(source, f"{e.problem}; cell {cell} holds a formula whose "
+                                        "value was never computed (the workbook was written "
+                                        "by a program, not saved by a spreadsheet): open it "
+                                        "in Excel or LibreOffice and save it") from None
+    m.provenance.update(sheet)
+    return m
+
+
+def _csv_samples(text: str, source: str, delimiter: str | None = None,
+                 file_format: str = "csv") -> Measurements:
+    """A CSV's samples; ``delimiter``: its cells' (None: Excel's ``sep=`` line, else
+    guessed from the header). Given as a tab (a sheet's cells), a line keeps its
+    leading tabs: its first cells may be empty (a row index's header)."""
     unit = unit_line = None
     lines: list[tuple[int, str]] = []
     comments: list[tuple[int, str]] = []  # those before the header
     for number, line in enumerate(_lines(text)):
-        stripped = line.strip()
+        stripped = line.strip(" \r\n") if delimiter == "\t" else line.strip()
         if not stripped:
             continue
         if stripped.startswith("#"):
@@ -603,7 +624,9 @@ def _csv_samples(text: str, source: str) -> Measurements:
         lines.append((number, stripped))
     if not lines:
         raise MeasurementsError(source, "no header and no data: the file is empty")
-    if m := re.fullmatch(r"sep=(.)", lines[0][1]):  # Excel's line naming the delimiter
+    if delimiter is not None:
+        pass
+    elif m := re.fullmatch(r"sep=(.)", lines[0][1]):  # Excel's line naming the delimiter
         delimiter, lines = m[1], lines[1:]
         if not lines:
             raise MeasurementsError(source, "no header and no data after its 'sep=' line")
@@ -635,7 +658,7 @@ def _csv_samples(text: str, source: str) -> Measurements:
     comma = _decimal_comma(lines[1:], delimiter, used, source)
     rows, numbers = _numbers(lines[1:], split_at, len(names), source, comma=comma, used=used)
     return _from_rows(rows, numbers, cols, source,
-                      {"format": "csv", "columns": [n.strip() for n in names],
+                      {"format": file_format, "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column",
                        **({"decimal_comma": True} if comma else {})}, lines[1:], split_at)
 

@@ -195,7 +195,7 @@ function chooseTable(table) {
 
 async function uploadTable() {
   const file = $("upload-file").files[0];
-  if (!file) throw new Error("choose a measured file first (MERL .binary, ASTM, CSV, HDF5, MATLAB .mat, NumPy .npz)");
+  if (!file) throw new Error("choose a measured file first (MERL .binary, ASTM, CSV, HDF5, MATLAB .mat, NumPy .npz, Excel .xlsx)");
   clearMessage();
   say(`Uploading ${file.name} (${fmt(file.size / 1e6, 3)} MB)…`, "info");
   const table = await api("POST", `/v1/tables?name=${encodeURIComponent(file.name)}`,
