@@ -512,9 +512,9 @@ def test_cli_auto_prints_progress_on_stderr_and_json_on_stdout(tmp_path, capsys)
 def test_a_compile_notice_during_autos_progress_goes_on_a_line_of_its_own(capsys):
     """The first use of a candidate's options compiles while its progress line waits for
     its figures: the notice had run into it ("fitting gltf_pbr ...brdffit: first use")."""
-    from brdffit.cli.fit import _say_compiling_once, print_progress
+    from brdffit.cli.fit import print_progress, say_compiling_once
 
-    say = _say_compiling_once()
+    say = say_compiling_once()
     print_progress(0, 2, "lambert", None)
     say("lambert", True)
     say("lambert", True)  # once per command

@@ -15,7 +15,9 @@ import json
 import sys
 from pathlib import Path
 
+from brdffit import executables
 from brdffit.cli import output_folder
+from brdffit.cli.fit import say_compiling_once
 from brdffit.errors import BrdffitError, ExportError
 from brdffit.export import TARGETS, export
 from brdffit.fitting.quality import figure_words
@@ -101,12 +103,21 @@ def _is_store(source: str) -> bool:
         return f.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE
 
 
+def _say_exporting(target: str) -> None:
+    """Said once the fit is read, before the export starts: a Mitsuba export refits the
+    fit as the renderer's materials and weighs a metal against a dielectric (~12 s in a
+    new process, its programs loaded), and it printed nothing meanwhile."""
+    print(f"brdffit: exporting to {target}: the renderer's material made from the fit and "
+          "measured against the table (seconds)...", file=sys.stderr, flush=True)
+
+
 def _export(args):
     if not _is_store(args.result):
         if args.table is not None or args.model is not None:
             raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
                                "--model choose a fit of a batch results file (brdffit batch)")
         result = _read_result(args.result)
+        _say_exporting(args.target)
         try:
             return export(result, args.target, table=args.measured,
                           target_model=args.target_model, viewer=args.viewer)
@@ -132,7 +143,11 @@ def run(args) -> int:
     if args.glb and (args.target != "gltf" or not args.out):
         raise BrdffitError("--glb writes a binary glTF file: it needs --to gltf and --out DIR")
     folder = output_folder(args.out, "--out") if args.out else None  # before the export
-    out = _export(args)
+    previous, executables.on_compile = executables.on_compile, say_compiling_once()
+    try:
+        out = _export(args)
+    finally:
+        executables.on_compile = previous
     written = []
     if folder is not None:
         from brdffit.io.atomic import write_bytes
@@ -158,8 +173,11 @@ def run(args) -> int:
     line = f"{args.target}: {out.source_model} fit as {fid['target_model']} ({how})"
     if fid.get("log_rmse_to_table") is not None:
         colour = fid.get("sphere_colour") or {}
-        line += (f"; to the table: log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
-                 f"{_figure(fid.get('fit_log_rmse'), '.4g')}), lit sphere "
+        binned = fid.get("measured_on") == "binned samples"
+        line += (f"; to {'the samples binned onto the MERL grid' if binned else 'the table'}: "
+                 f"log_rmse {fid['log_rmse_to_table']:.4g} (the fit's "
+                 f"{_figure(fid.get('fit_log_rmse'), '.4g')}"
+                 f"{', at the samples themselves' if binned else ''}), lit sphere "
                  f"{figure_words(colour)}")
     print(line, file=sys.stderr)
     for viewer, v in (fid.get("viewers") or {}).items():

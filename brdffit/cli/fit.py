@@ -270,7 +270,7 @@ def run(args) -> int:
               "directions, with a held-out error", file=sys.stderr)
         table = binned(measured)[0]  # what the plots draw: the samples in their bins
     # for this fit only: a caller of main() in its own process keeps its own hook
-    previous, executables.on_compile = executables.on_compile, _say_compiling_once()
+    previous, executables.on_compile = executables.on_compile, say_compiling_once()
     try:
         report = fit_request(measured, request,
                              progress=print_progress if request.auto else None)
@@ -299,7 +299,7 @@ def format_models(report: FitReport) -> str:
     return "\n".join([*lines, report.reason, "", format_result(report.chosen_fit)])
 
 
-def _say_compiling_once():
+def say_compiling_once():
     """``executables.on_compile`` for one command: the first compile says, on stderr,
     why this run takes seconds (a first use of these options on this machine), and
     whether the next run will load what it compiles. A program that is not kept (a

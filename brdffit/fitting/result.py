@@ -248,6 +248,7 @@ FIELD_DOCS = {
 def error_measures_nothing(why: str | None) -> bool:
     """Whether an undetermined reason (``uncertainty["why"]``) says the parameter shapes
     a lobe or layer the data show none of: its standard error then measures nothing (an
-    absent film's index read "2.5 ± 1.8e+06"), and the text and report print the value
-    without one."""
+    absent film's index read "2.5 ± 1.8e+06"): the uncertainty reports none (null), and
+    the text and report print the value without one (also of results stored before it
+    reported none)."""
     return bool(why) and why.startswith(("no lobe", "no layer"))

@@ -47,6 +47,7 @@ import numpy as np
 
 from brdffit import executables
 from brdffit.fitting.loss import LossData, sandwich_terms
+from brdffit.fitting.result import error_measures_nothing
 from brdffit.models import AbstractBRDFModel
 
 #: Bins beyond which the Jacobian is taken on every k-th one (its memory is
@@ -248,8 +249,11 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
             reasons.append(None)
     undetermined = [r is not None for r in reasons]
     # A flat direction has no finite error along it; say so rather than print a number.
-    se_out = [None if (at_bound[i] or no_effect[i] or flat_partners[i]) else float(se[i])
-              for i in range(p)]
+    # Nor has the shape of a lobe or layer that is not there: alpha of a diffuse table
+    # read "1.117 +- 0.011" in the JSON beside its flag, a figure its value does not have.
+    vanished = [error_measures_nothing(r) for r in reasons]
+    se_out = [None if (at_bound[i] or no_effect[i] or flat_partners[i] or vanished[i])
+              else float(se[i]) for i in range(p)]
     se_u_out = [None if x is None else float(se_u[i]) for i, x in enumerate(se_out)]
     corr_out = [[None if not np.isfinite(corr[i, j]) else float(np.clip(corr[i, j], -1, 1))
                  for j in range(p)] for i in range(p)]
