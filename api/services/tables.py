@@ -40,10 +40,11 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     brdffit's HDF5 sample list (read back by its content whatever the stored file is
     called), which the jobs fit at its own directions; its summary is the summary of
     the table it bins into (what the plots draw), with ``input`` saying what the
-    binning did. The id stays the upload's sha256. Raises ``MerlFormatError`` naming ``name`` (not the temp file) for
-    a file no reader takes, and :class:`StoredTooLarge` where the stored sample list
-    would be over ``cap`` bytes (an HDF5 upload's declared rows are weighed before any
-    is read; a text file's once read)."""
+    binning did. The id stays the upload's sha256. Raises ``MerlFormatError`` naming
+    ``name`` (not the temp file) for a file no reader takes, and
+    :class:`StoredTooLarge` where the stored sample list would be over ``cap`` bytes (an
+    HDF5 upload's declared rows are weighed before any is read; a text file's once
+    read)."""
     record = store.get_table(digest)
     # known bytes, already validated, unless the stored file is gone (deleted by hand, a
     # lost disk): then this upload puts it back (it answered 200 and every fit failed

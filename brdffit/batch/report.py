@@ -130,7 +130,8 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
     n_failed = len(r.failed_tables)
     lines = [f"{source or 'batch'}: {len(r.tables)} tables ({n_failed} with failures), "
              f"{len(r.models)} models, brdffit {r.attrs.get('brdffit_version', '?')}",
-             f"{METRIC} on the full table, lower is better; * marks each table's best; "
+             f"{METRIC} on the full table (a sample list's: at its samples), lower is "
+             "better; * marks each table's best; "
              f"auto: the cheapest within {tolerance:g} of it (in quadrature)", ""]
     width = max([len("table")] + [len(t.name) for t in r.tables])
     cols = max([10] + [len(m) + 1 for m in r.models])
@@ -226,7 +227,8 @@ def summary_figure(r: Ranking, source: str = ""):
         ax_err.set_yscale("log")
     ax_err.set_xticks(positions, order, rotation=30, ha="right")
     ax_err.set_xlim(0.4, len(order) + 0.6)
-    ax_err.set_ylabel(f"{METRIC} (full table, log scale; lower is better)")
+    ax_err.set_ylabel(f"{METRIC} (full table, or a sample list's samples; log scale; "
+                      "lower is better)")
     ax_err.set_title(f"error per model over {len(r.tables)} tables (best median first)",
                      fontsize=11)
     ax_err.grid(True, axis="y", which="major", alpha=0.3)

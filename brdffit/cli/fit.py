@@ -105,7 +105,9 @@ def add_arguments(p) -> None:
     add_fit_options(p)
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (report, slices, error_map, spheres, polar; ranking "
-                        "with auto) as DIR/*.png")
+                        "with auto; spheres_judged, the spheres at the exposure the verdict "
+                        "judged, where that is 2 stops or more from spheres.png's) as "
+                        "DIR/*.png")
     add_request_arguments(p, "--model")
 
 

@@ -432,10 +432,11 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     exposure_ev = check_exposure_ev(exposure_ev)
     fig = Figure(figsize=(13.5, 10.0), layout="constrained")
     _draw_spheres(fig, table, result, size, exposure_ev=exposure_ev)
-    fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\nsphere renders at "
-                 "one exposure for table and fit (white diffuse facing the light = mid-grey"
-                 f"{' at 0 EV' if exposure_ev else ''}); camera along the normal at the "
-                 "centre; checkered: unmeasured bin", fontsize=12)
+    # its second line in fewer words: with " at 0 EV" it ran past both edges of the figure
+    fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\none exposure for "
+                 "table and fit (white diffuse facing the light: mid-grey"
+                 f"{' at 0 EV' if exposure_ev else ''}); camera on the normal; checkered: "
+                 "unmeasured bin", fontsize=12)
     return _png(fig)
 
 
