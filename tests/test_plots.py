@@ -325,3 +325,22 @@ def test_the_ranking_draws_exact_fits_and_a_tolerance_far_beyond_them(errors, to
                          "reason": "Chose lambert.", "table": "t.csv"})
     height, width = imread(io.BytesIO(png)).shape[:2]
     assert width < 1500 and height < 800, (width, height)
+
+
+def test_a_sample_lists_plots_say_what_they_can_show(ggx, tmp_path):
+    """A sample list's plots draw its binned table: 400 samples drew checkered spheres
+    and empty slices beside a 'looks good' verdict, with nothing said. The slices,
+    spheres and polar plots say how few bins the samples fill, and where to look."""
+    from brdffit.fitting.samples import binned
+    from brdffit.io.readers import read_measured
+    from data_synth.__main__ import main as synth
+
+    path = tmp_path / "lab.csv"
+    assert synth(["samples", str(path), "--layout", "uniform", "-n", "400"]) == 0
+    samples = read_measured(path)
+    r = fit(samples, "ggx", **FAST)
+    note = plots._few_samples(binned(samples)[0], r, "these slices")
+    assert note.startswith("\na sample list: 400 samples in ")
+    assert "few on these slices; the error map shows where they lie" in note.replace("\n", " ")
+    t, table_fit = ggx
+    assert plots._few_samples(t, table_fit, "these slices") == ""

@@ -115,6 +115,20 @@ def _title(table: MerlTable, result: FitResult) -> str:
             + ("n/a" if e is None else f"{e:.3g}"))
 
 
+def _few_samples(table: MerlTable, result: FitResult, what: str) -> str:
+    """For a fit of a sample list, what the plots of its binned table can show: its
+    samples fill a few of the grid's bins, and few of those lie on ``what`` (a list of
+    400 samples drew checkered spheres and empty slices beside a "looks good" verdict,
+    with nothing said); "" for a table."""
+    if (result.input or {}).get("fitted_at") != "samples":
+        return ""
+    n = (result.input or {}).get("samples")
+    note = (f"a sample list: {n if n is not None else 'its'} samples in {table.n_measured:,} "
+            f"of the grid's bins, few on {what}; the error map shows where they lie, and the "
+            "verdict judges the held-out samples")
+    return "\n" + "\n".join(textwrap.wrap(note, 100))
+
+
 def _png(fig: Figure) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, facecolor="white")
@@ -159,7 +173,8 @@ def slices(
     _draw_slices(fig, table, result, theta_d_deg, phi_d_deg)
     # the bins' centres, as the rows give them (asked 90, shown 90.5)
     shown = ", ".join(f"{p:.1f}°" for p in _phi_d_centres(phi_d_deg))
-    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}", fontsize=12)
+    fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}"
+                 f"{_few_samples(table, result, 'these slices')}", fontsize=12)
     return _png(fig)
 
 
@@ -436,7 +451,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\none exposure for "
                  "table and fit (white diffuse facing the light: mid-grey"
                  f"{' at 0 EV' if exposure_ev else ''}); camera on the normal; checkered: "
-                 "unmeasured bin", fontsize=12)
+                 f"unmeasured bin{_few_samples(table, result, 'the spheres')}", fontsize=12)
     return _png(fig)
 
 
@@ -598,7 +613,8 @@ def polar_figure(table: MerlTable, result: FitResult | dict, *,
     )
     fig.text(0.85, 0.06, "radius: f_r (1/sr, log),\none scale for R, G, B\nθo < 0: back "
              "towards\nthe light; > 0: forward", fontsize=9, va="bottom")
-    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel",
+    fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel"
+                 f"{_few_samples(table, result, 'the plane of incidence')}",
                  fontsize=12)
     return fig
 
@@ -631,7 +647,8 @@ def report(table: MerlTable, result: FitResult | dict, *,
     # smaller row labels: three lines of 10 pt ran into the next row's at this size
     _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev, label_size=8.5)
     sph.suptitle(f"sphere renders, one exposure for table and fit"
-                 f"{_exposure_words(exposure_ev)}; checkered: unmeasured bin", fontsize=11)
+                 f"{_exposure_words(exposure_ev)}; checkered: unmeasured bin"
+                 f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
     sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
