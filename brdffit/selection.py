@@ -1232,9 +1232,15 @@ def format_selection(sel: Selection, chosen_params: bool = True) -> str:
             + _gain_words(r["over_parent"]) for r in layers))
     starred = [r for r in sel.ranking if r["status"] != "failed" and _look_mark(r).endswith("*")]
     if starred:
-        lines.append("* reads " + "; ".join(f"{r['model']} {_look_words(r)}" for r in starred)
-                     + ": the light its highlight holds is further off than the picture "
-                     "shows (the row's radiance_verdict), and it ranks as the worse")
+        # said as two verdicts and which one counts where: "* reads ggx good, visible in
+        # radiance ... it ranks as the worse" left a newcomer asking whether the chosen
+        # fit was good (the fit's summary below says the picture's verdict)
+        lines.append("* " + "; ".join(
+            f"{r['model']} looks {r.get('verdict')} as displayed, {r.get('radiance_verdict')} "
+            "in radiance" for r in starred)
+            + ": the light its highlight holds is further off than the picture shows (the "
+            "row's radiance_verdict). The ranking counts the worse of the two; the fit's own "
+            "verdict is the picture's")
     lines.append("")
     if held:
         from brdffit.fitting.samples import FOLDS
