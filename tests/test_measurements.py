@@ -1425,6 +1425,11 @@ def test_a_long_layout_is_pivoted_to_the_wide_files_samples(tmp_path):
         ",".join(repr(float(a[k])) for a in s[:4]) + f",{c},{float(s[4][k, j])!r}\n"
         for k in range(40) for j, c in enumerate("rgb")))
     np.testing.assert_allclose(read_measured(astm).rgb, wide.rgb, rtol=1e-15)
+    # the channel first: its rows were read as header keys ("no data")
+    astm.write_text("VARS channel,theta_i,phi_i,theta_s,phi_s,BRDF\n" + "".join(
+        f"{c}," + ",".join(repr(float(a[k])) for a in s[:4]) + f",{float(s[4][k, j])!r}\n"
+        for k in range(40) for j, c in enumerate("rgb")))
+    np.testing.assert_allclose(read_measured(astm).rgb, wide.rgb, rtol=1e-15)
     # a channel or wavelength column is known by a word of its name (under a name
     # outside a short list its rows were read as grey samples of repeated directions),
     # a units row may say nm

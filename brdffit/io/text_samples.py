@@ -433,7 +433,8 @@ def _astm_samples(text: str, source: str) -> Measurements:
         stripped = line.strip()
         if not stripped or stripped.startswith("#"):
             continue
-        if data or re.match(r"^[-+.\d]", stripped) or _a_number(stripped):
+        if (data or re.match(r"^[-+.\d]", stripped) or _a_number(stripped)
+                or _channel_first(header, stripped)):
             data.append((number, stripped))
             continue
         key, value = (re.split(r"\s+", stripped, maxsplit=1) + [""])[:2]  # a tab too
@@ -471,6 +472,17 @@ def _astm_samples(text: str, source: str) -> Measurements:
     return _from_rows(rows, numbers, cols, source,
                       {"format": "astm", "columns": names, "angle_unit": "radians",
                        "header": header}, data, "," if commas else None)
+
+
+def _channel_first(header: dict[str, str], line: str) -> bool:
+    """Whether ``line`` is an ASTM data row that starts with its channel: VARS names a
+    channel column first (a long layout), and the line's first cell names one (``r``,
+    ``450nm``). Its rows were read as header keys ("no data")."""
+    names = [n for n in re.split(r"[,\s]+", header.get("VARS", "")) if n]
+    if not names or long_column_kind(names[0].lower()) != "channel":
+        return False
+    cell = re.split(r"[,\s]+", line, maxsplit=1)[0].lower()
+    return cell in long_layout.RGB_CELLS or spectra.wavelength_of(cell) is not None
 
 
 def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str) -> None:
