@@ -155,6 +155,14 @@ XYZ_WHY = ("CIE XYZ? A fit reads linear RGB (r, g, b: Rec. 709 primaries) or one
            "luminance")
 
 
+#: Why a polarisation column or dataset is refused (a CSV's, an HDF5 file's).
+POLARISED_WHY = ("a polarisation-resolved list is not read (which average of its states "
+                 "the reflectance is depends on the instrument); write the unpolarised "
+                 "values, one row per direction pair")
+#: What two columns (or datasets) that each name a row's channel or wavelength are told.
+TWO_LONG = "both say which channel or wavelength a row holds: keep one"
+
+
 #: A column of each value's uncertainty by another name than brdffit's ``sigma_r``:
 #: ``r_std``, ``std_r``, ``R_err``, ``uncertainty``. It was dropped unsaid, and the fit
 #: weighted every sample alike.

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdffit.io import spectra
-from brdffit.io.measurements import MeasurementsError
+from brdffit.io.measurements import Measurements, MeasurementsError
 
 #: A channel cell's words for R, G and B (any case).
 RGB_CELLS = {"r": 0, "red": 0, "g": 1, "green": 1, "b": 2, "blue": 2}
@@ -83,13 +83,21 @@ def channel_keys(cells: list[str], column: str, source: str, rows: np.ndarray,
     return ("wavelength", np.array(nm, float)) if nm else ("rgb", np.array(rgb, float))
 
 
-def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarray,
-          sigma: np.ndarray | None, rows: np.ndarray, source: str,
-          noun: str = "column") -> Pivoted:
-    """The rows (angles ``raw``, each (N,); one channel's ``values`` and ``sigma`` (N,)
-    each; ``rows`` their numbers in the file) pivoted by ``keys``: channel indices
-    (``kind`` ``"rgb"``) or wavelengths in nm (``kind`` ``"wavelength"``), from the
-    column named ``column`` (``noun``: what the refusals call it)."""
+def pivot(raw: list[np.ndarray], scales: list[float], keys, kind: str, column: str,
+          values: np.ndarray, sigma: np.ndarray | None, rows: np.ndarray, source: str,
+          noun: str = "column", names: dict[str, str] | None = None) -> Pivoted:
+    """The rows (angles ``raw`` as written, each (N,), in radians times ``scales``; one
+    channel's ``values`` and ``sigma`` (N,) each; ``rows`` their numbers in the file,
+    ``names`` the angles' names there) pivoted by ``keys``: channel indices (``kind``
+    ``"rgb"``) or wavelengths in nm (``kind`` ``"wavelength"``), from the column named
+    ``column`` (``noun``: what the refusals call it).
+
+    Each row is checked first as a wide list's sample is
+    (:meth:`Measurements.from_angles`: the angles' and sigma's lengths, what is not
+    finite, a sigma of 0), so that a refusal names the row and column it is in, not the
+    pair's first row after the pivot (a sigma of 0 in a g row was "sigma_g ... row 5")."""
+    Measurements.from_angles(*(a * scale for a, scale in zip(raw, scales, strict=True)),
+                             values, sigma, source=source, rows=rows, names=names)
     keys = np.asarray(keys, float)
     if not np.all(np.isfinite(keys)):
         bad = int(np.flatnonzero(~np.isfinite(keys))[0])
@@ -142,12 +150,11 @@ def pivot(raw: list[np.ndarray], keys, kind: str, column: str, values: np.ndarra
                     f" ({int((seen[p] >= 0).sum())} of the {k} the file holds): every pair "
                     "needs one row per " + ("channel" if kind == "rgb" else "wavelength")
                     + ", with the same four angles")
-    take = seen  # (n, k): the row of each pair's each channel
-    first_rows = take.min(axis=1)
+    first_rows = seen.min(axis=1)  # seen (n, k): the row of each pair's each channel
     return Pivoted(
         raw=[a[first_rows] for a in raw],
-        values=values[take],
-        sigma=None if sigma is None else sigma[take],
+        values=values[seen],
+        sigma=None if sigma is None else sigma[seen],
         rows=rows[first_rows],
         wavelengths=None if kind == "rgb" else [float(x) for x in channels],
         summary={"rows": int(keys.size), "column": column,

@@ -31,7 +31,9 @@ from brdffit.io.columns import (
     CHANNELS,
     ONE_CHANNEL,
     PER_STERADIAN,
+    POLARISED_WHY,
     SIGMA_IS,
+    TWO_LONG,
     UNCERTAINTY,
     XYZ_WHY,
     an_angle_unit,
@@ -339,15 +341,12 @@ def _long_dataset(f, v: dict[str, str], source: str, rows: int) -> tuple[str, st
             continue
         if kind == "polarisation":
             raise MeasurementsError(
-                source, f"dataset {k!r} says which polarisation each row holds: a "
-                        "polarisation-resolved list is not read (which average of its states "
-                        "the reflectance is depends on the instrument); write the unpolarised "
-                        f"values, one row per direction pair, or if every row has the same "
-                        f"{k}, drop it")
+                source, f"dataset {k!r} says which polarisation each row holds: "
+                        f"{POLARISED_WHY}, or if every row has the same {k}, drop it")
         found.append((k, kind))
     if len(found) > 1:
-        raise MeasurementsError(source, f"datasets {found[0][0]!r} and {found[1][0]!r} both say "
-                                        "which channel or wavelength a row holds: keep one")
+        raise MeasurementsError(source, f"datasets {found[0][0]!r} and {found[1][0]!r} "
+                                        + TWO_LONG)
     if found and found[0][1] == "wavelength" and (d := _opened(f, found[0][0])) is not None:
         unit = _attr_text(d.attrs.get("units"), "units", source)
         long_layout.refuse_other_units(unit or stated_unit(found[0][0].lower()),
@@ -363,9 +362,7 @@ def _declared_elements(f, name: str) -> int:
     cannot be opened here (an external link: refused where it is read)."""
     import h5py
 
-    if _external_link(f, name):
-        return -1
-    d = _opened(f, name)
+    d = _opened(f, name)  # None for an external link, or a link to nothing
     if d is None:
         return -1
     dims = d.attrs.get("MATLAB_dims")  # a version-5 file's struct, cell or char
@@ -377,10 +374,9 @@ def _declared_elements(f, name: str) -> int:
 def _pivoted(f, long: tuple[str, str], raw: list[np.ndarray], scales: list[float],
              values: np.ndarray, sigma: np.ndarray | None, source: str, matlab: bool):
     """A long layout's rows (:func:`_long_dataset`) pivoted to one per direction pair:
-    the angles, values, sigma, wavelengths (None for RGB) and what the pivot did. Each
-    row is checked first as a wide list's sample is (:meth:`Measurements.from_angles`:
-    the angles' and sigma's lengths, what is not finite, a sigma of 0), so that a
-    refusal names the row it is in; the channel's length is weighed before it is read."""
+    the angles, values, sigma, wavelengths (None for RGB) and what the pivot did. The
+    channel's length is weighed before it is read; each row is checked as a wide list's
+    sample is (:func:`brdffit.io.long_layout.pivot`)."""
     name, kind = long
     n = len(values)
     rows = _declared_rows(f, name, source, matlab)
@@ -390,16 +386,13 @@ def _pivoted(f, long: tuple[str, str], raw: list[np.ndarray], scales: list[float
         raise MeasurementsError(source, f"dataset {name} holds {rows:,} value(s), not one per "
                                         f"row ({n}): a long layout names each row's {kind}; if "
                                         f"every row has the same one, drop it{column}")
-    # checks alone (see above); the angles in radians, as they are checked
-    Measurements.from_angles(*(a * scale for a, scale in zip(raw, scales, strict=True)),
-                             values, sigma, source=source)
     numbers = np.arange(n)
     if kind == "wavelength":
         keys = _one_per_sample(f, name, source, matlab)
     else:
         kind, keys = long_layout.channel_keys(_texts(f, name, source, matlab), name, source,
                                               numbers, noun="dataset")
-    p = long_layout.pivot(raw, keys, kind, name, values, sigma, numbers, source,
+    p = long_layout.pivot(raw, scales, keys, kind, name, values, sigma, numbers, source,
                           noun="dataset")
     return p.raw, p.values, p.sigma, p.wavelengths, p.summary
 

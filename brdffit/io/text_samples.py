@@ -23,7 +23,9 @@ from brdffit.io.columns import (
     ANGLES,
     CHANNELS,
     ONE_CHANNEL,
+    POLARISED_WHY,
     SIGMA_IS,
+    TWO_LONG,
     UNCERTAINTY,
     XYZ_WHY,
     angle_name,
@@ -157,17 +159,15 @@ def _long_column(names: list[str], seen: dict[str, int],
         said = names[k].strip()[:40]
         if kind == "polarisation":
             raise MeasurementsError(
-                source, f"column {said!r} says which polarisation each row holds: a "
-                        "polarisation-resolved list is not read (which average of its states "
-                        "the reflectance is depends on the instrument); write the "
-                        "unpolarised values, one row per direction pair, or if every row "
-                        f"has the same {said}, drop the column")
+                source, f"column {said!r} says which polarisation each row holds: "
+                        f"{POLARISED_WHY}, or if every row has the same {said}, drop the "
+                        "column")
         if kind == "wavelength":
             long_layout.refuse_other_units(stated_unit(name), f"column {said!r}", source)
         found.append((k, kind, said))
     if len(found) > 1:
-        raise MeasurementsError(source, f"columns {found[0][2]!r} and {found[1][2]!r} both say "
-                                        "which channel or wavelength a row holds: keep one")
+        raise MeasurementsError(source, f"columns {found[0][2]!r} and {found[1][2]!r} "
+                                        + TWO_LONG)
     return found[0] if found else None
 
 
@@ -228,13 +228,9 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
                       long_layout.channel_keys([_cells(line, delimiter, source, number)[k]
                                                 for number, line in lines],
                                                name, source, row_numbers))
-        # every check a wide list's samples get, on the rows themselves: a refusal names
-        # the file's row and column, not the pair's first row after the pivot
-        Measurements.from_angles(*(a * scale for a, scale in zip(raw, scales, strict=True)),
-                                 values[:, 0], None if sigma is None else sigma[:, 0],
-                                 source=source, rows=row_numbers, names=cols["names"])
-        p = long_layout.pivot(raw, keys, kind, name, values[:, 0],
-                              None if sigma is None else sigma[:, 0], row_numbers, source)
+        p = long_layout.pivot(raw, scales, keys, kind, name, values[:, 0],
+                              None if sigma is None else sigma[:, 0], row_numbers, source,
+                              names=cols["names"])
         raw, values, sigma, row_numbers = p.raw, p.values, p.sigma, p.rows
         wavelengths, provenance["long_layout"] = p.wavelengths, p.summary
     radians_said_to_be_degrees(raw, scales, source)

@@ -18,6 +18,7 @@ import datetime
 import zipfile
 from pathlib import Path
 
+from brdffit.io import variables
 from brdffit.io.measurements import MAX_SAMPLES, MeasurementsError
 
 #: The part every .xlsx holds (an .npz, a .docx or an .ods is another zip archive).
@@ -40,22 +41,15 @@ def sheet_text(path: str | Path, source: str) -> tuple[str, dict]:
     """The first sheet with a cell, as tab-separated text a CSV reader reads, a line per
     row (:func:`_lines`; a cell's tabs and line breaks made blanks, its quotes quoted as
     a CSV's), and what was read (``{"sheet": name, "sheets": count}``)."""
+    import openpyxl
+
     _weighed(path, source)
-    try:
-        import openpyxl
-    except ImportError:  # pragma: no cover - a dependency of the package
-        raise MeasurementsError(source, "an Excel workbook, and openpyxl (which reads "
-                                        "one) is not installed: pip install openpyxl, or "
-                                        "save the sheet as CSV") from None
     # from an open file, not a path: openpyxl refuses a path not named .xlsx (an upload's
     # temporary copy, a workbook named .csv)
     with open(path, "rb") as raw:
+        book = None
         try:
             book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
-        except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged file
-            raise MeasurementsError(source, f"not a readable Excel workbook "
-                                            f"({' '.join(str(e).split())[:200]})") from None
-        try:
             names = book.sheetnames
             for name in names:
                 lines = _lines(book[name], source)
@@ -63,11 +57,13 @@ def sheet_text(path: str | Path, source: str) -> tuple[str, dict]:
                     return "\n".join(lines) + "\n", {"sheet": name, "sheets": len(names)}
         except MeasurementsError:
             raise
-        except Exception as e:  # noqa: BLE001 - a damaged sheet's XML, read as it streams
-            raise MeasurementsError(source, f"not a readable Excel workbook "
-                                            f"({' '.join(str(e).split())[:200]})") from None
+        except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged file
+            # (opening it, or reading a sheet's XML as it streams)
+            raise MeasurementsError(source, "not a readable Excel workbook "
+                                            f"({variables.said(e)})") from None
         finally:
-            book.close()
+            if book is not None:
+                book.close()
     raise MeasurementsError(source, "an Excel workbook whose sheets hold no cells")
 
 
@@ -99,7 +95,8 @@ def _weighed(path: str | Path, source: str) -> None:
         with zipfile.ZipFile(path) as z:
             expanded = sum(member.file_size for member in z.infolist())
     except (OSError, zipfile.BadZipFile, ValueError) as e:
-        raise MeasurementsError(source, f"not a readable Excel workbook ({e})") from None
+        raise MeasurementsError(source, "not a readable Excel workbook "
+                                        f"({variables.said(e)})") from None
     if expanded > MAX_EXPANDED:
         raise MeasurementsError(source, f"an Excel workbook whose parts expand to "
                                         f"{expanded:,} bytes: more than a sample list's "
