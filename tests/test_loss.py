@@ -480,3 +480,26 @@ def test_the_jacobian_one_parameter_at_a_time_is_jacfwds(name):
         scale = float(np.max(np.abs(np.asarray(whole))))
         np.testing.assert_allclose(np.asarray(jac), np.asarray(whole), rtol=1e-9,
                                    atol=1e-12 * max(scale, 1.0))
+
+
+def test_render_loss_sees_a_near_mirror_peak_in_the_energy_it_holds():
+    """The render loss's views weigh every bin a lit sphere reflects in, the peak rows
+    of theta_h too: a 256-px picture saw none of rows 0 and 1, where a fit could then put
+    any energy unseen (a spike carrying half of color-changing-paint3's ggx2 sphere)."""
+    from brdffit.fitting import render_loss
+    from brdffit.io.grid import bin_grid
+
+    area = render_loss.view_area()
+    rows = area.reshape(90, -1).sum(axis=1)
+    assert np.all(rows > 0)
+    # a near-mirror lobe: the subsample's energy is the views' own, every bin's
+    table = make_table("ggx", {"kd": [0.02, 0.02, 0.02], "ks": [0.5, 0.4, 0.3],
+                               "alpha": 0.002, "f0": 0.9})[0]
+    prep = fitting.prepare(table, None, 16384, 0, "float64", "render")
+    index = prep.sample_set.index[prep.sample_set.weight > 0]
+    assert set(range(4)) <= set(np.unique(index // (90 * 180)).tolist())
+    x = np.nan_to_num(table.rgb.reshape(3, -1)) * np.maximum(bin_grid().cos_i, 0.0)
+    usable = sampling.usable_bins(table).usable
+    w = np.where(usable, area, 0.0)
+    every_bin = x @ w / w.sum()
+    assert np.asarray(prep.data.energy)[:, 0] == pytest.approx(every_bin, rel=0.01)

@@ -48,6 +48,7 @@ import numpy as np
 
 from brdffit import executables, runtime
 from brdffit.fitting.colour import brightness_and_colour
+from brdffit.fitting.lit_sphere import bin_areas
 from brdffit.fitting.render_loss import MEAN_FLOOR
 from brdffit.io import array_cache
 from brdffit.io.angles import (
@@ -267,13 +268,11 @@ class SphereIntegral:
         weight_b = integral over the normals n whose (wi, wo) fall in bin b of
                    (n . l) (n . v) dOmega_n,
 
-    ``(n . v)`` being the screen's area element. With the light and the view fixed,
-    the half vector h is fixed, so ``n`` is parametrised by its angle ``theta_h`` from
-    h and its azimuth about h: the integral is done in those coordinates, on nodes
-    inside each theta_h bin (the sqrt mapping's own edges), and converges where a
-    pixel grid does not (a near-mirror's peak bins cover ~1e-7 of the disc: a 64-px
-    sphere caught them by chance, and chrome-steel's colour error swung by 50% with
-    the resolution). Fit and table are both read through the bins, as the table is.
+    ``(n . v)`` being the screen's area element, integrated about the half vector
+    (:func:`brdffit.fitting.lit_sphere.bin_areas`): it converges where a pixel grid
+    does not (a near-mirror's peak bins cover ~1e-7 of the disc: a 64-px sphere caught
+    them by chance, and chrome-steel's colour error swung by 50% with the resolution).
+    Fit and table are both read through the bins, as the table is.
     """
 
     bins: np.ndarray  # flat MERL bins the lit sphere sees
@@ -282,8 +281,8 @@ class SphereIntegral:
     wo: np.ndarray
 
 
-#: Bumped when :func:`_bin_weights` or the nodes change: the integrals kept in
-#: brdffit's cache directory are then computed again.
+#: Bumped when :func:`brdffit.fitting.lit_sphere.bin_areas` or the nodes change: the
+#: integrals kept in brdffit's cache directory are then computed again.
 _INTEGRAL_VERSION = 1
 
 
@@ -303,9 +302,8 @@ def _sphere_integral(light: tuple[float, ...]) -> SphereIntegral:
 
 
 def _compute_integral(light: tuple[float, ...]) -> dict[str, np.ndarray]:
-    n_flat = int(np.prod(SHAPE))
-    fine, wi_sum, wo_sum = _bin_weights(np.array(light), *COLOUR_NODES, n_flat)
-    coarse = _bin_weights(np.array(light), *CHECK_NODES, n_flat)[0]
+    fine, wi_sum, wo_sum = bin_areas(np.array(light), *COLOUR_NODES)
+    coarse = bin_areas(np.array(light), *CHECK_NODES)[0]
     bins = np.flatnonzero((fine > 0) | (coarse > 0))
     # a bin whose centre is below the horizon is evaluated at its mean lit direction
     mean_wi = wi_sum[bins] / np.linalg.norm(wi_sum[bins], axis=-1, keepdims=True).clip(1e-300)
@@ -313,37 +311,6 @@ def _compute_integral(light: tuple[float, ...]) -> dict[str, np.ndarray]:
     wi, wo = _bin_dirs(bins, mean_wi, mean_wo)
     weight = np.stack([fine[bins], coarse[bins]])
     return {"bins": bins, "weight": weight, "wi": wi, "wo": wo}
-
-
-def _bin_weights(light: np.ndarray, per_bin: int, per_degree: int, n_flat: int):
-    """Per flat bin: the quadrature weight of :class:`SphereIntegral` and the
-    weighted sums of the nodes' wi and wo."""
-    lgt = light / np.linalg.norm(light)
-    view = np.array([0.0, 0.0, 1.0])
-    h = (lgt + view) / np.linalg.norm(lgt + view)
-    e1 = np.cross([0.0, 1.0, 0.0] if abs(h[1]) < 0.9 else [1.0, 0.0, 0.0], h)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(h, e1)
-    x, w = np.polynomial.legendre.leggauss(per_bin)
-    edges = (np.arange(N_THETA_H + 1) / N_THETA_H) ** 2 * (np.pi / 2)
-    lo, hi = edges[:-1, None], edges[1:, None]
-    theta = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
-    w_theta = ((hi - lo) / 2 * w).ravel()
-    k = 360 * per_degree
-    psi = (np.arange(k) + 0.5) / k * 2 * np.pi
-    t, p = np.meshgrid(theta, psi, indexing="ij")
-    ring = (np.cos(p)[..., None] * e1 + np.sin(p)[..., None] * e2)
-    n = (np.cos(t)[..., None] * h + np.sin(t)[..., None] * ring).reshape(-1, 3)
-    cos_i, cos_o = n @ lgt, n @ view
-    lit = (cos_i > 0) & (cos_o > 0)
-    dw = (cos_i * cos_o * np.sin(t).ravel() * np.repeat(w_theta, k) * (2 * np.pi / k))[lit]
-    frame = tangent_frames(n[lit])
-    wi, wo = frame @ lgt, frame @ view
-    bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi, wo)), SHAPE)
-    weight = np.bincount(bins, weights=dw, minlength=n_flat)
-    sums = [np.stack([np.bincount(bins, weights=dw * d[:, j], minlength=n_flat)
-                      for j in range(3)], axis=-1) for d in (wi, wo)]
-    return weight, *sums
 
 
 #: The lights of the colour figures: the key light (the verdict's) and the grazing one
