@@ -1657,6 +1657,49 @@ def test_an_excel_sheet_is_read_as_the_csv_it_would_be_saved_as(tmp_path, monkey
         read_measured(tmp_path / "plain.xlsx")
 
 
+
+def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_path):
+    """A lab's workbook often opens on a sheet of notes, or a chart's data: the first
+    sheet that reads as samples is read, and the result names each sheet passed over
+    and why. Where no sheet reads, the refusal gives each sheet's reason."""
+    import openpyxl
+
+    from brdffit.io.readers import input_summary
+    from tests.cli_helpers import run_main
+
+    s = _samples(20)
+    wide = read_measured(_write_all(tmp_path, s)["csv"])
+    head = ["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"]
+    rows = [[float(x) for x in (*(np.degrees(a[k]) for a in s[:4]), *s[4][k])]
+            for k in range(20)]
+    wb = openpyxl.Workbook()
+    wb.active.title = "About"
+    wb.active.append(["Gonioreflectometer run 12, sample 7"])
+    wb.active.append(["operator", "J. Doe"])
+    wb.create_sheet("empty")
+    chart = wb.create_sheet("chart")
+    chart.append(["x", "y"])
+    chart.append([1, 2])
+    data = wb.create_sheet("Messung")
+    for row in [head, *rows]:
+        data.append(row)
+    wb.create_sheet("more")["A1"] = "left alone: after the sheet read"
+    wb.save(tmp_path / "lab.xlsx")
+    m = read_measured(tmp_path / "lab.xlsx")
+    np.testing.assert_allclose(m.rgb, wide.rgb, rtol=1e-15)
+    summary = input_summary(m)
+    assert (summary["sheet"], summary["sheets"]) == ("Messung", 5)
+    assert [p["sheet"] for p in summary["sheets_passed"]] == ["About", "chart"]
+    assert "no column for theta_i" in summary["sheets_passed"][1]["why"]
+    out = run_main("brdffit.cli", "fit", str(tmp_path / "lab.xlsx"), "--model", "lambert")
+    assert out.returncode == 0, out.stderr
+    assert "sheet 'Messung' of 5; sheet 'About' passed over: no column" in out.stderr
+    del wb["Messung"]
+    wb.save(tmp_path / "notes.xlsx")
+    with pytest.raises(MeasurementsError, match="sheet 'About': no column for theta_i.*; "
+                                                "sheet 'chart': no column for theta_i.*x, y"):
+        read_measured(tmp_path / "notes.xlsx")
+
 def test_files_as_lab_tools_write_them(tmp_path):
     """What a review of files written by other tools found (/tmp/h32d in session 32): a
     long layout (one row per direction and channel) was fitted as grey samples without

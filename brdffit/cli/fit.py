@@ -267,6 +267,10 @@ def run(args) -> int:
         if long := measured.provenance.get("long_layout"):
             comma += (f", pivoted from {long['rows']:,} rows, one per sample and "
                       f"{long['column']}: {long['per_sample']} per sample")
+        if measured.provenance.get("sheets", 1) > 1:  # which sheet of a workbook, and why
+            comma += f", sheet {measured.provenance['sheet']!r} of {measured.provenance['sheets']}"
+            comma += "".join(f"; sheet {p['sheet']!r} passed over: {p['why']}"
+                             for p in measured.provenance.get("sheets_passed", ()))
         print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "
               f"({measured.provenance.get('format')}{comma}), to be fitted at their own "
               "directions, with a held-out error", file=sys.stderr)

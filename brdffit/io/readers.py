@@ -32,8 +32,8 @@ onto the MERL grid, with what the binning did). The layouts (docs/measurements.m
   their unit.
 - **NumPy** ``.npz`` archives (``np.savez``): their arrays as the HDF5 datasets of the
   same names (:mod:`brdffit.io.npz`).
-- **Excel** workbooks (``.xlsx``, ``.xlsm``): the first sheet with a cell, read as the
-  CSV it would be saved as (:mod:`brdffit.io.workbook`).
+- **Excel** workbooks (``.xlsx``, ``.xlsm``): the first sheet that reads as samples,
+  read as the CSV it would be saved as (:mod:`brdffit.io.workbook`).
 - In every sample layout, one row per (direction pair, channel) too, a "long" layout: a
   ``channel`` column (``r``, ``g``, ``b``, or ``450nm``) or a ``wavelength`` one (nm) beside
   one ``value``, pivoted to one sample per pair (:mod:`brdffit.io.long_layout`).
@@ -190,6 +190,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
         out["long_layout"] = samples.provenance["long_layout"]
     if "sheet" in samples.provenance:  # an Excel workbook's: which sheet, of how many
         out.update(sheet=samples.provenance["sheet"], sheets=samples.provenance["sheets"])
+        if "sheets_passed" in samples.provenance:  # the sheets before it, and why
+            out["sheets_passed"] = samples.provenance["sheets_passed"]
     if binning is not None:
         out.update(binning=binning.summary(), note=binning.describe())
     return out

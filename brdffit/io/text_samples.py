@@ -10,6 +10,7 @@ is refused with its line number.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import re
@@ -587,21 +588,42 @@ def read_csv(path: str | os.PathLike) -> Measurements:
 
 
 def read_xlsx(path: str | os.PathLike) -> Measurements:
-    """An Excel workbook's first sheet with a cell, read as the CSV it would be saved as
-    (:mod:`brdffit.io.workbook`)."""
+    """An Excel workbook's first sheet that reads as samples, read as the CSV it would
+    be saved as (:mod:`brdffit.io.workbook`). A sheet before it (notes, a plot's data)
+    is passed over, and the result says why; where none reads, the refusal is the
+    first sheet's, and names the others'."""
     source = str(path)
-    text, sheet = workbook.sheet_text(path, source)
-    try:
-        m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
-    except MeasurementsError as e:
-        if (cell := workbook.uncomputed_formula(path, sheet["sheet"])) is None:
-            raise
-        raise MeasurementsError(source, f"{e.problem}; cell {cell} holds a formula whose "
-                                        "value was never computed (the workbook was written "
-                                        "by a program, not saved by a spreadsheet): open it "
-                                        "in Excel or LibreOffice and save it") from None
-    m.provenance.update(sheet)
-    return m
+    passed: list[dict] = []
+    with contextlib.closing(workbook.sheet_texts(path, source)) as sheets:
+        for name, text, count in sheets:
+            try:
+                m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
+            except MeasurementsError as e:
+                passed.append({"sheet": name, "why": _sheet_problem(path, name, e.problem)})
+                continue
+            m.provenance.update(sheet=name, sheets=count)
+            if passed:
+                m.provenance["sheets_passed"] = passed
+            return m
+    if not passed:
+        raise MeasurementsError(source, "an Excel workbook whose sheets hold no cells")
+    first, others = passed[0], passed[1:]
+    problem = first["why"] if count == 1 else f"sheet {first['sheet']!r}: {first['why']}"
+    if others:
+        problem += "; " + "; ".join(f"sheet {o['sheet']!r}: {o['why']}" for o in others[:3])
+        if len(others) > 3:
+            problem += f"; and {len(others) - 3} more sheets that hold no samples"
+    raise MeasurementsError(source, problem)
+
+
+def _sheet_problem(path, sheet: str, problem: str) -> str:
+    """Why ``sheet`` holds no samples: the CSV reader's ``problem``, with the cause where
+    it is a formula whose value was never computed."""
+    if (cell := workbook.uncomputed_formula(path, sheet)) is None:
+        return problem
+    return (f"{problem}; cell {cell} holds a formula whose value was never computed (the "
+            "workbook was written by a program, not saved by a spreadsheet): open it in "
+            "Excel or LibreOffice and save it")
 
 
 def _csv_samples(text: str, source: str, delimiter: str | None = None,

@@ -6,8 +6,10 @@ reads a CSV's.
 openpyxl reads the workbook (read-only, the cells' values: a formula's last computed
 value, as Excel shows it). A number keeps every digit Excel stored; a number Excel
 holds as text (``0,25``, typed in a comma-decimal locale) is text here too, and read as
-a CSV's decimal comma is. Which sheet: the first that holds a cell; the result names
-it, and says that others were left (``input.sheet``). A workbook is a zip archive of
+a CSV's decimal comma is. Which sheet: the first that reads as samples, in the
+workbook's order (a lab's workbook often opens on a sheet of notes); the result names
+it, of how many, and why each sheet before it was passed over (``input.sheet``,
+``input.sheets``, ``input.sheets_passed``). A workbook is a zip archive of
 XML: its members' declared sizes are weighed before it is opened, so that a few MB
 cannot expand to GBs.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import datetime
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from brdffit.io import variables
@@ -37,10 +40,12 @@ def is_xlsx(path: str | Path) -> bool:
         return False
 
 
-def sheet_text(path: str | Path, source: str) -> tuple[str, dict]:
-    """The first sheet with a cell, as tab-separated text a CSV reader reads, a line per
-    row (:func:`_lines`; a cell's tabs and line breaks made blanks, its quotes quoted as
-    a CSV's), and what was read (``{"sheet": name, "sheets": count}``)."""
+def sheet_texts(path: str | Path, source: str) -> Iterator[tuple[str, str, int]]:
+    """Each sheet with a cell, in the workbook's order, as tab-separated text a CSV
+    reader reads, a line per row (:func:`_lines`; a cell's tabs and line breaks made
+    blanks, its quotes quoted as a CSV's): ``(name, text, how many sheets the workbook
+    has)``. A sheet is read when it is asked for: the reader stops at the first that
+    holds samples."""
     import openpyxl
 
     _weighed(path, source)
@@ -49,22 +54,22 @@ def sheet_text(path: str | Path, source: str) -> tuple[str, dict]:
     with open(path, "rb") as raw:
         book = None
         try:
-            book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
-            names = book.sheetnames
-            for name in names:
-                lines = _lines(book[name], source)
-                if lines:
-                    return "\n".join(lines) + "\n", {"sheet": name, "sheets": len(names)}
-        except MeasurementsError:
-            raise
-        except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged file
-            # (opening it, or reading a sheet's XML as it streams)
-            raise MeasurementsError(source, "not a readable Excel workbook "
-                                            f"({variables.said(e)})") from None
+            try:
+                book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
+                names = book.sheetnames
+                texts = ((name, _lines(book[name], source)) for name in names)
+                for name, lines in texts:
+                    if lines:
+                        yield name, "\n".join(lines) + "\n", len(names)
+            except MeasurementsError:
+                raise
+            except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged
+                # file (opening it, or reading a sheet's XML as it streams)
+                raise MeasurementsError(source, "not a readable Excel workbook "
+                                                f"({variables.said(e)})") from None
         finally:
             if book is not None:
                 book.close()
-    raise MeasurementsError(source, "an Excel workbook whose sheets hold no cells")
 
 
 def uncomputed_formula(path: str | Path, sheet: str) -> str | None:

@@ -185,7 +185,11 @@ function chooseTable(table) {
       // one row per (direction, channel), pivoted: said, as the CLI says it
       + `${s.input.long_layout ? `, pivoted from ${count(s.input.long_layout.rows)} rows, one `
         + `per sample and ${s.input.long_layout.column}` : ""}`
-      + `${s.input.decimal_comma ? ", decimal commas" : ""}: `
+      + `${s.input.decimal_comma ? ", decimal commas" : ""}`
+      // which sheet of a workbook, and the sheets passed over (they held no samples)
+      + `${s.input.sheets > 1 ? `, sheet “${s.input.sheet}” of ${s.input.sheets}` : ""}`
+      + `${(s.input.sheets_passed || []).map((x) => `; sheet “${x.sheet}” passed over: `
+        + x.why).join("")}: `
       + `fitted at their own directions; ${count(s.measured_bins)} MERL bins hold one) `
     : ` (${count(s.measured_bins)} measured bins, ${count(s.unmeasured_bins)} unmeasured, `
       + `${count(s.nonfinite_bins)} non-finite) `;
