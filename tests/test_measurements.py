@@ -1694,6 +1694,18 @@ def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_
     out = run_main("brdffit.cli", "fit", str(tmp_path / "lab.xlsx"), "--model", "lambert")
     assert out.returncode == 0, out.stderr
     assert "sheet 'Messung' of 5; sheet 'About' passed over: no column" in out.stderr
+    # as the service stores an upload (HDF5): what it was, read back
+    from brdffit.io.writers import write_hdf5
+
+    theta_i, phi_i, theta_o, phi_o, rgb = s
+    np.savez(tmp_path / "s.npz", theta_i_rad=theta_i, phi_i_rad=phi_i, theta_o_rad=theta_o,
+             phi_o_rad=phi_o, rgb=rgb)
+    for read in (m, read_measured(tmp_path / "s.npz")):
+        stored = read_measured(write_hdf5(read, tmp_path / "stored.h5"))
+        # the format it was read in, its sheet and the sheets passed over: kept (it read
+        # "hdf5", and the sheet was lost)
+        assert input_summary(stored) == input_summary(read)
+        assert stored.provenance["stored_as"] == "hdf5"
     del wb["Messung"]
     wb.save(tmp_path / "notes.xlsx")
     with pytest.raises(MeasurementsError, match="sheet 'About': no column for theta_i.*; "

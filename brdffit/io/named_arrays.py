@@ -599,8 +599,10 @@ def declared_samples(path: str | os.PathLike, reader: Callable) -> int | None:
         return None
 
 
-#: The formats a sample list brdffit stored (brdffit.io.writers) was read from.
-_STORED_FORMATS = ("astm", "csv", "hdf5")
+#: The formats a sample list brdffit stored (brdffit.io.writers) was read from: every
+#: format brdffit reads samples in (an Excel sheet or a MATLAB file uploaded to the
+#: service, stored as HDF5, read back as "hdf5": its sheet and layout were lost).
+_STORED_FORMATS = ("astm", "csv", "hdf5", "mat", "npz", "xlsx")
 
 
 def _stored_provenance(stored, file_format: str) -> dict:
