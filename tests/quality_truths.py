@@ -143,6 +143,21 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
                            "specular_IOR": 1.5, "sheen": 0.5, "sheen_color": [1.0, 1.0, 1.0],
                            "sheen_roughness": 0.08}),
     ],
+    # a lobe whose colour turns with the angle: a red that turns blue-green, a paint's
+    # saturated body under a white-rimmed lobe, a dark one, a near-mirror, a broad one
+    # whose colour turns late (Schlick's exponent)
+    "generalized_schlick": [
+        ("example", {"kd": [0.3, 0.15, 0.08], "color0": [0.6, 0.3, 0.2],
+                     "color90": [0.3, 0.6, 0.7], "exponent": 1.5, "alpha": 0.15}),
+        ("saturated", {"kd": SATURATED, "color0": [0.05, 0.05, 0.05],
+                       "color90": [0.8, 0.8, 0.8], "exponent": 3.0, "alpha": 0.3}),
+        ("dark", {"kd": DARK, "color0": [0.03, 0.02, 0.04], "color90": [0.02, 0.05, 0.02],
+                  "exponent": 1.0, "alpha": 0.1}),
+        ("near-mirror", {"kd": [0.02, 0.02, 0.02], "color0": [0.8, 0.5, 0.3],
+                         "color90": [0.5, 0.6, 0.9], "exponent": 2.0, "alpha": 0.005}),
+        ("grazing-heavy", {"kd": [0.2, 0.2, 0.2], "color0": [0.04, 0.04, 0.04],
+                           "color90": [1.0, 1.0, 1.0], "exponent": 5.0, "alpha": 0.6}),
+    ],
     "principled": [
         ("example", {"base_color": [0.5, 0.2, 0.1], "roughness": 0.45, "specular": 0.5,
                      "sheen": 0.3, "sheen_tint": 0.5}),

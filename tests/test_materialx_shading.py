@@ -1,4 +1,5 @@
-"""The standard_surface model against MaterialX's own shading of the standard_surface node.
+"""The standard_surface model against MaterialX's own shading of the standard_surface node
+(and generalized_schlick against its generalized_schlick_bsdf over a diffuse).
 
 Two checks:
 
@@ -131,17 +132,42 @@ MORE_SHEEN = [
     {**BLEND, "sheen": 0.4, "sheen_color": [0.3, 0.9, 0.1], "sheen_roughness": 1.0},
 ]
 
+#: generalized_schlick (a generalized_schlick_bsdf layered over an oren_nayar_diffuse_bsdf):
+#: a red lobe that turns blue-green away from normal incidence
+TINTED = {"kd": [0.3, 0.15, 0.08], "color0": [0.6, 0.3, 0.2], "color90": [0.3, 0.6, 0.7],
+          "exponent": 1.5, "alpha": 0.15}
+#: MaterialX's generated GLSL's f_r at PAIRS (materialx_eval, 2026-12-06)
+PINNED_TINTED = [
+    (TINTED, [[2.207418, 1.097577, 0.7263001], [2.865485, 1.5249, 1.079151],
+              [0.09976954, 0.05050576, 0.03008026], [1.033985, 0.9709621, 0.9459569],
+              [0.1035817, 0.05719393, 0.03770402], [0.08620982, 0.04475976, 0.02716684],
+              [421.3156, 824.8636, 962.4532], [0.06892242, 0.03439524, 0.01881844]]),
+]
+#: Its bounds for the live comparison: a near-mirror whose colour turns early, the
+#: roughest with Schlick's curve and beyond, a black lobe, a white diffuse. (A channel
+#: whose colour runs to 0 at grazing, color0 0.9 to color90 0 at exponent 0.2, is
+#: 0.9 (1 - 0.9998) at 89.94 deg: the shader's float32 mix() loses 3e-4 of it there.)
+MORE_TINTED = [
+    {"kd": [0.0, 0.0, 0.0], "color0": [0.9, 0.1, 0.0], "color90": [0.2, 0.2, 1.0],
+     "exponent": 0.2, "alpha": 0.002},
+    {"kd": [1.0, 1.0, 1.0], "color0": [0.04, 0.04, 0.04], "color90": [1.0, 1.0, 1.0],
+     "exponent": 20.0, "alpha": 1.0},
+    {"kd": [0.5, 0.2, 0.9], "color0": [0.0, 0.0, 0.0], "color90": [0.0, 0.0, 0.0],
+     "exponent": 5.0, "alpha": 0.3},
+]
+
 
 def _model(params, wi, wo):
-    name = ("standard_surface_coat" if "coat" in params
+    name = ("generalized_schlick" if "color90" in params
+            else "standard_surface_coat" if "coat" in params
             else "standard_surface_sheen" if "sheen" in params else "standard_surface")
     m = models.get(name)
     return np.asarray(evaluate(m, m.check_params(params), wi, wo))  # compiled, not op by op
 
 
-@pytest.mark.parametrize("params, pinned", PINNED + PINNED_COAT + PINNED_SHEEN,
+@pytest.mark.parametrize("params, pinned", PINNED + PINNED_COAT + PINNED_SHEEN + PINNED_TINTED,
                          ids=["plastic", "metal", "blend", "coated-plastic", "coated-metal",
-                              "velvet", "sheened-metal"])
+                              "velvet", "sheened-metal", "tinted"])
 def test_model_matches_materialx_glsl_values(params, pinned):
     # float32 shader values: agreement measured at 1.7e-6 relative at worst
     np.testing.assert_allclose(_model(params, WI, WO), pinned, rtol=1e-5)
@@ -180,7 +206,7 @@ def _random_pairs(n_light, n_view, seed):
 
 @pytest.mark.parametrize("params", [PLASTIC, METAL, BLEND, *MORE, COATED_PLASTIC,
                                     COATED_METAL, *MORE_COAT, VELVET, SHEENED_METAL,
-                                    *MORE_SHEEN])
+                                    *MORE_SHEEN, TINTED, *MORE_TINTED])
 def test_model_matches_materialx_glsl_live(params):
     _needs_gl()
     wi, wo = _random_pairs(16, 20, seed=3)
@@ -198,7 +224,7 @@ def test_model_matches_materialx_glsl_live(params):
 
 def test_pinned_values_are_what_materialx_computes_now():
     _needs_gl()
-    for params, pinned in PINNED + PINNED_COAT + PINNED_SHEEN:
+    for params, pinned in PINNED + PINNED_COAT + PINNED_SHEEN + PINNED_TINTED:
         text = materialx.document(params, "check")
         np.testing.assert_allclose(check.materialx_eval(text, WI, WO), pinned, rtol=1e-6)
 
@@ -207,6 +233,7 @@ def test_pinned_values_are_what_materialx_computes_now():
     ("standard_surface", PLASTIC),
     ("standard_surface_coat", COATED_PLASTIC),
     ("standard_surface_sheen", VELVET),
+    ("generalized_schlick", TINTED),
     ("gltf_pbr", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45}),
     ("gltf_pbr_ior", {"base_color": [0.8, 0.35, 0.1], "metallic": 0.4, "roughness": 0.45,
                       "ior": 1.9}),
@@ -216,7 +243,8 @@ def test_documents_pass_materialx_validation(model, params):
     text = materialx.document(params, "3 red/plastic", model)
     ok, message = check.materialx_validate(text)
     assert ok, message
-    node = "standard_surface" if model.startswith("standard_surface") else "gltf_pbr"
+    node = ("standard_surface" if model.startswith("standard_surface")
+            else "generalized_schlick_bsdf" if model == "generalized_schlick" else "gltf_pbr")
     assert f"<{node} " in text
     assert materialx.document(params, "3 red/plastic") == text  # the model from the names
 
@@ -237,6 +265,7 @@ def test_the_export_writes_the_inputs_the_model_holds_fixed():
 
 def test_only_the_gltf_node_needs_the_shading_note():
     assert materialx.shading_notes("standard_surface") == []
+    assert materialx.shading_notes("generalized_schlick") == []
     assert materialx.shading_notes("gltf_pbr") == [materialx.SHADING_NOTE]
     assert materialx.shading_notes("gltf_pbr_ior") == [materialx.SHADING_NOTE]
 

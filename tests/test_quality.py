@@ -242,9 +242,15 @@ def test_next_names_what_nothing_here_can_fit():
     ggx = models.get("ggx")
     turning = quality.next_steps(_look(grazing={"brightness_stops": 0.0, "colour_shift": 15.0}),
                                  model=ggx, params={"alpha": 0.2}, loss="log", converged=True)
-    assert turning[0]["try"] == "nothing here: a colour that turns across the highlight"
+    # a lobe whose colour turns with the angle is what there is
+    assert turning[0]["try"] == "--model generalized_schlick --loss render"
     assert "turns with the angle" in turning[0]["why"]
-    assert "--model gltf_iridescence" in turning[0]["why"]  # what there is, and its limit
+    # fitted with it, what it cannot follow is said, with the film's limit
+    itself = quality.next_steps(_look(grazing={"brightness_stops": 0.0, "colour_shift": 15.0}),
+                                model=models.get("generalized_schlick"),
+                                params={"alpha": 0.2}, loss="render", converged=True)
+    assert itself[0]["try"] == "nothing here: a colour that turns across the highlight"
+    assert "--model gltf_iridescence" in itself[0]["why"]
     narrow = quality.next_steps(_look(), model=ggx, params={"alpha": 0.004}, loss="render",
                                 converged=False, rel_peak_error=0.8)
     assert [s["try"].split(":")[0] for s in narrow] == [
@@ -268,7 +274,7 @@ def test_a_colour_that_turns_in_the_table_is_named_where_the_fit_misses_the_key(
     assert quality.TABLE_TURN < 5.56
     steps = quality.next_steps(_look(colour_shift=10.8, grazing=graze), model=ggx,
                                params={"alpha": 0.04}, loss="log", converged=True)
-    assert steps[0]["try"] == "nothing here: a colour that turns across the highlight"
+    assert steps[0]["try"] == "--model generalized_schlick --loss render"
     assert "the table's own by CIEDE2000 10" in steps[0]["why"]
     # a table whose colour turns, fitted within the good verdict's colour: nothing said
     near = quality.next_steps(_look(colour_shift=2.0, grazing={**graze, "colour_shift": 2.5}),

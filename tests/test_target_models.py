@@ -165,6 +165,9 @@ EDGES = {
                           "specular_roughness": r, "specular_IOR": i}
                          for b in (0.0, 1.0) for m in (0.0, 1.0) for c in (0.0, 1.0)
                          for r in (math.sqrt(1e-3), 1.0) for i in (1.0, 50.0)],
+    "generalized_schlick": [{"kd": k, "color0": c0, "color90": c90, "exponent": e, "alpha": a}
+                            for k in (0.0, 1.0) for c0, c90 in ((0.0, 1.0), (1.0, 0.0))
+                            for e in (0.2, 20.0) for a in (1e-3, 1.0)],
 }
 
 
@@ -209,6 +212,19 @@ def test_standard_surface_fit_reproduces_its_table():
     r = fit(_table_of("standard_surface", STANDARD), "standard_surface", samples=4096)
     assert r.log_rmse < 1e-4, r
     assert r.params["specular_roughness"] == pytest.approx(0.4, rel=1e-2)
+
+
+TINTED = {"kd": [0.3, 0.15, 0.08], "color0": [0.6, 0.3, 0.2], "color90": [0.3, 0.6, 0.7],
+          "exponent": 1.5, "alpha": 0.15}
+
+
+def test_generalized_schlick_fit_recovers_a_colour_that_turns():
+    """A red lobe that turns blue-green away from normal incidence: recovered, the
+    Fresnel's two colours and its exponent included."""
+    r = fit(_table_of("generalized_schlick", TINTED), "generalized_schlick", samples=4096)
+    assert r.converged and r.log_rmse < 1e-5, r
+    for k, v in TINTED.items():
+        np.testing.assert_allclose(r.params[k], v, rtol=1e-3, atol=1e-4, err_msg=k)
 
 
 def test_standard_surface_layers_by_albedo_not_by_fresnel():

@@ -33,7 +33,8 @@ def add_arguments(p) -> None:
                                   "or a batch results file (brdffit batch --out)")
     p.add_argument("--to", required=True, choices=list(TARGETS), dest="target",
                    help="the renderer: mitsuba (load_dict + scene XML), gltf (glTF 2.0 "
-                        "material), materialx (standard_surface node)")
+                        "material), materialx (standard_surface node, or a "
+                        "generalized_schlick lobe over a diffuse)")
     p.add_argument("--target-model", metavar="MODEL",
                    help="which of the renderer's models the file carries: "
                         + "; ".join(f"{t}: {', '.join(m.SHADED_AS)}" for t, m in TARGETS.items())

@@ -38,7 +38,7 @@ from xml.sax.saxutils import quoteattr
 #: as the one layered over it that keeps the fit's coat or sheen);
 #: ``export(..., target_model=)`` chooses among every key of SHADED_AS
 TARGET_MODELS = ("standard_surface", "standard_surface_dielectric", "standard_surface_coat",
-                 "standard_surface_sheen")
+                 "standard_surface_sheen", "generalized_schlick")
 #: target model -> the model that evaluates the file as MaterialX shades it: its
 #: generated GLSL agrees with standard_surface to 1e-5 (validate.materialx_eval); its
 #: shading of the gltf_pbr node is not modelled (None)
@@ -46,6 +46,7 @@ SHADED_AS = {"standard_surface": "standard_surface",
              "standard_surface_dielectric": "standard_surface_dielectric",
              "standard_surface_coat": "standard_surface_coat",
              "standard_surface_sheen": "standard_surface_sheen",
+             "generalized_schlick": "generalized_schlick",
              "gltf_pbr": None, "gltf_pbr_ior": None}
 UNMODELLED_NOTE = ("fidelity: MaterialX's own shading of its gltf_pbr node is not modelled, "
                    "so log_rmse_to_table is not measured; the default standard_surface is")
@@ -72,13 +73,17 @@ LAYER_INPUTS = {"standard_surface_coat": (COAT_INPUTS, COAT_FIXED),
                 "standard_surface_sheen": (SHEEN_INPUTS, {})}
 GLTF_PBR_INPUTS = {"base_color": "color3", "metallic": "float", "roughness": "float",
                    "ior": "float"}
+#: generalized_schlick (models/generalized_schlick.py): the lobe's inputs under their
+#: names, its roughness written on both axes, over an oren_nayar_diffuse_bsdf of colour kd
+GENERALIZED_SCHLICK_INPUTS = {"color0": "color3", "color90": "color3", "exponent": "float"}
 
 
 def shading_notes(model: str) -> list[str]:
     """The export warnings a MaterialX document of ``model`` parameters needs: the
     ``gltf_pbr`` node's :data:`SHADING_NOTE`; none for ``standard_surface``, whose
     model is MaterialX's own shading."""
-    return [] if model.startswith("standard_surface") else [SHADING_NOTE]
+    return [] if model.startswith("standard_surface") or model == "generalized_schlick" else [
+        SHADING_NOTE]
 
 
 def _identifier(name: str) -> str:
@@ -98,14 +103,17 @@ def _input(name: str, kind: str, value) -> str:
 def document(params: dict, name: str, model: str | None = None) -> str:
     """The MaterialX document (XML text) of ``model`` parameters (one of
     :data:`SHADED_AS`): a ``standard_surface`` node for ``standard_surface`` (with its
-    coat or sheen for ``standard_surface_coat``, ``_sheen``), a ``gltf_pbr`` node for
+    coat or sheen for ``standard_surface_coat``, ``_sheen``), a ``surface`` of a
+    ``generalized_schlick_bsdf`` layered over an ``oren_nayar_diffuse_bsdf`` for
+    ``generalized_schlick``, a ``gltf_pbr`` node for
     ``gltf_pbr`` and ``gltf_pbr_ior``, and its ``surfacematerial``. ``model=None``: the model whose
     parameters ``params`` holds (``coat``: standard_surface_coat; ``sheen``:
     standard_surface_sheen; ``metalness``:
     standard_surface; ``specular_IOR`` alone: standard_surface_dielectric, written as
     the node at metalness 0; ``ior``: gltf_pbr_ior; else gltf_pbr)."""
     if model is None:
-        model = ("standard_surface_coat" if "coat" in params
+        model = ("generalized_schlick" if "color90" in params
+                 else "standard_surface_coat" if "coat" in params
                  else "standard_surface_sheen" if "sheen" in params
                  else "standard_surface" if "metalness" in params
                  else "standard_surface_dielectric" if "specular_IOR" in params
@@ -116,7 +124,11 @@ def document(params: dict, name: str, model: str | None = None) -> str:
         model, params = "standard_surface", {**params, "metalness": 0.0}
     ident = _identifier(name)
     shader = quoteattr("SR_" + ident)
-    if model == "standard_surface" or model in LAYER_INPUTS:
+    nodes: list[str] = []
+    if model == "generalized_schlick":
+        nodes, node, inputs = _generalized_schlick(params, ident), "surface", [
+            f'    <input name="bsdf" type="BSDF" nodename={quoteattr("BSDF_" + ident)}/>']
+    elif model == "standard_surface" or model in LAYER_INPUTS:
         node = "standard_surface"
         inputs = [_input(k, "float", v) for k, v in STANDARD_SURFACE_FIXED.items()]
         inputs += [_input(k, kind, params[k]) for k, kind in STANDARD_SURFACE_INPUTS.items()]
@@ -130,6 +142,7 @@ def document(params: dict, name: str, model: str | None = None) -> str:
     return "\n".join([
         '<?xml version="1.0"?>',
         '<materialx version="1.39">',
+        *nodes,
         f'  <{node} name={shader} type="surfaceshader">',
         *inputs,
         f"  </{node}>",
@@ -145,6 +158,27 @@ def document(params: dict, name: str, model: str | None = None) -> str:
         "</materialx>",
         "",
     ])
+
+
+def _generalized_schlick(params: dict, ident: str) -> list[str]:
+    """The BSDF nodes of a generalized_schlick fit: its lobe layered over its diffuse
+    (``layer``: the diffuse dimmed by the lobe's throughput), as the model shades it."""
+    lobe, diffuse, layered = (quoteattr(f"{p}_{ident}") for p in ("LOBE", "DIFFUSE", "BSDF"))
+    alpha = float(params["alpha"])
+    return [
+        f'  <oren_nayar_diffuse_bsdf name={diffuse} type="BSDF">',
+        _input("color", "color3", params["kd"]),
+        _input("roughness", "float", 0.0),
+        "  </oren_nayar_diffuse_bsdf>",
+        f'  <generalized_schlick_bsdf name={lobe} type="BSDF">',
+        *(_input(k, kind, params[k]) for k, kind in GENERALIZED_SCHLICK_INPUTS.items()),
+        f'    <input name="roughness" type="vector2" value="{alpha!r}, {alpha!r}"/>',
+        "  </generalized_schlick_bsdf>",
+        f'  <layer name={layered} type="BSDF">',
+        f'    <input name="top" type="BSDF" nodename={lobe}/>',
+        f'    <input name="base" type="BSDF" nodename={diffuse}/>',
+        "  </layer>",
+    ]
 
 
 def write(params: dict, name: str, target_model: str) -> tuple[str, dict[str, str], list[str]]:

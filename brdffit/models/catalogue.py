@@ -95,8 +95,9 @@ CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
     # lambert: Mitsuba's own diffuse plugin, exported exactly (a matte table's cheapest)
     "mitsuba": ("lambert", "rough_conductor", "rough_plastic", "principled",
                 "principled_clearcoat"),
+    # generalized_schlick: a highlight whose colour turns with the angle (effect paints)
     "materialx": ("standard_surface_dielectric", "standard_surface", "standard_surface_coat",
-                  "standard_surface_sheen"),
+                  "standard_surface_sheen", "generalized_schlick"),
 }
 
 

@@ -13,6 +13,7 @@ from brdffit.models.base import AbstractBRDFModel, share_programs
 from brdffit.models.beckmann import Beckmann
 from brdffit.models.blinn_phong import BlinnPhong
 from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
+from brdffit.models.generalized_schlick import GeneralizedSchlick
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.gltf_blender import GltfBlender
@@ -54,6 +55,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     Principled(clearcoat=True),
     # MaterialX's standard_surface with its coat, with its sheen
     StandardSurfaceCoat(), StandardSurfaceSheen(),
+    # MaterialX's generalized Schlick lobe over a diffuse: a highlight whose colour turns
+    GeneralizedSchlick(),
     GGX2(),
 )
 
