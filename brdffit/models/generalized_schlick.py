@@ -1,5 +1,6 @@
-"""MaterialX's generalized Schlick lobe over a Lambertian base: a highlight whose colour
-turns with the angle, as MaterialX 1.39.5's GLSL shades it.
+"""A highlight whose colour turns with the angle: MaterialX's generalized Schlick over a diffuse.
+
+As MaterialX 1.39.5's GLSL shades it.
 
 The BRDF of ``layer(top = generalized_schlick_bsdf, base = oren_nayar_diffuse_bsdf)``
 (``libraries/pbrlib``; distribution ggx, isotropic, no thin film, ``color82`` its default
