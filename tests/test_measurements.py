@@ -6,6 +6,7 @@ the material that made it. (The shells: tests/test_measurement_shells.py.)"""
 
 from __future__ import annotations
 
+import json
 import re
 
 import h5py
@@ -1706,6 +1707,28 @@ def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_
         # "hdf5", and the sheet was lost)
         assert input_summary(stored) == input_summary(read)
         assert stored.provenance["stored_as"] == "hdf5"
+    # a lab's own JSON under that attribute name is not brdffit's: read as what it is
+    import h5py
+
+    for foreign in ({"format": "xlsx", "sheets": "3"}, {"format": "csv", "sheets": 2},
+                    {"format": "xlsx", "sheet": "a", "sheets": 3, "sheets_passed": ["x"]},
+                    {"format": "csv", "long_layout": {"rows": "9"}}):
+        with h5py.File(tmp_path / "stored.h5", "a") as f:
+            f.attrs["provenance"] = json.dumps(foreign)
+        assert read_measured(tmp_path / "stored.h5").provenance["format"] == "hdf5"
+        out = run_main("brdffit.cli", "fit", str(tmp_path / "stored.h5"), "--model", "lambert")
+        assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+    # the samples' sheet with a bad row is refused, not passed over for the next sheet
+    bad = openpyxl.Workbook()
+    bad.active.title = "Messung"
+    for k, row in enumerate([head, *rows]):
+        bad.active.append(["n/a", *row[1:]] if k == 5 else row)
+    copy = bad.create_sheet("copy")
+    for row in [head, *rows]:
+        copy.append(row)
+    bad.save(tmp_path / "bad.xlsx")
+    with pytest.raises(MeasurementsError, match="sheet 'Messung': row 6"):
+        read_measured(tmp_path / "bad.xlsx")
     del wb["Messung"]
     wb.save(tmp_path / "notes.xlsx")
     with pytest.raises(MeasurementsError, match="sheet 'About': no column for theta_i.*; "

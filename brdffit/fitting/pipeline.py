@@ -290,9 +290,11 @@ def finish(solved: Solved, table_metrics: dict | None = None, *, parent_result=N
     """The ``FitResult`` of a :func:`solved_fit`: measured on the full table (or given
     ``table_metrics``, its full-table error measured beside other fits') and
     assembled; a nested fit worse on the table than its parent is the parent's
-    optimum, refined. ``parent_result``: the parent's fit, where the solve started from
-    a :class:`Solved` parent. ``shared_s``: the fit's share of a pass measured beside
-    others; its ``time_s`` then counts that share, not the wait for the others."""
+    optimum, refined (and where that refinement leaves the parent's optimum again, as
+    far off on the table, the note says so). ``parent_result``: the parent's fit, where
+    the solve started from a :class:`Solved` parent. ``shared_s``: the fit's share of a
+    pass measured beside others; its ``time_s`` then counts that share, not the wait for
+    the others."""
     s = solved
     t0 = s.t0 if shared_s is None else s.t0 + (time.perf_counter() - s.solved_at) - shared_s
     parent_result = s.parent_result if parent_result is None else parent_result

@@ -825,8 +825,9 @@ def prepare(table: MerlTable, bin_weight, samples, seed: int, precision: str,
         weight, sample_set = _weights_and_samples(counts.usable, bin_weight, weight_key,
                                                   samples, seed)
         if get_loss(loss).rendered and bin_weight is None:
-            # the solver sees the bins of the render loss's views, weighted by how
-            # many pixels see them; the error is still judged on every usable bin
+            # the solver sees the bins of the render loss's views, weighted by the
+            # area of the pictures that reflect in them; the error is still judged on
+            # every usable bin
             views = render_loss.view_bin_weight()
             _, sample_set = _weights_and_samples(counts.usable & (views > 0), views,
                                                  "render-views", samples, seed)

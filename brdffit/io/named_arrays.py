@@ -615,9 +615,37 @@ def _stored_provenance(stored, file_format: str) -> dict:
         said = json.loads(stored)
     except (TypeError, ValueError):
         said = None
-    if isinstance(said, dict) and said.get("format") in _STORED_FORMATS:
+    if isinstance(said, dict) and said.get("format") in _STORED_FORMATS and _shaped(said):
         return {**said, "stored_as": file_format}
     return {"format": file_format}
+
+
+def _is(value, kind) -> bool:
+    return isinstance(value, kind) and not isinstance(value, bool) or (
+        kind is bool and isinstance(value, bool))
+
+
+def _shaped(said: dict) -> bool:
+    """Whether every key of ``said`` that brdffit reads back has the type brdffit writes
+    (a lab's JSON that names ``format`` "csv" and ``sheets`` "3" is not brdffit's: the
+    CLI's first line compared "3" with 1, a traceback)."""
+    def texts(d, *keys):
+        return isinstance(d, dict) and all(_is(d.get(k), str) for k in keys)
+
+    checks = {
+        "sheet": lambda v: _is(v, str),
+        "sheets": lambda v: _is(v, int) and v >= 1,
+        "sheets_passed": lambda v: isinstance(v, list) and all(texts(p, "sheet", "why")
+                                                                for p in v),
+        "long_layout": lambda v: texts(v, "column", "per_sample") and _is(v.get("rows"), int),
+        "decimal_comma": lambda v: _is(v, bool),
+        "channels": lambda v: _is(v, int),
+        "spectral": lambda v: isinstance(v, dict),
+        "azimuths_within_deg": lambda v: _is(v, int | float),
+    }
+    if ("sheet" in said) != ("sheets" in said):
+        return False
+    return all(check(said[key]) for key, check in checks.items() if key in said)
 
 
 def _attr_text(value, what: str, source: str) -> str | None:

@@ -588,10 +588,11 @@ def read_csv(path: str | os.PathLike) -> Measurements:
 
 
 def read_xlsx(path: str | os.PathLike) -> Measurements:
-    """An Excel workbook's first sheet that reads as samples, read as the CSV it would
-    be saved as (:mod:`brdffit.io.workbook`). A sheet before it (notes, a plot's data)
-    is passed over, and the result says why; where none reads, the refusal is the
-    first sheet's, and names the others'."""
+    """An Excel workbook's first sheet of samples, read as the CSV it would be saved as
+    (:mod:`brdffit.io.workbook`). A sheet before it that names no angle columns (notes,
+    a chart's data) is passed over, and the result says why; a sheet that names them is
+    the samples' sheet, and its refusal is the workbook's; where no sheet names them,
+    the refusal gives each sheet's reason."""
     source = str(path)
     passed: list[dict] = []
     with contextlib.closing(workbook.sheet_texts(path, source)) as sheets:
@@ -599,7 +600,13 @@ def read_xlsx(path: str | os.PathLike) -> Measurements:
             try:
                 m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
             except MeasurementsError as e:
-                passed.append({"sheet": name, "why": _sheet_problem(path, name, e.problem)})
+                why = _sheet_problem(path, name, e.problem)
+                if _names_angles(text):
+                    # the samples' own sheet: its refusal is the file's (a row of "n/a" in
+                    # it passed it over, and a later sheet's samples were fitted)
+                    raise MeasurementsError(source, why if count == 1
+                                            else f"sheet {name!r}: {why}") from None
+                passed.append({"sheet": name, "why": why})
                 continue
             m.provenance.update(sheet=name, sheets=count)
             if passed:
@@ -616,9 +623,31 @@ def read_xlsx(path: str | os.PathLike) -> Measurements:
     raise MeasurementsError(source, problem)
 
 
+#: A sheet's first lines searched for a header of samples (a title, notes and a units
+#: row may stand above it).
+HEADER_LINES = 20
+
+
+def _names_angles(text: str) -> bool:
+    """Whether one of a sheet's first lines (tab-separated cells) names two of the
+    angle columns: a sheet of samples, whose refusal is the workbook's, where a sheet
+    of notes or of a chart's data is passed over."""
+    lines = [line for line in text.splitlines() if line.strip()][:HEADER_LINES]
+    for line in lines:
+        found = set()
+        for cell in line.split("\t"):
+            m = angle_name(cell.strip().strip('"'))
+            if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES:
+                found.add(ANGLE_ALIASES[f"{m[1]}_{m[2]}"])
+        if len(found) >= 2:
+            return True
+    return False
+
+
 def _sheet_problem(path, sheet: str, problem: str) -> str:
     """Why ``sheet`` holds no samples: the CSV reader's ``problem``, with the cause where
     it is a formula whose value was never computed."""
+    problem = problem.replace("the file holds", "the sheet holds")  # a sheet's, not the file's
     if (cell := workbook.uncomputed_formula(path, sheet)) is None:
         return problem
     return (f"{problem}; cell {cell} holds a formula whose value was never computed (the "
