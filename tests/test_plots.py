@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 
@@ -344,3 +345,38 @@ def test_a_sample_lists_plots_say_what_they_can_show(ggx, tmp_path):
     assert "few on these slices; the error map shows where they lie" in note.replace("\n", " ")
     t, table_fit = ggx
     assert plots._few_samples(t, table_fit, "these slices") == ""
+
+
+@pytest.mark.slow  # two CLI fits with their plots: the full suite's
+def test_a_sample_lists_samples_are_each_drawn(tmp_path):
+    """samples.png: each sample's fitted value at its own directions against the
+    measured one, and where the fit is off, for a sample list (its other plots draw the
+    few bins it fills); a table gets none. Many samples are drawn as a subset, said so;
+    a value of 0 cannot sit on log axes, and the title says how many."""
+    from brdffit.io.readers import read_measured
+    from brdffit.view import sample_plot
+    from data_synth.__main__ import main as synth
+
+    path = tmp_path / "lab.csv"
+    assert synth(["samples", str(path), "--layout", "uniform", "-n", "400", "--noise",
+                  "0.05"]) == 0
+    out = tmp_path / "plots"
+    assert cli_main(["fit", str(path), "--model", "lambert", "--plots", str(out)]) == 0
+    png = (out / "samples.png").read_bytes()
+    height, width = imread(io.BytesIO(png)).shape[:2]
+    assert width > 1000 and height > 500
+    samples = read_measured(path)
+    r = fit(samples, "lambert", **FAST)
+    title = sample_plot._title(samples, r, samples.n, 0)
+    assert "400 samples; held-out log_rmse" in title and "in-sample" in title
+    assert "of 400 samples (a random subset)" in sample_plot._title(samples, r, 100, 3)
+    assert "3 with a value <= 0" in sample_plot._title(samples, r, 100, 3)
+    zeroed = dataclasses.replace(samples, rgb=np.where(np.arange(samples.n)[:, None] < 7,
+                                                       0.0, samples.rgb))
+    assert sample_plot.samples(zeroed, r)[:8] == b"\x89PNG\r\n\x1a\n"
+    table_out = tmp_path / "table_plots"
+    t = tmp_path / "t.binary"
+    merl.write(t, table("ggx"))
+    assert cli_main(["fit", str(t), "--model", "lambert", "--samples", "2048", "--plots",
+                     str(table_out)]) == 0
+    assert not (table_out / "samples.png").exists()

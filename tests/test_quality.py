@@ -88,6 +88,8 @@ FROM_THE_TRUTH = {
                      name.startswith("standard_surface") and label in ("example", "dark"))
                  or (name.endswith(("_clearcoat", "_sheen", "_iridescence"))
                      and label != "example")
+                 # the turning lobe's four other truths: the full suite's
+                 or (name == "generalized_schlick" and label != "example")
                  # three.js's film fitted from its truth still takes ~12 s of the
                  # quick tier's 4 minutes
                  or name == "gltf_threejs_iridescence"

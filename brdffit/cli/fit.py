@@ -106,8 +106,9 @@ def add_arguments(p) -> None:
     p.add_argument("--plots", metavar="DIR",
                    help="also write the plots (report, slices, error_map, spheres, polar; ranking "
                         "with auto; spheres_judged, the spheres at the exposure the verdict "
-                        "judged, where that is 2 stops or more from spheres.png's) as "
-                        "DIR/*.png")
+                        "judged, where that is 2 stops or more from spheres.png's; "
+                        "samples, each sample fitted against measured, for a sample list) "
+                        "as DIR/*.png")
     add_request_arguments(p, "--model")
 
 
@@ -288,7 +289,8 @@ def run(args) -> int:
                        format_result(report.chosen_fit)]) if report.selection is not None
             else format_result(report.chosen_fit) if len(report.ranking) == 1
             else format_models(report))
-    return write_report(args, table, report, text)
+    return write_report(args, table, report, text,
+                        measured if isinstance(measured, Measurements) else None)
 
 
 def format_models(report: FitReport) -> str:
@@ -364,9 +366,11 @@ def print_progress(i: int, n: int, model: str, row: dict | None) -> None:
               file=sys.stderr, flush=True)
 
 
-def write_report(args, table, report: FitReport, as_text: str) -> int:
+def write_report(args, table, report: FitReport, as_text: str,
+                 samples: Measurements | None = None) -> int:
     """Print JSON (the chosen fit in the result schema; auto's carries its
-    ``selection``) or text, write the plots if asked."""
+    ``selection``) or text, write the plots if asked (and for a sample list,
+    ``samples``, each sample's: ``samples.png``)."""
     if args.json:
         jsonout.dump(report.chosen_fit.to_dict(), sys.stdout)  # a metric not measured is null
         sys.stdout.write("\n")
@@ -375,7 +379,12 @@ def write_report(args, table, report: FitReport, as_text: str) -> int:
     if args.plots:
         from brdffit.view import plots  # matplotlib only when asked for
 
-        for path in plots.save_report(table, report, args.plots):
+        paths = plots.save_report(table, report, args.plots)
+        if samples is not None:  # each sample, of which the others show few
+            from brdffit.view import sample_plot
+
+            paths.append(sample_plot.save(samples, report.chosen_fit, args.plots))
+        for path in paths:
             # stderr: with --json, stdout stays one JSON object
             print(f"wrote {path}", file=sys.stderr)
     # A fit that ran is a result, converged or not: `converged` says which.

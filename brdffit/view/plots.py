@@ -77,7 +77,7 @@ DPI = 110
 # -- shared pieces ------------------------------------------------------------------
 
 
-def _as_result(result: FitResult | dict) -> FitResult:
+def as_result(result: FitResult | dict) -> FitResult:
     return result if isinstance(result, FitResult) else FitResult.from_dict(result)
 
 
@@ -93,7 +93,7 @@ def evaluate(result: FitResult | dict, wi: np.ndarray, wo: np.ndarray) -> np.nda
     Compiled once per (model, batch shape): each plot calls it with fixed shapes
     (all bins above the horizon, all pixels), whatever the table's mask.
     """
-    r = _as_result(result)
+    r = as_result(result)
     model = models.get(r.model)
     params = {k: jnp.asarray(v) for k, v in r.param_arrays().items()}
     f = np.asarray(_model_values(model, params, jnp.asarray(wi), jnp.asarray(wo)),
@@ -129,13 +129,13 @@ def _few_samples(table: MerlTable, result: FitResult, what: str) -> str:
     return "\n" + "\n".join(textwrap.wrap(note, 100))
 
 
-def _png(fig: Figure) -> bytes:
+def png_bytes(fig: Figure) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, facecolor="white")
     return buf.getvalue()
 
 
-def _sqrt_axis(ax, axis: str = "x", ticks=(0, 1, 5, 10, 20, 40, 60, 90)) -> None:
+def sqrt_degree_axis(ax, axis: str = "x", ticks=(0, 1, 5, 10, 20, 40, 60, 90)) -> None:
     """Square-root degree axis: the table's theta_h spacing."""
     functions = (lambda d: np.sqrt(np.maximum(d, 0.0)), lambda s: np.square(s))
     if axis == "x":
@@ -167,7 +167,7 @@ def slices(
 ) -> bytes:
     """Measured (dots) and fitted (lines) f_r against theta_h, one panel per theta_d,
     one row per phi_d."""
-    result = _as_result(result)
+    result = as_result(result)
     phi_d_deg = tuple(np.atleast_1d(phi_d_deg).tolist())
     fig = Figure(figsize=(13.0, 2.0 + 2.9 * len(phi_d_deg)), layout="constrained")
     _draw_slices(fig, table, result, theta_d_deg, phi_d_deg)
@@ -175,7 +175,7 @@ def slices(
     shown = ", ".join(f"{p:.1f}°" for p in _phi_d_centres(phi_d_deg))
     fig.suptitle(f"{_title(table, result)}  |  slices at φd = {shown}"
                  f"{_few_samples(table, result, 'these slices')}", fontsize=12)
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def _phi_d_centres(phi_d_deg) -> list[float]:
@@ -217,7 +217,7 @@ def _draw_slices(fig, table, result, theta_d_deg, phi_d_deg):
                 if v.size:
                     lo, hi = min(lo, v.min()), max(hi, v.max())
             ax.set_yscale("log")
-            _sqrt_axis(ax)
+            sqrt_degree_axis(ax)
             ax.grid(True, which="major", alpha=0.3)
             ax.set_title(f"θd = {np.degrees(theta_d[p, 0]):.1f}°", fontsize=10)
             if row == len(phi_d_deg) - 1:
@@ -263,12 +263,12 @@ def bin_residuals(table: MerlTable, result: FitResult | dict) -> np.ndarray:
 
 def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
     """RMS and mean of the per-bin residual over phi_d and RGB, on (theta_h, theta_d)."""
-    result = _as_result(result)
+    result = as_result(result)
     fig = Figure(figsize=(12.0, 4.8), layout="constrained")
     _draw_error_map(fig, table, result)
     fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
                  fontsize=12)
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def _draw_error_map(fig, table: MerlTable, result: FitResult):
@@ -303,7 +303,7 @@ def _draw_error_map(fig, table: MerlTable, result: FitResult):
     ax_bias.set_title("sign: red = fit too bright, blue = too dark", fontsize=11)
 
     for ax in (ax_rms, ax_bias):
-        _sqrt_axis(ax)
+        sqrt_degree_axis(ax)
         ax.set_facecolor(NO_DATA)
         ax.set_xlabel("θh (degrees, √ scale)")
     ax_rms.set_ylabel("θd (degrees)")
@@ -375,7 +375,7 @@ def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
     fraction of each pixel on the sphere's disc, and the pixels whose samples are
     mostly unmeasured.
     """
-    result = _as_result(result)
+    result = as_result(result)
     n = size * supersample
     wi, wo, inside = sphere_disc(n, light)
     lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
@@ -443,7 +443,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     """Table and fit on a sphere under three lights, their brightness ratio and their
     colour ratio; ``exposure_ev`` brightens (or darkens) both renders by that many
     stops before tone mapping (the ratio panels do not change)."""
-    result = _as_result(result)
+    result = as_result(result)
     exposure_ev = check_exposure_ev(exposure_ev)
     fig = Figure(figsize=(13.5, 10.0), layout="constrained")
     _draw_spheres(fig, table, result, size, exposure_ev=exposure_ev)
@@ -452,7 +452,7 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
                  "table and fit (white diffuse facing the light: mid-grey"
                  f"{' at 0 EV' if exposure_ev else ''}); camera on the normal; checkered: "
                  f"unmeasured bin{_few_samples(table, result, 'the spheres')}", fontsize=12)
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def judged_ev(table: MerlTable, light, exposure_ev: float = 0.0) -> float | None:
@@ -550,13 +550,13 @@ def polar(
     """f_r in the plane of incidence, log radius, per incident angle: one half disc
     per channel (R, G, B) on one radial scale, so a colour misfit shows as curves
     that fit in one channel and miss in another."""
-    return _png(polar_figure(table, result, theta_i_deg=theta_i_deg))
+    return png_bytes(polar_figure(table, result, theta_i_deg=theta_i_deg))
 
 
 def polar_figure(table: MerlTable, result: FitResult | dict, *,
                  theta_i_deg=(10.0, 30.0, 50.0, 70.0)) -> Figure:
     """:func:`polar`'s figure."""
-    result = _as_result(result)
+    result = as_result(result)
     theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
     theta_i = np.radians(np.asarray(theta_i_deg, dtype=float))[:, None]
     wi = np.stack(np.broadcast_arrays(-np.sin(theta_i), 0.0, np.cos(theta_i) + 0 * theta_o), -1)
@@ -634,7 +634,7 @@ def report(table: MerlTable, result: FitResult | dict, *,
     every error metric, the spheres (at ``exposure_ev``; by default where the verdict
     judged the key light, :func:`page_exposure_ev`), the phi_d = 90 deg slices and the
     error map."""
-    result = _as_result(result)
+    result = as_result(result)
     exposure_ev = check_exposure_ev(page_exposure_ev(table) if exposure_ev is None
                                     else exposure_ev)
     # the head as tall as its longest column of text (10.5 pt lines, ~0.19 in each):
@@ -654,7 +654,7 @@ def report(table: MerlTable, result: FitResult | dict, *,
     _draw_error_map(err, table, result)
     err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
     fig.suptitle(_title(table, result), fontsize=14, fontweight="bold")
-    return _png(fig)
+    return png_bytes(fig)
 
 
 def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
@@ -808,8 +808,8 @@ def render(kind: str, table: MerlTable, result: FitResult | dict,
     if exposure_ev:
         if (why := exposure_refused(kind, exposure_ev)) is not None:
             raise ValueError(why)
-        return RENDERERS[kind](table, _as_result(result), exposure_ev=exposure_ev)
-    return RENDERERS[kind](table, _as_result(result))
+        return RENDERERS[kind](table, as_result(result), exposure_ev=exposure_ev)
+    return RENDERERS[kind](table, as_result(result))
 
 
 def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.PathLike,
@@ -938,7 +938,7 @@ def ranking(selection: dict) -> bytes:
 
 
 def _png_with_footer(fig: Figure) -> bytes:
-    """As :func:`_png`, keeping text placed below the axes (the reason) in the image."""
+    """As :func:`png_bytes`, keeping text placed below the axes (the reason) in the image."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, facecolor="white", bbox_inches="tight",
                 pad_inches=0.15)
