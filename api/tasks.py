@@ -86,6 +86,10 @@ def render_plot(table_path: str, source: str, result: dict, kind: str,
     from brdffit.view import plots
 
     try:
+        if kind == "samples":  # a sample list's, drawn at each sample (the route checked)
+            from brdffit.view import sample_plot
+
+            return Outcome.success(sample_plot.samples(_read(table_path, source), result))
         return Outcome.success(plots.render(kind, _read_table(table_path, source), result,
                                             exposure_ev))
     except Exception as e:  # noqa: BLE001 - a stored table gone bad, or a plotting bug

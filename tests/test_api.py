@@ -738,10 +738,11 @@ def test_the_browser_finds_an_icon(http):
 
 
 def test_the_api_description_lists_every_plot_kind(http):
-    from brdffit.view.kinds import KINDS
+    from brdffit.view.kinds import KINDS, SAMPLE_KINDS
 
     description = http.get("/openapi.json").json()["info"]["description"]
-    assert f"plots/{{kind}}.png`: {', '.join(KINDS)}." in description and "report" in KINDS
+    assert f"plots/{{kind}}.png`: {', '.join(KINDS)};" in description and "report" in KINDS
+    assert f"for a sample list's fit,\n   {', '.join(SAMPLE_KINDS)}" in description
 
 
 def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
@@ -808,6 +809,13 @@ def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
     assert "held_out_log_rmse" in r.error and r.quality["basis"] == "held_out"
     assert r.params["alpha"] == pytest.approx(SAMPLED["alpha"], rel=0.02)
     assert c.plot(job, "polar")[:8] == b"\x89PNG\r\n\x1a\n"
+    # each sample, fitted against measured: a sample list's fit only
+    assert c.plot(job, "samples")[:8] == b"\x89PNG\r\n\x1a\n"
+    (tmp_path / "t.binary").write_bytes(table_bytes("ggx"))
+    table_job = c.wait(c.fit(c.upload_table(tmp_path / "t.binary").id, "lambert", **FAST))
+    with pytest.raises(ApiError, match="fitted a MERL table") as e:
+        c.plot(table_job, "samples")
+    assert e.value.status_code == 422
     bad = tmp_path / "bad.csv"
     bad.write_text(BAD_CSV)
     with pytest.raises(ApiError) as e:

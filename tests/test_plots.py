@@ -342,7 +342,7 @@ def test_a_sample_lists_plots_say_what_they_can_show(ggx, tmp_path):
     r = fit(samples, "ggx", **FAST)
     note = plots._few_samples(binned(samples)[0], r, "these slices")
     assert note.startswith("\na sample list: 400 samples in ")
-    assert "few on these slices; the error map shows where they lie" in note.replace("\n", " ")
+    assert "few on these slices; the samples plot shows each of them" in note.replace("\n", " ")
     t, table_fit = ggx
     assert plots._few_samples(t, table_fit, "these slices") == ""
 

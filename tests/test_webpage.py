@@ -373,7 +373,7 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         note = page.locator("#samples-note").inner_text()
         assert "3000 samples (astm)" in note and "held-out log_rmse" in note
         visit.wait_image("#plot-slices")
-        assert "/plots/error_map.png" in page.get_attribute("#plot-slices", "data-shown")
+        assert "/plots/samples.png" in page.get_attribute("#plot-slices", "data-shown")
         visit.shot("token-samples")
         assert visit.outside == []
         assert visit.console_errors == []

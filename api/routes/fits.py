@@ -45,7 +45,7 @@ from brdffit.fitting.result import SCHEMA, FitResult
 from brdffit.fitting.scene import SceneError
 from brdffit.request import REQUEST_SCHEMA, FitRequest, legacy_request
 from brdffit.selection import chosen_result
-from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, exposure_refused
+from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, SAMPLE_KINDS, exposure_refused
 
 log = logging.getLogger("brdffit.api")
 
@@ -57,7 +57,8 @@ JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="the id POST 
 FitModel = Annotated[str | None, Query(max_length=64,
                                        description="which model's fit (default: the best)")]
 
-PlotKind = Enum("PlotKind", {k: k for k in KINDS}, type=str)  # type: ignore[misc]
+PlotKind = Enum("PlotKind", {k: k for k in (*KINDS, *SAMPLE_KINDS)},  # type: ignore[misc]
+                type=str)
 
 
 def _contract_field(name: str, of: type = options.FitOptions):
@@ -439,6 +440,11 @@ async def get_plot(
     if (why := exposure_refused(kind.value, exposure_ev)) is not None:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, why)
     job, result = await finished_fit(store, job_id, model, "plots")
+    if kind.value in SAMPLE_KINDS and (result.get("input") or {}).get("fitted_at") != "samples":
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
+                            f"the {kind.value} plot draws a sample list's fit at each sample; "
+                            f"fit job {job_id} fitted a MERL table: plot one of "
+                            f"{', '.join(KINDS)}")
     path = store.plot_path(job_id, result["model"], kind.value, exposure_ev)
     if not path.exists():
         # Rendered on first request, in a worker (a second or two of matplotlib

@@ -10,6 +10,10 @@ from __future__ import annotations
 #: Every plot of a fit, in the order a person reads them.
 KINDS = ("slices", "error_map", "spheres", "polar", "report")
 
+#: The plots of a sample list's fit alone (brdffit.view.sample_plot): every sample, fitted
+#: against measured. A table's fit has none.
+SAMPLE_KINDS = ("samples",)
+
 #: The plots that show sphere renders, so take an ``exposure_ev``.
 EXPOSED_KINDS = ("spheres", "report")
 

@@ -124,7 +124,7 @@ def _few_samples(table: MerlTable, result: FitResult, what: str) -> str:
         return ""
     n = (result.input or {}).get("samples")
     note = (f"a sample list: {n if n is not None else 'its'} samples in {table.n_measured:,} "
-            f"of the grid's bins, few on {what}; the error map shows where they lie, and the "
+            f"of the grid's bins, few on {what}; the samples plot shows each of them, and the "
             "verdict judges the held-out samples")
     return "\n" + "\n".join(textwrap.wrap(note, 100))
 

@@ -426,7 +426,7 @@ function showSamplesNote(best) {
     + `${c.regions.of} (theta_h, theta_d) regions; light ${c.theta_i_deg[0].toFixed(0)}-`
     + `${c.theta_i_deg[1].toFixed(0)} deg, view ${c.theta_o_deg[0].toFixed(0)}-`
     + `${c.theta_o_deg[1].toFixed(0)} deg${c.in_plane ? ", in-plane" : ""}; specular peak ${peak}. `
-    + "The error map below shows where the samples lie.";
+    + "The samples plot below shows each of them, fitted against measured.";
 }
 
 // What to try next where the chosen fit does not look good (quality.next), best first.
@@ -523,12 +523,13 @@ function showModel(model) {
   for (const url of state.blobs) URL.revokeObjectURL(url);
   state.blobs = [];
   loadPlot("spheres", $("plot-spheres"));
-  // a sample list's slices hold few samples: where they lie, and the error there, says more
+  // a sample list's slices hold few samples: each sample, fitted against measured, says more
   const samples = onSamples((state.job.results || []).find((r) => r.model === model));
   $("slices-caption").textContent = samples
-    ? "error map: where the samples lie over (theta_h, theta_d), and the fit's error there"
+    ? "samples: each sample's fitted value against the measured one, and how far off it is "
+      + "along theta_h (colour: theta_d)"
     : "slices: measured (dots) and fitted (lines) f_r against theta_h";
-  loadPlot(samples ? "error_map" : "slices", $("plot-slices"));
+  loadPlot(samples ? "samples" : "slices", $("plot-slices"));
   $("extra-figure").hidden = true;
 }
 
