@@ -428,7 +428,8 @@ class Client:
     def plot(self, job: JobRef, kind: str, model: str | None = None,
              exposure_ev: float = 0.0) -> bytes:
         """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,
-        ``spheres``, ``polar`` or ``report`` (see ``brdffit.view.plots``);
+        ``spheres``, ``polar`` or ``report`` (see ``brdffit.view.plots``), and for a
+        sample list's fit ``samples`` (``brdffit.view.sample_plot``);
         ``exposure_ev`` (stops, multiples of 0.25) brightens the sphere renders of
         ``spheres`` and ``report``."""
         params = {"model": model} if model else {}
