@@ -18,18 +18,28 @@ area, as a pixel count is).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from brdffit.io.angles import N_THETA_H, SHAPE, dirs_to_half_diff, half_diff_to_bins, tangent_frames
 
 
-def bin_areas(light: np.ndarray, per_bin: int, per_degree: int, *, lit_by: bool = True):
-    """Per flat MERL bin: the integral over the sphere's lit, visible normals in that
-    bin of ``(n . v) dOmega_n``, times ``(n . l)`` where ``lit_by``; and the integral's
-    weighted sums of the nodes' local wi and of their wo ((n_flat, 3) each).
-    ``per_bin`` Gauss-Legendre nodes per theta_h bin, ``per_degree`` azimuths per
-    degree about the half vector."""
-    n_flat = int(np.prod(SHAPE))
+class Nodes(NamedTuple):
+    """The quadrature's nodes on the lit, visible normals: each node's flat MERL bin,
+    its weight, and its local wi and wo ((k, 3) each)."""
+
+    bins: np.ndarray
+    weight: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+
+
+def lit_nodes(light: np.ndarray, per_bin: int, per_degree: int, *,
+              lit_by: bool = True) -> Nodes:
+    """The nodes of the integral over the sphere's lit, visible normals of
+    ``(n . v) dOmega_n``, times ``(n . l)`` where ``lit_by``: ``per_bin`` Gauss-Legendre
+    nodes per theta_h bin, ``per_degree`` azimuths per degree about the half vector."""
     lgt = np.asarray(light, np.float64) / np.linalg.norm(light)
     view = np.array([0.0, 0.0, 1.0])
     h = (lgt + view) / np.linalg.norm(lgt + view)
@@ -53,7 +63,20 @@ def bin_areas(light: np.ndarray, per_bin: int, per_degree: int, *, lit_by: bool 
     frame = tangent_frames(n[lit])
     wi, wo = frame @ lgt, frame @ view
     bins = np.ravel_multi_index(half_diff_to_bins(*dirs_to_half_diff(wi, wo)), SHAPE)
-    weight = np.bincount(bins, weights=dw, minlength=n_flat)
-    sums = [np.stack([np.bincount(bins, weights=dw * d[:, j], minlength=n_flat)
-                      for j in range(3)], axis=-1) for d in (wi, wo)]
-    return weight, *sums
+    return Nodes(bins, dw, wi, wo)
+
+
+def summed_per_bin(nodes: Nodes, values: np.ndarray | None = None) -> np.ndarray:
+    """The nodes' weights summed per flat MERL bin (n_flat,), or of the weights times
+    ``values`` ((k, c) per node: (n_flat, c))."""
+    n_flat = int(np.prod(SHAPE))
+    if values is None:
+        return np.bincount(nodes.bins, weights=nodes.weight, minlength=n_flat)
+    return np.stack([np.bincount(nodes.bins, weights=nodes.weight * v, minlength=n_flat)
+                     for v in values.T], axis=-1)
+
+
+def bin_areas(light: np.ndarray, per_bin: int, per_degree: int, *,
+              lit_by: bool = True) -> np.ndarray:
+    """Per flat MERL bin, the integral of :func:`lit_nodes` over its normals."""
+    return summed_per_bin(lit_nodes(light, per_bin, per_degree, lit_by=lit_by))

@@ -48,7 +48,7 @@ import numpy as np
 
 from brdffit import executables, runtime
 from brdffit.fitting.colour import brightness_and_colour
-from brdffit.fitting.lit_sphere import bin_areas
+from brdffit.fitting.lit_sphere import bin_areas, lit_nodes, summed_per_bin
 from brdffit.fitting.render_loss import MEAN_FLOOR
 from brdffit.io import array_cache
 from brdffit.io.angles import (
@@ -281,7 +281,7 @@ class SphereIntegral:
     wo: np.ndarray
 
 
-#: Bumped when :func:`brdffit.fitting.lit_sphere.bin_areas` or the nodes change: the
+#: Bumped when :func:`brdffit.fitting.lit_sphere.lit_nodes` or the nodes change: the
 #: integrals kept in brdffit's cache directory are then computed again.
 _INTEGRAL_VERSION = 1
 
@@ -302,8 +302,10 @@ def _sphere_integral(light: tuple[float, ...]) -> SphereIntegral:
 
 
 def _compute_integral(light: tuple[float, ...]) -> dict[str, np.ndarray]:
-    fine, wi_sum, wo_sum = bin_areas(np.array(light), *COLOUR_NODES)
-    coarse = bin_areas(np.array(light), *CHECK_NODES)[0]
+    nodes = lit_nodes(np.array(light), *COLOUR_NODES)
+    fine = summed_per_bin(nodes)
+    wi_sum, wo_sum = summed_per_bin(nodes, nodes.wi), summed_per_bin(nodes, nodes.wo)
+    coarse = bin_areas(np.array(light), *CHECK_NODES)
     bins = np.flatnonzero((fine > 0) | (coarse > 0))
     # a bin whose centre is below the horizon is evaluated at its mean lit direction
     mean_wi = wi_sum[bins] / np.linalg.norm(wi_sum[bins], axis=-1, keepdims=True).clip(1e-300)
