@@ -621,8 +621,8 @@ def _stored_provenance(stored, file_format: str) -> dict:
 
 
 def _is(value, kind) -> bool:
-    return isinstance(value, kind) and not isinstance(value, bool) or (
-        kind is bool and isinstance(value, bool))
+    """``isinstance``, where a bool is no int (True is one to Python, not to a JSON key)."""
+    return isinstance(value, kind) and (kind is bool) == isinstance(value, bool)
 
 
 def _shaped(said: dict) -> bool:

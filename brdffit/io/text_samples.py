@@ -604,8 +604,7 @@ def read_xlsx(path: str | os.PathLike) -> Measurements:
                 if _names_angles(text):
                     # the samples' own sheet: its refusal is the file's (a row of "n/a" in
                     # it passed it over, and a later sheet's samples were fitted)
-                    raise MeasurementsError(source, why if count == 1
-                                            else f"sheet {name!r}: {why}") from None
+                    raise MeasurementsError(source, _of_sheet(name, why, count)) from None
                 passed.append({"sheet": name, "why": why})
                 continue
             m.provenance.update(sheet=name, sheets=count)
@@ -615,12 +614,17 @@ def read_xlsx(path: str | os.PathLike) -> Measurements:
     if not passed:
         raise MeasurementsError(source, "an Excel workbook whose sheets hold no cells")
     first, others = passed[0], passed[1:]
-    problem = first["why"] if count == 1 else f"sheet {first['sheet']!r}: {first['why']}"
+    problem = _of_sheet(first["sheet"], first["why"], count)
     if others:
         problem += "; " + "; ".join(f"sheet {o['sheet']!r}: {o['why']}" for o in others[:3])
         if len(others) > 3:
             problem += f"; and {len(others) - 3} more sheets that hold no samples"
     raise MeasurementsError(source, problem)
+
+
+def _of_sheet(name: str, why: str, count: int) -> str:
+    """``why``, naming the sheet where the workbook has more than one."""
+    return why if count == 1 else f"sheet {name!r}: {why}"
 
 
 #: A sheet's first lines searched for a header of samples (a title, notes and a units
@@ -634,11 +638,8 @@ def _names_angles(text: str) -> bool:
     of notes or of a chart's data is passed over."""
     lines = [line for line in text.splitlines() if line.strip()][:HEADER_LINES]
     for line in lines:
-        found = set()
-        for cell in line.split("\t"):
-            m = angle_name(cell.strip().strip('"'))
-            if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES:
-                found.add(ANGLE_ALIASES[f"{m[1]}_{m[2]}"])
+        found = {ANGLE_ALIASES[f"{m[1]}_{m[2]}"] for cell in line.split("\t")
+                 if (m := angle_name(cell.strip('" '))) is not None}
         if len(found) >= 2:
             return True
     return False

@@ -54,19 +54,17 @@ def sheet_texts(path: str | Path, source: str) -> Iterator[tuple[str, str, int]]
     with open(path, "rb") as raw:
         book = None
         try:
-            try:
-                book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
-                names = book.sheetnames
-                texts = ((name, _lines(book[name], source)) for name in names)
-                for name, lines in texts:
-                    if lines:
-                        yield name, "\n".join(lines) + "\n", len(names)
-            except MeasurementsError:
-                raise
-            except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged
-                # file (opening it, or reading a sheet's XML as it streams)
-                raise MeasurementsError(source, "not a readable Excel workbook "
-                                                f"({variables.said(e)})") from None
+            book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
+            names = book.sheetnames
+            for name in names:
+                if lines := _lines(book[name], source):
+                    yield name, "\n".join(lines) + "\n", len(names)
+        except MeasurementsError:
+            raise
+        except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged
+            # file (opening it, or reading a sheet's XML as it streams)
+            raise MeasurementsError(source, "not a readable Excel workbook "
+                                            f"({variables.said(e)})") from None
         finally:
             if book is not None:
                 book.close()

@@ -102,11 +102,15 @@ def evaluate(result: FitResult | dict, wi: np.ndarray, wo: np.ndarray) -> np.nda
     return np.where(above[..., None], f, np.nan)
 
 
+def source_name(source: str) -> str:
+    """A measured file's name as a plot's title shows it. The name is the uploader's
+    text: matplotlib would parse "$...$" in it as math, and fail on an unbalanced one.
+    An escaped dollar is a literal dollar."""
+    return (os.path.basename(source) or source).replace("$", r"\$")
+
+
 def _title(table: MerlTable, result: FitResult) -> str:
-    name = os.path.basename(table.source) or table.source
-    # A table's name is the uploader's text: matplotlib would parse "$...$" in it as
-    # math, and fail on an unbalanced one. An escaped dollar is a literal dollar.
-    name = name.replace("$", r"\$")
+    name = source_name(table.source)
     e = result.error.get("log_rmse")
     # the loss it minimised, where not the default: a render-loss fit's pictures were
     # told from a log-loss one's by the log_rmse figure alone
@@ -930,8 +934,8 @@ def ranking(selection: dict) -> bytes:
         ax_err.legend(handles=[Patch(facecolor=RANKING_COLOURS[s], edgecolor="#333333",
                                      linewidth=0.5, label=s) for s in shown],
                       loc="lower right", fontsize=7, framealpha=0.9)
-    table = str(selection.get("table") or "table").replace("$", r"\$")
-    fig.suptitle(f"{os.path.basename(table)}: auto chose {selection['chosen']}", fontsize=12)
+    table = source_name(str(selection.get("table") or "table"))
+    fig.suptitle(f"{table}: auto chose {selection['chosen']}", fontsize=12)
     reason = selection["reason"].replace("$", r"\$")
     fig.text(0.01, 0.0, textwrap.fill(reason, 150), fontsize=8, va="top", ha="left")
     return _png_with_footer(fig)

@@ -22,7 +22,15 @@ from brdffit.fitting.result import FitResult
 from brdffit.io.angles import dirs_to_half_diff
 from brdffit.io.measurements import Measurements
 
-from .plots import CHANNELS, LUMINANCE, as_result, evaluate, png_bytes, sqrt_degree_axis
+from .plots import (
+    CHANNELS,
+    LUMINANCE,
+    as_result,
+    evaluate,
+    png_bytes,
+    source_name,
+    sqrt_degree_axis,
+)
 
 #: Samples drawn at most (a random subset beyond it, said in the title): a scatter of
 #: millions of dots is a solid blot, and slow to draw.
@@ -87,7 +95,7 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
 
 
 def _title(measured: Measurements, r: FitResult, n_shown: int, not_drawn: int) -> str:
-    name = (os.path.basename(measured.source) or measured.source).replace("$", r"\$")
+    name = source_name(measured.source)
     e = r.error
     held = e.get("held_out_log_rmse")
     inside = e.get("sample_log_rmse", e.get("log_rmse"))
