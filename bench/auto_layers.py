@@ -11,8 +11,11 @@ given loss. From that one selection's fits (nothing fitted twice):
 - ``auto``: what auto chooses among the default candidates alone (the rule re-decided
   on those rows, as ``select`` would: the tolerance rule, or the render rule under the
   render loss);
+- ``auto without layers``: what it chooses among the candidates without a layer (the
+  defaults and the layers' bases: gltf_pbr, principled, generalized_schlick), the
+  choice that ``select``'s guard holds a layered choice to;
 - ``auto with layers``: what it chooses among all of them (``select``'s own choice,
-  with its guard that a layer renders no worse than its base);
+  with its guard that a layer is no worse than the choice without one);
 - the best base fit and the best layered fit by log_rmse, side by side.
 
 Each chosen fit is also judged by ``bench.render_loss``'s independent render (three
@@ -83,8 +86,10 @@ def run(names: list[str], loss: str, layered: tuple[str, ...] = LAYERED) -> list
         plain = _rechoose(sel.ranking, set(DEFAULT_CANDIDATES), loss, DEFAULT_TOLERANCE)
         layered = [m for m in ranking if models.get(m).layers]
         bases = [m for m in ranking if m not in layered]
+        without = _rechoose(sel.ranking, set(bases), loss, DEFAULT_TOLERANCE)
         row = {"material": name, "select_s": took,
                "ggx": entry("ggx"), "auto": entry(plain["model"]),
+               "auto_bases": entry(without["model"]),
                "auto_layers": entry(sel.chosen),
                "best_base": entry(min(bases, key=lambda m: ranking[m]["log_rmse"])),
                "best_layered": entry(min(layered, key=lambda m: ranking[m]["log_rmse"]))}
@@ -110,20 +115,25 @@ def report(rows: list[dict], which: str, loss: str, layered: tuple[str, ...] = L
              "independent three-light render.", "",
              "| fit | poor | median indep PSNR dB | median log_rmse |", "|---|---|---|---|"]
     for key, label in (("ggx", "ggx"), ("auto", "auto (default candidates)"),
+                       ("auto_bases", "auto without layers (defaults and the layers' bases)"),
                        ("auto_layers", "auto with layers"), ("best_base", "best base fit"),
                        ("best_layered", "best layered fit")):
         lines.append(f"| {label} | {poor(key)} | {med(key, 'indep_psnr_db'):.2f} | "
                      f"{med(key, 'log_rmse'):.4g} |")
-    worse_log = [r["material"] for r in rows
-                 if r["auto_layers"]["log_rmse"] > 1.001 * r["auto"]["log_rmse"]]
-    worse_db = [r["material"] for r in rows
-                if r["auto_layers"]["indep_psnr_db"] < r["auto"]["indep_psnr_db"] - 0.5]
+    def worse(key):
+        log = [r["material"] for r in rows
+               if r["auto_layers"]["log_rmse"] > 1.001 * r[key]["log_rmse"]]
+        db = [r["material"] for r in rows
+              if r["auto_layers"]["indep_psnr_db"] < r[key]["indep_psnr_db"] - 0.5]
+        return (f"log_rmse above 1.001x on {len(log)} ({', '.join(log) or 'none'}); "
+                f"independent render more than 0.5 dB worse on {len(db)} "
+                f"({', '.join(db) or 'none'})")
+
     chosen = {}
     for r in rows:
         chosen[r["auto_layers"]["model"]] = chosen.get(r["auto_layers"]["model"], 0) + 1
-    lines += ["", f"auto with layers against auto: log_rmse above 1.001x on {len(worse_log)} "
-              f"({', '.join(worse_log) or 'none'}); independent render more than 0.5 dB worse "
-              f"on {len(worse_db)} ({', '.join(worse_db) or 'none'}).",
+    lines += ["", f"auto with layers against auto without layers: {worse('auto_bases')}.", "",
+              f"auto with layers against auto (default candidates): {worse('auto')}.", "",
               "Chosen with layers: " + ", ".join(f"{m} {n}" for m, n in
                                                  sorted(chosen.items(), key=lambda x: -x[1]))
               + f". Median select time {statistics.median(r['select_s'] for r in rows):.1f} s.",

@@ -548,23 +548,68 @@ def test_an_export_without_the_layer_says_what_was_lost():
     assert _layer_warning("ggx", Conversion("gltf_pbr", {}, False, 0.01)) == []
 
 
+def _log_rule(rows):
+    from brdffit.selection import choose
+
+    return choose(rows, 0.005, by_look=False)[0]
+
+
 def test_a_layer_that_renders_worse_than_its_base_is_not_chosen():
     """Under the log loss a layer can buy log_rmse at grazing bins and cost the look:
-    the rule's choice falls back to the base where the layer renders more than 0.5 dB
-    worse, and says so; a second lobe (ggx2 over ggx) is no layer and stays."""
-    from brdffit.selection import _layer_gains, _layer_that_looks_no_worse
+    the rule's choice falls back to the choice without a layer where the layer renders
+    more than 0.5 dB worse than its base, and says so; a second lobe (ggx2 over ggx)
+    is no layer and stays."""
+    from brdffit.selection import _layer_gains, _layer_no_worse_than_without
 
-    rows = [{"model": "gltf_pbr", "log_rmse": 0.02, "psnr_db": 30.0},
-            {"model": "gltf_sheen", "log_rmse": 0.015, "psnr_db": 25.0},
-            {"model": "ggx", "log_rmse": 0.03, "psnr_db": 30.0},
-            {"model": "ggx2", "log_rmse": 0.01, "psnr_db": 28.0}]
+    rows = [{"model": "gltf_pbr", "log_rmse": 0.02, "psnr_db": 30.0, "n_params": 8},
+            {"model": "gltf_sheen", "log_rmse": 0.015, "psnr_db": 25.0, "n_params": 12},
+            {"model": "ggx", "log_rmse": 0.03, "psnr_db": 30.0, "n_params": 8},
+            {"model": "ggx2", "log_rmse": 0.012, "psnr_db": 28.0, "n_params": 12}]
     _layer_gains(rows)
     assert rows[1]["over_parent"] == {"model": "gltf_pbr", "log_rmse_ratio": 0.75,
                                       "psnr_gain_db": -5.0, "no_gain": False}
-    chosen, reason = _layer_that_looks_no_worse(rows[1], "Chose gltf_sheen.", rows)
-    assert chosen is rows[0]
+
+    def guard(chosen):
+        return _layer_no_worse_than_without(chosen, "Chose it.", rows, "log_rmse", _log_rule)
+
+    chosen, reason = guard(rows[1])
+    assert chosen is rows[3]  # the choice without a layer, not the sheen's own base
     assert "gltf_sheen passes the rule but renders 5.0 dB worse than its base gltf_pbr" \
-        in reason and reason.endswith("so gltf_pbr is chosen.")
-    assert _layer_that_looks_no_worse(rows[3], "r", rows) == (rows[3], "r")
-    rows[1]["over_parent"]["psnr_gain_db"] = -0.4  # within the slack: the layer stays
-    assert _layer_that_looks_no_worse(rows[1], "r", rows) == (rows[1], "r")
+        in reason and reason.endswith("so ggx2 is chosen.")
+    assert guard(rows[3]) == (rows[3], "Chose it.")
+    rows[1]["over_parent"]["psnr_gain_db"] = -0.4  # within the slack
+    rows[1]["psnr_db"] = 29.6
+    rows[1]["log_rmse"] = 0.012  # as close as ggx2: the layer stays
+    assert guard(rows[1]) == (rows[1], "Chose it.")
+
+
+def test_under_the_log_rule_a_layer_is_no_further_off_than_the_choice_without_one():
+    """A cheaper layered model within the tolerance replaced a closer fit without a
+    layer (black-oxidized-steel under the log loss: gltf_clearcoat, 9 values, over
+    generalized_schlick, 11, at a higher log_rmse). A layered choice must be within
+    1.001x of the log_rmse of the choice without a layer, and render no more than
+    0.5 dB worse; the reason says which it missed."""
+    from brdffit.selection import _layer_gains, _layer_no_worse_than_without, choose
+
+    def rows(coat_log_rmse, coat_db):
+        return [{"model": m, "log_rmse": e, "psnr_db": db, "n_params": n, "verdict": "good",
+                 "radiance_verdict": "good"}
+                for m, e, db, n in (("gltf_pbr", 0.0104, 24.0, 8),
+                                    ("gltf_clearcoat", coat_log_rmse, coat_db, 9),
+                                    ("generalized_schlick", 0.0082, 24.5, 11))]
+
+    ok = rows(0.0090, 24.4)
+    chosen, reason = choose(ok, 0.005)
+    assert chosen["model"] == "gltf_clearcoat"  # the rule alone: cheaper, within tolerance
+    _layer_gains(ok)
+    chosen, reason = _layer_no_worse_than_without(chosen, reason, ok, "log_rmse", _log_rule)
+    assert chosen is ok[2], reason
+    assert ("gltf_clearcoat passes the rule at log_rmse 0.009, above 0.0082 of "
+            "generalized_schlick") in reason and reason.endswith("is chosen.")
+    ok = rows(0.0082, 23.5)  # as close in log_rmse, but 1 dB worse to look at
+    _layer_gains(ok)
+    chosen, reason = _layer_no_worse_than_without(ok[1], "r", ok, "log_rmse", _log_rule)
+    assert chosen is ok[2] and "renders 1.0 dB worse than generalized_schlick" in reason
+    ok = rows(0.0081, 24.2)  # closer, and within 0.5 dB: the layer is taken
+    _layer_gains(ok)
+    assert _layer_no_worse_than_without(ok[1], "r", ok, "log_rmse", _log_rule) == (ok[1], "r")

@@ -119,7 +119,11 @@ def test_under_the_render_rule_a_layer_is_taken_only_where_it_gains_on_the_base_
     no closer: the rule alone takes the cheaper, layered one; its coat bought nothing
     the render loss's lights saw, so ggx2, the choice without layers, is chosen. A
     layered fit that renders at least as close, or reads better, keeps its place."""
-    from brdffit.selection import _layer_that_gains_on_the_base_choice, choose_by_look
+    from brdffit.selection import _layer_no_worse_than_without, choose_by_look
+
+    def _layer_that_gains_on_the_base_choice(chosen, reason, ok):
+        return _layer_no_worse_than_without(chosen, reason, ok, "render_psnr_db",
+                                            lambda rows: choose_by_look(rows)[0])
 
     def rows(coat_db, coat_verdict="good"):
         return [{"model": m, "n_params": n, "views_psnr_db": db, "verdict": v,
