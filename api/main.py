@@ -24,7 +24,7 @@ from api.routes import docs, exports, fits, health, materials, models, page, tab
 from api.runner import AbstractRunner, make_runner
 from api.settings import Settings
 from api.store import ServerLock, Store
-from brdffit.view.kinds import KINDS, SAMPLE_KINDS
+from brdffit.view.kinds import KINDS, SAMPLE_KINDS, SELECTION_KINDS
 
 log = logging.getLogger("brdffit.api")
 
@@ -35,7 +35,8 @@ Fit analytic BRDF models to measured MERL tables.
 2. `POST /v1/fits` with `{{"table_id": ..., "models": "ggx"}}`: a job id (202).
 3. `GET /v1/fits/{{id}}` until `status` is `done` (or `failed`, with a `reason`).
 4. `GET /v1/fits/{{id}}/plots/{{kind}}.png`: {", ".join(KINDS)}; and for a sample list's fit,
-   {", ".join(SAMPLE_KINDS)} (each sample, fitted against measured).
+   {", ".join(SAMPLE_KINDS)} (each sample, fitted against measured); and for auto's chosen
+   fit, {", ".join(SELECTION_KINDS)} (every candidate, and why the chosen one).
 5. `GET /v1/fits/{{id}}/exports/{{target}}`: the fit as a Mitsuba 3, glTF 2.0 or MaterialX
    material, with its error to the measured table under the renderer's own shading.
 

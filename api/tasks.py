@@ -90,6 +90,8 @@ def render_plot(table_path: str, source: str, result: dict, kind: str,
             from brdffit.view import sample_plot
 
             return Outcome.success(sample_plot.samples(_read(table_path, source), result))
+        if kind == "ranking":  # auto's candidates: the selection carries them (the route checked)
+            return Outcome.success(plots.ranking(result["selection"]))
         return Outcome.success(plots.render(kind, _read_table(table_path, source), result,
                                             exposure_ev))
     except Exception as e:  # noqa: BLE001 - a stored table gone bad, or a plotting bug

@@ -429,7 +429,8 @@ class Client:
              exposure_ev: float = 0.0) -> bytes:
         """A plot of a finished fit as PNG bytes: ``slices``, ``error_map``,
         ``spheres``, ``polar`` or ``report`` (see ``brdffit.view.plots``), and for a
-        sample list's fit ``samples`` (``brdffit.view.sample_plot``);
+        sample list's fit ``samples`` (``brdffit.view.sample_plot``), for auto's
+        chosen fit ``ranking`` (every candidate, and why the chosen one);
         ``exposure_ev`` (stops, multiples of 0.25) brightens the sphere renders of
         ``spheres`` and ``report``."""
         params = {"model": model} if model else {}

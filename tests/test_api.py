@@ -492,6 +492,9 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     done = wait_status(http, r.json()["id"], ("done", "failed"))
     assert done["status"] == "done" and done["result"]["model"] in ("lambert", "blinn_phong_mono")
     assert http.get(f"/v1/fits/{done['id']}/plots/report.png").status_code == 200
+    # auto's ranking is a plot of auto's choice: a job of named models has none
+    assert_error(http.get(f"/v1/fits/{done['id']}/plots/ranking.png"), 422,
+                 "was not chosen by auto")
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "auto", "options": {
         **FAST, "candidates": ["lambert", "no_such_model"]}}), 422, "no_such_model")
     # mono_ks, as `brdffit fit --mono-ks` and select(mono_ks=True) have it; refused, not
@@ -502,6 +505,10 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     done = wait_status(http, r.json()["id"], ("done", "failed"))
     assert done["status"] == "done", done
     assert {x["model"] for x in done["results"]} == {"ggx", "ggx_mono"}
+    ranking = http.get(f"/v1/fits/{done['id']}/plots/ranking.png")  # the chosen fit's
+    assert ranking.status_code == 200 and ranking.content[:8] == b"\x89PNG\r\n\x1a\n"
+    assert http.get(f"/v1/fits/{done['id']}/plots/ranking.png?model=auto").content \
+        == ranking.content  # drawn once, then served from the data dir
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "ggx", "options": {
         **FAST, "mono_ks": True}}), 422,
         "the selection rule (mono_ks True) chooses among auto's candidates")

@@ -177,6 +177,18 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         assert "exposure_ev" not in page.get_attribute("#plot-slices", "data-shown")
         visit.shot("exposed")
 
+        # auto's ranking (every candidate, and why the chosen one) is drawn from the
+        # chosen fit, whichever row is shown
+        page.locator("#results-table tbody tr:not(.best)").first.click()
+        page.click("#ranking-button")
+        page.wait_for_function(
+            "m => (document.querySelector('#plot-extra').dataset.shown || '')"
+            ".includes('/plots/ranking.png?model=' + m)", arg=chosen, timeout=FIT_TIMEOUT_MS)
+        assert f"why it chose {chosen}" in page.locator("#extra-caption").inner_text()
+        page.locator("#extra-figure").scroll_into_view_if_needed()
+        visit.shot("ranking")
+        best.click()
+
         # Downloads: the glTF material validates; the JSON is the job.
         with page.expect_download(timeout=STEP_MS) as d:
             page.click("[data-export=gltf]")

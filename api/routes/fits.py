@@ -45,7 +45,13 @@ from brdffit.fitting.result import SCHEMA, FitResult
 from brdffit.fitting.scene import SceneError
 from brdffit.request import REQUEST_SCHEMA, FitRequest, legacy_request
 from brdffit.selection import chosen_result
-from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, SAMPLE_KINDS, exposure_refused
+from brdffit.view.kinds import (
+    EXPOSURE_EV_RANGE,
+    KINDS,
+    SAMPLE_KINDS,
+    SELECTION_KINDS,
+    exposure_refused,
+)
 
 log = logging.getLogger("brdffit.api")
 
@@ -57,7 +63,7 @@ JobId = Annotated[str, Path(pattern=r"^[0-9a-f]{32}$", description="the id POST 
 FitModel = Annotated[str | None, Query(max_length=64,
                                        description="which model's fit (default: the best)")]
 
-PlotKind = Enum("PlotKind", {k: k for k in (*KINDS, *SAMPLE_KINDS)},  # type: ignore[misc]
+PlotKind = Enum("PlotKind", {k: k for k in (*KINDS, *SAMPLE_KINDS, *SELECTION_KINDS)},  # type: ignore[misc]
                 type=str)
 
 
@@ -445,6 +451,12 @@ async def get_plot(
                             f"the {kind.value} plot draws a sample list's fit at each sample; "
                             f"fit job {job_id} fitted a MERL table: plot one of "
                             f"{', '.join(KINDS)}")
+    if kind.value in SELECTION_KINDS and not (result.get("selection") or {}).get("ranking"):
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
+                            f"the {kind.value} plot draws auto's candidates and its choice; "
+                            f"the {result['model']} fit of job {job_id} was not chosen by auto: "
+                            f"plot one of {', '.join(KINDS)}, or ask for auto's chosen fit "
+                            "(no ?model=, or ?model=auto)")
     path = store.plot_path(job_id, result["model"], kind.value, exposure_ev)
     if not path.exists():
         # Rendered on first request, in a worker (a second or two of matplotlib

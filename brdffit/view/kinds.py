@@ -14,6 +14,10 @@ KINDS = ("slices", "error_map", "spheres", "polar", "report")
 #: against measured. A table's fit has none.
 SAMPLE_KINDS = ("samples",)
 
+#: The plots of auto's choice alone (brdffit.view.plots.ranking): every candidate's error
+#: and look, and why the chosen one. A fit of one named model has none.
+SELECTION_KINDS = ("ranking",)
+
 #: The plots that show sphere renders, so take an ``exposure_ev``.
 EXPOSED_KINDS = ("spheres", "report")
 

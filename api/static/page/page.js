@@ -378,6 +378,8 @@ function showResults(job) {
   $("selection-reason").textContent = selection
     ? `auto: ${selection.reason}`
     : `best log_rmse: ${best ? best.model : "none"}`;
+  // the ranking is a plot of auto's choice: drawn from the chosen fit, whichever row is shown
+  $("ranking-button").hidden = !selection;
   const body = $("results-table").querySelector("tbody");
   body.textContent = "";
   for (const r of job.results || []) {
@@ -540,7 +542,9 @@ const EXPOSED = new Set(["spheres", "report"]);
 function plotPath(kind) {
   const ev = Number($("exposure").value);
   const exposure = EXPOSED.has(kind) && ev ? `&exposure_ev=${ev}` : "";
-  return `/v1/fits/${state.job.id}/plots/${kind}.png?model=${encodeURIComponent(state.model)}`
+  // auto's ranking is of its choice, not of the row shown
+  const model = kind === "ranking" ? state.job.result.model : state.model;
+  return `/v1/fits/${state.job.id}/plots/${kind}.png?model=${encodeURIComponent(model)}`
     + exposure;
 }
 
@@ -570,7 +574,9 @@ async function loadPlot(kind, img) {
 async function showExtraPlot(event) {
   const kind = event.currentTarget.dataset.plot;
   $("extra-figure").hidden = false;
-  $("extra-caption").textContent = `${kind} of ${state.model}`;
+  $("extra-caption").textContent = kind === "ranking"
+    ? `auto's ranking: every candidate it fitted, and why it chose ${state.job.result.model}`
+    : `${kind} of ${state.model}`;
   await loadPlot(kind, $("plot-extra"));
 }
 
