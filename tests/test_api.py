@@ -494,7 +494,7 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     assert http.get(f"/v1/fits/{done['id']}/plots/report.png").status_code == 200
     # auto's ranking is a plot of auto's choice: a job of named models has none
     assert_error(http.get(f"/v1/fits/{done['id']}/plots/ranking.png"), 422,
-                 "was not chosen by auto")
+                 "fitted the models it named, without auto: plot one of slices")
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "auto", "options": {
         **FAST, "candidates": ["lambert", "no_such_model"]}}), 422, "no_such_model")
     # mono_ks, as `brdffit fit --mono-ks` and select(mono_ks=True) have it; refused, not
@@ -509,6 +509,8 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     assert ranking.status_code == 200 and ranking.content[:8] == b"\x89PNG\r\n\x1a\n"
     assert http.get(f"/v1/fits/{done['id']}/plots/ranking.png?model=auto").content \
         == ranking.content  # drawn once, then served from the data dir
+    assert_error(http.get(f"/v1/fits/{done['id']}/plots/ranking.png?model=ggx_mono"), 422,
+                 "is a candidate, not auto's choice: ask for the chosen fit's (no ?model=)")
     assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "ggx", "options": {
         **FAST, "mono_ks": True}}), 422,
         "the selection rule (mono_ks True) chooses among auto's candidates")

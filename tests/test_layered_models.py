@@ -575,7 +575,8 @@ def test_a_layer_that_renders_worse_than_its_base_is_not_chosen():
     chosen, reason = guard(rows[1])
     assert chosen is rows[3]  # the choice without a layer, not the sheen's own base
     assert "gltf_sheen passes the rule but renders 5.0 dB worse than its base gltf_pbr" \
-        in reason and reason.endswith("so ggx2 is chosen.")
+        in reason and reason.endswith(
+            "so ggx2, the choice without a layer (log_rmse 0.012, 28.0 dB, None), is chosen.")
     assert guard(rows[3]) == (rows[3], "Chose it.")
     rows[1]["over_parent"]["psnr_gain_db"] = -0.4  # within the slack
     rows[1]["psnr_db"] = 29.6
@@ -613,3 +614,28 @@ def test_under_the_log_rule_a_layer_is_no_further_off_than_the_choice_without_on
     ok = rows(0.0081, 24.2)  # closer, and within 0.5 dB: the layer is taken
     _layer_gains(ok)
     assert _layer_no_worse_than_without(ok[1], "r", ok, "log_rmse", _log_rule) == (ok[1], "r")
+    ok = rows(0.0081, float("nan"))  # a render not measured is no render 'inf dB worse'
+    _layer_gains(ok)
+    assert _layer_no_worse_than_without(ok[1], "r", ok, "log_rmse", _log_rule) == (ok[1], "r")
+
+
+def test_a_budget_met_by_a_layered_candidate_is_not_overruled():
+    """With a budget met, auto takes the cheapest candidate under it, layered or not: the
+    guard's choice without a layer missed the budget (ggx at 0.0125 against 0.011), and
+    was chosen while the reason said the budget was met."""
+    from brdffit.selection import _layer_held_to_its_rule, choose
+
+    rows = [{"model": m, "log_rmse": e, "psnr_db": db, "n_params": n, "verdict": "good",
+             "radiance_verdict": "good"}
+            for m, e, db, n in (("lambert", 0.05, 20.0, 4), ("gltf_pbr", 0.013, 30.6, 5),
+                                ("gltf_clearcoat", 0.010, 29.0, 7), ("ggx", 0.0125, 31.0, 8))]
+    chosen, reason = choose(rows, 0.005, 0.011)
+    assert chosen["model"] == "gltf_clearcoat"
+    assert _layer_held_to_its_rule(chosen, reason, rows, "log_rmse", 0.005, 0.011,
+                                   True) == (chosen, reason)
+    # no budget met: the tolerance rule decided, and the guard holds the layer to it
+    chosen, reason = choose(rows, 0.005, 0.001)
+    chosen, reason = _layer_held_to_its_rule(chosen, reason, rows, "log_rmse", 0.005,
+                                             0.001, True)
+    assert chosen["model"] == "gltf_pbr", reason
+    assert "renders 1.6 dB worse than gltf_pbr, the choice among the candidates" in reason

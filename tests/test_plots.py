@@ -380,3 +380,24 @@ def test_a_sample_lists_samples_are_each_drawn(tmp_path):
     assert cli_main(["fit", str(t), "--model", "lambert", "--samples", "2048", "--plots",
                      str(table_out)]) == 0
     assert not (table_out / "samples.png").exists()
+
+
+def test_the_ranking_draws_the_psnr_its_rule_ranked_by():
+    """Under the render rule the ranking draws each candidate's PSNR under the render
+    loss's eight lights (what the rule and its reason use), else the sphere's; a
+    render that was not measured is drawn as none, and the plot still draws."""
+    from brdffit.view.plots import ranked_psnr, ranking
+
+    row = {"psnr_db": 35.7, "views_psnr_db": 34.5}
+    assert ranked_psnr(row, "render_psnr_db") == 34.5
+    assert ranked_psnr(row, "log_rmse") == 35.7
+    assert ranked_psnr({"psnr_db": 30.0, "views_psnr_db": None}, "render_psnr_db") == 30.0
+    assert ranked_psnr({"psnr_db": float("nan")}, "log_rmse") is None
+    rows = [{"model": m, "n_params": n, "status": st, "log_rmse": e, "psnr_db": p,
+             "views_psnr_db": v, "verdict": "good"}
+            for m, n, st, e, p, v in (("ggx", 8, "chosen", 0.01, 35.7, 34.5),
+                                      ("ggx2", 12, "looks worse", 0.009, None, None))]
+    png = ranking({"ranking": rows, "rule": "render_psnr_db", "tolerance": 0.005,
+                   "chosen": "ggx", "reason": "Chose ggx by its sphere renders.",
+                   "table": "t.binary"})
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"

@@ -452,11 +452,14 @@ async def get_plot(
                             f"fit job {job_id} fitted a MERL table: plot one of "
                             f"{', '.join(KINDS)}")
     if kind.value in SELECTION_KINDS and not (result.get("selection") or {}).get("ranking"):
+        ran_auto = any((r.get("selection") or {}).get("ranking") for r in job.results)
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY,
                             f"the {kind.value} plot draws auto's candidates and its choice; "
-                            f"the {result['model']} fit of job {job_id} was not chosen by auto: "
-                            f"plot one of {', '.join(KINDS)}, or ask for auto's chosen fit "
-                            "(no ?model=, or ?model=auto)")
+                            + (f"the {result['model']} fit of job {job_id} is a candidate, "
+                               "not auto's choice: ask for the chosen fit's (no ?model=)"
+                               if ran_auto else
+                               f"fit job {job_id} fitted the models it named, without auto: "
+                               f"plot one of {', '.join(KINDS)}"))
     path = store.plot_path(job_id, result["model"], kind.value, exposure_ev)
     if not path.exists():
         # Rendered on first request, in a worker (a second or two of matplotlib

@@ -44,7 +44,7 @@ except ModuleNotFoundError:
 from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
 from brdffit.fitting.options import DEFAULT_LOSS
 from brdffit.fitting.problem import sphere_reference
-from brdffit.fitting.quality import judged_brightness, judged_colour
+from brdffit.fitting.quality import ALIKE_DB, judged_brightness, judged_colour
 from brdffit.fitting.result import FitResult, error_measures_nothing
 from brdffit.fitting.sphere import (
     LIGHTS,
@@ -865,10 +865,25 @@ RANKING_COLOURS = {"chosen": "#2ca02c", "within tolerance": "#98df8a",
                    "under budget": "#98df8a", "looks worse": "#fdd0a2", "too far": "#c7c7c7"}
 
 
+def ranked_psnr(row: dict, rule: str | None) -> float | None:
+    """The PSNR (dB) :func:`ranking` draws for a candidate's ``row``: under the render
+    rule the one it ranked by (``views_psnr_db``, the render loss's eight lights, where
+    measured), else the sphere's two lights (``psnr_db``); None where not finite. The
+    plot drew ``psnr_db`` under the render rule too: ggx at 35.7 dB beside a reason
+    that said 34.5."""
+    p = row.get("views_psnr_db") if rule == "render_psnr_db" else None
+    p = row.get("psnr_db") if p is None else p
+    return float(p) if isinstance(p, int | float) and np.isfinite(p) else None
+
+
 def ranking(selection: dict) -> bytes:
     """``model="auto"``'s choice as a picture: each candidate's log_rmse (cheapest at
     the top), the best error and the tolerance line the chosen one had to be within,
-    and each candidate's sphere PSNR with its verdict; the reason under it.
+    and each candidate's sphere PSNR with its verdict; the reason under it. Where the
+    render rule chose (the render loss: ``selection["rule"]``), the PSNR is the one it
+    ranked by (``views_psnr_db``, the render loss's eight lights) with the 0.5 dB the
+    chosen one had to be within, and the log_rmse axis has no tolerance line: the
+    tolerance played no part.
 
     ``selection`` is a chosen fit's ``selection`` (``FitResult.selection``), so a
     stored result draws it as well as a fresh one.
@@ -877,6 +892,11 @@ def ranking(selection: dict) -> bytes:
 
     rows = selection["ranking"]
     fitted = [r for r in rows if r["status"] != "failed"]
+    by_look = selection.get("rule") == "render_psnr_db"
+
+    def psnr_of(r: dict) -> float | None:
+        return ranked_psnr(r, selection.get("rule"))
+
     n = len(rows)
     fig = Figure(figsize=(10, 2.2 + 0.42 * n), layout="constrained")
     ax_err, ax_psnr = fig.subplots(1, 2, sharey=True, width_ratios=(3, 2))
@@ -893,8 +913,8 @@ def ranking(selection: dict) -> bytes:
                     + ("" if r.get("converged", True) else " (not converged)"),
                     va="center", fontsize=8, zorder=4,  # over the tolerance lines
                     bbox={"facecolor": "white", "edgecolor": "none", "pad": 0.5, "alpha": 0.8})
-        psnr = r.get("psnr_db")
-        if psnr is not None and np.isfinite(psnr):
+        psnr = psnr_of(r)
+        if psnr is not None:
             ax_psnr.barh(i, psnr, color=colour, edgecolor="#333333", linewidth=0.5)
             ax_psnr.text(psnr, i, f" {psnr:.1f} dB" + (f", {r['verdict']}" if r.get("verdict")
                                                        else ""), va="center", fontsize=8)
@@ -909,7 +929,9 @@ def ranking(selection: dict) -> bytes:
         ax_err.set_xlim(0, right)
         ax_err.axvline(best, color="#333333", linewidth=1)
         words = f"best + tolerance {selection['tolerance']:g} (in quadrature)"
-        if limit <= right:
+        if by_look:
+            pass  # the render rule chose by the PSNR: its window is drawn there
+        elif limit <= right:
             ax_err.axvline(limit, color="#333333", linewidth=1, linestyle="--")
             ax_err.text(limit, -0.6, f" {words}", fontsize=7, va="center", ha="left")
         else:
@@ -918,13 +940,19 @@ def ranking(selection: dict) -> bytes:
                         transform=ax_err.get_yaxis_transform())
         if selection.get("budget") is not None:
             ax_err.axvline(selection["budget"], color="#1f77b4", linewidth=1, linestyle=":")
-        top = max((r.get("psnr_db") or 0.0) for r in fitted)
+        top = max((psnr_of(r) or 0.0) for r in fitted)
         ax_psnr.set_xlim(0, max(1.35 * top, 1.0))
+        if by_look and top > 0:
+            ax_psnr.axvline(top, color="#333333", linewidth=1)
+            ax_psnr.axvline(top - ALIKE_DB, color="#333333", linewidth=1, linestyle="--")
+            ax_psnr.text(top, -0.6, f" best − {ALIKE_DB:g} dB", fontsize=7, va="center",
+                         ha="right")
     ax_err.set_yticks(y, [f"{r['model']} ({r['n_params']})" for r in rows])
     ax_err.set_ylim(n - 0.5, -1.0)
     ax_err.set_xlabel("log_rmse (lower is better)")
-    ax_psnr.set_xlabel("sphere PSNR, dB (higher is better)")
-    ax_err.set_title("candidates, cheapest first (parameter count)", fontsize=10)
+    ax_psnr.set_xlabel("sphere PSNR under the render loss's eight lights, dB (higher is "
+                       "better)" if by_look else "sphere PSNR, dB (higher is better)")
+    ax_err.set_title("candidates in auto's order (parameter count)", fontsize=10)
     # the verdict weighs brightness and colour too: 30.0 dB "visible" beside 28.2 dB
     # "good" is a brightness the PSNR does not show (each fit's quality says which)
     ax_psnr.set_title("how each looks: PSNR, and the verdict\n(which also judges brightness "
