@@ -1659,6 +1659,67 @@ def test_an_excel_sheet_is_read_as_the_csv_it_would_be_saved_as(tmp_path, monkey
 
 
 
+def test_a_workbook_sheet_is_fitted_by_its_name(tmp_path):
+    """A workbook of two sheets of samples fitted the first, and the second could not be
+    reached. ``sheet=`` (``brdffit fit --sheet``) reads the one named; a name the
+    workbook lacks is refused with its sheets' names, as is a sheet named for a file
+    with no sheets; an export re-reads the sheet that was fitted, not the first."""
+    import openpyxl
+
+    from brdffit.export import export
+    from brdffit.fitting.result import FitResult
+    from tests.cli_helpers import run_main
+
+    head = ["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"]
+    s = _samples(40)
+
+    def rows(scale):
+        return [[float(x) for x in (*(np.degrees(a[k]) for a in s[:4]), *(scale * s[4][k]))]
+                for k in range(40)]
+
+    wb = openpyxl.Workbook()
+    wb.active.title = "sample A"
+    for row in [head, *rows(1.0)]:
+        wb.active.append(row)
+    second = wb.create_sheet("sample B")
+    for row in [head, *rows(3.0)]:
+        second.append(row)
+    wb.create_sheet("empty")
+    bad = wb.create_sheet("bad")
+    for row in [head, ["n/a"] * 7]:
+        bad.append(row)
+    book = tmp_path / "two.xlsx"
+    wb.save(book)
+    first, named = read_measured(book), read_measured(book, sheet="sample B")
+    assert first.provenance["sheet"] == "sample A" and named.provenance["sheet"] == "sample B"
+    np.testing.assert_allclose(named.rgb, 3.0 * first.rgb, rtol=1e-12)
+    assert read_table(book, sheet="sample B")[1]["sheet"] == "sample B"
+    for sheet, said in (("sample C", "no sheet named 'sample C': the workbook's sheets are "
+                                     "'sample A', 'sample B', 'empty', 'bad'"),
+                        ("empty", "sheet 'empty' holds no cells"),
+                        ("bad", "sheet 'bad': ")):
+        with pytest.raises(MeasurementsError, match=re.escape(said)):
+            read_measured(book, sheet=sheet)
+    csv = _write_all(tmp_path, s)["csv"]
+    with pytest.raises(MeasurementsError, match="a sheet was named .'sample B'., and this is "
+                                                "no Excel workbook"):
+        read_measured(csv, sheet="sample B")
+
+    out = run_main("brdffit.cli", "fit", str(book), "--sheet", "sample B", "--model",
+                   "lambert", "--json")
+    assert out.returncode == 0, out.stderr
+    fitted = json.loads(out.stdout)
+    assert fitted["input"]["sheet"] == "sample B"
+    # re-read from its own file: the sheet fitted, or the fidelity would be to sample A
+    # (3x darker) under a warning that the file changed since the fit
+    got = export(FitResult.from_dict(fitted), "gltf")
+    assert not [w for w in got.warnings if "does not hold" in w], got.warnings
+    assert got.fidelity.get("log_rmse_to_table") is not None
+    out = run_main("brdffit.cli", "fit", str(book), "--sheet", "nope", "--model", "lambert")
+    assert out.returncode != 0 and "no sheet named 'nope'" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
 def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_path):
     """A lab's workbook often opens on a sheet of notes, or a chart's data: the first
     sheet that reads as samples is read, and the result names each sheet passed over

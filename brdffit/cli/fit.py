@@ -96,6 +96,9 @@ def add_arguments(p) -> None:
                    "ASTM E1392 (.astm), CSV/TSV with a header, or HDF5 "
                    "(docs/measurements.md; samples are fitted at their own directions); "
                    "'-' reads it from standard input")
+    p.add_argument("--sheet", metavar="NAME",
+                   help="an Excel workbook's sheet of samples to fit (default: its first "
+                        "sheet that holds samples)")
     default_model = options.DEFAULT_MODEL
     p.add_argument("--model", default=default_model,
                    help="model name (see `brdffit models`), a comma-separated list of them "
@@ -257,7 +260,8 @@ def run(args) -> int:
     if args.plots:
         extras.require("plots", "brdffit fit --plots")  # before the fit, not after
     # '-' as brdffit export takes it (it was "-: cannot read: No such file")
-    measured = readers.read_measured("/dev/stdin" if args.table == "-" else args.table)
+    measured = readers.read_measured("/dev/stdin" if args.table == "-" else args.table,
+                                     sheet=getattr(args, "sheet", None))
     if args.plots:  # made once the input is read: a refused file leaves no empty folder
         output_folder(args.plots, "--plots")
     table = measured

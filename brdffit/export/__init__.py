@@ -169,8 +169,14 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, l
     refits, the metal-or-dielectric weighing): another table only judges."""
     from brdffit.io import readers
 
+    # a workbook's samples are re-read from the sheet that was fitted (its first sheet
+    # of samples may be another)
+    sheet = (result.input or {}).get("sheet")
     if table is not None:
-        given = table if isinstance(table, MerlTable) else readers.read_table(table)[0]
+        same_file = not isinstance(table, MerlTable) and os.path.basename(
+            str(table)) == os.path.basename(result.table or "")
+        given = table if isinstance(table, MerlTable) else readers.read_table(
+            table, sheet=sheet if same_file else None)[0]
         other = _another_table(result, given)  # by name: all a result keeps of its table
         if other:
             other.append(f"export: the material is made from the {result.model} fit, not "
@@ -179,7 +185,7 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, l
     source = result.table
     if source and os.path.isfile(source):
         try:  # the fit's own file, in whichever layout it was read
-            got = readers.read_measured(source)
+            got = readers.read_measured(source, sheet=sheet)
             own = got if isinstance(got, MerlTable) else got.to_table()[0]
         except BrdffitError as e:
             return None, False, [f"fidelity: log_rmse_to_table not measured: {e}"]

@@ -55,7 +55,7 @@ import numpy as np
 
 from brdffit.errors import MerlFormatError
 from brdffit.io import merl, named_arrays, npz, text_samples, workbook
-from brdffit.io.measurements import Measurements
+from brdffit.io.measurements import Measurements, MeasurementsError
 from brdffit.io.named_arrays import read_hdf5, read_mat, read_npz
 from brdffit.io.text_samples import read_astm, read_csv, read_text_samples, read_xlsx
 
@@ -110,11 +110,12 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
     return reader
 
 
-def read_measured(path: str | os.PathLike,
-                  name: str | None = None) -> merl.MerlTable | Measurements:
+def read_measured(path: str | os.PathLike, name: str | None = None,
+                  sheet: str | None = None) -> merl.MerlTable | Measurements:
     """A measured file in any layout (module docstring); ``name`` as in
-    :func:`read_table`. Raises MerlFormatError (MeasurementsError is one) with one
-    line on what is wrong."""
+    :func:`read_table`; ``sheet``: an Excel workbook's sheet to read (else its first
+    sheet of samples), refused for any other file. Raises MerlFormatError
+    (MeasurementsError is one) with one line on what is wrong."""
     path = Path(path)
     if path.is_dir():
         raise MerlFormatError(name or str(path), "is a directory, not a measured table")
@@ -130,10 +131,14 @@ def read_measured(path: str | os.PathLike,
         with tempfile.TemporaryDirectory(prefix="brdffit-stream-") as folder:
             copy = Path(folder) / (Path(name or path).name or "stream")
             _copy_stream(path, copy, name or str(path))
-            return read_measured(copy, name or str(path))
+            return read_measured(copy, name or str(path), sheet)
     reader = reader_for(path, name)
+    if sheet is not None and reader is not read_xlsx:
+        raise MeasurementsError(name or str(path), f"a sheet was named ({sheet!r}), and "
+                                                   "this is no Excel workbook: only a "
+                                                   "workbook has sheets")
     try:
-        got = reader(path)
+        got = reader(path) if sheet is None else reader(path, sheet=sheet)
     except MerlFormatError as e:
         if name is None:
             raise
@@ -163,12 +168,12 @@ def declared_samples(path: str | os.PathLike, name: str | None = None) -> int | 
     return named_arrays.declared_samples(path, reader_for(path, name))
 
 
-def read_table(path: str | os.PathLike, name: str | None = None):
+def read_table(path: str | os.PathLike, name: str | None = None, sheet: str | None = None):
     """A measured file as a MERL table: ``(table, input)``; ``input`` is None for a
     MERL file, else :func:`input_summary` of its samples. ``name``: what the file is
     called where ``path`` is a temporary copy (its suffix chooses the reader, and the
-    messages and the table name it)."""
-    got = read_measured(path, name)
+    messages and the table name it); ``sheet`` as in :func:`read_measured`."""
+    got = read_measured(path, name, sheet)
     if isinstance(got, merl.MerlTable):
         return got, None
     table, binning = got.to_table()

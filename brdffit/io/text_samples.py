@@ -587,21 +587,23 @@ def read_csv(path: str | os.PathLike) -> Measurements:
     return read_text_samples(path)
 
 
-def read_xlsx(path: str | os.PathLike) -> Measurements:
-    """An Excel workbook's first sheet of samples, read as the CSV it would be saved as
-    (:mod:`brdffit.io.workbook`). A sheet before it that names no angle columns (notes,
-    a chart's data) is passed over, and the result says why; a sheet that names them is
-    the samples' sheet, and its refusal is the workbook's; where no sheet names them,
-    the refusal gives each sheet's reason."""
+def read_xlsx(path: str | os.PathLike, sheet: str | None = None) -> Measurements:
+    """An Excel workbook's first sheet of samples, or the one named ``sheet``, read as the
+    CSV it would be saved as (:mod:`brdffit.io.workbook`). A sheet before it that names
+    no angle columns (notes, a chart's data) is passed over, and the result says why; a
+    sheet that names them is the samples' sheet, and its refusal is the workbook's;
+    where no sheet names them, the refusal gives each sheet's reason. A sheet named is
+    read or refused: a workbook of two sheets of samples fitted the first, and the
+    second could not be reached."""
     source = str(path)
     passed: list[dict] = []
-    with contextlib.closing(workbook.sheet_texts(path, source)) as sheets:
+    with contextlib.closing(workbook.sheet_texts(path, source, sheet)) as sheets:
         for name, text, count in sheets:
             try:
                 m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
             except MeasurementsError as e:
                 why = _sheet_problem(path, name, e.problem)
-                if _names_angles(text):
+                if _names_angles(text) or sheet is not None:
                     # the samples' own sheet: its refusal is the file's (a row of "n/a" in
                     # it passed it over, and a later sheet's samples were fitted)
                     raise MeasurementsError(source, _of_sheet(name, why, count)) from None

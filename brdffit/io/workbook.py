@@ -40,12 +40,14 @@ def is_xlsx(path: str | Path) -> bool:
         return False
 
 
-def sheet_texts(path: str | Path, source: str) -> Iterator[tuple[str, str, int]]:
+def sheet_texts(path: str | Path, source: str,
+                sheet: str | None = None) -> Iterator[tuple[str, str, int]]:
     """Each sheet with a cell, in the workbook's order, as tab-separated text a CSV
     reader reads, a line per row (:func:`_lines`; a cell's tabs and line breaks made
     blanks, its quotes quoted as a CSV's): ``(name, text, how many sheets the workbook
     has)``. A sheet is read when it is asked for: the reader stops at the first that
-    holds samples."""
+    holds samples. With ``sheet``, that sheet alone (MeasurementsError naming the
+    workbook's sheets where it has none of that name, or where it is empty)."""
     import openpyxl
 
     _weighed(path, source)
@@ -56,9 +58,14 @@ def sheet_texts(path: str | Path, source: str) -> Iterator[tuple[str, str, int]]
         try:
             book = openpyxl.load_workbook(raw, read_only=True, data_only=True)
             names = book.sheetnames
-            for name in names:
+            if sheet is not None and sheet not in names:
+                raise MeasurementsError(source, f"no sheet named {sheet!r}: the workbook's "
+                                                "sheets are " + ", ".join(map(repr, names)))
+            for name in names if sheet is None else [sheet]:
                 if lines := _lines(book[name], source):
                     yield name, "\n".join(lines) + "\n", len(names)
+                elif sheet is not None:
+                    raise MeasurementsError(source, f"sheet {sheet!r} holds no cells")
         except MeasurementsError:
             raise
         except Exception as e:  # noqa: BLE001 - openpyxl raises many kinds on a damaged
