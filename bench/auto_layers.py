@@ -27,7 +27,6 @@ bench/results/auto_layers_<half>_<loss>.{json,md}.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import os
 import statistics
@@ -44,13 +43,11 @@ LAYERED = ("gltf_pbr", "gltf_clearcoat", "gltf_sheen", "principled", "principled
 
 
 def _rechoose(rows: list[dict], names: set[str], loss: str, tolerance: float) -> dict:
-    """The row auto chooses among ``names`` alone (copies: the selection's rows keep
-    their own ranks)."""
-    from brdffit.selection import choose, choose_by_look
+    """The row auto chooses among ``names`` alone, as ``select`` would
+    (``brdffit.selection.rechoose``, on copies: the selection's rows keep their ranks)."""
+    from brdffit.selection import rechoose
 
-    subset = [copy.deepcopy(r) for r in rows if r["model"] in names and r["status"] != "failed"]
-    chosen, _ = choose_by_look(subset) if loss == "render" else choose(subset, tolerance)
-    return chosen
+    return rechoose([r for r in rows if r["model"] in names], loss, tolerance)
 
 
 def run(names: list[str], loss: str, layered: tuple[str, ...] = LAYERED) -> list[dict]:

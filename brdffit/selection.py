@@ -498,6 +498,29 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     return selection
 
 
+def rechoose(rows: list[dict], loss: str = DEFAULT_LOSS, tolerance: float = DEFAULT_TOLERANCE,
+             budget: float | None = None, by_look: bool = True) -> dict:
+    """The row auto chooses among ranking ``rows`` (cheapest first, as
+    ``Selection.ranking`` holds them, or a subset), without refitting: the rule that
+    ``select`` applies under ``loss`` (the render rule, or the tolerance rule with
+    ``tolerance`` and ``budget``; ``by_look`` False as with a scene) and its guard on
+    layered choices. It decides on copies: ``rows`` keep their ranks and statuses. For
+    replaying a rule on stored rankings (``bench.auto_rows``) and re-deciding on a
+    subset of candidates (``bench.auto_layers``)."""
+    ok = [dict(copy.deepcopy(row), status="fitted") for row in rows
+          if row.get("status") != "failed" and row.get("log_rmse") is not None]
+    if not ok:
+        raise FitInputError("no fitted candidate to choose among")
+    rule = "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
+    if rule == "render_psnr_db":
+        chosen, reason = choose_by_look(ok)
+    else:
+        chosen, reason = choose(ok, _within_noise(ok, tolerance), budget, by_look=by_look)
+    _layer_gains(ok, rule)
+    chosen, _ = _layer_held_to_its_rule(chosen, reason, ok, rule, tolerance, budget, by_look)
+    return chosen
+
+
 #: Each candidate's last solve in this process (s, wall, its wait for a parent
 #: included): the order in which candidates start (:func:`longest_chains_first`).
 _SOLVE_SECONDS: dict[str, float] = {}

@@ -639,3 +639,30 @@ def test_a_budget_met_by_a_layered_candidate_is_not_overruled():
                                              0.001, True)
     assert chosen["model"] == "gltf_pbr", reason
     assert "renders 1.6 dB worse than gltf_pbr, the choice among the candidates" in reason
+
+
+def test_rechoose_replays_the_rule_and_its_guard_on_stored_rows():
+    """``rechoose`` re-decides on ranking rows without refitting, as ``select`` decides:
+    the tolerance rule (or the render rule) and the guard on a layered choice, on
+    copies (the rows keep their statuses and ranks)."""
+    from brdffit.selection import rechoose
+
+    rows = [{"model": m, "log_rmse": e, "psnr_db": db, "views_psnr_db": db, "n_params": n,
+             "verdict": "good", "radiance_verdict": "good", "status": "too far"}
+            for m, e, db, n in (("gltf_pbr", 0.0104, 23.5, 5),
+                                ("gltf_clearcoat", 0.0090, 24.4, 7),
+                                ("generalized_schlick", 0.0082, 24.5, 11))]
+    # the rule alone takes the cheaper coat; the guard, the closer fit without a layer
+    assert rechoose(rows, "log", 0.005)["model"] == "generalized_schlick"
+    assert rechoose(rows[:2], "log", 0.005)["model"] == "gltf_clearcoat"  # nothing to hold it to
+    # the render rule takes the coat within its 0.5 dB; it renders no closer than the
+    # choice without a layer, so that is chosen; rendering closer, the coat stays
+    assert rechoose(rows, "render")["model"] == "generalized_schlick"
+    rows[1]["views_psnr_db"] = 24.6
+    assert rechoose(rows, "render")["model"] == "gltf_clearcoat"
+    assert [r["status"] for r in rows] == ["too far"] * 3 and "rank" not in rows[0]
+    failed = [dict(rows[0], status="failed", log_rmse=None)]
+    from brdffit.errors import FitInputError
+
+    with pytest.raises(FitInputError, match="no fitted candidate"):
+        rechoose(failed)
