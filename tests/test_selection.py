@@ -86,8 +86,10 @@ def test_a_nested_model_over_an_exact_parent_is_not_solved_again(ggx_selection):
 
 
 def test_a_cheaper_model_is_chosen_only_within_tolerance(ggx_selection):
-    """The rule alone, on rows that read the same verdict: the tolerance decides."""
-    rows = [dict(r, verdict="visible", radiance_verdict="visible")
+    """The rule alone, on rows that read the same verdict and render alike: the
+    tolerance decides."""
+    rows = [dict(r, verdict="visible", radiance_verdict="visible", psnr_db=30.0,
+                 views_psnr_db=None)
             for r in ggx_selection.ranking if r["model"] in ("phong", "ggx")]
     phong = rows[0]
     assert phong["model"] == "phong" and phong["excess"] > 0
@@ -145,14 +147,38 @@ def test_under_the_render_rule_a_layer_is_taken_only_where_it_gains_on_the_base_
         assert _layer_that_gains_on_the_base_choice(chosen, reason, ok)[0] is chosen
 
 
+def test_within_tolerance_a_cheaper_fit_that_renders_further_off_is_passed_over():
+    """The verdict is a class: within one, a cheaper fit within the tolerance rendered
+    7.7 dB further off (ggx over ggx2 on color-changing-paint1, log loss). Of the
+    candidates within tolerance that read the best verdict, those more than
+    LOOK_WINDOW_DB below the best-looking of them are passed over, and the reason says
+    so; within the window, the cheaper one stays."""
+    from brdffit.selection import LOOK_WINDOW_DB
+
+    def rows(ggx_db):
+        return [{"model": m, "n_params": n, "log_rmse": e, "psnr_db": db,
+                 "verdict": "poor", "radiance_verdict": "poor"}
+                for m, n, e, db in (("ggx", 8, 0.0150, ggx_db), ("ggx2", 12, 0.0145, 21.0))]
+
+    chosen, reason = choose(rows(13.3), 0.005)
+    assert chosen["model"] == "ggx2", reason
+    assert ("cheaper ones within tolerance that read as well render further off (ggx "
+            "13.3 dB against 21.0 dB)") in reason
+    chosen, reason = choose(rows(21.0 - LOOK_WINDOW_DB), 0.005)
+    assert chosen["model"] == "ggx" and "further off" not in reason
+    assert choose(rows(13.3), 0.005, by_look=False)[0]["model"] == "ggx"
+
+
 def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
     """beckmann and ggx both have 8 parameters: within tolerance of each other, the
     registry's order (beckmann first) is no reason to keep the worse fit."""
     beckmann = next(r for r in ggx_selection.ranking if r["model"] == "beckmann")
     ggx = next(r for r in ggx_selection.ranking if r["model"] == "ggx")
     assert beckmann["n_params"] == ggx["n_params"] and beckmann["log_rmse"] > ggx["log_rmse"]
-    # the rule alone, on rows that read alike (on this table beckmann also reads worse)
-    rows = [dict(r, verdict="good", radiance_verdict="good") for r in (beckmann, ggx)]
+    # the rule alone, on rows that read and render alike (on this table beckmann reads
+    # worse)
+    rows = [dict(r, verdict="good", radiance_verdict="good", psnr_db=30.0,
+                 views_psnr_db=None) for r in (beckmann, ggx)]
     chosen, reason = choose(rows, beckmann["excess"] * 1.5)
     assert chosen["model"] == "ggx"
     assert "as cheap and within tolerance too, but with a higher error: beckmann" in reason
