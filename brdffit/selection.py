@@ -439,9 +439,10 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
         elif budget is not None and row["log_rmse"] <= budget:
             row["status"] = "under budget"
         else:
-            row["status"] = ("looks worse" if (rule == "render_psnr_db" or (
+            row["status"] = ("looks worse" if ((rule == "render_psnr_db" or (
                 by_look and row["excess"] <= tolerance_used))
-                and _verdict_rank(row) > _verdict_rank(chosen) else
+                and _verdict_rank(row) > _verdict_rank(chosen))
+                or (by_look and row.get("renders_further_off")) else
                 "within tolerance" if row["excess"] <= tolerance_used else "too far")
     reason += _all_poor_warning(ok, loss)
 
@@ -839,20 +840,30 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None,
         prefix = (f"No candidate reaches the budget {_fmt(budget)} (best: {best['model']} "
                   f"{_fmt(best['log_rmse'])}), so the tolerance rule decides. ")
     within = [row for row in ok if row["excess"] <= tolerance]
-    eligible = within
+    eligible, further_off, top_row = within, [], None
     if by_look:
         look = min(_verdict_rank(row) for row in within)
         eligible = [row for row in within if _verdict_rank(row) == look]
-        # of those, the ones that render within LOOK_WINDOW_DB of the best-looking
-        top = max(_psnr(row) for row in eligible)
-        if math.isfinite(top):
-            eligible = [row for row in eligible if _psnr(row) >= top - LOOK_WINDOW_DB]
+        # of those, the ones that render within LOOK_WINDOW_DB of the best-looking (not
+        # a sample list's: its tolerance is widened for noise, its render is not; nor a
+        # row whose render was not measured: not measured is not further off)
+        top_row = max(eligible, key=_psnr)
+        if math.isfinite(_psnr(top_row)) and not any(
+                row.get("log_rmse_basis") == "held_out" for row in eligible):
+            further_off = [row for row in eligible if math.isfinite(_psnr(row))
+                           and _psnr(row) < _psnr(top_row) - LOOK_WINDOW_DB]
+            eligible = [row for row in eligible if row not in further_off]
+    for row in ok:  # the ranking's status says it (_decide: "looks worse")
+        row["renders_further_off"] = row in further_off
     c = _lowest_of_its_size(eligible[0], eligible)
     cheaper = [row for row in ok[: ok.index(c)] if row not in within]
-    # cheaper candidates within tolerance that the look passed over
-    looks_worse = [r for r in ok[: ok.index(c)] if r in within and r not in eligible]
-    renders_worse = [r for r in looks_worse if _verdict_rank(r) == _verdict_rank(c)]
-    looks_worse = [r for r in looks_worse if r not in renders_worse]
+    # cheaper candidates within tolerance that the look passed over (by the verdict),
+    # and those as cheap or cheaper that render further off at the same verdict (a row
+    # as large with a lower error among them too: the lower error did not decide)
+    looks_worse = [r for r in ok[: ok.index(c)] if r in within and r not in eligible
+                   and r not in further_off]
+    renders_worse = [r for r in further_off if ok.index(r) < ok.index(c)
+                     or r.get("n_params") == c.get("n_params")]
     said = ([f"reads {c.get('verdict')}"] if looks_worse else []) + (
         [f"renders within {LOOK_WINDOW_DB:g} dB of the best-looking of those"]
         if renders_worse else [])
@@ -876,9 +887,10 @@ def choose(ok: list[dict], tolerance: float, budget: float | None = None,
             + ": their PSNR, brightness or colour past the verdict's thresholds, "
             "quality.reason)")
     if renders_worse:
-        why += ("; cheaper ones within tolerance that read as well render further off (" +
-                ", ".join(f"{r['model']} {_psnr(r):.1f} dB" for r in renders_worse)
-                + f" against {_psnr(c):.1f} dB)")
+        why += ("; cheaper ones within tolerance that read as well render more than "
+                f"{LOOK_WINDOW_DB:g} dB below the best-looking of those ({top_row['model']}, "
+                f"{_psnr(top_row):.1f} dB): " + ", ".join(
+                    f"{r['model']} {_psnr(r):.1f} dB" for r in renders_worse))
     same_size = [r for r in eligible if r is not c and r.get("n_params") == c.get("n_params")]
     if same_size:
         why += ("; as cheap and within tolerance too, but with a higher error: " + ", ".join(

@@ -160,13 +160,26 @@ def test_within_tolerance_a_cheaper_fit_that_renders_further_off_is_passed_over(
                  "verdict": "poor", "radiance_verdict": "poor"}
                 for m, n, e, db in (("ggx", 8, 0.0150, ggx_db), ("ggx2", 12, 0.0145, 21.0))]
 
-    chosen, reason = choose(rows(13.3), 0.005)
+    ok = rows(13.3)
+    chosen, reason = choose(ok, 0.005)
     assert chosen["model"] == "ggx2", reason
-    assert ("cheaper ones within tolerance that read as well render further off (ggx "
-            "13.3 dB against 21.0 dB)") in reason
+    assert ("cheaper ones within tolerance that read as well render more than 1 dB below "
+            "the best-looking of those (ggx2, 21.0 dB): ggx 13.3 dB") in reason
+    assert ok[0]["renders_further_off"] and not ok[1]["renders_further_off"]
     chosen, reason = choose(rows(21.0 - LOOK_WINDOW_DB), 0.005)
-    assert chosen["model"] == "ggx" and "further off" not in reason
+    assert chosen["model"] == "ggx" and "best-looking" not in reason
     assert choose(rows(13.3), 0.005, by_look=False)[0]["model"] == "ggx"
+    # a render not measured is not further off; nor is a sample list's held-out fit
+    ok = rows(float("nan"))
+    assert choose(ok, 0.005)[0]["model"] == "ggx" and not ok[0]["renders_further_off"]
+    held = [dict(r, log_rmse_basis="held_out") for r in rows(13.3)]
+    assert choose(held, 0.005)[0]["model"] == "ggx"
+    # a row as large with a lower error, passed over for its render, is named too
+    same = [{"model": m, "n_params": 8, "log_rmse": e, "psnr_db": db, "verdict": "good",
+             "radiance_verdict": "good"} for m, e, db in (("beckmann", 0.0150, 21.0),
+                                                          ("ggx", 0.0148, 15.0))]
+    chosen, reason = choose(same, 0.005)
+    assert chosen["model"] == "beckmann" and "(beckmann, 21.0 dB): ggx 15.0 dB" in reason
 
 
 def test_a_tie_in_size_goes_to_the_lower_error(ggx_table, ggx_selection):
