@@ -42,6 +42,18 @@ LAYERED = ("gltf_pbr", "gltf_clearcoat", "gltf_sheen", "principled", "principled
            "generalized_schlick")
 
 
+def worse_log(layered: dict, base: dict) -> bool:
+    """Issue 40's line on the table: the layered choice's log_rmse above 1.001x the
+    base's."""
+    return layered["log_rmse"] > 1.001 * base["log_rmse"]
+
+
+def worse_render(layered: dict, base: dict) -> bool:
+    """Issue 40's line on the look: more than 0.5 dB below the base in the independent
+    render (``indep_psnr_db``)."""
+    return layered["indep_psnr_db"] < base["indep_psnr_db"] - 0.5
+
+
 def _rechoose(rows: list[dict], names: set[str], loss: str, tolerance: float) -> dict:
     """The row auto chooses among ``names`` alone, as ``select`` would
     (``brdffit.selection.rechoose``, on copies: the selection's rows keep their ranks)."""
@@ -118,10 +130,8 @@ def report(rows: list[dict], which: str, loss: str, layered: tuple[str, ...] = L
         lines.append(f"| {label} | {poor(key)} | {med(key, 'indep_psnr_db'):.2f} | "
                      f"{med(key, 'log_rmse'):.4g} |")
     def worse(key):
-        log = [r["material"] for r in rows
-               if r["auto_layers"]["log_rmse"] > 1.001 * r[key]["log_rmse"]]
-        db = [r["material"] for r in rows
-              if r["auto_layers"]["indep_psnr_db"] < r[key]["indep_psnr_db"] - 0.5]
+        log = [r["material"] for r in rows if worse_log(r["auto_layers"], r[key])]
+        db = [r["material"] for r in rows if worse_render(r["auto_layers"], r[key])]
         return (f"log_rmse above 1.001x on {len(log)} ({', '.join(log) or 'none'}); "
                 f"independent render more than 0.5 dB worse on {len(db)} "
                 f"({', '.join(db) or 'none'})")

@@ -26,7 +26,7 @@ import statistics
 
 import numpy as np
 
-from bench.auto_layers import LAYERED
+from bench.auto_layers import LAYERED, worse_log, worse_render
 from bench.render_loss import Views, cache_dir, half, judge
 
 #: What a row keeps of a selection's ranking row (params and arrays left out).
@@ -73,7 +73,7 @@ def replay(data: dict, loss: str) -> list[str]:
     lines = []
     for which in ("design", "check"):
         poor = {"ggx": 0, "auto": 0, "without layers": 0, "with layers": 0}
-        worse_log, worse_db, indep, changed = [], [], [], 0
+        log_names, db_names, indep, changed = [], [], [], 0
         for name in half(list(data), which):
             rows = data[name]["rows"]
             fitted = [r for r in rows if r["status"] != "failed"]
@@ -87,16 +87,16 @@ def replay(data: dict, loss: str) -> list[str]:
                 poor[key] += row.get("verdict") == "poor"
             lay, base = picks["with layers"], picks["without layers"]
             changed += lay["model"] != data[name]["chosen"]
-            if lay["log_rmse"] > 1.001 * base["log_rmse"]:
-                worse_log.append(name)
-            if lay["indep_psnr_db"] < base["indep_psnr_db"] - 0.5:
-                worse_db.append(name)
+            if worse_log(lay, base):
+                log_names.append(name)
+            if worse_render(lay, base):
+                db_names.append(name)
             indep.append(lay["indep_psnr_db"])
         lines.append(f"{loss} loss, {which} half: poor " + ", ".join(
             f"{k} {v}" for k, v in poor.items())
             + f"; with layers: median independent render {statistics.median(indep):.2f} dB,"
-            f" against without layers log_rmse > 1.001x on {len(worse_log)}, render "
-            f"< -0.5 dB on {len(worse_db)} ({', '.join(worse_db) or 'none'}); "
+            f" against without layers log_rmse > 1.001x on {len(log_names)}, render "
+            f"< -0.5 dB on {len(db_names)} ({', '.join(db_names) or 'none'}); "
             f"{changed} choices differ from the dump's")
     return lines
 

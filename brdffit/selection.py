@@ -400,7 +400,7 @@ def _decide(table, rows, fits, tolerance, budget, scene, mono_ks, grey_tolerance
     if not ok:
         raise FitInputError(f"no candidate could be fitted: {_failures(rows)}")
     loss = fit_options.get("loss", DEFAULT_LOSS)
-    rule = "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
+    rule = _rule_of(loss, budget)
     if rule == "render_psnr_db":
         chosen, reason = choose_by_look(ok)
         best = max(ok, key=_psnr)
@@ -512,14 +512,26 @@ def rechoose(rows: list[dict], loss: str = DEFAULT_LOSS, tolerance: float = DEFA
           if row.get("status") != "failed" and row.get("log_rmse") is not None]
     if not ok:
         raise FitInputError("no fitted candidate to choose among")
-    rule = "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
-    if rule == "render_psnr_db":
-        chosen, reason = choose_by_look(ok)
-    else:
-        chosen, reason = choose(ok, _within_noise(ok, tolerance), budget, by_look=by_look)
+    rule = _rule_of(loss, budget)
+    chosen, reason = _by_rule(ok, rule, tolerance, budget, by_look)
     _layer_gains(ok, rule)
     chosen, _ = _layer_held_to_its_rule(chosen, reason, ok, rule, tolerance, budget, by_look)
     return chosen
+
+
+def _rule_of(loss: str, budget: float | None) -> str:
+    """What auto ranks by: the render rule under the render loss, unless a budget (a
+    log_rmse figure) was given; else the tolerance rule."""
+    return "render_psnr_db" if loss == "render" and budget is None else "log_rmse"
+
+
+def _by_rule(rows: list[dict], rule: str, tolerance: float, budget: float | None,
+             by_look: bool) -> tuple[dict, str]:
+    """``rule``'s choice among ``rows`` and its reason: :func:`choose_by_look`, or
+    :func:`choose` with the tolerance worked out on these rows (:func:`_within_noise`)."""
+    if rule == "render_psnr_db":
+        return choose_by_look(rows)
+    return choose(rows, _within_noise(rows, tolerance), budget, by_look=by_look)
 
 
 #: Each candidate's last solve in this process (s, wall, its wait for a parent
@@ -1117,8 +1129,7 @@ def _layer_held_to_its_rule(chosen: dict, reason: str, ok: list[dict], rule: str
         return chosen, reason
     return _layer_no_worse_than_without(
         chosen, reason, ok, rule,
-        lambda rows: (choose_by_look(rows) if rule == "render_psnr_db" else choose(
-            rows, _within_noise(rows, tolerance), budget, by_look=by_look))[0])
+        lambda rows: _by_rule(rows, rule, tolerance, budget, by_look)[0])
 
 
 def _layer_no_worse_than_without(chosen: dict, reason: str, ok: list[dict], rule: str,

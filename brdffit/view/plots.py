@@ -892,10 +892,8 @@ def ranking(selection: dict) -> bytes:
 
     rows = selection["ranking"]
     fitted = [r for r in rows if r["status"] != "failed"]
-    by_look = selection.get("rule") == "render_psnr_db"
-
-    def psnr_of(r: dict) -> float | None:
-        return ranked_psnr(r, selection.get("rule"))
+    rule = selection.get("rule")
+    by_look = rule == "render_psnr_db"
 
     n = len(rows)
     fig = Figure(figsize=(10, 2.2 + 0.42 * n), layout="constrained")
@@ -913,7 +911,7 @@ def ranking(selection: dict) -> bytes:
                     + ("" if r.get("converged", True) else " (not converged)"),
                     va="center", fontsize=8, zorder=4,  # over the tolerance lines
                     bbox={"facecolor": "white", "edgecolor": "none", "pad": 0.5, "alpha": 0.8})
-        psnr = psnr_of(r)
+        psnr = ranked_psnr(r, rule)
         if psnr is not None:
             ax_psnr.barh(i, psnr, color=colour, edgecolor="#333333", linewidth=0.5)
             ax_psnr.text(psnr, i, f" {psnr:.1f} dB" + (f", {r['verdict']}" if r.get("verdict")
@@ -940,7 +938,7 @@ def ranking(selection: dict) -> bytes:
                         transform=ax_err.get_yaxis_transform())
         if selection.get("budget") is not None:
             ax_err.axvline(selection["budget"], color="#1f77b4", linewidth=1, linestyle=":")
-        top = max((psnr_of(r) or 0.0) for r in fitted)
+        top = max((ranked_psnr(r, rule) or 0.0) for r in fitted)
         ax_psnr.set_xlim(0, max(1.35 * top, 1.0))
         if by_look and top > 0:
             ax_psnr.axvline(top, color="#333333", linewidth=1)
