@@ -297,19 +297,24 @@ class Client:
         """The models the server fits, with their parameters (``GET /v1/models``)."""
         return self._json("GET", "/v1/models")
 
-    def upload(self, path: str | os.PathLike) -> str:
-        """Upload a MERL ``.binary`` file; returns its table id (its sha256).
+    def upload(self, path: str | os.PathLike, sheet: str | None = None) -> str:
+        """Upload a measured file (a MERL ``.binary`` table, or samples: docs/measurements.md);
+        returns its table id (its sha256).
 
-        Streams the file; the same bytes uploaded twice give the same id.
+        Streams the file; the same bytes uploaded twice give the same id. ``sheet``: an
+        Excel workbook's sheet of samples to store (default: its first), refused for any
+        other file; each sheet of a workbook gets an id of its own.
         """
-        return self.upload_table(path).id
+        return self.upload_table(path, sheet).id
 
-    def upload_table(self, path: str | os.PathLike) -> TableInfo:
+    def upload_table(self, path: str | os.PathLike, sheet: str | None = None) -> TableInfo:
         """As :meth:`upload`, returning the table's summary too."""
+        params = {"name": os.path.basename(os.fspath(path))}
+        if sheet is not None:
+            params["sheet"] = sheet
         with open(path, "rb") as f:  # httpx streams a file in chunks, with its length
             return self._json(
-                "POST", "/v1/tables", TableInfo.from_json, content=f,
-                params={"name": os.path.basename(os.fspath(path))},
+                "POST", "/v1/tables", TableInfo.from_json, content=f, params=params,
                 headers={"Content-Type": "application/octet-stream"},
             )
 

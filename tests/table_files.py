@@ -44,6 +44,29 @@ def write_astm(path: Path, model: str, params: dict, n: int = 20_000, seed: int 
 
 
 #: A CSV whose second row is below the horizon: one line, exit 2 / 422 / a failed table.
+def write_workbook(path: Path, sheets: dict[str, list[float]], n: int = 300,
+                   seed: int = 4) -> Path:
+    """An Excel workbook of one sheet of ``n`` Lambertian samples per ``name: kd`` of
+    ``sheets``, in that order, each at the same directions (degrees, as a lab's
+    spreadsheet holds them)."""
+    import numpy as np
+    import openpyxl
+
+    rng = np.random.default_rng(seed)
+    angles = np.column_stack([rng.choice([10.0, 30.0, 50.0, 70.0], n), np.zeros(n),
+                              np.degrees(np.arccos(rng.uniform(0.1, 1.0, n))),
+                              rng.uniform(0.0, 360.0, n)])
+    wb = openpyxl.Workbook()
+    wb.remove(wb.active)
+    for name, kd in sheets.items():
+        sheet = wb.create_sheet(name)
+        sheet.append(["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"])
+        for a in angles:
+            sheet.append([float(x) for x in (*a, *(np.asarray(kd) / np.pi))])
+    wb.save(path)
+    return path
+
+
 BAD_CSV = "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,120,0,1,1,1\n"
 #: The GGX material of the sample files.
 SAMPLED = {"kd": [0.2, 0.3, 0.4], "ks": [0.6, 0.6, 0.6], "alpha": 0.2, "f0": 0.2}

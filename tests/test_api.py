@@ -833,6 +833,36 @@ def test_a_sample_upload_is_fitted_at_its_own_directions(server, tmp_path):
     assert "bad.csv: theta_o_deg is below the horizon" in e.value.detail
 
 
+def test_a_workbooks_sheet_is_named_on_upload(server, tmp_path):
+    """A workbook of two sheets of samples: the service stored its first and the second
+    could not be reached. ``?sheet=`` (the client's ``sheet=``) stores the one named, as
+    a table of its own (its id is not the file's), whose fit reads that sheet; a sheet
+    the workbook lacks, or named for a file with no sheets, is a 422 that says so."""
+    from brdffit.client import ApiError, Client
+    from tests.table_files import write_workbook
+
+    book = write_workbook(tmp_path / "two.xlsx", {"sample A": [0.2, 0.1, 0.05],
+                                                  "sample B": [0.6, 0.3, 0.15]})
+    c = Client(server.url)
+    first, named = c.upload_table(book), c.upload_table(book, sheet="sample B")
+    assert first.summary["input"]["sheet"] == "sample A"
+    assert named.summary["input"]["sheet"] == "sample B" and named.id != first.id
+    assert c.upload(book, sheet="sample B") == named.id  # the same file and sheet: one id
+    job = c.wait(c.fit(named.id, "lambert", **FAST))
+    assert job.status == "done", job
+    r = c.result(job)
+    assert r.input["sheet"] == "sample B"
+    assert r.params["kd"] == pytest.approx([0.6, 0.3, 0.15], rel=1e-6)
+    with pytest.raises(ApiError, match="no sheet named 'sample C': the workbook's sheets "
+                                       "are 'sample A', 'sample B'") as e:
+        c.upload(book, sheet="sample C")
+    assert e.value.status_code == 422
+    (tmp_path / "t.binary").write_bytes(table_bytes("ggx"))
+    with pytest.raises(ApiError, match="this is no Excel workbook") as e:
+        c.upload(tmp_path / "t.binary", sheet="sample B")
+    assert e.value.status_code == 422
+
+
 def test_an_error_quotes_at_most_a_few_hundred_characters_of_the_input(http, table_id):
     """A 900,000-character model name was quoted whole, twice: a 1.8 MB answer."""
     r = http.post("/v1/fits", json={"table_id": table_id, "models": "g" * 900_000})

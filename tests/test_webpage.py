@@ -387,6 +387,19 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         visit.wait_image("#plot-slices")
         assert "/plots/samples.png" in page.get_attribute("#plot-slices", "data-shown")
         visit.shot("token-samples")
+
+        # a workbook's second sheet, named on the page: a table of its own
+        from tests.table_files import write_workbook
+
+        book = write_workbook(tmp_path / "two.xlsx", {"sample A": [0.2, 0.1, 0.05],
+                                                      "sample B": [0.6, 0.3, 0.15]})
+        page.set_input_files("#upload-file", str(book))
+        page.fill("#sheet-input", "sample B")
+        page.click("#upload-button")
+        page.wait_for_function("document.querySelector('#table-current').innerText"
+                               ".includes('two.xlsx')", timeout=STEP_MS)
+        assert "sheet “sample B” of 2" in page.locator("#table-current").inner_text()
+        visit.shot("token-sheet")
         assert visit.outside == []
         assert visit.console_errors == []
         visit.close()

@@ -61,7 +61,9 @@ class TableSummary(BaseModel):
 
 
 class TableOut(BaseModel):
-    id: str = Field(description="sha256 of the file: the same bytes always get the same id")
+    id: str = Field(description="sha256 of the file (of the file's sha256 and the sheet's "
+                                "name, for a workbook's sheet named on upload): the same "
+                                "bytes always get the same id")
     name: str = Field(description="the uploader's file name")
     size_bytes: int
     created_at: datetime
@@ -167,6 +169,12 @@ async def upload_table(
     settings: SettingsDep,
     name: Annotated[str | None, Query(max_length=MAX_NAME,
                                       description="file name to record")] = None,
+    sheet: Annotated[str | None, Query(
+        min_length=1, max_length=MAX_NAME,
+        description="an Excel workbook's sheet of samples to store (default: its first "
+                    "sheet of samples); refused for any other file. The id is then the "
+                    "sha256 of the file's sha256 and the sheet's name "
+                    "(api.services.tables.sheet_id): each sheet is a table of its own")] = None,
 ) -> TableOut:
     cap = settings.max_upload_bytes
     length = request.headers.get("content-length", "")
@@ -217,7 +225,7 @@ async def upload_table(
     name = (name or "upload").replace("\x00", "\ufffd")
     try:
         record, created = await run_in_threadpool(
-            tables.validate_and_store, store, tmp, digest, size, name, cap
+            tables.validate_and_store, store, tmp, digest, size, name, cap, sheet
         )
     except tables.StoredTooLarge as e:  # the cap holds for what is kept, compressed or not
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(e)) from None

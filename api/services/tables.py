@@ -31,8 +31,16 @@ def _stored_fits(name: str, samples: int, sigma: bool, cap: int | None) -> None:
             "samples (thin the list, or bin it onto the MERL grid)")
 
 
+def sheet_id(digest: str, sheet: str) -> str:
+    """The id of a workbook's sheet named on upload: the sha256 of the file's sha256 (hex)
+    and the sheet's name, so that each sheet of one file is a table of its own, and the
+    same file and sheet always get the same id (without a sheet, the id is the file's)."""
+    return hashlib.sha256(f"{digest}\x00sheet\x00{sheet}".encode()).hexdigest()
+
+
 def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
-                       name: str, cap: int | None = None) -> tuple[TableRecord, bool]:
+                       name: str, cap: int | None = None,
+                       sheet: str | None = None) -> tuple[TableRecord, bool]:
     """Store the table file ``tmp`` (its ``sha256`` and ``size`` already known) under
     ``name``: ``(record, created)``, ``created`` False where the same bytes were stored
     before. A file of samples (ASTM, CSV, Excel, HDF5, MATLAB, .npz;
@@ -40,11 +48,15 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     brdffit's HDF5 sample list (read back by its content whatever the stored file is
     called), which the jobs fit at its own directions; its summary is the summary of
     the table it bins into (what the plots draw), with ``input`` saying what the
-    binning did. The id stays the upload's sha256. Raises ``MerlFormatError`` naming
+    binning did. The id stays the upload's sha256 (:func:`sheet_id` where ``sheet``
+    names an Excel workbook's sheet to read, as ``brdffit fit --sheet``: refused, as
+    the reader refuses it, for any other file). Raises ``MerlFormatError`` naming
     ``name`` (not the temp file) for a file no reader takes, and
     :class:`StoredTooLarge` where the stored sample list would be over ``cap`` bytes (an
     HDF5 upload's declared rows are weighed before any is read; a text file's once
     read)."""
+    if sheet is not None:
+        digest = sheet_id(digest, sheet)
     record = store.get_table(digest)
     # known bytes, already validated, unless the stored file is gone (deleted by hand, a
     # lost disk): then this upload puts it back (it answered 200 and every fit failed
@@ -55,7 +67,7 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     declared = readers.declared_samples(tmp, name)
     if declared is not None:  # at least the angles and rgb: refused without reading
         _stored_fits(name, declared, False, cap)
-    measured = readers.read_measured(tmp, name=name)  # errors name the upload
+    measured = readers.read_measured(tmp, name=name, sheet=sheet)  # errors name the upload
     if isinstance(measured, Measurements):
         _stored_fits(name, measured.n, measured.sigma is not None, cap)
         # one layout for the jobs to read, sigma and all; the size stays the upload's, as

@@ -202,7 +202,9 @@ async function uploadTable() {
   if (!file) throw new Error("choose a measured file first (MERL .binary, ASTM, CSV, HDF5, MATLAB .mat, NumPy .npz, Excel .xlsx)");
   clearMessage();
   say(`Uploading ${file.name} (${fmt(file.size / 1e6, 3)} MB)…`, "info");
-  const table = await api("POST", `/v1/tables?name=${encodeURIComponent(file.name)}`,
+  const sheet = $("sheet-input").value.trim();
+  const named = sheet ? `&sheet=${encodeURIComponent(sheet)}` : "";
+  const table = await api("POST", `/v1/tables?name=${encodeURIComponent(file.name)}${named}`,
     { body: file, contentType: "application/octet-stream" });
   chooseTable(table);
   say(`Uploaded ${table.name}.`, "info");
