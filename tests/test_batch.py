@@ -528,7 +528,8 @@ def test_a_refused_out_leaves_no_journal_and_a_damaged_file_is_one_error(tmp_pat
     foreign = tmp_path / "foreign.h5"
     with h5py.File(foreign, "w") as f:
         f["x"] = 1
-    for out, says in ((folder, "a directory"), (text, "not a readable HDF5 file"),
+    for out, says in ((folder, "a directory"),
+                      (text, "a text file, not HDF5 .by its first bytes.; a batch results"),
                       (foreign, "not a brdffit batch results file")):
         with pytest.raises(BatchFileError, match=says):
             BatchStore(out).open()
@@ -650,23 +651,24 @@ def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     second = run_batch([str(d)], FitRequest(("lambert",), opts), out, workers=0,
                       progress=False)
     assert second.skipped == 1 and second.fits == 1
+    assert (second.replaced_changed, second.replaced_options) == (1, 0)  # said, not "none"
     t = _tables(out)["m1"]
     assert t["sha256"] == _sha256(str(d / "m1.binary"))
     assert _close(t["fits"]["lambert"]["params"]["kd"], [0.1, 0.1, 0.1], 0.02)
     # other options are another fit; --refit makes them again regardless
     third = run_batch([str(d)], FitRequest.of("lambert", samples=2048, starts=1), out,
                       workers=0, progress=False)
-    assert third.fits == 2
+    assert third.fits == 2 and third.replaced_options == 2 and third.replaced_changed == 0
     fourth = run_batch([str(d)], FitRequest.of("lambert", samples=2048, starts=1), out,
                        workers=0, progress=False, refit=True)
-    assert fourth.fits == 2 and fourth.skipped == 0
+    assert fourth.fits == 2 and fourth.skipped == 0 and fourth.replaced_refit == 2
     # a scene weights other directions: another fit, which a rerun then resumes
     from brdffit.fitting.scene import Scene
 
     in_scene = FitRequest.of("lambert", samples=2048, starts=1,
                              scene=Scene.preset("camera-normal"))
     fifth = run_batch([str(d)], in_scene, out, workers=0, progress=False)
-    assert fifth.fits == 2 and fifth.skipped == 0
+    assert fifth.fits == 2 and fifth.skipped == 0 and fifth.replaced_options == 2
     sixth = run_batch([str(d)], in_scene, out, workers=0, progress=False)
     assert sixth.fits == 0 and sixth.skipped == 2
     assert json.loads(read_results(out)["attrs"]["request"])["scene"]["name"] == "camera-normal"
@@ -847,7 +849,7 @@ def test_bad_outputs_exit_2(table_dir, tmp_path, capsys):
     not_h5 = tmp_path / "notes.h5"
     not_h5.write_text("my notes")
     assert cli_main(["batch", str(table_dir), "--models", "ggx", "--out", str(not_h5)]) == 2
-    assert "not a readable HDF5 file" in capsys.readouterr().err
+    assert "notes.h5: a text file, not HDF5" in capsys.readouterr().err
     assert not_h5.read_text() == "my notes"
 
 
@@ -935,6 +937,15 @@ def test_the_summary_line_counts_in_words():
                                          "kept from before")
     partly.skipped = 0
     assert summary_line(partly).endswith("; 3 fits kept from before")
+    # a rerun with other options, or of a changed file, replaces fits: not "none"
+    other = BatchSummary("out.h5", tables=2, fits=2, replaced_options=2, elapsed_s=3.1)
+    assert summary_line(other).endswith("; 2 fits made with other options, replaced")
+    other.replaced_changed, other.kept = 1, 1
+    assert summary_line(other).endswith("; 1 fit kept from before, 2 fits made with other "
+                                        "options, replaced, 1 fit of tables whose file "
+                                        "changed since, replaced")
+    refit = BatchSummary("out.h5", tables=2, fits=2, replaced_refit=2, elapsed_s=3.1)
+    assert summary_line(refit).endswith("; 2 fits from before, made again as --refit asks")
 
 
 def test_a_file_of_a_newer_format_is_named_so(tmp_path):

@@ -99,6 +99,9 @@ def test_a_plots_folder_that_cannot_be_made_is_refused_before_the_fit(tmp_path, 
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert f"--plots {blocker / 'plots'}: cannot make the folder (Not a directory)" in r.stderr
     assert "ggx fit" not in r.stdout  # nothing was fitted first
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--plots", str(blocker))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"--plots {blocker}: a file, not a folder" in r.stderr  # not "File exists"
 
 
 def test_models_lists_every_model_with_ranges():

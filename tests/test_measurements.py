@@ -428,6 +428,34 @@ def test_a_matlab_v5_file_reads_as_its_variables_saved_v73_do(tmp_path):
             read_measured(huge)
 
 
+@pytest.mark.system  # a second process holds the file open
+def test_an_hdf5_file_h5py_cannot_open_says_why(tmp_path):
+    """A truncated HDF5 file, and one another program holds open for writing, read as
+    "an HDF5 file, not HDF5 (by its first bytes)": its signature was found, the rest
+    was not read. Each now says what happened and what to do."""
+    import subprocess
+    import sys
+
+    h5 = _write_all(tmp_path, _samples(2000))["hdf5"]
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(h5.read_bytes()[:3000])
+    with pytest.raises(MeasurementsError, match=r"cut.h5: a truncated HDF5 file: 3,000 bytes "
+                                                r"of the [\d,]+ it says it holds .* copy or "
+                                                "write it again"):
+        read_measured(cut)
+    writer = subprocess.Popen([sys.executable, "-c", "import h5py, sys; f = h5py.File(sys.argv[1], "
+                               "'a'); print('open', flush=True); sys.stdin.read()", str(h5)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline().strip() == "open"
+        with pytest.raises(MeasurementsError, match="another program holds open for writing "
+                                                    ".*HDF5_USE_FILE_LOCKING=FALSE"):
+            read_measured(h5)
+    finally:
+        writer.communicate("")
+    assert read_measured(h5).n == 2000  # closed, it reads
+
+
 def test_a_mat_file_reads_only_what_a_sample_list_holds(tmp_path, monkeypatch):
     """What the fuzzing of version-5 files found (stop 74): variables no fit reads are
     never read (a 23 KB file of empty sparse matrices took 4.9 GB, densified); a name or
@@ -533,6 +561,9 @@ def test_a_numpy_npz_archive_reads_as_hdf5_datasets_of_its_names(tmp_path):
     (tmp_path / "cut.npz").write_bytes(data[:len(data) // 2])
     with pytest.raises(MeasurementsError, match="not a NumPy .npz archive|not a readable .npz"):
         read_measured(tmp_path / "cut.npz")
+    np.savez(tmp_path / "empty.npz")  # an archive, of no arrays: not "not an .npz"
+    with pytest.raises(MeasurementsError, match="an empty .npz archive: it holds no arrays"):
+        read_measured(tmp_path / "empty.npz")
     np.save(tmp_path / "one.npy", rgb)
     with pytest.raises(MerlFormatError, match="a numpy .npy array .one array, unnamed: np.savez "
                                               "names them."):

@@ -68,6 +68,22 @@ def test_negative_values_are_unmeasured(tmp_path, good_raw):
     assert merl.read(_raw_file(tmp_path / "m.binary", body=marked.ravel())).n_partial == 0
 
 
+def test_a_negative_zero_is_a_measured_zero(tmp_path, good_raw):
+    """-0.0 >= 0 (rounding a small negative noise writes it): its bin is measured, as
+    a sample list's and ``from_values`` keep it; its sign bit alone made half of a
+    table whose zeros were written so unmeasured. -1, MERL's marker, still is."""
+    body = good_raw.copy().reshape(3, -1)
+    measured = (body >= 0).all(axis=0)
+    some = np.flatnonzero(measured)[::3]
+    body[0, some] = -0.0  # one channel
+    body[:, some[::2]] = -0.0  # every channel
+    t = merl.read(_raw_file(tmp_path / "z.binary", body=body.ravel()))
+    np.testing.assert_array_equal(t.mask.ravel(), measured)
+    assert not np.signbit(t.rgb).any() and np.all(t.rgb.reshape(3, -1)[0, some] == 0.0)
+    assert t.n_partial == merl.read(_raw_file(tmp_path / "a.binary", body=good_raw)).n_partial
+    np.testing.assert_array_equal(merl.MerlTable.from_values(body).mask.ravel(), measured)
+
+
 def test_nonfinite_values_are_masked_and_counted(tmp_path):
     body = np.full(3 * N, 100.0)
     body[[0, 5, N + 7]] = [np.nan, np.inf, -np.inf]

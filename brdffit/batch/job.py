@@ -82,6 +82,11 @@ class BatchSummary:
     tables: int = 0
     skipped: int = 0  # tables whose every fit was already in the file
     kept: int = 0  # fits of the other tables already in the file, not made again
+    # fits in the file made again: made with other options, of a table whose file
+    # changed since, or all of them (refit)
+    replaced_options: int = 0
+    replaced_changed: int = 0
+    replaced_refit: int = 0
     fits: int = 0  # fits made in this run, failed ones included
     failed_tables: list[tuple[str, str]] = field(default_factory=list)
     failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
@@ -224,22 +229,30 @@ def file_sha256(path: str) -> str | None:
 
 
 def _plan(paths: list[str], model_names: list[str], key: str, store: BatchStore,
-          refit: bool) -> tuple[list[_Task], int]:
-    """Tasks for the tables with fits left to make, and how many tables are complete."""
+          refit: bool, summary: BatchSummary) -> list[_Task]:
+    """Tasks for the tables with fits left to make; ``summary`` counts the tables
+    complete and the stored fits that will be made again (and why)."""
     # Only tables a previous run read need hashing here; new ones are hashed by
     # their worker from the bytes it fits. hashlib releases the GIL: threads help.
     known = [p for p in paths if not refit and store.known_sha256(p)]
     with ThreadPoolExecutor(max_workers=4) as pool:
         current = dict(zip(known, pool.map(file_sha256, known), strict=True))
-    tasks, skipped = [], 0
+    tasks = []
     for p in paths:
         sha = current.get(p)
         done = store.done_models(p, sha, key) if sha else set()
         if done >= set(model_names):
-            skipped += 1
+            summary.skipped += 1
+            continue
+        tasks.append(_Task(p, sha, tuple(sorted(done))))
+        options, changed = store.replaced(p, None if refit else sha, key, model_names)
+        if refit:  # None: every stored fit counts as other content
+            summary.replaced_refit += changed
         else:
-            tasks.append(_Task(p, sha, tuple(sorted(done))))
-    return tasks, skipped
+            summary.replaced_options += options
+            summary.replaced_changed += changed
+    summary.kept = sum(len(t.done_models) for t in tasks)
+    return tasks
 
 
 def _models_left(task: _Task, sha256: str | None, model_names: list[str]) -> list[str]:
@@ -464,8 +477,7 @@ def run_batch(
         summary.tables = len(paths)
         store.reserve_names(paths)  # group names follow the input order, not finish order
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
-        tasks, summary.skipped = _plan(paths, model_names, request.fit_key(), store, refit)
-        summary.kept = sum(len(t.done_models) for t in tasks)
+        tasks = _plan(paths, model_names, request.fit_key(), store, refit, summary)
         bar = progress if isinstance(progress, ProgressLine) else ProgressLine(
             len(tasks), skipped=summary.skipped, enabled=bool(progress))
         bar.draw(force=True)

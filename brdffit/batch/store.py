@@ -60,6 +60,7 @@ import numpy as np
 from brdffit import __version__, jsonout
 from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord, now
 from brdffit.errors import BrdffitError
+from brdffit.io.named_arrays import hdf5_unreadable
 
 FORMAT = "brdffit-batch"
 FORMAT_VERSION = 1
@@ -241,6 +242,19 @@ class BatchStore:
             return set()
         return {m for m, f in t.fits.items()
                 if f.sha256 == sha256 and f.options == key and f.status == "ok"}
+
+    def replaced(self, path: str, sha256: str | None, key: str,
+                 models) -> tuple[int, int]:
+        """Of ``models``' successful fits stored for ``path``, those a run that fits
+        content ``sha256`` (None: not hashed, every fit is made again) under fit key
+        ``key`` makes again: ``(made with other options, made of other content)``."""
+        t = self._tables.get(path)
+        if t is None:
+            return 0, 0
+        stored = [t.fits[m] for m in models if m in t.fits and t.fits[m].status == "ok"]
+        other_content = sum(f.sha256 != sha256 for f in stored)
+        other_options = sum(f.sha256 == sha256 and f.options != key for f in stored)
+        return other_options, other_content
 
     def counts(self) -> dict[str, int]:
         tables = self._tables.values()
@@ -464,8 +478,8 @@ def _open(path: str) -> h5py.File:
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise BatchFileError(f"{path}: not a readable HDF5 file "
-                             f"({' '.join(str(e).split())})") from None
+        raise BatchFileError(f"{path}: {hdf5_unreadable(path, e)}; a batch results file is "
+                             "the HDF5 file `brdffit batch --out` writes") from None
     if f.attrs.get("format") != FORMAT:
         f.close()
         raise BatchFileError(f"{path}: an HDF5 file, but not a brdffit batch results file")

@@ -47,6 +47,8 @@ def output_folder(path: str, flag: str):
     from pathlib import Path
 
     folder = Path(path)
+    if folder.exists() and not folder.is_dir():  # mkdir said "File exists"
+        raise BrdffitError(f"{flag} {path}: a file, not a folder: name a folder to write into")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -74,6 +74,12 @@ def summary_line(s) -> str:
     if s.kept:
         done.append(f"{_count(s.kept, 'fit')}{' of the others' if s.skipped else ''} kept "
                     "from before")
+    # fits in the file made again were done before, and are gone: one fit per model is
+    # kept (it read "none was done before" where a run with other options replaced them)
+    replaced = ((s.replaced_options, "made with other options, replaced"),
+                (s.replaced_changed, "of tables whose file changed since, replaced"),
+                (s.replaced_refit, "from before, made again as --refit asks"))
+    done += [f"{_count(n, 'fit')} {why}" for n, why in replaced if n]
     done = ", ".join(done) or "none was done before"
     return (f"{s.out}: {_count(s.fits, 'fit')} on {_count(s.tables - s.skipped, 'table')} in "
             f"{format_duration(s.elapsed_s)}; {done}")

@@ -161,7 +161,7 @@ class MerlTable:
         }
 
 
-def _looks_like_text(head: bytes) -> bool:
+def looks_like_text(head: bytes) -> bool:
     return len(head) > 0 and all(32 <= b < 127 or b in (9, 10, 13) for b in head)
 
 
@@ -195,7 +195,7 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
     kind = other_format(header)
     if kind is not None:  # before the text test: a PDF's and a .mat file's start is text
         raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
-    if _looks_like_text(header):
+    if looks_like_text(header):
         raise MerlFormatError(source, "looks like a text file, not a binary MERL table")
     dims = [int(d) for d in np.frombuffer(header, dtype="<i4", count=3)]
     if tuple(int(d) for d in np.frombuffer(header, dtype=">i4", count=3)) == SHAPE:
@@ -281,13 +281,16 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     The tests work on the values' bits (see ``_INF_BITS``): a bin is measured when
     the largest of its three channels' bit patterns, read as unsigned integers, is
     below +inf's, one pass instead of a minimum, a maximum and their comparisons.
-    A negative zero counts as negative (unmeasured), as its sign bit says.
+    A negative zero is a measured zero (``-0.0 >= 0``: rounding a small negative
+    noise writes one, ``np.round(-1e-9, 6)``), made ``+0.0``; its sign bit alone had
+    made its bin unmeasured.
     """
     raw = raw.reshape(3, -1)
     bits = raw.view(np.uint64)
     top = np.maximum(bits[0], bits[1])
     np.maximum(top, bits[2], out=top)
     unmeasured = top >= _INF_BITS
+    _measured_zeros(raw, bits, unmeasured)
     # of those, the bins with a channel finite and >= 0 and none NaN or infinite (a few
     # ms: only the unmeasured bins are looked at again); a bin with an infinite channel
     # is a non-finite one, not "negative in some channels" (every 7th value +inf read as
@@ -321,6 +324,21 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
     for c in range(3):
         raw[c] *= SCALE[c]
     return MerlTable(rgb, measured, source, n_nonfinite, n_partial=n_partial)
+
+
+def _measured_zeros(raw: np.ndarray, bits: np.ndarray, unmeasured: np.ndarray) -> None:
+    """The bins of ``unmeasured`` whose channels are finite and >= 0 once a negative
+    zero counts as 0, made measured, their negative zeros ``+0.0`` (in place). Only
+    the unmeasured bins are looked at: a negative zero's bits are above ``_INF_BITS``."""
+    where = np.flatnonzero(unmeasured)
+    held = bits[:, where]
+    zeros = held == _SIGN_BIT
+    if not zeros.any():
+        return
+    ok = ((held < _INF_BITS) | zeros).all(axis=0)
+    for c in range(3):
+        raw[c, where[ok & zeros[c]]] = 0.0
+    unmeasured[where[ok]] = False
 
 
 def _aligned_values() -> np.ndarray:

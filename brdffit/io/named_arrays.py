@@ -91,6 +91,33 @@ def _written_by_matlab(f, path) -> bool:
                for d in (_opened(f, name) for name in f.keys()))
 
 
+def hdf5_unreadable(path: str | os.PathLike, e: OSError) -> str:
+    """Why h5py could not open ``path`` (its error ``e``), in words that say what to do:
+    another format by its first bytes, a file another program holds open for writing
+    (HDF5's lock), a file cut short, or damaged. h5py's own words were "an HDF5 file,
+    not HDF5" for the last three: the signature was there, the rest was not read."""
+    text = " ".join(str(e).split())
+    try:
+        with open(path, "rb") as raw:
+            head = raw.read(64)
+    except OSError:
+        head = b""
+    kind = merl.other_format(head) or ("a text file" if merl.looks_like_text(head) else None)
+    if kind is not None and kind != "an HDF5 file":
+        return f"{kind}, not HDF5 (by its first bytes)"
+    if isinstance(e, BlockingIOError) or "unable to lock file" in text:
+        return ("an HDF5 file another program holds open for writing (HDF5's file lock): "
+                "close it there, or set HDF5_USE_FILE_LOCKING=FALSE to read it as it is")
+    cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", text)
+    if cut:
+        return (f"a truncated HDF5 file: {int(cut[1]):,} bytes of the {int(cut[2]):,} it "
+                "says it holds (a copy cut short, or a writer stopped mid-write): copy or "
+                "write it again")
+    if kind is None:
+        return f"not an HDF5 file, nor one brdffit knows by its first bytes ({text})"
+    return f"a damaged HDF5 file, which h5py cannot open ({text})"
+
+
 def read_hdf5(path: str | os.PathLike) -> Measurements:
     """An HDF5 file of sample datasets (module docstring)."""
     import h5py
@@ -99,11 +126,7 @@ def read_hdf5(path: str | os.PathLike) -> Measurements:
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        with open(path, "rb") as raw:
-            head = raw.read(64)
-        kind = merl.other_format(head)
-        raise MeasurementsError(source, f"{kind}, not HDF5 (by its first bytes)" if kind
-                                else f"not a readable HDF5 file ({e})") from None
+        raise MeasurementsError(source, hdf5_unreadable(path, e)) from None
     with f:
         if not _written_by_matlab(f, path):
             return _hdf5_samples(f, source, False)
@@ -132,6 +155,9 @@ def read_npz(path: str | os.PathLike) -> Measurements:
     """A NumPy ``.npz`` archive of named arrays (:mod:`brdffit.io.npz`), read as an
     HDF5 file of the same datasets is."""
     if not npz.is_npz(path):
+        if npz.is_empty_zip(path):  # np.savez(path) of no arrays: "not an .npz" puzzled
+            raise MeasurementsError(str(path), "an empty .npz archive: it holds no arrays "
+                                               "(np.savez was given none)")
         with open(path, "rb") as raw:
             kind = merl.other_format(raw.read(64))
         raise MeasurementsError(str(path), (f"{kind}, not" if kind else "not") + " a NumPy "

@@ -40,6 +40,16 @@ def is_npz(path: str | Path) -> bool:
     return bool(names) and all(n.endswith(".npy") for n in names)
 
 
+def is_empty_zip(path: str | Path) -> bool:
+    """Whether ``path`` is a zip archive of no members (what ``np.savez`` of no arrays
+    writes)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return not z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+
+
 def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtype]]:
     """(name, shape, dtype) of every array, from its .npy header alone."""
     out = []
