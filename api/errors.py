@@ -112,14 +112,22 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
 
 
 async def _http_error(request: Request, exc: HTTPException):
-    """FastAPI's own errors as it sends them, but for a JSON body that is not UTF-8:
-    it answered that with a bare 400 "There was an error parsing the body"; it is a
-    body that is not valid JSON (RFC 8259: JSON is UTF-8), said where and as every
-    other such body is (422, with ``errors``)."""
+    """FastAPI's own errors as it sends them, but for a JSON body that is not UTF-8,
+    nested too deep for the parser, or holding an integer of more than 4,300 digits:
+    it answered each with a bare 400 "There was an error parsing the body"; each is a
+    body that is not valid JSON (RFC 8259: JSON is UTF-8) or a request no option
+    takes, said as every other such body is (422, with ``errors``)."""
     cause = exc.__cause__
+    msg = None
     if exc.status_code == 400 and isinstance(cause, UnicodeDecodeError):
         msg = (f"not valid JSON: not UTF-8 (byte 0x{cause.object[cause.start]:02x} at "
                f"byte {cause.start}); send JSON encoded as UTF-8")
+    elif exc.status_code == 400 and isinstance(cause, RecursionError):
+        msg = "JSON nested deeper than the parser follows; no request is nested so deep"
+    elif exc.status_code == 400 and isinstance(cause, ValueError) and "digits" in str(cause):
+        # Python's limit on converting a long integer (4,300 digits), hit while parsing
+        msg = "a number of more than 4,300 digits; no option takes one"
+    if msg is not None:
         return JSONResponse({"detail": f"body: {msg}", "errors": [{"loc": ["body"],
                                                                    "msg": msg}]},
                             status_code=status.HTTP_422_UNPROCESSABLE_CONTENT)

@@ -183,6 +183,11 @@ def test_malformed_multipart_upload(http):
     assert_error(r, 422, "bad.binary", "text")
     r = http.post("/v1/tables", files={"other": ("x.binary", b"1234")})
     assert_error(r, 422, "'file' field")
+    # curl -F "file=<t.csv" (no @): the field is there, as text; it read "needs a 'file' field"
+    r = http.post("/v1/tables", content=b'--xyz\r\nContent-Disposition: form-data; name="file"'
+                  b"\r\n\r\ntheta_i_deg,phi_i_deg\r\n--xyz--\r\n",
+                  headers={"Content-Type": "multipart/form-data; boundary=xyz"})
+    assert_error(r, 422, "'file' field came as text, not as a file", "curl -F file=@PATH")
     r = http.post("/v1/tables", content=b"--xyz\r\ngarbage",
                   headers={"Content-Type": "multipart/form-data; boundary=xyz"})
     assert_error(r, 400, "malformed multipart")
@@ -397,6 +402,12 @@ def test_malformed_fit_bodies_are_422(http):
     assert r.json()["detail"] == ("body: not valid JSON: not UTF-8 (byte 0xe9 at byte 17); "
                                   "send JSON encoded as UTF-8")
     assert r.json()["errors"] == [{"loc": ["body"], "msg": r.json()["detail"][6:]}]
+    # nested past the parser's depth, or an integer of more than 4,300 digits: the same
+    # bare 400, now said as every other body that no request can be
+    for content, said in ((b'{"scene": ' + b"[" * 5000 + b"]" * 5000 + b"}", "nested deeper"),
+                          (b'{"options": {"samples": ' + b"9" * 5000 + b"}}", "4,300 digits")):
+        r = http.post("/v1/fits", content=content, headers={"Content-Type": "application/json"})
+        assert_error(r, 422, said)
     for body in ({"models": []}, {"model": []}):  # the request's form, and the earlier one
         r = http.post("/v1/fits", json={"table_id": UNKNOWN_TABLE, **body})
         assert_error(r, 422)
@@ -525,6 +536,62 @@ def test_the_front_fits_and_plots_without_jax_or_matplotlib(server, http, table_
     assert workers, "the server has no worker process"
     worker = set().union(*(libraries(pid) for pid in workers))
     assert {"jaxlib", "matplotlib"} <= worker, sorted(worker)
+
+
+def test_a_material_is_rebuilt_in_a_worker_not_in_the_front(server, http):
+    """POST /v1/materials/{name} rebuilt the table from its network (JAX) in the server's
+    own process: 120 -> 420 MB for one, 2 GB for six at once. A worker rebuilds it; the
+    front hashes and stores it, and still maps no JAX."""
+    first = http.post("/v1/materials/red-plastic")
+    assert first.status_code in (200, 201), first.text
+    again = http.post("/v1/materials/red-plastic")
+    assert again.status_code == 200 and again.json()["id"] == first.json()["id"]
+    assert first.json()["name"] == "red-plastic.binary"
+    assert not {part for f in server.mapped_files() if ".so" in f
+                for part in Path(f).parts if part == "jaxlib"}
+    assert not list((Path(server.data_dir) / "tmp").glob("material-*"))  # nothing left
+
+
+def test_the_earlier_form_keeps_or_refuses_every_key_it_is_sent(http, table_id):
+    """``model`` with flat ``options`` (the form before brdffit.request/1) took only
+    table_id, model and options: a top-level scene beside them was dropped without a
+    word, and the job fitted the whole table; any other key was dropped too."""
+    scene = {"preset": "camera-normal"}
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert", "options": FAST,
+                                    "scene": scene})
+    assert r.status_code == 202, r.text
+    assert r.json()["request"]["scene"]["name"] == "camera-normal"  # not null: applied
+    http.post(f"/v1/fits/{r.json()['id']}/cancel")
+    assert_error(http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
+                                             "options": {**FAST, "scene": scene},
+                                             "scene": scene}), 422,
+                 "a scene at the top level and another in `options`: give one")
+    assert http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
+                                       "options": FAST, "tolerence": 0.1}).status_code == 422
+
+
+@pytest.mark.unit
+def test_a_stored_request_is_served_as_stored(monkeypatch):
+    """A job's request was checked by the library when it was posted; a GET serves it
+    without checking it again (0.8 s of the server's CPU per GET of a job whose scene
+    held 19,881 pairs)."""
+    from api.routes import fits
+    from api.store import JobRecord
+
+    def checked_again(*a, **k):
+        raise AssertionError("the library checked a stored request again")
+
+    request = FitRequest.of("lambert", scene={"preset": "camera-normal"}).to_dict()
+    job = JobRecord(**{f: None for f in JobRecord.__dataclass_fields__} | {
+        "id": "a" * 32, "status": "queued", "table_id": "b" * 64, "models": ["lambert"],
+        "request": request, "attempts": 0, "created_at": 0.0})
+    monkeypatch.setattr(fits.FitRequest, "from_dict", checked_again)
+    out = fits._out(job)
+    assert out.model_dump(by_alias=True)["request"] == request
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="checked a stored request again"):
+        fits.RequestBody.model_validate(request)  # what a POST is checked by
 
 
 def test_a_worker_killed_mid_fit_costs_an_attempt_not_the_job(server, http, table_id):

@@ -996,7 +996,7 @@ def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all
         tmp_path, monkeypatch):
     """csv.Sniffer's time grows with the square of its text: a one-line JSON export of
     517 KB named .txt ran for minutes before its refusal. The delimiter is guessed from
-    the header's first SNIFF_CHARS, and the refusal quotes the header shortened."""
+    the header's first SNIFF_CHARS; its 36,000 "columns" are refused on their count."""
     import csv
 
     from brdffit.io import text_samples
@@ -1009,10 +1009,10 @@ def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all
     p = tmp_path / "records.txt"
     p.write_text("[" + ", ".join(f'{{"theta_i": {k}, "phi_i": {k}, "value": {k}}}'
                                  for k in range(12000)) + "]")
-    with pytest.raises(MeasurementsError, match="no column for theta_i") as e:
+    with pytest.raises(MeasurementsError, match="the header names 36,000 columns") as e:
         read_measured(p)
     assert sniffed == [text_samples.SNIFF_CHARS]
-    assert len(str(e.value)) < 600 and "(36000 columns)" in str(e.value)
+    assert len(str(e.value)) < 600
 
 
 @pytest.mark.parametrize("name, head", [
@@ -1190,6 +1190,22 @@ def test_values_of_another_shape_are_named_by_it(values, says):
     angles = [np.full(5, 0.3)] * 4
     with pytest.raises(MeasurementsError, match=re.escape(says)):
         Measurements.from_angles(*angles, values)
+
+
+def test_a_header_of_a_million_columns_is_refused_before_any_is_read(tmp_path, monkeypatch):
+    """A 40 MB header of 20 million columns took 41 s to refuse (column by column) in
+    the service's own process: it is refused on its count, no column looked at."""
+    from brdffit.io import text_samples
+
+    wide = tmp_path / "wide.csv"
+    wide.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,"
+                    + ",".join(f"x{k}" for k in range(1_000_000)) + "\n")
+    looked = []
+    monkeypatch.setattr(text_samples, "angle_name", lambda name: looked.append(name))
+    with pytest.raises(MeasurementsError, match="wide.csv: the header names 1,000,007 columns; "
+                                                ".* at most 10,000 are read"):
+        read_measured(wide)
+    assert looked == []
 
 
 def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path):

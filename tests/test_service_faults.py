@@ -395,3 +395,32 @@ def test_tables_list_filter_and_delete(http):
     assert http.get(f"/v1/fits/{job['id']}").status_code == 404
     assert http.delete(f"/v1/tables/{b}").status_code == 204
     assert http.delete(f"/v1/tables/{b}").status_code == 404
+
+
+def test_a_plot_or_export_whose_table_is_deleted_meanwhile_is_a_404(tmp_path):
+    """A plot and an export wait for the one worker (busy with a slow fit) while their
+    job's table is deleted with its fits: the plot answered 500 and the export 422, each
+    quoting the data dir's path of the table's file. Both are 404s."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with Server(tmp_path / "one", workers=1) as s, httpx.Client(base_url=s.url,
+                                                                timeout=120) as http:
+        fitted = upload(http, table_bytes("ggx"), "ggx.binary")
+        busy = upload(http, scaled_table_bytes("ggx", 0.5), "busy.binary")
+        job = http.post("/v1/fits", json={"table_id": fitted, "model": "lambert",
+                                          "options": FAST}).json()
+        assert wait_status(http, job["id"], ("done", "failed"))["status"] == "done"
+        slow = http.post("/v1/fits", json={"table_id": busy, **SLOW_JOB}).json()
+        wait_status(http, slow["id"], ("running",), poll=0.02)
+        with ThreadPoolExecutor(2) as pool:
+            plot = pool.submit(http.get, f"/v1/fits/{job['id']}/plots/spheres.png",
+                               params={"exposure_ev": 3})
+            export = pool.submit(http.get, f"/v1/fits/{job['id']}/exports/mitsuba")
+            time.sleep(0.5)  # both wait for the worker
+            assert http.delete(f"/v1/tables/{fitted}",
+                               params={"with_fits": "true"}).status_code == 204
+            answers = plot.result(), export.result()
+        for r in answers:
+            assert r.status_code == 404, r.text
+            assert str(s.data_dir) not in r.text and "deleted while" in r.json()["detail"]
+        assert "Traceback" not in s.log()

@@ -454,5 +454,5 @@ def test_materials_where_data_synth_is_not_installed(monkeypatch):
         # In a thread of its own: Playwright's sync API keeps an event loop in this one.
         with ThreadPoolExecutor(1) as pool:
             pool.submit(asyncio.run, materials.add_material("red-plastic", Response(),
-                                                            store=None)).result()
+                                                            store=None, runner=None)).result()
     assert e.value.status_code == 404 and "red-plastic" in e.value.detail

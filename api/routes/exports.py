@@ -13,6 +13,7 @@ from enum import Enum
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, status
+from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field
 
 from api import tasks
@@ -81,12 +82,25 @@ async def get_export(
     job, result = await finished_fit(store, job_id, model, "exports")
     # the job's table, for the export's error to the measurement (a deleted one: said)
     path = store.table_path(job.table_id)
-    try:
-        outcome = await runner.run(tasks.export_fit, result, target.value,
-                                   str(path) if path.exists() else None, target_model, viewer)
-    except WorkerLost as e:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
-                            headers={"Retry-After": "5"}) from None
+
+    async def exported(table: str | None):
+        try:
+            return await runner.run(tasks.export_fit, result, target.value, table,
+                                    target_model, viewer)
+        except WorkerLost as e:
+            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
+                                headers={"Retry-After": "5"}) from None
+
+    table = str(path) if path.exists() else None
+    outcome = await exported(table)
+    if not outcome.ok and table is not None and not path.exists():
+        # the table deleted while the export waited for a worker: a 422 that quoted the
+        # data dir's path of the file. Its job gone too (with_fits): 404; else the export
+        # is made as for a table deleted before (its fidelity to the table not measured)
+        if await run_in_threadpool(store.get_job, job_id) is None:
+            raise HTTPException(status.HTTP_404_NOT_FOUND,
+                                f"no fit job {job_id}: deleted while it was exported")
+        outcome = await exported(None)
     if not outcome.ok:
         if not outcome.internal:  # this fit cannot be exported so: the request's answer
             raise HTTPException(status.HTTP_422_UNPROCESSABLE_ENTITY, outcome.reason)

@@ -9,16 +9,21 @@ image ships without ``data_synth``: there the list is empty and says why.
 
 from __future__ import annotations
 
+import logging
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, HTTPException, Path, Response, status
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, Field
 
-from api.deps import StoreDep, require_token
+from api import tasks
+from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
 from api.routes.tables import TableOut, table_out
+from api.runner import WorkerLost
 from api.services import tables
+
+log = logging.getLogger("brdffit.api")
 
 router = APIRouter(prefix="/v1/materials", tags=["tables"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -48,12 +53,25 @@ def list_materials() -> MaterialList:
     responses={200: {"model": TableOut, "description": "stored before: same id"},
                404: {"model": ErrorMessage, "description": "no such material here"}},
 )
-async def add_material(name: MaterialName, response: Response, store: StoreDep) -> TableOut:
+async def add_material(name: MaterialName, response: Response, store: StoreDep,
+                       runner: RunnerDep) -> TableOut:
     if name not in (tables.material_names() or ()):
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             f"no shipped material {name!r}; GET /v1/materials lists them")
-    # About a second of numpy and a 35 MB write: off the event loop.
-    record, created = await run_in_threadpool(tables.store_material, store, name)
+    # rebuilt in a worker (JAX), as a fit is; hashed and stored here (numpy alone)
+    path = await run_in_threadpool(tables.material_file, store)
+    try:
+        outcome = await runner.run(tasks.write_material, name, str(path))
+    except WorkerLost as e:
+        path.unlink(missing_ok=True)
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
+                            headers={"Retry-After": "5"}) from None
+    if not outcome.ok:
+        path.unlink(missing_ok=True)
+        log.error("material %s not rebuilt:\n%s", name, outcome.traceback)
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
+                            f"rebuilding the material {name} failed: {outcome.reason}")
+    record, created = await run_in_threadpool(tables.store_material_file, store, name, path)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"/v1/tables/{record.id}"

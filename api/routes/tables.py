@@ -194,6 +194,11 @@ async def upload_table(
                 raise HTTPException(status.HTTP_400_BAD_REQUEST,
                                     "malformed multipart body: no complete part (was it cut "
                                     "short?); the table goes in a 'file' field")
+            if isinstance(upload, str):  # the field, as text: no filename= in its part
+                raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                                    "the multipart 'file' field came as text, not as a file "
+                                    "(its part names no filename): send the file itself "
+                                    "(curl -F file=@PATH, with the @)")
             if not isinstance(upload, UploadFile):
                 raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                                     "the multipart body needs the table in a 'file' field")

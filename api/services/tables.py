@@ -4,11 +4,12 @@ upload route (``/v1/tables``) and the shipped materials (``/v1/materials``)."""
 from __future__ import annotations
 
 import hashlib
+import os
 import tempfile
 from pathlib import Path
 
 from api.store import Store, TableRecord
-from brdffit.io import merl, readers
+from brdffit.io import readers
 from brdffit.io.measurements import Measurements
 from brdffit.io.writers import hdf5_bytes, write_hdf5
 
@@ -92,14 +93,20 @@ def material_names() -> list[str] | None:
     return None if module is None else list(module.material_names())
 
 
-def store_material(store: Store, name: str) -> tuple[TableRecord, bool]:
-    """Rebuild the shipped material ``name`` (a known one: see :func:`material_names`)
-    and store it as a table, as an upload of its bytes would be."""
+def material_file(store: Store) -> Path:
+    """A new empty file in the store's temporary folder for a material's table, to be
+    written by a worker (``api.tasks.write_material``) and stored by
+    :func:`store_material_file`."""
     fd, tmp = tempfile.mkstemp(prefix="material-", suffix=".binary", dir=store.tmp_dir)
-    path = Path(tmp)
+    os.close(fd)
+    return Path(tmp)
+
+
+def store_material_file(store: Store, name: str, path: Path) -> tuple[TableRecord, bool]:
+    """Store the shipped material ``name``'s table written at ``path`` as an upload of
+    its bytes would be (numpy alone: no JAX in the server's process); ``path`` is
+    removed."""
     try:
-        with open(fd, "wb") as f:
-            f.write(merl.to_bytes(nbrdf().make_table(name)))
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         return validate_and_store(store, path, digest, path.stat().st_size, f"{name}.binary")
     finally:
