@@ -163,6 +163,10 @@ def test_one_channel_and_sigma(tmp_path):
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10;0;20;0;1;1;1\n",
      "row 2 has 1 values, the header names 7 columns (this row is split by semicolons, the "
      "header by commas: use one delimiter for both)"),
+    # a comma-decimal locale's numbers split by commas too: the likely cause said
+    ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n10,0,20,0,0,25,0,5,1\n",
+     "row 2 has 9 values, the header names 7 columns (decimal commas in a comma-separated "
+     "file? Separate the cells by ';' or tabs"),
     # value and sigma columns that would be guessed at or dropped are refused
     ("a.csv", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,x,y,z\n10,0,20,0,1,1,1\n",
      "columns x, y, z: CIE XYZ"),
@@ -1103,6 +1107,21 @@ def test_radians_said_to_be_degrees_are_refused(tmp_path):
     p.write_text("theta_i_rad,phi_i_deg,theta_o_rad,phi_o_deg,r,g,b\n"
                  + "\n".join(",".join(repr(float(x)) for x in r) for r in mixed) + "\n")
     assert read_measured(p).n == 100
+    # degrees under _rad names: "theta_i_rad is below the horizon in 67 rows", the value
+    # and the unit unsaid; now the unit is asked, with the largest value
+    deg = np.column_stack([*(np.degrees(a) for a in s[:4]), s[4]])
+    p.write_text("theta_i_rad,phi_i_rad,theta_o_rad,phi_o_rad,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in deg) + "\n")
+    with pytest.raises(MeasurementsError, match=r"said to be in radians, but [\d,]+ of the 200 "
+                                                r"polar angles are past pi/2 .up to [\d.]+., "
+                                                "and all are within 90: degrees\\?"):
+        read_measured(p)
+    few = rows.copy()  # radians, two rows past the horizon: refused row by row, as before
+    few[:2, 0] = 2.0
+    p.write_text("theta_i_rad,phi_i_rad,theta_o_rad,phi_o_rad,r,g,b\n"
+                 + "\n".join(",".join(repr(float(x)) for x in r) for r in few) + "\n")
+    with pytest.raises(MeasurementsError, match="theta_i_rad is below the horizon"):
+        read_measured(p)
 
 
 def test_hdf5_links_to_nothing_huge_declarations_and_foreign_attributes(tmp_path):

@@ -107,6 +107,33 @@ def test_lights_and_views_are_every_combination():
         Scene.from_dict({"light": [[0, 0, 1]]})
 
 
+def test_lights_and_views_are_kept_as_given_in_a_request():
+    """141 lights with 141 views were stored as their 19,881 pairs: a 2.5 MB job record,
+    and a client's body over the service's 1 MB cap for a scene it accepts. The spec
+    keeps the lights and views; read back, it is the same scene, pair for pair. Pairs
+    given beside them are listed as before."""
+    from brdffit.request import FitRequest
+
+    rng = np.random.default_rng(3)
+
+    def above(n):
+        d = rng.normal(size=(n, 3))
+        d[:, 2] = np.abs(d[:, 2]) + 0.1
+        return d.tolist()
+
+    given = {"lights": above(141), "views": above(141), "name": "studio"}
+    scene = Scene.from_dict(given)
+    spec = scene.to_spec()
+    assert "pairs" not in spec and len(spec["lights"]) == len(spec["views"]) == 141
+    again = Scene.from_dict(spec)
+    np.testing.assert_array_equal(again.pairs, scene.pairs)
+    assert again == scene and again.key() == scene.key()
+    body = json.dumps(FitRequest.of("ggx", scene=given).to_dict())
+    assert len(body) < 30_000  # the pairs listed: ~2.5 MB
+    mixed = Scene.from_dict({**given, "pairs": [[[0, 0, 1], [0, 0, 1]]]})
+    assert "lights" not in mixed.to_spec() and len(mixed.to_spec()["pairs"]) == 141 * 141 + 1
+
+
 # -- files ----------------------------------------------------------------------------------
 
 

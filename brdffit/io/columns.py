@@ -207,6 +207,28 @@ def radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
                     "a units attribute 'radians')")
 
 
+def degrees_said_to_be_radians(raw: list[np.ndarray], scales: list[float],
+                               source: str) -> None:
+    """Refuses polar angles in radians (``scales``) of which a quarter or more lie past
+    the horizon, pi/2, and all within 90: degrees under a radians name, most likely.
+    They read as "below the horizon in 67 rows", with neither the value nor the unit
+    said. A list with a few bad rows is left to that refusal, row by row."""
+    n = raw[0].size
+    if n < _JUDGED_FROM or any(scale != 1.0 for scale in scales[0::2]):
+        return
+    polar = np.abs(np.concatenate(raw[0::2]))
+    if not np.all(np.isfinite(polar)):
+        return
+    past = polar > np.pi / 2 + HORIZON_SLACK
+    if np.mean(past) >= 0.25 and np.all(polar <= 90.0 + HORIZON_SLACK):
+        raise MeasurementsError(
+            source, f"the angles are said to be in radians, but {np.count_nonzero(past):,} of "
+                    f"the {polar.size:,} polar angles are past pi/2 (up to {polar.max():.4g}), "
+                    "and all are within 90: degrees? Name their columns _deg (theta_i_deg), "
+                    "or put '# angles: degrees' before the header (HDF5: a units attribute "
+                    "'degrees')")
+
+
 #: From this many samples, azimuths are judged by :func:`azimuths_within`.
 _AZIMUTHS_JUDGED_FROM = 20
 

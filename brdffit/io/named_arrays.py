@@ -40,6 +40,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    degrees_said_to_be_radians,
     long_column_kind,
     radians_said_to_be_degrees,
     stated_unit,
@@ -273,6 +274,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
         raw, values, sigma, wavelengths, provenance["long_layout"] = _pivoted(
             f, long, raw, scales, values, sigma, source, matlab)
     radians_said_to_be_degrees(raw, scales, source)
+    degrees_said_to_be_radians(raw, scales, source)
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     provenance.update(azimuths_within(raw, scales))
     if wavelengths is not None:

@@ -32,6 +32,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    degrees_said_to_be_radians,
     long_column_kind,
     radians_said_to_be_degrees,
     stated_unit,
@@ -240,6 +241,7 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
         raw, values, sigma, row_numbers = p.raw, p.values, p.sigma, p.rows
         wavelengths, provenance["long_layout"] = p.wavelengths, p.summary
     radians_said_to_be_degrees(raw, scales, source)
+    degrees_said_to_be_radians(raw, scales, source)
     provenance.update(azimuths_within(raw, scales))
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     if wavelengths is not None:
@@ -289,6 +291,10 @@ def _other_delimiter(line: str, delimiter: str | None, width: int) -> str:
         if other != delimiter and len(line.split(other)) == width:
             return (f" (this row is split by {said[other]}, the header by "
                     f"{said.get(delimiter, repr(delimiter))}: use one delimiter for both)")
+    if delimiter == "," and "." not in line and len(line.split(",")) > width:
+        # 0,25,30,... : a comma-decimal locale's numbers, split by commas as well
+        return (" (decimal commas in a comma-separated file? Separate the cells by ';' or "
+                "tabs, or write the numbers with decimal points)")
     return ""
 
 
