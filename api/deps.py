@@ -38,18 +38,36 @@ RunnerDep = Annotated[AbstractRunner, Depends(get_runner)]
 _bearer = HTTPBearer(auto_error=False, description="BRDFFIT_API_TOKEN, when the server sets one")
 
 
+def token_refusal(settings: Settings, token: str | None) -> HTTPException | None:
+    """The 401 for a request whose bearer token is ``token`` (None: it sent none), or
+    None where it may pass (the right token, or a server without one). One check for
+    the routes (:func:`require_token`) and for a body's first reader, the request
+    limits (``api.limits``): a malformed body of a request without the token was
+    answered 422 before its 401."""
+    if settings.api_token is None:
+        return None
+    if token is None:
+        return HTTPException(status.HTTP_401_UNAUTHORIZED,
+                             "this server needs 'Authorization: Bearer <token>'",
+                             headers={"WWW-Authenticate": "Bearer"})
+    if not secrets.compare_digest(token.encode(), settings.api_token.get_secret_value().encode()):
+        return HTTPException(status.HTTP_401_UNAUTHORIZED, "wrong bearer token",
+                             headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
+    return None
+
+
+def bearer_token(authorization: str | None) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` header, as FastAPI's
+    ``HTTPBearer`` reads it (the scheme in any case), else None."""
+    scheme, _, token = (authorization or "").partition(" ")
+    return token if scheme.lower() == "bearer" and token else None
+
+
 def require_token(
     settings: SettingsDep,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
 ) -> None:
     """401 unless the request carries the server's token (no-op without one)."""
-    if settings.api_token is None:
-        return
-    expected = settings.api_token.get_secret_value()
-    if credentials is None:
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED,
-                            "this server needs 'Authorization: Bearer <token>'",
-                            headers={"WWW-Authenticate": "Bearer"})
-    if not secrets.compare_digest(credentials.credentials.encode(), expected.encode()):
-        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "wrong bearer token",
-                            headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
+    refusal = token_refusal(settings, None if credentials is None else credentials.credentials)
+    if refusal is not None:
+        raise refusal

@@ -1,5 +1,7 @@
 """Request bounds, applied before a route sees the request (an ASGI middleware).
 
+- A request to a ``/v1`` route with a body and without the server's token is a 401
+  before its body is read (``api.deps.token_refusal``, the routes' own check).
 - A body that stalls (sends nothing for ``BRDFFIT_BODY_READ_TIMEOUT_S``) is a 408:
   a slow or stuck client does not hold a connection and a temp file forever.
 - A body other than a table upload is read here, up to ``BRDFFIT_MAX_JSON_BYTES``
@@ -15,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import json
 
+from api.deps import bearer_token, token_refusal
 from api.errors import BodyTimeout, internal_error_body
 from api.settings import Settings
 
@@ -48,6 +51,13 @@ class RequestLimits:
                                   "(BRDFFIT_BODY_READ_TIMEOUT_S)") from None
 
         app_receive = timed_receive
+        if scope["path"].startswith("/v1/") and _may_have_body(scope):
+            # every /v1 route needs the token: refused before a byte of its body is read
+            # (a malformed body without it was answered 422, and 1 MiB of it read)
+            refusal = token_refusal(self.settings, bearer_token(_header(scope, b"authorization")))
+            if refusal is not None:
+                return await _answer(send, refusal.status_code, refusal.detail,
+                                     refusal.headers)
         if (scope["method"], scope["path"]) not in STREAMED and _may_have_body(scope):
             cap = self.settings.max_json_bytes
             try:
@@ -105,9 +115,16 @@ def _replay(body: bytes, receive):
     return replay
 
 
-async def _answer(send, status: int, detail: str) -> None:
+def _header(scope, name: bytes) -> str | None:
+    value = dict(scope["headers"]).get(name)
+    return None if value is None else value.decode("latin-1")
+
+
+async def _answer(send, status: int, detail: str, headers: dict | None = None) -> None:
     body = json.dumps({"detail": detail}).encode()
     await send({"type": "http.response.start", "status": status,
                 "headers": [(b"content-type", b"application/json"),
-                            (b"content-length", str(len(body)).encode())]})
+                            (b"content-length", str(len(body)).encode()),
+                            *((k.lower().encode(), v.encode("latin-1"))
+                              for k, v in (headers or {}).items())]})
     await send({"type": "http.response.body", "body": body})

@@ -643,9 +643,20 @@ def test_token_guards_every_route_but_healthz(tmp_path):
             assert_error(http.request(method, path), 401, "bearer")
             wrong = http.request(method, path, headers={"Authorization": "Bearer guess"})
             assert_error(wrong, 401, "wrong bearer token")
+        # a body is not read (nor judged) before the token is: malformed JSON, one nested
+        # past the parser and an upload were each answered on their body first
+        for path, content in (("/v1/fits", b"{x"), ("/v1/fits", b"[" * 5000),
+                              ("/v1/tables", b"\0" * 100_000)):
+            r = http.post(path, content=content, headers={"Content-Type": "application/json"})
+            assert_error(r, 401, "bearer")
+            assert r.headers["www-authenticate"] == "Bearer"
+            wrong = http.post(path, content=content, headers={"Authorization": "bearer guess"})
+            assert_error(wrong, 401, "wrong bearer token")
         ok = {"Authorization": "Bearer s3cret"}
         assert http.get("/v1/models", headers=ok).status_code == 200
         assert_error(http.get(f"/v1/fits/{UNKNOWN_JOB}", headers=ok), 404)
+        assert_error(http.post("/v1/fits", content=b"{x", headers={
+            **ok, "Content-Type": "application/json"}), 422, "not valid JSON")
         assert http.get("/openapi.json", headers=ok).json()["info"]["title"] == "brdffit"
 
 
