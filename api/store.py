@@ -572,6 +572,13 @@ class Store:
 
     # -- plots ----------------------------------------------------------------------
 
+    def export_path(self, job_id: str, model: str, target: str, target_model: str | None,
+                    viewer: str) -> Path:
+        """Where a made export is kept (beside the job's plots, removed with them): one
+        file per target, renderer's model and viewer asked for."""
+        name = f"export-{target}-{target_model or '-'}-{viewer}.json"
+        return self.plots_dir / job_id / model / name
+
     def plot_path(self, job_id: str, model: str, kind: str, exposure_ev: float = 0.0) -> Path:
         """Where a rendered plot is kept; one file per exposure asked for."""
         name = kind if exposure_ev == 0 else f"{kind}@{exposure_ev:+g}EV"

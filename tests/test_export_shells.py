@@ -5,6 +5,7 @@ both give what ``brdffit.export.export`` gives."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import httpx
 import pytest
@@ -218,6 +219,16 @@ def test_api_and_client_export_a_finished_fit(server, ggx_file):
         for_three = c.export(job, "gltf", viewer="threejs")
         assert for_three.fidelity["target_model"] == "gltf_threejs"
         assert for_three == export(c.result(job), "gltf", table=ggx_file, viewer="threejs")
+        # made once, then served from the data dir (each GET was a worker's 5-15 s)
+        kept = list(Path(server.data_dir).rglob("export-*.json"))
+        assert len(kept) == 3, kept
+        assert c.export(job, "gltf", viewer="threejs") == for_three
+        assert c.export(job, "mitsuba", model="rough_conductor") == got
+        assert len(list(Path(server.data_dir).rglob("export-*.json"))) == 3
+        with pytest.raises(ApiError) as e:  # a name that is no renderer's model: not kept
+            c.export(job, "gltf", target_model="../../x")
+        assert e.value.status_code == 422
+        assert len(list(Path(server.data_dir).rglob("export-*.json"))) == 3
         with pytest.raises(ApiError) as e:
             c.export(job, "gltf", model="lambert")
         assert e.value.status_code == 404 and "has no 'lambert' fit" in e.value.detail

@@ -9,6 +9,7 @@ model to the fit (seconds of JAX), so it runs in a worker process like a fit.
 from __future__ import annotations
 
 import logging
+import shutil
 from enum import Enum
 from typing import Annotated, Literal
 
@@ -19,11 +20,16 @@ from pydantic import BaseModel, ConfigDict, Field
 from api import tasks
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.routes.fits import FitModel, JobId, finished_fit
-from api.runner import WorkerLost
+from api.routes.fits import FitModel, JobId, finished_fit, write_atomic
+from api.runner import TimeLimitExceeded, WorkerLost
 from brdffit.export import SCHEMA, TARGETS
 
 log = logging.getLogger("brdffit.api")
+
+#: The longest an export may run in its worker (a Mitsuba export's refit: ~12 s): past
+#: it the worker is replaced and the request answered 503, rather than holding the
+#: worker, and the fits queued behind it, for as long as it runs.
+EXPORT_LIMIT_S = 300.0
 
 router = APIRouter(prefix="/v1/fits", tags=["exports"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -80,16 +86,28 @@ async def get_export(
                     "way three.js or Blender (Cycles) shades them")] = "spec",
 ) -> ExportOut:
     job, result = await finished_fit(store, job_id, model, "exports")
+    # made once, then served from the data dir as a plot is (each GET made it again in
+    # a worker, 5-15 s, queued before later fits); only for a renderer's model the
+    # target has (the name is part of the file's)
+    kept = (store.export_path(job_id, result["model"], target.value, target_model, viewer)
+            if target_model is None or target_model in TARGETS[target.value].SHADED_AS
+            else None)
+    if kept is not None and kept.exists():
+        return ExportOut.model_validate_json(await run_in_threadpool(kept.read_bytes))
     # the job's table, for the export's error to the measurement (a deleted one: said)
     path = store.table_path(job.table_id)
 
     async def exported(table: str | None):
         try:
             return await runner.run(tasks.export_fit, result, target.value, table,
-                                    target_model, viewer)
+                                    target_model, viewer, limit_s=EXPORT_LIMIT_S)
         except WorkerLost as e:
             raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                                 headers={"Retry-After": "5"}) from None
+        except TimeLimitExceeded as e:
+            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
+                                f"the {target.value} export {e}; try again later",
+                                headers={"Retry-After": "30"}) from None
 
     table = str(path) if path.exists() else None
     outcome = await exported(table)
@@ -107,4 +125,10 @@ async def get_export(
         log.error("export %s of job %s failed:\n%s", target.value, job_id, outcome.traceback)
         raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                             f"the {target.value} export failed: {outcome.reason}")
-    return ExportOut.model_validate(outcome.value)
+    out = ExportOut.model_validate(outcome.value)
+    if kept is not None:
+        await run_in_threadpool(write_atomic, kept, out.model_dump_json(by_alias=True).encode())
+        if await run_in_threadpool(store.get_job, job_id) is None:
+            # deleted meanwhile: its folder went before this file came (as a plot's)
+            await run_in_threadpool(shutil.rmtree, store.plots_dir / job_id, True)
+    return out

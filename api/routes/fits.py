@@ -34,7 +34,7 @@ from pydantic import (
 from api import tasks
 from api.deps import QueueDep, RunnerDep, SettingsDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage, short
-from api.runner import WorkerLost
+from api.runner import TimeLimitExceeded, WorkerLost
 from api.services import fits
 from api.store import STATUSES, JobRecord, Store
 from brdffit import models
@@ -54,6 +54,10 @@ from brdffit.view.kinds import (
 )
 
 log = logging.getLogger("brdffit.api")
+
+#: The longest a plot may render in its worker (a second or two; a report of every
+#: candidate, several): past it the worker is replaced and the request answered 503.
+PLOT_LIMIT_S = 300.0
 
 router = APIRouter(prefix="/v1/fits", tags=["fits"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -484,10 +488,15 @@ async def get_plot(
             raise await _deleted(store, job_id, job.table_id)
         try:
             outcome = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
-                                       table.name, result, kind.value, exposure_ev)
+                                       table.name, result, kind.value, exposure_ev,
+                                       limit_s=PLOT_LIMIT_S)
         except WorkerLost as e:
             raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                                 headers={"Retry-After": "5"}) from None
+        except TimeLimitExceeded as e:
+            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
+                                f"the {kind.value} plot {e}; try again later",
+                                headers={"Retry-After": "30"}) from None
         if not outcome.ok and not store.table_path(job.table_id).exists():
             # the table (and the job, with_fits) deleted while the plot waited for a
             # worker: a 500 that quoted the data dir's path of the file, where it is a 404
@@ -496,7 +505,7 @@ async def get_plot(
             log.error("plot %s of job %s failed:\n%s", kind.value, job_id, outcome.traceback)
             raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                                 f"rendering the {kind.value} plot failed: {outcome.reason}")
-        await run_in_threadpool(_write_atomic, path, outcome.value)
+        await run_in_threadpool(write_atomic, path, outcome.value)
         if await run_in_threadpool(store.get_job, job_id) is None:
             # deleted while it was drawn: its plots' folder went before this file came,
             # and the file stayed on disk for good (a delete after this look removes it)
@@ -518,7 +527,8 @@ async def _deleted(store, job_id: str, table_id: str) -> HTTPException:
                          "plot draws the fit beside its table")
 
 
-def _write_atomic(path, data: bytes) -> None:
+def write_atomic(path, data: bytes) -> None:
+    """``data`` into ``path`` (its folders made) by a rename: a reader sees it whole."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{id(data)}")
     tmp.write_bytes(data)
