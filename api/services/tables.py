@@ -9,6 +9,7 @@ import tempfile
 from pathlib import Path
 
 from api.store import Store, TableRecord
+from brdffit import heap
 from brdffit.io import readers
 from brdffit.io.measurements import Measurements
 from brdffit.io.writers import hdf5_bytes, write_hdf5
@@ -68,13 +69,21 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     declared = readers.declared_samples(tmp, name)
     if declared is not None:  # at least the angles and rgb: refused without reading
         _stored_fits(name, declared, False, cap)
-    measured = readers.read_measured(tmp, name=name, sheet=sheet)  # errors name the upload
-    if isinstance(measured, Measurements):
-        _stored_fits(name, measured.n, measured.sigma is not None, cap)
-        # one layout for the jobs to read, sigma and all; the size stays the upload's, as
-        # the id does (the stored file's made a 32 KB CSV read 36 KB, and 32 KB in a batch)
-        write_hdf5(measured, tmp)
-    return store.add_table(digest, tmp, size, name, readers.table_summary(measured))
+    try:
+        measured = readers.read_measured(tmp, name=name, sheet=sheet)  # errors name it
+        if isinstance(measured, Measurements):
+            _stored_fits(name, measured.n, measured.sigma is not None, cap)
+            # one layout for the jobs to read, sigma and all; the size stays the upload's,
+            # as the id does (the stored file's made a 32 KB CSV read 36 KB, and 32 KB in
+            # a batch)
+            write_hdf5(measured, tmp)
+        summary = readers.table_summary(measured)
+        del measured
+    finally:
+        # the front does not sit on a parse's peak (it stayed 300+ MB above its start
+        # after three large CSVs: brdffit.heap)
+        heap.give_memory_back()
+    return store.add_table(digest, tmp, size, name, summary)
 
 
 
