@@ -7,6 +7,7 @@ from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.security.utils import get_authorization_scheme_param
 
 from api.jobs import JobQueue
 from api.runner import AbstractRunner
@@ -58,9 +59,10 @@ def token_refusal(settings: Settings, token: str | None) -> HTTPException | None
 
 def bearer_token(authorization: str | None) -> str | None:
     """The token of an ``Authorization: Bearer <token>`` header, as FastAPI's
-    ``HTTPBearer`` reads it (the scheme in any case), else None."""
-    scheme, _, token = (authorization or "").partition(" ")
-    return token if scheme.lower() == "bearer" and token else None
+    ``HTTPBearer`` reads it (``get_authorization_scheme_param``: the scheme in any
+    case, the token stripped), else None."""
+    scheme, token = get_authorization_scheme_param(authorization)
+    return token if authorization and scheme.lower() == "bearer" and token else None
 
 
 def require_token(

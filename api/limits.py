@@ -116,7 +116,9 @@ def _replay(body: bytes, receive):
 
 
 def _header(scope, name: bytes) -> str | None:
-    value = dict(scope["headers"]).get(name)
+    """The first ``name`` header, as Starlette's ``Headers.get`` reads it (the routes'
+    token check reads it so; ``dict`` kept the last of two)."""
+    value = next((v for k, v in scope["headers"] if k == name), None)
     return None if value is None else value.decode("latin-1")
 
 

@@ -575,8 +575,12 @@ class Store:
     def export_path(self, job_id: str, model: str, target: str, target_model: str | None,
                     viewer: str) -> Path:
         """Where a made export is kept (beside the job's plots, removed with them): one
-        file per target, renderer's model and viewer asked for."""
-        name = f"export-{target}-{target_model or '-'}-{viewer}.json"
+        file per target, renderer's model and viewer asked for, and per version of
+        brdffit that made it (a newer one makes it again: its schema or its fit may
+        differ)."""
+        from brdffit import __version__
+
+        name = f"export-{target}-{target_model or '-'}-{viewer}-{__version__}.json"
         return self.plots_dir / job_id / model / name
 
     def plot_path(self, job_id: str, model: str, kind: str, exposure_ev: float = 0.0) -> Path:

@@ -566,6 +566,10 @@ def test_the_earlier_form_keeps_or_refuses_every_key_it_is_sent(http, table_id):
                                              "options": {**FAST, "scene": scene},
                                              "scene": scene}), 422,
                  "a scene at the top level and another in `options`: give one")
+    r = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",  # null: none
+                                    "options": {**FAST, "scene": scene}, "scene": None})
+    assert r.status_code == 202 and r.json()["request"]["scene"]["name"] == "camera-normal"
+    http.post(f"/v1/fits/{r.json()['id']}/cancel")
     assert http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
                                        "options": FAST, "tolerence": 0.1}).status_code == 422
 
@@ -657,6 +661,14 @@ def test_token_guards_every_route_but_healthz(tmp_path):
         assert_error(http.get(f"/v1/fits/{UNKNOWN_JOB}", headers=ok), 404)
         assert_error(http.post("/v1/fits", content=b"{x", headers={
             **ok, "Content-Type": "application/json"}), 422, "not valid JSON")
+        # read as the routes read it: the token stripped, the first of two headers
+        for headers in ([("Authorization", "Bearer  s3cret")],
+                        [("Authorization", "Bearer s3cret"), ("Authorization", "Bearer x")]):
+            for method in ("GET", "POST"):
+                r = http.request(method, "/v1/fits", headers=headers + [
+                    ("Content-Type", "application/json")],
+                    content=b"{x" if method == "POST" else None)
+                assert r.status_code == (200 if method == "GET" else 422), (headers, r.text)
         assert http.get("/openapi.json", headers=ok).json()["info"]["title"] == "brdffit"
 
 

@@ -611,7 +611,7 @@ def test_a_table_named_with_dots_alone_gets_a_group_of_its_own(tmp_path):
     assert tables["_"]["path"].endswith("/..binary") and "lambert" in tables["_"]["fits"]
 
 
-def test_a_folder_reached_through_a_link_resumes_its_fits(tmp_path):
+def test_a_folder_reached_through_a_link_resumes_its_fits(tmp_path, capsys):
     """The folder a first run fitted, given again through a symbolic link: its tables are
     the recorded ones (nothing fitted again, one entry each); given both ways in one
     run, each table is fitted once. A link that reaches another folder since is new."""
@@ -636,6 +636,16 @@ def test_a_folder_reached_through_a_link_resumes_its_fits(tmp_path):
     link.symlink_to(other, target_is_directory=True)
     moved = run_batch([str(link)], request, out, workers=0, progress=False)
     assert moved.fits == 2
+    # their names are the first tables' groups: stored as m0~2, m1~2, and said so
+    assert [group for _, group in moved.renamed] == ["m0~2", "m1~2"]
+    assert both.renamed == again.renamed == []
+    (tmp_path / "third").mkdir()
+    third, _ = _two_lambert_tables(tmp_path / "third")
+    capsys.readouterr()
+    assert cli_main(["batch", str(third), "--models", "lambert", "--samples", "1024",
+                     "--starts", "1", "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"stored as group 'm0~3': {third / 'm0.binary'} (another table has its name)" in err
 
 
 def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
@@ -661,7 +671,8 @@ def test_changed_table_is_refitted_and_stale_fits_dropped(tmp_path):
     assert third.fits == 2 and third.replaced_options == 2 and third.replaced_changed == 0
     fourth = run_batch([str(d)], FitRequest.of("lambert", samples=2048, starts=1), out,
                        workers=0, progress=False, refit=True)
-    assert fourth.fits == 2 and fourth.skipped == 0 and fourth.replaced_refit == 2
+    assert fourth.fits == 2 and fourth.skipped == 0  # as asked: not counted as replaced
+    assert (fourth.replaced_options, fourth.replaced_changed) == (0, 0)
     # a scene weights other directions: another fit, which a rerun then resumes
     from brdffit.fitting.scene import Scene
 
@@ -944,8 +955,6 @@ def test_the_summary_line_counts_in_words():
     assert summary_line(other).endswith("; 1 fit kept from before, 2 fits made with other "
                                         "options, replaced, 1 fit of tables whose file "
                                         "changed since, replaced")
-    refit = BatchSummary("out.h5", tables=2, fits=2, replaced_refit=2, elapsed_s=3.1)
-    assert summary_line(refit).endswith("; 2 fits from before, made again as --refit asks")
 
 
 def test_a_file_of_a_newer_format_is_named_so(tmp_path):

@@ -130,6 +130,15 @@ def test_lights_and_views_are_kept_as_given_in_a_request():
     assert again == scene and again.key() == scene.key()
     body = json.dumps(FitRequest.of("ggx", scene=given).to_dict())
     assert len(body) < 30_000  # the pairs listed: ~2.5 MB
+    # its key (a batch's identity of the scene) hashes the pairs listed, as before lights
+    # and views were kept: a batch file made then resumes
+    assert json.loads(json.dumps(scene.to_spec(pairs_listed=True)))["pairs"] == \
+        np.asarray(scene.pairs).tolist()
+    # made otherwise, with other pairs: the pairs it holds, not the lights' and views'
+    import dataclasses
+
+    fewer = dataclasses.replace(scene, pairs=scene.pairs[:2])
+    assert fewer.lights_views is None and len(fewer.to_spec()["pairs"]) == 2
     mixed = Scene.from_dict({**given, "pairs": [[[0, 0, 1], [0, 0, 1]]]})
     assert "lights" not in mixed.to_spec() and len(mixed.to_spec()["pairs"]) == 141 * 141 + 1
 

@@ -126,7 +126,9 @@ async def get_export(
         raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                             f"the {target.value} export failed: {outcome.reason}")
     out = ExportOut.model_validate(outcome.value)
-    if kept is not None:
+    if kept is not None and table is not None and path.exists():
+        # kept where it was judged against the job's table: one made without it (the
+        # table's file gone) would stay without that figure if the file came back
         await run_in_threadpool(write_atomic, kept, out.model_dump_json(by_alias=True).encode())
         if await run_in_threadpool(store.get_job, job_id) is None:
             # deleted meanwhile: its folder went before this file came (as a plot's)

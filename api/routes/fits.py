@@ -216,7 +216,7 @@ class FitJobRequest(RequestBody):
             # top-level scene beside `model` was dropped without a word (the fit weighed
             # the whole table), as was any key this form does not have
             rest = {k: v for k, v in data.items() if k not in ("table_id", "model", "options")}
-            if "scene" in rest and request.get("scene") is not None:
+            if rest.get("scene") is not None and request.get("scene") is not None:
                 raise ValueError("a scene at the top level and another in `options`: give one")
             data = {"table_id": data.get("table_id"), **request,
                     **{k: v for k, v in rest.items() if k != "scene" or v is not None}}

@@ -20,10 +20,13 @@ from api import tasks
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
 from api.routes.tables import TableOut, table_out
-from api.runner import WorkerLost
+from api.runner import TimeLimitExceeded, WorkerLost
 from api.services import tables
 
 log = logging.getLogger("brdffit.api")
+
+#: The longest a material's rebuild may run in its worker (a few seconds).
+MATERIAL_LIMIT_S = 300.0
 
 router = APIRouter(prefix="/v1/materials", tags=["tables"], dependencies=[Depends(require_token)],
                    responses=ERROR_RESPONSES)
@@ -61,17 +64,19 @@ async def add_material(name: MaterialName, response: Response, store: StoreDep,
     # rebuilt in a worker (JAX), as a fit is; hashed and stored here (numpy alone)
     path = await run_in_threadpool(tables.material_file, store)
     try:
-        outcome = await runner.run(tasks.write_material, name, str(path))
-    except WorkerLost as e:
-        path.unlink(missing_ok=True)
+        outcome = await runner.run(tasks.write_material, name, str(path),
+                                   limit_s=MATERIAL_LIMIT_S)
+        if not outcome.ok:
+            log.error("material %s not rebuilt:\n%s", name, outcome.traceback)
+            raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
+                                f"rebuilding the material {name} failed: {outcome.reason}")
+        record, created = await run_in_threadpool(tables.store_material_file, store, name,
+                                                  path)
+    except (WorkerLost, TimeLimitExceeded) as e:
         raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
                             headers={"Retry-After": "5"}) from None
-    if not outcome.ok:
+    finally:  # stored (renamed away) or not, nothing is left in tmp
         path.unlink(missing_ok=True)
-        log.error("material %s not rebuilt:\n%s", name, outcome.traceback)
-        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
-                            f"rebuilding the material {name} failed: {outcome.reason}")
-    record, created = await run_in_threadpool(tables.store_material_file, store, name, path)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"/v1/tables/{record.id}"

@@ -10,7 +10,6 @@ that returns the same id.
 
 from __future__ import annotations
 
-import asyncio
 import hashlib
 import os
 import tempfile
@@ -86,12 +85,6 @@ UPLOAD_BODY = {
 
 class _TooLarge(Exception):
     pass
-
-
-#: One upload read and validated at a time in this process (the front): a sample list's
-#: parse holds ~12x its size (three 27 MB CSVs at once peaked at 1.6 GB). A MERL
-#: table's takes ~50 ms; a long list's, seconds, which the others wait for.
-_VALIDATING = asyncio.Semaphore(1)
 
 
 def table_out(record: TableRecord) -> TableOut:
@@ -236,10 +229,9 @@ async def upload_table(
     # whose attributes cannot hold one (a 500), and a MERL table's name could
     name = (name or "upload").replace("\x00", "\ufffd")
     try:
-        async with _VALIDATING:
-            record, created = await run_in_threadpool(
-                tables.validate_and_store, store, tmp, digest, size, name, cap, sheet
-            )
+        record, created = await run_in_threadpool(
+            tables.validate_and_store_one_at_a_time, store, tmp, digest, size, name, cap,
+            sheet)
     except tables.StoredTooLarge as e:  # the cap holds for what is kept, compressed or not
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(e)) from None
     finally:

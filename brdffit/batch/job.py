@@ -82,11 +82,14 @@ class BatchSummary:
     tables: int = 0
     skipped: int = 0  # tables whose every fit was already in the file
     kept: int = 0  # fits of the other tables already in the file, not made again
-    # fits in the file made again: made with other options, of a table whose file
-    # changed since, or all of them (refit)
+    # fits in the file to be made again, of tables hashed before the run (--refit hashes
+    # none: it makes every fit again, as asked): made with other options, or of a table
+    # whose file changed since
     replaced_options: int = 0
     replaced_changed: int = 0
-    replaced_refit: int = 0
+    # (path, group) of each new table whose group is not its file's name: another
+    # table of the same name has that group (a/mat.binary and b/mat.binary: mat, mat~2)
+    renamed: list[tuple[str, str]] = field(default_factory=list)
     fits: int = 0  # fits made in this run, failed ones included
     failed_tables: list[tuple[str, str]] = field(default_factory=list)
     failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
@@ -245,10 +248,8 @@ def _plan(paths: list[str], model_names: list[str], key: str, store: BatchStore,
             summary.skipped += 1
             continue
         tasks.append(_Task(p, sha, tuple(sorted(done))))
-        options, changed = store.replaced(p, None if refit else sha, key, model_names)
-        if refit:  # None: every stored fit counts as other content
-            summary.replaced_refit += changed
-        else:
+        if sha is not None:  # hashed: its fits of other options or content go once it is read
+            options, changed = store.replaced(p, sha, key, model_names)
             summary.replaced_options += options
             summary.replaced_changed += changed
     summary.kept = sum(len(t.done_models) for t in tasks)
@@ -475,7 +476,8 @@ def run_batch(
         summary.damaged = len(store.damaged)
         paths = store.as_known(paths)
         summary.tables = len(paths)
-        store.reserve_names(paths)  # group names follow the input order, not finish order
+        # group names follow the input order, not finish order
+        summary.renamed = store.reserve_names(paths)
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
         tasks = _plan(paths, model_names, request.fit_key(), store, refit, summary)
         bar = progress if isinstance(progress, ProgressLine) else ProgressLine(

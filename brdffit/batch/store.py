@@ -243,11 +243,10 @@ class BatchStore:
         return {m for m, f in t.fits.items()
                 if f.sha256 == sha256 and f.options == key and f.status == "ok"}
 
-    def replaced(self, path: str, sha256: str | None, key: str,
-                 models) -> tuple[int, int]:
+    def replaced(self, path: str, sha256: str, key: str, models) -> tuple[int, int]:
         """Of ``models``' successful fits stored for ``path``, those a run that fits
-        content ``sha256`` (None: not hashed, every fit is made again) under fit key
-        ``key`` makes again: ``(made with other options, made of other content)``."""
+        content ``sha256`` under fit key ``key`` makes again: ``(made with other
+        options, made of other content)``."""
         t = self._tables.get(path)
         if t is None:
             return 0, 0
@@ -266,10 +265,17 @@ class BatchStore:
             "n_fits_failed": sum(f.status != "ok" for f in fits),
         }
 
-    def reserve_names(self, paths: list[str]) -> None:
-        """Fix the group names of new tables in this order (results arrive in any order)."""
+    def reserve_names(self, paths: list[str]) -> list[tuple[str, str]]:
+        """Fix the group names of new tables in this order (results arrive in any order);
+        returns ``(path, name)`` of each new one named ``stem~N``, its file's name being
+        another table's group already."""
+        renamed = []
         for p in paths:
-            self._group_name(p)
+            new = p not in self._names
+            name = self._group_name(p)
+            if new and "~" in name and not os.path.basename(p).startswith(name):
+                renamed.append((p, name))
+        return renamed
 
     # -- recording ---------------------------------------------------------------------
 

@@ -77,8 +77,7 @@ def summary_line(s) -> str:
     # fits in the file made again were done before, and are gone: one fit per model is
     # kept (it read "none was done before" where a run with other options replaced them)
     replaced = ((s.replaced_options, "made with other options, replaced"),
-                (s.replaced_changed, "of tables whose file changed since, replaced"),
-                (s.replaced_refit, "from before, made again as --refit asks"))
+                (s.replaced_changed, "of tables whose file changed since, replaced"))
     done += [f"{_count(n, 'fit')} {why}" for n, why in replaced if n]
     done = ", ".join(done) or "none was done before"
     return (f"{s.out}: {_count(s.fits, 'fit')} on {_count(s.tables - s.skipped, 'table')} in "
@@ -147,6 +146,9 @@ def run(args) -> int:
     if s.damaged:
         print(f"fitted again: {_count(s.damaged, 'fit')} whose stored result did not read back "
               "(a damaged file)", file=sys.stderr)
+    for path, group in s.renamed:  # the file's own name is another table's group
+        print(f"stored as group {group!r}: {path} (another table has its name)",
+              file=sys.stderr)
     print(summary_line(s))
     if s.ok:
         return 0

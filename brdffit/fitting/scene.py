@@ -91,8 +91,10 @@ class Scene:
     extra: dict = field(default_factory=dict)
     # the lights and the views whose every pairing ``pairs`` holds, where it was given
     # so and nothing else: kept so, a request stores 2 x 141 directions where the
-    # pairs were 19,881 (a 2.5 MB job record, and a client's body over the service's cap)
-    lights_views: tuple[np.ndarray, np.ndarray] | None = None
+    # pairs were 19,881 (a 2.5 MB job record, and a client's body over the service's
+    # cap). Set by from_dict alone: a scene made otherwise (dataclasses.replace with
+    # other pairs) has none, and lists its pairs
+    lights_views: tuple[np.ndarray, np.ndarray] | None = field(default=None, init=False)
 
     def __post_init__(self):
         for k in ("max_theta_i", "max_theta_o"):
@@ -165,9 +167,10 @@ class Scene:
         if parts:
             _not_too_many(sum(map(len, parts)), "its pairs")
             kw["pairs"] = np.concatenate(parts)
-            if len(parts) == 1 and "lights" in d:  # lights x views alone
-                kw["lights_views"] = (lights, views)
-        return cls(**kw)
+        scene = cls(**kw)
+        if len(parts) == 1 and "lights" in d:  # lights x views alone
+            object.__setattr__(scene, "lights_views", (lights, views))
+        return scene
 
     @classmethod
     def from_file(cls, path: str | os.PathLike) -> Scene:
@@ -271,13 +274,13 @@ class Scene:
         return (f"{self.name}: {what}; {self.n_bins:,} bins, "
                 f"{100 * self.solid_angle_fraction:.2g}% of the solid angle")
 
-    def to_spec(self) -> dict:
+    def to_spec(self, *, pairs_listed: bool = False) -> dict:
         """The scene as :meth:`from_dict` reads it (the pairs listed, as kept; lights and
         views where it was given as every pairing of them): what a request stores, so
         that the same scene comes back from it."""
         spec = {"name": self.name, "max_theta_i": self.max_theta_i,
                 "max_theta_o": self.max_theta_o, "spread": self.spread}
-        if self.lights_views is not None:  # the same pairs, as given: each pairing
+        if self.lights_views is not None and not pairs_listed:  # the same pairs, as given
             spec["lights"], spec["views"] = (np.asarray(a, np.float64).tolist()
                                              for a in self.lights_views)
         elif self.pairs is not None:
@@ -286,12 +289,15 @@ class Scene:
 
     def key(self) -> str:
         """A short identity of what the scene weights (its name and a hash of
-        :meth:`to_spec`): a batch resumes a fit only under the same scene."""
+        :meth:`to_spec` with the pairs listed, however the scene was given: a batch
+        file's keys from before lights and views were kept stay its keys): a batch
+        resumes a fit only under the same scene."""
         import hashlib
 
         from brdffit import jsonout
 
-        text = jsonout.dumps(self.to_spec(), sort_keys=True, separators=(",", ":"))
+        text = jsonout.dumps(self.to_spec(pairs_listed=True), sort_keys=True,
+                             separators=(",", ":"))
         return f"{self.name}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
 
     def __eq__(self, other) -> bool:
