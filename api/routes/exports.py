@@ -20,7 +20,13 @@ from pydantic import BaseModel, ConfigDict, Field
 from api import tasks
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
-from api.routes.fits import FitModel, JobId, finished_fit, write_atomic
+from api.routes.fits import (
+    FitModel,
+    JobId,
+    finished_fit,
+    worker_unavailable,
+    write_atomic,
+)
 from api.runner import TimeLimitExceeded, WorkerLost
 from brdffit.export import SCHEMA, TARGETS
 
@@ -101,13 +107,8 @@ async def get_export(
         try:
             return await runner.run(tasks.export_fit, result, target.value, table,
                                     target_model, viewer, limit_s=EXPORT_LIMIT_S)
-        except WorkerLost as e:
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
-                                headers={"Retry-After": "5"}) from None
-        except TimeLimitExceeded as e:
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
-                                f"the {target.value} export {e}; try again later",
-                                headers={"Retry-After": "30"}) from None
+        except (WorkerLost, TimeLimitExceeded) as e:
+            raise worker_unavailable(e, f"the {target.value} export") from None
 
     table = str(path) if path.exists() else None
     outcome = await exported(table)

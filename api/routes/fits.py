@@ -490,13 +490,8 @@ async def get_plot(
             outcome = await runner.run(tasks.render_plot, str(store.table_path(job.table_id)),
                                        table.name, result, kind.value, exposure_ev,
                                        limit_s=PLOT_LIMIT_S)
-        except WorkerLost as e:
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
-                                headers={"Retry-After": "5"}) from None
-        except TimeLimitExceeded as e:
-            raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
-                                f"the {kind.value} plot {e}; try again later",
-                                headers={"Retry-After": "30"}) from None
+        except (WorkerLost, TimeLimitExceeded) as e:
+            raise worker_unavailable(e, f"the {kind.value} plot") from None
         if not outcome.ok and not store.table_path(job.table_id).exists():
             # the table (and the job, with_fits) deleted while the plot waited for a
             # worker: a 500 that quoted the data dir's path of the file, where it is a 404
@@ -514,6 +509,16 @@ async def get_plot(
                                 f"no fit job {job_id}: deleted while its plot was drawn")
         return Response(outcome.value, media_type="image/png")
     return Response(await run_in_threadpool(path.read_bytes), media_type="image/png")
+
+
+def worker_unavailable(e: WorkerLost | TimeLimitExceeded, what: str) -> HTTPException:
+    """The 503 of a task (``what``: "the spheres plot") whose worker died under it, or
+    that ran past its time limit (its worker replaced): try again, sooner or later."""
+    if isinstance(e, TimeLimitExceeded):
+        return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE,
+                             f"{what} {e}; try again later", headers={"Retry-After": "30"})
+    return HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
+                         headers={"Retry-After": "5"})
 
 
 async def _deleted(store, job_id: str, table_id: str) -> HTTPException:

@@ -19,6 +19,7 @@ from pydantic import BaseModel, Field
 from api import tasks
 from api.deps import RunnerDep, StoreDep, require_token
 from api.errors import ERROR_RESPONSES, ErrorMessage
+from api.routes.fits import worker_unavailable
 from api.routes.tables import TableOut, table_out
 from api.runner import TimeLimitExceeded, WorkerLost
 from api.services import tables
@@ -73,8 +74,7 @@ async def add_material(name: MaterialName, response: Response, store: StoreDep,
         record, created = await run_in_threadpool(tables.store_material_file, store, name,
                                                   path)
     except (WorkerLost, TimeLimitExceeded) as e:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, f"{e}; try again",
-                            headers={"Retry-After": "5"}) from None
+        raise worker_unavailable(e, f"rebuilding the material {name}") from None
     finally:  # stored (renamed away) or not, nothing is left in tmp
         path.unlink(missing_ok=True)
     if not created:
