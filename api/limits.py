@@ -51,14 +51,15 @@ class RequestLimits:
                                   "(BRDFFIT_BODY_READ_TIMEOUT_S)") from None
 
         app_receive = timed_receive
-        if scope["path"].startswith("/v1/") and _may_have_body(scope):
+        has_body = _may_have_body(scope)
+        if has_body and scope["path"].startswith("/v1/"):
             # every /v1 route needs the token: refused before a byte of its body is read
             # (a malformed body without it was answered 422, and 1 MiB of it read)
             refusal = token_refusal(self.settings, bearer_token(_header(scope, b"authorization")))
             if refusal is not None:
                 return await _answer(send, refusal.status_code, refusal.detail,
                                      refusal.headers)
-        if (scope["method"], scope["path"]) not in STREAMED and _may_have_body(scope):
+        if has_body and (scope["method"], scope["path"]) not in STREAMED:
             cap = self.settings.max_json_bytes
             try:
                 body = await _read_body(timed_receive, cap)

@@ -9,7 +9,6 @@ model to the fit (seconds of JAX), so it runs in a worker process like a fit.
 from __future__ import annotations
 
 import logging
-import shutil
 from enum import Enum
 from typing import Annotated, Literal
 
@@ -24,8 +23,8 @@ from api.routes.fits import (
     FitModel,
     JobId,
     finished_fit,
+    kept_for_the_job,
     worker_unavailable,
-    write_atomic,
 )
 from api.runner import TimeLimitExceeded, WorkerLost
 from brdffit.export import SCHEMA, TARGETS
@@ -130,8 +129,5 @@ async def get_export(
     if kept is not None and table is not None and path.exists():
         # kept where it was judged against the job's table: one made without it (the
         # table's file gone) would stay without that figure if the file came back
-        await run_in_threadpool(write_atomic, kept, out.model_dump_json(by_alias=True).encode())
-        if await run_in_threadpool(store.get_job, job_id) is None:
-            # deleted meanwhile: its folder went before this file came (as a plot's)
-            await run_in_threadpool(shutil.rmtree, store.plots_dir / job_id, True)
+        await kept_for_the_job(store, job_id, kept, out.model_dump_json(by_alias=True).encode())
     return out

@@ -500,11 +500,7 @@ async def get_plot(
             log.error("plot %s of job %s failed:\n%s", kind.value, job_id, outcome.traceback)
             raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
                                 f"rendering the {kind.value} plot failed: {outcome.reason}")
-        await run_in_threadpool(write_atomic, path, outcome.value)
-        if await run_in_threadpool(store.get_job, job_id) is None:
-            # deleted while it was drawn: its plots' folder went before this file came,
-            # and the file stayed on disk for good (a delete after this look removes it)
-            await run_in_threadpool(shutil.rmtree, store.plots_dir / job_id, True)
+        if not await kept_for_the_job(store, job_id, path, outcome.value):
             raise HTTPException(status.HTTP_404_NOT_FOUND,
                                 f"no fit job {job_id}: deleted while its plot was drawn")
         return Response(outcome.value, media_type="image/png")
@@ -532,7 +528,19 @@ async def _deleted(store, job_id: str, table_id: str) -> HTTPException:
                          "plot draws the fit beside its table")
 
 
-def write_atomic(path, data: bytes) -> None:
+async def kept_for_the_job(store, job_id: str, path, data: bytes) -> bool:
+    """``data`` kept at ``path``, in job ``job_id``'s folder of plots and exports;
+    False (and the folder removed) where the job was deleted meanwhile: its folder went
+    before this file came, and the file would stay on disk for good (a delete after
+    this look removes it)."""
+    await run_in_threadpool(_write_atomic, path, data)
+    if await run_in_threadpool(store.get_job, job_id) is None:
+        await run_in_threadpool(shutil.rmtree, store.plots_dir / job_id, True)
+        return False
+    return True
+
+
+def _write_atomic(path, data: bytes) -> None:
     """``data`` into ``path`` (its folders made) by a rename: a reader sees it whole."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{id(data)}")

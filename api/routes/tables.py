@@ -230,8 +230,7 @@ async def upload_table(
     name = (name or "upload").replace("\x00", "\ufffd")
     try:
         record, created = await run_in_threadpool(
-            tables.validate_and_store_one_at_a_time, store, tmp, digest, size, name, cap,
-            sheet)
+            tables.validate_and_store, store, tmp, digest, size, name, cap, sheet)
     except tables.StoredTooLarge as e:  # the cap holds for what is kept, compressed or not
         raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, str(e)) from None
     finally:

@@ -41,17 +41,11 @@ def sheet_id(digest: str, sheet: str) -> str:
     return hashlib.sha256(f"{digest}\x00sheet\x00{sheet}".encode()).hexdigest()
 
 
-#: One upload read and validated at a time in this process (the front): a sample list's
-#: parse holds ~12x its size (three 26 MB CSVs at once took it from 72 MB to 823 MB). A
-#: MERL table's takes ~50 ms; a long list's, seconds, which the others wait for (in
-#: their own threads, not the event loop's).
+#: One file read and validated at a time in this process (the front), an upload's or a
+#: material's: a sample list's parse holds ~12x its size (three 26 MB CSVs at once took
+#: it from 72 MB to 823 MB). A MERL table's takes ~50 ms; a long list's, seconds, which
+#: the others wait for (in their own threads, not the event loop's).
 _VALIDATING = threading.Lock()
-
-
-def validate_and_store_one_at_a_time(*args) -> tuple[TableRecord, bool]:
-    """:func:`validate_and_store`, one call at a time in this process."""
-    with _VALIDATING:
-        return validate_and_store(*args)
 
 
 def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
@@ -83,6 +77,14 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
     declared = readers.declared_samples(tmp, name)
     if declared is not None:  # at least the angles and rgb: refused without reading
         _stored_fits(name, declared, False, cap)
+    with _VALIDATING:
+        summary = _validated(tmp, name, cap, sheet)
+    return store.add_table(digest, tmp, size, name, summary)
+
+
+def _validated(tmp: Path, name: str, cap: int | None, sheet: str | None) -> dict:
+    """The summary of the measured file ``tmp`` (:func:`validate_and_store`), a sample
+    list rewritten in place as brdffit's HDF5."""
     try:
         measured = readers.read_measured(tmp, name=name, sheet=sheet)  # errors name it
         if isinstance(measured, Measurements):
@@ -97,7 +99,7 @@ def validate_and_store(store: Store, tmp: Path, digest: str, size: int,
         # the front does not sit on a parse's peak (it stayed 300+ MB above its start
         # after three large CSVs: brdffit.heap)
         heap.give_memory_back()
-    return store.add_table(digest, tmp, size, name, summary)
+    return summary
 
 
 
@@ -127,10 +129,7 @@ def material_file(store: Store) -> Path:
 
 def store_material_file(store: Store, name: str, path: Path) -> tuple[TableRecord, bool]:
     """Store the shipped material ``name``'s table written at ``path`` as an upload of
-    its bytes would be (numpy alone: no JAX in the server's process); ``path`` is
-    removed."""
-    try:
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-        return validate_and_store(store, path, digest, path.stat().st_size, f"{name}.binary")
-    finally:
-        path.unlink(missing_ok=True)
+    its bytes would be (numpy alone: no JAX in the server's process); the caller removes
+    ``path`` where it is not stored."""
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return validate_and_store(store, path, digest, path.stat().st_size, f"{name}.binary")

@@ -179,11 +179,11 @@ SIGMA_IS = ("their standard deviation, in 1/sr. Rename it so to weigh the fit by
              "drop it")
 
 
-#: Fewer samples than this are not judged by :func:`radians_said_to_be_degrees`.
+#: Fewer samples than this are not judged by :func:`polar_unit_checked`.
 _JUDGED_FROM = 3
 
 
-def radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
+def _radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
                                 source: str) -> None:
     """Refuses polar angles in degrees (``scales``) whose numbers all fit radians' range,
     pi/2: read as degrees, the whole list sits within 1.6 degrees of the normal, where
@@ -207,7 +207,7 @@ def radians_said_to_be_degrees(raw: list[np.ndarray], scales: list[float],
                     "a units attribute 'radians')")
 
 
-def degrees_said_to_be_radians(raw: list[np.ndarray], scales: list[float],
+def _degrees_said_to_be_radians(raw: list[np.ndarray], scales: list[float],
                                source: str) -> None:
     """Refuses polar angles in radians (``scales``) of which a quarter or more lie past
     the horizon, pi/2, and all within 90: degrees under a radians name, most likely.
@@ -227,6 +227,14 @@ def degrees_said_to_be_radians(raw: list[np.ndarray], scales: list[float],
                     "and all are within 90: degrees? Name their columns _deg (theta_i_deg), "
                     "or put '# angles: degrees' before the header (HDF5: a units attribute "
                     "'degrees')")
+
+
+def polar_unit_checked(raw: list[np.ndarray], scales: list[float], source: str) -> None:
+    """Refuses polar angles whose numbers contradict the unit they are said to be in,
+    either way (:func:`_radians_said_to_be_degrees`, :func:`_degrees_said_to_be_radians`),
+    ``raw`` as written and ``scales`` their radians per unit."""
+    _radians_said_to_be_degrees(raw, scales, source)
+    _degrees_said_to_be_radians(raw, scales, source)
 
 
 #: From this many samples, azimuths are judged by :func:`azimuths_within`.

@@ -40,9 +40,8 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
-    degrees_said_to_be_radians,
     long_column_kind,
-    radians_said_to_be_degrees,
+    polar_unit_checked,
     stated_unit,
     unit_scale,
 )
@@ -156,7 +155,7 @@ def read_npz(path: str | os.PathLike) -> Measurements:
     """A NumPy ``.npz`` archive of named arrays (:mod:`brdffit.io.npz`), read as an
     HDF5 file of the same datasets is."""
     if not npz.is_npz(path):
-        if npz.is_empty_zip(path):  # np.savez(path) of no arrays: "not an .npz" puzzled
+        if npz.zip_members(path) == []:  # np.savez(path) of no arrays: "not an .npz" puzzled
             raise MeasurementsError(str(path), "an empty .npz archive: it holds no arrays "
                                                "(np.savez was given none)")
         with open(path, "rb") as raw:
@@ -273,8 +272,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     if long is not None:  # one row per (direction, channel): pivoted first
         raw, values, sigma, wavelengths, provenance["long_layout"] = _pivoted(
             f, long, raw, scales, values, sigma, source, matlab)
-    radians_said_to_be_degrees(raw, scales, source)
-    degrees_said_to_be_radians(raw, scales, source)
+    polar_unit_checked(raw, scales, source)
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     provenance.update(azimuths_within(raw, scales))
     if wavelengths is not None:

@@ -29,25 +29,20 @@ from brdffit.io.measurements import MeasurementsError
 ZIP_MAGIC = b"PK\x03\x04"
 
 
+def zip_members(path: str | Path) -> list[str] | None:
+    """The member names of the zip archive ``path``, or None where it is not one."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return None
+
+
 def is_npz(path: str | Path) -> bool:
     """Whether ``path`` is a zip archive whose members are all ``.npy`` arrays (an
     Excel workbook is a zip archive too)."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            names = z.namelist()
-    except (OSError, zipfile.BadZipFile, ValueError):
-        return False
+    names = zip_members(path)
     return bool(names) and all(n.endswith(".npy") for n in names)
-
-
-def is_empty_zip(path: str | Path) -> bool:
-    """Whether ``path`` is a zip archive of no members (what ``np.savez`` of no arrays
-    writes)."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            return not z.namelist()
-    except (OSError, zipfile.BadZipFile, ValueError):
-        return False
 
 
 def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtype]]:

@@ -32,9 +32,8 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
-    degrees_said_to_be_radians,
     long_column_kind,
-    radians_said_to_be_degrees,
+    polar_unit_checked,
     stated_unit,
     unit_scale,
     value_name,
@@ -240,8 +239,7 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
                               names=cols["names"])
         raw, values, sigma, row_numbers = p.raw, p.values, p.sigma, p.rows
         wavelengths, provenance["long_layout"] = p.wavelengths, p.summary
-    radians_said_to_be_degrees(raw, scales, source)
-    degrees_said_to_be_radians(raw, scales, source)
+    polar_unit_checked(raw, scales, source)
     provenance.update(azimuths_within(raw, scales))
     angles = [a * scale for a, scale in zip(raw, scales, strict=True)]
     if wavelengths is not None:
