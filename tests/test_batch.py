@@ -1067,3 +1067,154 @@ def test_a_table_rewritten_at_every_read_fails_its_fits_saying_so(tmp_path, monk
     assert not summary.ok and summary.failed_fits
     assert all("the file changed while the batch fitted it" in why
                for _, _, why in summary.failed_fits)
+
+
+# -- what a review of the batch found (session 39) -------------------------------------
+
+
+def test_an_interrupted_refit_goes_on_where_it_stopped(tmp_path, capsys):
+    """An interrupted --refit told the user to run the same command again, which made
+    every fit again (the refit's own finished fits too) and said "none was done
+    before". The file now marks a refit until it finishes: run again, it goes on."""
+    d, opts = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    request = FitRequest(("lambert",), opts)
+    assert run_batch([str(d)], request, out, workers=0, progress=False).fits == 2
+
+    def stop_after_one(table, fits):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_batch([str(d)], request, out, workers=0, progress=False, refit=True,
+                  on_result=stop_after_one)
+    assert "refit_pending" in read_results(out)["attrs"]
+    again = run_batch([str(d)], request, out, workers=0, progress=False, refit=True)
+    assert (again.fits, again.kept + again.skipped, again.refitted) == (1, 1, 1)
+    assert again.resumed_refit is not None
+    assert "refit_pending" not in read_results(out)["attrs"], "a finished refit is unmarked"
+    # the next --refit is a new one: every fit made again, and said so
+    capsys.readouterr()
+    assert cli_main(["batch", str(d), "--models", "lambert", "--samples", "1024", "--starts",
+                     "1", "--out", str(out), "--quiet", "--refit"]) == 0
+    assert "2 fits on 2 tables" in (line := capsys.readouterr().out)
+    assert "2 stored fits made again (--refit)" in line and "going on" not in line
+
+
+def test_a_symbolic_link_named_as_out_is_written_through(tmp_path):
+    """--out a link: the link was replaced by a file of its own, its target kept the
+    old results, and the lock was per spelling (two batches could write one file)."""
+    d, opts = _two_lambert_tables(tmp_path)
+    (tmp_path / "store").mkdir()
+    target, link = tmp_path / "store" / "real.h5", tmp_path / "link.h5"
+    link.symlink_to(target)
+    request = FitRequest(("lambert",), opts)
+    assert run_batch([str(d / "m0.binary")], request, link, workers=0, progress=False).ok
+    assert link.is_symlink() and os.path.isfile(target)
+    assert run_batch([str(d)], request, link, workers=0, progress=False).fits == 1
+    assert link.is_symlink() and sorted(_tables(target)) == ["m0", "m1"]
+    with BatchStore(target), pytest.raises(BatchFileError, match="another batch"):
+        BatchStore(link).open()
+
+
+def test_a_moved_folder_keeps_its_tables_and_fits(tmp_path, capsys):
+    """A fit is identified by its table's content: a folder renamed since the last run
+    made every fit again, as new tables beside the old (m0~2)."""
+    d, opts = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    request = FitRequest(("lambert",), opts)
+    assert run_batch([str(d)], request, out, workers=0, progress=False).fits == 2
+    moved = tmp_path / "renamed"
+    os.rename(d, moved)
+    capsys.readouterr()
+    assert cli_main(["batch", str(moved), "--models", "lambert", "--samples", "1024",
+                     "--starts", "1", "--out", str(out), "--quiet"]) == 0
+    line = capsys.readouterr().out
+    assert "0 fits on 0 tables" in line and "2 tables found at a new path" in line
+    tables = _tables(out)
+    assert sorted(tables) == ["m0", "m1"]
+    assert tables["m0"]["path"] == str(moved / "m0.binary")
+    assert tables["m0"]["fits"]["lambert"]["status"] == "ok"
+    # and resumed from the file alone, as a new process reads it
+    assert run_batch([str(moved)], request, out, workers=0, progress=False).skipped == 2
+
+
+def test_results_read_back_as_strict_json(tmp_path):
+    """read_results gave NaN for a failed fit's time and for a metric not measured (null
+    in the fit's own JSON): json.dumps(..., allow_nan=False) failed on it."""
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    table = make_table("lambert", {"kd": [0.5, 0.3, 0.2]})[0]
+    keep = np.zeros(table.mask.size, bool)
+    keep[np.flatnonzero(table.mask.ravel())[::60000]] = True  # ~18 bins: ggx needs 32
+    rgb = np.where(keep.reshape(table.mask.shape), table.rgb, -1.0)
+    merl.write(tmp_path / "sparse.binary", merl.MerlTable(rgb, keep.reshape(table.mask.shape)))
+    out = tmp_path / "r.h5"
+    s = run_batch([str(tmp_path / "sparse.binary")], FitRequest.of(["lambert", "ggx"],
+                  samples=1024, starts=1), out, workers=0, progress=False)
+    assert [m for _, m, _ in s.failed_fits] == ["ggx"]
+    results = read_results(out)
+    json.dumps(results, allow_nan=False)
+    fit = results["tables"][0]["fits"]["ggx"]
+    assert fit["status"] == "failed" and fit["time_s"] is None
+
+
+def test_auto_with_a_candidate_added_says_it_makes_every_candidate_again(tmp_path):
+    """auto's candidates are fitted together: with one added, the others are made again,
+    and the summary said they were kept."""
+    d, opts = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    first = run_batch([str(d)], FitRequest.of("auto", candidates=["lambert", "phong"],
+                      samples=1024, starts=1), out, workers=0, progress=False)
+    assert first.ok and first.fits == 4
+    second = run_batch([str(d)], FitRequest.of("auto", candidates=["lambert", "phong",
+                       "blinn_phong"], samples=1024, starts=1), out, workers=0, progress=False)
+    assert second.fits == 6 and second.kept == 0
+
+
+def test_results_files_that_cannot_be_journals_and_folders_that_refuse_writes(
+        tmp_path, monkeypatch):
+    import errno
+    import shutil
+
+    d, opts = _two_lambert_tables(tmp_path)
+    request = FitRequest(("lambert",), opts)
+    first = tmp_path / "r1.h5.journal"
+    with pytest.raises(BatchFileError, match="journal; name the results file .h5"):
+        run_batch([str(d)], request, first, workers=0, progress=False)
+    # a results file left under a journal's name is not taken (and deleted) as one
+    assert run_batch([str(d)], request, tmp_path / "other.h5", workers=0, progress=False).ok
+    os.rename(tmp_path / "other.h5", tmp_path / "r1.h5.journal")
+    with pytest.raises(BatchFileError, match="is an HDF5 file, not this file's journal"):
+        run_batch([str(d)], request, tmp_path / "r1.h5", workers=0, progress=False)
+    assert os.path.getsize(tmp_path / "r1.h5.journal") > 1000
+    # a folder that refuses the write mid-run: the journal keeps the fits, and it says so
+    out = tmp_path / "r2.h5"
+    calls = {"n": 0}
+    copy = shutil.copyfile
+
+    def refused(src, dst, **kw):
+        calls["n"] += 1
+        if calls["n"] > 1:
+            raise PermissionError(errno.EPERM, "Operation not permitted", dst)
+        return copy(src, dst, **kw)
+
+    monkeypatch.setattr(shutil, "copyfile", refused)
+    with pytest.raises(BatchFileError, match=r"Operation not permitted\); this run's finished "
+                       r"fits are kept in .*r2\.h5\.journal: make the folder writable"):
+        run_batch([str(d)], request, out, workers=0, progress=False, checkpoint_s=0)
+    assert not [f for f in os.listdir(tmp_path) if ".tmp-" in f]
+    monkeypatch.setattr(shutil, "copyfile", copy)
+    again = run_batch([str(d)], request, out, workers=0, progress=False)
+    assert again.recovered >= 1 and again.fits + again.skipped + again.kept >= 1
+
+
+def test_a_folder_of_hidden_files_alone_says_so(tmp_path):
+    d, _ = _two_lambert_tables(tmp_path)
+    hidden = tmp_path / "h"
+    (hidden / ".cache").mkdir(parents=True)
+    os.rename(d / "m0.binary", hidden / ".m0.binary")
+    os.rename(d / "m1.binary", hidden / ".cache" / "m1.binary")
+    with pytest.raises(BatchInputError, match=r"holds no measured file but .*\.m0\.binary.* "
+                       r"hidden \(a name or folder starting with '\.'\)"):
+        find_tables([str(hidden)])

@@ -25,6 +25,7 @@ import concurrent.futures
 import contextlib
 import glob
 import hashlib
+import json
 import math
 import os
 import threading
@@ -87,6 +88,9 @@ class BatchSummary:
     # whose file changed since
     replaced_options: int = 0
     replaced_changed: int = 0
+    refitted: int = 0  # stored successful fits made again because --refit asked
+    resumed_refit: str | None = None  # when the interrupted --refit this run goes on with began
+    moved: int = 0  # tables found at a new path (same content): their fits went with them
     # (path, group) of each new table whose group is not its file's name: another
     # table of the same name has that group (a/mat.binary and b/mat.binary: mat, mat~2)
     renamed: list[tuple[str, str]] = field(default_factory=list)
@@ -130,6 +134,7 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     skip = {os.path.abspath(os.fspath(p)) + end for p in exclude for end in ("", ".journal")}
 
     skipped: list[str] = []
+    hidden: list[str] = []
 
     def add_dir(d: str) -> int:
         # glob passes over a folder it cannot read without a word: its files were left
@@ -145,6 +150,11 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
                                   "or name the folders to fit")
         files = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
             os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
+        # glob leaves out hidden files and folders (an editor's, a sync tool's): said
+        # where they are all the folder holds ("holds no measured file" was untrue)
+        hidden.extend(f for suffix in DIR_SUFFIXES for f in glob.glob(
+            os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True,
+            include_hidden=True) if f not in files)
         n = 0
         for f in files:
             if os.path.abspath(f) in skip:
@@ -159,9 +169,13 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     for text in inputs:
         if os.path.isdir(text):
             skipped.clear()
+            hidden.clear()
             if not add_dir(text):
                 but = (f" but {', '.join(skipped)}, the batch's own results file (--out)"
                        if skipped else "")
+                if hidden:
+                    but += (f"{';' if but else ' but'} {_hidden_words(hidden)}, hidden (a "
+                            "name or folder starting with '.'): name them to fit them")
                 raise BatchInputError(f"{text}: directory holds no measured file{but} "
                                       f"({', '.join('*' + s for s in DIR_SUFFIXES)})")
         elif os.path.lexists(text):
@@ -187,6 +201,10 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
         raise BatchInputError("no tables to fit")
     _check_names_storable(found)
     return list(found)
+
+
+def _hidden_words(hidden: list[str]) -> str:
+    return ", ".join(hidden[:3]) + (f" and {len(hidden) - 3} more" if len(hidden) > 3 else "")
 
 
 def _check_names_storable(paths) -> None:
@@ -231,29 +249,84 @@ def file_sha256(path: str) -> str | None:
     return h.hexdigest()
 
 
-def _plan(paths: list[str], model_names: list[str], key: str, store: BatchStore,
-          refit: bool, summary: BatchSummary) -> list[_Task]:
+def _moved(paths: list[str], store: BatchStore) -> int:
+    """How many of ``paths`` are tables the file recorded at a path now gone, found
+    at a new one (by their sha256); each move is recorded (:meth:`BatchStore.record_move`): a
+    folder moved or renamed is resumed, its tables keep their groups. New files are
+    hashed only when some recorded file is gone."""
+    gone = store.vanished()
+    new = [p for p in paths if store.known_sha256(p) is None]
+    if not gone or not new:
+        return 0
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        hashes = list(pool.map(file_sha256, new))
+    moved = 0
+    for p, sha in zip(new, hashes, strict=True):
+        old = gone.pop(sha, None)
+        if old is not None:
+            store.record_move(old, p)
+            moved += 1
+    return moved
+
+
+def _plan(paths: list[str], request: FitRequest, store: BatchStore, refit: bool,
+          summary: BatchSummary, refit_since: str | None = None) -> list[_Task]:
     """Tasks for the tables with fits left to make; ``summary`` counts the tables
-    complete and the stored fits that will be made again (and why)."""
+    complete and the stored fits that will be made again (and why). ``refit``: every
+    fit is made again, but those made since ``refit_since`` (an interrupted --refit
+    of the same request, gone on with)."""
+    model_names, key = list(request.fitted_models), request.fit_key()
     # Only tables a previous run read need hashing here; new ones are hashed by
     # their worker from the bytes it fits. hashlib releases the GIL: threads help.
-    known = [p for p in paths if not refit and store.known_sha256(p)]
+    known = [p for p in paths if (not refit or refit_since) and store.known_sha256(p)]
     with ThreadPoolExecutor(max_workers=4) as pool:
         current = dict(zip(known, pool.map(file_sha256, known), strict=True))
     tasks = []
     for p in paths:
         sha = current.get(p)
         done = store.done_models(p, sha, key) if sha else set()
+        if refit:
+            done &= store.made_since(p, refit_since) if refit_since else set()
+            summary.refitted += len(store.stored_ok(p, model_names) - done)
         if done >= set(model_names):
             summary.skipped += 1
             continue
+        # auto's candidates are fitted together: where one is left, all are made again
+        left = {m for item in work_items(request, [m for m in model_names if m not in done])
+                for m in item}
         tasks.append(_Task(p, sha, tuple(sorted(done))))
-        if sha is not None:  # hashed: its fits of other options or content go once it is read
+        summary.kept += len(done - left)
+        if sha is not None and not refit:  # its fits of other options or content go once read
             options, changed = store.replaced(p, sha, key, model_names)
             summary.replaced_options += options
             summary.replaced_changed += changed
-    summary.kept = sum(len(t.done_models) for t in tasks)
     return tasks
+
+
+def _refit_mark(store: BatchStore, attrs: dict, refit: bool,
+                summary: BatchSummary) -> str | None:
+    """For ``--refit``: sets ``attrs["refit_pending"]`` (the request and when its refit
+    began, kept in the file until the refit finishes) and returns when an interrupted
+    refit of the same request began, which this run goes on with (None: none)."""
+    if not refit:
+        return None
+    mark = {"models": attrs["models"], "options": attrs["options"], "since": now()}
+    pending = None
+    if os.path.exists(store.path):
+        from brdffit.batch.store import read_attrs
+
+        try:
+            pending = json.loads(read_attrs(store.path).get("refit_pending") or "null")
+        except ValueError:
+            pending = None
+    since = None
+    if (isinstance(pending, dict) and pending.get("models") == mark["models"]
+            and pending.get("options") == mark["options"]
+            and isinstance(pending.get("since"), str)):
+        since = mark["since"] = pending["since"]
+        summary.resumed_refit = since
+    attrs["refit_pending"] = mark
+    return since
 
 
 def _models_left(task: _Task, sha256: str | None, model_names: list[str]) -> list[str]:
@@ -476,10 +549,12 @@ def run_batch(
         summary.damaged = len(store.damaged)
         paths = store.as_known(paths)
         summary.tables = len(paths)
+        summary.moved = _moved(paths, store)
         # group names follow the input order, not finish order
         summary.renamed = store.reserve_names(paths)
+        refit_since = _refit_mark(store, attrs, refit, summary)
         store.checkpoint(attrs, inputs=paths)  # the file exists, readable, from the start
-        tasks = _plan(paths, model_names, request.fit_key(), store, refit, summary)
+        tasks = _plan(paths, request, store, refit, summary, refit_since)
         bar = progress if isinstance(progress, ProgressLine) else ProgressLine(
             len(tasks), skipped=summary.skipped, enabled=bool(progress))
         bar.draw(force=True)
@@ -518,6 +593,7 @@ def run_batch(
                 if stop_requested.is_set():
                     raise KeyboardInterrupt  # the signal's own exception was lost
 
+        finished = False
         try:
             if tasks and workers == 0 and not scheduler:
                 take(_run_in_process(tasks, request))
@@ -528,8 +604,11 @@ def run_batch(
                       else connect(workers, scheduler)) as client, contextlib.closing(
                         _run_on_dask(client, tasks, request, timeout_s)) as results:
                     take(results)
+            finished = True
         finally:
             bar.finish()
+            if finished and refit:
+                attrs["refit_pending"] = None  # done: a later --refit starts afresh
             # Interrupted or not, what was journaled goes into the file now; if
             # this process is killed instead, the next run replays the journal.
             store.checkpoint(attrs)

@@ -124,12 +124,17 @@ def rank(path: str | os.PathLike) -> Ranking:
     return Ranking(attrs, list(models), tables, summary)
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLERANCE) -> str:
     """The ranking as a plain-text report: one row per table, then one per model.
     Column ``auto``: the model selection's choice at ``tolerance`` (docs/selection.md)."""
     n_failed = len(r.failed_tables)
-    lines = [f"{source or 'batch'}: {len(r.tables)} tables ({n_failed} with failures), "
-             f"{len(r.models)} models, brdffit {r.attrs.get('brdffit_version', '?')}",
+    lines = [f"{source or 'batch'}: {_count(len(r.tables), 'table')} ({n_failed} with "
+             f"failures), {_count(len(r.models), 'model')}, "
+             f"brdffit {r.attrs.get('brdffit_version', '?')}",
              f"{METRIC} on the full table (a sample list's: at its samples), lower is "
              "better; * marks each table's best; "
              f"auto: the cheapest within {tolerance:g} of it (in quadrature)", ""]

@@ -53,6 +53,7 @@ import json
 import os
 import shutil
 from dataclasses import asdict, dataclass, field
+from datetime import datetime
 
 import h5py
 import numpy as np
@@ -128,6 +129,11 @@ def _apply_row(tables: dict[str, TableEntry], row: dict) -> None:
     path = row["path"]
     if row["kind"] == "table":
         old = tables.get(path)
+        if old is None:
+            # a group keeps one table: its name under another path is that table moved
+            # (BatchStore.record_move), and its fits go with it
+            moved = next((p for p, e in tables.items() if e.name == row["name"]), None)
+            old = tables.pop(moved) if moved is not None else None
         t = TableEntry(row["name"], path, row["sha256"] or None, row["status"], row["message"],
                        row["measured_bins"])
         if old is not None:
@@ -150,7 +156,10 @@ class BatchStore:
     """
 
     def __init__(self, path: str | os.PathLike):
-        self.path = os.path.abspath(os.fspath(path))
+        # the link's target: a symbolic link named as --out was replaced by a file of
+        # its own (the target kept its old results), and two spellings of one file took
+        # two locks
+        self.path = os.path.realpath(os.fspath(path))
         self.journal_path = self.path + ".journal"
         self._tmp_prefix = os.path.join(os.path.dirname(self.path),
                                         f".{os.path.basename(self.path)}.tmp-")
@@ -178,7 +187,18 @@ class BatchStore:
         if os.path.isdir(self.path):
             raise BatchFileError(f"{self.path}: a directory; the results file is a .h5 "
                                  "file in it, e.g. --out DIR/results.h5")
-        self._journal_fd = _lock(self.journal_path, self.path)
+        if self.path.endswith(".journal"):
+            raise BatchFileError(f"{self.path}: a .journal name is another results file's "
+                                 "journal; name the results file .h5")
+        if _is_hdf5(self.journal_path):
+            raise BatchFileError(
+                f"{self.path}: {self.journal_path} is an HDF5 file, not this file's journal "
+                "(a results file written under that name?): move it away or rename it")
+        try:
+            self._journal_fd = _lock(self.journal_path, self.path)
+        except OSError as e:
+            raise BatchFileError(f"{self.path}: cannot write in {directory} ({e.strerror}): "
+                                 "the results file and its journal go there") from None
         try:
             if os.path.exists(self.path):
                 self._tables = read_index(self.path)
@@ -254,6 +274,51 @@ class BatchStore:
         other_content = sum(f.sha256 != sha256 for f in stored)
         other_options = sum(f.sha256 == sha256 and f.options != key for f in stored)
         return other_options, other_content
+
+    def stored_ok(self, path: str, models) -> set[str]:
+        """Of ``models``, those with a successful fit stored for ``path`` (any options)."""
+        t = self._tables.get(path)
+        return set() if t is None else {m for m in models
+                                        if m in t.fits and t.fits[m].status == "ok"}
+
+    def vanished(self) -> dict[str, str]:
+        """sha256 -> recorded path, of the tables read before whose file is gone from
+        its path (moved, renamed, or deleted)."""
+        return {t.sha256: p for p, t in self._tables.items()
+                if t.status == "ok" and t.sha256 and not os.path.lexists(p)}
+
+    def record_move(self, old: str, new: str) -> None:
+        """The table recorded at ``old`` is now at ``new`` (the same content: its
+        sha256): its group, its fits and the group's ``path`` go with it, so that a
+        folder moved or renamed is resumed, not fitted again as new tables (``mat~2``)."""
+        t = self._tables[old]
+        with _reading(self.path) as f:
+            attrs = {k: _plain(v) for k, v in f["tables"][t.name].attrs.items()}
+        self._names[new] = t.name
+        record = asdict(TableReadRecord(
+            path=new, sha256=t.sha256, status="ok", message="",
+            size_bytes=_int(attrs.get("size_bytes")), measured_bins=t.measured_bins,
+            read_s=float(attrs.get("read_s", 0.0)), worker=f"moved from {old}",
+            finished_at=now()))
+        self._apply({"kind": "table", **record})
+        _write_all(self._journal_fd, (jsonout.dumps({"kind": "table", **record},
+                                                    separators=(",", ":")) + "\n").encode())
+        os.fsync(self._journal_fd)
+
+    def made_since(self, path: str, since: str) -> set[str]:
+        """Models of the table at ``path`` whose stored fit was made at or after
+        ``since`` (``now()``'s ISO time): what an interrupted ``--refit`` already made."""
+        t = self._tables.get(path)
+        if t is None or not os.path.exists(self.path):
+            return set()
+        with _reading(self.path) as f:
+            g = f["tables"].get(t.name)
+            if g is None:
+                return set()
+            start = _time(since)
+            return {m for m in g if m in t.fits and start is not None
+                    and (made := _time(_plain(g[m].attrs.get("finished_at", "")))) is not None
+                    and made >= start}
 
     def counts(self) -> dict[str, int]:
         tables = self._tables.values()
@@ -336,7 +401,11 @@ class BatchStore:
                         del f["inputs"]
                     f.create_dataset("inputs", data=list(inputs), dtype=h5py.string_dtype())
                 for k, v in (attrs or {}).items():
-                    f.attrs[k] = v if isinstance(v, (str, int, float)) else jsonout.dumps(v)
+                    if v is None:  # a mark that no longer holds (refit_pending)
+                        if k in f.attrs:
+                            del f.attrs[k]
+                    else:
+                        f.attrs[k] = v if isinstance(v, (str, int, float)) else jsonout.dumps(v)
                 f.attrs["brdffit_version"] = __version__
                 f.attrs["updated"] = now()
                 for k, v in self.counts().items():
@@ -345,15 +414,17 @@ class BatchStore:
             os.replace(tmp, self.path)
             _fsync_path(os.path.dirname(self.path))
         except BaseException as e:
-            if os.path.exists(tmp):
+            with contextlib.suppress(OSError):  # the folder may refuse this too
                 os.unlink(tmp)
-            if _write_failed(e):  # a full disk or quota: the file as it was is whole
+            if _write_failed(e):  # the file as it was is whole; the journal holds the rest
+                full = getattr(e, "errno", None) in _FULL or getattr(e, "errno", None) is None
                 raise BatchFileError(
                     f"{self.path}: could not write the results file ("
                     f"{os.strerror(e.errno) if getattr(e, 'errno', None) else 'a write failed'}"
-                    f"; a full disk?); this run's finished fits are kept in "
-                    f"{self.journal_path}: free some space and run the batch again, which "
-                    "folds them in") from None
+                    f"{'; a full disk?' if full else ''}); this run's finished fits are kept "
+                    f"in {self.journal_path}: "
+                    f"{'free some space' if full else 'make the folder writable'} and run "
+                    "the batch again, which folds them in") from None
             if (existed and isinstance(e, (OSError, KeyError, ValueError, TypeError,
                                            AttributeError, RuntimeError))
                     and getattr(e, "errno", None) is None):  # h5py's, not the disk's
@@ -566,17 +637,19 @@ def read_results(path: str | os.PathLike) -> dict:
     docs/results.md), the JSON ``brdffit fit --json`` prints.
     """
     with _reading(os.fspath(path)) as f:
-        out = {"attrs": {k: _plain(v) for k, v in f.attrs.items()}, "tables": [],
+        out = {"attrs": {k: _json_safe(v) for k, v in f.attrs.items()}, "tables": [],
                "inputs": [_plain(s) for s in f["inputs"][()]] if "inputs" in f else []}
         for name, g in f["tables"].items():
-            table = {"name": name, **{k: _plain(v) for k, v in g.attrs.items()}, "fits": {}}
+            table = {"name": name, **{k: _json_safe(v) for k, v in g.attrs.items()},
+                     "fits": {}}
             for model, m in g.items():
-                fit = {k: _plain(v) for k, v in m.attrs.items()}
+                fit = {k: _json_safe(v) for k, v in m.attrs.items()}
                 if "fit_json" in fit:  # FitResult.to_dict(), as the CLI and the API give it
                     fit["fit"] = json.loads(fit.pop("fit_json"))
                 params, error = m.get("params", {}), m.get("error", {})
-                fit["params"] = {k: _plain(d[()]) for k, d in params.items()}
-                fit["error"] = {k: float(d[()]) for k, d in error.items()}
+                fit["params"] = {k: _json_safe(d[()]) for k, d in params.items()}
+                # NaN in HDF5 is a metric not measured: None, as in the fit's own JSON
+                fit["error"] = {k: _json_safe(float(d[()])) for k, d in error.items()}
                 table["fits"][model] = fit
             out["tables"].append(table)
     return out
@@ -670,13 +743,31 @@ def _failed(fits: dict) -> str:
     return f"; its fits: {', '.join(failed)}" if failed else ""
 
 
+#: Errors of a disk without room.
+_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+#: Errors of a folder or disk that refuses the write (made read-only during the batch,
+#: an immutable folder, a disk gone): a bare "operation not permitted" said nothing of
+#: the finished fits kept in the journal.
+_REFUSED = (errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO)
+
+
 def _write_failed(e: BaseException) -> bool:
-    """Whether writing the results file failed for want of room: the disk's own error,
-    or HDF5's, which carries no errno ("can't close file (file write failed: time =
-    ..., buf = 0x55a8...)", which was the whole message)."""
-    if getattr(e, "errno", None) in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+    """Whether writing the results file failed on the disk: its own error (no room, or
+    a folder that refuses the write), or HDF5's, which carries no errno ("can't close
+    file (file write failed: time = ..., buf = 0x55a8...)", which was the whole
+    message)."""
+    if getattr(e, "errno", None) in _FULL + _REFUSED:
         return True
     return isinstance(e, OSError) and "write failed" in str(e)
+
+
+def _is_hdf5(path: str) -> bool:
+    """Whether ``path`` is a file that starts with HDF5's signature."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(8) == b"\x89HDF\r\n\x1a\n"
+    except OSError:
+        return False
 
 
 def _plain(v):
@@ -687,6 +778,26 @@ def _plain(v):
         return v.tolist()
     if isinstance(v, np.generic):
         return v.item()
+    return v
+
+
+def _time(text) -> datetime | None:
+    """An ISO time written by ``now()`` (to the second in files written before
+    2026-12-06), or None where it does not read as one."""
+    try:
+        return datetime.fromisoformat(text)
+    except (TypeError, ValueError):
+        return None
+
+
+def _json_safe(v):
+    """:func:`_plain`, with a float that is not finite (NaN: not measured, a failed
+    fit's time) as None: what :func:`read_results` returns is strict JSON."""
+    v = _plain(v)
+    if isinstance(v, float):
+        return v if np.isfinite(v) else None
+    if isinstance(v, list):
+        return [_json_safe(x) for x in v]
     return v
 
 

@@ -77,7 +77,9 @@ def worker_name() -> str:
 
 
 def now() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds")
+    # to the microsecond: an interrupted --refit goes on with the fits made since it
+    # began (BatchStore.made_since), which may be the same second
+    return datetime.now(UTC).isoformat(timespec="microseconds")
 
 
 def _describe(e: BaseException) -> str:

@@ -79,6 +79,13 @@ def summary_line(s) -> str:
     replaced = ((s.replaced_options, "made with other options, replaced"),
                 (s.replaced_changed, "of tables whose file changed since, replaced"))
     done += [f"{_count(n, 'fit')} {why}" for n, why in replaced if n]
+    if s.refitted:  # it read "none was done before" where --refit replaced them
+        done.append(f"{_count(s.refitted, 'stored fit')} made again (--refit)")
+    if s.resumed_refit:
+        done.append(f"going on with the --refit begun {s.resumed_refit}")
+    if s.moved:
+        done.append(f"{_count(s.moved, 'table')} found at a new path, "
+                    f"{'its' if s.moved == 1 else 'their'} fits kept")
     done = ", ".join(done) or "none was done before"
     return (f"{s.out}: {_count(s.fits, 'fit')} on {_count(s.tables - s.skipped, 'table')} in "
             f"{format_duration(s.elapsed_s)}; {done}")
