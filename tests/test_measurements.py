@@ -985,6 +985,18 @@ def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
                      "30,0,40,180,1,1,1\n")
     with pytest.raises(MerlFormatError, match="span 450-650 nm; projecting to RGB needs"):
         read_measured(short)
+    # three lasers span the range, but the colour between them would be a straight line
+    lasers = tmp_path / "lasers.csv"
+    lasers.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,405nm,532nm,690nm\n"
+                      "30,0,40,180,1,1,1\n")
+    with pytest.raises(MerlFormatError, match="3 wavelengths, 158 nm apart between 532 and "
+                                              "690 nm.*at most 100 nm apart"):
+        read_measured(lasers)
+    steps = tmp_path / "steps.csv"  # a multispectral camera's 50 nm steps read
+    steps.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,"
+                     + ",".join(f"{w}nm" for w in range(400, 751, 50)) + "\n30,0,40,180,"
+                     + ",".join(["0.5"] * 8) + "\n")
+    np.testing.assert_allclose(read_measured(steps).rgb, 0.5, rtol=0.02)
     both = tmp_path / "both.csv"
     both.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b,450nm\n"
                     "30,0,40,180,1,1,1,1\n")
@@ -1068,6 +1080,16 @@ def test_text_as_excel_and_numpy_write_it(tmp_path):
     table = merl.MerlTable.from_values(np.full((3, 90, 90, 180), 0.1))
     merl.write(tmp_path / "table.csv", table)
     assert isinstance(read_measured(tmp_path / "table.csv"), merl.MerlTable)
+    # a CSV saved as .xlsx (it was "not a readable Excel workbook (File is not a zip
+    # file)"); a gzip archive is told to be decompressed, whatever its name
+    for fake in ("csv.xlsx", "csv.npz"):
+        (tmp_path / fake).write_bytes((tmp_path / "s.csv").read_bytes())
+        assert read_measured(tmp_path / fake).provenance["format"] == "csv"
+    import gzip
+
+    (tmp_path / "s.csv.gz").write_bytes(gzip.compress((tmp_path / "s.csv").read_bytes()))
+    with pytest.raises(MerlFormatError, match=r"a gzip archive.*\(decompress it first\)"):
+        read_measured(tmp_path / "s.csv.gz")
     # a zip archive that is no workbook (test_an_excel_sheet_... reads one named .csv)
     (tmp_path / "book.csv").write_bytes(b"PK\x03\x04" + bytes(60))
     with pytest.raises(MeasurementsError, match="a zip archive, not a text sample list .by its "
@@ -1242,6 +1264,11 @@ def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path)
     got = read_measured(sheet)
     np.testing.assert_array_equal(got.rgb, plain.rgb)
     np.testing.assert_array_equal(got.wo, plain.wo)
+    assert "empty_rows" not in got.provenance  # after the data: a sheet's leftovers
+    # a row of empty cells among the data is skipped too, and counted (it was unsaid)
+    sheet.write_text("\n".join([header, *rows[:5], ",,,,,,", *rows[5:]]) + "\n")
+    got = read_measured(sheet)
+    assert got.n == 40 and got.provenance["empty_rows"] == 1
     sheet.write_text("\n".join([f"{header},note", f"{rows[0]},x", f"{rows[1][:-3]}y,x"]))
     with pytest.raises(MeasurementsError, match="row 3 is not all numbers"):
         read_measured(sheet)
@@ -1249,12 +1276,18 @@ def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path)
 
 def test_a_polar_angle_a_rounding_below_zero_is_the_normal():
     """An instrument's -0.0001 degrees at normal incidence is read as 0 (it was
-    refused as negative, while 90.00001 degrees was read as 90)."""
+    refused as negative, while 90.00001 degrees was read as 90); 90.004 degrees is 90
+    as -0.004 is 0 (it was refused as below the horizon), 90.02 is still refused."""
     angles = [np.radians([-0.0001, 10.0]), np.zeros(2), np.radians([20.0, -0.005]),
               np.zeros(2)]
     m = Measurements.from_angles(*angles, np.ones(2))
     np.testing.assert_array_equal(m.wi[0], [0.0, 0.0, 1.0])
     np.testing.assert_array_equal(m.wo[1], [0.0, 0.0, 1.0])
+    grazing = [np.radians([90.004, 10.0]), np.zeros(2), np.radians([20.0, 30.0]), np.zeros(2)]
+    assert Measurements.from_angles(*grazing, np.ones(2)).wi[0, 2] == pytest.approx(0, abs=1e-12)
+    grazing[0] = np.radians([90.02, 10.0])
+    with pytest.raises(MeasurementsError, match="below the horizon"):
+        Measurements.from_angles(*grazing, np.ones(2))
 
 
 def test_a_list_over_max_samples_is_refused_before_a_number_is_read(tmp_path, monkeypatch):
@@ -1725,6 +1758,34 @@ def test_an_excel_sheet_is_read_as_the_csv_it_would_be_saved_as(tmp_path, monkey
 
 
 
+def test_a_hidden_sheet_is_read_after_the_visible_ones_and_said(tmp_path):
+    """A hidden sheet before the one on show was fitted instead of it (a review's
+    workbook: 100 hidden rows fitted, 500 shown ones not), said only by its name."""
+    import openpyxl
+
+    from brdffit.io.readers import input_summary
+
+    head = ["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"]
+    s = _samples(40)
+    wb = openpyxl.Workbook()
+    wb.active.title = "old run"
+    wb.active.sheet_state = "hidden"
+    shown = wb.create_sheet("run 2")
+    for sheet, scale in ((wb["old run"], 2.0), (shown, 1.0)):
+        sheet.append(head)
+        for k in range(40):
+            sheet.append([float(x) for x in (*(np.degrees(a[k]) for a in s[:4]),
+                                               *(scale * s[4][k]))])
+    book = tmp_path / "hidden.xlsx"
+    wb.save(book)
+    m = read_measured(book)
+    assert m.provenance["sheet"] == "run 2" and "sheet_hidden" not in m.provenance
+    np.testing.assert_allclose(m.rgb, s[4], rtol=1e-12)
+    named = read_measured(book, sheet="old run")
+    assert named.provenance["sheet_hidden"] is True
+    assert input_summary(named)["sheet_hidden"] is True
+
+
 def test_a_workbook_sheet_is_fitted_by_its_name(tmp_path):
     """A workbook of two sheets of samples fitted the first, and the second could not be
     reached. ``sheet=`` (``brdffit fit --sheet``) reads the one named; a name the
@@ -1861,6 +1922,56 @@ def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_
     with pytest.raises(MeasurementsError, match="sheet 'About': no column for theta_i.*; "
                                                 "sheet 'chart': no column for theta_i.*x, y"):
         read_measured(tmp_path / "notes.xlsx")
+
+@pytest.mark.parametrize("key, mark, packed", [("missing_value", 999.0, False),
+                                                ("_FillValue", -9999.0, False),
+                                                ("_FillValue", 65535, True)])
+def test_an_hdf5_value_marked_not_measured_is_refused_by_its_mark(tmp_path, key, mark, packed):
+    """CF's _FillValue and missing_value: 37 rows of 999 marked missing were fitted as data
+    (kd 3.1 for 0.2, "successful"), and -9999 was refused as a negative value. Refused
+    by the mark's name, as a CSV's "n/a" cell is; a mark no value holds reads as before."""
+    s = _samples(60)
+    deg = [np.degrees(a) for a in s[:4]]
+    path = tmp_path / "marked.h5"
+    values = np.round(s[4] / 1e-4).astype(np.uint16) if packed else s[4].copy()
+    with h5py.File(path, "w") as f:
+        for a, v in zip(("theta_i", "phi_i", "theta_o", "phi_o"), deg, strict=True):
+            f.create_dataset(a, data=v).attrs["units"] = "degrees"
+        clean = f.create_dataset("rgb", data=values)
+        if packed:
+            clean.attrs["scale_factor"] = 1e-4
+        clean.attrs[key] = mark
+    read_measured(path)  # no value holds the mark
+    with h5py.File(path, "r+") as f:
+        f["rgb"][4] = mark
+    with pytest.raises(MeasurementsError, match=re.escape(
+            f"dataset rgb: 3 values are its {key} ({mark:g}), the mark of a value not "
+            "measured: leave those samples out of the file before fitting")):
+        read_measured(path)
+
+
+def test_radiances_beside_their_irradiance_are_refused_saying_what_a_brdf_is(tmp_path):
+    """A review's "value,irradiance" file was fitted as a BRDF (kd 3.5, the irradiance
+    never read); "radiance,irradiance" was "no value columns". Both say what to divide;
+    a BRDF column beside a lamp's record reads as before."""
+    head = "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,"
+    rows = "".join(f"{10 + k},0,{20 + k},180,0.4,10\n" for k in range(20))
+    for columns in ("value,irradiance", "radiance,irradiance", "r,E_i"):
+        path = tmp_path / "radiance.csv"
+        path.write_text(head + columns + "\n" + rows.replace(",0.4,10", ",0.4,10"))
+        with pytest.raises(MeasurementsError, match="holds the light falling on the sample: "
+                           r"are the values radiances\? brdffit reads a BRDF, in 1/sr"):
+            read_measured(path)
+    alone = tmp_path / "alone.csv"
+    alone.write_text(head + "radiance\n" + "".join(f"{10 + k},0,{20 + k},180,0.4\n"
+                                                   for k in range(20)))
+    with pytest.raises(MeasurementsError, match="no value columns.*'radiance': a radiance, "
+                                                "not a BRDF"):
+        read_measured(alone)
+    kept = tmp_path / "kept.csv"
+    kept.write_text(head + "brdf,lamp_power\n" + rows)
+    assert read_measured(kept).rgb.shape == (20, 3)
+
 
 def test_files_as_lab_tools_write_them(tmp_path):
     """What a review of files written by other tools found (/tmp/h32d in session 32): a

@@ -144,6 +144,26 @@ def test_a_table_far_darker_than_any_material_is_fitted_as_given_and_said():
     assert not any("in 1/sr?" in n for n in fit(black, "lambert").notes)
 
 
+def test_a_glossy_table_far_darker_than_any_material_is_said_by_its_mean():
+    """A sharp highlight kept the brightest value of a table scaled 1500x too dark
+    above the threshold: kd 1500x too small, "looks good", no word (a review's MERL
+    table stored already scaled, then scaled again by the reader). Its mean says so;
+    the darkest and the most mirror-like real materials' do not."""
+    from brdffit.fitting.inputs import SUSPECT_DARK, mean_level
+    from brdffit.io import merl
+    from data_synth import make_table
+
+    table = make_table("ggx", {"kd": [0.2, 0.1, 0.05], "ks": [0.8, 0.7, 0.6],
+                               "alpha": 0.03, "f0": 0.6})[0]
+    dark = merl.MerlTable.from_values(np.asarray(table.rgb) / 1500, table.mask)
+    assert np.nanmax(np.where(dark.mask, dark.rgb, np.nan)) > SUSPECT_DARK  # the old test's
+    (note,) = [n for n in fit(dark, "ggx").notes if "in 1/sr?" in n]
+    assert note.startswith("the table's values average ") and "below the darkest of the " \
+        "100 MERL materials (black-fabric: 0.0067 1/sr)" in note, note
+    assert not any("in 1/sr?" in n for n in fit(table, "ggx").notes)
+    assert mean_level(table) == pytest.approx(1500 * mean_level(dark))
+
+
 def test_a_table_measured_at_its_peak_alone_is_not_told_its_units_are_wrong():
     """40 bins at theta_h = theta_d = 0 and nothing else: the diffuse floor was read
     from the peak ("an albedo of 12.2: are its values in 1/sr?"), and the sphere, none

@@ -269,11 +269,14 @@ def run(args) -> int:
         from brdffit.fitting.samples import binned
 
         comma = ", decimal commas" if measured.provenance.get("decimal_comma") else ""
+        if empty := measured.provenance.get("empty_rows"):
+            comma += f", {empty:,} row{'s' if empty != 1 else ''} of empty cells skipped"
         if long := measured.provenance.get("long_layout"):
             comma += (f", pivoted from {long['rows']:,} rows, one per sample and "
                       f"{long['column']}: {long['per_sample']} per sample")
         if measured.provenance.get("sheets", 1) > 1:  # which sheet of a workbook, and why
-            comma += f", sheet {measured.provenance['sheet']!r} of {measured.provenance['sheets']}"
+            comma += (f", {'hidden ' if measured.provenance.get('sheet_hidden') else ''}"
+                      f"sheet {measured.provenance['sheet']!r} of {measured.provenance['sheets']}")
             comma += "".join(f"; sheet {p['sheet']!r} passed over: {p['why']}"
                              for p in measured.provenance.get("sheets_passed", ()))
         print(f"brdffit: {measured.n} sample{'s' if measured.n != 1 else ''} "

@@ -117,6 +117,11 @@ class TableInput:
         # once per table: auto's candidates share it
         brightest = cached(self.table, "brightest-value", lambda: _brightest(self.table.rgb))
         dark_notes, dark_steps = _too_dark(brightest, "table")
+        if not dark_notes:
+            # a sharp highlight keeps the brightest value up in a table whose every
+            # other value is 1500x too dark: its mean says so
+            dark_notes, dark_steps = _too_dark_on_average(
+                cached(self.table, "mean-level", lambda: mean_level(self.table)))
         notes, steps = notes + dark_notes, steps + dark_steps
         notes += _partly_negative(self.table)
         spikes = cached(self.table, "isolated-spikes", self.table.isolated_spikes)
@@ -218,6 +223,42 @@ def _too_dark(brightest: float, what: str) -> tuple[list[str], list[dict]]:
         f"{MERL_DARKEST / brightest:,.0f}x below the lowest of the 100 MERL materials' "
         f"brightest values (white-fabric2: {MERL_DARKEST} 1/sr): are its values in 1/sr? "
         f"{DARK_SCALES}", what)
+
+
+#: The mean value (1/sr, :func:`mean_level`) below which a table's values are read as
+#: not in 1/sr: 10x below the darkest of the 100 MERL materials (black-fabric, 0.0067
+#: 1/sr; the next, specular-black-phenolic, 0.010; the brightest, 0.17). A MERL table
+#: scaled by its channel factors twice: 1.1e-4 at most; a table of black-fabric divided
+#: by 100 (percent): 6.7e-5. Only a surface darker than 0.2% albedo on average (a
+#: Vantablack) is asked about wrongly; a mirror's peak keeps its mean up (chrome-steel:
+#: 0.05 1/sr), where its diffuse floor is 0.
+SUSPECT_DARK_MEAN = 6.7e-4
+#: The lowest mean value of the 100 MERL materials (black-fabric), 1/sr.
+MERL_DARKEST_MEAN = 0.0067
+
+
+def mean_level(table: merl.MerlTable) -> float:
+    """The table's brightest channel averaged over its measured bins, each weighted
+    by its solid angle (1/sr): its typical value, whatever its highlight."""
+    from brdffit.io.grid import bin_grid
+
+    measured = table.mask.ravel()
+    if not measured.any():
+        return float("nan")
+    w = bin_grid().weight.ravel()[measured]
+    v = table.rgb.reshape(3, -1)[:, measured].max(axis=0)
+    return float(v @ w / w.sum()) if w.sum() > 0 else float("nan")
+
+
+def _too_dark_on_average(mean: float) -> tuple[list[str], list[dict]]:
+    """As :func:`_too_dark`, from the table's :func:`mean_level`."""
+    if not (np.isfinite(mean) and 0 < mean < SUSPECT_DARK_MEAN):
+        return [], []
+    return _unit_question(
+        f"the table's values average {mean:.3g} 1/sr (its brightest channel over its "
+        f"measured bins, by solid angle), {MERL_DARKEST_MEAN / mean:,.0f}x below the "
+        f"darkest of the 100 MERL materials (black-fabric: {MERL_DARKEST_MEAN} 1/sr): are "
+        f"its values in 1/sr? {DARK_SCALES}", "table")
 
 
 def _brightest(values: np.ndarray) -> float:

@@ -79,7 +79,7 @@ def unit_scale(unit: str, source: str) -> float:
     """Radians per ``unit``: degrees or radians, in any of their spellings (``deg``,
     ``radian``); any other unit is refused."""
     unit = unit.strip().lower()
-    if unit in ("deg", "degree", "degrees"):
+    if unit in ("deg", "degree", "degrees", "°", "º", "deg.", "degs"):
         return np.pi / 180.0
     if unit in ("rad", "radian", "radians"):
         return 1.0
@@ -173,6 +173,21 @@ UNCERTAINTY = re.compile(
     r"|var|variance|ci|ci95|ci_95|conf)"
     rf"(?:[\s_.-]*(?:{_VALUE_WORDS}))?")
 
+
+#: A column or dataset of the light falling on the sample (an irradiance, a lamp's
+#: power): beside it the values are most likely radiances, not a BRDF. A review's
+#: ``value,irradiance`` file was fitted as a BRDF (kd 3.5), the irradiance unsaid.
+IRRADIANCE = re.compile(
+    r"(?:irradiance|illuminance|e_?i|e_?in"
+    r"|(?:incident|incoming|source|lamp)[\s_.-]*(?:power|flux|intensity|irradiance))"
+    r"(?:[\s_.-]*(?:incident|in|i|w/m2|w/m\^?2|w m-2|lx|lux|\[.*\]|\(.*\)))*")
+#: A value column named as a radiance (no BRDF column beside it).
+RADIANCE = re.compile(r"(?:reflected[\s_.-]*|outgoing[\s_.-]*)?(?:radiance|luminance|l_?o)"
+                      r"(?:[\s_.-]*(?:\[.*\]|\(.*\)|[rgb]|red|green|blue))*")
+#: What a file with a radiance or an irradiance is told.
+RADIANCE_IS = ("brdffit reads a BRDF, in 1/sr: the reflected radiance over the irradiance "
+               "that made it (L_o / E_i, E_i on the sample's surface). Divide them, write "
+               "the result as r, g, b (or value), and leave the irradiance out")
 
 #: What a refused uncertainty column or dataset is told: what sigma is, what to do.
 SIGMA_IS = ("their standard deviation, in 1/sr. Rename it so to weigh the fit by it, or "

@@ -44,9 +44,11 @@ from brdffit.io.angles import (
 
 #: Largest BRDF value (1/sr) a sample may hold: the MERL reader's bound (1e12).
 MAX_VALUE = 1e12
-#: Directions this far below the horizon (radians) are refused, not clamped: a
-#: gonioreflectometer's 90.000 deg in a file reads as 1.5707963 (a little over pi / 2).
-HORIZON_SLACK = 1e-6
+#: Polar angles this little over 90 degrees (radians; 0.01 degrees, as
+#: :data:`NORMAL_SLACK` below 0) are read as 90; beyond, a direction below the horizon
+#: is refused, not clamped. A gonioreflectometer's 90.000 deg reads as 1.5707963 (a
+#: little over pi / 2), and its 90.004 was refused where -0.004 at the normal was read.
+HORIZON_SLACK = float(np.radians(0.01))
 #: Polar angles this little below 0 (radians; 0.01 degrees) are read as 0: an
 #: instrument's -0.0001 degrees at normal incidence is rounding, while an in-plane
 #: file's signed angles, which are refused, reach far below it.

@@ -194,7 +194,9 @@ def _check_layout(header: bytes, size: int, source: str) -> None:
         raise MerlFormatError(source, f"only {size} bytes, shorter than the 12-byte header")
     kind = other_format(header)
     if kind is not None:  # before the text test: a PDF's and a .mat file's start is text
-        raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first bytes)")
+        hint = " (decompress it first)" if kind == "a gzip archive" else ""
+        raise MerlFormatError(source, f"{kind}, not a binary MERL table (by its first "
+                                      f"bytes){hint}")
     if looks_like_text(header):
         raise MerlFormatError(source, "looks like a text file, not a binary MERL table")
     dims = [int(d) for d in np.frombuffer(header, dtype="<i4", count=3)]

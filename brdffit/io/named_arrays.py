@@ -29,9 +29,11 @@ from brdffit.io.columns import (
     ANGLES,
     CHANNEL_WORDS,
     CHANNELS,
+    IRRADIANCE,
     ONE_CHANNEL,
     PER_STERADIAN,
     POLARISED_WHY,
+    RADIANCE_IS,
     SIGMA_IS,
     TWO_LONG,
     UNCERTAINTY,
@@ -488,6 +490,12 @@ def _hdf5_sigma(f, v: dict[str, str], source: str, matlab: bool, rgb: bool,
     unsaid, and the fit weighed every sample alike."""
     read = set(v.values())
     for key in f.keys():
+        if (key not in read and IRRADIANCE.fullmatch(key.strip().lower())
+                and not any(str(k).lower().startswith("brdf") for k in read)):
+            # the unread datasets are looked at here: an irradiance too (columns.IRRADIANCE)
+            raise MeasurementsError(
+                source, f"dataset {key!r} holds the light falling on the sample: are the "
+                        f"values radiances? {RADIANCE_IS}")
         if key not in read and UNCERTAINTY.fullmatch(key.strip().lower()):
             raise MeasurementsError(
                 source, f"dataset {key!r} looks like each value's uncertainty, which is "
@@ -731,6 +739,26 @@ def _unpacked(d, a: np.ndarray, name: str, source: str) -> np.ndarray:
                                             "one finite number")
         packing.append(float(v[0]))
     scale, offset = packing
+    # CF's marks of a value not measured, compared as stored (before the packing):
+    # 999 rows were fitted as data (kd 3.1 for 0.2), and -9999 refused as "negative".
+    # Refused by name, as a CSV's "n/a" cell is: which samples to leave out is the
+    # measurer's to say
+    for key in ("_FillValue", "missing_value"):
+        v = d.attrs.get(key)
+        if v is None:
+            continue
+        try:
+            marks = np.asarray(v, float).ravel()
+        except (TypeError, ValueError):
+            raise MeasurementsError(source, f"dataset {name}: {key} {v!r} is not a number"
+                                    ) from None
+        for mark in marks[np.isfinite(marks)]:
+            n = int(np.count_nonzero(a == mark))
+            if n:
+                raise MeasurementsError(
+                    source, f"dataset {name}: {n:,} value{'s are' if n != 1 else ' is'} its "
+                            f"{key} ({mark:g}), the mark of a value not measured: leave "
+                            "those samples out of the file before fitting")
     return a if (scale, offset) == (1.0, 0.0) else a * scale + offset
 
 
@@ -769,6 +797,8 @@ def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
     except MemoryError:
         raise MeasurementsError(source, f"dataset {name} ({d.size:,} numbers) does not fit "
                                         "in memory") from None
+    except MeasurementsError:
+        raise
     except (TypeError, ValueError, OSError) as e:
         raise MeasurementsError(source, f"dataset {name} cannot be read as numbers "
                                         f"({e})") from None

@@ -92,6 +92,12 @@ READERS: dict[str, Callable] = {
 }
 
 
+#: The readers of containers (by their first bytes, :func:`_container`): a file named
+#: as one that is text is read as text. Not a .mat: MATLAB's ``save -ascii`` writes
+#: text under that name, which its reader names as such.
+CONTAINER_READERS = (read_hdf5, read_npz, read_xlsx)
+
+
 def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
     """The reader of ``path``: by its suffix (``name``'s, where given), else by its
     first bytes."""
@@ -104,6 +110,10 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
             head = f.read(named_arrays.HEAD_BYTES)
         if (container := _container(path, head)) is not None:
             return container
+        if reader in CONTAINER_READERS and text_samples.looks_like_text(head):
+            # a CSV saved as .xlsx: "not a readable Excel workbook (File is not a zip
+            # file)"; read as the text it is, as any layout named as another is
+            return read_text_samples
         if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
             # a MERL table named .csv
             return merl.read
@@ -191,10 +201,14 @@ def input_summary(samples: Measurements, binning=None) -> dict:
         out["spectral"] = samples.provenance["spectral"]
     if samples.provenance.get("decimal_comma"):  # read as 0.25 from 0,25: said, not silent
         out["decimal_comma"] = True
+    if samples.provenance.get("empty_rows"):  # rows of empty cells among the data, skipped
+        out["empty_rows"] = samples.provenance["empty_rows"]
     if "long_layout" in samples.provenance:  # one row per (direction, channel), pivoted
         out["long_layout"] = samples.provenance["long_layout"]
     if "sheet" in samples.provenance:  # an Excel workbook's: which sheet, of how many
         out.update(sheet=samples.provenance["sheet"], sheets=samples.provenance["sheets"])
+        if samples.provenance.get("sheet_hidden"):  # a hidden sheet's samples: said
+            out["sheet_hidden"] = True
         if "sheets_passed" in samples.provenance:  # the sheets before it, and why
             out["sheets_passed"] = samples.provenance["sheets_passed"]
     if binning is not None:

@@ -23,8 +23,11 @@ from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
     CHANNELS,
+    IRRADIANCE,
     ONE_CHANNEL,
     POLARISED_WHY,
+    RADIANCE,
+    RADIANCE_IS,
     SIGMA_IS,
     TWO_LONG,
     UNCERTAINTY,
@@ -65,6 +68,7 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         seen[name] = k
     long = _long_column(names, seen, source)
     _unread_uncertainty(seen, names, source)
+    _unread_irradiance(seen, names, source)
     out: dict = {}
     for name, k in seen.items():
         m = angle_name(name)
@@ -183,8 +187,25 @@ def _other_units(seen: dict[str, int]) -> str:
     other = [n for n in seen
              if (m := re.fullmatch(r"(\w+)\s*[\[(].*[\])]", n))
              and value_name(m[1]) in (*CHANNELS, *ONE_CHANNEL)]
-    return (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
+    said = (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
             "a reflectance in % or a radiance is not one)" if other else "")
+    radiances = [n for n in seen if RADIANCE.fullmatch(n)]
+    if radiances:
+        said += f"; {', '.join(repr(n) for n in radiances)}: a radiance, not a BRDF: {RADIANCE_IS}"
+    return said
+
+
+def _unread_irradiance(seen: dict[str, int], names: list[str], source: str) -> None:
+    """Refuses a column of :data:`IRRADIANCE` (the light on the sample): the values
+    beside it are radiances, which were fitted as a BRDF with the irradiance unsaid.
+    Beside values named a BRDF (``brdf``, ``brdf_r``) it is the lab's record, not read."""
+    if any(name.startswith("brdf") for name in seen):
+        return
+    for name, k in seen.items():
+        if IRRADIANCE.fullmatch(name):
+            raise MeasurementsError(
+                source, f"column {names[k].strip()[:40]!r} holds the light falling on the "
+                        f"sample: are the values radiances? {RADIANCE_IS}")
 
 
 def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> None:
@@ -607,7 +628,7 @@ def read_xlsx(path: str | os.PathLike, sheet: str | None = None) -> Measurements
     source = str(path)
     passed: list[dict] = []
     with contextlib.closing(workbook.sheet_texts(path, source, sheet)) as sheets:
-        for name, text, count in sheets:
+        for name, text, count, hidden in sheets:
             try:
                 m = _csv_samples(text, source, delimiter="\t", file_format="xlsx")
             except MeasurementsError as e:
@@ -619,6 +640,8 @@ def read_xlsx(path: str | os.PathLike, sheet: str | None = None) -> Measurements
                 passed.append({"sheet": name, "why": why})
                 continue
             m.provenance.update(sheet=name, sheets=count)
+            if hidden:  # no visible sheet holds samples, or this one was named
+                m.provenance["sheet_hidden"] = True
             if passed:
                 m.provenance["sheets_passed"] = passed
             return m
@@ -712,9 +735,12 @@ def _csv_samples(text: str, source: str, delimiter: str | None = None,
                                         "list has its angles and values (one per channel "
                                         f"or wavelength): at most {MAX_COLUMNS:,} are read")
     # rows of empty cells (",,,,,,", a spreadsheet's formatted but empty rows) are
-    # skipped as blank lines are
-    lines = [lines[0], *(line for line in lines[1:]
-                         if line[1].strip(f"{delimiter} \t"))]
+    # skipped as blank lines are; those between rows of data are counted, and said (a
+    # row whose cells were all cleared was left out unsaid)
+    filled = [bool(line[1].strip(f"{delimiter} \t")) for line in lines[1:]]
+    last = max((k for k, f in enumerate(filled) if f), default=-1)
+    empty_between = sum(1 for k, f in enumerate(filled[:last]) if not f)
+    lines = [lines[0], *(line for line, f in zip(lines[1:], filled, strict=True) if f)]
     _numbers_for_a_header(names, comments, source)
     units = _units_row(lines[1] if len(lines) > 1 else None, split_at, len(names), source)
     _same_units(names, units or [""] * len(names), unit, source)
@@ -735,7 +761,9 @@ def _csv_samples(text: str, source: str, delimiter: str | None = None,
     return _from_rows(rows, numbers, cols, source,
                       {"format": file_format, "columns": [n.strip() for n in names],
                        "angle_unit": unit or "per column",
-                       **({"decimal_comma": True} if comma else {})}, lines[1:], split_at)
+                       **({"decimal_comma": True} if comma else {}),
+                       **({"empty_rows": empty_between} if empty_between else {})},
+                      lines[1:], split_at)
 
 
 def _header_below(lines: list[tuple[int, str]], source: str) -> None:

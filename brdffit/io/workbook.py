@@ -7,11 +7,12 @@ openpyxl reads the workbook (read-only, the cells' values: a formula's last comp
 value, as Excel shows it). A number keeps every digit Excel stored; a number Excel
 holds as text (``0,25``, typed in a comma-decimal locale) is text here too, and read as
 a CSV's decimal comma is. Which sheet: the first that reads as samples, in the
-workbook's order (a lab's workbook often opens on a sheet of notes); the result names
-it, of how many, and why each sheet before it was passed over (``input.sheet``,
-``input.sheets``, ``input.sheets_passed``). A workbook is a zip archive of
-XML: its members' declared sizes are weighed before it is opened, so that a few MB
-cannot expand to GBs.
+workbook's order, visible sheets before hidden ones (a lab's workbook often opens on
+a sheet of notes); the result names it, of how many, whether it is hidden, and why
+each sheet before it was passed over (``input.sheet``, ``input.sheets``,
+``input.sheet_hidden``, ``input.sheets_passed``). A workbook is a zip archive of XML:
+its members' declared sizes are weighed before it is opened, so that a few MB cannot
+expand to GBs.
 """
 
 from __future__ import annotations
@@ -41,13 +42,15 @@ def is_xlsx(path: str | Path) -> bool:
 
 
 def sheet_texts(path: str | Path, source: str,
-                sheet: str | None = None) -> Iterator[tuple[str, str, int]]:
-    """Each sheet with a cell, in the workbook's order, as tab-separated text a CSV
-    reader reads, a line per row (:func:`_lines`; a cell's tabs and line breaks made
-    blanks, its quotes quoted as a CSV's): ``(name, text, how many sheets the workbook
-    has)``. A sheet is read when it is asked for: the reader stops at the first that
-    holds samples. With ``sheet``, that sheet alone (MeasurementsError naming the
-    workbook's sheets where it has none of that name, or where it is empty)."""
+                sheet: str | None = None) -> Iterator[tuple[str, str, int, bool]]:
+    """Each sheet with a cell, in the workbook's order, the visible ones first (a
+    hidden sheet before the one on show was fitted instead of it), as tab-separated
+    text a CSV reader reads, a line per row (:func:`_lines`; a cell's tabs and line
+    breaks made blanks, its quotes quoted as a CSV's): ``(name, text, how many sheets
+    the workbook has, whether it is hidden)``. A sheet is read when it is asked for:
+    the reader stops at the first that holds samples. With ``sheet``, that sheet alone
+    (MeasurementsError naming the workbook's sheets where it has none of that name, or
+    where it is empty)."""
     import openpyxl
 
     _weighed(path, source)
@@ -61,9 +64,13 @@ def sheet_texts(path: str | Path, source: str,
             if sheet is not None and sheet not in names:
                 raise MeasurementsError(source, f"no sheet named {sheet!r}: the workbook's "
                                                 "sheets are " + ", ".join(map(repr, names)))
-            for name in names if sheet is None else [sheet]:
+            hidden = {n for n in names if getattr(book[n], "sheet_state", "visible")
+                      != "visible"}
+            order = ([n for n in names if n not in hidden] + [n for n in names if n in hidden]
+                     if sheet is None else [sheet])
+            for name in order:
                 if lines := _lines(book[name], source):
-                    yield name, "\n".join(lines) + "\n", len(names)
+                    yield name, "\n".join(lines) + "\n", len(names), name in hidden
                 elif sheet is not None:
                     raise MeasurementsError(source, f"sheet {sheet!r} holds no cells")
         except MeasurementsError:
