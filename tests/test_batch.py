@@ -1218,3 +1218,30 @@ def test_a_folder_of_hidden_files_alone_says_so(tmp_path):
     with pytest.raises(BatchInputError, match=r"holds no measured file but .*\.m0\.binary.* "
                        r"hidden \(a name or folder starting with '\.'\)"):
         find_tables([str(hidden)])
+
+
+def test_another_batchs_results_in_a_folder_are_passed_over_and_an_empty_out_is_new(
+        tmp_path, capsys):
+    """A folder holding another batch's results file failed it as a table on every run
+    (exit 1 for ever); `touch r.h5` then a batch was refused as "not an HDF5 file"."""
+    d, opts = _two_lambert_tables(tmp_path)
+    request = FitRequest(("lambert",), opts)
+    first = tmp_path / "first.h5"
+    first.touch()
+    assert run_batch([str(d)], request, first, workers=0, progress=False).fits == 2
+    os.replace(first, d / "old-results.h5")
+    capsys.readouterr()
+    assert cli_main(["batch", str(d), "--models", "lambert", "--samples", "1024", "--starts",
+                     "1", "--out", str(tmp_path / "second.h5"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"passed over: {d / 'old-results.h5'} (another batch's results file" in err
+    # named, it is taken (and fails as a table, saying what it is)
+    s = run_batch([str(d / "old-results.h5")], request, tmp_path / "third.h5", workers=0,
+                  progress=False)
+    assert len(s.failed_tables) == 1
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    os.replace(d / "old-results.h5", alone / "old.h5")
+    with pytest.raises(BatchInputError, match=r"holds no measured file but .*old\.h5, "
+                                              "another batch's results"):
+        find_tables([str(alone)], passed_over=[])

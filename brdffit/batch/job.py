@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 from brdffit import jsonout
 from brdffit.batch.cluster import DaskRunner, connect, require_dask
 from brdffit.batch.progress import ProgressLine
-from brdffit.batch.store import BatchStore
+from brdffit.batch.store import FORMAT, BatchStore
 from brdffit.batch.tasks import (
     FitRecord,
     TableReadRecord,
@@ -91,6 +91,8 @@ class BatchSummary:
     refitted: int = 0  # stored successful fits made again because --refit asked
     resumed_refit: str | None = None  # when the interrupted --refit this run goes on with began
     moved: int = 0  # tables found at a new path (same content): their fits went with them
+    # other batches' results files in a folder fitted: passed over (they are no tables)
+    passed_over: list[str] = field(default_factory=list)
     # (path, group) of each new table whose group is not its file's name: another
     # table of the same name has that group (a/mat.binary and b/mat.binary: mat, mat~2)
     renamed: list[tuple[str, str]] = field(default_factory=list)
@@ -118,7 +120,8 @@ class _Task:
     done_models: tuple[str, ...]
 
 
-def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]:
+def find_tables(inputs: Iterable[str], exclude: Iterable[str] = (),
+                passed_over: list[str] | None = None) -> list[str]:
     """Absolute paths of the tables that ``inputs`` name, in order, without repeats.
 
     A file is taken whatever its name (a bad one fails as a table, later); a
@@ -127,6 +130,9 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
     ``[``) is expanded like a shell glob, ``**`` included. An input that names nothing
     is an error: it is far more often a typo than an intent. ``exclude``: paths never
     taken (the batch's own results file, an HDF5 file in the folder it fits).
+    ``passed_over``: given, a folder's HDF5 files that are another batch's results
+    (``brdffit-batch``) are appended to it rather than taken (each failed as a table on
+    every run, and the batch always exited 1); named alone, such a file is taken.
     """
     found: dict[str, None] = {}
     # the results file and its journal (a quoted 'g/*' with --out g/r.h5 took the results
@@ -161,6 +167,8 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
                 skipped.append(f)
             # a link to nothing is taken too: it fails as a table, named with its
             # reason, rather than vanishing from the batch unsaid
+            elif passed_over is not None and is_batch_results(f):
+                passed_over.append(os.path.abspath(f))
             elif os.path.isfile(f) or not os.path.exists(f):
                 found.setdefault(os.path.abspath(f))
                 n += 1
@@ -170,12 +178,17 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
         if os.path.isdir(text):
             skipped.clear()
             hidden.clear()
+            before = len(passed_over or ())
             if not add_dir(text):
-                but = (f" but {', '.join(skipped)}, the batch's own results file (--out)"
-                       if skipped else "")
+                parts = [f"{', '.join(skipped)}, the batch's own results file (--out)"
+                         ] if skipped else []
+                if passed_over is not None and len(passed_over) > before:
+                    parts.append(f"{_hidden_words(passed_over[before:])}, another batch's "
+                                 "results")
                 if hidden:
-                    but += (f"{';' if but else ' but'} {_hidden_words(hidden)}, hidden (a "
-                            "name or folder starting with '.'): name them to fit them")
+                    parts.append(f"{_hidden_words(hidden)}, hidden (a name or folder "
+                                 "starting with '.'): name them to fit them")
+                but = f" but {'; '.join(parts)}" if parts else ""
                 raise BatchInputError(f"{text}: directory holds no measured file{but} "
                                       f"({', '.join('*' + s for s in DIR_SUFFIXES)})")
         elif os.path.lexists(text):
@@ -201,6 +214,22 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = ()) -> list[str]
         raise BatchInputError("no tables to fit")
     _check_names_storable(found)
     return list(found)
+
+
+def is_batch_results(path: str) -> bool:
+    """Whether ``path`` is an HDF5 file that a batch wrote (its ``format`` attribute)."""
+    if not path.endswith((".h5", ".hdf5")):
+        return False
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89HDF\r\n\x1a\n":
+                return False
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") in (FORMAT, FORMAT.encode())
+    except (OSError, ValueError):
+        return False
 
 
 def _hidden_words(hidden: list[str]) -> str:
@@ -531,8 +560,10 @@ def run_batch(
                               f"{checkpoint_s!r}")
     if scheduler or workers:
         require_dask()  # before the results file is created
-    paths = find_tables(inputs, exclude=[out])
-    summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths))
+    passed_over: list[str] = []
+    paths = find_tables(inputs, exclude=[out], passed_over=passed_over)
+    summary = BatchSummary(out=os.path.abspath(os.fspath(out)), tables=len(paths),
+                           passed_over=passed_over)
     attrs = {
         "models": list(model_names),
         "options": request.fit_key(),

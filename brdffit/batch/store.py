@@ -200,6 +200,8 @@ class BatchStore:
             raise BatchFileError(f"{self.path}: cannot write in {directory} ({e.strerror}): "
                                  "the results file and its journal go there") from None
         try:
+            if os.path.isfile(self.path) and os.path.getsize(self.path) == 0:
+                os.unlink(self.path)  # made by `touch` for the batch to fill: a new file
             if os.path.exists(self.path):
                 self._tables = read_index(self.path)
                 for t in self._tables.values():

@@ -153,6 +153,9 @@ def run(args) -> int:
     if s.damaged:
         print(f"fitted again: {_count(s.damaged, 'fit')} whose stored result did not read back "
               "(a damaged file)", file=sys.stderr)
+    for path in s.passed_over:
+        print(f"passed over: {path} (another batch's results file, not a table)",
+              file=sys.stderr)
     for path, group in s.renamed:  # the file's own name is another table's group
         print(f"stored as group {group!r}: {path} (another table has its name)",
               file=sys.stderr)
