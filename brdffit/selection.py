@@ -48,6 +48,7 @@ from brdffit.fitting.options import (
     DEFAULT_STARTS,
     DEFAULT_TOLERANCE,
     FIT_KEYWORDS,
+    FitOptions,
 )
 from brdffit.fitting.quality import (
     ALIKE_DB,
@@ -302,6 +303,9 @@ def select(
         raise FitInputError(
             f"select passes only {', '.join(FIT_KEYWORDS)} to fit, not {sorted(unknown)}"
         )
+    FitOptions.from_dict(fit_options)  # refused once, before any candidate (seed=None)
+    if isinstance(candidates, str):  # "ggx" was read letter by letter: unknown model 'g'
+        candidates = [c.strip() for c in candidates.split(",") if c.strip()]
     for name, v in (("tolerance", tolerance), ("grey_tolerance", grey_tolerance)):
         if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
             raise FitInputError(f"{name} must be a number >= 0, got {v!r}")

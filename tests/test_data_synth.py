@@ -83,7 +83,8 @@ def test_copies_of_one_truth_are_independent_tables():
     from data_synth.synth import Component
 
     clean, _ = make_table("ggx")
-    clean.rgb[:] = 0.0  # a caller may write into its table
+    with pytest.raises(ValueError, match="read-only"):  # a table is not changed in place
+        clean.rgb[:] = 0.0
     again, truth = make_table("ggx")
     params = {"kd": [0.2, 0.1, 0.1], "ks": [0.5, 0.5, 0.5], "alpha": 0.3, "f0": 0.5}
     other, _ = make_table("ggx", params)

@@ -197,3 +197,37 @@ def test_written_tables_respect_the_umask(tmp_path, good_raw):
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "b.binary").stat().st_mode) == 0o644
+
+
+def test_a_table_cannot_be_changed_in_place_and_arrays_given_by_hand_are_checked():
+    """What a library review found: a table changed in place (t.rgb *= 2) was fitted
+    again from the old values (a fit keeps what it derives with the table object); a
+    channels-last array was reshaped into a scramble and fitted "successful"; NaN in
+    unmeasured bins made a good fit "nonfinite"; an int mask failed deep in the fit."""
+    from brdffit import fit
+    from data_synth import make_table
+
+    table = make_table("lambert", {"kd": [0.5, 0.3, 0.2]})[0]
+    with pytest.raises(ValueError, match="read-only"):
+        table.rgb[...] *= 2
+    doubled = fit(merl.MerlTable.from_values(table.rgb * 2, table.mask), "lambert")
+    np.testing.assert_allclose(doubled.params["kd"], [1.0, 0.6, 0.4], rtol=1e-3)
+    # arrays given writable are copied: the caller's stay theirs, the table's do not move
+    rgb, mask = np.array(table.rgb), np.array(table.mask)
+    mine = merl.MerlTable(rgb, mask)
+    rgb *= 3
+    assert mine.rgb.max() == table.rgb.max() and not mine.rgb.flags.writeable
+    with pytest.raises(MerlFormatError, match=r"channels last: np.moveaxis\(rgb, -1, 0\)"):
+        merl.MerlTable.from_values(np.moveaxis(table.rgb, 0, -1))
+    with pytest.raises(MerlFormatError, match=r"rgb of shape \(90, 90, 180, 3\)"):
+        merl.MerlTable(np.moveaxis(table.rgb, 0, -1), table.mask)
+    # NaN where unmeasured is 0 in the table; an int mask of 0/1 is a mask
+    nan_unmeasured = np.where(table.mask, table.rgb, np.nan)
+    by_hand = merl.MerlTable(nan_unmeasured, table.mask.astype(np.int8))
+    assert by_hand.mask.dtype == bool and np.all(by_hand.rgb[:, ~by_hand.mask] == 0)
+    r = fit(by_hand, "lambert")
+    assert r.result == "successful" and np.isfinite(r.error["log_rmse"])
+    with pytest.raises(MerlFormatError, match="a measured bin .mask True. holds a negative"):
+        merl.MerlTable(np.where(table.mask, -1.0, 0.0) * np.ones((3, 1, 1, 1)), table.mask)
+    with pytest.raises(MerlFormatError, match="values other than 0 and 1"):
+        merl.MerlTable(table.rgb, table.mask.astype(float) * 2)

@@ -843,3 +843,23 @@ def test_under_the_render_rule_a_nested_gain_is_the_renders():
     _layer_gains(collapsed, "render_psnr_db")
     assert collapsed[1]["over_parent"]["no_gain"]
     assert NO_GAIN_DB == pytest.approx(0.0087, abs=1e-4)
+
+
+def test_library_callers_get_one_clear_line_for_what_a_review_passed():
+    """fit(t, "auto") said "unknown model 'auto'"; a parent_fit given as a name failed
+    with AttributeError; select(t, "ggx") read the name letter by letter ("unknown model
+    'g'"); select(seed=None) was refused only after every candidate was tried."""
+    from brdffit import fit
+    from brdffit.errors import FitInputError
+    from data_synth import make_table
+
+    t = make_table("lambert", {"kd": [0.5, 0.3, 0.2]})[0]
+    with pytest.raises(FitInputError, match="auto chooses among candidates, it is no model: "
+                                            r"brdffit.selection.select\(table\)"):
+        fit(t, "auto")
+    with pytest.raises(FitInputError, match="parent_fit must be the FitResult of ggx ggx2 "
+                                            "contains, got str"):
+        fit(t, "ggx2", parent_fit="ggx")
+    with pytest.raises(FitInputError, match="seed must be given, got None"):
+        select(t, seed=None, progress=lambda *a: pytest.fail("a candidate was fitted"))
+    assert select(t, "lambert", samples=1024).chosen == "lambert"

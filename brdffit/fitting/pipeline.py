@@ -131,7 +131,17 @@ def fit(
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
     """
+    if isinstance(model, str) and model.strip().lower() == "auto":
+        # the shells' "auto" is a selection, not a model: said where to find it
+        raise FitInputError("auto chooses among candidates, it is no model: "
+                            "brdffit.selection.select(table) returns the ranking and the "
+                            "chosen fit (.chosen_fit); brdffit.request.run(table, "
+                            "FitRequest.of('auto')) as the shells run it")
     m = models.get(model)
+    if not (parent_fit is None or callable(parent_fit)
+            or isinstance(parent_fit, FitResult | Solved)):
+        raise FitInputError(f"parent_fit must be the FitResult of {m.parent or 'the model'} "
+                            f"{m.name} contains, got {type(parent_fit).__name__}")
     samples, starts, max_steps, seed = _check_options(loss, solver, precision, samples,
                                                       starts, max_steps, physical, seed)
     if physical:

@@ -83,13 +83,26 @@ class MerlTable:
     n_partial: int = 0
 
     def __post_init__(self):
-        if self.rgb.shape != (3, *SHAPE) or self.mask.shape != SHAPE:
-            raise ValueError(f"MerlTable needs rgb (3, {SHAPE}) and mask {SHAPE}")
+        """The arrays checked and made read-only. A fit keeps what it derives from a
+        table (its subsample, device copy, renders) with the table object: a table
+        changed in place was fitted again from the old values, with an error measured
+        on the new ones. Arrays given writable are copied (the caller's stay theirs); to
+        change a table, make a new one (``MerlTable.from_values(t.rgb * 2, t.mask)``).
+        Arrays given read-only are taken as they are (the readers' own)."""
+        rgb, mask = self.rgb, self.mask
+        trusted = (isinstance(rgb, np.ndarray) and isinstance(mask, np.ndarray)
+                   and not rgb.flags.writeable and not mask.flags.writeable
+                   and rgb.dtype == np.float64 and mask.dtype == bool
+                   and rgb.shape == (3, *SHAPE) and mask.shape == SHAPE)
+        if not trusted:
+            rgb, mask = _checked_arrays(rgb, mask, self.source)
+            object.__setattr__(self, "rgb", rgb)
+            object.__setattr__(self, "mask", mask)
 
     @classmethod
     def from_values(cls, rgb, mask=None, source: str = "<memory>") -> MerlTable:
         """A table from physical values; bins that are negative or non-finite are masked."""
-        rgb = np.asarray(rgb, dtype=np.float64).reshape(3, *SHAPE)
+        rgb = _merl_layout(rgb, source)
         channel_ok = np.isfinite(rgb) & (rgb >= 0)
         ok = np.all(channel_ok, axis=0)
         n_partial = int(np.count_nonzero(~ok & np.any(channel_ok, axis=0)
@@ -102,7 +115,7 @@ class MerlTable:
                                           "non-finite or masked")
         rgb = np.where(ok, rgb, 0.0)
         _check_range(rgb, source)
-        return cls(rgb, ok, source, n_nonfinite, n_partial=n_partial)
+        return cls(_read_only(rgb), _read_only(ok), source, n_nonfinite, n_partial=n_partial)
 
     @property
     def n_measured(self) -> int:
@@ -325,7 +338,51 @@ def _from_raw(raw: np.ndarray, source: str) -> MerlTable:
         _check_range(rgb * SCALE[:, None, None, None], source, raw=rgb, measured=measured)
     for c in range(3):
         raw[c] *= SCALE[c]
-    return MerlTable(rgb, measured, source, n_nonfinite, n_partial=n_partial)
+    return MerlTable(_read_only(rgb), _read_only(measured), source, n_nonfinite,
+                     n_partial=n_partial)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def _merl_layout(rgb, source: str) -> np.ndarray:
+    """``rgb`` as float64 of shape (3, 90, 90, 180): given so, or flat in that order
+    (a .binary file's body). Any other shape of as many values is refused: channels
+    last, (90, 90, 180, 3), reshaped, was fitted as a scramble, "successful"."""
+    a = np.asarray(rgb)
+    if a.dtype.kind not in "biuf":
+        raise MerlFormatError(source, f"rgb holds {a.dtype} values, not real numbers")
+    if a.shape not in ((3, *SHAPE), (3 * N_BINS,), (3, N_BINS)):
+        hint = (" (channels last: np.moveaxis(rgb, -1, 0))"
+                if a.shape == (*SHAPE, 3) else "")
+        raise MerlFormatError(source, f"rgb of shape {a.shape}: a MERL table's values are "
+                                      f"(3, {', '.join(map(str, SHAPE))}), channel first, or "
+                                      f"flat in that order{hint}")
+    return a.astype(np.float64, copy=False).reshape(3, *SHAPE)
+
+
+def _checked_arrays(rgb, mask, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """A table's arrays given to :class:`MerlTable` directly, checked as the readers'
+    are and copied read-only: a mask of booleans (or of 0 and 1), measured bins finite
+    and >= 0, unmeasured ones 0 (NaN there made a good fit read "nonfinite")."""
+    rgb = np.array(_merl_layout(rgb, source), dtype=np.float64)  # a copy of its own
+    m = np.asarray(mask)
+    if m.shape != SHAPE:
+        raise MerlFormatError(source, f"mask of shape {m.shape}: a MERL table's is {SHAPE}")
+    if m.dtype != bool:
+        if m.dtype.kind not in "biuf" or not np.isin(m, (0, 1)).all():
+            raise MerlFormatError(source, f"mask of {m.dtype} values other than 0 and 1: "
+                                          "a mask is True where a bin is measured")
+    m = np.array(m, dtype=bool)
+    measured = rgb[:, m]
+    if not (np.isfinite(measured).all() and (measured >= 0).all()):
+        raise MerlFormatError(source, "a measured bin (mask True) holds a negative or "
+                                      "non-finite value: MerlTable.from_values(rgb) masks "
+                                      "such bins itself")
+    rgb[:, ~m] = 0.0
+    return _read_only(rgb), _read_only(m)
 
 
 def _measured_zeros(raw: np.ndarray, bits: np.ndarray, unmeasured: np.ndarray) -> None:
