@@ -728,6 +728,44 @@ def test_a_lambert_fit_goes_to_mitsuba_as_its_diffuse_plugin_exactly():
     assert not [w for w in e.warnings if w.startswith(("approximated:", "clamp:", "class:"))]
 
 
+def test_a_lambert_fit_brighter_than_one_goes_to_mitsuba_within_its_range():
+    """kd [1.22, 1.18, 1.15] was copied to Mitsuba's diffuse, which refused to load the
+    file ("Invalid RGB reflectance value ... must be in the range [0, 1]"), exit 0 and
+    no word: it is refitted within Mitsuba's range, said, and the clamp named; asked
+    for lambert by name, it is refused."""
+    from brdffit.export import ExportError
+
+    bright = result("lambert", {"kd": [1.22, 1.18, 1.15]})
+    e = export(bright, "mitsuba")
+    assert e.fidelity["target_model"] == "rough_conductor" and not e.fidelity["exact"]
+    assert e.fidelity["log_rmse_to_fit"] > 0.01
+    assert any(w.startswith("range: kd [1.22, 1.18, 1.15] is above 1, which Mitsuba's "
+                            "diffuse reflectance cannot hold") for w in e.warnings), e.warnings
+    assert any(w.startswith("clamp: kd = R 1") for w in e.warnings), e.warnings
+    assert max(e.material["bsdf_1"]["reflectance"]["value"]) <= 1.0
+    with pytest.raises(ExportError, match="Mitsuba cannot load it"):
+        export(bright, "mitsuba", target_model="lambert")
+
+
+def test_names_a_renderer_refuses_are_made_its_own():
+    """A table named "_lab" gave Mitsuba files that did not load ("leading underscores
+    are reserved"), one named "金 red plastic" MaterialX documents that validate()
+    refused ("Invalid element name"): both were written without a word."""
+    import re
+
+    from brdffit.export import materialx, mitsuba
+
+    xml = mitsuba.scene_xml({"type": "diffuse", "reflectance": {"type": "rgb",
+                                                                "value": [0.5] * 3}}, "_lab")
+    assert 'id="lab"' in xml
+    e = export(result("lambert", {"kd": [0.5, 0.35, 0.2]}), "materialx", name="金 red plastïc")
+    text = next(v for v in e.files.values() if isinstance(v, str))
+    names = re.findall(r'<\w+ name="([^"]+)"', text)
+    assert names and all(n.isascii() for n in names), names
+    assert any("red_plastic" in n for n in names), names
+    assert materialx is not None
+
+
 def test_a_diffuse_fit_goes_to_mitsuba_with_a_black_conductor_and_no_class_weighing():
     """A pure diffuse fit's refit to Mitsuba's conductor blend has a conductor that
     reflects nothing (eta ~1, k ~0, alpha wherever): no metal to weigh against a

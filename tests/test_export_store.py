@@ -4,6 +4,8 @@ best fit by default, and errors that say what the file holds."""
 
 from __future__ import annotations
 
+import os
+
 import h5py
 import numpy as np
 import pytest
@@ -77,6 +79,15 @@ def test_the_default_is_the_best_fit(store):
     tied = [m for m, r in fits.items() if r.log_rmse <= lowest + TIE]
     best = min(tied, key=lambda m: models.get(m).n_params)
     assert read_fit(out, "gold~2")["model"] == best
+
+
+def test_a_table_named_by_the_relative_path_the_batch_was_given(store, monkeypatch):
+    """--table btab/chrome-steel.binary, as the batch was run, was "no table": the file
+    holds the absolute path."""
+    root, out = store
+    monkeypatch.chdir(root)
+    assert read_fit(out, os.path.join("a", "gold.binary"), "lambert") == \
+        _stored(out, "gold", "lambert").to_dict()
 
 
 def test_unknown_table_or_model_lists_what_the_file_holds(store):

@@ -723,11 +723,13 @@ def _find_table(path: str, groups: h5py.Group, table: str) -> str:
     if table in groups:
         return table
     stem = table.removesuffix(".binary")
+    # the path as the batch was given it (relative to here) reaches the stored absolute one
+    spelled = {table, os.path.abspath(table), os.path.realpath(table)}
     found = []
     for name, g in groups.items():
         source = _plain(g.attrs.get("path", ""))
         base = os.path.basename(source)
-        if table == source or table == base or stem == base.removesuffix(".binary"):
+        if source in spelled or table == base or stem == base.removesuffix(".binary"):
             found.append(name)
     if len(found) == 1:
         return found[0]

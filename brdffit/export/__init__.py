@@ -302,6 +302,13 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     models_wanted = ((target_model,) if target_model
                      else _by_layers_kept(spec.target_models, result))
     warnings: list[str] = []
+    out_of_range = getattr(module, "out_of_range", lambda model, params: None)
+    if result.model in models_wanted and (why := out_of_range(result.model, result.params)):
+        if target_model is not None or len(models_wanted) == 1:
+            raise ExportError(f"{why}: {spec.label} cannot load it; export it as another of "
+                              f"its models ({', '.join(spec.target_models)})")
+        models_wanted = tuple(m for m in models_wanted if m != result.model)
+        warnings.append(f"range: {why}; refitted as {models_wanted[0]} instead")
     measured, fitted = None, False
     carried = result.model if result.model in models_wanted else models_wanted[0]
     if spec.shaded_as[carried] is not None:  # else nothing can be measured against it

@@ -298,10 +298,13 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
     tried = []
+    fitted_as: dict[str, tuple[str, dict]] = {}  # export model -> the model fitted, its params
     for d in alt.dielectrics:
-        params = d.as_export(fit(reference, d.model, loss=result.loss).params)
+        fitted = fit(reference, d.model, loss=result.loss).params
+        params = d.as_export(fitted)
         tried.append((float(table_error(reference, d.export_model, params)["log_rmse"]),
                       d.export_model, params))
+        fitted_as[d.export_model] = (d.model, fitted)
     err_d, export_model, dielectric = min(tried, key=lambda t: t[0])
     err_m = float(table_error(reference, alt.mixture_model, conv.params)["log_rmse"])
     metallic = alt.metal_fraction(conv.params)
@@ -329,6 +332,12 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
         f"class: exported as a dielectric ({export_model}), refitted to {against}: "
         f"log_rmse {err_d:.4g} against {err_m:.4g} for the metal mixture (metal fraction "
         f"{metallic:.3g}), {why}")
-    return (Conversion(export_model, dielectric, False, to_fit,
-                       warnings + bound_warnings(export_model, dielectric)),
+    # the bounds the dielectric was fitted within (standard_surface_dielectric's IOR ends
+    # at 3, standard_surface's at 50: an IOR of 2.99999997 went out unsaid)
+    model_fitted, params_fitted = fitted_as[export_model]
+    clamps = bound_warnings(export_model, dielectric)
+    said = {w.split(" = ", 1)[0] for w in clamps}
+    clamps += [w for w in bound_warnings(model_fitted, params_fitted)
+               if w.split(" = ", 1)[0] not in said]
+    return (Conversion(export_model, dielectric, False, to_fit, warnings + clamps),
             {**report, "chosen": "dielectric"})

@@ -87,8 +87,15 @@ def shading_notes(model: str) -> list[str]:
 
 
 def _identifier(name: str) -> str:
-    """A MaterialX element name: letters, digits and underscores, not starting with a digit."""
-    out = "".join(c if c.isalnum() or c == "_" else "_" for c in name) or "brdffit"
+    """A MaterialX element name: ASCII letters, digits and underscores, not starting with
+    a digit. Accents are dropped from their letters (``ü``: ``u``), other characters
+    made ``_``: MaterialX's validate() refused "SR_金_red_plastic", which str.isalnum let
+    through, and the document was written without a word."""
+    import unicodedata
+
+    plain = unicodedata.normalize("NFKD", name)
+    out = "".join(c if (c.isascii() and c.isalnum()) or c == "_" else "" if
+                  unicodedata.combining(c) else "_" for c in plain) or "brdffit"
     return out if not out[0].isdigit() else f"m_{out}"
 
 

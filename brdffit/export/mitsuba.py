@@ -77,6 +77,17 @@ MEDIA_TYPE = "application/json"
 SPECTRAL_TOLERANCE = 0.02
 
 
+def out_of_range(model: str, params: dict) -> str | None:
+    """Why Mitsuba cannot load ``model``'s ``params`` as they are (None: it can): a
+    ``lambert`` fit brighter than 1 (a table in other units, a fluorescent sample), which
+    Mitsuba's ``diffuse`` refuses ("Invalid RGB reflectance value, must be in the range
+    [0, 1]") where the model has no bound; the file was written, and did not load."""
+    if model == "lambert" and float(np.max(np.asarray(params["kd"], float))) > 1.0:
+        return (f"kd {np.round(np.asarray(params['kd'], float), 4).tolist()} is above 1, "
+                "which Mitsuba's diffuse reflectance cannot hold (its range is [0, 1])")
+    return None
+
+
 class SpectralExportError(BrdffitError, ValueError):
     """A material that a Mitsuba variant cannot render as the RGB variants do."""
 
@@ -262,6 +273,9 @@ def scene_xml(material: dict, material_id: str = "brdffit_material") -> str:
     reference from a shape with ``<ref id=.../>``. The file is for the variants its
     dictionary is for: ``scene_xml(load_dict(params))`` for RGB variants,
     ``scene_xml(load_dict(params, spectral=True))`` for spectral ones."""
+    # Mitsuba reserves ids that start with "_" ("invalid id: leading underscores are
+    # reserved"): a table named _lab.binary gave files that did not load
+    material_id = material_id.lstrip("_ ") or "brdffit_material"
     lines = _xml(material, None, "    ")
     lines[0] = lines[0].replace(f'<bsdf type="{material["type"]}"',
                                 f'<bsdf type="{material["type"]}" id={quoteattr(material_id)}', 1)
