@@ -1274,6 +1274,20 @@ def test_a_spreadsheets_leftovers_and_a_column_of_notes_are_left_alone(tmp_path)
         read_measured(sheet)
 
 
+def test_samples_are_read_only_and_the_callers_arrays_stay_theirs():
+    """As a MerlTable's: a fit keeps what it derives with the Measurements object, so a
+    sample list changed in place was fitted from the old samples."""
+    s = _samples(20)
+    values = np.array(s[4])
+    m = Measurements.from_angles(*s[:4], values)
+    with pytest.raises(ValueError, match="read-only"):
+        m.rgb[0] = 1.0
+    values *= 2  # the caller's array is not the samples'
+    np.testing.assert_array_equal(m.rgb, s[4])
+    own = Measurements(np.array(m.wi), np.array(m.wo), np.array(m.rgb))
+    assert not (own.wi.flags.writeable or own.rgb.flags.writeable)
+
+
 def test_a_polar_angle_a_rounding_below_zero_is_the_normal():
     """An instrument's -0.0001 degrees at normal incidence is read as 0 (it was
     refused as negative, while 90.00001 degrees was read as 90); 90.004 degrees is 90

@@ -142,6 +142,17 @@ class Measurements:
     source: str = "<memory>"
     provenance: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        # read-only, as a MerlTable's: a fit keeps what it derives with the object (its
+        # binned table, folds), and samples changed in place were fitted from the old
+        for name in ("wi", "wo", "rgb", "sigma"):
+            a = getattr(self, name)
+            if a is None or (isinstance(a, np.ndarray) and not a.flags.writeable):
+                continue
+            a = np.array(a, dtype=float)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
     @property
     def n(self) -> int:
         return int(self.rgb.shape[0])
