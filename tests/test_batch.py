@@ -1245,3 +1245,21 @@ def test_another_batchs_results_in_a_folder_are_passed_over_and_an_empty_out_is_
     with pytest.raises(BatchInputError, match=r"holds no measured file but .*old\.h5, "
                                               "another batch's results"):
         find_tables([str(alone)], passed_over=[])
+
+
+def test_a_report_says_where_fits_of_other_options_stand_side_by_side(tmp_path, capsys):
+    """Runs with other options resumed into one file: batch-report ranked a log-loss
+    fit beside a render-loss one as the same kind of fit, unsaid."""
+    d, opts = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    assert run_batch([str(d / "m0.binary")], FitRequest(("lambert",), opts), out, workers=0,
+                     progress=False).ok
+    assert run_batch([str(d / "m1.binary")], FitRequest.of("lambert", samples=2048, starts=1),
+                     out, workers=0, progress=False).ok
+    ranking = rank(out)
+    assert ranking.mixed_options == {"samples": [1024, 2048]}
+    assert ("Fits made with different options side by side (runs of other options resumed "
+            "into this file): samples 1024, 2048") in format_ranking(ranking, str(out))
+    capsys.readouterr()
+    assert cli_main(["batch-report", str(out), "--json", "--no-png"]) == 0
+    assert json.loads(capsys.readouterr().out)["mixed_options"] == {"samples": [1024, 2048]}

@@ -81,6 +81,10 @@ class Ranking:
     models: list[str]
     tables: list[TableRanking]
     summary: list[ModelSummary]
+    #: option -> the values the file's successful fits were made with, where they differ
+    #: (runs with other options resumed into one file: a log and a render loss fit side
+    #: by side were ranked as one kind of fit, unsaid)
+    mixed_options: dict[str, list] = field(default_factory=dict)
 
     @property
     def failed_tables(self) -> list[TableRanking]:
@@ -93,12 +97,13 @@ def rank(path: str | os.PathLike) -> Ranking:
     models: dict[str, None] = {}
     for m in _list_attr(attrs.get("models")):
         models.setdefault(m)
-    tables, not_converged = [], {}
+    tables, not_converged, keys = [], {}, set()
     for t in sorted(read_index(path).values(), key=lambda t: t.name):
         row = TableRanking(t.name, t.path, t.status, t.message, {})
         for model, f in t.fits.items():
             models.setdefault(model)
             if f.status == "ok":
+                keys.add(f.options)
                 row.errors[model] = f.log_rmse  # METRIC
                 not_converged[model] = not_converged.get(model, 0) + (not f.converged)
             else:
@@ -121,7 +126,31 @@ def rank(path: str | os.PathLike) -> Ranking:
             looks={v: sum(t.looks.get(m, {}).get("verdict") == v for t in tables)
                    for v in VERDICTS},
         ))
-    return Ranking(attrs, list(models), tables, summary)
+    return Ranking(attrs, list(models), tables, summary, _mixed(keys))
+
+
+def _mixed(keys: set[str]) -> dict[str, list]:
+    """The options whose values differ among the fit keys ``keys`` (JSON objects)."""
+    import json
+
+    parsed = []
+    for k in keys:
+        try:
+            parsed.append(json.loads(k))
+        except ValueError:
+            continue
+    names = sorted({n for d in parsed for n in d})
+    out = {}
+    for n in names:
+        values = {json.dumps(d.get(n), sort_keys=True) for d in parsed}
+        if len(values) > 1:
+            out[n] = sorted(json.loads(v) if v != "null" else None for v in values)
+    return out
+
+
+def _shown(value) -> str:
+    """An option's value in a line: its default (absent from the key) said so."""
+    return "default" if value is None else str(value)
 
 
 def _count(n: int, noun: str) -> str:
@@ -137,7 +166,12 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
              f"brdffit {r.attrs.get('brdffit_version', '?')}",
              f"{METRIC} on the full table (a sample list's: at its samples), lower is "
              "better; * marks each table's best; "
-             f"auto: the cheapest within {tolerance:g} of it (in quadrature)", ""]
+             f"auto: the cheapest within {tolerance:g} of it (in quadrature)"]
+    if r.mixed_options:
+        lines.append("Fits made with different options side by side (runs of other options "
+                     "resumed into this file): " + "; ".join(
+                         f"{k} {', '.join(map(_shown, v))}" for k, v in r.mixed_options.items()))
+    lines.append("")
     width = max([len("table")] + [len(t.name) for t in r.tables])
     cols = max([10] + [len(m) + 1 for m in r.models])
     lines.append(f"{'table':<{width}}  {'best':<{cols}}{'auto':<{cols}}"

@@ -41,6 +41,8 @@ def run(args) -> int:
                                   for k in ("verdict", "reason", "next")}}
                        for t in ranking.tables],
             "models": [vars(s) for s in ranking.summary],
+            # options whose values differ among the fits ranked side by side (absent: none)
+            **({"mixed_options": ranking.mixed_options} if ranking.mixed_options else {}),
         }, sys.stdout, indent=2, default=str)
         sys.stdout.write("\n")
     else:
