@@ -985,6 +985,12 @@ def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
                      "30,0,40,180,1,1,1\n")
     with pytest.raises(MerlFormatError, match="span 450-650 nm; projecting to RGB needs"):
         read_measured(short)
+    # wavelengths in micrometres: said
+    microns = tmp_path / "microns.npz"
+    np.savez(microns, theta_i_deg=[30.0], phi_i_deg=[0.0], theta_o_deg=[40.0], phi_o_deg=[180.0],
+             spectral=np.ones((1, 5)), wavelengths=np.linspace(0.38, 0.78, 5))
+    with pytest.raises(MerlFormatError, match=r"span 0.38-0.78 nm \(micrometres\?"):
+        read_measured(microns)
     # three lasers span the range, but the colour between them would be a straight line
     lasers = tmp_path / "lasers.csv"
     lasers.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,405nm,532nm,690nm\n"
@@ -1936,6 +1942,17 @@ def test_a_workbook_that_opens_on_a_sheet_of_notes_is_read_from_its_samples(tmp_
     with pytest.raises(MeasurementsError, match="sheet 'About': no column for theta_i.*; "
                                                 "sheet 'chart': no column for theta_i.*x, y"):
         read_measured(tmp_path / "notes.xlsx")
+
+def test_a_scale_factor_of_zero_is_refused_by_name(tmp_path):
+    s = _samples(20)
+    path = tmp_path / "zero.h5"
+    with h5py.File(path, "w") as f:
+        for a, v in zip(("theta_i", "phi_i", "theta_o", "phi_o"), s[:4], strict=True):
+            f.create_dataset(a, data=np.degrees(v)).attrs["units"] = "degrees"
+        f.create_dataset("rgb", data=s[4]).attrs["scale_factor"] = 0.0
+    with pytest.raises(MeasurementsError, match="scale_factor 0 makes every value 0"):
+        read_measured(path)
+
 
 @pytest.mark.parametrize("key, mark, packed", [("missing_value", 999.0, False),
                                                 ("_FillValue", -9999.0, False),

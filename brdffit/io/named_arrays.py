@@ -737,6 +737,10 @@ def _unpacked(d, a: np.ndarray, name: str, source: str) -> np.ndarray:
         if v.size != 1 or not np.isfinite(v[0]):
             raise MeasurementsError(source, f"dataset {name}: {key} {v.tolist()[:3]} is not "
                                             "one finite number")
+        if key == "scale_factor" and v[0] == 0:  # every value 0: "brightest 0" said later
+            raise MeasurementsError(source, f"dataset {name}: scale_factor 0 makes every "
+                                            "value 0 (CF packing: value * scale_factor + "
+                                            "add_offset)")
         packing.append(float(v[0]))
     scale, offset = packing
     # CF's marks of a value not measured, compared as stored (before the packing):

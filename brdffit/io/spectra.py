@@ -52,10 +52,13 @@ def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, di
         raise MeasurementsError(source, "the wavelengths must be finite and increasing, at "
                                         f"least two (got {lam.tolist()[:8]})")
     if lam[0] > MIN_SPAN[0] or lam[-1] < MIN_SPAN[1]:
+        unit = (" (micrometres? wavelengths are read in nm: multiply them by 1000)"
+                if 0.3 <= lam[0] and lam[-1] <= 3.0 else
+                " (metres? wavelengths are read in nm)" if lam[-1] < 1e-5 else "")
         raise MeasurementsError(
-            source, f"the spectra span {lam[0]:g}-{lam[-1]:g} nm; projecting to RGB needs "
-                    f"at least {MIN_SPAN[0]:g}-{MIN_SPAN[1]:g} nm (where the eye's response "
-                    "is), else the colour would be mostly a guess")
+            source, f"the spectra span {lam[0]:g}-{lam[-1]:g} nm{unit}; projecting to RGB "
+                    f"needs at least {MIN_SPAN[0]:g}-{MIN_SPAN[1]:g} nm (where the eye's "
+                    "response is), else the colour would be mostly a guess")
     # the gaps that cross the visible span (a gap wholly outside it weighs ~nothing)
     gaps = np.diff(lam)
     crossing = (lam[1:] > MIN_SPAN[0]) & (lam[:-1] < MIN_SPAN[1])
