@@ -42,7 +42,6 @@ except ModuleNotFoundError:
     raise extras.MissingExtraError("brdffit.view.plots", "plots", ("matplotlib",)) from None
 
 from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
-from brdffit.fitting.options import DEFAULT_LOSS
 from brdffit.fitting.problem import sphere_reference
 from brdffit.fitting.quality import ALIKE_DB, judged_brightness, judged_colour
 from brdffit.fitting.result import FitResult, error_measures_nothing
@@ -114,9 +113,15 @@ def _title(table: MerlTable, result: FitResult) -> str:
     e = result.error.get("log_rmse")
     # the loss it minimised, where not the default: a render-loss fit's pictures were
     # told from a log-loss one's by the log_rmse figure alone
-    loss = "" if result.loss == DEFAULT_LOSS else f" ({result.loss} loss)"
+    loss = f" ({result.loss} loss)"
+    # how it looks, beside the number: a first look at spheres.png gave log_rmse alone
+    # (a review: "no sphere figure states PSNR or verdict")
+    psnr = result.error.get("psnr_db")
+    verdict = (result.quality or {}).get("verdict")
+    look = ("" if psnr is None else f", sphere PSNR {psnr:.1f} dB") + (
+        f", looks {verdict}" if verdict else "")
     return (f"{name}: {result.model} fit{loss}, log_rmse "
-            + ("n/a" if e is None else f"{e:.3g}"))
+            + ("n/a" if e is None else f"{e:.3g}") + look)
 
 
 def _few_samples(table: MerlTable, result: FitResult, what: str) -> str:
@@ -300,7 +305,10 @@ def _draw_error_map(fig, table: MerlTable, result: FitResult):
                      fontsize=11)
 
     finite_bias = np.abs(bias[np.isfinite(bias)])
-    bmax = float(np.percentile(finite_bias, 99.5)) if finite_bias.size else 1.0
+    # the 95th percentile: a few grazing or peak bins (theta_d > 85, theta_h < 1 deg) set
+    # the 99.5th, and left the rest of the map white where the |error| map shows 1e-2;
+    # beyond it, the bar's arrows
+    bmax = float(np.percentile(finite_bias, 95.0)) if finite_bias.size else 1.0
     m = ax_bias.pcolormesh(x, y, bias.T, cmap=_with_bad("RdBu_r"), vmin=-max(bmax, 1e-6),
                            vmax=max(bmax, 1e-6), shading="flat", rasterized=True)
     fig.colorbar(m, ax=ax_bias, label="mean residual: fit − measured", extend="both")
@@ -310,8 +318,10 @@ def _draw_error_map(fig, table: MerlTable, result: FitResult):
         sqrt_degree_axis(ax)
         ax.set_facecolor(NO_DATA)
         ax.set_xlabel("θh (degrees, √ scale)")
-    ax_rms.set_ylabel("θd (degrees)")
-    ax_rms.set_yticks([0, 15, 30, 45, 60, 75, 90])
+    for ax in (ax_rms, ax_bias):  # each its own: the left bar's label read as the right's
+        ax.set_ylabel("θd (degrees)")
+        ax.set_yticks([0, 15, 30, 45, 60, 75, 90])
+        ax.tick_params(labelleft=True)
 
 
 #: The |error| map's colour scale spans at most this factor below its largest bin.
@@ -450,12 +460,13 @@ def spheres(table: MerlTable, result: FitResult | dict, *, size: int = 200,
     result = as_result(result)
     exposure_ev = check_exposure_ev(exposure_ev)
     fig = Figure(figsize=(13.5, 10.0), layout="constrained")
-    _draw_spheres(fig, table, result, size, exposure_ev=exposure_ev)
+    _, checkered = _draw_spheres(fig, table, result, size, exposure_ev=exposure_ev)
     # its second line in fewer words: with " at 0 EV" it ran past both edges of the figure
     fig.suptitle(f"{_title(table, result)}{_exposure_words(exposure_ev)}\none exposure for "
                  "table and fit (white diffuse facing the light: mid-grey"
-                 f"{' at 0 EV' if exposure_ev else ''}); camera on the normal; checkered: "
-                 f"unmeasured bin{_few_samples(table, result, 'the spheres')}", fontsize=12)
+                 f"{' at 0 EV' if exposure_ev else ''}); camera on the normal"
+                 f"{_CHECKERED if checkered else ''}"
+                 f"{_few_samples(table, result, 'the spheres')}", fontsize=12)
     return png_bytes(fig)
 
 
@@ -502,9 +513,17 @@ def _checker(size: int, cell: int = 4) -> np.ndarray:
     return np.where(((i + j) % 2 == 0)[..., None], light, light * 0.8)
 
 
+#: What the spheres' caption says of their checkered pixels, where any are drawn (every
+#: caption said it, over tables that have none).
+_CHECKERED = "; checkered: unmeasured bin"
+
+
 def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SPHERE_LIGHTS,
                   exposure_ev: float = 0.0, label_size: float = 10):
+    """The sphere panels; returns their axes and whether any pixel is checkered (its
+    bin unmeasured)."""
     axes = np.atleast_2d(fig.subplots(len(lights), 4))
+    checkered = False
     background = np.array(to_rgb(SPHERE_BACKGROUND))
     no_data = _checker(size)
     ratio_img = colour_img = None
@@ -514,6 +533,7 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         images = [_composite(measured, coverage, background, exposure_ev),
                   _composite(fitted, coverage, background, exposure_ev)]
         images[0][unmeasured] = no_data[unmeasured]
+        checkered = checkered or bool(unmeasured.any())
         on = (coverage > 0.5) & ~unmeasured
         ratio, colour = ratio_images(measured, fitted, on, verdict_exposure(table, light))
         for col, img in enumerate(images):
@@ -542,7 +562,7 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
     axes[-1, 3].set_xlabel("grey: right hue; tinted: the fit has too much\nof that colour "
                            f"(full at CIEDE2000 {TINT_FULL_DE:g}); black: unlit, or\ntoo dark "
                            "to judge at the verdict's exposure", fontsize=9)
-    return axes
+    return axes, checkered
 
 
 # -- polar --------------------------------------------------------------------------
@@ -649,9 +669,10 @@ def report(table: MerlTable, result: FitResult | dict, *,
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[head_in, 9.0, 3.6, 4.2])
     _draw_summary(head, result, params, metrics)
     # smaller row labels: three lines of 10 pt ran into the next row's at this size
-    _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev, label_size=8.5)
+    _, checkered = _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev,
+                                 label_size=8.5)
     sph.suptitle(f"sphere renders, one exposure for table and fit"
-                 f"{_exposure_words(exposure_ev)}; checkered: unmeasured bin"
+                 f"{_exposure_words(exposure_ev)}{_CHECKERED if checkered else ''}"
                  f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
     sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
