@@ -45,8 +45,9 @@ except ModuleNotFoundError:
 DEFAULT_URL = "http://127.0.0.1:8000"
 
 
-class ClientError(Exception):
-    """Base of what :class:`Client` raises (besides ``TimeoutError``)."""
+class ClientError(BrdffitError):
+    """Base of what :class:`Client` raises (besides ``TimeoutError``): a
+    :class:`brdffit.errors.BrdffitError`, as the library's own errors are."""
 
 
 class ApiError(ClientError):
@@ -74,6 +75,12 @@ class InvalidSetting(ClientError, ValueError):
 class Unreachable(ClientError):
     """No brdffit server answered at the client's URL (refused, unknown host, a URL
     that is no http(s) one): the request never reached the service."""
+
+
+class NoAnswer(ClientError):
+    """The request was sent, and the connection ended before an answer (the server
+    restarted, a proxy dropped it): it may have been carried out. A fit started so may
+    be queued: look for it (``fits()``) before starting it again."""
 
 
 class FitFailed(ClientError):
@@ -222,6 +229,9 @@ class Client:
                                  "BRDFFIT_API_TOKEN, as it was set)")
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         _check_timeout(timeout)
+        if not isinstance(base_url, str):
+            raise InvalidSetting(f"the server's URL is text, as {DEFAULT_URL}; got "
+                                 f"{type(base_url).__name__}")
         try:
             self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers,
                                       timeout=timeout, transport=transport)
@@ -250,10 +260,24 @@ class Client:
         try:
             response = self._http.request(method, url, **kw)
         except httpx.TimeoutException as e:
+            sent = "" if isinstance(e, httpx.ConnectTimeout | httpx.PoolTimeout) else (
+                "; the request may have been carried out"
+                + ("; look for the fit (Client.fits()) before starting it again"
+                   if method == "POST" and url == "/v1/fits" else ""))
             raise TimeoutError(f"{method} {base}{url}: no answer within the client's "
-                               f"timeout ({type(e).__name__})") from None
+                               f"timeout ({type(e).__name__}){sent}") from None
         except httpx.UnsupportedProtocol:
             raise Unreachable(f"{base}: not an http:// or https:// URL") from None
+        except (httpx.RemoteProtocolError, httpx.ReadError, httpx.WriteError) as e:
+            # sent, or partly: "never reached the service" made a user start a queued
+            # fit again, and it ran twice
+            raise NoAnswer(f"{method} {base}{url}: the connection ended before an answer "
+                           f"({' '.join(str(e).split()) or type(e).__name__}); the request "
+                           "may have been carried out"
+                           + ("; look for the fit (Client.fits()) before starting it again"
+                              if method == "POST" and url == "/v1/fits" else "")) from None
+        except RuntimeError as e:  # httpx's, on a closed client
+            raise ClientError(f"{method} {base}{url}: {e}") from None
         except httpx.TransportError as e:
             raise Unreachable(f"cannot reach the brdffit server at {base} "
                               f"({' '.join(str(e).split()) or type(e).__name__})") from None
@@ -355,12 +379,23 @@ class Client:
 
         Raises ``TimeoutError`` after ``timeout`` seconds (None: no limit); ``poll``:
         the longest pause between two polls, in seconds (the first ones are quicker).
+        A server that restarts or is briefly unavailable meanwhile (refused, no answer,
+        503) is asked again until the deadline: its jobs survive a restart.
         """
         _check_wait(timeout, poll)
         deadline = math.inf if timeout is None else time.monotonic() + timeout
         delay = min(poll, 0.1)
         while True:
-            current = self.job(job)
+            try:
+                current = self.job(job)
+            except (Unreachable, NoAnswer, TimeoutError, ApiError) as e:
+                if isinstance(e, ApiError) and e.status_code not in (502, 503, 504):
+                    raise
+                if time.monotonic() >= deadline:
+                    raise TimeoutError(f"fit job {_job_id(job)}: the server did not answer "
+                                       f"before the wait's {timeout:g} s were up ({e})") from None
+                time.sleep(min(max(poll, 0.5), max(deadline - time.monotonic(), 0.0)))
+                continue
             if current.finished:
                 return current
             left = deadline - time.monotonic()
@@ -368,7 +403,7 @@ class Client:
                 raise TimeoutError(f"fit job {current.id} still {current.status} "
                                    f"after {timeout:g} s")
             time.sleep(min(delay, left))
-            delay = min(delay * 1.5, max(poll, 2.0))  # quick at first, then gentle
+            delay = min(delay * 1.5, poll)  # quick at first, then every poll seconds
 
     def result(self, job: JobRef, model: str | None = None) -> FitResult:
         """The fit of a finished job: the best one, or ``model``'s.
@@ -388,7 +423,8 @@ class Client:
         for r in current.results:
             if r.model == model:
                 return r
-        raise ClientError(f"fit job {current.id} has no {model!r} fit; it has {current.models}")
+        raise ClientError(f"fit job {current.id} has no {model!r} fit; it has "
+                          f"{[r.model for r in current.results]}")
 
     # -- job control --------------------------------------------------------------------
 

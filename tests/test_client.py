@@ -144,6 +144,66 @@ def test_wait_times_out_and_result_wants_a_finished_job(client, files):
     assert client.wait(job, timeout=240).status == "done"
 
 
+def test_wait_outlasts_a_server_briefly_gone_and_polls_as_it_says(client, files,
+                                                                  monkeypatch):
+    """wait() gave up at the first refused connection while the server restarted (its
+    jobs survive a restart); its pauses grew to 2 s whatever ``poll`` said."""
+    import time
+
+    from brdffit.client import NoAnswer, Unreachable
+
+    table_id = client.upload(files["lambert"])
+    job = client.fit(table_id, "lambert", seed=5, **FAST)
+    real, calls, pauses = client.job, [], []
+    sleep = time.sleep
+
+    def flaky(ref):
+        calls.append(ref)
+        if len(calls) == 1:
+            raise Unreachable("cannot reach the brdffit server (a restart)")
+        if len(calls) == 2:
+            raise NoAnswer("the connection ended before an answer")
+        if len(calls) == 3:
+            raise ApiError(503, "storage unavailable", "GET", "/v1/fits/x")
+        return real(ref)
+
+    monkeypatch.setattr(client, "job", flaky)
+    monkeypatch.setattr(time, "sleep", lambda s: (pauses.append(s), sleep(s)))
+    assert client.wait(job, timeout=240, poll=0.3).status == "done"
+    assert len(calls) >= 4 and max(pauses[3:] or [0.3]) <= 0.3 + 1e-9
+    # any other error is the caller's at once
+    monkeypatch.setattr(client, "job", lambda ref: (_ for _ in ()).throw(
+        ApiError(404, "no such fit job", "GET", "/v1/fits/x")))
+    with pytest.raises(ApiError, match="404"):
+        client.wait(job, timeout=240)
+
+
+def test_a_request_sent_without_an_answer_says_it_may_have_been_carried_out():
+    """A connection dropped after POST /v1/fits was "cannot reach the server ... the
+    request never reached the service": a user started the fit again, and it ran twice."""
+    from brdffit.client import InvalidSetting, NoAnswer
+
+    def dropped(request):
+        raise httpx.RemoteProtocolError("Server disconnected without sending a response.",
+                                        request=request)
+
+    with Client("http://brdffit.test", token="", transport=httpx.MockTransport(dropped)) as c:
+        with pytest.raises(NoAnswer, match=r"POST http://brdffit.test/v1/fits: the connection "
+                                           r"ended before an answer .*may have been carried "
+                                           r"out; look for the fit \(Client.fits\(\)\)"):
+            c._request("POST", "/v1/fits", json={})
+    assert issubclass(NoAnswer, ClientError)
+    from brdffit.errors import BrdffitError
+
+    assert issubclass(ClientError, BrdffitError)  # caught as the library's own errors
+    with pytest.raises(InvalidSetting, match="the server's URL is text"):
+        Client(None)
+    c = Client("http://brdffit.test", token="", transport=httpx.MockTransport(dropped))
+    c.close()
+    with pytest.raises(ClientError, match="closed"):
+        c.health()
+
+
 def test_list_cancel_and_delete(client, files):
     table_id = client.upload(files["lambert"])
     # Queued behind nothing but cancelled at once, or running and stopped: either
