@@ -158,7 +158,8 @@ def test_a_glossy_table_far_darker_than_any_material_is_said_by_its_mean():
     dark = merl.MerlTable.from_values(np.asarray(table.rgb) / 1500, table.mask)
     assert np.nanmax(np.where(dark.mask, dark.rgb, np.nan)) > SUSPECT_DARK  # the old test's
     (note,) = [n for n in fit(dark, "ggx").notes if "in 1/sr?" in n]
-    assert note.startswith("the table's values average ") and "below the darkest of the " \
+    assert note.startswith("the table's values (its brightest channel, over its measured "
+                           "bins by solid angle) average ") and "below the darkest of the " \
         "100 MERL materials (black-fabric: 0.0067 1/sr)" in note, note
     assert not any("in 1/sr?" in n for n in fit(table, "ggx").notes)
     assert mean_level(table) == pytest.approx(1500 * mean_level(dark))

@@ -216,13 +216,21 @@ DARK_SCALES = ("a MERL table scaled by its 1/1500 channel factors twice is ~1500
 def _too_dark(brightest: float, what: str) -> tuple[list[str], list[dict]]:
     """A note and a next step where ``what``'s brightest used value (1/sr) is below
     :data:`SUSPECT_DARK`: values in another unit, as :func:`_too_bright`'s."""
-    if not (np.isfinite(brightest) and 0 < brightest < SUSPECT_DARK):
+    return _darker_than_merl(
+        brightest, SUSPECT_DARK, f"the {what}'s brightest value is",
+        f"the lowest of the 100 MERL materials' brightest values (white-fabric2: "
+        f"{MERL_DARKEST}", MERL_DARKEST, what)
+
+
+def _darker_than_merl(value: float, suspect: float, measure: str, merl_words: str,
+                      darkest: float, what: str) -> tuple[list[str], list[dict]]:
+    """The unit question where ``value`` (1/sr, what ``measure`` names) is below
+    ``suspect``, saying how far below the MERL materials' ``darkest`` it is."""
+    if not (np.isfinite(value) and 0 < value < suspect):
         return [], []
     return _unit_question(
-        f"the {what}'s brightest value is {brightest:.3g} 1/sr, "
-        f"{MERL_DARKEST / brightest:,.0f}x below the lowest of the 100 MERL materials' "
-        f"brightest values (white-fabric2: {MERL_DARKEST} 1/sr): are its values in 1/sr? "
-        f"{DARK_SCALES}", what)
+        f"{measure} {value:.3g} 1/sr, {darkest / value:,.0f}x below {merl_words} 1/sr): "
+        f"are its values in 1/sr? {DARK_SCALES}", what)
 
 
 #: The mean value (1/sr, :func:`mean_level`) below which a table's values are read as
@@ -252,13 +260,11 @@ def mean_level(table: merl.MerlTable) -> float:
 
 def _too_dark_on_average(mean: float) -> tuple[list[str], list[dict]]:
     """As :func:`_too_dark`, from the table's :func:`mean_level`."""
-    if not (np.isfinite(mean) and 0 < mean < SUSPECT_DARK_MEAN):
-        return [], []
-    return _unit_question(
-        f"the table's values average {mean:.3g} 1/sr (its brightest channel over its "
-        f"measured bins, by solid angle), {MERL_DARKEST_MEAN / mean:,.0f}x below the "
-        f"darkest of the 100 MERL materials (black-fabric: {MERL_DARKEST_MEAN} 1/sr): are "
-        f"its values in 1/sr? {DARK_SCALES}", "table")
+    return _darker_than_merl(
+        mean, SUSPECT_DARK_MEAN, "the table's values (its brightest channel, over its "
+        "measured bins by solid angle) average",
+        f"the darkest of the 100 MERL materials (black-fabric: {MERL_DARKEST_MEAN}",
+        MERL_DARKEST_MEAN, "table")
 
 
 def _brightest(values: np.ndarray) -> float:
