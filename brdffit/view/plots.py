@@ -118,7 +118,8 @@ def _title(table: MerlTable, result: FitResult) -> str:
     # (a review: "no sphere figure states PSNR or verdict")
     psnr = result.error.get("psnr_db")
     verdict = (result.quality or {}).get("verdict")
-    look = ("" if psnr is None else f", sphere PSNR {psnr:.1f} dB") + (
+    judged = "held-out PSNR" if _on_samples(result) else "sphere PSNR"
+    look = ("" if psnr is None else f", {judged} {psnr:.1f} dB") + (
         f", looks {verdict}" if verdict else "")
     return (f"{name}: {result.model} fit{loss}, log_rmse "
             + ("n/a" if e is None else f"{e:.3g}") + look)

@@ -50,10 +50,10 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     theta_h, theta_d, _ = dirs_to_half_diff(measured.wi[shown], measured.wo[shown])
     drawable = (meas > 0) & np.isfinite(fit) & (fit > 0)
 
-    fig = Figure(figsize=(12.5, 5.6))
+    fig = Figure(figsize=(17.5, 5.6), layout="constrained")
     fig.suptitle(_title(measured, r, len(shown), int(np.count_nonzero(~drawable.all(1)))),
                  fontsize=10)
-    ax, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.35]})
+    ax, right, hue = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1.35, 1.1]})
     # few samples drawn large, many small and faint: each still seen, the crowd's density too
     size, alpha = (14, 0.6) if len(shown) <= 2000 else (5, 0.3)
     for c, (label, colour) in enumerate(CHANNELS):
@@ -78,7 +78,7 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     ax.grid(True, which="major", alpha=0.3)
 
     lum_meas, lum_fit = meas @ LUMINANCE, fit @ LUMINANCE
-    ok = (lum_meas > 0) & np.isfinite(lum_fit) & (lum_fit > 0)
+    ok = ok_full(lum_meas, lum_fit)
     stops = np.clip(np.log2(lum_fit[ok] / lum_meas[ok]), -RATIO_STOPS, RATIO_STOPS)
     dots = right.scatter(np.degrees(theta_h[ok]), stops, c=np.degrees(theta_d[ok]), s=size,
                          cmap="viridis", vmin=0, vmax=90, lw=0, alpha=max(alpha, 0.5))
@@ -91,7 +91,27 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     right.set_ylabel("log2(fit / measured), luminance (+1: fit 2x brighter)")
     right.set_title(f"where the fit is off (clipped at {RATIO_STOPS:g} stops)", fontsize=9)
     fig.colorbar(dots, ax=right, label="theta_d (degrees)")
+    # each channel against the luminance: a colour error (a verdict's CIEDE2000) shows
+    # here, where the luminance panel beside it read "within 0.6 stops" (a review)
+    for c, (label, colour) in enumerate(CHANNELS):
+        both_ok = drawable[:, c] & ok_full(lum_meas, lum_fit)
+        rel = (np.log2(fit[both_ok, c] / meas[both_ok, c])
+               - np.log2(lum_fit[both_ok] / lum_meas[both_ok]))
+        hue.scatter(np.degrees(theta_h[both_ok]), np.clip(rel, -RATIO_STOPS, RATIO_STOPS),
+                    s=size, color=colour, lw=0, alpha=alpha, label=label)
+    hue.axhline(0.0, color="black", lw=1)
+    hue.set_ylim(-RATIO_STOPS - 0.2, RATIO_STOPS + 0.2)
+    sqrt_degree_axis(hue, "x")
+    hue.set_xlabel("theta_h (degrees, sqrt scale)")
+    hue.set_ylabel("channel's log2(fit / measured) less the luminance's")
+    hue.set_title("colour: each channel's error beyond the brightness's", fontsize=9)
+    hue.legend(loc="upper right", fontsize=8, markerscale=2)
     return png_bytes(fig)
+
+
+def ok_full(lum_meas: np.ndarray, lum_fit: np.ndarray) -> np.ndarray:
+    """Samples whose measured and fitted luminance are both drawable (> 0, finite)."""
+    return (lum_meas > 0) & np.isfinite(lum_fit) & (lum_fit > 0)
 
 
 def _title(measured: Measurements, r: FitResult, n_shown: int, not_drawn: int) -> str:
@@ -106,8 +126,13 @@ def _title(measured: Measurements, r: FitResult, n_shown: int, not_drawn: int) -
              else f"{n_shown:,} of {measured.n:,} samples (a random subset)")
     lost = (f"; {not_drawn:,} with a value <= 0 or below the horizon are not on the log axes"
             if not_drawn else "")
+    psnr = e.get("psnr_db")
+    verdict = (r.quality or {}).get("verdict")
+    look = "; ".join(x for x in (
+        None if psnr is None else f"held-out PSNR {psnr:.1f} dB",
+        None if verdict is None else f"looks {verdict}") if x)
     line = (f"{name}: {r.model} fit at each of its samples' own directions; {shown}"
-            f"{'; ' + figures if figures else ''}{lost}")
+            f"{'; ' + figures if figures else ''}{'; ' + look if look else ''}{lost}")
     return "\n".join(textwrap.wrap(line, 120))
 
 
