@@ -43,7 +43,7 @@ except ModuleNotFoundError:
 
 from brdffit.fitting.colour import DISPLAY_Y, ciede2000_of, rgb_to_lab
 from brdffit.fitting.problem import sphere_reference
-from brdffit.fitting.quality import ALIKE_DB, judged_brightness, judged_colour
+from brdffit.fitting.quality import ALIKE_DB, GOOD, POOR, judged_brightness, judged_colour
 from brdffit.fitting.result import FitResult, error_measures_nothing
 from brdffit.fitting.sphere import (
     LIGHTS,
@@ -948,12 +948,16 @@ def ranking(selection: dict) -> bytes:
         right = 1.3 * (max(worst, min(limit, 3 * worst)) if worst > 0 else limit) or 1.0
         ax_err.set_xlim(0, right)
         ax_err.axvline(best, color="#333333", linewidth=1)
+        lines = [Line2D([], [], color="#333333", linewidth=1, label="best")]
         words = f"best + tolerance {selection['tolerance']:g} (in quadrature)"
         if by_look:
             pass  # the render rule chose by the PSNR: its window is drawn there
         elif limit <= right:
+            # named in the legend: written beside the line it ran past the axes, or over
+            # the best line's own label
             ax_err.axvline(limit, color="#333333", linewidth=1, linestyle="--")
-            ax_err.text(limit, -0.6, f" {words}", fontsize=7, va="center", ha="left")
+            lines.append(Line2D([], [], color="#333333", linewidth=1, linestyle="--",
+                                label=words))
         else:
             ax_err.text(1.0, -0.6, f"{words}: {limit:.3g}, beyond the axis \u2192 ",
                         fontsize=7, va="center", ha="right",
@@ -961,12 +965,24 @@ def ranking(selection: dict) -> bytes:
         if selection.get("budget") is not None:
             ax_err.axvline(selection["budget"], color="#1f77b4", linewidth=1, linestyle=":")
         top = max((ranked_psnr(r, rule) or 0.0) for r in fitted)
-        ax_psnr.set_xlim(0, max(1.35 * top, 1.0))
+        psnrs = [p for r in fitted if (p := ranked_psnr(r, rule)) is not None]
+        # from a little below the lowest (and the poor line), not 0: 25 against 29 dB
+        # looked alike on an axis from 0; the verdict's lines drawn
+        low = max(0.0, 5.0 * np.floor((min([*psnrs, POOR[0]]) - 3.0) / 5.0))
+        ax_psnr.set_xlim(low, max(top + 0.35 * (top - low), low + 1.0))
+        for level, said in ((POOR[0], "poor below"), (GOOD[0], "good from")):
+            ax_psnr.axvline(level, color="#888888", linewidth=0.8, linestyle=":")
+            ax_psnr.text(level, -0.72, f" {said} {level:g} dB", fontsize=7, va="center",
+                         color="#444444")
         if by_look and top > 0:
             ax_psnr.axvline(top, color="#333333", linewidth=1)
             ax_psnr.axvline(top - ALIKE_DB, color="#333333", linewidth=1, linestyle="--")
-            ax_psnr.text(top, -0.6, f" best − {ALIKE_DB:g} dB", fontsize=7, va="center",
-                         ha="right")
+            # in a legend: written at the top it ran over the verdict lines' labels
+            ax_psnr.legend(handles=[
+                Line2D([], [], color="#333333", linewidth=1, label="best"),
+                Line2D([], [], color="#333333", linewidth=1, linestyle="--",
+                       label=f"best − {ALIKE_DB:g} dB")], loc="lower left", fontsize=7,
+                framealpha=0.9)
     ax_err.set_yticks(y, [f"{r['model']} ({r['n_params']})" for r in rows])
     ax_err.set_ylim(n - 0.5, -1.0)
     ax_err.set_xlabel("log_rmse (lower is better)")
@@ -978,10 +994,10 @@ def ranking(selection: dict) -> bytes:
     ax_psnr.set_title("how each looks: PSNR, and the verdict\n(which also judges brightness "
                       "and colour)", fontsize=9)
     shown = dict.fromkeys(r["status"] for r in fitted if r["status"] in RANKING_COLOURS)
-    if shown:
-        ax_err.legend(handles=[Patch(facecolor=RANKING_COLOURS[s], edgecolor="#333333",
-                                     linewidth=0.5, label=s) for s in shown],
-                      loc="lower right", fontsize=7, framealpha=0.9)
+    handles = [Patch(facecolor=RANKING_COLOURS[s], edgecolor="#333333", linewidth=0.5,
+                     label=s) for s in shown] + (lines if fitted else [])
+    if handles:
+        ax_err.legend(handles=handles, loc="lower right", fontsize=7, framealpha=0.9)
     table = source_name(str(selection.get("table") or "table"))
     fig.suptitle(f"{table}: auto chose {selection['chosen']}", fontsize=12)
     reason = selection["reason"].replace("$", r"\$")
