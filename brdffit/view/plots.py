@@ -514,6 +514,16 @@ def _checker(size: int, cell: int = 4) -> np.ndarray:
     return np.where(((i + j) % 2 == 0)[..., None], light, light * 0.8)
 
 
+def _judged_colour_shift(result: FitResult, row: int) -> float | None:
+    """The verdict's colour shift (CIEDE2000 of the mean displayed colours) of the
+    sphere row ``row`` (0: the key light, 1: the grazing one; None for the others, and
+    where the fit has no verdict)."""
+    q = result.quality or {}
+    figures = q if row == 0 else q.get("grazing") if row == 1 else None
+    value = (figures or {}).get("displayed_colour_shift")
+    return float(value) if isinstance(value, int | float) and np.isfinite(value) else None
+
+
 #: What the spheres' caption says of their checkered pixels, where any are drawn (every
 #: caption said it, over tables that have none).
 _CHECKERED = "; checkered: unmeasured bin"
@@ -548,6 +558,15 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         colour_img = np.where(np.isnan(colour), base, colour)
         axes[row, 3].imshow(colour_img, interpolation="nearest")
         axes[row, 0].set_ylabel(label + verdict_ev.get(row, ""), fontsize=label_size)
+        mean_de = _judged_colour_shift(result, row)
+        if mean_de is not None:
+            # each pixel's tint saturates at TINT_FULL_DE, the verdict judges the mean
+            # colour: a teal sphere read 0.8, and the two looked at odds (a review)
+            axes[row, 3].text(0.5, 0.02, f"verdict's mean: CIEDE2000 {mean_de:.1f}",
+                              transform=axes[row, 3].transAxes, ha="center",
+                              va="bottom", fontsize=label_size - 2, color="white",
+                              bbox={"facecolor": "black", "alpha": 0.55, "pad": 1.5,
+                                    "edgecolor": "none"})
         for ax in axes[row]:  # the unlit part is black: outline the sphere
             ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False,
                                 lw=0.8, ec="0.65"))
