@@ -1029,12 +1029,18 @@ def test_a_long_one_line_file_is_refused_without_guessing_its_delimiter_from_all
                         lambda self, text, *a, **k: sniffed.append(len(text))
                         or sniff(self, text, *a, **k))
     p = tmp_path / "records.txt"
-    p.write_text("[" + ", ".join(f'{{"theta_i": {k}, "phi_i": {k}, "value": {k}}}'
-                                 for k in range(12000)) + "]")
+    p.write_text(", ".join(f"theta_i {k}, phi_i {k}, value {k}" for k in range(12000)))
     with pytest.raises(MeasurementsError, match="the header names 36,000 columns") as e:
         read_measured(p)
     assert sniffed == [text_samples.SNIFF_CHARS]
     assert len(str(e.value)) < 600
+    # the JSON export itself is said to be JSON before any delimiter is guessed
+    sniffed.clear()
+    p.write_text("[" + ", ".join(f'{{"theta_i": {k}, "phi_i": {k}, "value": {k}}}'
+                                 for k in range(12000)) + "]")
+    with pytest.raises(MeasurementsError, match="a JSON document, not a measured table"):
+        read_measured(p)
+    assert sniffed == []
 
 
 @pytest.mark.parametrize("name, head", [
@@ -1096,6 +1102,10 @@ def test_text_as_excel_and_numpy_write_it(tmp_path):
     (tmp_path / "s.csv.gz").write_bytes(gzip.compress((tmp_path / "s.csv").read_bytes()))
     with pytest.raises(MerlFormatError, match=r"a gzip archive.*\(decompress it first\)"):
         read_measured(tmp_path / "s.csv.gz")
+    # a fit's JSON given as the table (brdffit export --measured fit.json)
+    (tmp_path / "fit.json").write_text('{"schema": "brdffit.fit/3", "params": [null]}')
+    with pytest.raises(MeasurementsError, match="a JSON document, not a measured table"):
+        read_measured(tmp_path / "fit.json")
     # a zip archive that is no workbook (test_an_excel_sheet_... reads one named .csv)
     (tmp_path / "book.csv").write_bytes(b"PK\x03\x04" + bytes(60))
     with pytest.raises(MeasurementsError, match="a zip archive, not a text sample list .by its "

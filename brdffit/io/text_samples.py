@@ -790,6 +790,12 @@ def read_text_samples(path: str | os.PathLike) -> Measurements:
     """A text sample list of either layout: ASTM where it has a VARS or NUM_POINTS
     line, else CSV (``.txt`` is both)."""
     text = _text(Path(path))  # decoded once, for the choice and the reader
+    if text.lstrip("\ufeff \t\r\n")[:1] in ("{", "["):
+        # a fit's JSON given as the measured table (`export --measured fit.json`) read
+        # as a CSV: "column 'null]' appears twice in the header"
+        raise MeasurementsError(str(path), "a JSON document, not a measured table or a "
+                                           "sample list (a fit's result? give the file it "
+                                           "was fitted to)")
     keys = {re.split(r"\s+", line.strip(), maxsplit=1)[0].upper()
             for line in _lines(text) if line.strip()}
     return (_astm_samples if {"VARS", "NUM_POINTS"} & keys else _csv_samples)(text, str(path))
