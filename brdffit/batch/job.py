@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 from brdffit import jsonout
 from brdffit.batch.cluster import DaskRunner, connect, require_dask
 from brdffit.batch.progress import ProgressLine
-from brdffit.batch.store import FORMAT, BatchStore
+from brdffit.batch.store import FORMAT, BatchStore, is_hdf5
 from brdffit.batch.tasks import (
     FitRecord,
     TableReadRecord,
@@ -154,13 +154,17 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = (),
             raise BatchInputError(f"{e.filename}: cannot be read ({e.strerror}){more}: its "
                                   "files would be left out of the batch; make it readable, "
                                   "or name the folders to fit")
-        files = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
-            os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True))
-        # glob leaves out hidden files and folders (an editor's, a sync tool's): said
-        # where they are all the folder holds ("holds no measured file" was untrue)
-        hidden.extend(f for suffix in DIR_SUFFIXES for f in glob.glob(
+        # one walk; hidden files and folders (an editor's, a sync tool's) are left out,
+        # as a shell's * leaves them, and said where they are all the folder holds
+        # ("holds no measured file" was untrue)
+        every = sorted(f for suffix in DIR_SUFFIXES for f in glob.glob(
             os.path.join(glob.escape(d), "**", "*" + suffix), recursive=True,
-            include_hidden=True) if f not in files)
+            include_hidden=True))
+        files = []
+        for f in every:
+            is_hidden = any(part.startswith(".") for part in
+                            os.path.relpath(f, d).split(os.sep))
+            (hidden if is_hidden else files).append(f)
         n = 0
         for f in files:
             if os.path.abspath(f) in skip:
@@ -218,12 +222,9 @@ def find_tables(inputs: Iterable[str], exclude: Iterable[str] = (),
 
 def is_batch_results(path: str) -> bool:
     """Whether ``path`` is an HDF5 file that a batch wrote (its ``format`` attribute)."""
-    if not path.endswith((".h5", ".hdf5")):
+    if not path.endswith((".h5", ".hdf5")) or not is_hdf5(path):
         return False
     try:
-        with open(path, "rb") as f:
-            if f.read(8) != b"\x89HDF\r\n\x1a\n":
-                return False
         import h5py
 
         with h5py.File(path, "r") as f:

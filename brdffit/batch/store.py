@@ -61,7 +61,7 @@ import numpy as np
 from brdffit import __version__, jsonout
 from brdffit.batch.tasks import FitOptions, FitRecord, TableReadRecord, now
 from brdffit.errors import BrdffitError
-from brdffit.io.named_arrays import hdf5_unreadable
+from brdffit.io.named_arrays import HDF5_SIGNATURE, hdf5_unreadable
 
 FORMAT = "brdffit-batch"
 FORMAT_VERSION = 1
@@ -190,7 +190,7 @@ class BatchStore:
         if self.path.endswith(".journal"):
             raise BatchFileError(f"{self.path}: a .journal name is another results file's "
                                  "journal; name the results file .h5")
-        if _is_hdf5(self.journal_path):
+        if is_hdf5(self.journal_path):
             raise BatchFileError(
                 f"{self.path}: {self.journal_path} is an HDF5 file, not this file's journal "
                 "(a results file written under that name?): move it away or rename it")
@@ -765,11 +765,11 @@ def _write_failed(e: BaseException) -> bool:
     return isinstance(e, OSError) and "write failed" in str(e)
 
 
-def _is_hdf5(path: str) -> bool:
+def is_hdf5(path: str) -> bool:
     """Whether ``path`` is a file that starts with HDF5's signature."""
     try:
         with open(path, "rb") as f:
-            return f.read(8) == b"\x89HDF\r\n\x1a\n"
+            return f.read(len(HDF5_SIGNATURE)) == HDF5_SIGNATURE
     except OSError:
         return False
 
