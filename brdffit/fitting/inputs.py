@@ -251,11 +251,15 @@ def mean_level(table: merl.MerlTable) -> float:
     from brdffit.io.grid import bin_grid
 
     measured = table.mask.ravel()
-    if not measured.any():
+    w = bin_grid().weight.ravel()
+    w_measured = float(np.sum(w, where=measured))
+    if not w_measured > 0:
         return float("nan")
-    w = bin_grid().weight.ravel()[measured]
-    v = table.rgb.reshape(3, -1)[:, measured].max(axis=0)
-    return float(v @ w / w.sum()) if w.sum() > 0 else float("nan")
+    # over the whole grid, the unmeasured bins zeroed: a boolean selection copied the
+    # table and took ~13x as long (75 against 6 ms, a third of a warm ggx fit)
+    rgb = table.rgb.reshape(3, -1)
+    brightest = np.where(measured, np.maximum(np.maximum(rgb[0], rgb[1]), rgb[2]), 0.0)
+    return float(np.dot(brightest, w) / w_measured)
 
 
 def _too_dark_on_average(mean: float) -> tuple[list[str], list[dict]]:
@@ -269,6 +273,10 @@ def _too_dark_on_average(mean: float) -> tuple[list[str], list[dict]]:
 
 def _brightest(values: np.ndarray) -> float:
     """The largest finite value of ``values`` (NaN where there is none)."""
+    if values.size:
+        top = values.max()
+        if np.isfinite(top):  # a table's values always are: no selection to copy
+            return float(top)
     v = values[np.isfinite(values)]
     return float(v.max()) if v.size else float("nan")
 
