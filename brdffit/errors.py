@@ -25,6 +25,11 @@ class FitInputError(BrdffitError, ValueError):
     """Fit options or a table that a fit cannot work with (explained in the message)."""
 
 
+class ResultFormatError(BrdffitError, ValueError):
+    """A fit result (a ``fit.json``, a results file's fit) that is not one: another
+    schema version, unknown or missing keys, values of the wrong type."""
+
+
 class ExportError(BrdffitError, ValueError):
     """An export that cannot be made: unknown target, or a fit with nothing to export
     (``brdffit.export``; here, below it, so that its conversions raise it too)."""

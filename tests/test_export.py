@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import re
 import xml.etree.ElementTree as ET
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from brdffit import models
+from brdffit.errors import BrdffitError
 from brdffit.export import SCHEMA, TARGETS, Export, ExportError, export, gltf
 from brdffit.export.conversion import fit_as_table
 from brdffit.fitting.problem import sphere_reference, table_error
@@ -417,7 +419,11 @@ def test_a_fit_json_of_the_wrong_types_is_refused_by_its_key():
             ("notes", [1], "notes is not a list of text")):
         with pytest.raises(ValueError, match=re.escape(says)):
             FitResult.from_dict({**good, key: value})
+    with pytest.raises(BrdffitError, match="unknown result keys"):  # the shells' errors
+        FitResult.from_dict({**good, "colour": 1})
+    # strict JSON's null for a metric not measured reads back as the NaN the fit held
     unmeasured = FitResult.from_dict({**good, "error": {"log_rmse": None}})
+    assert math.isnan(unmeasured.log_rmse) and not unmeasured.log_rmse < 1
     e = export(unmeasured, "mitsuba", target_model="principled")
     assert any("(the fit's own log_rmse to its table: not measured)" in w
                for w in e.warnings), e.warnings

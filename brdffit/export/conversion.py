@@ -205,7 +205,8 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
                           warnings + bound_warnings(result.model, plain, fitted=True))
     target_model = target_models[0]
     refit = fit(fit_as_table(result), target_model, samples=samples, seed=seed)
-    own = result.error.get("log_rmse")  # null where the fit could not measure it
+    own = result.error.get("log_rmse")  # NaN (null in JSON) where the fit could not
+    own = None if own is None or not np.isfinite(own) else own  # measure it
     warnings.append(
         f"approximated: {target_model} (the renderer's model) fitted to the {result.model} "
         f"fit at every bin above the horizon; log_rmse to the fit "

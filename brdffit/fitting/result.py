@@ -15,6 +15,7 @@ import numbers
 from dataclasses import MISSING, asdict, dataclass, fields
 
 from brdffit import jsonout
+from brdffit.errors import ResultFormatError
 
 #: The status of a finished fit, as ``FitResult.result`` names it. Only the first
 #: means the optimality test holds (``brdffit.fitting.solver``).
@@ -126,25 +127,31 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict) -> FitResult:
-        """A result from :meth:`to_dict`'s output (any version of :data:`READS`);
-        refuses another schema version."""
+        """A result from :meth:`to_dict`'s output (any version of :data:`READS`), or
+        from its strict JSON, where a metric that was not measured (NaN) is null: it
+        reads back as NaN, as the fit held it (``r.log_rmse < x`` is then False, not
+        a TypeError). Refuses another schema version, unknown or missing keys and values
+        of the wrong type (:class:`~brdffit.errors.ResultFormatError`, a ValueError)."""
         d = dict(d)
         schema = d.pop("schema", SCHEMA)
         if schema not in READS:
-            raise ValueError(f"result schema {schema!r}; this brdffit reads "
+            raise ResultFormatError(f"result schema {schema!r}; this brdffit reads "
                              f"{', '.join(map(repr, READS[:-1]))} and {READS[-1]!r}")
         if "notes" in d:  # JSON has lists; the result holds a tuple
             d["notes"] = tuple(d["notes"] or ())
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
-            raise ValueError(f"unknown result keys {unknown} for schema {SCHEMA!r}")
+            raise ResultFormatError(f"unknown result keys {unknown} for schema {SCHEMA!r}")
         missing = [f.name for f in fields(cls) if f.name not in d
                    and f.default is MISSING and f.default_factory is MISSING]
         if missing:
-            raise ValueError(f"no {', '.join(missing)} (a fit result has "
+            raise ResultFormatError(f"no {', '.join(missing)} (a fit result has "
                              f"{', '.join(f.name for f in fields(cls))})")
         _check_types(d)
+        for key in ("error", "full_table_error"):  # strict JSON wrote an unmeasured NaN as null
+            if d.get(key) is not None:
+                d[key] = {k: float("nan") if v is None else v for k, v in d[key].items()}
         return cls(**d)
 
     @classmethod
@@ -190,22 +197,22 @@ def _check_types(d: dict) -> None:
             and not (isinstance(v, bool) and bool not in types))
         if not ok:
             want = " or ".join(dict.fromkeys(_WORDS[t] for t in types))
-            raise ValueError(f"{key!r} is {a(v)}, where a fit result has {want}")
+            raise ResultFormatError(f"{key!r} is {a(v)}, where a fit result has {want}")
     for key in ("error", "full_table_error"):
         for name, v in (d.get(key) or {}).items():
             if v is not None and (not isinstance(v, _NUMBER) or isinstance(v, bool)):
-                raise ValueError(f"{key}.{name} is {a(v)}, where a fit result has a "
+                raise ResultFormatError(f"{key}.{name} is {a(v)}, where a fit result has a "
                                  "number or null")
     quality = d.get("quality") or {}
     if not isinstance(quality.get("verdict", ""), (str, type(None))):
-        raise ValueError(f"quality.verdict is {a(quality['verdict'])}, where a fit result "
+        raise ResultFormatError(f"quality.verdict is {a(quality['verdict'])}, where a fit result "
                          "has text")
     steps = quality.get("next")
     if steps is not None and (not isinstance(steps, list) or not all(
             isinstance(step, dict) and isinstance(step.get("try", ""), str) for step in steps)):
-        raise ValueError("quality.next is not a list of steps (objects with 'try' text)")
+        raise ResultFormatError("quality.next is not a list of steps (objects with 'try' text)")
     if not all(isinstance(n, str) for n in d.get("notes", ())):
-        raise ValueError("notes is not a list of text")
+        raise ResultFormatError("notes is not a list of text")
 
 
 #: What each key of the result schema means, in a line (docs/results.md says more).
