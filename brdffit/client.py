@@ -215,6 +215,12 @@ def _check_wait(timeout, poll) -> None:
                                  f"{' (or None: no limit)' if none else ''}, got {value!r}")
 
 
+#: The longest a plot or an export may take to come back (s): the service renders one
+#: in a worker for at most 300 s (its PLOT_LIMIT_S and EXPORT_LIMIT_S), then answers 503;
+#: a client that gave up at its own 120 s read a slow render as no answer at all.
+RENDER_WAIT_S = 330.0
+
+
 class Client:
     """Talk to one brdffit server. ``token``: its ``BRDFFIT_API_TOKEN``, if any
     (default: the ``BRDFFIT_API_TOKEN`` environment variable)."""
@@ -249,6 +255,13 @@ class Client:
         self._http.close()
 
     # -- plumbing ---------------------------------------------------------------------
+
+    def _render_timeout(self) -> httpx.Timeout:
+        """The client's timeout, its read part at least :data:`RENDER_WAIT_S` (a plot or
+        an export renders on the server first)."""
+        t = self._http.timeout
+        read = None if t.read is None else max(t.read, RENDER_WAIT_S)
+        return httpx.Timeout(connect=t.connect, read=read, write=t.write, pool=t.pool)
 
     def _request(self, method: str, url: str, expect: str | None = "application/json",
                  **kw) -> httpx.Response:
@@ -478,7 +491,8 @@ class Client:
         if exposure_ev:
             params["exposure_ev"] = exposure_ev
         return self._request("GET", f"/v1/fits/{_job_id(job)}/plots/{_segment(kind)}.png",
-                             expect="image/png", params=params).content
+                             expect="image/png", params=params,
+                             timeout=self._render_timeout()).content
 
     def export(self, job: JobRef, target: str, model: str | None = None,
                target_model: str | None = None, viewer: str = "spec") -> Export:
@@ -491,7 +505,7 @@ class Client:
                                     ("viewer", None if viewer == "spec" else viewer)) if v}
         params = params or None
         return self._json("GET", f"/v1/fits/{_job_id(job)}/exports/{_segment(target)}",
-                          Export.from_dict, params=params)
+                          Export.from_dict, params=params, timeout=self._render_timeout())
 
 
 def _detail(response: httpx.Response) -> str:

@@ -329,6 +329,35 @@ def test_an_answer_that_is_not_the_services_is_an_api_error():
             Client("http://brdffit.test", token=token)
 
 
+def test_a_plot_or_export_is_waited_for_as_long_as_the_server_renders_it():
+    """The service renders a plot or an export for up to 300 s; the client's 120 s
+    read timeout ended such a request as no answer. Those two wait RENDER_WAIT_S;
+    every other request keeps the client's timeout."""
+    from brdffit.client import RENDER_WAIT_S
+
+    reads = {}
+
+    def handler(request):
+        reads[request.url.path.split("/")[-2]] = request.extensions["timeout"]["read"]
+        if request.url.path.endswith(".png"):
+            return httpx.Response(200, content=b"\x89PNG", headers={"content-type": "image/png"})
+        return httpx.Response(200, json={"status": "ok"})
+
+    job = "0" * 32
+    with Client("http://brdffit.test", token="", timeout=10,
+                transport=httpx.MockTransport(handler)) as c:
+        c.plot(job, "slices")
+        with pytest.raises(ApiError):  # the handler's JSON is no export: asked all the same
+            c.export(job, "gltf")
+        c.health()
+    assert RENDER_WAIT_S > 300
+    assert reads == {"plots": RENDER_WAIT_S, "exports": RENDER_WAIT_S, "": 10}, reads
+    with Client("http://brdffit.test", token="", timeout=None,
+                transport=httpx.MockTransport(handler)) as c:
+        c.plot(job, "slices")
+    assert reads["plots"] is None  # no limit stays none
+
+
 def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
     """``http://[::1`` (a bracket left open) raised httpx.InvalidURL, and a timeout of
     -1 a bare ValueError at the first request: the client's own error, when it is made,
