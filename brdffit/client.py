@@ -238,6 +238,9 @@ class Client:
         if not isinstance(base_url, str):
             raise InvalidSetting(f"the server's URL is text, as {DEFAULT_URL}; got "
                                  f"{type(base_url).__name__}")
+        if base_url.rstrip("/").endswith("/v1"):  # every path is /v1/...: /v1/v1/fits, a 404
+            raise InvalidSetting(f"{base_url!r}: give the server's own URL, without /v1 "
+                                 f"(as {DEFAULT_URL}); the client adds the API's paths")
         try:
             self._http = httpx.Client(base_url=base_url.rstrip("/"), headers=headers,
                                       timeout=timeout, transport=transport)

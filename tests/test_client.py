@@ -375,6 +375,8 @@ def test_a_url_or_timeout_the_client_cannot_use_is_its_own_error_when_made():
                                                  r"\(connect, read, write, pool\) of them, got "):
             Client("http://brdffit.test", token="", timeout=timeout)
     assert issubclass(InvalidSetting, ClientError) and issubclass(InvalidSetting, ValueError)
+    with pytest.raises(InvalidSetting, match="without /v1"):  # it was a bare 404 later
+        Client("http://brdffit.test/v1/", token="")
     Client("http://brdffit.test", token="", timeout=None).close()  # no limit: httpx's own
     # httpx's (connect, read, write, pool), None in a part: no limit on that one
     Client("http://brdffit.test", token="", timeout=(5, None, 5, 2.5)).close()
