@@ -980,6 +980,20 @@ def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
         f.create_dataset("spectral", data=np.stack([flat, red]))
         f.create_dataset("wavelengths", data=lam.astype(float))
     np.testing.assert_allclose(read_measured(h5).rgb, m.rgb, rtol=1e-12)
+    # a wavelengths dataset longest first: each value keeps its wavelength (was refused;
+    # a CSV's columns are sorted by their names already)
+    with h5py.File(h5, "w") as f:
+        for name, v in (("theta_i", [30.0, 30.0]), ("phi_i", [0.0, 0.0]),
+                        ("theta_o", [40.0, 40.0]), ("phi_o", [180.0, 180.0])):
+            f.create_dataset(name, data=v).attrs["units"] = "degrees"
+        f.create_dataset("spectral", data=np.stack([flat, red])[:, ::-1])
+        f.create_dataset("wavelengths", data=lam[::-1].astype(float))
+    b = read_measured(h5)
+    np.testing.assert_allclose(b.rgb, m.rgb, rtol=1e-12)
+    assert b.provenance["spectral"]["wavelength_order"].startswith("not increasing")
+    assert "wavelength_order" not in m.provenance["spectral"]
+    with pytest.raises(MerlFormatError, match="finite and distinct"):
+        spectra.to_rgb(np.ones((1, 3)), [500.0, 400.0, 500.0], "twice.csv")
     short = tmp_path / "short.csv"
     short.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,450nm,550nm,650nm\n"
                      "30,0,40,180,1,1,1\n")

@@ -41,15 +41,24 @@ PROJECTION = {"illuminant": "D65", "observer": "CIE 1931 2 deg",
 
 def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, dict]:
     """``values`` (n, k) at ``wavelengths`` (k,) in nm as linear sRGB (n, 3), and the
-    provenance entry that says how. Raises :class:`MeasurementsError` for wavelengths
-    that are not increasing, finite and spanning :data:`MIN_SPAN`."""
+    provenance entry that says how. Wavelengths in another order (longest first) are
+    sorted, each with its values, and the entry says so. Raises
+    :class:`MeasurementsError` for wavelengths that are not finite and distinct, or
+    not spanning :data:`MIN_SPAN`."""
     lam = np.asarray(wavelengths, float).ravel()
     values = np.asarray(values, float)
     if values.ndim != 2 or values.shape[1] != lam.size:
         raise MeasurementsError(source, f"{lam.size} wavelengths but spectra of shape "
                                         f"{values.shape}")
+    resorted = False
+    if (lam.size >= 2 and np.all(np.isfinite(lam)) and np.any(np.diff(lam) < 0)
+            and np.unique(lam).size == lam.size):
+        # columns written longest wavelength first (some spectrometers' order): each
+        # value keeps its own wavelength, so sorting them changes no measurement
+        order = np.argsort(lam, kind="stable")
+        lam, values, resorted = lam[order], values[:, order], True
     if lam.size < 2 or not np.all(np.isfinite(lam)) or np.any(np.diff(lam) <= 0):
-        raise MeasurementsError(source, "the wavelengths must be finite and increasing, at "
+        raise MeasurementsError(source, "the wavelengths must be finite and distinct, at "
                                         f"least two (got {lam.tolist()[:8]})")
     if lam[0] > MIN_SPAN[0] or lam[-1] < MIN_SPAN[1]:
         unit = (" (micrometres? wavelengths are read in nm: multiply them by 1000)"
@@ -82,6 +91,8 @@ def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, di
     outside = np.any(rgb < 0, axis=1)
     info = {"wavelengths_nm": [float(lam[0]), float(lam[-1]), int(lam.size)], **PROJECTION,
             "outside_srgb": int(outside.sum())}
+    if resorted:
+        info["wavelength_order"] = "not increasing in the file: read sorted"
     return np.maximum(rgb, 0.0), info
 
 
