@@ -1593,6 +1593,14 @@ def test_a_long_layout_is_pivoted_to_the_wide_files_samples(tmp_path):
     for name, rows, said in (
             ("missing.csv", lines[:5] + lines[6:], "the direction pair of row 5 has no row "
                                                    "for channel g .2 of the 3"),
+            # one channel's angles written with other digits: the near row is named
+            ("digits.csv", [lines[0], lines[1], ",".join(
+                f"{float(c) + 1e-5!r}" if i == 2 else c
+                for i, c in enumerate(lines[2].split(","))), *lines[3:]],
+             "the direction pair of row 2 has no row for channel g .2 of the 3.*; row 3 "
+             "gives it at angles within 1e-05 degrees of these .theta_o_deg "
+             f"{float(deg[2][0]) + 1e-5!r} there.: the same direction written with other "
+             "digits"),
             ("twice.csv", [*lines, lines[3]], "rows 4 and 122 both give channel b of one "
                                               "direction pair: keep one"),
             ("green.csv", [lines[0], *(r for r in lines if r.endswith(tuple(

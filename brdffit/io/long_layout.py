@@ -83,6 +83,34 @@ def channel_keys(cells: list[str], column: str, source: str, rows: np.ndarray,
     return ("wavelength", np.array(nm, float)) if nm else ("rgb", np.array(rgb, float))
 
 
+#: Angles of two rows this close (radians) are one direction pair written twice with
+#: different digits (30 and 30.000001), not two measured directions: said, not merged.
+NEAR_MISS_RAD = 1e-4
+
+
+def _near_miss(raw, scales, seen, p: int, c: int, rows, names) -> str:
+    """Where another pair's row gives the missing channel ``c`` at angles within
+    :data:`NEAR_MISS_RAD` of pair ``p``'s, a clause naming it (rounded differently,
+    most likely), else ''."""
+    angles = np.column_stack([a * s for a, s in zip(raw, scales, strict=True)])
+    mine = angles[seen[p][seen[p] >= 0].min()]
+    candidates = seen[:, c][seen[:, c] >= 0]
+    if candidates.size == 0:
+        return ""
+    gap = np.max(np.abs(angles[candidates] - mine), axis=1)
+    best = int(np.argmin(gap))
+    if not 0 < gap[best] <= NEAR_MISS_RAD:
+        return ""
+    row = int(candidates[best])
+    column = int(np.argmax(np.abs(angles[row] - mine)))
+    angle = ("theta_i", "phi_i", "theta_o", "phi_o")[column]
+    name = (names or {}).get(angle, angle)  # as the file names it
+    written = float(raw[column][row])
+    return (f"; row {int(rows[row]) + 1} gives it at angles within "
+            f"{np.degrees(gap[best]):.2g} degrees of these ({name} {written!r} there): the "
+            "same direction written with other digits? write each row's angles alike")
+
+
 def pivot(raw: list[np.ndarray], scales: list[float], keys, kind: str, column: str,
           values: np.ndarray, sigma: np.ndarray | None, rows: np.ndarray, source: str,
           noun: str = "column", names: dict[str, str] | None = None) -> Pivoted:
@@ -149,7 +177,8 @@ def pivot(raw: list[np.ndarray], scales: list[float], keys, kind: str, column: s
             source, f"the direction pair of row {at} has no row for {_said(kind, channels[c])}"
                     f" ({int((seen[p] >= 0).sum())} of the {k} the file holds): every pair "
                     "needs one row per " + ("channel" if kind == "rgb" else "wavelength")
-                    + ", with the same four angles")
+                    + ", with the same four angles"
+                    + _near_miss(raw, scales, seen, p, c, rows, names))
     first_rows = seen.min(axis=1)  # seen (n, k): the row of each pair's each channel
     return Pivoted(
         raw=[a[first_rows] for a in raw],
