@@ -2082,6 +2082,14 @@ def test_files_as_lab_tools_write_them(tmp_path):
     with pytest.raises(MeasurementsError, match=r"no value columns.*'r \[a.u.\]', 'g \[a.u.\]'"
                                                 r", 'b \[a.u.\]': a unit that is not 1/sr"):
         read_measured(au)
+    # a units row in a radiance's units: refused as radiances (it read as no units row,
+    # and the angles were called unitless)
+    for unit in ("W/(m2 sr)", "[W m-2 sr-1]", "cd/m2"):
+        au.write_text(f"theta_i,phi_i,theta_o,phi_o,r,g,b\n[deg],[deg],[deg],[deg],{unit},"
+                      f"{unit},{unit}\n10,0,20,180,1,1,1\n")
+        with pytest.raises(MeasurementsError, match=r"'b \[.*\]': a radiance, not a BRDF: "
+                                                    r"brdffit reads a BRDF, in 1/sr"):
+            read_measured(au)
     astm = tmp_path / "long.astm"
     astm.write_text("VARS theta_i,phi_i,theta_s,phi_s,wavelength,BRDF\n0.1,0,0.2,0,450,0.3\n")
     with pytest.raises(MeasurementsError, match="column 'wavelength' holds one wavelength "

@@ -187,9 +187,12 @@ def _other_units(seen: dict[str, int]) -> str:
     other = [n for n in seen
              if (m := re.fullmatch(r"(\w+)\s*[\[(].*[\])]", n))
              and value_name(m[1]) in (*CHANNELS, *ONE_CHANNEL)]
+    # in watts or candelas: radiances, which are told what a BRDF is below
+    by_power = [n for n in other if re.search(r"[\[(]\s*([mµuk]?w\b|cd\s*/|nits?\b)", n)]
+    other = [n for n in other if n not in by_power]
     said = (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
             "a reflectance in % or a radiance is not one)" if other else "")
-    radiances = [n for n in seen if RADIANCE.fullmatch(n)]
+    radiances = [n for n in seen if RADIANCE.fullmatch(n)] + by_power
     if radiances:
         said += f"; {', '.join(repr(n) for n in radiances)}: a radiance, not a BRDF: {RADIANCE_IS}"
     return said
@@ -536,7 +539,10 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
 _UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|nm|-|"
                         # arbitrary units: read as a row of units, so that the values'
                         # columns are refused as not a BRDF's, not the angles' as unitless
-                        r"a\.?\s*u\.?|arb\.?(\s*units?)?|)",
+                        r"a\.?\s*u\.?|arb\.?(\s*units?)?|"
+                        # a radiance's or an irradiance's (W/(m2 sr), W m-2, cd/m2, lx):
+                        # read as units, so that the values are refused as radiances
+                        r"[mµuk]?W(\W.*)?|cd\s*/.*|nits?|lx|lux|)",
                         re.IGNORECASE)
 
 
@@ -546,13 +552,21 @@ def _names_a_unit(name: str) -> bool:
     return bool(re.search(r"[\[(/]|_(deg|rad|degrees|radians)$", name))
 
 
+def _unbracketed(cell: str) -> str:
+    """``[deg]`` or ``(1/sr)`` as ``deg`` or ``1/sr``; ``W/(m2 sr)`` as it is."""
+    cell = cell.strip()
+    while len(cell) >= 2 and (cell[0], cell[-1]) in (("[", "]"), ("(", ")")):
+        cell = cell[1:-1].strip()
+    return cell
+
+
 def _units_row(row: tuple[int, str] | None, delimiter: str | None, width: int,
                source: str) -> list[str] | None:
     """The cells of a row of units under the header (``deg,deg,deg,deg,1/sr,1/sr,
     1/sr``), brackets dropped; None where the row is not one (a data row)."""
     if row is None:
         return None
-    cells = [c.strip().strip("[]()").strip() for c in _cells(row[1], delimiter, source, row[0])]
+    cells = [_unbracketed(c) for c in _cells(row[1], delimiter, source, row[0])]
     if len(cells) != width or not any(cells) or not all(_UNIT_CELL.fullmatch(c) for c in cells):
         return None
     return cells
