@@ -51,7 +51,7 @@ class ExportTarget:
     #: its document can be saved as one binary ``.glb`` (the module's ``to_glb``)
     glb: bool = False
     #: each variant family's dictionary (``Export.variants``; the module's ``variants``,
-    #: ``VARIANTS`` and ``VARIANTS_NOTE``, and a ``write`` that takes them)
+    #: ``VARIANTS``, and a ``write`` that takes them and notes what each file is for)
     variants: bool = False
 
     @property
@@ -365,7 +365,6 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         material, files, notes = module.write(conv.params, name, conv.target_model, made)
         variants = {"rgb": made[0], "spectral": made[1] if isinstance(made[1], dict) else None,
                     "for": dict(module.VARIANTS)}
-        notes.append(module.VARIANTS_NOTE)
     else:
         material, files, notes = module.write(conv.params, name, conv.target_model)
     return Export(target, result.model, spec.media_type, material, files,

@@ -288,9 +288,10 @@ VARIANTS = {"rgb": "scalar_rgb, llvm_ad_rgb, cuda_ad_rgb (and their _polarized k
                    "a _mono variant is refused: variant())",
             "spectral": "scalar_spectral, llvm_ad_spectral, cuda_ad_spectral (and their "
                         "_polarized kin)"}
-VARIANTS_NOTE = ("material is the load_dict dictionary for Mitsuba's RGB variants; in a "
-                 "spectral variant use variants['spectral'] (or NAME_spectral.xml): the RGB "
-                 "one there is 10-25% off in colour")
+#: What the two files are for, where both are written (``NAME``: the material's name).
+VARIANTS_NOTE = ("variants: NAME.xml (and the material, a load_dict dictionary) is for "
+                 "Mitsuba's RGB variants; in a spectral variant load NAME_spectral.xml (or "
+                 "variants['spectral']): the RGB one there is 10-25% off in colour")
 
 
 def write(params: dict, name: str, target_model: str,
@@ -305,7 +306,8 @@ def write(params: dict, name: str, target_model: str,
     notes = []
     if isinstance(spectral, dict):
         files[f"{name}_spectral.xml"] = scene_xml(spectral, name)
-    else:
+        notes.append(VARIANTS_NOTE.replace("NAME", name))
+    else:  # no spectral file: the note on the two would point at none
         notes.append(f"spectral: {spectral}")
     return material, files, notes
 
