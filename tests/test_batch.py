@@ -180,8 +180,26 @@ def test_report_ranks_each_table_own_model_first(cluster_batch, tmp_path):
     png = plot_summary(r, tmp_path / "summary.png")
     assert open(png, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
     # the count of tables each model wins is ticked in whole tables
-    wins_axis = summary_figure(r).axes[1]
+    err_axis, wins_axis = summary_figure(r).axes[:2]
     assert all(float(t).is_integer() for t in wins_axis.get_yticks())
+    # each model's wins stacked by how the winning fit looks, and each fit's dot in its
+    # look's colour (the figure had neither: only the text said how fits look)
+    from matplotlib.colors import to_rgba
+
+    from brdffit.batch.report import LOOK_COLOURS
+
+    stacked = {}
+    for bar in wins_axis.patches:
+        x = round(bar.get_x() + bar.get_width() / 2)
+        stacked[x] = stacked.get(x, 0) + bar.get_height()
+    order = [t.get_text() for t in wins_axis.get_xticklabels()]
+    assert {order[x - 1]: n for x, n in stacked.items() if n} == {
+        s.model: s.wins for s in r.summary if s.wins}
+    dots = [tuple(c) for coll in err_axis.collections for c in coll.get_facecolors()]
+    looks = [t.looks[m]["verdict"] for t in r.tables for m in t.looks]
+    for look in set(looks):
+        want = to_rgba(LOOK_COLOURS[look], 0.75)
+        assert sum(np.allclose(d, want) for d in dots) == looks.count(look), look
 
 
 def test_report_cli(cluster_batch, tmp_path, capsys):

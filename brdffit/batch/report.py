@@ -245,6 +245,7 @@ def plot_summary(r: Ranking, png: str | os.PathLike, source: str = "") -> str:
 def summary_figure(r: Ranking, source: str = ""):
     """:func:`plot_summary`'s figure (a ``matplotlib.figure.Figure``)."""
     from matplotlib.figure import Figure  # no pyplot: no global state, safe in workers
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import MaxNLocator
 
     medians = {s.model: s.median for s in r.summary}
@@ -259,10 +260,16 @@ def summary_figure(r: Ranking, source: str = ""):
     shown = [(p, d) for p, d in zip(positions, data, strict=True) if d]
     if shown:
         ax_err.boxplot([d for _, d in shown], positions=[p for p, _ in shown], widths=0.5,
-                       showfliers=False)
-        for p, d in shown:  # every table as a dot: a box hides small batches
-            jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(d))]
-            ax_err.scatter(jitter, d, s=10, alpha=0.6, zorder=3, color="tab:blue")
+                       showfliers=False,  # the median black: orange is a look's colour
+                       medianprops={"color": "black", "linewidth": 1.5})
+        for p, m in zip(positions, order, strict=True):
+            # every table as a dot, coloured by how its fit looks: a box hides small
+            # batches, and an error alone does not say whether the fit looks right
+            fits = [(e, _look(t, m)) for t in r.tables
+                    if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0]
+            jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(fits))]
+            ax_err.scatter(jitter, [e for e, _ in fits], s=12, alpha=0.75, zorder=3,
+                           color=[LOOK_COLOURS[look] for _, look in fits])
         ax_err.set_yscale("log")
     ax_err.set_xticks(positions, order, rotation=30, ha="right")
     ax_err.set_xlim(0.4, len(order) + 0.6)
@@ -272,8 +279,24 @@ def summary_figure(r: Ranking, source: str = ""):
                      fontsize=11)
     ax_err.grid(True, axis="y", which="major", alpha=0.3)
     wins = [next((s.wins for s in r.summary if s.model == m), 0) for m in order]
-    bars = ax_win.bar(positions, wins, color="tab:green")
-    ax_win.bar_label(bars, fontsize=9)
+    # each model's wins split by how the winning fit looks (quality.verdict)
+    bottom = [0] * len(order)
+    for look, colour in LOOK_COLOURS.items():
+        counts = [sum(t.best == m and _look(t, m) == look for t in r.tables) for m in order]
+        if any(counts):
+            ax_win.bar(positions, counts, bottom=bottom, color=colour,
+                       label=LOOK_LABELS[look])
+            bottom = [b + c for b, c in zip(bottom, counts, strict=True)]
+    for p, w in zip(positions, wins, strict=True):
+        ax_win.annotate(str(w), (p, w), ha="center", va="bottom", fontsize=9,
+                        xytext=(0, 1), textcoords="offset points")
+    if any(wins):
+        ax_win.legend(title="the best fit looks", fontsize=9, title_fontsize=9,
+                      loc="upper right")
+    ax_err.legend(handles=[Line2D([], [], ls="", marker="o", color=c, label=LOOK_LABELS[k])
+                           for k, c in LOOK_COLOURS.items()
+                           if any(_look(t, m) == k for t in r.tables for m in order)],
+                  title="the fit looks", fontsize=9, title_fontsize=9, loc="best")
     ax_win.set_xticks(positions, order, rotation=30, ha="right")
     ax_win.set_ylabel("tables where it is the best fit")
     ax_win.set_ylim(0, max(wins + [1]) * 1.15)
@@ -284,6 +307,19 @@ def summary_figure(r: Ranking, source: str = ""):
     name = os.path.basename(os.fspath(source)) if source else "batch"
     fig.suptitle(f"{name}: {len(r.tables)} tables x {len(order)} models", fontsize=13)
     return fig
+
+
+#: The summary figure's colour for each look of a fit (None: not judged, e.g. a
+#: results file written before verdicts were stored).
+LOOK_COLOURS = {"good": "tab:green", "visible": "tab:orange", "poor": "tab:red",
+                None: "tab:gray"}
+LOOK_LABELS = {"good": "good", "visible": "visible", "poor": "poor", None: "not judged"}
+
+
+def _look(t, model: str) -> str | None:
+    """The verdict of ``t``'s fit of ``model`` (None where there is none)."""
+    verdict = (t.looks.get(model) or {}).get("verdict")
+    return verdict if verdict in LOOK_COLOURS else None
 
 
 def _n_params(model: str) -> float:
