@@ -26,7 +26,7 @@ import os
 import re
 import time
 import urllib.parse
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from datetime import datetime
 
@@ -390,17 +390,25 @@ class Client:
         return self._json("GET", f"/v1/fits/{_job_id(job)}", FitJob.from_json)
 
     def wait(self, job: JobRef, timeout: float | None = 600.0, *,
-             poll: float = 0.25) -> FitJob:
+             poll: float = 0.25, on_update: Callable[[FitJob], None] | None = None) -> FitJob:
         """Poll until the job is done or failed; returns it either way.
 
         Raises ``TimeoutError`` after ``timeout`` seconds (None: no limit); ``poll``:
         the longest pause between two polls, in seconds (the first ones are quicker).
         A server that restarts or is briefly unavailable meanwhile (refused, no answer,
         503) is asked again until the deadline: its jobs survive a restart.
+        ``on_update(job)`` is called with the job each time its status or its
+        ``progress`` changes (the first poll's included): a long ``auto`` fit says
+        which model it is fitting, e.g.
+        ``on_update=lambda j: print(j.status, (j.progress or {}).get("stage", ""))``.
         """
         _check_wait(timeout, poll)
+        if on_update is not None and not callable(on_update):
+            raise InvalidSetting(f"on_update must be callable (it is called with the job), "
+                                 f"got {type(on_update).__name__}")
         deadline = math.inf if timeout is None else time.monotonic() + timeout
         delay = min(poll, 0.1)
+        said = None  # what on_update was last told: (status, progress)
         while True:
             try:
                 current = self.job(job)
@@ -412,6 +420,9 @@ class Client:
                                        f"before the wait's {timeout:g} s were up ({e})") from None
                 time.sleep(min(max(poll, 0.5), max(deadline - time.monotonic(), 0.0)))
                 continue
+            if on_update is not None and (current.status, current.progress) != said:
+                said = (current.status, current.progress)
+                on_update(current)
             if current.finished:
                 return current
             left = deadline - time.monotonic()

@@ -178,6 +178,36 @@ def test_wait_outlasts_a_server_briefly_gone_and_polls_as_it_says(client, files,
         client.wait(job, timeout=240)
 
 
+def test_wait_tells_on_update_each_change_of_status_and_progress(monkeypatch):
+    """A long fit said nothing until it ended; ``on_update`` is told each new status
+    or progress once, the last one included, and a poll that changes nothing is not
+    told again."""
+    import time
+    from types import SimpleNamespace
+
+    from brdffit.client import InvalidSetting
+
+    def state(status, stage=None):
+        return SimpleNamespace(id="0" * 32, status=status, finished=status == "done",
+                               progress=None if stage is None else {"stage": stage})
+
+    polls = iter([state("queued"), state("queued"), state("running", "fitting ggx (1 of 2)"),
+                  state("running", "fitting ggx (1 of 2)"),
+                  state("running", "fitting ggx2 (2 of 2)"), state("done")])
+    told = []
+    with Client("http://brdffit.test", token="",
+                transport=httpx.MockTransport(lambda r: httpx.Response(500))) as c:
+        monkeypatch.setattr(c, "job", lambda ref: next(polls))
+        monkeypatch.setattr(time, "sleep", lambda s: None)
+        done = c.wait("0" * 32, on_update=lambda j: told.append(
+            (j.status, (j.progress or {}).get("stage"))))
+        assert done.status == "done"
+        assert told == [("queued", None), ("running", "fitting ggx (1 of 2)"),
+                        ("running", "fitting ggx2 (2 of 2)"), ("done", None)]
+        with pytest.raises(InvalidSetting, match="on_update must be callable"):
+            c.wait("0" * 32, on_update="print")
+
+
 def test_a_request_sent_without_an_answer_says_it_may_have_been_carried_out():
     """A connection dropped after POST /v1/fits was "cannot reach the server ... the
     request never reached the service": a user started the fit again, and it ran twice."""
