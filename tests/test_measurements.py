@@ -797,6 +797,9 @@ def test_latin1_comments_and_header_are_read_and_binary_is_not(tmp_path):
     ({"rgb": np.array([[b"x"] * 3] * 4)}, "dataset rgb holds text, not numbers"),
     ({"rgb": np.ones((4, 3)), "sigma": np.array([b"x"] * 4)}, "dataset sigma holds text"),
     ({"rgb": None}, "rgb is an HDF5 group, not a dataset"),
+    # h5py's own words were the message ("Use () not None as shape arguments")
+    ({"rgb": np.ones((4, 3)), "phi_o": h5py.Empty("f8")},
+     "dataset phi_o is empty (an HDF5 null dataspace): it holds no values"),
     ({"rgb": np.ones((4, 3)), "value": np.ones(4)}, "datasets rgb and value"),
     # flattened, a (2, n) angle array paired one sample's angle with another's values
     ({"rgb": np.ones((4, 3)), "theta_i": np.full((2, 2), 10.0)},
@@ -828,6 +831,17 @@ def test_a_malformed_hdf5_file_gets_one_line_naming_it(tmp_path, datasets, says)
         read_measured(path)
     message = str(e.value)
     assert message.startswith(f"{path}: ") and says in message, message
+
+
+def test_a_ragged_hdf5_dataset_is_named_as_one_not_as_text(tmp_path):
+    path = _h5(tmp_path / "ragged.h5")
+    with h5py.File(path, "a") as f:
+        d = f.create_dataset("rgb", (4,), dtype=h5py.vlen_dtype(np.float64))
+        for k in range(4):
+            d[k] = np.ones(3 if k else 2)
+    with pytest.raises(MeasurementsError, match="dataset rgb holds a variable-length array "
+                                                "per row .a ragged list.: write it as one"):
+        read_measured(path)
 
 
 def test_an_hdf5_file_that_says_what_it_is_is_named_so(tmp_path):

@@ -784,12 +784,19 @@ def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
         raise MeasurementsError(source, f"dataset {name} holds text, not numbers")
     if matlab and d.attrs.get("MATLAB_empty"):  # [] is stored as its dimensions
         return np.zeros((0, 0))
+    if d.shape is None:  # HDF5's null dataspace (h5py.Empty): h5py refuses to read it
+        raise MeasurementsError(source, f"dataset {name} is empty (an HDF5 null dataspace): "
+                                        "it holds no values")
+    if h5py.check_vlen_dtype(d.dtype) is not None and h5py.check_string_dtype(d.dtype) is None:
+        raise MeasurementsError(source, f"dataset {name} holds a variable-length array per "
+                                        "row (a ragged list): write it as one (n,) or (n, 3) "
+                                        "array of numbers")
     if d.dtype.kind not in "iuf":
         held = ("text" if d.dtype.kind in "SUO" else "complex numbers (a BRDF is real: keep "
                 "the real part)" if d.dtype.kind == "c" else "booleans (a mask?)"
                 if d.dtype.kind == "b" else d.dtype)
         raise MeasurementsError(source, f"dataset {name} holds {held}, not numbers")
-    if (d.size or 0) > MAX_NUMBERS:  # None: a null dataspace, read below as empty
+    if (d.size or 0) > MAX_NUMBERS:
         # the declared shape, before anything is read: a file of a few KB may declare
         # 10^12 numbers never written (it asked numpy for 7 TiB)
         raise MeasurementsError(source, f"dataset {name} holds {d.size:,} numbers (shape "
