@@ -205,13 +205,12 @@ def convert(result: FitResult, target_models: tuple[str, ...], *,
                           warnings + bound_warnings(result.model, plain, fitted=True))
     target_model = target_models[0]
     refit = fit(fit_as_table(result), target_model, samples=samples, seed=seed)
-    own = result.error.get("log_rmse")  # NaN (null in JSON) where the fit could not
-    own = None if own is None or not np.isfinite(own) else own  # measure it
+    own = result.error.get("log_rmse", np.nan)  # NaN where the fit could not measure it
     warnings.append(
         f"approximated: {target_model} (the renderer's model) fitted to the {result.model} "
         f"fit at every bin above the horizon; log_rmse to the fit "
         f"{refit.error['log_rmse']:.4g} (the fit's own log_rmse to its table: "
-        f"{'not measured' if own is None else format(own, '.4g')})")
+        f"{format(own, '.4g') if np.isfinite(own) else 'not measured'})")
     if not refit.converged:
         warnings.append(f"the conversion's {target_model} fit ended {refit.result}")
     return Conversion(target_model, refit.params, False, float(refit.error["log_rmse"]),

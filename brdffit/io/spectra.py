@@ -51,10 +51,10 @@ def to_rgb(values: np.ndarray, wavelengths, source: str) -> tuple[np.ndarray, di
         raise MeasurementsError(source, f"{lam.size} wavelengths but spectra of shape "
                                         f"{values.shape}")
     resorted = False
-    if (lam.size >= 2 and np.all(np.isfinite(lam)) and np.any(np.diff(lam) < 0)
-            and np.unique(lam).size == lam.size):
+    if lam.size >= 2 and np.all(np.isfinite(lam)) and np.any(np.diff(lam) < 0):
         # columns written longest wavelength first (some spectrometers' order): each
-        # value keeps its own wavelength, so sorting them changes no measurement
+        # value keeps its own wavelength, so sorting them changes no measurement (a
+        # wavelength given twice is refused below, sorted or not)
         order = np.argsort(lam, kind="stable")
         lam, values, resorted = lam[order], values[:, order], True
     if lam.size < 2 or not np.all(np.isfinite(lam)) or np.any(np.diff(lam) <= 0):

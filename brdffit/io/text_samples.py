@@ -188,7 +188,8 @@ def _other_units(seen: dict[str, int]) -> str:
              if (m := re.fullmatch(r"(\w+)\s*[\[(].*[\])]", n))
              and value_name(m[1]) in (*CHANNELS, *ONE_CHANNEL)]
     # in watts or candelas: radiances, which are told what a BRDF is below
-    by_power = [n for n in other if re.search(r"[\[(]\s*([mµuk]?w\b|cd\s*/|nits?\b)", n)]
+    by_power = [n for n in other
+                if re.search(rf"[\[(]\s*(?:{_POWER_UNIT})", n, re.IGNORECASE)]
     other = [n for n in other if n not in by_power]
     said = (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
             "a reflectance in % or a radiance is not one)" if other else "")
@@ -535,6 +536,10 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
                                     "columns name their unit: theta_i_deg, ...)")
 
 
+#: A unit of power or luminous intensity (``W/(m2 sr)``, ``mW m-2``, ``cd/m2``, ``nits``):
+#: a radiance's, not a BRDF's (read case-insensitively).
+_POWER_UNIT = r"[mµuk]?w\b.*|cd\s*/.*|nits?\b"
+
 #: What a units row under the header may hold, cell by cell.
 _UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|nm|-|"
                         # arbitrary units: read as a row of units, so that the values'
@@ -542,7 +547,7 @@ _UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\
                         r"a\.?\s*u\.?|arb\.?(\s*units?)?|"
                         # a radiance's or an irradiance's (W/(m2 sr), W m-2, cd/m2, lx):
                         # read as units, so that the values are refused as radiances
-                        r"[mµuk]?W(\W.*)?|cd\s*/.*|nits?|lx|lux|)",
+                        rf"{_POWER_UNIT}|lx|lux|)",
                         re.IGNORECASE)
 
 
