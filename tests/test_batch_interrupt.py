@@ -223,6 +223,42 @@ def test_ctrl_c_on_local_workers_is_one_line(plugin_env, table_dir, tmp_path):
     assert json.loads(read_results(out)["attrs"]["models"]) == MODELS.split(",")
 
 
+def test_ctrl_c_while_the_local_workers_start_is_one_line(table_dir, tmp_path):
+    """A Ctrl-C as the worker processes appear, while they still import: each printed
+    its KeyboardInterrupt traceback under the batch's line (they ignore SIGINT only
+    once started). The batch holds the signal while its cluster starts, and the
+    workers inherit that: one line, and the batch stops."""
+    import psutil
+
+    out = tmp_path / "results.h5"
+    cmd = [sys.executable, "-m", "brdffit.cli", "batch", str(table_dir), "--models", "lambert",
+           "--out", str(out), "--workers", "2", "--quiet"]
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as above
+    try:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, start_new_session=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        def workers_spawned() -> bool:
+            with contextlib.suppress(psutil.Error):
+                return any("--multiprocessing-fork" in c.cmdline()
+                           for c in psutil.Process(proc.pid).children(recursive=True))
+            return False
+
+        assert _wait_until(workers_spawned, 120, poll=0.02), proc.communicate()
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == [
+        f"brdffit: interrupted; the finished fits are in {out}, run the same command again "
+        "to go on"], stderr
+
+
 @pytest.mark.unit
 def test_the_upstream_error_of_a_cancelled_call_that_had_not_started_is_not_shown():
     """distributed's ``sync`` cancels a client call on Ctrl-C; where the interrupt came

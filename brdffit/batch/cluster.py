@@ -20,7 +20,10 @@ import concurrent.futures
 import contextlib
 import logging
 import os
+import signal
 import socket
+import sys
+import threading
 import time
 from collections.abc import Iterator
 
@@ -90,6 +93,13 @@ def connect(workers: int = 1, scheduler: str | None = None,
         return
     if workers < 1:
         raise ValueError(f"a local cluster needs at least 1 worker, got {workers}")
+    # Ctrl-C at a terminal signals the whole process group, the workers too; they
+    # ignore it once started (brdffit.batch.local_worker), but one pressed while they
+    # still imported printed each one's KeyboardInterrupt traceback. SIGINT is held
+    # (blocked, not lost) while the cluster starts: the threads it starts, and the
+    # worker processes they start, inherit the blocked signal, and this process takes
+    # it once the cluster can be closed, as any Ctrl-C during the batch
+    held = _hold_sigint()
     try:
         cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -97,6 +107,7 @@ def connect(workers: int = 1, scheduler: str | None = None,
             **local_cluster_options(workers),
         )
     except (RuntimeError, OSError, TimeoutError) as e:
+        _release_sigint(held)
         # e.g. "Nanny failed to start" where worker processes cannot start (a
         # container without /dev/shm): one line for the user, not distributed's
         # traceback
@@ -104,11 +115,42 @@ def connect(workers: int = 1, scheduler: str | None = None,
         raise OSError(f"cannot start {workers} local Dask worker process(es): "
                       f"{type(cause).__name__}: {cause}; --workers 0 fits in this "
                       "process without Dask") from None
+    except BaseException:
+        _release_sigint(held)
+        raise
     try:
+        _release_sigint(held)
         with Client(cluster, set_as_default=False) as client:
             yield client
     finally:
         cluster.close()
+
+
+def _hold_sigint() -> bool:
+    """Block SIGINT in the main thread; True where the caller unblocks it again."""
+    if (threading.current_thread() is not threading.main_thread()
+            or not hasattr(signal, "pthread_sigmask")):  # Windows: no signal masks
+        return False
+    # multiprocessing's resource tracker, started by the first worker process, blocks
+    # SIGINT around its own start and then unblocks it in the thread that started it
+    # (the cluster's): started here first, it leaves the mask alone. Its warning at
+    # exit of "leaked semaphore objects to clean up", after a Ctrl-C while the workers
+    # start, is of the queues it then cleans up: nothing is left, and nothing to say
+    from multiprocessing import resource_tracker
+
+    saved = list(sys.warnoptions)  # the tracker's -W options are these, when it starts
+    sys.warnoptions.append("ignore:resource_tracker:UserWarning")
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        sys.warnoptions[:] = saved
+    return signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def _release_sigint(held: bool) -> None:
+    # a Ctrl-C pressed meanwhile is delivered here (KeyboardInterrupt in the main thread)
+    if held:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _refused(address: str, grace_s: float = REFUSED_GRACE_S) -> str | None:
