@@ -59,7 +59,7 @@ from brdffit.fitting.quality import (
     with_measured_gains,
 )
 from brdffit.fitting.result import FitResult
-from brdffit.fitting.scene import Scene, fit_in_scene
+from brdffit.fitting.scene import Scene, as_scene, fit_in_scene
 from brdffit.io.merl import MerlTable
 
 # The modules that compute with JAX (the problem, the sphere renders, the grey-ks
@@ -255,7 +255,7 @@ def select(
     *,
     tolerance: float = DEFAULT_TOLERANCE,
     budget: float | None = None,
-    scene: Scene | None = None,
+    scene: Scene | dict | str | None = None,
     mono_ks: bool = False,
     grey_tolerance: float = DEFAULT_GREY_TOLERANCE,
     image_size: int | None = None,
@@ -272,8 +272,9 @@ def select(
             candidate a cheaper one may be and still be chosen.
         budget: optional absolute ``log_rmse`` budget: the cheapest candidate
             under it wins (the tolerance rule decides when none is).
-        scene: optional :class:`brdffit.fitting.scene.Scene`: the loss, the errors the
-            choice uses, and the ranking are on its bins; the full-table error is
+        scene: optional :class:`brdffit.fitting.scene.Scene` (or its JSON form, a
+            preset's name or a scene file's path: ``as_scene``): the loss, the errors
+            the choice uses, and the ranking are on its bins; the full-table error is
             reported beside.
         mono_ks: also fit the chosen model with a grey ``ks`` (``<model>_mono``)
             when its fitted specular colour is grey within ``grey_tolerance``.
@@ -304,6 +305,8 @@ def select(
             f"select passes only {', '.join(FIT_KEYWORDS)} to fit, not {sorted(unknown)}"
         )
     FitOptions.from_dict(fit_options)  # refused once, before any candidate (seed=None)
+    if scene is not None:
+        scene = as_scene(scene)
     if isinstance(candidates, str):  # "ggx" was read letter by letter: unknown model 'g'
         candidates = [c.strip() for c in candidates.split(",") if c.strip()]
     for name, v in (("tolerance", tolerance), ("grey_tolerance", grey_tolerance)):

@@ -301,6 +301,32 @@ def test_scene_fit_reports_scene_and_full_table_error(fresnel_table):
     assert WHOLE_SPHERE_WORDS not in everywhere.quality["reason"]
 
 
+def test_the_front_door_fits_in_a_scene(fresnel_table, tmp_path):
+    from brdffit import FitInputError, fit
+
+    by_preset = fit(fresnel_table, "blinn_phong", scene="camera-normal", **FAST)
+    by_hand = fit_in_scene(fresnel_table, "blinn_phong", Scene.preset("camera-normal"), **FAST)
+    assert by_preset.scene["name"] == "camera-normal"
+    assert by_preset.params == by_hand.params
+    assert by_preset.full_table_error == by_hand.full_table_error
+    # its JSON form and a file of it give the same scene
+    spec = {"preset": "camera-normal"}
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(spec))
+    for given in (spec, str(path), path):
+        assert fit(fresnel_table, "blinn_phong", scene=given, **FAST).params == by_hand.params
+    with pytest.raises(FitInputError, match="not both"):
+        fit(fresnel_table, "blinn_phong", scene="camera-normal",
+            bin_weight=np.ones(90 * 90 * 180), **FAST)
+    from brdffit.selection import select
+
+    for call in (fit, select):  # refused before anything is fitted
+        with pytest.raises(SceneError, match="a scene is a .*got int"):
+            call(fresnel_table, scene=3)
+    with pytest.raises(SceneError):
+        fit(fresnel_table, "blinn_phong", scene=str(tmp_path / "missing.json"), **FAST)
+
+
 def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):
     path = str(tmp_path / "fresnel.binary")
     merl.write(path, fresnel_table)

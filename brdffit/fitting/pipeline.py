@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -75,6 +75,9 @@ from brdffit.io.angles import N_BINS
 from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
 
+if TYPE_CHECKING:
+    from brdffit.fitting.scene import Scene
+
 
 @runtime.in_float64
 def fit(
@@ -92,6 +95,7 @@ def fit(
     bin_weight: np.ndarray | None = None,
     parent_fit: FitResult | Callable[[], FitResult] | None = None,
     physical: bool = False,
+    scene: Scene | dict | str | None = None,
 ) -> FitResult:
     """Fit ``model`` to ``table``; see the module docstring for the pipeline.
 
@@ -130,7 +134,17 @@ def fit(
         physical: constrain the fit to conserve energy (directional albedo <= 1)
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
+        scene: weight the fit towards the directions a scene uses
+            (``brdffit.fitting.scene.fit_in_scene``): a ``Scene``, its JSON form (a
+            dict), a preset's name (``brdffit.fitting.scene.PRESETS``) or a scene
+            file's path. The result's ``error`` is then on the scene's bins, its
+            ``full_table_error`` on every bin. Not with ``bin_weight``.
     """
+    if scene is not None:
+        return _fit_in_scene(table, model, scene, bin_weight, loss=loss, solver=solver,
+                             samples=samples, precision=precision, starts=starts,
+                             max_steps=max_steps, seed=seed, init=init,
+                             parent_fit=parent_fit, physical=physical)
     if isinstance(model, str) and model.strip().lower() == "auto":
         # the shells' "auto" is a selection, not a model: said where to find it
         raise FitInputError("auto chooses among candidates, it is no model: "
@@ -153,6 +167,16 @@ def fit(
                              precision=precision, starts=starts, max_steps=max_steps,
                              seed=seed, init=init, bin_weight=bin_weight,
                              parent_fit=parent_fit))
+
+
+def _fit_in_scene(table, model, scene, bin_weight, **fit_options) -> FitResult:
+    # imported here: the scene module fits through this one
+    from brdffit.fitting.scene import as_scene, fit_in_scene
+
+    if bin_weight is not None:
+        raise FitInputError("give a scene or a bin_weight, not both: a scene's weights are "
+                            "its own (Scene.bin_weight())")
+    return fit_in_scene(table, model, as_scene(scene), **fit_options)
 
 
 class Solved(NamedTuple):

@@ -505,6 +505,20 @@ def _pair_weight(pairs: np.ndarray, spread: float) -> np.ndarray:
 # -- fitting in a scene --------------------------------------------------------------------
 
 
+def as_scene(scene) -> Scene:
+    """The scene a library caller names (``fit(..., scene=)``, ``select(..., scene=)``):
+    a :class:`Scene`, its JSON form (a dict), a preset's name (:data:`PRESETS`) or a
+    scene file's path. Raises :class:`SceneError` for anything else."""
+    if isinstance(scene, str) and scene in PRESETS:
+        return Scene.preset(scene)
+    if not isinstance(scene, Scene | dict | str | os.PathLike):
+        raise SceneError("a scene is a brdffit.fitting.scene.Scene, its JSON form (a dict), "
+                         f"a preset's name ({', '.join(PRESETS)}) or a scene file's path, "
+                         f"got {type(scene).__name__}")
+    return Scene.from_options(scene)
+
+
+
 @runtime.in_float64
 def full_table_error(table, model, params: dict) -> dict[str, float]:
     """Error metrics (``brdffit.fitting.loss``) of ``params`` on every usable bin of ``table``,
