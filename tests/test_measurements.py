@@ -664,6 +664,13 @@ def test_quoted_cells_are_the_numbers_inside_them(tmp_path):
     "Theta_i deg,Phi_i deg,Theta_o deg,Phi_o deg,R,G,B",
     # the values' own unit, and channels spelled out
     "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,Red [1/sr],Green (1/sr),Blue [sr^-1]",
+    # the angles in words, in either order, as instruments and people name them
+    "Incident theta (deg),Incident phi (deg),Outgoing theta (deg),Outgoing phi (deg),R,G,B",
+    "Incidence zenith angle [deg],Incidence azimuth angle [deg],Viewing zenith angle [deg],"
+    "Viewing azimuth angle [deg],r,g,b",
+    "θi (°),φi (°),θo (°),φo (°),r,g,b",
+    "theta_light_deg,phi_light_deg,theta_view_deg,phi_view_deg,r,g,b",
+    "Theta Incident/deg,Phi Incident/deg,Theta Detector/deg,Phi Detector/deg,r,g,b",
 ])
 def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, header):
     """As lab software and spreadsheets write a column's unit: the same samples as
@@ -676,6 +683,27 @@ def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, heade
     got = read_measured(other)
     np.testing.assert_array_equal(got.wi, plain.wi)
     np.testing.assert_array_equal(got.rgb, plain.rgb)
+
+
+def test_an_angle_in_words_is_one_word_of_which_and_one_of_whose():
+    """An angle named in words needs both: which angle (theta, zenith, phi, azimuth)
+    and whose (incident, light; view, outgoing, detector). Rusinkiewicz's theta_h,
+    theta_d and phi_d are no direction's; an elevation is not a zenith angle; two
+    words of one kind, or another word, are no angle."""
+    from brdffit.io.columns import angle_name
+
+    def read(name):
+        m = angle_name(name)
+        return None if m is None else (m[1], m[2], m[3])
+
+    assert read("incident (deg) theta") == ("theta", "i", "deg")  # a merged group's
+    assert read("outgoing polar angle (°)") == ("theta", "o", "deg")
+    assert read("theta of incidence") == ("theta", "i", None)
+    assert read("phi (light)") == ("phi", "i", None)
+    for other in ("theta_h", "theta_d", "phi_d", "zenith", "incident", "elevation incident",
+                  "theta incident view", "theta phi incident", "theta deg rad incident",
+                  "incident theta spread", "BRDF R", "red"):
+        assert read(other) is None, other
 
 
 @pytest.mark.parametrize("units", ["deg,deg,deg,deg,1/sr,1/sr,1/sr",

@@ -276,13 +276,65 @@ def azimuths_within(raw: list[np.ndarray], scales: list[float]) -> dict:
 
 
 def angle_name(name: str) -> re.Match | None:
-    """An angle column's name read (``theta_i_deg``, ``Theta_S [rad]``, ``phi_o``):
-    groups the angle's name and its unit, if any; None for any other column."""
-    # every spelling unit_scale reads: a units row of "degree" was accepted, then its
-    # columns (theta_i [degree]) found no angle
-    m = re.fullmatch(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees?|radians?))?",
-                     unit_suffixed(value_name(name.strip().lower())))
-    return m if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES else None
+    """An angle column's name read (``theta_i_deg``, ``Theta_S [rad]``, ``phi_o``, or in
+    words, :func:`_angle_in_words`: ``Incident theta (deg)``, ``view azimuth``,
+    ``θi (°)``): groups the angle's name and its unit, if any; None for any other
+    column."""
+    suffixed = unit_suffixed(value_name(name.strip().lower()))
+    m = _ANGLE.fullmatch(suffixed)
+    if m is not None and f"{m[1]}_{m[2]}" in ANGLE_ALIASES:
+        return m
+    spelled = _angle_in_words(suffixed)
+    return None if spelled is None else _ANGLE.fullmatch(spelled)
+
+
+# every spelling unit_scale reads: a units row of "degree" was accepted, then its
+# columns (theta_i [degree]) found no angle
+_ANGLE = re.compile(r"(theta|phi)_([a-z]+?)(?:_(deg|rad|degrees?|radians?))?")
+_ANGLE_UNITS = frozenset({"deg", "rad", "degree", "degrees", "radian", "radians"})
+#: Words that name which angle of a direction (``elevation`` is not one: it is 90
+#: degrees less the zenith angle, and is left unread rather than read as theta).
+_ANGLE_KIND_WORDS = {"theta": "theta", "θ": "theta", "zenith": "theta", "polar": "theta",
+                     "phi": "phi", "φ": "phi", "ϕ": "phi", "azimuth": "phi",
+                     "azimuthal": "phi", "azi": "phi"}
+#: Words that name whose direction: the light's or the view's. Not ``d`` or ``h``:
+#: theta_d and theta_h are Rusinkiewicz's difference and half angles, not directions.
+_ANGLE_SIDE_WORDS = {
+    **dict.fromkeys(("i", "in", "inc", "incident", "incidence", "incoming", "illumination",
+                     "illum", "light", "lighting", "source", "src", "l"), "i"),
+    **dict.fromkeys(("o", "out", "outgoing", "r", "refl", "reflected", "reflection", "v",
+                     "view", "viewing", "viewer", "s", "scatter", "scattered", "scattering",
+                     "detector", "det", "camera", "cam", "sensor", "observer",
+                     "observation", "obs", "exit", "emergent", "emergence", "e"), "o"),
+}
+_ANGLE_FILLER = frozenset({"angle", "angles", "of", "the", "direction", "dir"})
+
+
+def _angle_in_words(name: str) -> str | None:
+    """``theta_i`` (with ``_deg`` or ``_rad`` where it ends with a unit) for a name that
+    says an angle in words, in any order and with any separators: one word of which
+    angle (theta, zenith, phi, azimuth, θ, φ), one of whose (incident, light, source;
+    view, outgoing, reflected, scattered, detector, camera), and nothing else but
+    ``angle`` or ``of``, and at most one unit (``Incidence zenith angle``,
+    ``theta_view``, ``θo``, ``incident (deg) theta``: a merged group's name before its
+    column's). None for any other name: a word unknown, or two of one kind, reads as no
+    angle."""
+    words = re.findall(r"[a-z0-9]+|[θφϕ][a-z]*", name)
+    # θi, φ_o: the Greek letter and its side as one word
+    words = [part for w in words for part in ((w[0], w[1:]) if w[0] in "θφϕ" and w[1:]
+                                              else (w,))]
+    units = [w for w in words if w in _ANGLE_UNITS]  # at the end, or of a group's name
+    if len(units) > 1:
+        return None
+    unit = units[0] if units else None
+    words = [w for w in words if w not in _ANGLE_UNITS]
+    kinds = [_ANGLE_KIND_WORDS[w] for w in words if w in _ANGLE_KIND_WORDS]
+    sides = [_ANGLE_SIDE_WORDS[w] for w in words if w in _ANGLE_SIDE_WORDS]
+    rest = [w for w in words if w not in _ANGLE_KIND_WORDS and w not in _ANGLE_SIDE_WORDS
+            and w not in _ANGLE_FILLER]
+    if len(kinds) != 1 or len(sides) != 1 or rest:
+        return None
+    return f"{kinds[0]}_{sides[0]}" + (f"_{unit}" if unit else "")
 
 
 def an_angle_unit(unit: str | None) -> bool:
