@@ -671,6 +671,7 @@ def test_quoted_cells_are_the_numbers_inside_them(tmp_path):
     "θi (°),φi (°),θo (°),φo (°),r,g,b",
     "theta_light_deg,phi_light_deg,theta_view_deg,phi_view_deg,r,g,b",
     "Theta Incident/deg,Phi Incident/deg,Theta Detector/deg,Phi Detector/deg,r,g,b",
+    "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,BRDF R,BRDF_green,Blue BRDF [1/sr]",
 ])
 def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, header):
     """As lab software and spreadsheets write a column's unit: the same samples as
@@ -1850,6 +1851,58 @@ def test_an_excel_sheet_is_read_as_the_csv_it_would_be_saved_as(tmp_path, monkey
                                                 "[0-9,]+ bytes: more than a sample list's"):
         read_measured(tmp_path / "plain.xlsx")
 
+
+
+def test_merged_header_cells_are_read_as_the_header_they_show(tmp_path):
+    """A lab's sheet with merged cells in its header (they read "line 1 is read as the
+    header" or "no column for theta_i"; openpyxl's read-only sheets give a range's
+    value in its first cell alone): a title across the columns, groups over their
+    columns' names, names merged down two rows. Each reads as the plain sheet; a bad
+    row keeps its own number; merged cells among the numbers are left as they are."""
+    import openpyxl
+
+    s = _samples(30)
+    wide = read_measured(_write_all(tmp_path, s)["csv"])
+    rows = [[float(x) for x in (*(np.degrees(a[k]) for a in s[:4]), *s[4][k])]
+            for k in range(30)]
+
+    def book(name, head_rows, merged, body=rows):
+        wb = openpyxl.Workbook()
+        for row in [*head_rows, *body]:
+            wb.active.append(row)
+        for ref in merged:
+            wb.active.merge_cells(ref)
+        wb.save(tmp_path / name)
+        return tmp_path / name
+
+    names = ["theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "r", "g", "b"]
+    title = book("title.xlsx", [["Gonioreflectometer run 12, sample A"], names], ["A1:G1"])
+    groups = book("groups.xlsx", [
+        ["Incident (deg)", None, "Outgoing (deg)", None, "BRDF (1/sr)", None, None],
+        ["theta", "phi", "theta", "phi", "R", "G", "B"]], ["A1:B1", "C1:D1", "E1:G1"])
+    down = book("down.xlsx", [
+        ["theta_i (deg)", "phi_i (deg)", "theta_o (deg)", "phi_o (deg)", "BRDF", None, None],
+        [None, None, None, None, "red", "green", "blue"]],
+        ["A1:A2", "B1:B2", "C1:C2", "D1:D2", "E1:G1"])
+    both = book("both.xlsx", [["Run 12"], *[[c for c in r] for r in (
+        ["Incident (deg)", None, "Outgoing (deg)", None, "BRDF", None, None],
+        ["theta", "phi", "theta", "phi", "R", "G", "B"])]],
+        ["A1:G1", "A2:B2", "C2:D2", "E2:G2"])
+    for path in (title, groups, down, both):
+        m = read_measured(path)
+        np.testing.assert_allclose(m.rgb, wide.rgb, rtol=1e-15, err_msg=path.name)
+        np.testing.assert_allclose(m.wi, wide.wi, rtol=0, atol=1e-15, err_msg=path.name)
+    # a bad row is named by its row in the sheet, as in a sheet of no merged cells
+    bad = [list(r) for r in rows]
+    bad[4][2] = "n/a"
+    with pytest.raises(MeasurementsError, match=r"\b(row|line) 7\b"):
+        read_measured(book("bad.xlsx", [
+            ["Incident (deg)", None, "Outgoing (deg)", None, "BRDF", None, None],
+            ["theta", "phi", "theta", "phi", "R", "G", "B"]], ["A1:B1", "C1:D1", "E1:G1"],
+            body=bad))
+    # merged among the numbers: no header of them (the row is read, and refused, as is)
+    with pytest.raises(MeasurementsError, match=r"\b(row|line) 3\b"):
+        read_measured(book("body.xlsx", [names], ["E3:G3"]))
 
 
 def test_a_hidden_sheet_is_read_after_the_visible_ones_and_said(tmp_path):

@@ -102,7 +102,25 @@ def value_name(name: str) -> str:
     last = max(name.rfind("["), name.rfind("("))
     if last >= 0 and PER_STERADIAN.fullmatch(name, last):
         name = name[:last].rstrip()
-    return CHANNEL_WORDS.get(name, name)
+    name = CHANNEL_WORDS.get(name, name)
+    return _brdf_channel(name) or name
+
+
+def _brdf_channel(name: str) -> str | None:
+    """``r`` of ``BRDF R``, ``brdf_red``, ``Red BRDF`` or ``BRDF (1/sr) R`` (a merged
+    group's name before its column's): the word brdf, one channel's, and at most the
+    per-steradian unit; None for any other name."""
+    if len(name) > 80 or "brdf" not in name:  # a column's name is short; most are not this
+        return None
+    rest = PER_STERADIAN.sub(" ", name)
+    if not re.fullmatch(r"[a-z_\s.-]+", rest):  # another unit ([%], (a.u.)) is not 1/sr
+        return None
+    words = re.findall(r"[a-z]+", rest)
+    if len(words) != 2 or "brdf" not in words:
+        return None
+    channel = words[1] if words[0] == "brdf" else words[0]
+    channel = CHANNEL_WORDS.get(channel, channel)
+    return channel if channel in CHANNELS else None
 
 
 def unit_suffixed(name: str) -> str:

@@ -18,6 +18,7 @@ expand to GBs.
 from __future__ import annotations
 
 import datetime
+import re
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -69,7 +70,7 @@ def sheet_texts(path: str | Path, source: str,
             order = ([n for n in names if n not in hidden] + [n for n in names if n in hidden]
                      if sheet is None else [sheet])
             for name in order:
-                if lines := _lines(book[name], source):
+                if lines := _lines(book[name], source, _merged_header_ranges(path, name)):
                     yield name, "\n".join(lines) + "\n", len(names), name in hidden
                 elif sheet is not None:
                     raise MeasurementsError(source, f"sheet {sheet!r} holds no cells")
@@ -120,11 +121,12 @@ def _weighed(path: str | Path, source: str) -> None:
                                         f"({MAX_EXPANDED:,}); save the sheet as CSV")
 
 
-def _lines(sheet, source: str) -> list[str]:
+def _lines(sheet, source: str, merges: list[tuple[int, int, int, int]] = ()) -> list[str]:
     """The sheet's rows as tab-separated lines, one per row (so that a line's number is
     its row's: the reader's "row 5" is the sheet's row 5; an empty row an empty line);
-    none where the sheet holds no cell."""
-    lines: list[str] = []
+    none where the sheet holds no cell. ``merges``: the merged cells of its first rows
+    (:func:`_merged_header_ranges`), read as :func:`_unmerged` says."""
+    rows: list[list[str]] = []
     for k, row in enumerate(sheet.iter_rows(values_only=True), start=1):
         if k > MAX_SAMPLES + 1000:  # the header, units and comment rows, with room
             raise MeasurementsError(source, f"an Excel sheet of more than {k - 1:,} rows: "
@@ -133,10 +135,131 @@ def _lines(sheet, source: str) -> list[str]:
         cells = [_cell(v) for v in row]
         while cells and not cells[-1].strip():
             cells.pop()
-        lines.append("\t".join(cells))
+        rows.append(cells)
+        if k == HEADER_ROWS and merges:
+            _unmerged(rows, merges)
+    if len(rows) < HEADER_ROWS and merges:
+        _unmerged(rows, merges)
+    lines = ["\t".join(cells) for cells in rows]
     while lines and not lines[-1]:
         lines.pop()
     return lines
+
+
+#: The rows at the top of a sheet whose merged cells are read as a header's
+#: (:func:`_unmerged`); merged cells below them are left as they are.
+HEADER_ROWS = 20
+
+
+def _unmerged(rows: list[list[str]], merges) -> None:
+    """The header of a sheet whose first rows hold merged cells, as one row a CSV
+    reader reads (openpyxl's read-only sheets give a merged range's value in its first
+    cell alone, and the rest empty). In place, keeping each row's number:
+
+    - a row whose only content is one merged range across columns is a title
+      (``Gonioreflectometer run 12``): made a comment (``# ...``);
+    - a range across columns over a row of names (``incident (deg)`` over ``theta``
+      and ``phi``; ``BRDF`` over ``R``, ``G``, ``B``) names each of its columns, and a
+      range down rows (``theta_i`` over two rows) its column in each: the rows of
+      such a header are read as one, its last, each column's names joined in order
+      (``incident (deg) theta``, ``BRDF R``: ``brdffit.io.columns`` reads both), and
+      the rows above it are made comments. A range across columns over a row of
+      numbers is left as it is: it is no group of names."""
+    def numeric(cells: list[str]) -> bool:
+        return any(_a_number(c) for c in cells)
+
+    def filled(cells: list[str], c: int) -> bool:
+        return c < len(cells) and bool(cells[c].strip())
+
+    header_rows: set[int] = set()
+    for r1, c1, r2, c2 in merges:
+        if r1 >= len(rows) or not filled(rows[r1], c1):
+            continue
+        row = rows[r1]
+        if r1 == r2 and c2 > c1 and not any(filled(row, c) for c in range(len(row)) if c != c1):
+            rows[r1] = [f"# {row[c1]}"]  # a title
+            continue
+        if r2 == r1 and (r1 + 1 >= len(rows) or numeric(rows[r1 + 1]) or numeric(row)):
+            continue  # nothing under it to name, or not a header
+        value = row[c1]
+        for r in range(r1, min(r2, len(rows) - 1) + 1):
+            rows[r].extend([""] * (c2 + 1 - len(rows[r])))
+            for c in range(c1, c2 + 1):
+                rows[r][c] = value if r == r1 or not rows[r][c].strip() else rows[r][c]
+            header_rows.add(r)
+        if r2 == r1:
+            header_rows.add(r1 + 1)  # the names it is over
+    if not header_rows:
+        return
+    first, last = min(header_rows), max(header_rows)
+    width = max(len(rows[r]) for r in range(first, last + 1))
+    joined = []
+    for c in range(width):
+        names: list[str] = []
+        for r in range(first, last + 1):
+            cell = rows[r][c].strip() if c < len(rows[r]) else ""
+            if cell and cell not in names:
+                names.append(cell)
+        joined.append(" ".join(names))
+    for r in range(first, last):
+        rows[r] = [f"# {' '.join(c for c in rows[r] if c.strip())}"]
+    rows[last] = joined
+
+
+def _a_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _merged_header_ranges(path: str | Path, sheet: str) -> list[tuple[int, int, int, int]]:
+    """The merged ranges of ``sheet`` that begin in its first :data:`HEADER_ROWS` rows,
+    as 0-based (first row, first column, last row, last column): read from the sheet's
+    XML (its ``mergeCells``, after its rows), which openpyxl's read-only mode does not
+    read. None found, or a part that cannot be read, is an empty list: the sheet is then
+    read as it was."""
+    import xml.etree.ElementTree as ET
+
+    rel = "{http://schemas.openxmlformats.org/officeDocument/2006/relationships}id"
+    try:
+        with zipfile.ZipFile(path) as z:
+            book = ET.fromstring(z.read(WORKBOOK_PART))
+            rid = next((e.get(rel) for e in book.iter() if e.tag.endswith("}sheet")
+                        and e.get("name") == sheet), None)
+            rels = ET.fromstring(z.read("xl/_rels/workbook.xml.rels"))
+            target = next((e.get("Target") for e in rels.iter() if e.get("Id") == rid), None)
+            if rid is None or target is None:
+                return []
+            part = target.lstrip("/") if target.startswith("/") else f"xl/{target}"
+            return _merge_refs(z, part)
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, ValueError):
+        return []
+
+
+_MERGE = re.compile(rb"<(?:\w+:)?mergeCell\b[^>]*?\bref=\"([A-Z]+)(\d+):([A-Z]+)(\d+)\"")
+
+
+def _merge_refs(z: zipfile.ZipFile, part: str) -> list[tuple[int, int, int, int]]:
+    # streamed: a sheet's XML may be hundreds of MB, and its merged cells come last
+    found, tail = [], b""
+    with z.open(part) as xml:
+        while chunk := xml.read(1 << 20):
+            text = tail + chunk
+            for m in _MERGE.finditer(text):
+                r1, r2 = int(m[2]) - 1, int(m[4]) - 1
+                if r1 < HEADER_ROWS:
+                    found.append((r1, _column(m[1]), r2, _column(m[3])))
+            tail = text[-200:]  # a range cut in two by the chunk: found whole next time
+    return sorted(set(found))
+
+
+def _column(letters: bytes) -> int:
+    n = 0
+    for ch in letters:
+        n = n * 26 + ch - 64
+    return n - 1
 
 
 def _cell(value) -> str:
