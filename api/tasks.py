@@ -37,18 +37,6 @@ def _read(table_path: str, source: str):
     return dataclasses.replace(readers.read_measured(table_path), source=source)
 
 
-def _read_table(table_path: str, source: str):
-    """:func:`_read`, a sample list as the table it bins into (what a plot draws)."""
-    from brdffit.io.merl import MerlTable
-
-    got = _read(table_path, source)
-    if isinstance(got, MerlTable):
-        return got
-    from brdffit.fitting.samples import binned
-
-    return binned(got)[0]
-
-
 def fit_models(table_path: str, source: str, request: dict,
                measured_input: dict | None = None) -> Outcome:
     """The fits a job asks for (``brdffit.request.run``): an :class:`Outcome` whose
@@ -92,8 +80,16 @@ def render_plot(table_path: str, source: str, result: dict, kind: str,
             return Outcome.success(sample_plot.samples(_read(table_path, source), result))
         if kind == "ranking":  # auto's candidates: the selection carries them (the route checked)
             return Outcome.success(plots.ranking(result["selection"]))
-        return Outcome.success(plots.render(kind, _read_table(table_path, source), result,
-                                            exposure_ev))
+        from brdffit.io.merl import MerlTable
+
+        measured = _read(table_path, source)
+        if isinstance(measured, MerlTable):
+            return Outcome.success(plots.render(kind, measured, result, exposure_ev))
+        from brdffit.fitting.samples import binned
+
+        # a sample list: its report draws its samples, the other plots its binned table
+        return Outcome.success(plots.render(kind, binned(measured)[0], result, exposure_ev,
+                                            measured=measured))
     except Exception as e:  # noqa: BLE001 - a stored table gone bad, or a plotting bug
         return Outcome.failure(e)
 

@@ -347,8 +347,37 @@ def test_a_sample_lists_plots_say_what_they_can_show(ggx, tmp_path):
     assert plots._few_samples(t, table_fit, "these slices") == ""
 
 
+def test_a_sample_lists_report_draws_its_samples_and_the_fits_spheres(tmp_path, monkeypatch):
+    """report.png of a sample list's fit: its spheres were mostly checkered (the samples
+    fill few bins); each sample fitted against measured, and the fit's own spheres, are
+    drawn in their place, by the library, the CLI and the service's plot task alike.
+    Without the samples (or for a table) the report is a table's."""
+    from api.tasks import render_plot
+    from brdffit.fitting.samples import binned
+    from brdffit.io.readers import read_measured
+    from brdffit.view import sample_plot
+    from data_synth.__main__ import main as synth
+
+    path = tmp_path / "lab.csv"
+    assert synth(["samples", str(path), "--layout", "uniform", "-n", "400"]) == 0
+    samples = read_measured(path)
+    r = fit(samples, "lambert", **FAST)
+    drawn = []
+    draw = sample_plot.draw
+    monkeypatch.setattr(sample_plot, "draw",
+                        lambda fig, m, res: drawn.append(m.n) or draw(fig, m, res))
+    table = binned(samples)[0]
+    assert_sane_png(plots.render("report", table, r, measured=samples))
+    assert drawn == [400]
+    plots.render("slices", table, r, measured=samples)  # the other kinds draw the table
+    assert drawn == [400]
+    outcome = render_plot(str(path), "lab.csv", r.to_dict(), "report")
+    assert outcome.value[:8] == b"\x89PNG\r\n\x1a\n" and drawn == [400, 400]
+    # (the CLI's: test_a_sample_lists_samples_are_each_drawn)
+
+
 @pytest.mark.slow  # two CLI fits with their plots: the full suite's
-def test_a_sample_lists_samples_are_each_drawn(tmp_path):
+def test_a_sample_lists_samples_are_each_drawn(tmp_path, monkeypatch):
     """samples.png: each sample's fitted value at its own directions against the
     measured one, and where the fit is off, for a sample list (its other plots draw the
     few bins it fills); a table gets none. Many samples are drawn as a subset, said so;
@@ -361,7 +390,12 @@ def test_a_sample_lists_samples_are_each_drawn(tmp_path):
     assert synth(["samples", str(path), "--layout", "uniform", "-n", "400", "--noise",
                   "0.05"]) == 0
     out = tmp_path / "plots"
+    drawn = []
+    draw = sample_plot.draw
+    monkeypatch.setattr(sample_plot, "draw",
+                        lambda fig, m, res: drawn.append(m.n) or draw(fig, m, res))
     assert cli_main(["fit", str(path), "--model", "lambert", "--plots", str(out)]) == 0
+    assert drawn == [400, 400]  # samples.png, and report.png in place of its spheres
     png = (out / "samples.png").read_bytes()
     height, width = imread(io.BytesIO(png)).shape[:2]
     assert width > 1000 and height > 500

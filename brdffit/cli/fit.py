@@ -386,7 +386,7 @@ def write_report(args, table, report: FitReport, as_text: str,
     if args.plots:
         from brdffit.view import plots  # matplotlib only when asked for
 
-        paths = plots.save_report(table, report, args.plots)
+        paths = plots.save_report(table, report, args.plots, measured=samples)
         if samples is not None:  # each sample, of which the others show few
             from brdffit.view import sample_plot
 

@@ -63,6 +63,7 @@ from brdffit.io.angles import (
     half_diff_to_dirs,
 )
 from brdffit.io.grid import bin_grid
+from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
 from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, check_exposure_ev, exposure_refused
 
@@ -673,11 +674,14 @@ def _discrete_colours(name: str, n: int):
 
 
 def report(table: MerlTable, result: FitResult | dict, *,
-           exposure_ev: float | None = None) -> bytes:
+           exposure_ev: float | None = None, measured: Measurements | None = None) -> bytes:
     """One page: the parameters with their standard errors and undetermined flags,
     every error metric, the spheres (at ``exposure_ev``; by default where the verdict
     judged the key light, :func:`page_exposure_ev`), the phi_d = 90 deg slices and the
-    error map."""
+    error map. ``measured``: the sample list ``result`` was fitted to (``table`` its
+    binned table), whose samples fill few of the spheres' pixels: each sample fitted
+    against measured (``brdffit.view.sample_plot``) and the fit's own spheres are drawn
+    in their place."""
     result = as_result(result)
     exposure_ev = check_exposure_ev(page_exposure_ev(table) if exposure_ev is None
                                     else exposure_ev)
@@ -688,18 +692,57 @@ def report(table: MerlTable, result: FitResult | dict, *,
     fig = Figure(figsize=(14.0, 16.9 + head_in), layout="constrained")
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[head_in, 9.0, 3.6, 4.2])
     _draw_summary(head, result, params, metrics)
-    # smaller row labels: three lines of 10 pt ran into the next row's at this size
-    _, checkered = _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev,
-                                 label_size=8.5)
-    sph.suptitle(f"sphere renders, one exposure for table and fit"
-                 f"{_exposure_words(exposure_ev)}{_CHECKERED if checkered else ''}"
-                 f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
+    if measured is not None and _on_samples(result):
+        _draw_samples_and_fit(sph, table, measured, result, exposure_ev)
+    else:
+        # smaller row labels: three lines of 10 pt ran into the next row's at this size
+        _, checkered = _draw_spheres(sph, table, result, size=160, exposure_ev=exposure_ev,
+                                     label_size=8.5)
+        sph.suptitle(f"sphere renders, one exposure for table and fit"
+                     f"{_exposure_words(exposure_ev)}{_CHECKERED if checkered else ''}"
+                     f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
-    sli.suptitle("slices: measured (dots), fit (lines)", fontsize=11)
+    sli.suptitle("slices: fit (lines), and the few samples' bins on them (dots)"
+                 if measured is not None and _on_samples(result)
+                 else "slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
     err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
     fig.suptitle(_title(table, result), fontsize=14, fontweight="bold")
     return png_bytes(fig)
+
+
+def _draw_samples_and_fit(fig, table: MerlTable, measured: Measurements, result: FitResult,
+                          exposure_ev: float) -> None:
+    """A sample list's report, where a table's has its spheres: each sample fitted
+    against measured, and the fit's spheres under the three lights (the measured ones
+    would be mostly unmeasured bins)."""
+    from brdffit.view import sample_plot  # it draws with this module's helpers
+
+    top, bottom = fig.subfigures(2, 1, height_ratios=[5.0, 4.0])
+    shown, not_drawn = sample_plot.draw(top, measured, result)
+    held = result.error.get("held_out_log_rmse")
+    words = [f"each sample, fitted against measured: {shown:,} of {measured.n:,} drawn "
+             "(a random subset)" if shown < measured.n
+             else f"each of the {measured.n:,} samples, fitted against measured"]
+    if held is not None:
+        words.append(f"held-out log_rmse {held:.3g}")
+    if not_drawn:
+        words.append(f"{not_drawn:,} with a value <= 0 or below the horizon not drawn")
+    top.suptitle("; ".join(words) + "; the verdict judges the held-out samples", fontsize=11)
+    background = np.array(to_rgb(SPHERE_BACKGROUND))
+    size = 160
+    axes = bottom.subplots(1, len(SPHERE_LIGHTS))
+    for ax, (label, light) in zip(axes, SPHERE_LIGHTS, strict=True):
+        _, fitted, coverage, _ = sphere_images(table, result, light, size)
+        ax.imshow(_composite(fitted, coverage, background, exposure_ev),
+                  interpolation="bilinear")
+        ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False, lw=0.8,
+                            ec="0.65"))
+        ax.set_title(label.replace("\n", " "), fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    bottom.suptitle(f"the fit ({result.model}) rendered on a sphere"
+                    f"{_exposure_words(exposure_ev)}", fontsize=11)
 
 
 def summary_lines(result: FitResult) -> tuple[list[str], list[str]]:
@@ -844,21 +887,23 @@ RENDERERS: dict[str, Callable[[MerlTable, FitResult], bytes]] = {
 
 
 def render(kind: str, table: MerlTable, result: FitResult | dict,
-           exposure_ev: float = 0.0) -> bytes:
+           exposure_ev: float = 0.0, measured: Measurements | None = None) -> bytes:
     """The plot called ``kind`` (one of :data:`KINDS`) as PNG bytes; ``exposure_ev``
     (stops) for the kinds with sphere renders (``brdffit.view.kinds.EXPOSED_KINDS``), refused for
-    the others rather than ignored."""
+    the others rather than ignored. ``measured``: the sample list ``table`` was binned
+    from, which the report draws (:func:`report`)."""
     if kind not in RENDERERS:
         raise ValueError(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")
+    more = {"measured": measured} if kind == "report" and measured is not None else {}
     if exposure_ev:
         if (why := exposure_refused(kind, exposure_ev)) is not None:
             raise ValueError(why)
-        return RENDERERS[kind](table, as_result(result), exposure_ev=exposure_ev)
-    return RENDERERS[kind](table, as_result(result))
+        return RENDERERS[kind](table, as_result(result), exposure_ev=exposure_ev, **more)
+    return RENDERERS[kind](table, as_result(result), **more)
 
 
 def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.PathLike,
-             kinds=KINDS) -> list[str]:
+             kinds=KINDS, measured: Measurements | None = None) -> list[str]:
     """Write ``<directory>/<kind>.png`` for each kind; returns the paths.
 
     Each file is rendered first, then written beside its place and renamed over
@@ -870,7 +915,8 @@ def save_all(table: MerlTable, result: FitResult | dict, directory: str | os.Pat
     paths = []
     for kind in kinds:
         path = os.path.join(directory, f"{kind}.png")
-        atomic.write_bytes(path, render(kind, table, result), prefix=f".{kind}.")
+        atomic.write_bytes(path, render(kind, table, result, measured=measured),
+                           prefix=f".{kind}.")
         paths.append(path)
     if "spheres" in kinds and (ev := page_exposure_ev(table)) != 0.0:
         path = os.path.join(directory, JUDGED_SPHERES)  # its rows say where each was judged
@@ -1033,11 +1079,11 @@ def _png_with_footer(fig: Figure) -> bytes:
 
 
 def save_report(table: MerlTable, report, directory: str | os.PathLike,
-                kinds=KINDS) -> list[str]:
+                kinds=KINDS, measured: Measurements | None = None) -> list[str]:
     """The plots of a :class:`brdffit.request.FitReport`'s chosen fit
-    (:func:`save_all`), and for ``auto`` the ranking of every candidate
-    (``ranking.png``, :func:`ranking`)."""
-    paths = save_all(table, report.chosen_fit, directory, kinds)
+    (:func:`save_all`; ``measured``, the sample list ``table`` was binned from), and for
+    ``auto`` the ranking of every candidate (``ranking.png``, :func:`ranking`)."""
+    paths = save_all(table, report.chosen_fit, directory, kinds, measured=measured)
     selection = report.chosen_fit.selection
     if selection is not None:
         path = os.path.join(directory, "ranking.png")

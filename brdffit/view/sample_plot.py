@@ -42,6 +42,16 @@ RATIO_STOPS = 4.0
 def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     """The plot (PNG bytes) of ``result``, a fit of ``measured``, at every sample."""
     r = as_result(result)
+    fig = Figure(figsize=(17.5, 5.6), layout="constrained")
+    shown, not_drawn = draw(fig, measured, r)
+    fig.suptitle(_title(measured, r, shown, not_drawn), fontsize=10)
+    return png_bytes(fig)
+
+
+def draw(fig, measured: Measurements, r: FitResult) -> tuple[int, int]:
+    """The three panels into ``fig`` (a figure or a subfigure: the one-page report of a
+    sample list draws them in place of its spheres); returns how many samples are drawn
+    and how many of those have a value <= 0 or are below the horizon."""
     fitted = evaluate(r, measured.wi, measured.wo)  # NaN below the horizon
     shown = np.arange(measured.n)
     if measured.n > MAX_DRAWN:
@@ -50,9 +60,6 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     theta_h, theta_d, _ = dirs_to_half_diff(measured.wi[shown], measured.wo[shown])
     drawable = (meas > 0) & np.isfinite(fit) & (fit > 0)
 
-    fig = Figure(figsize=(17.5, 5.6), layout="constrained")
-    fig.suptitle(_title(measured, r, len(shown), int(np.count_nonzero(~drawable.all(1)))),
-                 fontsize=10)
     ax, right, hue = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1.35, 1.1]})
     # few samples drawn large, many small and faint: each still seen, the crowd's density too
     size, alpha = (14, 0.6) if len(shown) <= 2000 else (5, 0.3)
@@ -106,7 +113,7 @@ def samples(measured: Measurements, result: FitResult | dict) -> bytes:
     hue.set_ylabel("channel's log2(fit / measured) less the luminance's")
     hue.set_title("colour: each channel's error beyond the brightness's", fontsize=9)
     hue.legend(loc="upper right", fontsize=8, markerscale=2)
-    return png_bytes(fig)
+    return len(shown), int(np.count_nonzero(~drawable.all(1)))
 
 
 def ok_full(lum_meas: np.ndarray, lum_fit: np.ndarray) -> np.ndarray:
