@@ -376,6 +376,43 @@ def test_a_sample_lists_report_draws_its_samples_and_the_fits_spheres(tmp_path, 
     # (the CLI's: test_a_sample_lists_samples_are_each_drawn)
 
 
+def test_a_sample_lists_polar_plot_draws_its_samples_in_their_plane_of_incidence():
+    """polar.png drew a sample list's binned table at 10, 30, 50 and 70 degrees, where
+    a gonioreflectometer's in-plane samples (the commonest layout) seldom fall: "few on
+    the plane of incidence". The samples in their plane are drawn at their own
+    incident angles, forward (> 0) or back towards the light (< 0); a view out of the
+    plane is not; an angle with too few samples is not drawn."""
+    from brdffit.io.measurements import Measurements
+    from brdffit.view.plots import IN_PLANE_MIN, in_plane_samples
+
+    theta_o = np.array([-60.0, -30.0, 0.0, 20.0, 40.0, 70.0])
+    n = theta_o.size
+    # the light at 30 degrees from azimuth 90; forward is azimuth 270
+    light = [30.0, 90.0]
+    views_at = [(abs(t), 270.0 if t >= 0 else 90.0) for t in theta_o]
+    rows = ([[*light, *v] for v in views_at]
+            + [[30.0, 90.0, 40.0, 200.0]]  # out of the plane: not drawn
+            + [[0.0, 0.0, 25.0, 123.0]] * 2  # an angle of two samples: too few
+            + [[60.0, 10.0, 45.0, 190.0]] * IN_PLANE_MIN)  # forward of a light at 60
+    a = np.radians(np.array(rows))
+    rgb = np.linspace(0.1, 1.0, len(rows))[:, None] * np.ones(3)
+    m = Measurements.from_angles(a[:, 0], a[:, 1], a[:, 2], a[:, 3], rgb)
+    found = in_plane_samples(m)
+    assert sorted(found) == [30.0, 60.0]
+    at, values = found[30.0]
+    np.testing.assert_allclose(np.degrees(at), theta_o, atol=1e-9)
+    np.testing.assert_allclose(values, rgb[:n])
+    np.testing.assert_allclose(np.degrees(found[60.0][0]), 45.0, atol=1e-9)
+    r = FitResult("lambert", {"kd": [0.3, 0.3, 0.3]}, {"log_rmse": 0.1}, True, "successful",
+                  1, 0.1, {}, input={"fitted_at": "samples", "samples": len(rows)})
+    from brdffit.fitting.samples import binned
+
+    fig = plots.polar_figure(binned(m)[0], r, measured=m)
+    assert "lie in their plane of incidence at these 2 incident angles" in fig._suptitle.get_text()
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert legend[:2] == ["θi = 30°", "θi = 60°"]
+
+
 @pytest.mark.slow  # two CLI fits with their plots: the full suite's
 def test_a_sample_lists_samples_are_each_drawn(tmp_path, monkeypatch):
     """samples.png: each sample's fitted value at its own directions against the

@@ -589,28 +589,85 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
 # -- polar --------------------------------------------------------------------------
 
 
+POLAR_THETA_I = (10.0, 30.0, 50.0, 70.0)
+
+
 def polar(
-    table: MerlTable, result: FitResult | dict, *, theta_i_deg=(10.0, 30.0, 50.0, 70.0)
+    table: MerlTable, result: FitResult | dict, *, theta_i_deg=POLAR_THETA_I,
+    measured: Measurements | None = None,
 ) -> bytes:
     """f_r in the plane of incidence, log radius, per incident angle: one half disc
     per channel (R, G, B) on one radial scale, so a colour misfit shows as curves
-    that fit in one channel and miss in another."""
-    return png_bytes(polar_figure(table, result, theta_i_deg=theta_i_deg))
+    that fit in one channel and miss in another. ``measured``: the sample list
+    ``result`` was fitted to, whose samples in the plane of incidence are drawn at
+    their own directions and incident angles (:func:`in_plane_samples`)."""
+    return png_bytes(polar_figure(table, result, theta_i_deg=theta_i_deg, measured=measured))
+
+
+#: How far (degrees) a sample's view may be from its plane of incidence and still be
+#: drawn in it, and the fewest samples at one incident angle that make a curve of dots.
+IN_PLANE_DEG = 1.0
+IN_PLANE_MIN = 3
+#: The most incident angles a polar plot draws (more, and its colours blur).
+POLAR_MOST = 6
+
+
+def in_plane_samples(measured: Measurements) -> dict[float, tuple[np.ndarray, np.ndarray]]:
+    """A sample list's samples in the plane of incidence (the view within
+    :data:`IN_PLANE_DEG` of it), by incident angle (degrees, to 0.1): each as
+    ``(theta_o, rgb)``, theta_o signed as the polar plot draws it (radians; > 0 on the
+    far side of the normal from the light, < 0 back towards it). At most
+    :data:`POLAR_MOST` angles of :data:`IN_PLANE_MIN` samples or more, the most
+    populous spread over the range; empty where there are none."""
+    wi, wo = np.asarray(measured.wi, float), np.asarray(measured.wo, float)
+    theta_i = np.degrees(np.arccos(np.clip(wi[:, 2], -1.0, 1.0)))
+    # the plane's forward direction along the surface: away from the light, or along
+    # the view where the light is on the normal (any plane holds it)
+    across = -wi[:, :2]
+    norm = np.linalg.norm(across, axis=1)
+    overhead = norm < 1e-6
+    across[overhead] = wo[overhead, :2]
+    norm = np.linalg.norm(across, axis=1)
+    u = across / np.where(norm > 0, norm, 1.0)[:, None]
+    along = np.sum(wo[:, :2] * u, axis=1)
+    off = np.abs(wo[:, 0] * u[:, 1] - wo[:, 1] * u[:, 0])  # the view's part out of the plane
+    flat = (off <= np.sin(np.radians(IN_PLANE_DEG))) & (wo[:, 2] > 0)
+    groups: dict[float, np.ndarray] = {}
+    keys = np.round(theta_i[flat], 1)
+    idx = np.flatnonzero(flat)
+    for key in np.unique(keys):
+        members = idx[keys == key]
+        if members.size >= IN_PLANE_MIN:
+            groups[float(key)] = members
+    if len(groups) > POLAR_MOST:
+        ordered = sorted(groups)
+        keep = {ordered[int(round(k))] for k in np.linspace(0, len(ordered) - 1, POLAR_MOST)}
+        groups = {k: v for k, v in groups.items() if k in keep}
+    return {k: (np.arctan2(along[v], wo[v, 2]), np.asarray(measured.rgb[v], float))
+            for k, v in sorted(groups.items())}
 
 
 def polar_figure(table: MerlTable, result: FitResult | dict, *,
-                 theta_i_deg=(10.0, 30.0, 50.0, 70.0)) -> Figure:
+                 theta_i_deg=POLAR_THETA_I, measured: Measurements | None = None) -> Figure:
     """:func:`polar`'s figure."""
     result = as_result(result)
+    samples = (in_plane_samples(measured) if measured is not None and _on_samples(result)
+               else {})
+    if samples:
+        theta_i_deg = tuple(samples)
     theta_o = np.radians(np.linspace(-89.0, 89.0, 357))
     theta_i = np.radians(np.asarray(theta_i_deg, dtype=float))[:, None]
     wi = np.stack(np.broadcast_arrays(-np.sin(theta_i), 0.0, np.cos(theta_i) + 0 * theta_o), -1)
     wo = np.broadcast_to(
         np.stack([np.sin(theta_o), np.zeros_like(theta_o), np.cos(theta_o)], axis=-1), wi.shape
     )
-    measured = table.lookup(wi, wo)  # (n_theta_i, n_theta_o, 3)
+    if samples:  # the samples themselves, each at its own directions
+        dots = [samples[k] for k in theta_i_deg]
+    else:  # the table's bins along the plane
+        looked_up = table.lookup(wi, wo)  # (n_theta_i, n_theta_o, 3)
+        dots = [(theta_o, looked_up[k]) for k in range(len(theta_i_deg))]
     fitted = evaluate(result, wi, wo)
-    values = np.concatenate([measured.ravel(), fitted.ravel()])
+    values = np.concatenate([*(rgb.ravel() for _, rgb in dots), fitted.ravel()])
     values = values[np.isfinite(values) & (values > 0)]
     top = np.ceil(np.log10(values.max())) if values.size else 1.0
     bottom = max(np.floor(np.log10(values.min())) if values.size else -3.0, top - 5)
@@ -632,8 +689,9 @@ def polar_figure(table: MerlTable, result: FitResult | dict, *,
         ax.set_thetamin(-90)
         ax.set_thetamax(90)
         for k, (ti, colour) in enumerate(zip(theta_i_deg, colours, strict=True)):
-            ax.plot(theta_o, radius(measured[k, :, c]), "o", ms=2.2, color=colour, alpha=0.5,
-                    mec="none")
+            at, rgb = dots[k]
+            ax.plot(at, radius(rgb[:, c]), "o", ms=4.0 if samples else 2.2, color=colour,
+                    alpha=0.8 if samples else 0.5, mec="none")
             ax.plot(theta_o, radius(fitted[k, :, c]), "-", lw=1.4, color=colour,
                     label=f"θi = {ti:g}°")
             ax.plot([-np.radians(ti)] * 2, [0, top - bottom], ls=":", lw=1, color=colour)
@@ -658,9 +716,15 @@ def polar_figure(table: MerlTable, result: FitResult | dict, *,
     )
     fig.text(0.85, 0.06, "radius: f_r (1/sr, log),\none scale for R, G, B\nθo < 0: back "
              "towards\nthe light; > 0: forward", fontsize=9, va="bottom")
+    if samples:
+        n_flat = sum(len(at) for at, _ in samples.values())
+        note = (f"\na sample list: {n_flat:,} of its {measured.n:,} samples lie in their plane "
+                f"of incidence at these {len(samples)} incident angles, each drawn at its "
+                "own directions")
+    else:
+        note = _few_samples(table, result, "the plane of incidence")
     fig.suptitle(f"{_title(table, result)}  |  BRDF in the plane of incidence, per channel"
-                 f"{_few_samples(table, result, 'the plane of incidence')}",
-                 fontsize=12)
+                 f"{note}", fontsize=12)
     return fig
 
 
@@ -894,7 +958,8 @@ def render(kind: str, table: MerlTable, result: FitResult | dict,
     from, which the report draws (:func:`report`)."""
     if kind not in RENDERERS:
         raise ValueError(f"unknown plot kind {kind!r}; choose one of {', '.join(KINDS)}")
-    more = {"measured": measured} if kind == "report" and measured is not None else {}
+    more = ({"measured": measured} if kind in ("report", "polar") and measured is not None
+            else {})
     if exposure_ev:
         if (why := exposure_refused(kind, exposure_ev)) is not None:
             raise ValueError(why)
