@@ -294,7 +294,7 @@ def _run(table: MerlTable | Measurements, request: FitRequest, progress: ModelPr
         return FitReport(request=request, fits=dict(sel.fits), failed=failed,
                          chosen=sel.chosen, reason=sel.reason, ranking=sel.ranking,
                          selection=sel)
-    from brdffit.fitting.scene import fit_in_scene
+    from brdffit.fitting.pipeline import fit_in_scene
     from brdffit.models.base import sharing_where_it_pays
 
     fits: dict[str, FitResult] = {}

@@ -59,7 +59,7 @@ from brdffit.fitting.quality import (
     with_measured_gains,
 )
 from brdffit.fitting.result import FitResult
-from brdffit.fitting.scene import Scene, as_scene, fit_in_scene
+from brdffit.fitting.scene import Scene, as_scene
 from brdffit.io.merl import MerlTable
 
 # The modules that compute with JAX (the problem, the sphere renders, the grey-ks
@@ -781,6 +781,14 @@ def _failed(e: BaseException) -> Future:
     f = Future()
     f.set_exception(e)
     return f
+
+
+def fit_in_scene(table, model, scene, **fit_options) -> FitResult:
+    """``brdffit.fitting.pipeline.fit_in_scene``, imported at the first fit: the request
+    module imports this one, and a client imports the request module, without JAX."""
+    from brdffit.fitting.pipeline import fit_in_scene as fit_on_the_scene
+
+    return fit_on_the_scene(table, model, scene, **fit_options)
 
 
 def _fit_converged(table, m, scene, fits: dict, fit_options: dict) -> FitResult:

@@ -347,6 +347,7 @@ def test_a_sample_lists_plots_say_what_they_can_show(ggx, tmp_path):
     assert plots._few_samples(t, table_fit, "these slices") == ""
 
 
+@pytest.mark.slow  # a fit and two report pages: ~8 s, the full suite's
 def test_a_sample_lists_report_draws_its_samples_and_the_fits_spheres(tmp_path, monkeypatch):
     """report.png of a sample list's fit: its spheres were mostly checkered (the samples
     fill few bins); each sample fitted against measured, and the fit's own spheres, are

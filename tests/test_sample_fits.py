@@ -215,7 +215,8 @@ def test_a_list_in_percent_and_rows_given_twice_are_noted():
 
 
 def test_a_scene_weights_samples_and_reports_every_sample_beside():
-    from brdffit.fitting.scene import Scene, fit_in_scene
+    from brdffit.fitting.pipeline import fit_in_scene
+    from brdffit.fitting.scene import Scene
 
     meas, _ = sample_model("ggx", None, "uniform", 3000, noise=0.02, seed=4)
     scene = Scene.from_options(None, max_theta=40.0)

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from brdffit import cli
+from brdffit.fitting.pipeline import fit_in_scene
 from brdffit.fitting.sampling import bin_weights
 from brdffit.fitting.scene import (
     WHOLE_SPHERE_WORDS,
     Scene,
     SceneError,
-    fit_in_scene,
     full_table_error,
     read_pairs,
 )

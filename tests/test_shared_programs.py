@@ -114,7 +114,7 @@ def test_only_members_fitted_together_share():
 
 def test_a_request_for_several_members_fits_them_on_shared_programs(monkeypatch):
     from brdffit import request as request_module
-    from brdffit.fitting import scene as scene_module
+    from brdffit.fitting import pipeline as scene_module
     from data_synth.synth import make_table
 
     fitted = []

@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -65,8 +65,10 @@ from brdffit.fitting.problem import (
     score_starts,
     takes_steps_as_data,
 )
+from brdffit.fitting.quality import of_the_whole_sphere
 from brdffit.fitting.result import FitResult
 from brdffit.fitting.sampling import DEFAULT_SAMPLES
+from brdffit.fitting.scene import WHOLE_SPHERE_WORDS, Scene, as_scene, full_table_error
 from brdffit.fitting.solve import SCOUT_STEPS, Outcome, Solve
 from brdffit.fitting.solver import loss_floor
 from brdffit.fitting.starts import candidates as start_vectors
@@ -74,9 +76,6 @@ from brdffit.fitting.uncertainty import parameter_uncertainty
 from brdffit.io.angles import N_BINS
 from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
-
-if TYPE_CHECKING:
-    from brdffit.fitting.scene import Scene
 
 
 @runtime.in_float64
@@ -135,7 +134,7 @@ def fit(
             and to reflectances <= 1; ``FitResult.physical`` reports what that cost
             (``brdffit.fitting.physical``).
         scene: weight the fit towards the directions a scene uses
-            (``brdffit.fitting.scene.fit_in_scene``): a ``Scene``, its JSON form (a
+            (:func:`fit_in_scene`): a ``Scene``, its JSON form (a
             dict), a preset's name (``brdffit.fitting.scene.PRESETS``) or a scene
             file's path. The result's ``error`` is then on the scene's bins, its
             ``full_table_error`` on every bin. Not with ``bin_weight``.
@@ -170,13 +169,37 @@ def fit(
 
 
 def _fit_in_scene(table, model, scene, bin_weight, **fit_options) -> FitResult:
-    # imported here: the scene module fits through this one
-    from brdffit.fitting.scene import as_scene, fit_in_scene
-
     if bin_weight is not None:
         raise FitInputError("give a scene or a bin_weight, not both: a scene's weights are "
                             "its own (Scene.bin_weight())")
     return fit_in_scene(table, model, as_scene(scene), **fit_options)
+
+
+@runtime.in_float64
+def fit_in_scene(table, model, scene: Scene | None, **fit_options) -> FitResult:
+    """``fit`` with the scene's bin weights; the full-table error goes beside the scene's.
+
+    The result's ``error`` is on the scene (the loss and the reported error use the
+    same weights); ``scene`` describes the scene and ``full_table_error`` holds the
+    same metrics on the whole table (or every sample of a list), so the trade is
+    visible. Without a scene this is plain :func:`fit`.
+    """
+    if scene is None:
+        return fit(table, model, **fit_options)
+    result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
+    look = result.quality
+    if of_the_whole_sphere(look):
+        # the verdict renders every direction (one figure across losses and scenes);
+        # "visible" on a scene fit read as if of the scene's directions
+        look = {**look, "reason": f"{look['reason']}; {WHOLE_SPHERE_WORDS}"}
+    if isinstance(table, MerlTable):
+        whole = full_table_error(table, model, result.params)
+    else:  # a sample list: every sample, without the scene's weights
+        from brdffit.fitting.samples import sample_error
+
+        whole = sample_error(table, model, result.params)
+    return dataclasses.replace(result, scene=scene.to_dict(), full_table_error=whole,
+                               quality=look)
 
 
 class Solved(NamedTuple):

@@ -34,7 +34,6 @@ at or below the horizon are dropped and counted in :attr:`Scene.dropped_pairs`.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import json
 import math
@@ -45,10 +44,8 @@ import numpy as np
 
 from brdffit import runtime
 from brdffit.errors import FitInputError
-from brdffit.fitting.quality import of_the_whole_sphere
 from brdffit.io.angles import dirs_to_half_diff, flat_index, half_diff_to_bins
 from brdffit.io.grid import bin_grid
-from brdffit.io.merl import MerlTable
 
 #: Named scenes: keyword arguments of :class:`Scene`.
 PRESETS: dict[str, dict] = {
@@ -526,35 +523,6 @@ def full_table_error(table, model, params: dict) -> dict[str, float]:
     from brdffit.fitting.problem import table_error
 
     return table_error(table, model, params)
-
-
-@runtime.in_float64
-def fit_in_scene(table, model, scene: Scene | None, **fit_options):
-    """``fit`` with the scene's bin weights; the full-table error goes beside the scene's.
-
-    The result's ``error`` is on the scene (the loss and the reported error use the
-    same weights); ``scene`` describes the scene and
-    ``full_table_error`` holds the same metrics on the whole table, so the
-    trade is visible. Without a scene this is plain ``fit``.
-    """
-    from brdffit.fitting.pipeline import fit
-
-    if scene is None:
-        return fit(table, model, **fit_options)
-    result = fit(table, model, bin_weight=scene.bin_weight(), **fit_options)
-    look = result.quality
-    if of_the_whole_sphere(look):
-        # the verdict renders every direction (one figure across losses and scenes);
-        # "visible" on a scene fit read as if of the scene's directions
-        look = {**look, "reason": f"{look['reason']}; {WHOLE_SPHERE_WORDS}"}
-    if isinstance(table, MerlTable):
-        whole = full_table_error(table, model, result.params)
-    else:  # a sample list: every sample, without the scene's weights
-        from brdffit.fitting.samples import sample_error
-
-        whole = sample_error(table, model, result.params)
-    return dataclasses.replace(result, scene=scene.to_dict(), full_table_error=whole,
-                               quality=look)
 
 
 #: What a scene fit's verdict of a sphere says of itself (``quality.of_the_whole_sphere``).

@@ -27,11 +27,9 @@ import textwrap
 import warnings
 from collections.abc import Callable
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
-from brdffit import extras, models, runtime
+from brdffit import extras
 
 try:
     from matplotlib.colors import LogNorm, to_rgb
@@ -65,48 +63,18 @@ from brdffit.io.angles import (
 from brdffit.io.grid import bin_grid
 from brdffit.io.measurements import Measurements
 from brdffit.io.merl import MerlTable
+from brdffit.view.drawing import (
+    CHANNELS,
+    DPI,
+    LUMINANCE,
+    NO_DATA,
+    as_result,
+    evaluate,
+    png_bytes,
+    source_name,
+    sqrt_degree_axis,
+)
 from brdffit.view.kinds import EXPOSURE_EV_RANGE, KINDS, check_exposure_ev, exposure_refused
-
-CHANNELS = (("R", "#d62728"), ("G", "#2ca02c"), ("B", "#1f77b4"))
-#: Rec. 709 luminance weights, for the one-curve-per-angle plots.
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-NO_DATA = "#b0b0b0"
-DPI = 110
-
-
-# -- shared pieces ------------------------------------------------------------------
-
-
-def as_result(result: FitResult | dict) -> FitResult:
-    return result if isinstance(result, FitResult) else FitResult.from_dict(result)
-
-
-@eqx.filter_jit
-def _model_values(model, params, wi, wo):
-    return model(params, wi, wo)
-
-
-@runtime.in_float64
-def evaluate(result: FitResult | dict, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """The fitted model at direction pairs (..., 3) -> f_r (..., 3); NaN below the horizon.
-
-    Compiled once per (model, batch shape): each plot calls it with fixed shapes
-    (all bins above the horizon, all pixels), whatever the table's mask.
-    """
-    r = as_result(result)
-    model = models.get(r.model)
-    params = {k: jnp.asarray(v) for k, v in r.param_arrays().items()}
-    f = np.asarray(_model_values(model, params, jnp.asarray(wi), jnp.asarray(wo)),
-                   dtype=np.float64)
-    above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    return np.where(above[..., None], f, np.nan)
-
-
-def source_name(source: str) -> str:
-    """A measured file's name as a plot's title shows it. The name is the uploader's
-    text: matplotlib would parse "$...$" in it as math, and fail on an unbalanced one.
-    An escaped dollar is a literal dollar."""
-    return (os.path.basename(source) or source).replace("$", r"\$")
 
 
 def _title(table: MerlTable, result: FitResult) -> str:
@@ -138,25 +106,6 @@ def _few_samples(table: MerlTable, result: FitResult, what: str) -> str:
             f"of the grid's bins, few on {what}; the samples plot shows each of them, and the "
             "verdict judges the held-out samples")
     return "\n" + "\n".join(textwrap.wrap(note, 100))
-
-
-def png_bytes(fig: Figure) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, facecolor="white")
-    return buf.getvalue()
-
-
-def sqrt_degree_axis(ax, axis: str = "x", ticks=(0, 1, 5, 10, 20, 40, 60, 90)) -> None:
-    """Square-root degree axis: the table's theta_h spacing."""
-    functions = (lambda d: np.sqrt(np.maximum(d, 0.0)), lambda s: np.square(s))
-    if axis == "x":
-        ax.set_xscale("function", functions=functions)
-        ax.set_xlim(0, 90)
-        ax.set_xticks(ticks)
-    else:
-        ax.set_yscale("function", functions=functions)
-        ax.set_ylim(0, 90)
-        ax.set_yticks(ticks)
 
 
 def _theta_h_edges_deg() -> np.ndarray:
@@ -780,7 +729,7 @@ def _draw_samples_and_fit(fig, table: MerlTable, measured: Measurements, result:
     """A sample list's report, where a table's has its spheres: each sample fitted
     against measured, and the fit's spheres under the three lights (the measured ones
     would be mostly unmeasured bins)."""
-    from brdffit.view import sample_plot  # it draws with this module's helpers
+    from brdffit.view import sample_plot
 
     top, bottom = fig.subfigures(2, 1, height_ratios=[5.0, 4.0])
     shown, not_drawn = sample_plot.draw(top, measured, result)

@@ -21,8 +21,7 @@ from matplotlib.figure import Figure
 from brdffit.fitting.result import FitResult
 from brdffit.io.angles import dirs_to_half_diff
 from brdffit.io.measurements import Measurements
-
-from .plots import (
+from brdffit.view.drawing import (
     CHANNELS,
     LUMINANCE,
     as_result,
