@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from tests.api_fixtures import Server
-from tests.cli_helpers import run
+from tests.cli_helpers import run, run_main
 
 pytestmark = pytest.mark.system
 
@@ -95,7 +95,7 @@ def test_the_model_is_listed_with_its_parameters(plugin_path):
     assert info["minnaert"]["parent"] == "lambert"
     assert "lambert" in info and "ggx" in info  # the built-ins are still there
     # without the package the name is unknown, with the choices listed
-    r = run("brdffit.cli", "fit", "nowhere.binary", "--model", "minnaert")
+    r = run_main("brdffit.cli", "fit", "nowhere.binary", "--model", "minnaert")
     assert r.returncode == 2 and "unknown model 'minnaert'" in r.stderr
 
 

@@ -172,5 +172,5 @@ def test_warmup_keeps_the_fits_for_the_next_process(tmp_path, monkeypatch):
     assert again.returncode == 0, again.stderr
     assert " 0 compiled" in again.stderr, again.stderr
     assert "(all loaded from the cache: nothing to compile)" in again.stderr, again.stderr
-    bad = run("brdffit.cli", "warmup", "--models", "no_such_model")
+    bad = run_main("brdffit.cli", "warmup", "--models", "no_such_model")  # refused first
     assert bad.returncode == 2 and "no_such_model" in bad.stderr

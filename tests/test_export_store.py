@@ -13,7 +13,7 @@ import pytest
 from brdffit import merl, models
 from brdffit.batch.exports import export_from_store
 from brdffit.batch.job import run_batch
-from brdffit.batch.store import BatchFileError, read_fit, read_results
+from brdffit.batch.store import BatchFileError, read_fit, read_results, table_name
 from brdffit.export import ExportError, export
 from brdffit.fitting.result import FitResult
 from brdffit.io.grid import bin_grid
@@ -65,9 +65,12 @@ def test_two_tables_of_one_file_name_export_to_files_of_their_own(store):
 def test_a_stored_fit_exports_as_the_fit_itself(store):
     root, out = store
     want = export(_stored(out, "gold", "ggx"), "gltf")
-    for table in ("gold", str(root / "a" / "gold.binary")):
-        got = export_from_store(out, table, "gltf", model="ggx")
-        assert got.to_dict() == want.to_dict()
+    got = export_from_store(out, "gold", "gltf", model="ggx")
+    assert got.to_dict() == want.to_dict()
+    # by its path: the same fit, and the same name (what export_from_store exports)
+    by_path = str(root / "a" / "gold.binary")
+    assert read_fit(out, by_path, "ggx") == _stored(out, "gold", "ggx").to_dict()
+    assert table_name(out, by_path) == "gold"
     assert read_fit(out, "gold~2", "lambert") == _stored(out, "gold~2", "lambert").to_dict()
 
 

@@ -178,10 +178,11 @@ def test_a_layer_worse_than_its_base_on_the_table_is_put_back_at_the_base():
     assert back.error["log_rmse"] == pytest.approx(base.error["log_rmse"], rel=1e-3)
 
 
-@pytest.mark.slow  # a fit and the glTF validator: ~8-10 s; the quick tier keeps the formulas
+@pytest.mark.slow  # the glTF validator: the quick tier keeps the formulas
 def test_a_coated_fit_exports_to_gltf_as_the_extension(gltf_validator):  # noqa: F811
     table, _ = make_table("gltf_clearcoat", COATED)
-    r = fit(table, "gltf_clearcoat", samples=4096)
+    # the truth as the fit (a coat is recovered by the tests above): the export is checked
+    r = FitResult("gltf_clearcoat", COATED, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
     e = export(r, "gltf", table=table)
     report = check.gltf_validate(e.material, gltf_validator)  # the Khronos validator
     assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0, report
@@ -443,7 +444,8 @@ def test_a_layered_fit_exports_to_materialx_with_its_layer(model, params, layere
     refitted as standard_surface_coat or _sheen (the layer kept, no layer warning),
     closer to the fit than the plain node, which says the layer was lost."""
     table, _ = make_table(model, params)
-    r = fit(table, model, samples=4096)
+    # the truth as the fit (the layers are recovered by the tests above)
+    r = FitResult(model, params, {"log_rmse": 0.01}, True, "successful", 5, 0.1, {})
     e = export(r, "materialx", table=table)
     assert e.fidelity["target_model"] == layered
     assert e.target_params[weight] > 0.2

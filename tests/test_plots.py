@@ -106,6 +106,7 @@ def test_cli_fit_writes_plots(tmp_path, capsys):
     for kind in plots.KINDS:
         assert f"{kind}.png" in captured.err
         assert_sane_png((out / f"{kind}.png").read_bytes())
+    assert not (out / "samples.png").exists()  # a sample list's alone
 
 
 # -- what the pictures must show (issue 13) ---------------------------------------------
@@ -446,12 +447,7 @@ def test_a_sample_lists_samples_are_each_drawn(tmp_path, monkeypatch):
     zeroed = dataclasses.replace(samples, rgb=np.where(np.arange(samples.n)[:, None] < 7,
                                                        0.0, samples.rgb))
     assert sample_plot.samples(zeroed, r)[:8] == b"\x89PNG\r\n\x1a\n"
-    table_out = tmp_path / "table_plots"
-    t = tmp_path / "t.binary"
-    merl.write(t, table("ggx"))
-    assert cli_main(["fit", str(t), "--model", "lambert", "--samples", "2048", "--plots",
-                     str(table_out)]) == 0
-    assert not (table_out / "samples.png").exists()
+    # (a table's plots have no samples.png: test_cli_fit_writes_plots)
 
 
 def test_the_ranking_draws_the_psnr_its_rule_ranked_by():
