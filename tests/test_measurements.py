@@ -686,6 +686,54 @@ def test_a_unit_in_brackets_or_after_a_space_is_the_columns_unit(tmp_path, heade
     np.testing.assert_array_equal(got.rgb, plain.rgb)
 
 
+def test_samples_given_by_their_half_and_difference_angles(tmp_path):
+    """A list indexed as the MERL table is (theta_h, theta_d, phi_d; phi_h 0 where
+    absent): with phi_h, the same directions as the list of its four angles; without,
+    the same half and difference angles (an isotropic list turned about the normal).
+    It was "no column for theta_i, ...". Units as a direction's angles take them; two
+    of the three are a refusal naming what is missing; the result says how it was read."""
+    from brdffit.io.angles import dirs_to_half_diff
+    from brdffit.io.readers import input_summary
+
+    plain = read_measured(_write_all(tmp_path, _samples(60))["csv"])
+    theta_h, theta_d, phi_d = dirs_to_half_diff(plain.wi, plain.wo)
+    h = plain.wi + plain.wo
+    phi_h = np.arctan2(h[:, 1], h[:, 0])
+
+    def write(name, header, columns):
+        rows = np.column_stack([*columns, plain.rgb])
+        (tmp_path / name).write_text(
+            "\n".join([header, *(",".join(map(repr, map(float, r))) for r in rows)]) + "\n")
+        return tmp_path / name
+
+    turned = read_measured(write("hd.csv", "theta_h_deg,theta_d_deg,phi_d_deg,r,g,b",
+                                 [np.degrees(a) for a in (theta_h, theta_d, phi_d)]))
+    np.testing.assert_allclose(turned.rgb, plain.rgb)
+    for got, want in zip(dirs_to_half_diff(turned.wi, turned.wo), (theta_h, theta_d, phi_d),
+                         strict=True):
+        np.testing.assert_allclose(got, want, atol=1e-9)
+    assert input_summary(turned)["half_diff"] == ["theta_h_deg", "theta_d_deg", "phi_d_deg"]
+    same = read_measured(write("hd4.csv", "theta_h [rad],theta_d [rad],phi_d [rad],"
+                               "phi_h [rad],r,g,b", [theta_h, theta_d, phi_d, phi_h]))
+    np.testing.assert_allclose(same.wi, plain.wi, atol=1e-9)
+    np.testing.assert_allclose(same.wo, plain.wo, atol=1e-9)
+    with pytest.raises(MeasurementsError, match="or theta_h, theta_d and phi_d .the half and "
+                                                "difference angles.: the file has phi_d, "
+                                                "theta_h of them"):
+        read_measured(write("two.csv", "theta_h_deg,phi_d_deg,r,g,b",
+                            [np.degrees(theta_h), np.degrees(phi_d)]))
+    with pytest.raises(MeasurementsError, match="'theta_d' has no unit"):
+        read_measured(write("unitless.csv", "theta_h_deg,theta_d,phi_d_deg,r,g,b",
+                            [np.degrees(a) for a in (theta_h, theta_d, phi_d)]))
+    with h5py.File(tmp_path / "hd.h5", "w") as f:  # datasets: not read, and said so
+        for name, a in (("theta_h", theta_h), ("theta_d", theta_d), ("phi_d", phi_d)):
+            f[f"{name}_rad"] = a
+        f["rgb"] = plain.rgb
+    with pytest.raises(MeasurementsError, match="half and difference angles are read from a "
+                                                "CSV's or a workbook's columns"):
+        read_measured(tmp_path / "hd.h5")
+
+
 def test_an_angle_in_words_is_one_word_of_which_and_one_of_whose():
     """An angle named in words needs both: which angle (theta, zenith, phi, azimuth)
     and whose (incident, light; view, outgoing, detector). Rusinkiewicz's theta_h,

@@ -269,6 +269,8 @@ def run(args) -> int:
         from brdffit.fitting.samples import binned
 
         comma = ", decimal commas" if measured.provenance.get("decimal_comma") else ""
+        if half := measured.provenance.get("half_diff"):
+            comma += f", directions from their half and difference angles ({', '.join(half)})"
         if empty := measured.provenance.get("empty_rows"):
             comma += f", {empty:,} row{'s' if empty != 1 else ''} of empty cells skipped"
         if long := measured.provenance.get("long_layout"):

@@ -355,6 +355,31 @@ def _angle_in_words(name: str) -> str | None:
     return f"{kinds[0]}_{sides[0]}" + (f"_{unit}" if unit else "")
 
 
+#: Rusinkiewicz's half and difference angles: a sample list may give its directions by
+#: them, as the MERL table is indexed (phi_h 0 where it is absent: the material is
+#: isotropic, and every model here is).
+HALF_DIFF = ("theta_h", "theta_d", "phi_d", "phi_h")
+
+
+def half_diff_name(name: str) -> re.Match | None:
+    """A half or difference angle's column name read (``theta_h_deg``, ``Phi_d [rad]``,
+    ``theta_d (°)``): groups the angle and its unit, if any; None for any other."""
+    return re.fullmatch(r"(theta_h|theta_d|phi_d|phi_h)(?:_(deg|rad|degrees?|radians?))?",
+                        unit_suffixed(value_name(name.strip().lower())))
+
+
+def directions_from_half_diff(theta_h, theta_d, phi_d, phi_h=None) -> list[np.ndarray]:
+    """``[theta_i, phi_i, theta_o, phi_o]`` (radians) of half and difference angles
+    (radians; ``brdffit.io.angles.half_diff_to_dirs``, the table's own mapping)."""
+    from brdffit.io.angles import half_diff_to_dirs
+
+    wi, wo = half_diff_to_dirs(theta_h, theta_d, phi_d, 0.0 if phi_h is None else phi_h)
+    out = []
+    for w in (wi, wo):
+        out += [np.arccos(np.clip(w[..., 2], -1.0, 1.0)), np.arctan2(w[..., 1], w[..., 0])]
+    return out
+
+
 def an_angle_unit(unit: str | None) -> bool:
     """Whether ``unit`` is an angle's (:func:`unit_scale` reads it)."""
     try:

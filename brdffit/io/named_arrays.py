@@ -42,6 +42,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    half_diff_name,
     long_column_kind,
     polar_unit_checked,
     stated_unit,
@@ -599,10 +600,14 @@ def _declared_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
         structs = [k for k in f.keys() if isinstance(d := _opened(f, k), h5py.Group)
                    and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source)
                    == "struct"]
+        half = [k for k in f.keys() if half_diff_name(k) is not None]
         raise MeasurementsError(
             source, f"no dataset {', '.join(missing)} (the file has "
                     f"{', '.join(f.keys()) or 'none'})"
             + (f": a {kind} file, not a sample list" if isinstance(kind, str) else "")
+            + (f"; {', '.join(half)}: half and difference angles are read from a CSV's or "
+               "a workbook's columns, not from datasets: store the directions' angles"
+               if half else "")
             + (f"; {structs[0]} is a MATLAB struct: save its fields as variables, "
                f"save('file.mat', '-struct', '{structs[0]}')" if structs else ""))
     if (why := too_many_samples(_declared_samples(f, [named[a][0] for a in ANGLES]))):

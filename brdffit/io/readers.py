@@ -203,6 +203,8 @@ def input_summary(samples: Measurements, binning=None) -> dict:
         out["decimal_comma"] = True
     if samples.provenance.get("empty_rows"):  # rows of empty cells among the data, skipped
         out["empty_rows"] = samples.provenance["empty_rows"]
+    if "half_diff" in samples.provenance:  # directions given by their half/difference angles
+        out["half_diff"] = samples.provenance["half_diff"]
     if "long_layout" in samples.provenance:  # one row per (direction, channel), pivoted
         out["long_layout"] = samples.provenance["long_layout"]
     if "sheet" in samples.provenance:  # an Excel workbook's: which sheet, of how many

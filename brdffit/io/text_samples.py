@@ -23,6 +23,7 @@ from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
     CHANNELS,
+    HALF_DIFF,
     IRRADIANCE,
     ONE_CHANNEL,
     POLARISED_WHY,
@@ -35,6 +36,8 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    directions_from_half_diff,
+    half_diff_name,
     long_column_kind,
     polar_unit_checked,
     stated_unit,
@@ -88,12 +91,21 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
         out[canonical] = (k, unit_scale(unit, source))
         out.setdefault("names", {})[canonical] = names[k].strip()[:40]
     missing = [a for a in ANGLES if a not in out]
+    half = _half_diff_columns(seen, names, default_unit, source) if not out else {}
+    if len(missing) == len(ANGLES) and {"theta_h", "theta_d", "phi_d"} <= set(half):
+        out["half_diff"] = half
+        out["half_diff_names"] = [names[k].strip()[:40] for k, _ in half.values()]
+        out["names"] = {a: f"{a} (of {', '.join(out['half_diff_names'])})" for a in ANGLES}
+        missing = []
     if missing:
         # in-plane data often leaves the azimuths out, and which side a signed theta is
         # on differs between instruments: asked for, not guessed
         in_plane = ("; in-plane samples still need them: phi_i 0 and phi_o 180 on the "
                     "side opposite the light (the specular side), 0 on the light's side"
                     if set(missing) <= {"phi_i", "phi_o"} else "")
+        if half:  # some of the half and difference angles, not all three
+            in_plane = (f"; or theta_h, theta_d and phi_d (the half and difference angles): "
+                        f"the file has {', '.join(sorted(half))} of them")
         listed = ", ".join(n.strip() for n in names)
         listed = listed if len(listed) <= 200 else f"{listed[:200]}... ({len(names)} columns)"
         raise MeasurementsError(source, f"no column for {', '.join(missing)} (the header has "
@@ -225,6 +237,37 @@ def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> 
                     f"from columns sigma_r, sigma_g, sigma_b (or one sigma): {SIGMA_IS}")
 
 
+def _half_diff_columns(seen: dict[str, int], names: list[str], default_unit: str | None,
+                       source: str) -> dict[str, tuple[int, float]]:
+    """The half and difference angles' columns (``theta_h``, ``theta_d``, ``phi_d``,
+    optional ``phi_h``: :data:`~brdffit.io.columns.HALF_DIFF`) -> (index, radians per
+    unit), refused as a direction's angle column is where one has no unit or two give
+    one angle; empty where there are none."""
+    found: dict[str, tuple[int, float]] = {}
+    for name, k in seen.items():
+        if (m := half_diff_name(name)) is None:
+            continue
+        if m[1] in found:
+            raise MeasurementsError(source, f"two columns give {m[1]} "
+                                            f"({names[found[m[1]][0]].strip()!r} and "
+                                            f"{names[k].strip()!r})")
+        unit = m[2] or default_unit
+        if unit is None:
+            raise MeasurementsError(
+                source, f"column {names[k].strip()!r} has no unit: name it {m[1]}_deg or "
+                        f"{m[1]}_rad, or put '# angles: degrees' (or radians) before the header")
+        found[m[1]] = (k, unit_scale(unit, source))
+    return {h: found[h] for h in HALF_DIFF if h in found}
+
+
+def angle_columns(cols: dict) -> list[int]:
+    """The columns that hold a sample's directions: its four angles, or its half and
+    difference angles."""
+    if "half_diff" in cols:
+        return [k for k, _ in cols["half_diff"].values()]
+    return [cols[a][0] for a in ANGLES]
+
+
 def _sigma_columns(seen: dict[str, int], source: str, rgb: bool) -> list[int] | None:
     """The sigma columns' indices: none, one ``sigma`` for every channel, or (RGB
     values) ``sigma_r, sigma_g, sigma_b``. Any other mix is refused: a fit without the
@@ -248,8 +291,15 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     """The samples of the data rows (``rows`` as numbers, ``row_numbers`` their lines);
     ``lines`` and ``delimiter``: the rows as text, where a long layout's channel column
     is read from its cells."""
-    raw = [rows[:, cols[a][0]] for a in ANGLES]
-    scales = [cols[a][1] for a in ANGLES]
+    if "half_diff" in cols:  # the directions, in radians, of the half and difference angles
+        half = {h: rows[:, k] * scale for h, (k, scale) in cols["half_diff"].items()}
+        raw = directions_from_half_diff(half["theta_h"], half["theta_d"], half["phi_d"],
+                                        half.get("phi_h"))
+        scales = [1.0] * len(ANGLES)
+        provenance["half_diff"] = cols["half_diff_names"]
+    else:
+        raw = [rows[:, cols[a][0]] for a in ANGLES]
+        scales = [cols[a][1] for a in ANGLES]
     values = rows[:, cols["values"]]
     sigma = None if cols["sigma"] is None else rows[:, cols["sigma"]]
     wavelengths = cols.get("wavelengths")
@@ -520,6 +570,8 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
     """Refuses an ASTM file whose angles are degrees (the standard's are radians), said
     as that, with the file's own column names: it read "phi_o is beyond +-720 degrees"
     of a file whose phi_s held 295, or "theta_i is below the horizon" of 30."""
+    if "half_diff" in cols:  # no direction's polar angle to judge the unit by
+        return
     theta = [rows[:, cols[a][0]] for a in ("theta_i", "theta_o")]
     phi = [rows[:, cols[a][0]] for a in ("phi_i", "phi_o")]
     if not rows.size or not all(np.all(np.isfinite(a)) for a in (*theta, *phi)):
@@ -693,6 +745,8 @@ def _names_angles(text: str) -> bool:
     for line in lines:
         found = {ANGLE_ALIASES[f"{m[1]}_{m[2]}"] for cell in line.split("\t")
                  if (m := angle_name(cell.strip('" '))) is not None}
+        found |= {m[1] for cell in line.split("\t")
+                  if (m := half_diff_name(cell.strip('" '))) is not None}
         if len(found) >= 2:
             return True
     return False
@@ -773,7 +827,7 @@ def _csv_samples(text: str, source: str, delimiter: str | None = None,
         _header_below(lines, source)
         raise
     # only the columns read are numbers: a column of sample names or notes is left
-    used = sorted({cols[a][0] for a in ANGLES} | set(cols["values"]) | set(cols["sigma"] or ())
+    used = sorted(set(angle_columns(cols)) | set(cols["values"]) | set(cols["sigma"] or ())
                   | ({cols["long"][0]} if cols.get("long", (0, ""))[1] == "wavelength" else set()))
     comma = _decimal_comma(lines[1:], delimiter, used, source)
     rows, numbers = _numbers(lines[1:], split_at, len(names), source, comma=comma, used=used)
