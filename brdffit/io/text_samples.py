@@ -73,23 +73,9 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     _unread_uncertainty(seen, names, source)
     _unread_irradiance(seen, names, source)
     out: dict = {}
-    for name, k in seen.items():
-        m = angle_name(name)
-        if m is None:
-            continue
-        canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
-        if canonical in out:
-            raise MeasurementsError(source, f"two columns give {canonical} "
-                                            f"({names[out[canonical][0]].strip()!r} and "
-                                            f"{names[k].strip()!r})")
-        unit = m[3] or default_unit
-        if unit is None:
-            raise MeasurementsError(
-                source, f"column {names[k].strip()!r} has no unit: name it {canonical}_deg or "
-                        f"{canonical}_rad, or put '# angles: degrees' (or radians) before "
-                        "the header")
-        out[canonical] = (k, unit_scale(unit, source))
-        out.setdefault("names", {})[canonical] = names[k].strip()[:40]
+    out.update(_named_angles(seen, names, default_unit, source, _direction_angle))
+    if any(a in out for a in ANGLES):
+        out["names"] = {a: names[out[a][0]].strip()[:40] for a in ANGLES if a in out}
     missing = [a for a in ANGLES if a not in out]
     half = _half_diff_columns(seen, names, default_unit, source) if not out else {}
     if len(missing) == len(ANGLES) and {"theta_h", "theta_d", "phi_d"} <= set(half):
@@ -237,26 +223,46 @@ def _unread_uncertainty(seen: dict[str, int], names: list[str], source: str) -> 
                     f"from columns sigma_r, sigma_g, sigma_b (or one sigma): {SIGMA_IS}")
 
 
+def _direction_angle(name: str) -> tuple[str, str | None] | None:
+    m = angle_name(name)
+    return None if m is None else (ANGLE_ALIASES[f"{m[1]}_{m[2]}"], m[3])
+
+
+def _half_diff_angle(name: str) -> tuple[str, str | None] | None:
+    m = half_diff_name(name)
+    return None if m is None else (m[1], m[2])
+
+
+def _named_angles(seen: dict[str, int], names: list[str], default_unit: str | None,
+                  source: str, read) -> dict[str, tuple[int, float]]:
+    """The angle columns ``read`` knows (a lower-case name -> the angle it gives and the
+    unit its name says, or None) -> (index, radians per unit), refused where one has no
+    unit or two give one angle."""
+    found: dict[str, tuple[int, float]] = {}
+    for name, k in seen.items():
+        if (known := read(name)) is None:
+            continue
+        angle, unit = known
+        if angle in found:
+            raise MeasurementsError(source, f"two columns give {angle} "
+                                            f"({names[found[angle][0]].strip()!r} and "
+                                            f"{names[k].strip()!r})")
+        unit = unit or default_unit
+        if unit is None:
+            raise MeasurementsError(
+                source, f"column {names[k].strip()!r} has no unit: name it {angle}_deg or "
+                        f"{angle}_rad, or put '# angles: degrees' (or radians) before the "
+                        "header")
+        found[angle] = (k, unit_scale(unit, source))
+    return found
+
+
 def _half_diff_columns(seen: dict[str, int], names: list[str], default_unit: str | None,
                        source: str) -> dict[str, tuple[int, float]]:
     """The half and difference angles' columns (``theta_h``, ``theta_d``, ``phi_d``,
-    optional ``phi_h``: :data:`~brdffit.io.columns.HALF_DIFF`) -> (index, radians per
-    unit), refused as a direction's angle column is where one has no unit or two give
-    one angle; empty where there are none."""
-    found: dict[str, tuple[int, float]] = {}
-    for name, k in seen.items():
-        if (m := half_diff_name(name)) is None:
-            continue
-        if m[1] in found:
-            raise MeasurementsError(source, f"two columns give {m[1]} "
-                                            f"({names[found[m[1]][0]].strip()!r} and "
-                                            f"{names[k].strip()!r})")
-        unit = m[2] or default_unit
-        if unit is None:
-            raise MeasurementsError(
-                source, f"column {names[k].strip()!r} has no unit: name it {m[1]}_deg or "
-                        f"{m[1]}_rad, or put '# angles: degrees' (or radians) before the header")
-        found[m[1]] = (k, unit_scale(unit, source))
+    optional ``phi_h``: :data:`~brdffit.io.columns.HALF_DIFF`), in that order; empty
+    where there are none."""
+    found = _named_angles(seen, names, default_unit, source, _half_diff_angle)
     return {h: found[h] for h in HALF_DIFF if h in found}
 
 
