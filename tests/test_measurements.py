@@ -725,6 +725,11 @@ def test_samples_given_by_their_half_and_difference_angles(tmp_path):
     with pytest.raises(MeasurementsError, match="'theta_d' has no unit"):
         read_measured(write("unitless.csv", "theta_h_deg,theta_d,phi_d_deg,r,g,b",
                             [np.degrees(a) for a in (theta_h, theta_d, phi_d)]))
+    # radians under a degrees header are refused as a direction's angles are (they put
+    # every direction within 1.5 degrees of the normal, unsaid)
+    with pytest.raises(MeasurementsError, match="said to be in degrees"):
+        read_measured(write("radians.csv", "theta_h_deg,theta_d_deg,phi_d_deg,r,g,b",
+                            [theta_h, theta_d, phi_d]))
     with h5py.File(tmp_path / "hd.h5", "w") as f:  # datasets: not read, and said so
         for name, a in (("theta_h", theta_h), ("theta_d", theta_d), ("phi_d", phi_d)):
             f[f"{name}_rad"] = a
@@ -749,10 +754,25 @@ def test_an_angle_in_words_is_one_word_of_which_and_one_of_whose():
     assert read("outgoing polar angle (°)") == ("theta", "o", "deg")
     assert read("theta of incidence") == ("theta", "i", None)
     assert read("phi (light)") == ("phi", "i", None)
+    assert read("Incident light theta (deg)") == ("theta", "i", "deg")  # two words, one side
+    assert read("Theta (in degrees)") is None  # "in" is no light's
     for other in ("theta_h", "theta_d", "phi_d", "zenith", "incident", "elevation incident",
                   "theta incident view", "theta phi incident", "theta deg rad incident",
                   "incident theta spread", "BRDF R", "red"):
         assert read(other) is None, other
+
+
+def test_brdf_named_channels_beside_the_irradiance_are_read(tmp_path):
+    """``BRDF R`` (read as r) still names a BRDF: the lab's irradiance column beside it
+    is its record, not a sign of radiances (it was refused as one)."""
+    s = _samples(20)
+    plain = read_measured(_write_all(tmp_path, s)["csv"])
+    lines = (tmp_path / "s.csv").read_text().splitlines()
+    other = tmp_path / "irradiance.csv"
+    other.write_text("\n".join([lines[0].replace(",r,g,b", ",BRDF R,BRDF G,BRDF B")
+                                 + ",irradiance", *(f"{line},100" for line in lines[1:])])
+                     + "\n")
+    np.testing.assert_array_equal(read_measured(other).rgb, plain.rgb)
 
 
 @pytest.mark.parametrize("units", ["deg,deg,deg,deg,1/sr,1/sr,1/sr",
@@ -1951,6 +1971,17 @@ def test_merged_header_cells_are_read_as_the_header_they_show(tmp_path):
     # merged among the numbers: no header of them (the row is read, and refused, as is)
     with pytest.raises(MeasurementsError, match=r"\b(row|line) 3\b"):
         read_measured(book("body.xlsx", [names], ["E3:G3"]))
+    # a sample's name merged down its rows (a column not read): read as without the merge
+    named = book("named.xlsx", [["sample", *names]], ["A2:A11"],
+                 body=[["S1" if k == 0 else None, *r] for k, r in enumerate(rows)])
+    np.testing.assert_allclose(read_measured(named).rgb, wide.rgb, rtol=1e-15)
+    # a group over some columns alone is a group, not a title; a units row under the
+    # header stays the units row
+    lone = book("lone.xlsx", [["Incident", None, None, None, None, None, None],
+                              ["theta", "phi", "theta_o", "phi_o", "r", "g", "b"],
+                              ["deg", "deg", "deg", "deg", "1/sr", "1/sr", "1/sr"]], ["A1:B1"])
+    m = read_measured(lone)
+    np.testing.assert_allclose(m.wi, wide.wi, rtol=0, atol=1e-15)
 
 
 def test_a_hidden_sheet_is_read_after_the_visible_ones_and_said(tmp_path):

@@ -399,6 +399,11 @@ def test_a_sample_lists_polar_plot_draws_its_samples_in_their_plane_of_incidence
     a = np.radians(np.array(rows))
     rgb = np.linspace(0.1, 1.0, len(rows))[:, None] * np.ones(3)
     m = Measurements.from_angles(a[:, 0], a[:, 1], a[:, 2], a[:, 3], rgb)
+    # a light a hair off the normal is on it: every view is in a plane with it, forward
+    near = np.radians(np.array([[0.05, 90.0, 30.0, az] for az in (0.0, 70.0, 200.0)]))
+    overhead = in_plane_samples(Measurements.from_angles(*near.T, np.full((3, 3), 0.2)))
+    assert list(overhead) == [0.0]
+    np.testing.assert_allclose(np.degrees(overhead[0.0][0]), 30.0, atol=1e-9)
     found = in_plane_samples(m)
     assert sorted(found) == [30.0, 60.0]
     at, values = found[30.0]

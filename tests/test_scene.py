@@ -325,6 +325,9 @@ def test_the_front_door_fits_in_a_scene(fresnel_table, tmp_path):
             call(fresnel_table, scene=3)
     with pytest.raises(SceneError):
         fit(fresnel_table, "blinn_phong", scene=str(tmp_path / "missing.json"), **FAST)
+    with pytest.raises(SceneError, match="unknown scene preset 'camera_normal'; choose one "
+                                         "of camera-normal"):
+        fit(fresnel_table, "blinn_phong", scene="camera_normal", **FAST)
 
 
 def test_cli_auto_with_a_scene(fresnel_table, tmp_path, capsys):

@@ -508,6 +508,10 @@ def as_scene(scene) -> Scene:
     scene file's path. Raises :class:`SceneError` for anything else."""
     if isinstance(scene, str) and scene in PRESETS:
         return Scene.preset(scene)
+    if (isinstance(scene, str) and not os.path.splitext(scene)[1]
+            and not os.path.exists(scene)):  # no file, and named as no file is
+        raise SceneError(f"unknown scene preset {scene!r}; choose one of "
+                         f"{', '.join(PRESETS)} (or a scene file: .json, .npy, .csv)")
     if not isinstance(scene, Scene | dict | str | os.PathLike):
         raise SceneError("a scene is a brdffit.fitting.scene.Scene, its JSON form (a dict), "
                          f"a preset's name ({', '.join(PRESETS)}) or a scene file's path, "

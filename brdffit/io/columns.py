@@ -318,7 +318,8 @@ _ANGLE_KIND_WORDS = {"theta": "theta", "θ": "theta", "zenith": "theta", "polar"
 #: Words that name whose direction: the light's or the view's. Not ``d`` or ``h``:
 #: theta_d and theta_h are Rusinkiewicz's difference and half angles, not directions.
 _ANGLE_SIDE_WORDS = {
-    **dict.fromkeys(("i", "in", "inc", "incident", "incidence", "incoming", "illumination",
+    # not "in" (theta_in is read above, by name): "theta (in degrees)" is no light's
+    **dict.fromkeys(("i", "inc", "incident", "incidence", "incoming", "illumination",
                      "illum", "light", "lighting", "source", "src", "l"), "i"),
     **dict.fromkeys(("o", "out", "outgoing", "r", "refl", "reflected", "reflection", "v",
                      "view", "viewing", "viewer", "s", "scatter", "scattered", "scattering",
@@ -350,7 +351,7 @@ def _angle_in_words(name: str) -> str | None:
     sides = [_ANGLE_SIDE_WORDS[w] for w in words if w in _ANGLE_SIDE_WORDS]
     rest = [w for w in words if w not in _ANGLE_KIND_WORDS and w not in _ANGLE_SIDE_WORDS
             and w not in _ANGLE_FILLER]
-    if len(kinds) != 1 or len(sides) != 1 or rest:
+    if len(set(kinds)) != 1 or len(set(sides)) != 1 or rest:  # "incident light theta": one
         return None
     return f"{kinds[0]}_{sides[0]}" + (f"_{unit}" if unit else "")
 

@@ -201,7 +201,9 @@ def _unread_irradiance(seen: dict[str, int], names: list[str], source: str) -> N
     """Refuses a column of :data:`IRRADIANCE` (the light on the sample): the values
     beside it are radiances, which were fitted as a BRDF with the irradiance unsaid.
     Beside values named a BRDF (``brdf``, ``brdf_r``) it is the lab's record, not read."""
-    if any(name.startswith("brdf") for name in seen):
+    # the header's own words: BRDF R is read as r, and still names a BRDF
+    if any(names[k].strip().lower().startswith("brdf") or "brdf" in name
+           for name, k in seen.items()):
         return
     for name, k in seen.items():
         if IRRADIANCE.fullmatch(name):
@@ -298,7 +300,15 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     ``lines`` and ``delimiter``: the rows as text, where a long layout's channel column
     is read from its cells."""
     if "half_diff" in cols:  # the directions, in radians, of the half and difference angles
-        half = {h: rows[:, k] * scale for h, (k, scale) in cols["half_diff"].items()}
+        written = {h: (rows[:, k], scale) for h, (k, scale) in cols["half_diff"].items()}
+        # their units judged as written, as a direction's angles are: theta_h and theta_d
+        # are polar angles, phi_d and phi_h azimuths (radians said to be degrees put every
+        # direction within 1.5 degrees of the normal, unsaid)
+        flat = np.zeros(len(rows))
+        order = [written["theta_h"], written["phi_d"], written["theta_d"],
+                 written.get("phi_h", (flat, written["phi_d"][1]))]
+        polar_unit_checked([a for a, _ in order], [scale for _, scale in order], source)
+        half = {h: a * scale for h, (a, scale) in written.items()}
         raw = directions_from_half_diff(half["theta_h"], half["theta_d"], half["phi_d"],
                                         half.get("phi_h"))
         scales = [1.0] * len(ANGLES)
@@ -576,10 +586,14 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
     """Refuses an ASTM file whose angles are degrees (the standard's are radians), said
     as that, with the file's own column names: it read "phi_o is beyond +-720 degrees"
     of a file whose phi_s held 295, or "theta_i is below the horizon" of 30."""
-    if "half_diff" in cols:  # no direction's polar angle to judge the unit by
-        return
-    theta = [rows[:, cols[a][0]] for a in ("theta_i", "theta_o")]
-    phi = [rows[:, cols[a][0]] for a in ("phi_i", "phi_o")]
+    if "half_diff" in cols:  # theta_h and theta_d are its polar angles
+        index = {a: k for a, (k, _) in cols["half_diff"].items()}
+        polar, azimuth = ("theta_h", "theta_d"), ("phi_d", "phi_h")
+    else:
+        index = {a: cols[a][0] for a in ANGLES}
+        polar, azimuth = ("theta_i", "theta_o"), ("phi_i", "phi_o")
+    theta = [rows[:, index[a]] for a in polar]
+    phi = [rows[:, index[a]] for a in azimuth if a in index]
     if not rows.size or not all(np.all(np.isfinite(a)) for a in (*theta, *phi)):
         return
     top = max(float(np.max(np.abs(a))) for a in theta)
@@ -587,7 +601,7 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
         # radians (a polar angle past the horizon in radians is refused as such, row by
         # row), or angles of neither unit
         return
-    shown = ", ".join(names[cols[a][0]] for a in ANGLES)
+    shown = ", ".join(names[k] for k in index.values())
     raise MeasurementsError(source, f"an ASTM E1392 file's angles are radians, and {shown} "
                                     f"hold polar angles up to {top:.4g}: degrees? Convert "
                                     "them to radians (or write the list as a CSV, whose "

@@ -154,53 +154,67 @@ HEADER_ROWS = 20
 def _unmerged(rows: list[list[str]], merges) -> None:
     """The header of a sheet whose first rows hold merged cells, as one row a CSV
     reader reads (openpyxl's read-only sheets give a merged range's value in its first
-    cell alone, and the rest empty). In place, keeping each row's number:
+    cell alone, and the rest empty). In place, keeping each row's number; only ranges
+    above the first row that holds a number are read so:
 
-    - a row whose only content is one merged range across columns is a title
+    - a row whose only content is one range across every named column is a title
       (``Gonioreflectometer run 12``): made a comment (``# ...``);
     - a range across columns over a row of names (``incident (deg)`` over ``theta``
       and ``phi``; ``BRDF`` over ``R``, ``G``, ``B``) names each of its columns, and a
       range down rows (``theta_i`` over two rows) its column in each: the rows of
       such a header are read as one, its last, each column's names joined in order
       (``incident (deg) theta``, ``BRDF R``: ``brdffit.io.columns`` reads both), and
-      the rows above it are made comments. A range across columns over a row of
-      numbers is left as it is: it is no group of names."""
+      the rows above it are made comments. A row below it (a row of units) stays.
+
+    A range that reaches a row of numbers (a sample's name merged down its rows) is
+    left as it is, as is one with nothing under it to name."""
     def numeric(cells: list[str]) -> bool:
         return any(_a_number(c) for c in cells)
 
-    def filled(cells: list[str], c: int) -> bool:
-        return c < len(cells) and bool(cells[c].strip())
+    def named(cells: list[str]) -> list[int]:
+        return [c for c, v in enumerate(cells) if v.strip()]
 
-    header_rows: set[int] = set()
+    data = next((r for r, cells in enumerate(rows) if numeric(cells)), len(rows))
+    above = [r for r in range(data) if named(rows[r])]
+    if not above:
+        return
+    names = named(rows[above[-1]])  # the last row of names above the numbers
+    groups, block = [], set()
     for r1, c1, r2, c2 in merges:
-        if r1 >= len(rows) or not filled(rows[r1], c1):
+        if r2 >= data or c1 >= len(rows[r1]) or not rows[r1][c1].strip():
+            continue  # among the numbers, or empty
+        if (r1 == r2 and r1 < above[-1] and named(rows[r1]) == [c1]
+                and c1 <= names[0] and c2 >= names[-1]):
+            rows[r1] = [f"# {rows[r1][c1]}"]  # a title over every column
             continue
-        row = rows[r1]
-        if r1 == r2 and c2 > c1 and not any(filled(row, c) for c in range(len(row)) if c != c1):
-            rows[r1] = [f"# {row[c1]}"]  # a title
+        bottom = r2 if r2 > r1 else r1 + 1  # down: its own rows; across: the names under it
+        if bottom >= data:
+            continue  # nothing under it to name
+        groups.append((r1, c1, r2, c2))
+        block.update(range(r1, bottom + 1))
+    if not block:
+        return
+    first = last = min(block)
+    while last + 1 in block:  # one run of header rows (another, lower, is left alone)
+        last += 1
+    for r1, c1, r2, c2 in groups:
+        if not first <= r1 <= last:
             continue
-        if r2 == r1 and (r1 + 1 >= len(rows) or numeric(rows[r1 + 1]) or numeric(row)):
-            continue  # nothing under it to name, or not a header
-        value = row[c1]
-        for r in range(r1, min(r2, len(rows) - 1) + 1):
+        value = rows[r1][c1]
+        for r in range(r1, r2 + 1):
             rows[r].extend([""] * (c2 + 1 - len(rows[r])))
             for c in range(c1, c2 + 1):
-                rows[r][c] = value if r == r1 or not rows[r][c].strip() else rows[r][c]
-            header_rows.add(r)
-        if r2 == r1:
-            header_rows.add(r1 + 1)  # the names it is over
-    if not header_rows:
-        return
-    first, last = min(header_rows), max(header_rows)
+                if not rows[r][c].strip():
+                    rows[r][c] = value
     width = max(len(rows[r]) for r in range(first, last + 1))
     joined = []
     for c in range(width):
-        names: list[str] = []
+        column: list[str] = []
         for r in range(first, last + 1):
             cell = rows[r][c].strip() if c < len(rows[r]) else ""
-            if cell and cell not in names:
-                names.append(cell)
-        joined.append(" ".join(names))
+            if cell and cell not in column:
+                column.append(cell)
+        joined.append(" ".join(column))
     for r in range(first, last):
         rows[r] = [f"# {' '.join(c for c in rows[r] if c.strip())}"]
     rows[last] = joined

@@ -559,6 +559,8 @@ IN_PLANE_DEG = 1.0
 IN_PLANE_MIN = 3
 #: The most incident angles a polar plot draws (more, and its colours blur).
 POLAR_MOST = 6
+#: A light this close to the normal (degrees) is on it, for the plane of incidence.
+OVERHEAD_DEG = 0.1
 
 
 def in_plane_samples(measured: Measurements) -> dict[float, tuple[np.ndarray, np.ndarray]]:
@@ -566,16 +568,19 @@ def in_plane_samples(measured: Measurements) -> dict[float, tuple[np.ndarray, np
     :data:`IN_PLANE_DEG` of it), by incident angle (degrees, to 0.1): each as
     ``(theta_o, rgb)``, theta_o signed as the polar plot draws it (radians; > 0 on the
     far side of the normal from the light, < 0 back towards it). At most
-    :data:`POLAR_MOST` angles of :data:`IN_PLANE_MIN` samples or more, the most
-    populous spread over the range; empty where there are none."""
+    :data:`POLAR_MOST` angles of :data:`IN_PLANE_MIN` samples or more, spread evenly
+    over their range; empty where there are none. A light within
+    :data:`OVERHEAD_DEG` of the normal is on it: every view is in a plane with it, drawn
+    forward."""
     wi, wo = np.asarray(measured.wi, float), np.asarray(measured.wo, float)
     theta_i = np.degrees(np.arccos(np.clip(wi[:, 2], -1.0, 1.0)))
     # the plane's forward direction along the surface: away from the light, or along
     # the view where the light is on the normal (any plane holds it)
     across = -wi[:, :2]
     norm = np.linalg.norm(across, axis=1)
-    overhead = norm < 1e-6
+    overhead = norm < np.sin(np.radians(OVERHEAD_DEG))  # its azimuth says nothing there
     across[overhead] = wo[overhead, :2]
+    theta_i[overhead] = 0.0  # one group, however near the normal each is
     norm = np.linalg.norm(across, axis=1)
     u = across / np.where(norm > 0, norm, 1.0)[:, None]
     along = np.sum(wo[:, :2] * u, axis=1)
