@@ -730,13 +730,26 @@ def test_samples_given_by_their_half_and_difference_angles(tmp_path):
     with pytest.raises(MeasurementsError, match="said to be in degrees"):
         read_measured(write("radians.csv", "theta_h_deg,theta_d_deg,phi_d_deg,r,g,b",
                             [theta_h, theta_d, phi_d]))
-    with h5py.File(tmp_path / "hd.h5", "w") as f:  # datasets: not read, and said so
+    # datasets by those names (HDF5, and .npz alike), their unit in the name or an attribute
+    with h5py.File(tmp_path / "hd.h5", "w") as f:
         for name, a in (("theta_h", theta_h), ("theta_d", theta_d), ("phi_d", phi_d)):
             f[f"{name}_rad"] = a
+        f["phi_h"] = phi_h
+        f["phi_h"].attrs["units"] = "radians"
         f["rgb"] = plain.rgb
-    with pytest.raises(MeasurementsError, match="half and difference angles are read from a "
-                                                "CSV's or a workbook's columns"):
-        read_measured(tmp_path / "hd.h5")
+    stored = read_measured(tmp_path / "hd.h5")
+    np.testing.assert_allclose(stored.wi, plain.wi, atol=1e-9)
+    np.testing.assert_allclose(stored.wo, plain.wo, atol=1e-9)
+    assert input_summary(stored)["half_diff"] == ["theta_h_rad", "theta_d_rad", "phi_d_rad",
+                                                  "phi_h"]
+    np.savez(tmp_path / "hd.npz", theta_h_deg=np.degrees(theta_h),
+             theta_d_deg=np.degrees(theta_d), phi_d_deg=np.degrees(phi_d), rgb=plain.rgb)
+    np.testing.assert_allclose(read_measured(tmp_path / "hd.npz").rgb, plain.rgb)
+    with h5py.File(tmp_path / "two.h5", "w") as f:
+        f["theta_h_rad"], f["phi_d_rad"], f["rgb"] = theta_h, phi_d, plain.rgb
+    with pytest.raises(MeasurementsError, match="or theta_h, theta_d and phi_d .the half and "
+                                                "difference angles.: it has theta_h, phi_d"):
+        read_measured(tmp_path / "two.h5")
 
 
 def test_an_angle_in_words_is_one_word_of_which_and_one_of_whose():

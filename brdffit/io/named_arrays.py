@@ -29,6 +29,7 @@ from brdffit.io.columns import (
     ANGLES,
     CHANNEL_WORDS,
     CHANNELS,
+    HALF_DIFF,
     IRRADIANCE,
     ONE_CHANNEL,
     PER_STERADIAN,
@@ -42,6 +43,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
+    directions_from_half_diff,
     half_diff_name,
     long_column_kind,
     polar_unit_checked,
@@ -72,15 +74,28 @@ def _hdf5_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
     one angle are refused."""
     named: dict[str, tuple[str, str | None]] = {}
     for key in f.keys():
-        m = angle_name(key)
-        if m is None:
+        if (m := angle_name(key)) is not None:
+            canonical, unit = ANGLE_ALIASES[f"{m[1]}_{m[2]}"], m[3]
+        elif (m := half_diff_name(key)) is not None:  # theta_h, theta_d, phi_d, phi_h
+            canonical, unit = m[1], m[2]
+        else:
             continue
-        canonical = ANGLE_ALIASES[f"{m[1]}_{m[2]}"]
         if canonical in named:
             raise MeasurementsError(source, f"two datasets give {canonical} "
                                             f"({named[canonical][0]!r} and {key!r})")
-        named[canonical] = (key, m[3])
+        named[canonical] = (key, unit)
     return named
+
+
+def direction_keys(named: dict) -> tuple[str, ...] | None:
+    """Which of ``named``'s angles give the samples' directions: the four angles, or
+    else the half and difference angles (theta_h, theta_d, phi_d, and phi_h where
+    given); None where neither is whole."""
+    if all(a in named for a in ANGLES):
+        return ANGLES
+    if all(a in named for a in HALF_DIFF[:3]):
+        return tuple(a for a in HALF_DIFF if a in named)
+    return None
 
 
 def _written_by_matlab(f, path) -> bool:
@@ -185,7 +200,8 @@ def _read_here(name: str) -> bool:
     their sigma, wavelengths, a long layout's channel): a file of named arrays reads
     only these."""
     key = name.strip().lower()
-    return (angle_name(name) is not None or long_column_kind(key) is not None
+    return (angle_name(name) is not None or half_diff_name(name) is not None
+            or long_column_kind(key) is not None
             or any(key in names for names in _VALUE_DATASETS.values()))
 
 
@@ -215,6 +231,12 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     named = _declared_angles(f, source)
     raw, scales = _raw_angles(f, named, source, matlab, file_format)
     provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
+    names = {a: named[a][0] for a in ANGLES if a in named}
+    if direction_keys(named) != ANGLES:  # the half and difference angles, as written
+        raw, scales = _directions_of(raw, scales, source)
+        given = [named[a][0] for a in direction_keys(named)]
+        provenance["half_diff"] = given
+        names = {a: f"{a} (of {', '.join(given)})" for a in ANGLES}
     v = _value_names(f, source)
     long = _long_dataset(f, v, source, len(raw[0]))
     channels = [v[c] for c in CHANNELS if c in v]
@@ -287,17 +309,29 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
             values.ndim == 1 or np.all(values == values[:, :1])):
         del provenance["channels"]  # said of grey values: these are coloured
     return Measurements.from_angles(*angles, values, sigma, source=source,
-                                    provenance=provenance,
-                                    names={a: named[a][0] for a in ANGLES})
+                                    provenance=provenance, names=names)
+
+
+def _directions_of(raw: list[np.ndarray], scales: list[float],
+                   source: str) -> tuple[list[np.ndarray], list[float]]:
+    """The four angles (radians, scales 1) of the half and difference angles as
+    written (theta_h, theta_d, phi_d[, phi_h]), their units judged first as a
+    direction's angles are (theta_h and theta_d polar angles, the others azimuths)."""
+    phi_h = (raw[3], scales[3]) if len(raw) > 3 else (np.zeros_like(raw[0]), scales[2])
+    polar_unit_checked([raw[0], raw[2], raw[1], phi_h[0]],
+                       [scales[0], scales[2], scales[1], phi_h[1]], source)
+    half = [a * scale for a, scale in zip(raw, scales, strict=True)]
+    return directions_from_half_diff(*half), [1.0] * len(ANGLES)
 
 
 def _raw_angles(f, named: dict, source: str, matlab: bool,
                 file_format: str) -> tuple[list[np.ndarray], list[float]]:
-    """The four angle datasets' numbers as stored (``named``: :func:`_declared_angles`),
+    """The angle datasets' numbers as stored (``named``: :func:`_declared_angles`; the
+    four angles, or the half and difference angles: :func:`direction_keys`),
     and the radians per unit of each, from its name or its ``units`` attribute (or the
     file's), which must agree where both say it."""
     raw, scales = [], []
-    for canonical in ANGLES:
+    for canonical in direction_keys(named):
         name, in_name = named[canonical]
         own, shared = _dataset(f, name, source).attrs.get("units"), f.attrs.get("units")
         if in_name is not None:
@@ -594,23 +628,23 @@ def _declared_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
 
     named = _hdf5_angles(f, source)
     missing = [a for a in ANGLES if a not in named]
-    if missing:
+    if direction_keys(named) is None:
         # a file that says what it is (a batch's results), or a MATLAB struct of them
         kind = _attr_text(f.attrs.get("format"), "format", source)
         structs = [k for k in f.keys() if isinstance(d := _opened(f, k), h5py.Group)
                    and _attr_text(d.attrs.get("MATLAB_class"), "MATLAB_class", source)
                    == "struct"]
-        half = [k for k in f.keys() if half_diff_name(k) is not None]
+        half = [a for a in HALF_DIFF[:3] if a in named]
         raise MeasurementsError(
             source, f"no dataset {', '.join(missing)} (the file has "
                     f"{', '.join(f.keys()) or 'none'})"
             + (f": a {kind} file, not a sample list" if isinstance(kind, str) else "")
-            + (f"; {', '.join(half)}: half and difference angles are read from a CSV's or "
-               "a workbook's columns, not from datasets: store the directions' angles"
-               if half else "")
+            + (f"; or theta_h, theta_d and phi_d (the half and difference angles): it has "
+               f"{', '.join(half)} of them" if half else "")
             + (f"; {structs[0]} is a MATLAB struct: save its fields as variables, "
                f"save('file.mat', '-struct', '{structs[0]}')" if structs else ""))
-    if (why := too_many_samples(_declared_samples(f, [named[a][0] for a in ANGLES]))):
+    if (why := too_many_samples(_declared_samples(
+            f, [named[a][0] for a in direction_keys(named)]))):
         raise MeasurementsError(source, f"its datasets declare {why}")
     return named
 
@@ -631,9 +665,9 @@ def declared_samples(path: str | os.PathLike, reader: Callable) -> int | None:
         with (declared(path, str(path), max_numbers=MAX_NUMBERS, wanted=_read_here,
                        values=False) if declared else h5py.File(path, "r")) as f:
             named = _hdf5_angles(f, str(path))
-            if any(a not in named for a in ANGLES):
+            if (keys := direction_keys(named)) is None:
                 return None
-            return _declared_samples(f, [named[a][0] for a in ANGLES])
+            return _declared_samples(f, [named[a][0] for a in keys])
     except (OSError, MeasurementsError):
         return None
 
