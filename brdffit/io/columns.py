@@ -369,16 +369,26 @@ def half_diff_name(name: str) -> re.Match | None:
                         unit_suffixed(value_name(name.strip().lower())))
 
 
-def directions_from_half_diff(theta_h, theta_d, phi_d, phi_h=None) -> list[np.ndarray]:
-    """``[theta_i, phi_i, theta_o, phi_o]`` (radians) of half and difference angles
-    (radians; ``brdffit.io.angles.half_diff_to_dirs``, the table's own mapping)."""
+def half_diff_as_directions(raw: list[np.ndarray], scales: list[float],
+                            source: str) -> tuple[list[np.ndarray], list[float]]:
+    """``[theta_i, phi_i, theta_o, phi_o]`` (radians; their scales 1) of half and
+    difference angles as written (``raw``: theta_h, theta_d, phi_d and optional phi_h,
+    :data:`HALF_DIFF`'s order; ``scales`` their radians per unit), by the table's own
+    mapping (``brdffit.io.angles.half_diff_to_dirs``). Their units are judged first as a
+    direction's are (:func:`polar_unit_checked`: theta_h and theta_d polar angles, the
+    others azimuths): radians under a degrees header put every direction within 1.5
+    degrees of the normal, unsaid."""
     from brdffit.io.angles import half_diff_to_dirs
 
-    wi, wo = half_diff_to_dirs(theta_h, theta_d, phi_d, 0.0 if phi_h is None else phi_h)
-    out = []
+    phi_h = (raw[3], scales[3]) if len(raw) > 3 else (np.zeros_like(raw[0]), scales[2])
+    polar_unit_checked([raw[0], raw[2], raw[1], phi_h[0]],
+                       [scales[0], scales[2], scales[1], phi_h[1]], source)
+    half = [a * scale for a, scale in zip(raw, scales, strict=True)]
+    wi, wo = half_diff_to_dirs(*half[:3], half[3] if len(half) > 3 else 0.0)
+    angles = []
     for w in (wi, wo):
-        out += [np.arccos(np.clip(w[..., 2], -1.0, 1.0)), np.arctan2(w[..., 1], w[..., 0])]
-    return out
+        angles += [np.arccos(np.clip(w[..., 2], -1.0, 1.0)), np.arctan2(w[..., 1], w[..., 0])]
+    return angles, [1.0] * len(ANGLES)
 
 
 def an_angle_unit(unit: str | None) -> bool:

@@ -43,7 +43,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
-    directions_from_half_diff,
+    half_diff_as_directions,
     half_diff_name,
     long_column_kind,
     polar_unit_checked,
@@ -233,7 +233,7 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
     names = {a: named[a][0] for a in ANGLES if a in named}
     if direction_keys(named) != ANGLES:  # the half and difference angles, as written
-        raw, scales = _directions_of(raw, scales, source)
+        raw, scales = half_diff_as_directions(raw, scales, source)
         given = [named[a][0] for a in direction_keys(named)]
         provenance["half_diff"] = given
         names = {a: f"{a} (of {', '.join(given)})" for a in ANGLES}
@@ -310,18 +310,6 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
         del provenance["channels"]  # said of grey values: these are coloured
     return Measurements.from_angles(*angles, values, sigma, source=source,
                                     provenance=provenance, names=names)
-
-
-def _directions_of(raw: list[np.ndarray], scales: list[float],
-                   source: str) -> tuple[list[np.ndarray], list[float]]:
-    """The four angles (radians, scales 1) of the half and difference angles as
-    written (theta_h, theta_d, phi_d[, phi_h]), their units judged first as a
-    direction's angles are (theta_h and theta_d polar angles, the others azimuths)."""
-    phi_h = (raw[3], scales[3]) if len(raw) > 3 else (np.zeros_like(raw[0]), scales[2])
-    polar_unit_checked([raw[0], raw[2], raw[1], phi_h[0]],
-                       [scales[0], scales[2], scales[1], phi_h[1]], source)
-    half = [a * scale for a, scale in zip(raw, scales, strict=True)]
-    return directions_from_half_diff(*half), [1.0] * len(ANGLES)
 
 
 def _raw_angles(f, named: dict, source: str, matlab: bool,

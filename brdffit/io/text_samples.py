@@ -36,7 +36,7 @@ from brdffit.io.columns import (
     angle_name,
     azimuths_within,
     cie_xyz,
-    directions_from_half_diff,
+    half_diff_as_directions,
     half_diff_name,
     long_column_kind,
     polar_unit_checked,
@@ -77,8 +77,9 @@ def _columns(names: list[str], source: str, default_unit: str | None) -> dict:
     if any(a in out for a in ANGLES):
         out["names"] = {a: names[out[a][0]].strip()[:40] for a in ANGLES if a in out}
     missing = [a for a in ANGLES if a not in out]
+    # the half and difference angles, where no direction's angle is named
     half = _half_diff_columns(seen, names, default_unit, source) if not out else {}
-    if len(missing) == len(ANGLES) and {"theta_h", "theta_d", "phi_d"} <= set(half):
+    if set(HALF_DIFF[:3]) <= set(half):
         out["half_diff"] = half
         out["half_diff_names"] = [names[k].strip()[:40] for k, _ in half.values()]
         out["names"] = {a: f"{a} (of {', '.join(out['half_diff_names'])})" for a in ANGLES}
@@ -300,18 +301,9 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     ``lines`` and ``delimiter``: the rows as text, where a long layout's channel column
     is read from its cells."""
     if "half_diff" in cols:  # the directions, in radians, of the half and difference angles
-        written = {h: (rows[:, k], scale) for h, (k, scale) in cols["half_diff"].items()}
-        # their units judged as written, as a direction's angles are: theta_h and theta_d
-        # are polar angles, phi_d and phi_h azimuths (radians said to be degrees put every
-        # direction within 1.5 degrees of the normal, unsaid)
-        flat = np.zeros(len(rows))
-        order = [written["theta_h"], written["phi_d"], written["theta_d"],
-                 written.get("phi_h", (flat, written["phi_d"][1]))]
-        polar_unit_checked([a for a, _ in order], [scale for _, scale in order], source)
-        half = {h: a * scale for h, (a, scale) in written.items()}
-        raw = directions_from_half_diff(half["theta_h"], half["theta_d"], half["phi_d"],
-                                        half.get("phi_h"))
-        scales = [1.0] * len(ANGLES)
+        half = cols["half_diff"].values()  # in HALF_DIFF's order
+        raw, scales = half_diff_as_directions([rows[:, k] for k, _ in half],
+                                              [scale for _, scale in half], source)
         provenance["half_diff"] = cols["half_diff_names"]
     else:
         raw = [rows[:, cols[a][0]] for a in ANGLES]

@@ -69,8 +69,10 @@ def sheet_texts(path: str | Path, source: str,
                       != "visible"}
             order = ([n for n in names if n not in hidden] + [n for n in names if n in hidden]
                      if sheet is None else [sheet])
+            parts = _sheet_parts(path)
             for name in order:
-                if lines := _lines(book[name], source, _merged_header_ranges(path, name)):
+                merges = _merged_header_ranges(path, parts.get(name))
+                if lines := _lines(book[name], source, merges):
                     yield name, "\n".join(lines) + "\n", len(names), name in hidden
                 elif sheet is not None:
                     raise MeasurementsError(source, f"sheet {sheet!r} holds no cells")
@@ -228,27 +230,40 @@ def _a_number(cell: str) -> bool:
     return True
 
 
-def _merged_header_ranges(path: str | Path, sheet: str) -> list[tuple[int, int, int, int]]:
-    """The merged ranges of ``sheet`` that begin in its first :data:`HEADER_ROWS` rows,
-    as 0-based (first row, first column, last row, last column): read from the sheet's
-    XML (its ``mergeCells``, after its rows), which openpyxl's read-only mode does not
-    read. None found, or a part that cannot be read, is an empty list: the sheet is then
-    read as it was."""
+def _sheet_parts(path: str | Path) -> dict[str, str]:
+    """Each sheet's name -> its XML part in the archive (through workbook.xml and its
+    relationships); empty where they cannot be read (its sheets are then read without
+    their merged cells)."""
     import xml.etree.ElementTree as ET
 
     rel = "{http://schemas.openxmlformats.org/officeDocument/2006/relationships}id"
     try:
         with zipfile.ZipFile(path) as z:
             book = ET.fromstring(z.read(WORKBOOK_PART))
-            rid = next((e.get(rel) for e in book.iter() if e.tag.endswith("}sheet")
-                        and e.get("name") == sheet), None)
             rels = ET.fromstring(z.read("xl/_rels/workbook.xml.rels"))
-            target = next((e.get("Target") for e in rels.iter() if e.get("Id") == rid), None)
-            if rid is None or target is None:
-                return []
-            part = target.lstrip("/") if target.startswith("/") else f"xl/{target}"
-            return _merge_refs(z, part)
     except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError, ValueError):
+        return {}
+    targets = {e.get("Id"): e.get("Target") for e in rels.iter() if e.get("Target")}
+    parts = {}
+    for e in book.iter():
+        if e.tag.endswith("}sheet") and (target := targets.get(e.get(rel))) is not None:
+            parts[e.get("name")] = (target.lstrip("/") if target.startswith("/")
+                                    else f"xl/{target}")
+    return parts
+
+
+def _merged_header_ranges(path: str | Path, part: str | None) -> list[tuple[int, int, int, int]]:
+    """The merged ranges of the sheet whose XML is ``part`` (:func:`_sheet_parts`) that
+    begin in its first :data:`HEADER_ROWS` rows, as 0-based (first row, first column,
+    last row, last column): read from its ``mergeCells``, after its rows, which
+    openpyxl's read-only mode does not read. None found, or a part that cannot be read,
+    is an empty list: the sheet is then read as it was."""
+    if part is None:
+        return []
+    try:
+        with zipfile.ZipFile(path) as z:
+            return _merge_refs(z, part)
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError):
         return []
 
 

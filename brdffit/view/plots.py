@@ -710,7 +710,8 @@ def report(table: MerlTable, result: FitResult | dict, *,
     fig = Figure(figsize=(14.0, 16.9 + head_in), layout="constrained")
     head, sph, sli, err = fig.subfigures(4, 1, height_ratios=[head_in, 9.0, 3.6, 4.2])
     _draw_summary(head, result, params, metrics)
-    if measured is not None and _on_samples(result):
+    of_samples = measured is not None and _on_samples(result)
+    if of_samples:
         _draw_samples_and_fit(sph, table, measured, result, exposure_ev)
     else:
         # smaller row labels: three lines of 10 pt ran into the next row's at this size
@@ -721,8 +722,7 @@ def report(table: MerlTable, result: FitResult | dict, *,
                      f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
     sli.suptitle("slices: fit (lines), and the few samples' bins on them (dots)"
-                 if measured is not None and _on_samples(result)
-                 else "slices: measured (dots), fit (lines)", fontsize=11)
+                 if of_samples else "slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
     err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
     fig.suptitle(_title(table, result), fontsize=14, fontweight="bold")
