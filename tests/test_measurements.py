@@ -745,6 +745,13 @@ def test_samples_given_by_their_half_and_difference_angles(tmp_path):
     np.savez(tmp_path / "hd.npz", theta_h_deg=np.degrees(theta_h),
              theta_d_deg=np.degrees(theta_d), phi_d_deg=np.degrees(phi_d), rgb=plain.rgb)
     np.testing.assert_allclose(read_measured(tmp_path / "hd.npz").rgb, plain.rgb)
+    with h5py.File(tmp_path / "stray.h5", "w") as f:  # a direction's angle beside them
+        for name, a in (("theta_h", theta_h), ("theta_d", theta_d), ("phi_d", phi_d),
+                        ("theta_i", theta_h)):
+            f[f"{name}_rad"] = a
+        f["rgb"] = plain.rgb
+    with pytest.raises(MeasurementsError, match="no dataset phi_i, theta_o, phi_o"):
+        read_measured(tmp_path / "stray.h5")  # as a CSV's columns: not read past it
     with h5py.File(tmp_path / "two.h5", "w") as f:
         f["theta_h_rad"], f["phi_d_rad"], f["rgb"] = theta_h, phi_d, plain.rgb
     with pytest.raises(MeasurementsError, match="or theta_h, theta_d and phi_d .the half and "

@@ -88,12 +88,13 @@ def _hdf5_angles(f, source: str) -> dict[str, tuple[str, str | None]]:
 
 
 def direction_keys(named: dict) -> tuple[str, ...] | None:
-    """Which of ``named``'s angles give the samples' directions: the four angles, or
-    else the half and difference angles (theta_h, theta_d, phi_d, and phi_h where
-    given); None where neither is whole."""
+    """Which of ``named``'s angles give the samples' directions: the four angles, or,
+    where none of them is named (as a CSV's columns are read), the half and difference
+    angles (theta_h, theta_d, phi_d, and phi_h where given); None where neither is
+    whole."""
     if all(a in named for a in ANGLES):
         return ANGLES
-    if all(a in named for a in HALF_DIFF[:3]):
+    if not any(a in named for a in ANGLES) and all(a in named for a in HALF_DIFF[:3]):
         return tuple(a for a in HALF_DIFF if a in named)
     return None
 
