@@ -93,13 +93,15 @@ class Estimate:
 
 
 def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
-    """The models a fit of ``names`` makes: a nested model fits its parent too (from
-    the catalogue: the service's front does not import JAX)."""
+    """The models a fit of ``names`` makes: a nested model fits its parent too, and
+    that one its own (ggx3, ggx2, ggx; from the catalogue: the service's front does
+    not import JAX)."""
     out: list[str] = []
     for name in names:
-        for m in (parents.get(name), name):
-            if m is not None and m not in out:
-                out.append(m)
+        chain = [name]
+        while parents.get(chain[-1]) is not None and parents[chain[-1]] not in chain:
+            chain.append(parents[chain[-1]])
+        out += [m for m in reversed(chain) if m not in out]
     return out
 
 

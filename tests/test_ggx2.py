@@ -1,4 +1,5 @@
-"""The models issue 6 adds: ggx2, the dielectric Fresnel option, grey-ks variants."""
+"""The models issue 6 adds: ggx2, the dielectric Fresnel option, grey-ks variants; and
+ggx3, ggx2 with a third lobe (issue 40)."""
 
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ from tests.compiled_models import check_jit, evaluate
 
 pytestmark = pytest.mark.unit
 
-NEW_MODELS = ("ggx2", "ggx_dielectric", "beckmann_dielectric", "ggx_mono", "ggx2_mono")
+NEW_MODELS = ("ggx2", "ggx_dielectric", "beckmann_dielectric", "ggx_mono", "ggx2_mono",
+              "ggx3")
 
 
 def _dirs(theta_i, theta_o, phi):
@@ -74,7 +76,7 @@ def test_ggx_and_beckmann_keep_their_contract():
 def test_registry_order_and_names():
     names = list(models.REGISTRY)
     assert names[:5] == ["lambert", "oren_nayar", "blinn_phong", "phong", "beckmann"]
-    assert names[-1] == "ggx2"
+    assert names[-2:] == ["ggx2", "ggx3"]
     assert {"ggx_dielectric", "beckmann_dielectric"} <= set(names)
     for name, m in models.REGISTRY.items():
         assert m.name == name
@@ -195,6 +197,55 @@ def test_ggx2_fit_recovers_two_lobes(ggx2_table):
     np.testing.assert_allclose(r.params["ks2"], truth["params"]["ks2"], rtol=1e-4)
 
 
+# -- ggx3 ---------------------------------------------------------------------------------
+
+GGX3_PARAMS = {"kd": [0.02, 0.015, 0.01], "ks1": [0.2, 0.15, 0.12], "alpha1": 0.01,
+               "ks2": [0.1, 0.1, 0.1], "alpha2": 0.06, "ks3": [0.05, 0.06, 0.08],
+               "alpha3": 0.4, "f0": 0.7}
+
+
+def test_ggx3_is_the_sum_of_three_ggx_lobes():
+    wi, wo = _random_pairs(2000)
+    p = GGX3_PARAMS
+    got = np.asarray(evaluate(models.get("ggx3"), p, wi, wo))
+    ref = _ggx_reference(p["kd"], p["ks1"], p["alpha1"], p["f0"], wi, wo)
+    for k, a in (("ks2", "alpha2"), ("ks3", "alpha3")):
+        ref = ref + _ggx_reference(0.0, p[k], p[a], p["f0"], wi, wo)
+    np.testing.assert_allclose(got, ref, rtol=1e-9)
+
+
+def test_ggx3_contains_ggx2():
+    """Its third lobe off, ggx3 is ggx2 to the last bit, and a fit of it starts from
+    ggx2's optimum with that lobe off (embed_parent) and on at each width it scans."""
+    m3, m2 = models.get("ggx3"), models.get("ggx2")
+    assert m3.parent == "ggx2" and not m3.auto_candidate
+    p2 = {k: v for k, v in GGX3_PARAMS.items() if k not in ("ks3", "alpha3")}
+    embedded = m3.embed_parent(p2)
+    assert np.all(embedded["ks3"] == 0) and embedded["alpha3"] == pytest.approx(0.01 / 3)
+    wi, wo = _random_pairs(500)
+    np.testing.assert_array_equal(np.asarray(evaluate(m3, embedded, wi, wo)),
+                                  np.asarray(evaluate(m2, p2, wi, wo)))
+    widths = [s["alpha3"] for s in m3.parent_scan]
+    assert min(widths) < 0.005 and max(widths) > 0.3  # sharper than a peak, as broad as a haze
+    assert all(s["alpha1"] * 3 <= s["alpha2"] and s["alpha2"] * 3 <= s["alpha3"]
+               for s in m3.shape_grid)
+
+
+def test_ggx3_fit_finds_the_third_lobe_from_ggx2():
+    """On a three-lobe table, ggx2 misses and ggx3 fitted from it ends at the truth."""
+    table, _ = make_table("ggx3", GGX3_PARAMS)
+    r2 = fit(table, "ggx2", samples=8192)
+    r3 = fit(table, "ggx3", samples=8192, parent_fit=r2)
+    assert r2.log_rmse > 1e-3
+    assert r3.converged, r3.result
+    assert r3.log_rmse < 1e-5
+    lobes = sorted((r3.params[a], k) for a, k in (("alpha1", "ks1"), ("alpha2", "ks2"),
+                                                   ("alpha3", "ks3")))
+    for (alpha, k), want in zip(lobes, ((0.01, "ks1"), (0.06, "ks2"), (0.4, "ks3")), strict=True):
+        assert alpha == pytest.approx(want[0], rel=1e-3)
+        np.testing.assert_allclose(r3.params[k], GGX3_PARAMS[want[1]], rtol=1e-3)
+
+
 def test_dielectric_fit_recovers_eta():
     table, truth = make_table("ggx_dielectric", {"eta": 1.7})
     r = fit(table, "ggx_dielectric", samples=8192, starts=1)
@@ -236,7 +287,7 @@ def _extreme_params(m):
     """Smallest roughness, eta at its lower bound, f0 at 0: the hardest corners."""
     p = {}
     for s in m.param_specs:
-        if s.name in ("alpha", "alpha1", "alpha2"):
+        if s.name in ("alpha", "alpha1", "alpha2", "alpha3"):
             v = 1e-3
         elif s.name == "eta":
             v = 1.0

@@ -317,6 +317,17 @@ def test_a_lobe_fitted_to_another_loss_is_told_the_render_loss_first():
     # without it, chrome's ggx2 fell from 24.4 dB to 18.4 (the log loss)
     assert [s["try"] for s in rendered] == ["--model ggx2 --loss render",
                                             "--model auto --candidates gltf --loss render"]
+    # ggx2 under the log loss: a third lobe (aluminium 17.9 -> 22.6 dB as ggx3); not
+    # measured under the render loss, where ggx2 is not advised it
+    ggx2 = models.get("ggx2")
+    two = {"alpha1": 0.01, "ks1": [0.1] * 3, "alpha2": 0.1, "ks2": [0.05] * 3}
+    logged = quality.next_steps(_look(), model=ggx2, params=two, loss="log", converged=True,
+                                rel_peak_error=0.1)
+    assert [s["try"] for s in logged] == ["--loss render", "--model ggx3",
+                                          "--model auto --candidates gltf --loss render"]
+    assert "third lobe" in logged[1]["why"]
+    assert all("ggx3" not in s["try"] for s in quality.next_steps(
+        _look(), model=ggx2, params=two, loss="render", converged=True, rel_peak_error=0.1))
     cube = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="cube_root",
                               converged=True, rel_peak_error=0.1)
     assert [s["try"] for s in cube] == ["--loss render", "--model ggx2 --loss cube_root",

@@ -69,8 +69,11 @@ class GGX2(AbstractBRDFModel):
     parent = "ggx"
     lobe_scales = ("ks1", "ks2")
 
+    #: each lobe's roughness, in the order of ``lobe_scales``
+    lobe_alphas = ("alpha1", "alpha2")
+
     def unit_lobes(self, shape, frame: Frame):
-        stacked = jnp.stack([shape["alpha1"], shape["alpha2"], shape["f0"]])
+        stacked = jnp.stack([*(shape[a] for a in self.lobe_alphas), shape["f0"]])
         return _lobes(stacked.astype(frame.cos_d.dtype), frame)
 
     def embed_parent(self, parent_params: dict) -> dict:
@@ -86,11 +89,12 @@ class GGX2(AbstractBRDFModel):
 
     def eval_channels(self, params, frame: Frame):
         # channel-major (3, ...), the fitting loss's layout: colours broadcast, lobes once
-        shape = jnp.stack([params["alpha1"], params["alpha2"], params["f0"]])
-        lobe1, lobe2 = _lobes(shape.astype(frame.cos_d.dtype), frame)
-        expand = (slice(None),) + (None,) * lobe1.ndim
-        kd, ks1, ks2 = (params[k][expand] for k in ("kd", "ks1", "ks2"))
-        return kd / jnp.pi + ks1 * lobe1[None] + ks2 * lobe2[None]
+        lobes = self.unit_lobes(params, frame)
+        expand = (slice(None),) + (None,) * (lobes.ndim - 1)
+        out = params["kd"][expand] / jnp.pi
+        for scale, lobe in zip(self.lobe_scales, lobes, strict=True):
+            out = out + params[scale][expand] * lobe[None]
+        return out
 
     def start_candidates(self, table, usable: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """Unconstrained start vectors (K, 12), one per ``shape_grid`` entry.
@@ -107,51 +111,51 @@ class GGX2(AbstractBRDFModel):
         # bins dense near the peak, where a sharp lobe lives.
         sel = sel[:: max(1, sel.size // _SEED_BINS)]
         f_meas = table.rgb.reshape(3, -1)[:, sel].T  # (n, 3)
-        alphas = np.array(sorted({s[k] for s in self.shape_grid for k in ("alpha1", "alpha2")}))
+        alphas = np.array(sorted({s[k] for s in self.shape_grid for k in self.lobe_alphas}))
         f0s = np.array(sorted({s["f0"] for s in self.shape_grid}))
         # lobes[a, f, n]: F DG at the chosen bins for every alpha and f0 on the grid
         lobes = np.asarray(_lobes_at(jnp.asarray(alphas), jnp.asarray(f0s),
                                      jnp.asarray(g.wi[sel]), jnp.asarray(g.wo[sel])))
         # Relative residuals: the haze must count as much as the peak.
         w = 1.0 / np.maximum(f_meas.mean(axis=1), 1e-6)
-        rows = {name: [] for name in ("kd", "ks1", "ks2", "alpha1", "alpha2", "f0")}
+        rows = {name: [] for name in ("kd", *self.lobe_scales, *self.lobe_alphas, "f0")}
         for shape in self.shape_grid:
-            j1 = int(np.searchsorted(alphas, shape["alpha1"]))
-            j2 = int(np.searchsorted(alphas, shape["alpha2"]))
             k = int(np.searchsorted(f0s, shape["f0"]))
-            design = np.stack(
-                [np.full(sel.size, 1.0 / np.pi), lobes[j1, k], lobes[j2, k]], axis=1
-            )
+            design = np.stack([np.full(sel.size, 1.0 / np.pi),
+                               *(lobes[int(np.searchsorted(alphas, shape[a])), k]
+                                 for a in self.lobe_alphas)], axis=1)
             coef, *_ = np.linalg.lstsq(design * w[:, None], f_meas * w[:, None], rcond=None)
             # A negative scale is no start. Floor it where the softplus still has a
             # slope (1e-3, not 1e-6): a lobe started at ~0 takes LM hundreds of steps.
             coef = np.clip(coef, 1e-3, 1e6)
-            for name, v in (("kd", coef[0] if np.any(coef[0] > 1e-3) else kd),
-                            ("ks1", coef[1]), ("ks2", coef[2]), *shape.items()):
+            rows["kd"].append(coef[0] if np.any(coef[0] > 1e-3) else kd)
+            for scale, c in zip(self.lobe_scales, coef[1:], strict=True):
+                rows[scale].append(c)
+            for name, v in shape.items():
                 rows[name].append(v)
         return self.unconstrain_rows(rows)
 
 
 @jax.custom_jvp
 def _lobes(shape, frame: Frame):
-    """(2, ...): F DG(alpha1) and F DG(alpha2) for ``shape = (alpha1, alpha2, f0)``."""
-    fresnel = schlick_fresnel(shape[2], frame.cos_d)
-    return jnp.stack([fresnel * _GGX.shadowed_ndf(shape[0], frame),
-                      fresnel * _GGX.shadowed_ndf(shape[1], frame)])
+    """(k, ...): F DG(alpha_i) for each lobe, for ``shape = (alpha_1, ..., alpha_k, f0)``."""
+    fresnel = schlick_fresnel(shape[-1], frame.cos_d)
+    return jnp.stack([fresnel * _GGX.shadowed_ndf(shape[i], frame)
+                      for i in range(shape.shape[0] - 1)])
 
 
 @functools.partial(_lobes.defjvp, symbolic_zeros=True)
 def _lobes_jvp(primals, tangents):
-    # Why: the fit's Jacobian pushes all 12 parameter tangents through the model at
-    # once, but the lobes depend on 3 of them (the 9 colour tangents are zero there).
-    # Forming the lobes' Jacobian in their 3 inputs once and contracting it with each
-    # tangent makes the fit's normal equations ~4x cheaper (exact, not approximate).
+    # Why: the fit's Jacobian pushes every parameter tangent through the model at once
+    # (ggx2's 12, ggx3's 16), but the lobes depend on k + 1 of them (the colour tangents
+    # are zero there). Forming the lobes' Jacobian in those inputs once and contracting
+    # it with each tangent makes the fit's normal equations ~4x cheaper (exact).
     shape, frame = primals
     t_shape, t_frame = tangents
     value = _lobes.fun(shape, frame)
     tangent = jnp.zeros_like(value)
     if not isinstance(t_shape, SymbolicZero):
-        jac = jax.jacfwd(_lobes.fun)(shape, frame)  # (2, ..., 3)
+        jac = jax.jacfwd(_lobes.fun)(shape, frame)  # (k, ..., k + 1)
         tangent = tangent + jac @ t_shape
     frame_tangents = jax.tree_util.tree_leaves(t_frame)
     if not all(isinstance(t, SymbolicZero) for t in frame_tangents):  # d/d(directions)

@@ -16,6 +16,7 @@ from brdffit.models.catalogue import MONO_SUFFIX, UnknownModelError, check_name
 from brdffit.models.generalized_schlick import GeneralizedSchlick
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
+from brdffit.models.ggx3 import GGX3
 from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import (
     GltfBlenderClearcoat,
@@ -58,6 +59,8 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     # MaterialX's generalized Schlick lobe over a diffuse: a highlight whose colour turns
     GeneralizedSchlick(),
     GGX2(),
+    # a third lobe (contains ggx2): metals and metallic paints under the log loss
+    GGX3(),
 )
 
 REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
