@@ -257,4 +257,9 @@ QUALITY_TRUTHS: dict[str, list[tuple[str, dict]]] = {
                            "ks2": [0.5] * 3, "alpha2": 0.4, "ks3": [0.8] * 3, "alpha3": 1.2,
                            "f0": 0.03}),
     ],
+    "ggx4": [
+        ("near-mirror", {"kd": [0.01] * 3, "ks1": [1.0] * 3, "alpha1": 0.003,
+                         "ks2": [0.2] * 3, "alpha2": 0.02, "ks3": [0.05] * 3, "alpha3": 0.1,
+                         "ks4": [0.03] * 3, "alpha4": 0.5, "f0": 0.9}),
+    ],
 }

@@ -22,7 +22,7 @@ from tests.compiled_models import check_jit, evaluate
 pytestmark = pytest.mark.unit
 
 NEW_MODELS = ("ggx2", "ggx_dielectric", "beckmann_dielectric", "ggx_mono", "ggx2_mono",
-              "ggx3")
+              "ggx3", "ggx4")
 
 
 def _dirs(theta_i, theta_o, phi):
@@ -76,7 +76,7 @@ def test_ggx_and_beckmann_keep_their_contract():
 def test_registry_order_and_names():
     names = list(models.REGISTRY)
     assert names[:5] == ["lambert", "oren_nayar", "blinn_phong", "phong", "beckmann"]
-    assert names[-2:] == ["ggx2", "ggx3"]
+    assert names[-3:] == ["ggx2", "ggx3", "ggx4"]
     assert {"ggx_dielectric", "beckmann_dielectric"} <= set(names)
     for name, m in models.REGISTRY.items():
         assert m.name == name
@@ -231,6 +231,22 @@ def test_ggx3_contains_ggx2():
                for s in m3.shape_grid)
 
 
+def test_ggx4_contains_ggx3():
+    m4, m3 = models.get("ggx4"), models.get("ggx3")
+    assert m4.parent == "ggx3" and m4.n_params == m3.n_params + 4
+    embedded = m4.embed_parent(GGX3_PARAMS)
+    assert np.all(embedded["ks4"] == 0) and embedded["alpha4"] == pytest.approx(0.01 / 3)
+    wi, wo = _random_pairs(500)
+    np.testing.assert_array_equal(np.asarray(evaluate(m4, embedded, wi, wo)),
+                                  np.asarray(evaluate(m3, GGX3_PARAMS, wi, wo)))
+    four = {**GGX3_PARAMS, "ks4": [0.3, 0.2, 0.1], "alpha4": 0.003}
+    np.testing.assert_allclose(
+        np.asarray(evaluate(m4, four, wi, wo)),
+        np.asarray(evaluate(m3, GGX3_PARAMS, wi, wo))
+        + _ggx_reference(0.0, four["ks4"], four["alpha4"], four["f0"], wi, wo), rtol=1e-9)
+    assert all(s["alpha3"] * 3 <= s["alpha4"] for s in m4.shape_grid)
+
+
 def test_ggx3_fit_finds_the_third_lobe_from_ggx2():
     """On a three-lobe table, ggx2 misses and ggx3 fitted from it ends at the truth."""
     table, _ = make_table("ggx3", GGX3_PARAMS)
@@ -287,7 +303,7 @@ def _extreme_params(m):
     """Smallest roughness, eta at its lower bound, f0 at 0: the hardest corners."""
     p = {}
     for s in m.param_specs:
-        if s.name in ("alpha", "alpha1", "alpha2", "alpha3"):
+        if s.name.startswith("alpha"):
             v = 1e-3
         elif s.name == "eta":
             v = 1.0

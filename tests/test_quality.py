@@ -328,6 +328,10 @@ def test_a_lobe_fitted_to_another_loss_is_told_the_render_loss_first():
     assert "third lobe" in logged[1]["why"]
     assert all("ggx3" not in s["try"] for s in quality.next_steps(
         _look(), model=ggx2, params=two, loss="render", converged=True, rel_peak_error=0.1))
+    three = quality.next_steps(_look(), model=models.get("ggx3"),
+                               params={**two, "alpha3": 0.5, "ks3": [0.02] * 3}, loss="log",
+                               converged=True, rel_peak_error=0.1)
+    assert "--model ggx4" in [s["try"] for s in three]
     cube = quality.next_steps(_look(), model=ggx, params={"alpha": 0.2}, loss="cube_root",
                               converged=True, rel_peak_error=0.1)
     assert [s["try"] for s in cube] == ["--loss render", "--model ggx2 --loss cube_root",

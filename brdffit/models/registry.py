@@ -17,6 +17,7 @@ from brdffit.models.generalized_schlick import GeneralizedSchlick
 from brdffit.models.ggx import GGX
 from brdffit.models.ggx2 import GGX2
 from brdffit.models.ggx3 import GGX3
+from brdffit.models.ggx4 import GGX4
 from brdffit.models.gltf_blender import GltfBlender
 from brdffit.models.gltf_clearcoat import (
     GltfBlenderClearcoat,
@@ -59,8 +60,9 @@ BUILTIN: tuple[AbstractBRDFModel, ...] = (
     # MaterialX's generalized Schlick lobe over a diffuse: a highlight whose colour turns
     GeneralizedSchlick(),
     GGX2(),
-    # a third lobe (contains ggx2): metals and metallic paints under the log loss
-    GGX3(),
+    # a third and a fourth lobe (each contains the one before): metals and metallic
+    # paints under the log loss
+    GGX3(), GGX4(),
 )
 
 REGISTRY: dict[str, AbstractBRDFModel] = {m.name: m for m in BUILTIN}
