@@ -38,10 +38,11 @@ from bench.render_loss import Views, cache_dir, half, judge
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 #: the layered candidates added to auto's defaults, with the bases they are fitted from
-#: (ggx3 is no layer but a third lobe, ggx2's, for the metals and metallic paints that
-#: read poor under the log loss: ranked as a base, left out with --leave-out ggx3)
+#: (ggx3 and ggx4 are no layers but a third and a fourth lobe over ggx2, for the metals
+#: and metallic paints that read poor under the log loss: ranked as bases, left out with
+#: --leave-out ggx3,ggx4)
 LAYERED = ("gltf_pbr", "gltf_clearcoat", "gltf_sheen", "principled", "principled_clearcoat",
-           "generalized_schlick", "ggx3")
+           "generalized_schlick", "ggx3", "ggx4")
 
 
 def worse_log(layered: dict, base: dict) -> bool:
