@@ -52,25 +52,48 @@ _GGX = GGX()
 _SEED_BINS = 512
 
 
+#: The new lobe's widths a fit from the parent's optimum starts at (ggx3's third over
+#: ggx2, ggx4's fourth over ggx3), each beside the parent's lobes: sharper than a
+#: mirror-like peak, at a glossy shoulder, at a haze (a third lobe started only sharper
+#: than the first stayed at zero on chrome and tungsten-carbide). Its scale starts
+#: small, but where the softplus has a slope.
+NEW_LOBE_STARTS = (0.002, 0.006, 0.02, 0.06, 0.2, 0.6)
+NEW_LOBE_SCALE = 0.01
+
+
+def lobe_grid(alphas: tuple[str, ...]) -> tuple[dict, ...]:
+    """Start shapes of a multi-lobe model: each lobe at least 3x broader than the one
+    before on the microfacet roughness grid (closer pairs are one lobe twice), f0 below
+    its bound (at the bound the sigmoid is flat and a fit could not leave it)."""
+    def chains(k: int, above: float):
+        if k == 0:
+            yield ()
+            return
+        for a in ALPHA_GRID:
+            if a >= 3.0 * above:
+                for rest in chains(k - 1, a):
+                    yield (a, *rest)
+
+    return tuple({**dict(zip(alphas, chain, strict=True)), "f0": f0}
+                 for chain in chains(len(alphas), 0.0) for f0 in (0.3, 0.95))
+
+
+def new_lobe_scan(scale: str, alpha: str) -> tuple[dict, ...]:
+    """``parent_scan`` of a model that adds lobe ``(scale, alpha)`` to its parent's: the
+    new lobe at each of :data:`NEW_LOBE_STARTS`, at :data:`NEW_LOBE_SCALE`."""
+    return tuple({alpha: a, scale: np.full(3, NEW_LOBE_SCALE)} for a in NEW_LOBE_STARTS)
+
+
 class GGX2(AbstractBRDFModel):
     name = "ggx2"
     auto_candidate = True
     param_specs = (KD, KS1, ALPHA1, KS2, ALPHA2, F0)
-    # Lobe pairs at least 3x apart in roughness: closer pairs are one lobe twice.
-    # f0 starts below 1: at the bound the sigmoid is flat and a fit could not leave it.
-    shape_grid = tuple(
-        {"alpha1": a1, "alpha2": a2, "f0": f0}
-        for a1 in ALPHA_GRID
-        for a2 in ALPHA_GRID
-        if a2 >= 3.0 * a1
-        for f0 in (0.3, 0.95)
-    )
 
     parent = "ggx"
     lobe_scales = ("ks1", "ks2")
-
     #: each lobe's roughness, in the order of ``lobe_scales``
     lobe_alphas = ("alpha1", "alpha2")
+    shape_grid = lobe_grid(lobe_alphas)
 
     def unit_lobes(self, shape, frame: Frame):
         stacked = jnp.stack([*(shape[a] for a in self.lobe_alphas), shape["f0"]])

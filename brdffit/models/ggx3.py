@@ -28,37 +28,11 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KD, ParamSpec
-from .ggx2 import ALPHA1, ALPHA2, GGX2, KS1, KS2
-from .microfacet import ALPHA_GRID, F0
+from .ggx2 import ALPHA1, ALPHA2, GGX2, KS1, KS2, lobe_grid, new_lobe_scan
+from .microfacet import F0
 
 KS3 = ParamSpec("ks3", "scale of the third lobe (RGB)", 0.0, None, rgb=True)
 ALPHA3 = ParamSpec("alpha3", "roughness of the third lobe", 1e-3, 2.0, scale="log")
-
-#: The new lobe's widths a fit from the parent's optimum starts at (ggx3's third over
-#: ggx2, ggx4's fourth over ggx3), each beside the parent's lobes: sharper than a
-#: mirror-like peak, at a glossy shoulder, at a haze (a third lobe started only sharper
-#: than the first stayed at zero on chrome and tungsten-carbide). Its scale starts
-#: small, but where the softplus has a slope.
-NEW_LOBE_STARTS = (0.002, 0.006, 0.02, 0.06, 0.2, 0.6)
-NEW_LOBE_SCALE = 0.01
-
-
-def lobe_grid(alphas: tuple[str, ...]) -> tuple[dict, ...]:
-    """Start shapes: each lobe at least 3x broader than the one before on the
-    microfacet roughness grid (closer pairs are one lobe twice), f0 below its bound
-    (at the bound the sigmoid is flat), as ggx2's."""
-    def chains(k: int, above: float):
-        if k == 0:
-            yield ()
-            return
-        for a in ALPHA_GRID:
-            if a >= 3.0 * above:
-                for rest in chains(k - 1, a):
-                    yield (a, *rest)
-
-    return tuple({**dict(zip(alphas, chain, strict=True)), "f0": f0}
-                 for chain in chains(len(alphas), 0.0) for f0 in (0.3, 0.95))
-
 
 class GGX3(GGX2):
     name = "ggx3"
@@ -68,8 +42,7 @@ class GGX3(GGX2):
     lobe_alphas = ("alpha1", "alpha2", "alpha3")
     shape_grid = lobe_grid(lobe_alphas)
     parent = "ggx2"
-    parent_scan = tuple({"alpha3": a, "ks3": np.full(3, NEW_LOBE_SCALE)}
-                        for a in NEW_LOBE_STARTS)
+    parent_scan = new_lobe_scan(lobe_scales[-1], lobe_alphas[-1])
 
     def embed_parent(self, parent_params: dict) -> dict:
         """The parent's lobes, the new one off (scale 0) and a third of the sharpest's
@@ -78,4 +51,4 @@ class GGX3(GGX2):
         sharpest = min(float(np.asarray(parent_params[a])) for a in self.lobe_alphas[:-1])
         return {**{k: parent_params[k] for k in ("kd", *self.lobe_scales[:-1],
                                                   *self.lobe_alphas[:-1], "f0")},
-                new_scale: np.zeros(3), new_alpha: max(1e-3, sharpest / 3.0)}
+                new_scale: np.zeros(3), new_alpha: max(ALPHA3.lower, sharpest / 3.0)}

@@ -13,11 +13,9 @@ not ordered by width after a fit: any of them may end the sharpest.
 
 from __future__ import annotations
 
-import numpy as np
-
 from .base import KD, ParamSpec
-from .ggx2 import ALPHA1, ALPHA2, KS1, KS2
-from .ggx3 import ALPHA3, GGX3, KS3, NEW_LOBE_SCALE, NEW_LOBE_STARTS, lobe_grid
+from .ggx2 import ALPHA1, ALPHA2, KS1, KS2, lobe_grid, new_lobe_scan
+from .ggx3 import ALPHA3, GGX3, KS3
 from .microfacet import F0
 
 KS4 = ParamSpec("ks4", "scale of the fourth lobe (RGB)", 0.0, None, rgb=True)
@@ -31,5 +29,4 @@ class GGX4(GGX3):
     lobe_alphas = ("alpha1", "alpha2", "alpha3", "alpha4")
     shape_grid = lobe_grid(lobe_alphas)
     parent = "ggx3"
-    parent_scan = tuple({"alpha4": a, "ks4": np.full(3, NEW_LOBE_SCALE)}
-                        for a in NEW_LOBE_STARTS)
+    parent_scan = new_lobe_scan(lobe_scales[-1], lobe_alphas[-1])
