@@ -37,7 +37,8 @@ function token() {
 // One request; its error becomes an ApiError carrying the API's `detail`.
 async function api(method, path, { json, body, contentType, as = "json" } = {}) {
   const headers = {};
-  if (token()) headers.Authorization = `Bearer ${token()}`;
+  const sent = token();
+  if (sent) headers.Authorization = `Bearer ${sent}`;
   if (json !== undefined) {
     headers["Content-Type"] = "application/json";
     body = JSON.stringify(json);
@@ -56,7 +57,9 @@ async function api(method, path, { json, body, contentType, as = "json" } = {}) 
       const data = await response.json();
       if (data && typeof data.detail === "string") detail = data.detail;
     } catch (e) { /* not JSON: a proxy's page; keep the status text */ }
-    if (response.status === 401) askForToken(detail);
+    // A refusal of a token already replaced is stale: requests sent together answer
+    // one by one, and a late 401 for the wrong token reopened the form over the right one.
+    if (response.status === 401 && sent === token()) askForToken(detail);
     throw new ApiError(response.status, detail);
   }
   if (response.status === 204) return null;
