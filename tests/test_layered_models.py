@@ -476,6 +476,19 @@ def test_a_renderers_name_stands_for_its_materials_layers_included():
         SelectionRule(candidates=("gltf2",))
 
 
+def test_default_stands_for_autos_own_list_and_more_lobes_join_it():
+    from brdffit.fitting.options import SelectionRule
+    from brdffit.models.catalogue import auto_candidates
+
+    rule = SelectionRule(candidates=("default", "ggx3", "ggx4"))
+    assert rule.candidates == (*auto_candidates(), "ggx3", "ggx4")
+    assert "ggx3" not in auto_candidates() and "ggx2" in auto_candidates()
+    # beside a renderer's set, and named twice: each model once, in the order given
+    assert SelectionRule(candidates=("ggx", "default", "gltf")).candidates == (
+        "ggx", *[m for m in auto_candidates() if m != "ggx"],
+        "gltf_pbr", "gltf_clearcoat", "gltf_sheen")
+
+
 @pytest.mark.slow  # fits: the full suite runs them, the quick tier the formulas
 def test_auto_takes_a_sheen_where_it_is_seen_and_not_where_it_is_not():
     """auto among glTF's materials on a velvet: the sheen wins, and the ranking says

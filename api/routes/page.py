@@ -58,7 +58,7 @@ def choices() -> dict:
     default_loss, loss = options.spec("loss")
     return {"losses": list(loss.choices), "default_loss": default_loss,
             "scene_presets": list(PRESETS), "auto": options.AUTO,
-            "candidate_sets": list(catalogue.CANDIDATE_SETS),
+            "candidate_sets": [*catalogue.CANDIDATE_SETS, catalogue.DEFAULT_CANDIDATES],
             "defaults": {"samples": options.spec("samples")[0],
                          "starts": options.spec("starts")[0],
                          "max_steps": options.spec("max_steps")[0],

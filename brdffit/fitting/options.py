@@ -273,7 +273,8 @@ class SelectionRule:
         models.catalogue.auto_candidates(), kind=tuple, words="a list of model names",
         doc="the models to choose among, fitted cheapest first (default: `brdffit models`' "
             "auto candidates); gltf, mitsuba or materialx stands for the materials that "
-            "renderer's file carries, layers included")
+            "renderer's file carries, layers included, and default for the default list "
+            "(default,ggx3,ggx4 adds the third and fourth lobes)")
     mono_ks: bool = _option(
         False, kind=bool,
         doc="also fit the chosen model with a grey ks (<model>_mono) when its fitted "
@@ -281,7 +282,8 @@ class SelectionRule:
 
     def __post_init__(self):
         _check_fields(self)
-        # a set's name (gltf, mitsuba, materialx) stands for its models; twice is once
+        # a set's name (gltf, mitsuba, materialx, default) stands for its models; twice
+        # is once
         names = tuple(dict.fromkeys(models.catalogue.expand_candidates(self.candidates)))
         for name in names:
             models.check_name(name)

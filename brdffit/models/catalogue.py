@@ -101,13 +101,21 @@ CANDIDATE_SETS: dict[str, tuple[str, ...]] = {
 }
 
 
+#: a word among the candidates for auto's own default list: the lobe models that are not
+#: defaults (ggx3, ggx4) or a plugin's model are added to it without spelling it out
+DEFAULT_CANDIDATES = "default"
+
+
 def expand_candidates(names) -> tuple:
-    """``names`` with each :data:`CANDIDATE_SETS` name replaced by those of its models
-    not named before it (a name given twice stays twice: the caller decides)."""
+    """``names`` with each :data:`CANDIDATE_SETS` name, and ``default``
+    (:func:`auto_candidates`), replaced by those of its models not named before it (a
+    name given twice stays twice: the caller decides)."""
     out: list = []
     for name in names:
-        if isinstance(name, str) and name in CANDIDATE_SETS:
-            out += [m for m in CANDIDATE_SETS[name] if m not in out]
+        if isinstance(name, str) and (name in CANDIDATE_SETS or name == DEFAULT_CANDIDATES):
+            members = (auto_candidates() if name == DEFAULT_CANDIDATES
+                       else CANDIDATE_SETS[name])
+            out += [m for m in members if m not in out]
         else:
             out.append(name)
     return tuple(out)
