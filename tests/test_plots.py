@@ -144,6 +144,18 @@ def test_each_verdict_light_says_at_which_exposure_the_verdict_judged_it():
     assert shifted[0] == f"\nverdict judged {round(4 * (ev - 2)) / 4:+g} EV from here"
 
 
+def test_the_fits_sphere_alone_is_the_same_image_without_the_tables():
+    t = table("lambert")
+    r = fit(t, "lambert", **FAST)
+    light = plots.SPHERE_LIGHTS[0][1]
+    m, f, coverage, unmeasured = plots.sphere_images(t, r, light, size=32)
+    alone = plots.sphere_images(t, r, light, size=32, with_measured=False)
+    assert alone[0] is None and alone[3] is None
+    np.testing.assert_array_equal(alone[1], f)
+    np.testing.assert_array_equal(alone[2], coverage)
+    assert np.isfinite(m).any() and unmeasured.shape == coverage.shape
+
+
 @pytest.mark.slow
 def test_exposure_brightens_table_and_fit_alike_before_the_tone_curve():
     t = table("lambert")

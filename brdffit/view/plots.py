@@ -332,28 +332,33 @@ def _block_mean(a: np.ndarray, k: int) -> np.ndarray:
 
 
 def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
-                  size: int = 200, supersample: int = SUPERSAMPLE):
+                  size: int = 200, supersample: int = SUPERSAMPLE, *,
+                  with_measured: bool = True):
     """Anti-aliased radiance images of the table and the fit under ``light``.
 
     Returns ``(measured, fitted, coverage, unmeasured)``: (size, size, 3) radiance
     (black where unlit; the measured image NaN where the table has no bin), the
     fraction of each pixel on the sphere's disc, and the pixels whose samples are
-    mostly unmeasured.
+    mostly unmeasured. ``with_measured=False``: the fit's image alone (measured and
+    unmeasured None), where the table's would not be drawn (a sample list's report:
+    its table is mostly unmeasured bins; their lookup was ~100 ms of it).
     """
     result = as_result(result)
     n = size * supersample
     wi, wo, inside = sphere_disc(n, light)
     lit = inside & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    measured = np.zeros((n, n, 3))
     fitted = np.zeros((n, n, 3))
-    measured[lit] = table.lookup(wi[lit], wo[lit])
     fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
-    measured, fitted = radiance(measured, wi), radiance(fitted, wi)
-    missing = inside & ~np.all(np.isfinite(measured), axis=-1)
-    outside = ~inside
-    measured[outside] = np.nan  # off the disc: not part of the pixel's average
-    fitted[outside] = np.nan
+    fitted = radiance(fitted, wi)
+    fitted[~inside] = np.nan  # off the disc: not part of the pixel's average
     coverage = _block_mean(inside.astype(float), supersample)
+    if not with_measured:
+        return None, _block_mean(fitted, supersample), coverage, None
+    measured = np.zeros((n, n, 3))
+    measured[lit] = table.lookup(wi[lit], wo[lit])
+    measured = radiance(measured, wi)
+    missing = inside & ~np.all(np.isfinite(measured), axis=-1)
+    measured[~inside] = np.nan
     unmeasured = _block_mean(missing.astype(float), supersample) > 0.5 * np.maximum(coverage, 1e-9)
     return (_block_mean(measured, supersample), _block_mean(fitted, supersample), coverage,
             unmeasured)
@@ -751,7 +756,8 @@ def _draw_samples_and_fit(fig, table: MerlTable, measured: Measurements, result:
     size = 160
     axes = bottom.subplots(1, len(SPHERE_LIGHTS))
     for ax, (label, light) in zip(axes, SPHERE_LIGHTS, strict=True):
-        _, fitted, coverage, _ = sphere_images(table, result, light, size)
+        _, fitted, coverage, _ = sphere_images(table, result, light, size,
+                                               with_measured=False)
         ax.imshow(_composite(fitted, coverage, background, exposure_ev),
                   interpolation="bilinear")
         ax.add_patch(Circle(((size - 1) / 2, (size - 1) / 2), size / 2, fill=False, lw=0.8,
