@@ -282,6 +282,11 @@ def test_mono_variant_shares_ks_over_channels():
     np.testing.assert_allclose(np.asarray(evaluate(m, p, wi, wo)),
                                np.asarray(evaluate(models.get("ggx"), rgb, wi, wo)))
     assert models.get("ggx2_mono").n_params == 3 + 1 + 1 + 1 + 1 + 1
+    # every lobe's scale is grey, the third's and the fourth's too (kd, scales, alphas, f0)
+    for name, lobes in (("ggx3", 3), ("ggx4", 4)):
+        mono = models.get(f"{name}_mono")
+        assert mono.n_params == 3 + lobes + lobes + 1, name
+        assert [s.name for s in mono.param_specs if s.rgb] == ["kd"], name
     for bad in ("lambert_mono", "oren_nayar_mono", "nope_mono"):
         with pytest.raises(models.UnknownModelError):
             models.get(bad)

@@ -1,7 +1,7 @@
 """A model's variant with a grey (monochrome) specular scale: ``MonoKs(GGX())``.
 
-Every RGB parameter that colours a specular lobe alone (``ks``; ``ks1`` and ``ks2``
-of ggx2; MaterialX's ``specular_color``) becomes one value shared by R, G and B;
+Every RGB parameter that colours a specular lobe alone (``ks``; each lobe's scale of
+ggx2, ggx3 and ggx4; MaterialX's ``specular_color``) becomes one value shared by R, G and B;
 the rest of the model is unchanged. Its name is the base's plus ``_mono``
 (``"ggx_mono"``), which ``brdffit.models.get`` resolves.
 
@@ -27,18 +27,22 @@ from .base import AbstractBRDFModel, ParamSpec
 SUFFIX = "_mono"
 
 
-#: The RGB parameters that are a specular lobe's colour and nothing else: a lobe's
-#: scale (``ks``; ggx2's ``ks1``, ``ks2``) and MaterialX's ``specular_color``. A base
-#: colour (glTF, principled, standard_surface) is the diffuse's colour too, a sheen's its
-#: own layer's, a conductor's ``eta`` and ``k`` its optics: "every RGB parameter but kd"
-#: made gltf_pbr_mono a grey material and called gltf_sheen's "ks" not grey.
-SPECULAR_COLOURS = ("ks", "ks1", "ks2", "specular_color")
+#: The RGB parameters that are a specular lobe's colour and nothing else, beside the
+#: scales a model declares of its lobes (``lobe_scales``: ggx2's ``ks1``, ``ks2``, ...):
+#: a lobe's ``ks`` (rough_plastic's too, which declares none) and MaterialX's
+#: ``specular_color``. A base colour (glTF, principled, standard_surface) is the
+#: diffuse's colour too, a sheen's its own layer's, a conductor's ``eta`` and ``k`` its
+#: optics: "every RGB parameter but kd" made gltf_pbr_mono a grey material and called
+#: gltf_sheen's "ks" not grey.
+SPECULAR_COLOURS = ("ks", "specular_color")
 
 
 def specular_colour_specs(model: AbstractBRDFModel) -> tuple[ParamSpec, ...]:
     """The RGB parameters of ``model`` that colour a specular lobe alone
-    (:data:`SPECULAR_COLOURS`)."""
-    return tuple(s for s in model.param_specs if s.rgb and s.name in SPECULAR_COLOURS)
+    (:data:`SPECULAR_COLOURS` and its ``lobe_scales``: a list of names written here
+    left ggx3's third and ggx4's fourth lobe coloured in their _mono variants)."""
+    names = {*SPECULAR_COLOURS, *model.lobe_scales}
+    return tuple(s for s in model.param_specs if s.rgb and s.name in names)
 
 
 class MonoKs(AbstractBRDFModel):
