@@ -351,17 +351,17 @@ def sphere_images(table: MerlTable, result: FitResult | dict, light: np.ndarray,
     fitted[lit] = evaluate(result, wi, wo)[lit]  # every pixel: one compiled shape
     fitted = radiance(fitted, wi)
     fitted[~inside] = np.nan  # off the disc: not part of the pixel's average
+    fitted_image = _block_mean(fitted, supersample)
     coverage = _block_mean(inside.astype(float), supersample)
     if not with_measured:
-        return None, _block_mean(fitted, supersample), coverage, None
+        return None, fitted_image, coverage, None
     measured = np.zeros((n, n, 3))
     measured[lit] = table.lookup(wi[lit], wo[lit])
     measured = radiance(measured, wi)
     missing = inside & ~np.all(np.isfinite(measured), axis=-1)
     measured[~inside] = np.nan
     unmeasured = _block_mean(missing.astype(float), supersample) > 0.5 * np.maximum(coverage, 1e-9)
-    return (_block_mean(measured, supersample), _block_mean(fitted, supersample), coverage,
-            unmeasured)
+    return _block_mean(measured, supersample), fitted_image, coverage, unmeasured
 
 
 def ratio_images(measured: np.ndarray, fitted: np.ndarray, on: np.ndarray,
