@@ -48,7 +48,8 @@ class GGX3(GGX2):
         """The parent's lobes, the new one off (scale 0) and a third of the sharpest's
         width; ``parent_scan`` turns it on at each of its widths."""
         new_scale, new_alpha = self.lobe_scales[-1], self.lobe_alphas[-1]
+        floor = next(s.lower for s in self.param_specs if s.name == new_alpha)
         sharpest = min(float(np.asarray(parent_params[a])) for a in self.lobe_alphas[:-1])
         return {**{k: parent_params[k] for k in ("kd", *self.lobe_scales[:-1],
                                                   *self.lobe_alphas[:-1], "f0")},
-                new_scale: np.zeros(3), new_alpha: max(ALPHA3.lower, sharpest / 3.0)}
+                new_scale: np.zeros(3), new_alpha: max(floor, sharpest / 3.0)}
