@@ -342,3 +342,32 @@ def test_a_black_channel_has_no_relative_peak_error_of_its_own(synth_tables):
     truth = TRUTH["ggx"]
     assert rendered.params["alpha"] == pytest.approx(truth["alpha"], rel=1e-3)
     assert rendered.params["ks"][0] == pytest.approx(np.ravel(truth["ks"])[0], rel=1e-3)
+
+
+def test_oren_nayar_stops_at_lamberts_optimum_where_no_roughness_lowers_the_loss(monkeypatch):
+    """On this noisy Lambert table no sigma just above 0 lowers oren_nayar's loss at
+    lambert's optimum (the first-order test, ``first_order_probes``): the fit is that
+    optimum, its own starts not solved, and says so. Without the probes its starts run
+    down to the same optimum. On an Oren-Nayar table the probes find the descent and
+    the fit finds sigma. (On noise alone the slope in sigma has either sign: with
+    seed 5 and 5% noise the probes find a descent, and the fit ends at sigma 0.008.)"""
+    from brdffit.models.oren_nayar import OrenNayar
+
+    table, _ = make_table("lambert", TRUTH["lambert"], noise=0.02, seed=2)
+    lambert = fit(table, "lambert")
+    probed = fit(table, "oren_nayar", parent_fit=lambert)
+    assert any(n.startswith("nested: no gain: no value of what oren_nayar adds just off "
+                            "lambert's optimum (sigma 0.01; sigma 0.1)") for n in probed.notes)
+    assert probed.converged and probed.params["sigma"] < 1e-4
+    np.testing.assert_allclose(probed.params["kd"], lambert.params["kd"], rtol=1e-9)
+    assert probed.error["log_rmse"] == pytest.approx(lambert.error["log_rmse"], rel=1e-9)
+    monkeypatch.setattr(OrenNayar, "first_order_probes", ())
+    solved = fit(table, "oren_nayar", parent_fit=lambert)
+    assert not any(n.startswith("nested: no gain") for n in solved.notes)
+    assert solved.error["log_rmse"] == pytest.approx(probed.error["log_rmse"], rel=1e-5)
+    monkeypatch.undo()
+    rough, _ = make_table("oren_nayar", {"kd": [0.5, 0.35, 0.2], "sigma": 0.3}, noise=0.05,
+                          seed=5)
+    r = fit(rough, "oren_nayar")
+    assert not any("no gain" in n for n in r.notes)
+    assert r.params["sigma"] == pytest.approx(0.3, rel=0.05)

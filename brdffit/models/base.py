@@ -134,6 +134,15 @@ class AbstractBRDFModel(eqx.Module):
     #: parameters (a thin film's thickness), where the parent's optimum with the layer
     #: off is a point from which no gradient finds them. Empty: none.
     parent_scan: ClassVar[tuple[dict, ...]] = ()
+    #: Values of what this model adds, just off its parent's embedding (oren_nayar's
+    #: sigma a little above 0), each tried over the parent's optimum before this
+    #: model's own starts are solved: where none lowers the loss, the parent's optimum
+    #: is a stationary point of this model's loss with the addition at its bound, and
+    #: the fit ends there ("nested: no gain", brdffit.fitting.pipeline) without solving
+    #: its own starts. For an addition whose loss is one basin in it, so that no
+    #: descent at the bound means none further out (checked on the 100 MERL
+    #: materials for oren_nayar, docs/selection.md). Empty: its own starts are solved.
+    first_order_probes: ClassVar[tuple[dict, ...]] = ()
     #: The fewest starts a fit of this model refines (more where asked), for a model
     #: whose best-scored start candidate often lies in another mode than the optimum
     #: (a thin film's); the result's notes say so where it is more than was asked.

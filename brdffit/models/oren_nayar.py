@@ -35,6 +35,11 @@ class OrenNayar(AbstractBRDFModel):
     param_specs = (KD, SIGMA)
     shape_grid = tuple({"sigma": s} for s in (0.05, 0.2, 0.4, 0.7, 1.0))
     parent = "lambert"
+    #: sigma 0.01 and 0.1 over lambert's kd: on the 100 MERL materials neither lowered
+    #: the loss on the 98 where oren_nayar's own fit ends at lambert's (sigma <= 1e-5,
+    #: log_rmse within 4e-7), and both did on the two it improves (white-fabric2,
+    #: light-brown-fabric) and on oren_nayar's own tables
+    first_order_probes = ({"sigma": 0.01}, {"sigma": 0.1})
 
     def embed_parent(self, parent_params: dict) -> dict:
         """Lambert is Oren-Nayar with sigma = 0."""
