@@ -141,7 +141,7 @@ class AbstractBRDFModel(eqx.Module):
     #: the fit ends there ("nested: no gain", brdffit.fitting.pipeline) without solving
     #: its own starts. For an addition whose loss is one basin in it, so that no
     #: descent at the bound means none further out (checked on the 100 MERL
-    #: materials for oren_nayar, docs/selection.md). Empty: its own starts are solved.
+    #: materials for oren_nayar, docs/fitting.md). Empty: its own starts are solved.
     first_order_probes: ClassVar[tuple[dict, ...]] = ()
     #: The fewest starts a fit of this model refines (more where asked), for a model
     #: whose best-scored start candidate often lies in another mode than the optimum
