@@ -29,3 +29,10 @@ def machine() -> dict:
             "jax": jax.__version__, "backend": jax.default_backend(),
             "device": str(jax.devices()[0]), "brdffit": __version__,
             "date": datetime.now(UTC).isoformat(timespec="seconds"), "loadavg": load}
+
+
+def machine_line(m: dict) -> str:
+    """:func:`machine`'s record as a report's line: CPU, cores, versions, date, load."""
+    load = " ".join(f"{x:.1f}" for x in m["loadavg"] or ())
+    return (f"{m['cpu']}, {m['cores']} cores; JAX {m['jax']}, brdffit {m['brdffit']}; "
+            f"{m['date']} (load average {load})")
