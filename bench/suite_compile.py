@@ -74,7 +74,7 @@ def pytest_sessionfinish(session) -> None:
 # -- the runner and its report ---------------------------------------------------------------
 
 
-def report(sums: dict[str, dict[str, float]], wall_s: float, args: list[str], cold: bool,
+def report(sums: dict[str, dict], wall_s: float, args: list[str], cold: bool,
            top: int = 25) -> str:
     from bench.machine import machine, machine_line
 
@@ -122,13 +122,11 @@ def main(argv: list[str] | None = None) -> int:
         rc = subprocess.run([sys.executable, "-m", "pytest", "-p", "bench.suite_compile",
                              *pytest_args], env=env).returncode
         wall = time.perf_counter() - t0
-        sums: dict[str, dict[str, float]] = collections.defaultdict(dict)
+        sums: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
         for path in glob.glob(os.path.join(out, "*.json")):
             with open(path) as f:
                 for test, v in json.load(f).items():
-                    merged = collections.Counter(sums[test])
-                    merged.update(v)
-                    sums[test] = dict(merged)
+                    sums[test].update(v)
     text = report(sums, wall, pytest_args, args.cold)
     with open(args.out, "w") as f:
         f.write(text)

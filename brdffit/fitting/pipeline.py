@@ -288,7 +288,7 @@ def solved_fit(
     if init is None and not polish and m.parent is not None and m.parent_scan:
         parent, parent_result = _parent_fit(source, table, m, parent_fit, prep, polish,
                                             samples, again)
-        u_candidates = np.concatenate([u_candidates, _over_the_parent(m, parent)])
+        u_candidates = np.concatenate([u_candidates, _over_the_parent(m, parent, m.parent_scan)])
     notes = []
     if init is None and not polish and starts < m.least_starts:
         notes.append(f"{m.least_starts} starts refined ({starts} asked): {m.name}'s loss is "
@@ -597,13 +597,13 @@ def _parent_fit(source, table, m, parent_fit, prep, polish: bool, samples, again
     return m.unconstrain(m.check_params(m.embed_parent(parent_fit.params))), parent_fit
 
 
-def _over_the_parent(m, parent: np.ndarray) -> np.ndarray:
-    """Start candidates on the parent's optimum (``parent``, embedded): it with each of
-    ``m.parent_scan``'s values of what the parent lacks (a thin film's thickness and
-    index), to be scored with the rest."""
+def _over_the_parent(m, parent: np.ndarray, values: tuple[dict, ...]) -> np.ndarray:
+    """The parent's optimum (``parent``, embedded) with each of ``values`` of what the
+    parent lacks, unconstrained: ``m.parent_scan``'s start candidates (a thin film's
+    thickness and index), to be scored with the rest, or ``m.first_order_probes``."""
     embedded = plain_params(constrained(m, parent))
     return np.stack([m.unconstrain(m.check_params({**embedded, **layer}))
-                     for layer in m.parent_scan])
+                     for layer in values])
 
 
 def _no_descent_off(m, solve: Solve, parent: np.ndarray, parent_loss: float) -> bool:
@@ -612,9 +612,8 @@ def _no_descent_off(m, solve: Solve, parent: np.ndarray, parent_loss: float) -> 
     test at the bound (False where the model declares no probes)."""
     if not m.first_order_probes:
         return False
-    embedded = plain_params(constrained(m, parent))
-    return all(solve.loss_at(m.unconstrain(m.check_params({**embedded, **probe})))
-               >= parent_loss for probe in m.first_order_probes)
+    return all(solve.loss_at(u) >= parent_loss
+               for u in _over_the_parent(m, parent, m.first_order_probes))
 
 
 def _from_the_parent(m, solve: Solve, outcome: Outcome, parent_start: np.ndarray,
