@@ -41,6 +41,8 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from brdffit import runtime
+
 MODELS = ("lambert", "oren_nayar", "blinn_phong", "phong", "beckmann", "ggx", "ggx2")
 #: (child, parent): the child contains the parent, so it must never be worse.
 NESTED = (("ggx2", "ggx"), ("oren_nayar", "lambert"))
@@ -61,10 +63,12 @@ def cache_dir() -> str:
 # -- the reference ---------------------------------------------------------------------
 
 
+@runtime.in_float64
 def _scipy_polish(table, model_name, params, samples=32768, seed=0):
     """scipy's TRF on the fit's own residuals (exact Jacobian from JAX), from
     ``params``; returns polished params. An independent optimiser checks that the
-    point is an optimum, not just where brdffit's LM stopped."""
+    point is an optimum, not just where brdffit's LM stopped. In float64, as brdffit's
+    fits run (without it, JAX truncated the samples to float32 and said so)."""
     import equinox as eqx
     import jax
     from scipy.optimize import least_squares
