@@ -7,7 +7,9 @@ design half of the 100 MERL, and check it on the other half.
 ``dump`` runs one ``select`` per MERL material over auto's default candidates and
 ``bench.auto_layers.LAYERED``, default options, and stores every candidate's ranking
 row with bench.render_loss's independent three-light render of its fit
-(``indep_psnr_db``) in the bench cache (``auto_rows_<loss>.json``; not committed).
+(``indep_psnr_db``) and the fit's parameters (to try another measure of the same fits:
+a sweep of lights, another display) in the bench cache (``auto_rows_<loss>.json``; not
+committed).
 ``replay`` re-decides each material with today's rule (``brdffit.selection.rechoose``)
 among auto's defaults, among the candidates without a layer, and among them all, and
 prints per half: poor verdicts, the median independent render, and how many choices
@@ -29,7 +31,8 @@ import numpy as np
 from bench.auto_layers import LAYERED, worse_log, worse_render
 from bench.render_loss import Views, cache_dir, half, judge
 
-#: What a row keeps of a selection's ranking row (params and arrays left out).
+#: What a row keeps of a selection's ranking row (arrays left out; the params are added
+#: as lists).
 KEPT = ("model", "n_params", "status", "log_rmse", "log_rmse_se", "psnr_db", "views_psnr_db",
         "verdict", "radiance_verdict", "converged", "result")
 
@@ -58,6 +61,8 @@ def dump(loss: str) -> dict:
                 fit = sel.fits[r["model"]]
                 row["indep_psnr_db"] = judge(ref, views.model_radiance(
                     models.get(r["model"]), fit.params))["indep_psnr_db"]
+                # the fit itself, for a replay that tries another measure of it
+                row["params"] = {k: np.asarray(v).tolist() for k, v in fit.params.items()}
             rows.append(row)
         out[name] = {"chosen": sel.chosen, "rows": rows}
         print(f"[{i}] {name}: {sel.chosen}", flush=True)
