@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -869,6 +870,50 @@ def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert code == 2 and message in err and err.count("\n") == 1
     assert not (tmp_path / "r.h5").exists()
+
+
+@contextlib.contextmanager
+def _silent_port():
+    """A loopback port that takes connections and never says a word, as another
+    service's port or a stuck process does."""
+    import socket
+
+    listener = socket.create_server(("127.0.0.1", 0))
+    taken, stop = [], threading.Event()
+
+    def accept() -> None:
+        listener.settimeout(0.1)
+        while not stop.is_set():
+            with contextlib.suppress(TimeoutError):
+                taken.append(listener.accept()[0])
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{listener.getsockname()[1]}"
+    finally:
+        stop.set()
+        thread.join()
+        for conn in taken:
+            conn.close()
+        listener.close()
+
+
+def test_a_port_that_never_answers_is_no_scheduler():
+    """distributed's connect timeout leaves its handshake out: a Client of a port that
+    accepts and never answers waited for good. Batch and service alike say so in one
+    line after their timeout."""
+    from brdffit.batch.cluster import connect
+
+    with _silent_port() as address:
+        t0 = time.monotonic()
+        for reach in (lambda: connect(scheduler=address, timeout_s=1.0).__enter__(),
+                      lambda: DaskRunner(address, timeout_s=1.0)):
+            with pytest.raises(OSError, match=(
+                    f"cannot reach the Dask scheduler at {address}: something listens there "
+                    r"but did not answer as a Dask scheduler within 1 s")):
+                reach()
+        assert time.monotonic() - t0 < 20  # not the 30-s default, and not for good
 
 
 def test_bad_outputs_exit_2(table_dir, tmp_path, capsys):

@@ -80,15 +80,7 @@ def connect(workers: int = 1, scheduler: str | None = None,
     from distributed import Client, LocalCluster
 
     if scheduler:
-        refused = _refused(scheduler)
-        if refused:
-            raise OSError(f"cannot reach the Dask scheduler at {scheduler}: nothing listens "
-                          f"there ({refused})")
-        try:
-            client = Client(scheduler, timeout=timeout_s, set_as_default=False)
-        except (OSError, TimeoutError) as e:
-            raise OSError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
-        with client:
+        with scheduler_client(scheduler, timeout_s) as client:
             yield client
         return
     if workers < 1:
@@ -153,6 +145,60 @@ def _release_sigint(held: bool) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
+def scheduler_client(address: str, timeout_s: float = 30.0):
+    """A ``distributed.Client`` of the scheduler at ``address``, or an ``OSError`` that
+    says why there is none: nothing listens there (:func:`_refused`), or something does
+    and does not answer as a Dask scheduler within ``timeout_s`` (:func:`_silent`), or
+    the client's own error."""
+    from distributed import Client
+
+    refused = _refused(address)
+    why = f"nothing listens there ({refused})" if refused else _silent(address, timeout_s)
+    if why:
+        raise OSError(f"cannot reach the Dask scheduler at {address}: {why}")
+    try:
+        return Client(address, timeout=timeout_s, set_as_default=False)
+    except (OSError, TimeoutError) as e:
+        raise OSError(f"cannot reach the Dask scheduler at {address}: {e}") from None
+
+
+def _silent(address: str, timeout_s: float) -> str | None:
+    """Why ``address`` is no Dask scheduler though it took the connection, else None:
+    it did not complete Dask's handshake within ``timeout_s`` seconds. distributed's
+    connect timeout leaves the handshake out (dask/distributed#7698), and
+    ``Client(address, timeout=30)`` waited for good on a port that accepts and never
+    answers (another service on that port, a stopped process whose socket is still
+    open). The probe is distributed's own ``connect``, on a thread of its own (the
+    service calls this inside its event loop), so no detail of the protocol is
+    assumed here; other errors are left to the client."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def handshake() -> None:
+        comm = await asyncio.wait_for(connect(address, timeout=timeout_s), timeout_s)
+        await comm.close()
+
+    done: concurrent.futures.Future = concurrent.futures.Future()
+
+    def probe() -> None:
+        try:
+            done.set_result(asyncio.run(handshake()))
+        except BaseException as e:  # noqa: BLE001 - handed to the waiting thread
+            done.set_exception(e)
+
+    # a daemon thread: a Ctrl-C meanwhile ends the process without waiting it out
+    threading.Thread(target=probe, name="dask-probe", daemon=True).start()
+    try:
+        done.result()
+    except TimeoutError:
+        return (f"something listens there but did not answer as a Dask scheduler "
+                f"within {timeout_s:g} s (another service on that port?)")
+    except Exception:  # noqa: BLE001 - refused, reset, a bad address: the client says
+        return None
+    return None
+
+
 def _refused(address: str, grace_s: float = REFUSED_GRACE_S) -> str | None:
     """Why a TCP connection to ``address`` was refused (nothing listens at that port)
     throughout ``grace_s`` seconds, else None: the client retries a refused address
@@ -200,13 +246,8 @@ class DaskRunner:
 
     def __init__(self, address: str, *, timeout_s: float = 30.0):
         extras.require("batch", f"a Dask runner ({SCHEDULER_ENV})")
-        from distributed import Client
-
         self.address = address
-        try:
-            self._client = Client(address, timeout=timeout_s, set_as_default=False)
-        except (OSError, TimeoutError) as e:
-            raise OSError(f"cannot reach the Dask scheduler at {address}: {e}") from None
+        self._client = scheduler_client(address, timeout_s)
 
     @classmethod
     def from_env(cls, environ=os.environ) -> DaskRunner | None:
