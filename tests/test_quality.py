@@ -379,6 +379,40 @@ def test_a_fit_far_off_the_tables_peak_is_told_the_render_loss_first():
     assert lambert[0]["try"] == "--model ggx"  # no lobe: its peak is its to miss
 
 
+@pytest.mark.parametrize(("model", "family"), [
+    ("standard_surface", "materialx"), ("standard_surface_dielectric", "materialx"),
+    ("generalized_schlick", "materialx"), ("rough_conductor", "mitsuba"),
+    ("rough_plastic", "mitsuba"), ("gltf_pbr", "gltf"), ("gltf_threejs", "gltf"),
+    ("ggx", "gltf"), ("lambert", "gltf")])
+def test_a_renderers_material_is_told_its_own_renderers_layers(model, family):
+    """A MaterialX standard_surface fit that did not look good (chrome-steel's, poor
+    under the render loss) was told `--candidates gltf`: glTF's layers, in a file its
+    renderer does not read. A renderer's material is told its own renderer's set;
+    auto's analytic candidates (lambert is also Mitsuba's diffuse) keep glTF's."""
+    m = models.get(model)
+    steps = quality.next_steps(_look(), model=m, params={}, loss="render", converged=True)
+    layers = [s for s in steps if s["try"].startswith("--model auto --candidates")]
+    assert [s["try"] for s in layers] == [f"--model auto --candidates {family} --loss render"]
+    assert "gain not measured" in layers[0]["why"]
+    # measured by an auto over that set, the step is not repeated
+    got = quality.with_measured_gains({"verdict": "poor", "next": steps},
+                                      [("--model gltf_sheen", "m", -0.4)], loss="render")
+    assert not any(s["try"].startswith("--model auto --candidates") for s in got["next"])
+
+
+def test_a_layered_fit_is_told_its_renderers_model_with_a_layer_more():
+    """principled (its sheen) was told "nothing here: no model here is richer of this
+    kind" beside principled_clearcoat, which starts from it and adds a clear coat."""
+    steps = quality.next_steps(_look(), model=models.get("principled"), params={},
+                               loss="render", converged=True)
+    assert [s["try"] for s in steps] == ["--model principled_clearcoat --loss render"]
+    assert "adds clearcoat to principled's sheen" in steps[0]["why"]
+    # where the renderer has none, nothing here is richer, as before
+    sheen = quality.next_steps(_look(), model=models.get("standard_surface_sheen"), params={},
+                               loss="render", converged=True)
+    assert [s["try"].split(":")[0] for s in sheen] == ["nothing here"]
+
+
 def test_a_verdict_that_is_not_good_never_has_an_empty_next():
     """chrome-steel under auto --loss render chose beckmann, poor, and every guess was
     measured by auto to render no closer: its ``next`` was empty while its reason said

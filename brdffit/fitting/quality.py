@@ -364,6 +364,13 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
         add(f"--model {MORE_LOBES[name]}", MORE_LOBES_WHY[name])
     elif "clearcoat" in model.layers:
         add("--model ggx2", COAT_AS_TWO_LOBES)
+    elif model.layers:
+        # a layer more of the same renderer (principled's sheen, not good, was told
+        # nothing here is richer, beside principled_clearcoat)
+        for child, added in _layer_more(model):
+            add(f"--model {child}", f"{child} adds {' and '.join(added)} to {model.name}'s "
+                f"{' and '.join(model.layers)}, in the same renderer; gain not measured on "
+                "this table")
     if loss != "render":
         add("--loss render", RENDER_WHY)
     # each lobe's width and scale (ks, the mean over channels)
@@ -398,8 +405,9 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
         # auto ranks by the look under the render loss only (by log_rmse under another):
         # from a log-loss fit the glTF candidates, ranked so, rendered worse than its ggx
         # on 5 of 11 real materials (blue-metallic-paint 20.0 -> 14.6 dB)
-        add(_LAYERS["try"] if loss == "render" else f"{_LAYERS['try']} --loss render",
-            _LAYERS["why"])
+        layers = _layers_step(model)
+        add(layers["try"] if loss == "render" else f"{layers['try']} --loss render",
+            layers["why"])
     if not steps:
         steps = _last_steps(model)
     return with_measured_gains({"verdict": look["verdict"], "basis": look.get("basis"),
@@ -475,6 +483,54 @@ _LAYERS = {"try": "--model auto --candidates gltf",
                   "paints; a sheen: fabrics, velvets), each fitted and ranked by how it "
                   "renders; gain not measured on this table (a thin film is fitted where "
                   "named: --candidates gltf,gltf_iridescence)", "gain_db": None}
+
+
+#: What the layers of a renderer's own base material add, by its candidate set
+#: (``brdffit.models.catalogue.CANDIDATE_SETS``): a fit of MaterialX's standard_surface
+#: or of Mitsuba's principled was told glTF's layers, a file its renderer does not read.
+_RENDERER_LAYERS = {
+    "materialx": ("MaterialX's materials with their layers (standard_surface with a coat: "
+                  "coated paints; with a sheen: fabrics, velvets; generalized_schlick: a "
+                  "highlight whose colour turns with the angle), each fitted and ranked by "
+                  "how it renders; gain not measured on this table"),
+    "mitsuba": ("Mitsuba's materials (principled with a clear coat: coated paints; "
+                "rough_conductor, rough_plastic), each fitted and ranked by how it renders; "
+                "gain not measured on this table"),
+}
+
+
+#: How every layers step begins (:data:`_LAYERS`, :func:`_layers_step`).
+_AUTO_OVER = "--model auto --candidates "
+
+
+def _layers_step(model) -> dict:
+    """The step to the renderers' layered materials for a fit without layers: its own
+    renderer's set where the model is a renderer's material (not one of auto's own
+    analytic candidates, which every set may hold: lambert is Mitsuba's diffuse), else
+    glTF's (:data:`_LAYERS`)."""
+    from brdffit.models.catalogue import CANDIDATE_SETS
+
+    name = model.name.removesuffix("_mono")
+    if not getattr(model, "auto_candidate", False):
+        for family, why in _RENDERER_LAYERS.items():
+            if name in CANDIDATE_SETS.get(family, ()):
+                return {"try": f"{_AUTO_OVER}{family}", "why": why,
+                        "gain_db": None}
+    return dict(_LAYERS)
+
+
+def _layer_more(model) -> list[tuple[str, tuple[str, ...]]]:
+    """The registry's models that start from ``model`` (their ``parent``) and add a
+    layer to the ones it has, each with the layers it adds."""
+    from brdffit import models
+
+    out = []
+    for name in models.REGISTRY:
+        child = models.get(name)
+        added = tuple(x for x in child.layers if x not in model.layers)
+        if child.parent == model.name and added:
+            out.append((name, added))
+    return out
 
 
 def _last_steps(model) -> list[dict]:
@@ -586,8 +642,8 @@ def with_measured_gains(look: dict | None, gains: list, loss: str | None = None)
     layered = any(_layered(t.removeprefix("--model ")) for t in names)
     # a ranking with layered candidates measured them: theirs is no guess to repeat
     rest = [s for s in look.get("next", []) if bare(s["try"]) not in names
-            and not (layered and s["try"].startswith(_LAYERS["try"]))]
-    if not measured and all(bare(s["try"]) == _LAYERS["try"] for s in rest):
+            and not (layered and s["try"].startswith(_AUTO_OVER))]
+    if not measured and all(bare(s["try"]).startswith(_AUTO_OVER) for s in rest):
         # every guess was measured, and none rendered closer
         rest = [{"try": "nothing here: no candidate rendered closer",
                  "why": "auto fitted each of its candidates to this table and none renders "
