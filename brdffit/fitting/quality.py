@@ -474,11 +474,14 @@ MORE_LOBES_WHY = {
 #: its highlight's peak: chrome's ggx fit is 0.79 off, chrome-steel's 0.89.
 PEAK_FAR = 0.5
 
+#: How every layers step begins (:data:`_LAYERS`, :func:`_layers_step`).
+_AUTO_OVER = "--model auto --candidates "
+
 #: The last step of a fit without layers that is not good, and of ``auto``'s choice
 #: where no candidate rendered closer: the renderers' materials with layers, which
 #: auto's default candidates leave out (on blue-fabric, ggx 29.5 dB and ggx2 30.0, where
 #: gltf_sheen renders at 33.3 with its sheen identified).
-_LAYERS = {"try": "--model auto --candidates gltf",
+_LAYERS = {"try": f"{_AUTO_OVER}gltf",
            "why": "the glTF materials with their layers (a clear coat over a base: coated "
                   "paints; a sheen: fabrics, velvets), each fitted and ranked by how it "
                   "renders; gain not measured on this table (a thin film is fitted where "
@@ -487,7 +490,8 @@ _LAYERS = {"try": "--model auto --candidates gltf",
 
 #: What the layers of a renderer's own base material add, by its candidate set
 #: (``brdffit.models.catalogue.CANDIDATE_SETS``): a fit of MaterialX's standard_surface
-#: or of Mitsuba's principled was told glTF's layers, a file its renderer does not read.
+#: or of Mitsuba's rough_conductor was told glTF's layers, a file its renderer does not
+#: read.
 _RENDERER_LAYERS = {
     "materialx": ("MaterialX's materials with their layers (standard_surface with a coat: "
                   "coated paints; with a sheen: fabrics, velvets; generalized_schlick: a "
@@ -499,10 +503,6 @@ _RENDERER_LAYERS = {
 }
 
 
-#: How every layers step begins (:data:`_LAYERS`, :func:`_layers_step`).
-_AUTO_OVER = "--model auto --candidates "
-
-
 def _layers_step(model) -> dict:
     """The step to the renderers' layered materials for a fit without layers: its own
     renderer's set where the model is a renderer's material (not one of auto's own
@@ -511,7 +511,7 @@ def _layers_step(model) -> dict:
     from brdffit.models.catalogue import CANDIDATE_SETS
 
     name = model.name.removesuffix("_mono")
-    if not getattr(model, "auto_candidate", False):
+    if not model.auto_candidate:
         for family, why in _RENDERER_LAYERS.items():
             if name in CANDIDATE_SETS.get(family, ()):
                 return {"try": f"{_AUTO_OVER}{family}", "why": why,
