@@ -398,6 +398,23 @@ def test_a_renderers_material_is_told_its_own_renderers_layers(model, family):
     got = quality.with_measured_gains({"verdict": "poor", "next": steps},
                                       [("--model gltf_sheen", "m", -0.4)], loss="render")
     assert not any(s["try"].startswith("--model auto --candidates") for s in got["next"])
+    # an auto over candidates without layers, none closer: the fit's own set stays
+    # (it was replaced by glTF's set, without the render loss)
+    others = [(s["try"].removesuffix(" --loss render"), "m", -1.0) for s in steps
+              if s not in layers] or [("--model ggx", "m", -1.0)]
+    none_closer = quality.with_measured_gains({"verdict": "poor", "next": steps}, others,
+                                              loss="render")
+    assert [s["try"] for s in none_closer["next"]] == [
+        "nothing here: no candidate rendered closer",
+        f"--model auto --candidates {family} --loss render"]
+    log = quality.next_steps(_look(), model=m, params={}, loss="log", converged=True)
+    log_others = [(s["try"], "m", -1.0) for s in log if s["try"].startswith("--model ")
+                  and not s["try"].startswith("--model auto")] or [("--model ggx", "m", -1.0)]
+    log_none_closer = quality.with_measured_gains({"verdict": "poor", "next": log},
+                                                  log_others, loss="log")
+    assert [s["try"] for s in log_none_closer["next"]
+            if s["try"].startswith("--model auto")] == [
+        f"--model auto --candidates {family} --loss render"]
 
 
 def test_a_layered_fit_is_told_its_renderers_model_with_a_layer_more():

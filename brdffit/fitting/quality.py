@@ -644,12 +644,15 @@ def with_measured_gains(look: dict | None, gains: list, loss: str | None = None)
     rest = [s for s in look.get("next", []) if bare(s["try"]) not in names
             and not (layered and s["try"].startswith(_AUTO_OVER))]
     if not measured and all(bare(s["try"]).startswith(_AUTO_OVER) for s in rest):
-        # every guess was measured, and none rendered closer
+        # every guess was measured, and none rendered closer. The layers step a fit was
+        # given stays as given (its own renderer's set, with the render loss: a
+        # standard_surface fit was told glTF's set here, a file MaterialX does not read)
+        layers = rest or [dict(_LAYERS)]
         rest = [{"try": "nothing here: no candidate rendered closer",
                  "why": "auto fitted each of its candidates to this table and none renders "
                         f"closer than this fit by {ALIKE_DB:g} dB or more; the verdict's "
                         "reason says what is off",
-                 "gain_db": None}, *([] if layered else [dict(_LAYERS)])]
+                 "gain_db": None}, *([] if layered else layers)]
     return {**look, "next": _with_the_loss(_worded_for(look.get("basis"), measured + rest),
                                            own)}
 
