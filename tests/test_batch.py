@@ -9,6 +9,7 @@ parameters to well under 2 %.
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import os
 import signal
@@ -867,8 +868,10 @@ def test_find_tables(table_dir, tmp_path, monkeypatch):
 ])
 def test_bad_arguments_exit_2(table_dir, tmp_path, capsys, argv, message):
     code = cli_main(["batch", str(table_dir), "--out", str(tmp_path / "r.h5"), *argv])
-    err = capsys.readouterr().err
-    assert code == 2 and message in err and err.count("\n") == 1
+    err = capsys.readouterr().err.splitlines()
+    # a scheduler not reached within 2 s is said to be waited for, before the error
+    waiting = [e for e in err if e.startswith("reaching the Dask scheduler at ")]
+    assert code == 2 and message in err[-1] and len(err) == 1 + len(waiting)
     assert not (tmp_path / "r.h5").exists()
 
 
@@ -914,6 +917,24 @@ def test_a_port_that_never_answers_is_no_scheduler():
                     r"but did not answer as a Dask scheduler within 1 s")):
                 reach()
         assert time.monotonic() - t0 < 20  # not the 30-s default, and not for good
+
+
+def test_a_scheduler_that_keeps_the_batch_waiting_is_said_to(table_dir, tmp_path,
+                                                              monkeypatch):
+    """A batch given a port that never answers waited 30 s on a blank terminal before
+    its one-line refusal: after 2 s it says what it waits for, once; nothing is written."""
+    from brdffit.batch import job
+    from brdffit.batch.progress import ProgressLine
+
+    monkeypatch.setattr(job, "CONNECT_TIMEOUT_S", 2.0)
+    monkeypatch.setattr(job, "SAY_WAITING_AFTER_S", 0.3)
+    stream = io.StringIO()
+    with _silent_port() as address, pytest.raises(OSError, match="within 2 s"):
+        job.run_batch([str(table_dir)], ["lambert"], tmp_path / "r.h5", scheduler=address,
+                      progress=ProgressLine(0, stream=stream))
+    assert stream.getvalue() == (f"reaching the Dask scheduler at {address} (waiting up to "
+                                 "2s for its answer)\n")
+    assert not (tmp_path / "r.h5").exists()
 
 
 def test_bad_outputs_exit_2(table_dir, tmp_path, capsys):

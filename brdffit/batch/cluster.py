@@ -71,9 +71,14 @@ def require_dask() -> None:
                    hint="workers=0, or --workers 0, fits in this process without Dask")
 
 
+#: How long a scheduler's address is given to answer Dask's handshake
+#: (:func:`scheduler_client`): distributed's own default connect timeout.
+CONNECT_TIMEOUT_S = 30.0
+
+
 @contextlib.contextmanager
 def connect(workers: int = 1, scheduler: str | None = None,
-            timeout_s: float = 30.0) -> Iterator:
+            timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator:
     """A ``distributed.Client``: to ``scheduler`` if given, else to ``workers`` local
     worker processes, shut down on exit."""
     require_dask()
@@ -145,7 +150,7 @@ def _release_sigint(held: bool) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def scheduler_client(address: str, timeout_s: float = 30.0):
+def scheduler_client(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
     """A ``distributed.Client`` of the scheduler at ``address``, or an ``OSError`` that
     says why there is none: nothing listens there (:func:`_refused`), or something does
     and does not answer as a Dask scheduler within ``timeout_s`` (:func:`_silent`), or
@@ -244,7 +249,7 @@ class DaskRunner:
     that dies under a call raises :class:`DaskWorkerLost`.
     """
 
-    def __init__(self, address: str, *, timeout_s: float = 30.0):
+    def __init__(self, address: str, *, timeout_s: float = CONNECT_TIMEOUT_S):
         extras.require("batch", f"a Dask runner ({SCHEDULER_ENV})")
         self.address = address
         self._client = scheduler_client(address, timeout_s)

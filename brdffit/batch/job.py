@@ -36,8 +36,8 @@ from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
 from brdffit import jsonout
-from brdffit.batch.cluster import DaskRunner, connect, require_dask
-from brdffit.batch.progress import ProgressLine
+from brdffit.batch.cluster import CONNECT_TIMEOUT_S, DaskRunner, connect, require_dask
+from brdffit.batch.progress import ProgressLine, format_duration
 from brdffit.batch.store import FORMAT, BatchStore, is_hdf5
 from brdffit.batch.tasks import (
     FitRecord,
@@ -514,6 +514,32 @@ def _refit_changed(t: _Task, result: dict, fitted: dict[str, str | None],
     return None if gone else result
 
 
+#: A scheduler not reached after this long is said to be waited for (:func:`_reached`).
+SAY_WAITING_AFTER_S = 2.0
+
+
+@contextlib.contextmanager
+def _reached(scheduler: str, progress: bool | ProgressLine) -> Iterator:
+    """``connect(scheduler=...)``, saying on stderr what the batch waits for where
+    that takes more than :data:`SAY_WAITING_AFTER_S`: an address that takes the
+    connection and never answers is waited for up to the connect timeout (30 s), and
+    the terminal stayed blank meanwhile. A quick connect or refusal says nothing."""
+    line = progress if isinstance(progress, ProgressLine) else ProgressLine(
+        0, enabled=bool(progress))
+    timer = threading.Timer(SAY_WAITING_AFTER_S, line.say, [
+        f"reaching the Dask scheduler at {scheduler} (waiting up to "
+        f"{format_duration(CONNECT_TIMEOUT_S)} for its answer)"])
+    timer.daemon = True
+    with contextlib.ExitStack() as stack:
+        timer.start()
+        try:
+            client = stack.enter_context(connect(scheduler=scheduler,
+                                                 timeout_s=CONNECT_TIMEOUT_S))
+        finally:
+            timer.cancel()
+        yield client
+
+
 def run_batch(
     inputs: Iterable[str],
     request: FitRequest | Iterable[str] | str,
@@ -575,7 +601,7 @@ def run_batch(
     # an existing cluster is reached before the results file is touched: an address
     # that is wrong or down is refused with nothing written (it rewrote a resumed
     # file's models and options to the refused run's)
-    with (connect(workers, scheduler) if scheduler else contextlib.nullcontext()) as remote, \
+    with (_reached(scheduler, progress) if scheduler else contextlib.nullcontext()) as remote, \
             BatchStore(out) as store:
         summary.recovered = store.recovered
         summary.damaged = len(store.damaged)

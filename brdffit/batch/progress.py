@@ -80,6 +80,12 @@ class ProgressLine:
             self.stream.write(self.line() + "\n")
         self.stream.flush()
 
+    def say(self, text: str) -> None:
+        """One line of its own (a wait before the first count: reaching a scheduler)."""
+        if self.enabled:
+            self.stream.write(text + "\n")
+            self.stream.flush()
+
     def finish(self) -> None:
         """The last line: in a log (not a TTY) the count where the batch ended, done or
         interrupted (an interrupted one printed none since the last 30 s)."""
