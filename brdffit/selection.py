@@ -626,9 +626,11 @@ class _CandidateFits:
     seven models (issue 41). A nested candidate then starts from its parent's
     solution before that is measured, where the measurement can change nothing (the
     parent converged and has no parent itself); elsewhere it waits for the parent's
-    fit and is fitted after the pass, as one fit. (Measuring the candidates solved
-    first beside the last solve, and that one after, gained nothing measurable on
-    2 cores: a solve keeps ~1.5 cores busy, so no core was idle.)
+    fit and is fitted after the pass, as one fit. A candidate left at its parent's
+    optimum, not one step taken, is measured as its parent (:func:`_at_its_parent`).
+    (Measuring the candidates solved first beside the last solve, and that one after,
+    gained nothing measurable on 2 cores: a solve keeps ~1.5 cores busy, so no core
+    was idle.)
 
     Every fit is the one a sequential run makes: each depends only on the table,
     its options and its parent's fit (the one pass sums each model's errors as its
@@ -707,12 +709,20 @@ class _CandidateFits:
             except Exception as e:  # noqa: BLE001 - kept as that candidate's outcome
                 done[m.name] = _failed(e)
         ready = [s for s in solved.values() if s is not None]
+        # a candidate left at its parent's optimum is measured as its parent
+        as_parent = {s.m.name: s.m.parent for s in ready if _at_its_parent(s, solved)}
+        measured = [s for s in ready if s.m.name not in as_parent]
         t_pass = time.perf_counter()
-        metrics = {} if not ready else dict(zip(
-            (s.m.name for s in ready),
-            full_table_metrics_of(self._table, [(s.m, s.best().u) for s in ready],
-                                  ready[0].prep.weight, peak=ready[0].prep.peak),
+        metrics = {} if not measured else dict(zip(
+            (s.m.name for s in measured),
+            full_table_metrics_of(self._table, [(s.m, s.best().u) for s in measured],
+                                  measured[0].prep.weight, peak=measured[0].prep.peak),
             strict=True))
+        for name in as_parent:
+            parent = as_parent[name]
+            while parent in as_parent:  # ggx3 at ggx2's, itself at ggx's
+                parent = as_parent[parent]
+            metrics[name] = dict(metrics[parent])
         share = (time.perf_counter() - t_pass) / max(len(ready), 1)
         # finished on the pool, parents first: a fit waits for its parent's only
         finished: dict[str, Future] = {}
@@ -760,6 +770,28 @@ class _CandidateFits:
         # on an error, fits not yet started are dropped, running ones finish
         self._pool.shutdown(wait=True, cancel_futures=True)
         return False
+
+
+def _at_its_parent(s, solved: dict) -> bool:
+    """Whether the solved candidate ``s`` is its parent's optimum, solved in this
+    ``auto``, with what it adds switched off and not one step taken from there
+    ("nested: no gain": oren_nayar on 98 of the 100 MERL, ggx2 on a single-lobe
+    table). Its full-table figures are then its parent's: what it adds sits at its
+    bound (ggx2's ks2, oren_nayar's sigma, deep in the softplus tail), where it moves
+    no bin's value (its loss on the solver's samples is the parent's, to 1e-9, or
+    both are at the exact-fit floor). The pass measured it anyway, ~1/7 of the pass
+    each, for the parent's log_rmse to 1e-12."""
+    from brdffit.fitting.solver import loss_floor
+
+    parent = solved.get(s.m.parent) if s.m.parent is not None else None
+    if parent is None or s.parent is None:
+        return False
+    best, theirs = s.best(), parent.best()
+    if best.steps != 0 or not np.array_equal(np.asarray(best.u, np.float64),
+                                             np.asarray(s.parent, np.float64)):
+        return False
+    floor = float(loss_floor(s.prep.data.target, s.prep.data.weight))
+    return abs(float(best.loss) - float(theirs.loss)) <= 1e-9 * abs(float(theirs.loss)) + floor
 
 
 class _AfterThePass(Exception):

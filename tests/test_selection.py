@@ -298,7 +298,14 @@ def test_candidates_are_measured_in_one_pass_and_fit_as_alone(monkeypatch):
     monkeypatch.setattr(brdffit.fitting.problem, "full_table_metrics_of", counting_pass)
     candidates = ("lambert", "oren_nayar", "ggx", "ggx2")
     sel = select(table, candidates, **FAST)
-    assert passes[-1] == candidates, passes  # every candidate in the last pass: one pass
+    # every candidate in the last pass, one pass, but oren_nayar: its sigma finds no
+    # descent off lambert's optimum ("nested: no gain", not one step taken), so its
+    # figures are lambert's, not measured again (ggx2's second lobe takes steps here)
+    assert passes[-1] == ("lambert", "ggx", "ggx2"), passes
+    no_gain = sel.fits["oren_nayar"]
+    assert no_gain.steps == 0 and any(n.startswith("nested: no gain") for n in no_gain.notes)
+    for k in ("log_rmse", "cube_root_rmse", "rmse_cos", "rel_peak_error"):
+        assert no_gain.error[k] == sel.fits["lambert"].error[k], k
     alone = {"lambert": fit(table, "lambert", **FAST), "ggx": fit(table, "ggx", **FAST)}
     alone["oren_nayar"] = fit(table, "oren_nayar", parent_fit=alone["lambert"], **FAST)
     alone["ggx2"] = fit(table, "ggx2", parent_fit=alone["ggx"], **FAST)
