@@ -933,7 +933,7 @@ def test_a_scheduler_that_keeps_the_batch_waiting_is_said_to(table_dir, tmp_path
         job.run_batch([str(table_dir)], ["lambert"], tmp_path / "r.h5", scheduler=address,
                       progress=ProgressLine(0, stream=stream))
     assert stream.getvalue() == (f"reaching the Dask scheduler at {address} (waiting up to "
-                                 "2s for its answer)\n")
+                                 "2 s for its answer)\n")
     assert not (tmp_path / "r.h5").exists()
 
 

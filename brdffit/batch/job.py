@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 
 from brdffit import jsonout
 from brdffit.batch.cluster import CONNECT_TIMEOUT_S, DaskRunner, connect, require_dask
-from brdffit.batch.progress import ProgressLine, format_duration
+from brdffit.batch.progress import ProgressLine
 from brdffit.batch.store import FORMAT, BatchStore, is_hdf5
 from brdffit.batch.tasks import (
     FitRecord,
@@ -528,7 +528,7 @@ def _reached(scheduler: str, progress: bool | ProgressLine) -> Iterator:
         0, enabled=bool(progress))
     timer = threading.Timer(SAY_WAITING_AFTER_S, line.say, [
         f"reaching the Dask scheduler at {scheduler} (waiting up to "
-        f"{format_duration(CONNECT_TIMEOUT_S)} for its answer)"])
+        f"{CONNECT_TIMEOUT_S:g} s for its answer)"])
     timer.daemon = True
     with contextlib.ExitStack() as stack:
         timer.start()
