@@ -780,7 +780,8 @@ def _at_its_parent(s, solved: dict) -> bool:
     bound (ggx2's ks2, oren_nayar's sigma, deep in the softplus tail), where it moves
     no bin's value (its loss on the solver's samples is the parent's, to 1e-9, or
     both are at the exact-fit floor). The pass measured it anyway, ~1/7 of the pass
-    each, for the parent's log_rmse to 1e-12."""
+    each, for the parent's figures (to the last bit on 20 MERL materials). A solve
+    that moved it, or in another precision, is measured as any other."""
     from brdffit.fitting.solver import loss_floor
 
     parent = solved.get(s.m.parent) if s.m.parent is not None else None
