@@ -6,7 +6,11 @@ The figures are fitted to measured jobs (``python -m bench.job_shapes``:
 fit, every bin with one and four starts, ggx2, auto, the render loss, subsamples of
 131,072 and 262,144 bins with several starts, the bounded fit. The estimate is above
 every one of those measurements and within 2x of it: a job it accepts fits in what it
-promised, and it does not refuse jobs the machine can do.
+promised, and it does not refuse jobs the machine can do. That holds on the machine
+they were measured on (an Intel Xeon); on one 2.0-2.4x faster (an AMD EPYC,
+``bench/results/job_shapes_epyc.md``) time is still never under, but up to 4x over:
+fixed constants cannot be within 2x on both, and the estimate does not yet measure the
+machine it runs on.
 
 How a fit spends, and so how the estimate counts:
 
