@@ -723,13 +723,16 @@ class _CandidateFits:
             while parent in as_parent:  # ggx3 at ggx2's, itself at ggx's
                 parent = as_parent[parent]
             metrics[name] = dict(metrics[parent])
-        share = (time.perf_counter() - t_pass) / max(len(ready), 1)
+        # each measured fit's time counts its share of the pass; one measured as its
+        # parent took no part in it
+        share = (time.perf_counter() - t_pass) / max(len(measured), 1)
         # finished on the pool, parents first: a fit waits for its parent's only
         finished: dict[str, Future] = {}
         for m in self._ordered:
             if m.name not in done:
                 finished[m.name] = self._pool.submit(
-                    self._finished, m, solved[m.name], metrics.get(m.name), share,
+                    self._finished, m, solved[m.name], metrics.get(m.name),
+                    0.0 if m.name in as_parent else share,
                     finished.get(m.parent) if m.parent is not None else None)
         for name, f in finished.items():
             done[name] = _done_as(f, lambda pair: pair[0])
