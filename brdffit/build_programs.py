@@ -27,10 +27,13 @@ import time
 from brdffit import exported
 
 #: Where the programs' code lives: the modules whose functions are ``executables.jit``
-#: programs, and the registry of models (every built-in model's code is traced).
+#: programs, and the registry of models (every built-in model's code is traced); and
+#: auto's flow, which decides which of them a first auto runs (its one pass over the
+#: table is one program per set of candidates it measures: when that set changed, the
+#: shipped programs lacked the new one and stayed "current").
 ROOT_MODULES = ("brdffit.fitting.problem", "brdffit.fitting.samples", "brdffit.fitting.sphere",
                 "brdffit.fitting.starts", "brdffit.fitting.uncertainty", "brdffit.models",
-                "brdffit.executables")
+                "brdffit.executables", "brdffit.selection")
 
 
 def _module_file(module: str) -> str | None:

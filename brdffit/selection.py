@@ -785,7 +785,7 @@ def _at_its_parent(s, solved: dict) -> bool:
     both are at the exact-fit floor). The pass measured it anyway, ~1/7 of the pass
     each, for the parent's figures (to the last bit on 20 MERL materials). A solve
     that moved it, or in another precision, is measured as any other."""
-    from brdffit.fitting.solver import loss_floor
+    from brdffit.fitting.pipeline import exact_fit_loss
 
     parent = solved.get(s.m.parent) if s.m.parent is not None else None
     if parent is None or s.parent is None:
@@ -794,8 +794,8 @@ def _at_its_parent(s, solved: dict) -> bool:
     if best.steps != 0 or not np.array_equal(np.asarray(best.u, np.float64),
                                              np.asarray(s.parent, np.float64)):
         return False
-    floor = float(loss_floor(s.prep.data.target, s.prep.data.weight))
-    return abs(float(best.loss) - float(theirs.loss)) <= 1e-9 * abs(float(theirs.loss)) + floor
+    return (abs(float(best.loss) - float(theirs.loss))
+            <= 1e-9 * abs(float(theirs.loss)) + exact_fit_loss(s.prep))
 
 
 class _AfterThePass(Exception):

@@ -50,6 +50,8 @@ def test_the_digest_covers_every_programs_code():
     # every built-in model's code, and what they import
     for name in ("ggx", "ggx2", "oren_nayar", "gltf_iridescence", "microfacet", "base"):
         assert exported.PACKAGE / "models" / f"{name}.py" in files
+    # auto's flow, which decides the set of programs a first auto runs
+    assert exported.PACKAGE / "selection.py" in files
     # not the shells: a change there leaves the programs current
     for shell in ("cli/__init__.py", "batch/__init__.py", "client.py", "build_programs.py"):
         assert exported.PACKAGE / shell not in files

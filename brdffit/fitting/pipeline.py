@@ -323,7 +323,7 @@ def solved_fit(
     solve = Solve(m, solver, precision, prep.data, max_steps,
                   bucket=max(bucket, len(best_starts)))
     parent_loss = None if parent is None else solve.loss_at(parent)
-    if parent is not None and parent_loss <= _exact_fit_loss(prep):
+    if parent is not None and parent_loss <= exact_fit_loss(prep):
         # The parent fits these data exactly: nothing is left for what this model adds
         # (a second lobe, a layer), whose own starts would only spend steps (dozens, on
         # ggx2's collapsing lobe) finding the parent again.
@@ -531,7 +531,7 @@ def _start_notes(m, starts: int, n_candidates: int, init, coarse, prep) -> list[
     return []
 
 
-def _exact_fit_loss(prep) -> float:
+def exact_fit_loss(prep) -> float:
     """The loss at or below which a fit of ``prep``'s data is exact (the solver's own
     floor, ``brdffit.fitting.solver.loss_floor``)."""
     return float(loss_floor(prep.data.target, prep.data.weight))

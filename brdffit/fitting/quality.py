@@ -350,7 +350,9 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
             f"{loss} loss, which a broader, dimmer lobe satisfies; the render loss weighs the "
             "light a picture shows (docs/fitting.md); gain not measured on this table")
             if peak_far else RENDER_WHY)
-    name = model.name.removesuffix("_mono")
+    from brdffit.models.catalogue import MONO_SUFFIX
+
+    name = model.name.removesuffix(MONO_SUFFIX)
     richer = {"lambert": "ggx", "oren_nayar": "ggx", "blinn_phong": "ggx", "phong": "ggx",
               "beckmann": "ggx2", "ggx": "ggx2"}
     why_richer = {
@@ -508,9 +510,9 @@ def _layers_step(model) -> dict:
     renderer's set where the model is a renderer's material (not one of auto's own
     analytic candidates, which every set may hold: lambert is Mitsuba's diffuse), else
     glTF's (:data:`_LAYERS`)."""
-    from brdffit.models.catalogue import CANDIDATE_SETS
+    from brdffit.models.catalogue import CANDIDATE_SETS, MONO_SUFFIX
 
-    name = model.name.removesuffix("_mono")
+    name = model.name.removesuffix(MONO_SUFFIX)
     if not model.auto_candidate:
         for family, why in _RENDERER_LAYERS.items():
             if name in CANDIDATE_SETS.get(family, ()):
