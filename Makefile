@@ -45,7 +45,7 @@ test-quick: $(STAMP)
 
 # the default fits' programs lowered (StableHLO, jax.export) and shipped in the package:
 # a new process compiles them without tracing. Run after changing what they import
-# (brdffit/models, brdffit/fitting, ...); tests/test_exported.py fails while they are stale
+# (brdffit/models, brdffit/fitting, brdffit/selection.py, ...); tests/test_exported.py fails while they are stale
 programs: $(STAMP)
 	$(BIN)/python -m brdffit.build_programs build
 
