@@ -1,16 +1,21 @@
 """What a requested fit will cost, before it is queued: peak memory and run time.
 
 The figures are fitted to measured jobs (``python -m bench.job_shapes``:
-``bench/results/job_shapes.md``), each a new process on a 2-core x86 machine running
-``brdffit.request.run`` on a real MERL table, as a service worker does: the default
-fit, every bin with one and four starts, ggx2, auto, the render loss, subsamples of
-131,072 and 262,144 bins with several starts, the bounded fit. The estimate is above
-every one of those measurements and within 2x of it: a job it accepts fits in what it
-promised, and it does not refuse jobs the machine can do. That holds on the machine
-they were measured on (an Intel Xeon); on one 2.0-2.4x faster (an AMD EPYC,
-``bench/results/job_shapes_epyc.md``) time is still never under, but up to 4x over:
-fixed constants cannot be within 2x on both, and the estimate does not yet measure the
-machine it runs on.
+``bench/results/job_shapes.md``), each a new process on a 2-core x86 machine (an AMD
+EPYC) running ``brdffit.request.run`` on a real MERL table, as a service worker does:
+the default fit, every bin with one and four starts, ggx2, auto, the render loss,
+subsamples of 131,072 and 262,144 bins with several starts, the bounded fit. The
+estimate is above every one of those measurements and within 2x of it: a job it
+accepts fits in what it promised, and it does not refuse jobs the machine can do.
+
+A slower machine runs the same jobs longer (an Intel Xeon took 1.3-2.4x as long:
+``bench/results/job_shapes_xeon.md``), and no constants can be within 2x on both. So a
+server measures its own: each done job stores the seconds its worker spent on it
+(``run_s``), and :func:`machine_factor` raises the estimate by the largest ratio of
+measured to estimated time among its recent jobs, with headroom. It never lowers it:
+on a faster machine the constants stay above its jobs. Until a slower machine has
+run a job, its first estimates are low; the hard bound on a running job is the
+server's ``job_time_limit_s``, which stops it.
 
 How a fit spends, and so how the estimate counts:
 
@@ -19,25 +24,28 @@ How a fit spends, and so how the estimate counts:
   with its padded sample count and parameters, not with its starts (the starts are
   solved one after another in one program);
 - **time** is a job's fixed part (reading the table, loading the programs, the
-  report: about a second per job and half a second per model) plus the solves: samples x starts x
-  parameters x steps. A fit stops when the optimality test holds, in 3 to 50 steps
-  on the measured tables, so the estimate counts ``TYPICAL_STEPS`` (or ``max_steps``
-  where fewer), not every start running ``max_steps``: the hard bound on a running job
-  is the server's ``job_time_limit_s``, which stops it.
+  report: about a second per job and a fifth of one per model) plus the solves: samples
+  x starts x parameters x steps. A fit stops when the optimality test holds, in 3 to 51
+  steps on the measured tables, so the estimate counts ``TYPICAL_STEPS`` (``NESTED_STEPS``
+  for a nested model, or ``max_steps`` where fewer), not every start running
+  ``max_steps``.
 - a fit of every bin (``samples`` null) is the default subsample fit, with the starts
-  asked, then one start on every bin that polishes its optimum (``POLISH_STEPS_PER_PARAM``
-  steps per parameter at most); a nested model (ggx2, oren_nayar) fits its parent too.
+  asked, then one start on every bin that polishes its optimum (``POLISH_STEPS``, or
+  ``NESTED_POLISH_STEPS``); a nested model (ggx2, oren_nayar) fits its parent too.
 
 Not counted: the compilation of a worker whose cache is empty. After ``brdffit warmup``
 (which ``brdffit serve --warmup`` and the image run) there is none; before it a first
-job compiles its programs, ~3 s per model on this machine (the default ggx job took
-4.3 s from an empty cache against 1.6 s, auto 14.8 s against 3.6 s:
-``bench/results/job_shapes_cold.md``). Nor are auto's refits of an unconverged candidate, and
-a scene's smaller set of bins (an overestimate).
+job compiles its programs, ~3 s per model on the Xeon (the default ggx job took 4.3 s
+from an empty cache against 1.6 s, auto 14.8 s against 3.6 s:
+``bench/results/job_shapes_cold.md``), and the worker time a job stores leaves its
+compiling out (``api.tasks``), so that one cold job does not teach the server that its
+machine is slow. Nor are auto's refits of an unconverged candidate counted, nor a
+scene's smaller set of bins (an overestimate).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bucket_size
@@ -57,21 +65,28 @@ AUTO_BYTES = 150 * MiB
 #: The render loss's sphere targets and tone curve (measured: +50 MiB).
 RENDER_BYTES = 100 * MiB
 
-#: Seconds per job besides its fits: reading the table, loading the programs.
+#: Seconds per job besides its fits: reading the table, loading the programs, the report.
 SECONDS_PER_JOB = 1.5
 #: Seconds per model fitted besides its solve: starts, full-table errors, uncertainty,
-#: sphere renders and verdict (auto counts each candidate's).
-SECONDS_PER_MODEL = 0.5
-#: Seconds per sample x start x parameter x solver step (measured 1.9e-8 for ggx on
-#: 131,072 samples x 8 starts, 2.9e-8 for ggx2 on 262,144 x 4; rounded up).
-SECONDS_PER_UNIT_STEP = 3.3e-8
-#: Steps a start is counted for (``max_steps`` where fewer): fits on the measured
-#: tables stopped in 25 to 47.
-TYPICAL_STEPS = 48
-#: A polish of every bin takes up to ~1.5 steps per parameter (measured: 3 for ggx,
-#: 16 for ggx2), each costing more per sample than a subsample's step.
-POLISH_STEPS_PER_PARAM = 1.5
-SECONDS_PER_POLISH_UNIT_STEP = 4e-8
+#: sphere renders and verdict.
+SECONDS_PER_MODEL = 0.2
+#: The same for each of auto's candidates, which share one full-table pass.
+SECONDS_PER_CANDIDATE = 0.05
+#: Seconds per sample x start x parameter x solver step.
+SECONDS_PER_UNIT_STEP = 2.3e-8
+#: Steps a start is counted for (``max_steps`` where fewer): a one-lobe model stopped in
+#: 25 to 28 steps on the measured tables, a nested one (a second lobe beside its parent's
+#: optimum, which it often leaves unused) in 47 to 51.
+TYPICAL_STEPS = 30
+NESTED_STEPS = 50
+#: A polish of every bin (the subsample fit's optimum, one start) takes few steps: 3 for
+#: ggx, 16 for ggx2, each costing more per sample than a subsample's step.
+POLISH_STEPS = 4
+NESTED_POLISH_STEPS = 18
+SECONDS_PER_POLISH_UNIT_STEP = 3.7e-8
+#: Besides its steps, a polish readies every bin (its weights and arrays): measured
+#: 0.7-1.7 s for ggx's 3 steps on one machine in two hours.
+SECONDS_PER_POLISH = 0.45
 #: The render loss costs more per step (its tone curve, its energy term) and per model
 #: (its sphere targets).
 RENDER_STEP_FACTOR = 2.0
@@ -80,12 +95,20 @@ RENDER_MODEL_FACTOR = 1.5
 #: unconstrained fit (``len(brdffit.fitting.physical.BARRIERS)``; a test checks it).
 PHYSICAL_SOLVES = 2
 
+#: How far above the slowest of a server's recent jobs (measured against this estimate)
+#: its estimates stay, and how many recent jobs that looks at (:func:`machine_factor`).
+MACHINE_HEADROOM = 1.2
+RECENT_JOBS = 50
+
 
 @dataclass(frozen=True)
 class Estimate:
     memory_bytes: int
     seconds: float
     detail: str  # how the numbers came about, for the refusal's message
+    #: ``seconds`` before the server's machine factor (:func:`machine_factor`): what a
+    #: finished job's measured time is held against
+    reference_seconds: float = 0.0
 
     @property
     def memory_mib(self) -> float:
@@ -94,6 +117,16 @@ class Estimate:
     def to_dict(self) -> dict:
         return {"memory_mib": round(self.memory_mib), "seconds": round(self.seconds, 1),
                 "detail": self.detail}
+
+
+def machine_factor(measured: Iterable[tuple[float, float]]) -> float:
+    """How much slower than the machine the constants were measured on this server's
+    workers are: from its recent jobs' ``(reference_seconds, run_s)`` pairs, the
+    largest ratio of measured to estimated time, with :data:`MACHINE_HEADROOM` above
+    it; never below 1 (a faster machine keeps the constants, which stay above its
+    jobs: an estimate is never lowered by what it measured, only raised)."""
+    ratios = [run / ref for ref, run in measured if ref > 0 and run > 0]
+    return max([1.0] + [MACHINE_HEADROOM * r for r in ratios])
 
 
 def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
@@ -109,39 +142,49 @@ def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
     return out
 
 
-def estimate(request, usable_bins: int) -> Estimate:
+def estimate(request, usable_bins: int, machine: float = 1.0) -> Estimate:
     """The cost of the fits ``request`` (a ``brdffit.request.FitRequest``) asks for on
-    a table with ``usable_bins`` measured bins."""
+    a table with ``usable_bins`` measured bins; its time ``machine`` times the
+    constants' (:func:`machine_factor`)."""
     described = catalogue.describe()
     n_params = {d["name"]: d["n_params"] for d in described}
     least_starts = {d["name"]: d.get("least_starts", 1) for d in described}
+    parents = {d["name"]: d.get("parent") for d in described}
     options = request.options
     polish = options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
     samples = (min(DEFAULT_SAMPLES, usable_bins) if polish else
                usable_bins if options.samples is None else min(options.samples, usable_bins))
-    starts, steps = options.starts, min(options.max_steps, TYPICAL_STEPS)
+    starts = options.starts
     render = options.loss == "render"
     step_factor, model_factor = (RENDER_STEP_FACTOR, RENDER_MODEL_FACTOR) if render else (1, 1)
-    fitted = _with_parents(request.fitted_models, {d["name"]: d.get("parent") for d in described})
+    per_model = SECONDS_PER_CANDIDATE if request.auto else SECONDS_PER_MODEL
+    fitted = _with_parents(request.fitted_models, parents)
     largest_solve = bucket_size(usable_bins if polish else samples)
     memory = 0
     seconds = SECONDS_PER_JOB
     for name in fitted:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
+        nested = parents.get(name) is not None
         memory = max(memory, BYTES_PER_SAMPLE_PARAM * largest_solve * (k + 1))
         solves = max(starts, least_starts.get(name, 1)) + (
             PHYSICAL_SOLVES if options.physical else 0)
-        seconds += model_factor * SECONDS_PER_MODEL + step_factor * SECONDS_PER_UNIT_STEP * (
+        steps = min(options.max_steps, NESTED_STEPS if nested else TYPICAL_STEPS)
+        seconds += model_factor * per_model + step_factor * SECONDS_PER_UNIT_STEP * (
             samples * k * solves * steps)
         if polish:
-            polish_steps = min(options.max_steps, POLISH_STEPS_PER_PARAM * k)
-            seconds += step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps
+            polish_steps = min(options.max_steps, NESTED_POLISH_STEPS if nested else POLISH_STEPS)
+            seconds += SECONDS_PER_POLISH + (
+                step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps)
     memory += FIXED_BYTES + (AUTO_BYTES if request.auto else 0) + (RENDER_BYTES if render else 0)
     what = "the auto candidates " + ", ".join(request.fitted_models) if request.auto else (
         ", ".join(request.fitted_models))
     how = (f"{samples:,} samples x {starts} start(s), then one start on every bin "
            f"({usable_bins:,})" if polish else f"{samples:,} samples x {starts} start(s)")
-    detail = (f"{what} on {how}, ~{steps} steps each"
-              f"{', and the physically bounded solves' if options.physical else ''} "
-              "(from measured jobs: bench/results/job_shapes.md)")
-    return Estimate(int(memory), seconds, detail)
+    slower = (f"; time x{machine:.2f}, as this server's recent jobs ran slower than the "
+              "machine the constants were measured on" if machine > 1 else "")
+    if render:
+        how += " under the render loss"
+    detail = (f"{what} on {how}, ~{TYPICAL_STEPS} steps a start ({NESTED_STEPS} for a "
+              f"nested model){', and the physically bounded solves' if options.physical else ''} "
+              f"(from measured jobs: bench/results/job_shapes.md{slower})")
+    return Estimate(int(memory), machine * seconds, detail, reference_seconds=seconds)

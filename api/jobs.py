@@ -182,7 +182,8 @@ class JobQueue:
             settle = (self.store.fail, (job.id, f"internal error: {e!r}"), "failed")
         else:
             if outcome.ok:
-                settle = (self.store.finish, (job.id, outcome.value, outcome.notes), "done")
+                settle = (self.store.finish, (job.id, outcome.value, outcome.notes,
+                                              outcome.seconds), "done")
             else:
                 if outcome.internal:
                     log.error("job %s failed:\n%s", job.id, outcome.traceback)

@@ -39,8 +39,9 @@ STATUSES = ("queued", "running", "done", "failed", "cancelled")
 FINISHED = ("done", "failed", "cancelled")
 
 #: ``PRAGMA user_version`` of the layout below. 0: the first layout (no
-#: ``cancelled``, no progress); :meth:`Store._migrate` brings it up to date.
-SCHEMA_VERSION = 1
+#: ``cancelled``, no progress); 1: no ``run_s``; :meth:`Store._migrate` brings it up
+#: to date.
+SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS tables (
@@ -67,7 +68,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     started_at  REAL,
     finished_at REAL,
     stage       TEXT,                      -- what a running job is doing
-    fraction    REAL                       -- how much of it is done, 0 .. 1
+    fraction    REAL,                      -- how much of it is done, 0 .. 1
+    run_s       REAL                       -- seconds its worker spent on it (done jobs)
 );
 CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 CREATE INDEX IF NOT EXISTS jobs_by_table ON jobs (table_id, seq);
@@ -285,6 +287,9 @@ class Store:
                 con.execute("DROP TABLE jobs_v0")
             else:
                 _create(con)
+                columns = {r["name"] for r in con.execute("PRAGMA table_info(jobs)")}
+                if "run_s" not in columns:  # version 1
+                    con.execute("ALTER TABLE jobs ADD COLUMN run_s REAL")
             con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             con.execute("COMMIT")
         except BaseException:
@@ -378,9 +383,11 @@ class Store:
             ).fetchall()  # fetch all: the statement (and its commit) completes
         return _job(rows[0]) if rows else None
 
-    def finish(self, job_id: str, results: list[dict], notes=()) -> None:
+    def finish(self, job_id: str, results: list[dict], notes=(),
+               run_s: float | None = None) -> None:
         """The job is done with ``results``; ``notes`` (what happened on the way, e.g.
-        a model that could not be fitted beside others) go to its note."""
+        a model that could not be fitted beside others) go to its note; ``run_s``: the
+        seconds its worker spent on it (:meth:`recent_runs`)."""
         with self._connect() as con:
             row = con.execute("SELECT note FROM jobs WHERE id = ?", (job_id,)).fetchone()
             note = row["note"] if row else None
@@ -388,9 +395,27 @@ class Store:
                 note = _add_note(note, text)
             con.execute(
                 "UPDATE jobs SET status = 'done', results = ?, reason = NULL, note = ?, "
-                "finished_at = ? WHERE id = ? AND status = 'running'",
-                (jsonout.dumps(results), note, time.time(), job_id),
+                "finished_at = ?, run_s = ? WHERE id = ? AND status = 'running'",
+                (jsonout.dumps(results), note, time.time(), run_s, job_id),
             )
+
+    def recent_runs(self, limit: int) -> list[tuple[dict, int, float]]:
+        """The ``limit`` latest done jobs whose worker time is known, newest first: each
+        job's request (``FitRequest.to_dict()``), its table's measured bins and the
+        seconds its worker spent on it (the cost estimate's measure of the machine)."""
+        with self._connect() as con:
+            rows = con.execute(
+                "SELECT jobs.models, jobs.options, jobs.run_s, tables.summary FROM jobs "
+                "JOIN tables ON tables.id = jobs.table_id "
+                "WHERE jobs.status = 'done' AND jobs.run_s IS NOT NULL "
+                "ORDER BY jobs.finished_at DESC LIMIT ?", (limit,)).fetchall()
+        out = []
+        for row in rows:
+            bins = json.loads(row["summary"]).get("measured_bins")
+            if isinstance(bins, int) and bins > 0:
+                out.append((_request(json.loads(row["models"]), json.loads(row["options"])),
+                            bins, row["run_s"]))
+        return out
 
     def fail(self, job_id: str, reason: str) -> None:
         with self._connect() as con:

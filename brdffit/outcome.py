@@ -26,7 +26,8 @@ class Outcome:
     ``error_type`` names the exception behind a failure; ``internal`` marks a bug
     rather than bad input (its ``traceback`` is kept for the log, never shown to
     the user as the reason); ``notes`` says what happened on the way (a model of
-    several that could not be fitted).
+    several that could not be fitted); ``seconds`` how long the work took where it
+    ran (the service's cost estimate learns its workers' speed from it).
     """
 
     ok: bool
@@ -36,10 +37,11 @@ class Outcome:
     internal: bool = False
     traceback: str | None = None
     notes: tuple[str, ...] = field(default=())
+    seconds: float | None = None
 
     @classmethod
-    def success(cls, value, notes=()) -> Outcome:
-        return cls(ok=True, value=value, notes=tuple(notes))
+    def success(cls, value, notes=(), seconds: float | None = None) -> Outcome:
+        return cls(ok=True, value=value, notes=tuple(notes), seconds=seconds)
 
     @classmethod
     def failure(cls, error: BaseException) -> Outcome:

@@ -465,6 +465,9 @@ def test_fit_runs_and_plots_wait_for_it(server, http, table_id):
     done = wait_status(http, job["id"], ("done", "failed"))
     assert done["status"] == "done", done
     assert done["attempts"] == 1 and done["reason"] is None
+    # the worker's time on it is stored: the cost estimate learns the machine from it
+    (run_s,) = Store(server.data_dir).recent_runs(1)[0][2:]
+    assert 0 < run_s < 600
     result = done["result"]
     assert result == done["results"][0]
     assert result["model"] == "lambert" and result["table"] == "ggx.binary"
@@ -882,11 +885,25 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
         fits.create(store, settings, "a" * 64, {"models": "ggx", "rule": {"tolerance": 0.02}})
     with pytest.raises(fits.OverLimits) as over:
         fits.create(store, settings, "a" * 64, {"models": "auto", "options": {
-            "samples": 200_000, "starts": 8}})
+            "samples": 200_000, "starts": 16}})
     why = str(over.value)
     assert "BRDFFIT_MAX_JOB_ESTIMATE_S" in why and "the auto candidates lambert" in why
     assert why.endswith("Ask for fewer samples or starts.") and "max_steps)" not in why
     assert store.list_jobs(limit=10).total == 0  # nothing queued by a refusal
+    # a server whose worker ran a fit 40x slower than the estimate's constants counts on
+    # that: a fit within the limit at the constants' speed is refused, saying why
+    slow = {"models": "ggx", "options": {"samples": 4096}}
+    assert fits.over_limits(fits.estimate(FitRequest.from_dict(slow), 1_000_000),
+                            settings) is None
+    done = store.create_job("a" * 64, FitRequest.from_dict(slow).to_dict())
+    store.claim_next()
+    reference = fits.estimate(FitRequest.from_dict(slow), 1_000_000).reference_seconds
+    store.finish(done.id, [], run_s=40 * reference)
+    with pytest.raises(fits.OverLimits, match=r"time x48\.00, as this server's recent jobs "
+                                              "ran slower"):
+        fits.create(store, settings, "a" * 64, slow)
+    store.delete_job(done.id)
+    assert store.list_jobs(limit=10).total == 0
     job = fits.create(store, settings, "a" * 64, {"models": ["ggx", "lambert", "ggx"],
                                                   "options": {"samples": 4096}})
     assert job.models == ["ggx", "lambert"] and job.status == "queued"

@@ -102,7 +102,8 @@ def test_errors_carry_the_servers_message(client, files, tmp_path):
         client.fit(table_id, "lambert", bin_weight=[1.0])
     # what only the server knows comes back in its words: its cost limits
     with pytest.raises(ApiError) as e:
-        client.fit(table_id, "auto", samples=1_000_000, starts=32, max_steps=10_000)
+        client.fit(table_id, "auto", samples=1_000_000, starts=32, max_steps=10_000,
+                   loss="render")
     assert e.value.status_code == 422 and "over the server's limits" in e.value.detail
     text = tmp_path / "notes.binary"
     text.write_text("not a table\n" * 20)

@@ -12,16 +12,19 @@ from pathlib import Path
 
 import pytest
 
-from api.estimate import estimate
+from api.estimate import MACHINE_HEADROOM, estimate, machine_factor
 from brdffit.request import FitRequest
 
 pytestmark = pytest.mark.unit
 
-MEASURED = Path(__file__).resolve().parents[1] / "bench" / "results" / "job_shapes.json"
+RESULTS = Path(__file__).resolve().parents[1] / "bench" / "results"
+MEASURED = RESULTS / "job_shapes.json"
+#: The same shapes on a machine 1.3-2.4x slower than the one the constants fit
+SLOWER = RESULTS / "job_shapes_xeon.json"
 
 
-def _rows():
-    res = json.loads(MEASURED.read_text())
+def _rows(path=MEASURED):
+    res = json.loads(path.read_text())
     return res["usable_bins"], res["rows"]
 
 
@@ -61,3 +64,28 @@ def test_starts_and_steps_count_but_max_steps_only_as_a_cap():
     # a nested model fits its parent too; auto holds every candidate
     assert estimate(FitRequest.of("ggx2"), 1_000_000).seconds > base.seconds
     assert estimate(FitRequest.of("auto"), 1_000_000).memory_mib > base.memory_mib
+
+
+def test_on_a_slower_machine_what_a_server_learns_keeps_every_estimate_above_its_job():
+    """The constants are under the slower machine's jobs; the factor a server learns
+    from its jobs (here every other shape's runs, so no row judges itself) is not."""
+    usable, rows = _rows(SLOWER)
+    reference = {r["shape"]: estimate(_request(r["request"]), usable).reference_seconds
+                 for r in rows}
+    assert any(reference[r["shape"]] < r["wall_s"] for r in rows)  # the constants alone
+    for row in rows:
+        factor = machine_factor([(reference[r["shape"]], run["wall_s"]) for r in rows
+                                 if r is not row for run in r["runs"]])
+        cost = estimate(_request(row["request"]), usable, machine=factor)
+        assert row["wall_s"] <= cost.seconds <= 2.5 * row["wall_s"], (row["shape"], factor)
+        assert cost.seconds == pytest.approx(factor * cost.reference_seconds)
+        assert f"time x{factor:.2f}" in cost.detail
+
+
+def test_the_machine_factor_only_ever_raises_the_estimate():
+    assert machine_factor([]) == 1.0
+    assert machine_factor([(2.0, 1.0), (10.0, 3.0)]) == 1.0  # a faster machine
+    assert machine_factor([(2.0, 1.0), (2.0, 4.0)]) == pytest.approx(2 * MACHINE_HEADROOM)
+    assert machine_factor([(0.0, 4.0), (2.0, 0.0)]) == 1.0  # nothing measured
+    plain = estimate(FitRequest.of("ggx"), 1_000_000)
+    assert plain.seconds == plain.reference_seconds and "time x" not in plain.detail

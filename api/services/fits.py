@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sqlite3
 
-from api.estimate import Estimate, estimate
+from api.estimate import RECENT_JOBS, Estimate, estimate, machine_factor
 from api.settings import Settings
 from api.store import JobRecord, Store
 from brdffit.errors import FitInputError
@@ -42,6 +42,19 @@ def over_limits(cost: Estimate, settings: Settings) -> str | None:
             f"for {cost.detail}. Ask for fewer samples or starts.")
 
 
+def measured_machine(store: Store) -> float:
+    """How much slower than the estimate's constants this server's workers ran its
+    recent jobs (``api.estimate.machine_factor``; 1 with none measured)."""
+    measured = []
+    for request, bins, run_s in store.recent_runs(RECENT_JOBS):
+        try:
+            fitted = FitRequest.from_dict(request)
+        except FitInputError:  # stored by another version, whose models this one lacks
+            continue
+        measured.append((estimate(fitted, bins).reference_seconds, run_s))
+    return machine_factor(measured)
+
+
 def create(store: Store, settings: Settings, table_id: str, request: dict) -> JobRecord:
     """Queue a fit job of ``request`` (``FitRequest.to_dict()``'s form): checked by the
     library, its cost against the limits, then stored in the library's own form.
@@ -55,7 +68,7 @@ def create(store: Store, settings: Settings, table_id: str, request: dict) -> Jo
         raise FitInputError(f"table {table_id} is a sample list: the physical bounds are not "
                             "available for a sample list yet (their albedo check reads a "
                             "table); fit it without them")
-    cost = estimate(request, table.summary["measured_bins"])
+    cost = estimate(request, table.summary["measured_bins"], machine=measured_machine(store))
     if (why := over_limits(cost, settings)) is not None:
         # Refused before anything is queued or allocated: say by how much, and why.
         raise OverLimits(why)
