@@ -11,11 +11,12 @@ accepts fits in what it promised, and it does not refuse jobs the machine can do
 A slower machine runs the same jobs longer (an Intel Xeon took 1.3-2.4x as long:
 ``bench/results/job_shapes_xeon.md``), and no constants can be within 2x on both. So a
 server measures its own: each done job stores the seconds its worker spent on it
-(``run_s``), and :func:`machine_factor` raises the estimate by the largest ratio of
-measured to estimated time among its recent jobs, with headroom. It never lowers it:
-on a faster machine the constants stay above its jobs. Until a slower machine has
-run a job, its first estimates are low; the hard bound on a running job is the
-server's ``job_time_limit_s``, which stops it.
+(``run_s``; not for a job that compiled programs, ``api.tasks``), and
+:func:`machine_factor` raises the estimate by the largest ratio of measured to
+estimated time among its recent jobs, with headroom. It never lowers it: on a faster
+machine the constants stay above its jobs. Until a slower machine has run a job, its
+first estimates are low; the hard bound on a running job is the server's
+``job_time_limit_s``, which stops it.
 
 How a fit spends, and so how the estimate counts:
 
@@ -37,9 +38,9 @@ Not counted: the compilation of a worker whose cache is empty. After ``brdffit w
 (which ``brdffit serve --warmup`` and the image run) there is none; before it a first
 job compiles its programs, ~3 s per model on the Xeon (the default ggx job took 4.3 s
 from an empty cache against 1.6 s, auto 14.8 s against 3.6 s:
-``bench/results/job_shapes_cold.md``), and the worker time a job stores leaves its
-compiling out (``api.tasks``), so that one cold job does not teach the server that its
-machine is slow. Nor are auto's refits of an unconverged candidate counted, nor a
+``bench/results/job_shapes_cold.md``), and a job that compiled stores no worker time
+(``api.tasks``), so that one cold job does not teach the server that its machine is
+slow. Nor are auto's refits of an unconverged candidate counted, nor a
 scene's smaller set of bins (an overestimate).
 """
 

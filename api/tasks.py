@@ -20,12 +20,16 @@ from brdffit.outcome import Outcome
 #: Where :func:`report` sends a running task's progress (set by :func:`serve`).
 _reporter = None
 
-#: JAX's events for making a program (tracing, lowering, XLA's compile): a job's
-#: worker time leaves them out, as the cost estimate does (``api.estimate``: a worker
-#: whose cache is empty compiles once, then never again).
+#: JAX's events for making a program (tracing, lowering, XLA's compile). A job that
+#: spent more than COMPILING_SHARE of its time on them is no measure of the machine's
+#: speed, as the cost estimate counts it (``api.estimate``: a worker whose cache is
+#: empty compiles once, then never again): its worker time is not stored. (Not the
+#: time less its compiling: the fits compile on several threads at once, and the
+#: summed events outran the job's wall time on a cold ggx job.)
 COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
                   "/jax/core/compile/jaxpr_to_mlir_module_duration",
                   "/jax/core/compile/backend_compile_duration")
+COMPILING_SHARE = 0.05
 _compiling_s = [0.0]  # summed by the listener _count_compiling registers, once
 
 
@@ -82,13 +86,13 @@ def fit_models(table_path: str, source: str, request: dict,
 
         fitted = run(table, request, progress=progress, measured_input=measured_input)
         report("storing the results", 1.0)
+        wall = time.perf_counter() - t0
+        compiled = _compiling_s[0] - compiling0 > COMPILING_SHARE * wall
         # Strict before it is stored and served: a metric a fit could not measure is null.
         return Outcome.success([strict(r.to_dict()) for r in fitted.fits.values()],
                                notes=[f"{m} could not be fitted: {why}"
                                       for m, why in fitted.failed.items()],
-                               # the fits' time, less any compiling (the estimate's measure)
-                               seconds=max(0.0, time.perf_counter() - t0
-                                           - (_compiling_s[0] - compiling0)))
+                               seconds=None if compiled else wall)
     except Exception as e:  # noqa: BLE001 - a failure is the job's outcome, not a crash
         return Outcome.failure(e)
 
