@@ -211,23 +211,28 @@ def test_backup_is_a_database_the_service_starts_on(tmp_path, capsys):
     assert Store(data).get_job(job_id).status == "done"
 
 
-def test_a_version_0_database_is_migrated_keeping_its_jobs(tmp_path):
-    db = tmp_path / "brdffit.sqlite3"
-    con = sqlite3.connect(db)
-    con.executescript("""
+def _old_database(path, statuses: str, more_columns: str, rows: str) -> None:
+    """A job database in an earlier layout: its jobs' ``statuses`` and columns after
+    ``finished_at``, and ``rows`` of SQL to fill it."""
+    con = sqlite3.connect(path)
+    con.executescript(f"""
         CREATE TABLE tables (id TEXT PRIMARY KEY, size INTEGER NOT NULL, name TEXT NOT NULL,
                              summary TEXT NOT NULL, created_at REAL NOT NULL);
         CREATE TABLE jobs (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE,
             table_id TEXT NOT NULL REFERENCES tables(id), models TEXT NOT NULL,
-            options TEXT NOT NULL, status TEXT NOT NULL
-            CHECK (status IN ('queued', 'running', 'done', 'failed')), reason TEXT, note TEXT,
-            results TEXT, attempts INTEGER NOT NULL DEFAULT 0, created_at REAL NOT NULL,
-            started_at REAL, finished_at REAL);
-        INSERT INTO tables VALUES ('t', 1, 'old.binary', '{}', 0);
-        INSERT INTO jobs (id, table_id, models, options, status, created_at)
-            VALUES ('j', 't', '["ggx"]', '{}', 'queued', 0);
+            options TEXT NOT NULL, status TEXT NOT NULL CHECK (status IN ({statuses})),
+            reason TEXT, note TEXT, results TEXT, attempts INTEGER NOT NULL DEFAULT 0,
+            created_at REAL NOT NULL, started_at REAL, finished_at REAL{more_columns});
+        {rows}
     """)
     con.close()
+
+
+def test_a_version_0_database_is_migrated_keeping_its_jobs(tmp_path):
+    _old_database(tmp_path / "brdffit.sqlite3", "'queued', 'running', 'done', 'failed'", "", """
+        INSERT INTO tables VALUES ('t', 1, 'old.binary', '{}', 0);
+        INSERT INTO jobs (id, table_id, models, options, status, created_at)
+            VALUES ('j', 't', '["ggx"]', '{}', 'queued', 0);""")
     store = Store(tmp_path)
     assert store.get_job("j").status == "queued"
     assert store.cancel_queued("j") and store.get_job("j").status == "cancelled"
@@ -235,26 +240,13 @@ def test_a_version_0_database_is_migrated_keeping_its_jobs(tmp_path):
 
 
 def test_a_version_1_database_gains_the_worker_time_keeping_its_jobs(tmp_path):
-    con = sqlite3.connect(tmp_path / "brdffit.sqlite3")
-    con.executescript("""
-        CREATE TABLE tables (id TEXT PRIMARY KEY, size INTEGER NOT NULL, name TEXT NOT NULL,
-                             summary TEXT NOT NULL, created_at REAL NOT NULL);
-        CREATE TABLE jobs (seq INTEGER PRIMARY KEY AUTOINCREMENT, id TEXT NOT NULL UNIQUE,
-            table_id TEXT NOT NULL REFERENCES tables(id), models TEXT NOT NULL,
-            options TEXT NOT NULL, status TEXT NOT NULL
-            CHECK (status IN ('queued', 'running', 'done', 'failed', 'cancelled')),
-            reason TEXT, note TEXT, results TEXT, attempts INTEGER NOT NULL DEFAULT 0,
-            created_at REAL NOT NULL, started_at REAL, finished_at REAL, stage TEXT,
-            fraction REAL);
-        CREATE INDEX jobs_by_status ON jobs (status, seq);
-        CREATE INDEX jobs_by_table ON jobs (table_id, seq);
-        CREATE TABLE probe (id INTEGER PRIMARY KEY CHECK (id = 1), at REAL NOT NULL);
+    _old_database(tmp_path / "brdffit.sqlite3",
+                  "'queued', 'running', 'done', 'failed', 'cancelled'",
+                  ", stage TEXT, fraction REAL", """
         PRAGMA user_version = 1;
         INSERT INTO tables VALUES ('t', 1, 'old.binary', '{"measured_bins": 1000}', 0);
         INSERT INTO jobs (id, table_id, models, options, status, created_at, finished_at)
-            VALUES ('j', 't', '["ggx"]', '{}', 'done', 0, 1);
-    """)
-    con.close()
+            VALUES ('j', 't', '["ggx"]', '{}', 'done', 0, 1);""")
     store = Store(tmp_path)
     assert store.get_job("j").status == "done"
     assert store.recent_runs(10) == []  # its worker time is unknown: it teaches nothing
