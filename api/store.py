@@ -168,6 +168,7 @@ class JobRecord:
     finished_at: float | None
     stage: str | None = None
     fraction: float | None = None
+    run_s: float | None = None  # seconds its worker spent on it (Store.finish)
 
 
 @dataclass(frozen=True)
@@ -202,6 +203,7 @@ def _job(row: sqlite3.Row) -> JobRecord:
         note=row["note"], results=json.loads(row["results"]) if row["results"] else None,
         attempts=row["attempts"], created_at=row["created_at"], started_at=row["started_at"],
         finished_at=row["finished_at"], stage=row["stage"], fraction=row["fraction"],
+        run_s=row["run_s"],
     )
 
 

@@ -129,6 +129,8 @@ class FitJob:
     #: While running: ``{"stage": "fitting ggx (2 of 3)", "fraction": 0.33}``
     #: (the fraction counts finished models); else None.
     progress: dict | None = None
+    #: Seconds the server's worker spent on it, once done (None where it compiled first).
+    run_seconds: float | None = None
 
     @property
     def finished(self) -> bool:
@@ -149,7 +151,7 @@ class FitJob:
             note=d.get("note"),
             result=FitResult.from_dict(d["result"]) if d.get("result") else None,
             results=[FitResult.from_dict(r) for r in d.get("results") or []],
-            progress=d.get("progress"),
+            progress=d.get("progress"), run_seconds=d.get("run_seconds"),
         )
 
 

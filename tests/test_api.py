@@ -469,9 +469,10 @@ def test_fit_runs_and_plots_wait_for_it(server, http, table_id):
     # (not from a job that compiled: the second of two alike, in the one worker, did not)
     again = http.post("/v1/fits", json={"table_id": table_id, "model": "lambert",
                                         "options": FAST | {"seed": 7}}).json()
-    assert wait_status(http, again["id"], ("done", "failed"))["status"] == "done"
+    again = wait_status(http, again["id"], ("done", "failed"))
     request, _, run_s = Store(server.data_dir).recent_runs(1)[0]
     assert request["options"]["seed"] == 7 and 0 < run_s < 600
+    assert again["run_seconds"] == run_s and job.get("run_seconds") is None  # once done
     result = done["result"]
     assert result == done["results"][0]
     assert result["model"] == "lambert" and result["table"] == "ggx.binary"

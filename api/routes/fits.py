@@ -268,6 +268,10 @@ class JobOut(BaseModel):
     created_at: datetime
     started_at: datetime | None = None
     finished_at: datetime | None = None
+    run_seconds: float | None = Field(
+        None, description="seconds its worker spent on it, reading the table and fitting "
+        "(what the server's cost estimate learns its machine's speed from); null until "
+        "done, and for a job that compiled programs first")
     result: FitResultOut | None = Field(None, description="the best fit, once done")
     results: list[FitResultOut] | None = Field(None, description="every model's fit, in order")
 
@@ -281,7 +285,7 @@ def _out(job: JobRecord) -> JobOut:
         id=job.id, status=job.status, table_id=job.table_id, models=job.models,
         request=RequestForm.model_validate(job.request), attempts=job.attempts, reason=job.reason,
         note=job.note, created_at=_time(job.created_at), started_at=_time(job.started_at),
-        finished_at=_time(job.finished_at),
+        finished_at=_time(job.finished_at), run_seconds=job.run_s,
         progress=(Progress(stage=job.stage, fraction=job.fraction or 0.0)
                   if job.status == "running" and job.stage else None),
         result=chosen_result(job.results) if job.results else None, results=job.results,

@@ -325,7 +325,9 @@ function showJob(job) {
       + (job.note ? `: ${job.note}` : "");
   } else {
     progress.value = job.status === "done" ? 1 : 0;
-    $("job-stage").textContent = `${job.status} (job ${job.id.slice(0, 8)})`
+    // its worker's time: null for a job that compiled its programs first
+    const took = job.run_seconds == null ? "" : `, fitted in ${job.run_seconds.toFixed(1)} s`;
+    $("job-stage").textContent = `${job.status} (job ${job.id.slice(0, 8)}${took})`
       + (job.reason ? `: ${job.reason}` : "") + (job.note ? ` (${job.note})` : "");
   }
   if (ACTIVE.has(job.status)) {
