@@ -30,6 +30,15 @@ How a fit spends, and so how the estimate counts:
   steps on the measured tables, so the estimate counts ``TYPICAL_STEPS`` (``NESTED_STEPS``
   for a nested model, or ``max_steps`` where fewer), not every start running
   ``max_steps``.
+- a model adds the seconds measured beyond what its parameters and steps count
+  (``api.model_costs``, ``python -m bench.model_costs``): a layered model's programs
+  take seconds to load in a worker, its steps cost far more than GGX's (a coat's
+  Fresnel, a thin film's Airy sum, MaterialX's standard_surface), and some refine
+  several starts by default; counted by parameters and steps alone, their jobs were
+  estimated at a quarter to a third of what they took (gltf_iridescence 2.6 s against
+  10 s, auto among MaterialX's candidates 2.5 s against 9.7 s). The added seconds are
+  a default fit's: a layered model's larger requests (more samples, more starts) are
+  still counted by parameters and steps;
 - a fit of every bin (``samples`` null) is the default subsample fit, with the starts
   asked, then one start on every bin that polishes its optimum (``POLISH_STEPS``, or
   ``NESTED_POLISH_STEPS``); a nested model (ggx2, oren_nayar) fits its parent too.
@@ -49,6 +58,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from api.model_costs import EXTRA_MIB, EXTRA_S
 from brdffit.fitting.sampling import DEFAULT_SAMPLES, bucket_size
 from brdffit.models import catalogue
 
@@ -143,10 +153,20 @@ def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
     return out
 
 
-def estimate(request, usable_bins: int, machine: float = 1.0) -> Estimate:
+def estimate(request, usable_bins: int, machine: float = 1.0,
+             extra: dict[str, float] | None = None,
+             extra_mib: dict[str, float] | None = None) -> Estimate:
     """The cost of the fits ``request`` (a ``brdffit.request.FitRequest``) asks for on
     a table with ``usable_bins`` measured bins; its time ``machine`` times the
-    constants' (:func:`machine_factor`)."""
+    constants' (:func:`machine_factor`). ``extra``: each model's seconds beyond what
+    its parameters and steps count (default: the measured ``api.model_costs.EXTRA_S``;
+    a model without them counts the largest); ``extra_mib`` likewise its memory
+    (``api.model_costs.EXTRA_MIB``), the largest of the job's models'."""
+    extra = EXTRA_S if extra is None else extra
+    extra_mib = EXTRA_MIB if extra_mib is None else extra_mib
+    costliest = max(extra.values(), default=0.0)
+    largest_mib = max(extra_mib.values(), default=0.0)
+    added_mib = 0.0
     described = catalogue.describe()
     n_params = {d["name"]: d["n_params"] for d in described}
     least_starts = {d["name"]: d.get("least_starts", 1) for d in described}
@@ -176,7 +196,11 @@ def estimate(request, usable_bins: int, machine: float = 1.0) -> Estimate:
             polish_steps = min(options.max_steps, NESTED_POLISH_STEPS if nested else POLISH_STEPS)
             seconds += SECONDS_PER_POLISH + (
                 step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps)
+        base = name.removesuffix(catalogue.MONO_SUFFIX)
+        seconds += extra.get(base, costliest)
+        added_mib = max(added_mib, extra_mib.get(base, largest_mib))
     memory += FIXED_BYTES + (AUTO_BYTES if request.auto else 0) + (RENDER_BYTES if render else 0)
+    memory += added_mib * MiB
     what = "the auto candidates " + ", ".join(request.fitted_models) if request.auto else (
         ", ".join(request.fitted_models))
     how = (f"{samples:,} samples x {starts} start(s), then one start on every bin "

@@ -4,7 +4,8 @@
         # writes bench/results/job_shapes.{json,md}
 
 Each job shape (a fit request the service takes: the default fit, every bin with one
-and four starts, ggx2, auto, the render loss, large subsamples, the bounded fit) runs
+and four starts, ggx2, auto, the render loss, large subsamples, the bounded fit, auto
+among glTF's and MaterialX's candidates, layered models) runs
 in a process of its own, as a service worker runs a job: ``brdffit.request.run`` on a
 real MERL table read from disk. Measured per run: the wall time of reading the table
 and fitting (imports not counted: a worker has made them before its first job), and
@@ -50,6 +51,14 @@ SHAPES: dict[str, dict] = {
     "ggx2, 262,144 samples x 4 starts": {"model": "ggx2", "samples": 262144, "starts": 4},
     "bounded ggx": {"model": "ggx", "physical": True},
     "auto, render loss": {"model": "auto", "loss": "render"},
+    # what a fit that does not look good is told to try next (brdffit.fitting.quality),
+    # and the layered models: a step costs them far more than GGX's
+    "auto, glTF's candidates": {"model": "auto", "candidates": ["gltf"]},
+    "auto, MaterialX's candidates": {"model": "auto", "candidates": ["materialx"]},
+    "standard_surface_coat": {"model": "standard_surface_coat"},
+    "gltf_iridescence": {"model": "gltf_iridescence"},
+    "rough_plastic": {"model": "rough_plastic"},
+    "ggx4": {"model": "ggx4"},
 }
 
 #: One job, in a process of its own: reads the table, runs the request, prints the figures.
