@@ -23,7 +23,8 @@ How a fit spends, and so how the estimate counts:
 - **memory** is a worker's process (JAX, the programs, the table and its full-table
   error pass: ~750 MiB whatever the fit) plus the largest solve's arrays, which grow
   with its padded sample count and parameters, not with its starts (the starts are
-  solved one after another in one program);
+  solved one after another in one program), and a layered model's measured excess
+  (``api.model_costs.EXTRA_MIB``: the thin film's 4 starts peaked at 2.0 GB);
 - **time** is a job's fixed part (reading the table, loading the programs, the
   report: about a second per job and a fifth of one per model) plus the solves: samples
   x starts x parameters x steps. A fit stops when the optimality test holds, in 3 to 51
