@@ -120,7 +120,7 @@ class Estimate:
     detail: str  # how the numbers came about, for the refusal's message
     #: ``seconds`` before the server's machine factor (:func:`machine_factor`): what a
     #: finished job's measured time is held against
-    reference_seconds: float = 0.0
+    reference_seconds: float
 
     @property
     def memory_mib(self) -> float:

@@ -10,6 +10,7 @@ does not).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import threading
 import time
@@ -30,12 +31,11 @@ COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
                   "/jax/core/compile/jaxpr_to_mlir_module_duration",
                   "/jax/core/compile/backend_compile_duration")
 COMPILING_SHARE = 0.05
-_compiling_s = [0.0]  # summed by the listener _count_compiling registers, once
+_compiling_s = [0.0]  # summed by the listener _count_compiling registers
 
 
+@functools.cache  # one listener per process
 def _count_compiling() -> None:
-    if getattr(_count_compiling, "registered", False):
-        return
     from jax import monitoring
 
     def heard(event: str, duration: float, **_kwargs) -> None:
@@ -43,7 +43,6 @@ def _count_compiling() -> None:
             _compiling_s[0] += duration
 
     monitoring.register_event_duration_secs_listener(heard)
-    _count_compiling.registered = True
 
 
 def report(stage: str, fraction: float) -> None:

@@ -78,6 +78,15 @@ print(json.dumps({"wall_s": wall, "peak_rss_mib": peak, "starts": r.starts,
 """
 
 
+def table_on_disk(table: Path) -> Path:
+    """``table``, rebuilt from its MERL network where it is not on disk yet (a cache)."""
+    if table.exists():
+        return table
+    from data_synth.nbrdf import cached_table
+
+    return Path(cached_table(table.stem, str(table.parent)))
+
+
 def run_one(spec: dict, table: Path, cache_dir: str | None) -> dict:
     """One job in a new process; ``cache_dir`` None: brdffit's default cache, whatever
     this process's ``BRDFFIT_CACHE_DIR`` says (the measured jobs are a service worker's,
@@ -220,10 +229,7 @@ def main(argv=None) -> int:
         (args.out / f"{stem}.md").write_text(markdown(res))
         print(markdown(res))
         return 0
-    if not args.table.exists():
-        from data_synth.nbrdf import cached_table
-
-        args.table = Path(cached_table(args.table.stem, str(args.table.parent)))
+    args.table = table_on_disk(args.table)
     res = run(args.table, args.repeats, args.cold, args.shape or list(SHAPES), args.cache_dir)
     if args.note is not None:
         res["note"] = args.note

@@ -1,6 +1,6 @@
 """What each model's job costs beyond GGX's, measured, for the service's estimate.
 
-    python -m bench.model_costs [--table PATH] [--repeats 2]
+    python -m bench.model_costs [--table PATH] [--repeats 3]
         # writes api/model_costs.py and bench/results/model_costs.md
 
 ``api.estimate`` counts a model's fit by its parameters and steps; a layered model's
@@ -23,7 +23,7 @@ import argparse
 import statistics
 from pathlib import Path
 
-from bench.job_shapes import TABLE
+from bench.job_shapes import TABLE, table_on_disk
 from bench.machine import machine, machine_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -106,10 +106,9 @@ def module_text(res: dict) -> str:
 
 def markdown(res: dict) -> str:
     lines = ["## Each model's fit beside GGX's: measured against the estimate's count", "",
-             machine_line(res["machine"]) + f"; table {res['table']}, default options, warm, "
-             f"in one process; the median of {res['repeats']} runs (GGX's of "
-             f"{2 * res['repeats'] + 1}). `python -m "
-             "bench.model_costs`.", "",
+             machine_line(res["machine"]) + f"; table {res['table']}, default options, each "
+             f"run a new process; the median of {res['repeats']} runs (GGX's of "
+             f"{2 * res['repeats'] + 1}). `python -m bench.model_costs`.", "",
              "| model | measured job (s) | counted (s) | added (s) | peak RSS (MiB) "
              "| counted (MiB) | added (MiB) |",
              "|---|---:|---:|---:|---:|---:|---:|"]
@@ -134,11 +133,7 @@ def main(argv=None) -> int:
     ap.add_argument("--table", type=Path, default=TABLE)
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args(argv)
-    if not args.table.exists():
-        from data_synth.nbrdf import cached_table
-
-        args.table = Path(cached_table(args.table.stem, str(args.table.parent)))
-    res = measure(args.table, args.repeats)
+    res = measure(table_on_disk(args.table), args.repeats)
     MODULE.write_text(module_text(res))
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "model_costs.md").write_text(markdown(res))
