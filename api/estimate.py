@@ -170,6 +170,9 @@ def estimate(request, usable_bins: int, machine: float = 1.0,
     added_mib = 0.0
     described = catalogue.describe()
     n_params = {d["name"]: d["n_params"] for d in described}
+    # a `_mono` variant (ggx_mono) fits fewer numbers than its base, and no parent
+    n_params.update({d["name"] + catalogue.MONO_SUFFIX: d["mono_n_params"]
+                     for d in described if d.get("mono_n_params")})
     least_starts = {d["name"]: d.get("least_starts", 1) for d in described}
     parents = {d["name"]: d.get("parent") for d in described}
     options = request.options

@@ -114,3 +114,16 @@ def test_every_model_has_its_measured_cost_and_a_plugin_counts_the_costliest():
     # a model without measured seconds (a plugin's) counts the largest
     assert estimate(request, 10**6, extra={"ggx": 3.0}).seconds == pytest.approx(
         estimate(request, 10**6, extra={costly: 3.0}).seconds)
+
+
+@pytest.mark.parametrize("base", ["ggx", "ggx2", "phong"])
+def test_a_grey_specular_variant_counts_its_own_parameters(base):
+    """``ggx_mono`` fits fewer numbers than ggx and has no parent: it costs no more
+    than its base (it was counted as a plugin's model, at the largest count)."""
+    from brdffit.models import catalogue
+
+    mono = base + catalogue.MONO_SUFFIX
+    plain, grey = (estimate(FitRequest.of(m, samples=None, starts=4), 1_096_216)
+                   for m in (base, mono))
+    assert grey.seconds <= plain.seconds and grey.memory_mib <= plain.memory_mib
+    assert catalogue.n_params(mono) < catalogue.n_params(base)
