@@ -13,13 +13,16 @@ message (``.detail``) and status; a fit that failed raises :class:`FitFailed`
 with its reason (:class:`FitCancelled` if it was cancelled); a wait that runs out
 raises ``TimeoutError``.
 
-Job control: :meth:`Client.fits` and :meth:`Client.tables` walk the server's
-paged listings (filtered), :meth:`Client.cancel` stops a queued or running job,
-:meth:`Client.delete_fit` and :meth:`Client.delete_table` remove finished ones.
+Before queueing, :meth:`Client.estimate` says what a fit would cost on the server
+and whether it would take it. Job control: :meth:`Client.fits` and
+:meth:`Client.tables` walk the server's paged listings (filtered),
+:meth:`Client.cancel` stops a queued or running job, :meth:`Client.delete_fit` and
+:meth:`Client.delete_table` remove finished ones.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import os
@@ -44,6 +47,22 @@ except ModuleNotFoundError:
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 
+
+
+def _fit_body(table_id: str, model, keywords: dict) -> dict:
+    """A fit's body (``POST /v1/fits``): the request checked here, by the library the
+    server runs, and sent in its one form (``FitRequest.to_dict()``)."""
+    _table_id(table_id)
+    if isinstance(model, FitRequest):
+        if keywords:
+            raise TypeError("give a FitRequest or keywords, not both")
+        request = model
+    else:
+        try:
+            request = FitRequest.of(DEFAULT_MODEL if model is None else model, **keywords)
+        except BrdffitError as e:  # the library's own check, as the server makes it
+            raise InvalidRequest(str(e)) from None
+    return {"table_id": table_id, **request.to_dict()}
 
 class ClientError(BrdffitError):
     """Base of what :class:`Client` raises (besides ``TimeoutError``): a
@@ -110,6 +129,25 @@ class TableInfo:
     def from_json(cls, d: dict) -> TableInfo:
         return cls(d["id"], d["name"], d["size_bytes"],
                    datetime.fromisoformat(d["created_at"].replace("Z", "+00:00")), d["summary"])
+
+
+@dataclass(frozen=True)
+class FitEstimate:
+    """What a fit would cost on the server (``POST /v1/fits/estimate``, before queueing)."""
+
+    table_id: str
+    models: list[str]
+    seconds: float  # the job's worker, with the server's machine_factor
+    memory_mib: float  # the job's worker's peak
+    machine_factor: float  # how much slower the server's recent jobs ran (1: not slower)
+    accepted: bool  # whether the server takes it now, within its limits
+    over_limits: str | None  # why not: by how much, and what to ask for instead
+    limits: dict  # {"seconds": ..., "memory_mib": ...}
+    detail: str  # how the figures came about
+
+    @classmethod
+    def from_json(cls, d: dict) -> FitEstimate:
+        return cls(**{f.name: d[f.name] for f in dataclasses.fields(cls)})
 
 
 @dataclass(frozen=True)
@@ -374,18 +412,16 @@ class Client:
         JSON object, docs/selection.md) and, with auto, the rule's (``tolerance``,
         ``budget``, ``candidates``, ``mono_ks``). The request is checked here, by the
         library the server runs, and sent in its one form (``FitRequest.to_dict()``)."""
-        _table_id(table_id)
-        if isinstance(model, FitRequest):
-            if keywords:
-                raise TypeError("give a FitRequest or keywords, not both")
-            request = model
-        else:
-            try:
-                request = FitRequest.of(DEFAULT_MODEL if model is None else model, **keywords)
-            except BrdffitError as e:  # the library's own check, as the server makes it
-                raise InvalidRequest(str(e)) from None
-        body = {"table_id": table_id, **request.to_dict()}
-        return self._json("POST", "/v1/fits", FitJob.from_json, json=body)
+        return self._json("POST", "/v1/fits", FitJob.from_json,
+                          json=_fit_body(table_id, model, keywords))
+
+    def estimate(self, table_id: str, model: str | list[str] | FitRequest | None = None,
+                 **keywords) -> FitEstimate:
+        """What :meth:`fit` with the same arguments would cost on the server, and whether
+        it would take it (``accepted``; ``over_limits`` says why not); nothing is
+        queued."""
+        return self._json("POST", "/v1/fits/estimate", FitEstimate.from_json,
+                          json=_fit_body(table_id, model, keywords))
 
     def job(self, job: JobRef) -> FitJob:
         """The job's current state."""

@@ -452,6 +452,36 @@ def test_a_request_that_would_store_what_breaks_the_service_is_422(http, table_i
     assert http.get("/v1/tables", params={"cursor": "9" * 18}).status_code == 200
 
 
+def test_a_fit_is_estimated_before_it_is_queued(http, table_id):
+    """``POST /v1/fits/estimate`` takes a fit's body and says what it would cost and
+    whether the server takes it: over the limits is an answer there (200), where
+    ``POST /v1/fits`` refuses (422, with the same words); nothing is queued."""
+    before = http.get("/v1/fits", params={"limit": 500}).json()["total"]
+    r = http.post("/v1/fits/estimate", json={"table_id": table_id, "models": "ggx"})
+    assert r.status_code == 200, r.text
+    cost = r.json()
+    assert cost["accepted"] and cost["over_limits"] is None and cost["models"] == ["ggx"]
+    assert 0 < cost["seconds"] <= cost["limits"]["seconds"]
+    assert 0 < cost["memory_mib"] <= cost["limits"]["memory_mib"]
+    assert cost["machine_factor"] >= 1.0 and "samples" in cost["detail"]
+    big = {"table_id": table_id, "models": "auto",
+           "options": {"samples": 1_000_000, "starts": 32, "loss": "render"}}
+    r = http.post("/v1/fits/estimate", json=big)
+    assert r.status_code == 200, r.text
+    over = r.json()
+    assert not over["accepted"] and over["seconds"] > cost["seconds"]
+    assert "BRDFFIT_MAX_JOB_ESTIMATE_S" in over["over_limits"]
+    assert_error(http.post("/v1/fits", json=big), 422, over["over_limits"][:60])
+    assert_error(http.post("/v1/fits/estimate", json={"table_id": "b" * 64, "models": "ggx"}),
+                 404, "upload it with POST /v1/tables")
+    assert_error(http.post("/v1/fits/estimate", json={"table_id": table_id,
+                                                       "models": "no-such-model"}),
+                 422, "no-such-model")
+    assert_error(http.post("/v1/fits/estimate", content=b"models=ggx",
+                           headers={"Content-Type": "text/plain"}), 415, "application/json")
+    assert http.get("/v1/fits", params={"limit": 500}).json()["total"] == before
+
+
 def test_fit_runs_and_plots_wait_for_it(server, http, table_id):
     r = http.post("/v1/fits", json={"table_id": table_id, "model": ["lambert", "lambert"],
                                     "options": FAST})
@@ -932,6 +962,10 @@ def test_the_fit_service_decides_what_a_request_means_and_costs(tmp_path):
     with pytest.raises(fits.OverLimits, match=r"time x48\.00, as this server's recent jobs "
                                               "ran slower"):
         fits.create(store, settings, "a" * 64, slow)
+    # what the estimate route answers: the same decision, before anything is queued
+    checked = fits.costed(store, settings, "a" * 64, slow)
+    assert checked.machine == pytest.approx(48.0) and "x48.00" in checked.over
+    assert checked.cost.seconds == pytest.approx(48.0 * reference)
     store.delete_job(done.id)
     assert store.list_jobs(limit=10).total == 0
     job = fits.create(store, settings, "a" * 64, {"models": ["ggx", "lambert", "ggx"],

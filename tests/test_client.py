@@ -101,11 +101,19 @@ def test_errors_carry_the_servers_message(client, files, tmp_path):
         client.fit(table_id, "lambert", starts=0)
     with pytest.raises(InvalidRequest, match="unknown fit options"):
         client.fit(table_id, "lambert", bin_weight=[1.0])
-    # what only the server knows comes back in its words: its cost limits
+    # what only the server knows comes back in its words: its cost limits, which an
+    # estimate tells before anything is queued
+    costly = {"samples": 1_000_000, "starts": 32, "max_steps": 10_000, "loss": "render"}
+    cost = client.estimate(table_id, "auto", **costly)
+    assert not cost.accepted and cost.seconds > cost.limits["seconds"]
+    assert cost.models == ["auto"] and cost.machine_factor >= 1.0
     with pytest.raises(ApiError) as e:
-        client.fit(table_id, "auto", samples=1_000_000, starts=32, max_steps=10_000,
-                   loss="render")
+        client.fit(table_id, "auto", **costly)
     assert e.value.status_code == 422 and "over the server's limits" in e.value.detail
+    assert all("BRDFFIT_MAX_JOB_ESTIMATE_S" in why for why in (cost.over_limits, e.value.detail))
+    assert client.estimate(table_id, "lambert", samples=4096).accepted
+    with pytest.raises(InvalidRequest, match="starts must be an integer in 1 .. 32"):
+        client.estimate(table_id, "lambert", starts=0)
     text = tmp_path / "notes.binary"
     text.write_text("not a table\n" * 20)
     with pytest.raises(ApiError) as e:

@@ -358,6 +358,58 @@ def create_fit(body: FitJobRequest, response: Response, store: StoreDep, queue: 
     return _out(job)
 
 
+class EstimateOut(BaseModel):
+    """What a fit request would cost on its table, and whether this server takes it."""
+
+    table_id: str
+    models: list[str] = Field(description="the job's models, as it would list them ('auto': its "
+                              "candidates are in detail)")
+    seconds: float = Field(description="estimated seconds of the job's worker, with this "
+                           "server's machine_factor (to compare with a done job's "
+                           "run_seconds, which it is above)")
+    memory_mib: float = Field(description="estimated peak memory of the job's worker, MiB")
+    machine_factor: float = Field(
+        description="how much slower than the machine the estimate's constants were measured "
+        "on this server's recent jobs ran (x1.2); 1 where none ran slower, or none ran yet")
+    accepted: bool = Field(description="whether POST /v1/fits takes it now (within the "
+                           "server's limits)")
+    over_limits: str | None = Field(description="why not, as POST /v1/fits would answer: by "
+                                    "how much, and what to ask for instead; null if accepted")
+    limits: dict[str, float] = Field(description="the server's limits: seconds "
+                                     "(BRDFFIT_MAX_JOB_ESTIMATE_S), memory_mib "
+                                     "(BRDFFIT_MAX_JOB_MEMORY_MIB)")
+    detail: str = Field(description="how the figures came about: the fits it counts, samples, "
+                        "starts and steps")
+
+
+@router.post(
+    "/estimate",
+    summary="What a fit would cost, before it is queued",
+    dependencies=[Depends(json_body)],
+    responses={
+        415: {"model": ErrorMessage, "description": "the body is not sent as JSON"},
+        404: {"model": ErrorMessage, "description": "no such table"},
+    },
+)
+def estimate_fit(body: FitJobRequest, store: StoreDep, settings: SettingsDep) -> EstimateOut:
+    """The body is POST /v1/fits's; nothing is queued. Over the server's limits is an
+    answer here (200, ``accepted`` false), where POST /v1/fits refuses it (422)."""
+    try:
+        checked = fits.costed(store, settings, body.table_id, body.request_dict())
+    except fits.TableNotFound as e:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, str(e)) from None
+    except FitInputError as e:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, short(str(e))) from None
+    cost = checked.cost
+    return EstimateOut(
+        table_id=body.table_id, models=list(checked.request.models),
+        seconds=round(cost.seconds, 2), memory_mib=round(cost.memory_mib),
+        machine_factor=round(checked.machine, 3), accepted=checked.over is None,
+        over_limits=checked.over, detail=cost.detail,
+        limits={"seconds": settings.max_job_estimate_s,
+                "memory_mib": float(settings.max_job_memory_mib)})
+
+
 class FitPage(BaseModel):
     items: list[JobOut] = Field(description="newest first")
     total: int = Field(description="jobs matching the filters, over all pages")

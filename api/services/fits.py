@@ -10,6 +10,7 @@ result among its fits is the library's one rule (``brdffit.selection.chosen_resu
 from __future__ import annotations
 
 import sqlite3
+from dataclasses import dataclass
 
 from api.estimate import RECENT_JOBS, Estimate, estimate, machine_factor
 from api.settings import Settings
@@ -55,10 +56,24 @@ def measured_machine(store: Store) -> float:
     return machine_factor(measured)
 
 
-def create(store: Store, settings: Settings, table_id: str, request: dict) -> JobRecord:
-    """Queue a fit job of ``request`` (``FitRequest.to_dict()``'s form): checked by the
-    library, its cost against the limits, then stored in the library's own form.
-    Raises ``TableNotFound``, ``FitInputError``, ``OverLimits``."""
+@dataclass(frozen=True)
+class Costed:
+    """A request checked against its table, and what it would cost there."""
+
+    request: FitRequest
+    cost: Estimate
+    #: how much slower than the constants' machine this server's recent jobs ran (1: none
+    #: slower, or none measured): ``cost.seconds`` holds it
+    machine: float
+    #: why the cost is over the server's limits (:func:`over_limits`), or None
+    over: str | None
+
+
+def costed(store: Store, settings: Settings, table_id: str, request: dict) -> Costed:
+    """``request`` (``FitRequest.to_dict()``'s form) checked by the library against the
+    table ``table_id``, and its cost estimate against the server's limits: what
+    :func:`create` decides by, and what ``POST /v1/fits/estimate`` answers before
+    anything is queued. Raises ``TableNotFound`` and ``FitInputError``."""
     table = store.get_table(table_id)
     if table is None:
         raise TableNotFound(f"no table {table_id}; upload it with POST /v1/tables")
@@ -68,8 +83,18 @@ def create(store: Store, settings: Settings, table_id: str, request: dict) -> Jo
         raise FitInputError(f"table {table_id} is a sample list: the physical bounds are not "
                             "available for a sample list yet (their albedo check reads a "
                             "table); fit it without them")
-    cost = estimate(request, table.summary["measured_bins"], machine=measured_machine(store))
-    if (why := over_limits(cost, settings)) is not None:
+    machine = measured_machine(store)
+    cost = estimate(request, table.summary["measured_bins"], machine=machine)
+    return Costed(request, cost, machine, over_limits(cost, settings))
+
+
+def create(store: Store, settings: Settings, table_id: str, request: dict) -> JobRecord:
+    """Queue a fit job of ``request`` (``FitRequest.to_dict()``'s form): checked by the
+    library, its cost against the limits (:func:`costed`), then stored in the library's
+    own form. Raises ``TableNotFound``, ``FitInputError``, ``OverLimits``."""
+    checked = costed(store, settings, table_id, request)
+    request = checked.request
+    if (why := checked.over) is not None:
         # Refused before anything is queued or allocated: say by how much, and why.
         raise OverLimits(why)
     try:
