@@ -341,7 +341,9 @@ HOLD_REFUSAL_OF_WRONG_TOKEN = """() => {
 
 
 def test_with_a_token_on_a_real_material(browser, tmp_path):
-    with fx.Server(tmp_path / "data", env={"BRDFFIT_API_TOKEN": "s3cret-token"}) as server:
+    # a time limit that the fits below are well within, and a request on every bin is not
+    with fx.Server(tmp_path / "data", env={"BRDFFIT_API_TOKEN": "s3cret-token",
+                                           "BRDFFIT_MAX_JOB_ESTIMATE_S": "100"}) as server:
         visit = Visit(browser, server, tmp_path / "screens")
         page = visit.page
         page.goto(server.url + "/")
@@ -374,6 +376,19 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         page.fill("#starts-input", "32")  # more than ggx has: the result's notes say so
         page.select_option("#loss-select", "cube_root")
         page.check("#physical-input")
+        # the server's estimate follows the form: a fit over its limits is said before
+        # it is sent, in the words a refusal would use
+        estimate = "document.querySelector('#fit-estimate').innerText"
+        page.wait_for_function(f"{estimate}.startsWith('estimated ~')", timeout=STEP_MS)
+        assert " s of fitting, " in page.locator("#fit-estimate").inner_text()
+        page.fill("#samples-input", "1458000")
+        page.wait_for_function(f"{estimate}.startsWith(\"this fit is estimated over the "
+                               "server's limits\")", timeout=STEP_MS)
+        assert "BRDFFIT_MAX_JOB_ESTIMATE_S" in page.locator("#fit-estimate").inner_text()
+        visit.shot("token-estimate-over", full=False)
+        page.fill("#samples-input", "2048")
+        page.wait_for_function(f"{estimate}.startsWith('estimated ~')", timeout=STEP_MS)
+        visit.shot("token-estimate", full=False)
         page.click("#fit-button")
         page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
         visit.wait_image("#plot-spheres")

@@ -178,6 +178,7 @@ function paramsCell(result) {
 
 function chooseTable(table) {
   state.table = table;
+  estimateSoon();
   const s = table.summary || {};
   const p = $("table-current");
   p.textContent = "";
@@ -229,6 +230,7 @@ async function deleteTable(table, withFits) {
   await api("DELETE", `/v1/tables/${table.id}${withFits ? "?with_fits=true" : ""}`);
   if (state.table && state.table.id === table.id) {
     state.table = null;
+    estimateSoon();
     $("table-current").textContent = "No table chosen.";
   }
   say(`Deleted table ${table.name}.`, "info");
@@ -262,6 +264,40 @@ function fitRequest() {
   const body = { table_id: state.table.id, models, options, scene };
   if (models === "auto" || Object.keys(rule).length) body.rule = rule;
   return body;
+}
+
+// What the fit would cost, asked of the server as the form changes: a fit over its limits
+// is said before it is sent, and a long one is known to be long.
+let estimateAsked = 0;
+let estimateTimer = null;
+
+function estimateSoon() {
+  if (estimateTimer !== null) clearTimeout(estimateTimer);
+  estimateTimer = setTimeout(() => { estimateTimer = null; showEstimate(); }, 300);
+}
+
+async function showEstimate() {
+  const line = $("fit-estimate");
+  const asked = ++estimateAsked;
+  let text = "", kind = "hint";
+  if (state.table) {
+    try {
+      const cost = await api("POST", "/v1/fits/estimate", { json: fitRequest() });
+      const memory = cost.memory_mib >= 1024 ? `${fmt(cost.memory_mib / 1024, 2)} GiB`
+        : `${Math.round(cost.memory_mib)} MiB`;
+      text = cost.accepted
+        ? `estimated ~${fmt(cost.seconds, 2)} s of fitting, ${memory} at its peak`
+        : cost.over_limits;  // "this fit is estimated over the server's limits: ..."
+      if (!cost.accepted) kind = "hint over";
+    } catch (e) {
+      // a form not yet a request (no model ticked) or one the service refuses: the fit
+      // button says why when pressed
+      text = "";
+    }
+  }
+  if (asked !== estimateAsked) return;  // a later change answered first
+  line.textContent = text;
+  line.className = kind;
 }
 
 async function startFit() {
@@ -782,6 +818,7 @@ document.addEventListener("DOMContentLoaded", () => {
   $("upload-button").addEventListener("click", guarded(uploadTable));
   $("material-button").addEventListener("click", guarded(useMaterial));
   $("fit-button").addEventListener("click", guarded(startFit));
+  for (const kind of ["input", "change"]) $("fit-panel").addEventListener(kind, estimateSoon);
   $("job-cancel").addEventListener("click", guarded(() => cancelJob(state.job)));
   $("refresh-button").addEventListener("click", guarded(refreshLists));
   $("json-button").addEventListener("click", guarded(downloadJson));
