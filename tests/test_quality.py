@@ -361,6 +361,25 @@ def test_a_lobe_fitted_to_another_loss_is_told_the_render_loss_first():
                                            "alpha2": 0.079, "ks2": [0.07, 0.06, 0.06]},
                                    loss="render")
     assert any("narrower than the table's bins" in s["try"] for s in highlight)
+    # the renderers' models name their lobe's width roughness (alpha = roughness^2), Phong
+    # and Blinn-Phong an exponent: a highlight as narrow is the table's bins' as well
+    for name, narrow, broad in (("gltf_pbr", {"roughness": 0.05}, {"roughness": 0.3}),
+                                ("standard_surface", {"specular_roughness": 0.05},
+                                 {"specular_roughness": 0.3}),
+                                ("principled", {"roughness": 0.05}, {"roughness": 0.3}),
+                                ("blinn_phong", {"n": 50_000.0, "ks": [0.5] * 3},
+                                 {"n": 200.0, "ks": [0.5] * 3}),
+                                ("phong", {"n": 10_000.0, "ks": [0.5] * 3},
+                                 {"n": 200.0, "ks": [0.5] * 3})):
+        told = [[s["try"] for s in quality.next_steps(
+            _look(), model=models.get(name), params=p, loss="render", converged=True,
+            rel_peak_error=20.0)] for p in (narrow, broad)]
+        assert "nothing here: the highlight is narrower than the table's bins" in told[0], name
+        assert not any("narrower" in t for t in told[1]), name
+    # Phong's lobe about the mirror direction is half as wide in theta_h as Blinn-Phong's
+    # of the same exponent
+    assert quality.specular_lobes({"n": 100.0}, phong=True)[0][0] == pytest.approx(
+        quality.specular_lobes({"n": 400.0})[0][0])
     # a measured gain still comes first; the layered step once, whichever form it has
     got = quality.with_measured_gains({"verdict": "poor", "next": steps},
                                       [("--model gltf_clearcoat", "m", 1.0, 15)])

@@ -249,6 +249,36 @@ _CONVERGE = {"try": "--starts 8 --max-steps 400",
 #: fewer than ~5 of the table's theta_h bins (bin 5 ends at 0.0058 rad): its shape is
 #: beyond what the table measured.
 NARROW_ALPHA = 0.01
+#: The base specular lobe's roughness in the renderers' models, whose GGX alpha is its
+#: square: glTF's and Disney's (Mitsuba's principled) ``roughness``, MaterialX's
+#: ``specular_roughness`` (``standard_surface.specular_alpha``).
+_ROUGHNESS = ("roughness", "specular_roughness")
+
+
+def specular_lobes(params: dict, phong: bool = False) -> list[tuple[float, float]]:
+    """Each specular lobe of a fit as (GGX or Beckmann alpha, its scale: ks, the mean
+    over channels, or 1 where a model has none), by the catalogue's parameter names:
+    ``alpha`` with ``ks`` (ggx, beckmann, rough_conductor, rough_plastic,
+    generalized_schlick), ``alpha1``..``alpha4`` with ``ks1``..``ks4`` (ggx2-4), the
+    renderers' ``roughness`` as alpha = roughness^2 (one lobe, their base layer's; a
+    coat's or a sheen's roughness is a layer's, not the highlight's), and an exponent
+    ``n`` as the Beckmann alpha of a lobe as wide near its peak: Blinn-Phong's
+    cos_h^n ~ exp(-n theta_h^2 / 2), alpha = sqrt(2 / (n + 2)); Phong's (``phong``)
+    lobe about the mirror direction, whose angle to wo is ~2 theta_h, as Blinn-Phong's
+    of exponent 4n."""
+    lobes = [(float(params[a]), float(np.mean(params[k])) if k in params else 1.0)
+             for a, k in (("alpha", "ks"), ("alpha1", "ks1"), ("alpha2", "ks2"),
+                          ("alpha3", "ks3"), ("alpha4", "ks4")) if a in params]
+    for name in _ROUGHNESS:
+        if name in params:
+            lobes.append((float(params[name]) ** 2, 1.0))
+    if "n" in params:
+        n = float(params["n"]) * (4.0 if phong else 1.0)
+        lobes.append((float(np.sqrt(2.0 / (n + 2.0))),
+                      float(np.mean(params["ks"])) if "ks" in params else 1.0))
+    return lobes
+
+
 #: A colour that turns by more than this (CIEDE2000) between the key and the grazing
 #: view, and that the fit misses there, is a colour that changes with the angle.
 TURNING_COLOUR = 6.0
@@ -375,10 +405,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
                 "this table")
     if loss != "render":
         add("--loss render", RENDER_WHY)
-    # each lobe's width and scale (ks, the mean over channels)
-    lobes = [(float(params[a]), float(np.mean(params[k])) if k in params else 1.0)
-             for a, k in (("alpha", "ks"), ("alpha1", "ks1"), ("alpha2", "ks2"),
-                          ("alpha3", "ks3"), ("alpha4", "ks4")) if a in params]
+    lobes = specular_lobes(params, phong=name == "phong")
     on_samples = look.get("basis") == "held_out"
     # The table is blamed where its bins cannot hold the highlight's shape: the fit's
     # narrowest lobe is its highlight (the larger lobe: chrome-steel's ggx2, alpha1 at
