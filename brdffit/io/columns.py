@@ -15,7 +15,7 @@ import re
 
 import numpy as np
 
-from brdffit.io.measurements import HORIZON_SLACK, MeasurementsError
+from brdffit.io.measurements import HORIZON_SLACK, MeasurementsError, angles_checked
 
 #: Column name -> the canonical name (light ``_i``, view ``_o``).
 ANGLE_ALIASES = {
@@ -369,21 +369,30 @@ def half_diff_name(name: str) -> re.Match | None:
                         unit_suffixed(value_name(name.strip().lower())))
 
 
-def half_diff_as_directions(raw: list[np.ndarray], scales: list[float],
-                            source: str) -> tuple[list[np.ndarray], list[float]]:
+def half_diff_as_directions(raw: list[np.ndarray], scales: list[float], source: str,
+                            rows: np.ndarray | None = None,
+                            names: list[str] | None = None) -> tuple[list[np.ndarray],
+                                                                      list[float]]:
     """``[theta_i, phi_i, theta_o, phi_o]`` (radians; their scales 1) of half and
     difference angles as written (``raw``: theta_h, theta_d, phi_d and optional phi_h,
     :data:`HALF_DIFF`'s order; ``scales`` their radians per unit), by the table's own
     mapping (``brdffit.io.angles.half_diff_to_dirs``). Their units are judged first as a
     direction's are (:func:`polar_unit_checked`: theta_h and theta_d polar angles, the
     others azimuths): radians under a degrees header put every direction within 1.5
-    degrees of the normal, unsaid."""
+    degrees of the normal, unsaid. Then their range, as a direction's angles' is
+    (:func:`brdffit.io.measurements.angles_checked`, naming ``rows``, each sample's row
+    in its file, and each angle by ``names``, as the file has them): the mapping
+    makes a pair of a negative theta_h or theta_d, or of a phi_d of 1e6 degrees, and
+    such a list was fitted without a word."""
     from brdffit.io.angles import half_diff_to_dirs
 
     phi_h = (raw[3], scales[3]) if len(raw) > 3 else (np.zeros_like(raw[0]), scales[2])
     polar_unit_checked([raw[0], raw[2], raw[1], phi_h[0]],
                        [scales[0], scales[2], scales[1], phi_h[1]], source)
     half = [a * scale for a, scale in zip(raw, scales, strict=True)]
+    said = dict(zip(HALF_DIFF, names or HALF_DIFF, strict=False))
+    angles_checked(dict(zip(HALF_DIFF, half, strict=False)), source, rows,
+                   lambda angle: said[angle])
     wi, wo = half_diff_to_dirs(*half[:3], half[3] if len(half) > 3 else 0.0)
     angles = []
     for w in (wi, wo):

@@ -124,6 +124,59 @@ def _positive_sigma(sigma: np.ndarray, source: str, rows: np.ndarray | None,
                     "deviation (1/sr)")
 
 
+_HALF_DIFF_RANGE = "theta_h and theta_d run from 0 to 90 degrees, as the MERL table's"
+#: Why a polar angle is refused, by which angle it is: (past 90 degrees, why; negative,
+#: why). A direction's (theta_i, theta_o) from the normal; a half or difference angle
+#: (theta_h, theta_d) from 0 to 90 degrees, as the MERL table's (the mapping made a
+#: pair of a negative one, and it was fitted unsaid).
+_POLAR_RANGE = {
+    "direction": ("is below the horizon (more than 90 degrees from the normal)",
+                  "a reflectance sample has both directions above the surface",
+                  "polar angles are measured from the normal, 0 to 90 degrees (an in-plane "
+                  "file's signed angle is theta = |angle|, with phi turned by 180 degrees "
+                  "on the negative side)"),
+    "half_diff": ("is over 90 degrees", _HALF_DIFF_RANGE, _HALF_DIFF_RANGE),
+}
+
+
+def angles_checked(angles: dict[str, np.ndarray], source: str,
+                   rows: np.ndarray | None = None, named=lambda angle: angle) -> None:
+    """Refuses angles no sample has, naming the first row (``rows``: each sample's row
+    in its file, 0-based): one that is not finite, an azimuth (``phi_*``) beyond
+    :data:`MAX_AZIMUTH`, a polar angle (``theta_*``) over 90 degrees or negative (beyond
+    :data:`HORIZON_SLACK`, :data:`NORMAL_SLACK`). ``angles``: name -> radians, (n,)
+    each, in the file's order; a direction's (``theta_i``, ``phi_i``, ...) or the half
+    and difference angles (``theta_h``, ``theta_d``, ``phi_d``, ``phi_h``), whose range
+    is the same. ``named(angle)``: the angle as its file names it."""
+    for name, a in angles.items():
+        if not np.all(np.isfinite(a)):
+            raise MeasurementsError(source, f"{named(name)} is not finite in "
+                                            f"{_first_rows(~np.isfinite(a), rows)}")
+    for name, a in angles.items():
+        # any azimuth is within a turn of 0; one of 1e300 degrees has lost every
+        # digit of its angle (in radians, a 1e300 degrees value is 1.7e298)
+        beyond = np.abs(a) > MAX_AZIMUTH
+        if name.startswith("phi") and beyond.any():
+            raise MeasurementsError(
+                source, f"{named(name)} is beyond +-{np.degrees(MAX_AZIMUTH):.0f} degrees in "
+                        f"{_first_rows(beyond, rows)}: an azimuth is within a turn or "
+                        "two of 0 (angles in another unit?)")
+    for name, a in angles.items():
+        if not name.startswith("theta"):
+            continue
+        over, why_over, why_negative = _POLAR_RANGE[
+            "half_diff" if name in ("theta_h", "theta_d") else "direction"]
+        below = a > np.pi / 2 + HORIZON_SLACK
+        if below.any():
+            raise MeasurementsError(
+                source, f"{named(name)} {over} in {_first_rows(below, rows)}: {why_over}")
+        negative = a < -NORMAL_SLACK
+        if negative.any():
+            raise MeasurementsError(
+                source, f"{named(name)} is negative in {_first_rows(negative, rows)}: "
+                        f"{why_negative}")
+
+
 def direction(theta, phi) -> np.ndarray:
     """Unit vectors (..., 3) of polar angle ``theta`` from the normal and azimuth ``phi``."""
     theta, phi = np.asarray(theta, float), np.asarray(phi, float)
@@ -188,33 +241,8 @@ class Measurements:
         if any(a.size != n for a in angles):
             raise MeasurementsError(source, f"{n} values but angles of "
                                             f"{[a.size for a in angles]} rows")
-        for name, a in zip(("theta_i", "phi_i", "theta_o", "phi_o"), angles, strict=True):
-            if not np.all(np.isfinite(a)):
-                raise MeasurementsError(source, f"{named(name)} is not finite in "
-                                                f"{_first_rows(~np.isfinite(a), rows)}")
-        for name, a in (("phi_i", angles[1]), ("phi_o", angles[3])):
-            # any azimuth is within a turn of 0; one of 1e300 degrees has lost every
-            # digit of its angle (in radians, a 1e300 degrees value is 1.7e298)
-            beyond = np.abs(a) > MAX_AZIMUTH
-            if beyond.any():
-                raise MeasurementsError(
-                    source, f"{named(name)} is beyond +-{np.degrees(MAX_AZIMUTH):.0f} degrees in "
-                            f"{_first_rows(beyond, rows)}: an azimuth is within a turn or "
-                            "two of 0 (angles in another unit?)")
-        for name, a in (("theta_i", angles[0]), ("theta_o", angles[2])):
-            below = a > np.pi / 2 + HORIZON_SLACK
-            if below.any():
-                raise MeasurementsError(
-                    source, f"{named(name)} is below the horizon (more than 90 degrees from the "
-                            f"normal) in {_first_rows(below, rows)}: a reflectance sample "
-                            "has both directions above the surface")
-            negative = a < -NORMAL_SLACK
-            if negative.any():
-                raise MeasurementsError(
-                    source, f"{named(name)} is negative in {_first_rows(negative, rows)}: polar "
-                            "angles are measured from the normal, 0 to 90 degrees (an "
-                            "in-plane file's signed angle is theta = |angle|, with phi "
-                            "turned by 180 degrees on the negative side)")
+        angles_checked(dict(zip(("theta_i", "phi_i", "theta_o", "phi_o"), angles,
+                                strict=True)), source, rows, named)
         if not np.all(np.isfinite(values)):
             raise MeasurementsError(source, "a value is not finite in "
                                             f"{_first_rows(~np.all(np.isfinite(values), 1), rows)}")

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.io import long_layout, matlab, merl, npz, spectra
+from brdffit.io import long_layout, matlab, merl, npz, spectra, variables
 from brdffit.io.columns import (
     ANGLE_ALIASES,
     ANGLES,
@@ -234,8 +234,8 @@ def _hdf5_samples(f, source: str, matlab: bool, file_format: str = "hdf5") -> Me
     provenance = _stored_provenance(f.attrs.get("provenance"), file_format)
     names = {a: named[a][0] for a in ANGLES if a in named}
     if direction_keys(named) != ANGLES:  # the half and difference angles, as written
-        raw, scales = half_diff_as_directions(raw, scales, source)
         given = [named[a][0] for a in direction_keys(named)]
+        raw, scales = half_diff_as_directions(raw, scales, source, names=given)
         provenance["half_diff"] = given
         names = {a: f"{a} (of {', '.join(given)})" for a in ANGLES}
     v = _value_names(f, source)
@@ -718,6 +718,13 @@ def _attr_text(value, what: str, source: str) -> str | None:
         return None
     if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "SUO":
         value = value.ravel()[0]
+    if isinstance(value, str):
+        try:
+            value.encode()
+        except UnicodeEncodeError:
+            # h5py gives a variable-length string's bytes that are no UTF-8 as lone
+            # surrogates (b'\xff' as '\udcff'): its bytes again, refused as such below
+            value = value.encode(errors="surrogateescape")
     if isinstance(value, bytes):
         try:
             return value.decode()
@@ -819,10 +826,7 @@ def _numeric(f, name: str, source: str, matlab: bool = False) -> np.ndarray:
         raise MeasurementsError(source, f"dataset {name} holds a variable-length array per "
                                         "row (a ragged list): write it as one (n,) or (n, 3) "
                                         "array of numbers")
-    if d.dtype.kind not in "iuf":
-        held = ("text" if d.dtype.kind in "SUO" else "complex numbers (a BRDF is real: keep "
-                "the real part)" if d.dtype.kind == "c" else "booleans (a mask?)"
-                if d.dtype.kind == "b" else d.dtype)
+    if (held := variables.not_numbers(d.dtype)) is not None:
         raise MeasurementsError(source, f"dataset {name} holds {held}, not numbers")
     if (d.size or 0) > MAX_NUMBERS:
         # the declared shape, before anything is read: a file of a few KB may declare

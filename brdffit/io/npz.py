@@ -99,6 +99,10 @@ def as_hdf5(path: str | Path, source: str, *, max_numbers: int, wanted=lambda na
             for name, _, dtype in declared:
                 if not (values and wanted(name)):
                     continue
+                if dtype.kind in "Mm":  # dates or durations: HDF5 holds none, so they are
+                    # refused here as the reader refuses an array of booleans when it reads it
+                    raise MeasurementsError(source, f"array {name} holds "
+                                                    f"{variables.not_numbers(dtype)}, not numbers")
                 if dtype.kind in "US":  # text the reader reads: a long layout's channels
                     if dtype.itemsize > 4 * variables.MAX_TEXT:  # before it is read
                         raise MeasurementsError(source, f"array {name} holds texts of "

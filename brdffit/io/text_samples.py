@@ -303,7 +303,8 @@ def _from_rows(rows: np.ndarray, row_numbers: np.ndarray, cols: dict, source: st
     if "half_diff" in cols:  # the directions, in radians, of the half and difference angles
         half = cols["half_diff"].values()  # in HALF_DIFF's order
         raw, scales = half_diff_as_directions([rows[:, k] for k, _ in half],
-                                              [scale for _, scale in half], source)
+                                              [scale for _, scale in half], source,
+                                              row_numbers, cols["half_diff_names"])
         provenance["half_diff"] = cols["half_diff_names"]
     else:
         raw = [rows[:, cols[a][0]] for a in ANGLES]

@@ -97,6 +97,27 @@ def fill_text(f, name: str, texts) -> None:
     f.create_dataset(name, data=data, dtype=h5py.string_dtype()).attrs.update(attrs)
 
 
+def not_numbers(dtype: np.dtype) -> str | None:
+    """What an array of ``dtype`` holds where that is not real numbers, as a refusal
+    says it ("dataset rgb holds booleans (a mask?), not numbers"); None for integers
+    and floats. Dates and durations (``datetime64[s]``) by their type: numpy's, which
+    HDF5 has none of (an .npz of them crashed the reader with h5py's TypeError)."""
+    kind = dtype.kind
+    if kind in "iuf":
+        return None
+    if kind in "SUO":
+        return "text"
+    if kind == "c":
+        return "complex numbers (a BRDF is real: keep the real part)"
+    if kind == "b":
+        return "booleans (a mask?)"
+    if kind == "V" and dtype.names:
+        return f"records of fields {', '.join(dtype.names[:8])}"
+    if kind == "V":
+        return f"raw bytes ({dtype})"
+    return str(dtype)  # datetime64[s], timedelta64[ms]
+
+
 def said(e: Exception) -> str:
     """A reader library's exception in one line, for a refusal's parentheses."""
     return " ".join(str(e).split())[:200] or type(e).__name__

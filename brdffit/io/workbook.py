@@ -31,6 +31,16 @@ WORKBOOK_PART = "xl/workbook.xml"
 #: The most bytes a workbook's parts may expand to: a sheet of two million rows of
 #: seven numbers is ~400 MB of XML.
 MAX_EXPANDED = 1 << 30
+#: The most columns a sheet's rows may reach: as many as a CSV's header may name
+#: (``brdffit.io.text_samples.MAX_COLUMNS``: a spectral list of one column per nm).
+MAX_COLUMNS = 10_000
+#: The most cells a sheet's rows may span, each row as wide as its last cell (or as
+#: the range the sheet declares): about as many as :data:`MAX_EXPANDED` of XML can
+#: hold (20 bytes or more a cell). openpyxl gives every row as wide as the sheet, so an
+#: empty cell costs no byte of XML and is read all the same: a 5 KB sheet with one
+#: cell at XFD5000 was 82 million cells, 11 s (~0.13 us each), and one at XFD1048576
+#: ran for hours.
+MAX_CELLS = 50_000_000
 
 
 def is_xlsx(path: str | Path) -> bool:
@@ -97,6 +107,8 @@ def uncomputed_formula(path: str | Path, sheet: str) -> str | None:
     with open(path, "rb") as raw, open(path, "rb") as raw_again:
         values = openpyxl.load_workbook(raw, read_only=True, data_only=True)
         formulas = openpyxl.load_workbook(raw_again, read_only=True, data_only=False)
+        for book in (values, formulas):  # the cells _lines read, not the declared range
+            book[sheet].reset_dimensions()
         try:
             for row_values, row_formulas in zip(values[sheet].iter_rows(),
                                                 formulas[sheet].iter_rows(), strict=False):
@@ -128,12 +140,20 @@ def _lines(sheet, source: str, merges: list[tuple[int, int, int, int]] = ()) -> 
     its row's: the reader's "row 5" is the sheet's row 5; an empty row an empty line);
     none where the sheet holds no cell. ``merges``: the merged cells of its first rows
     (:func:`_merged_header_ranges`), read as :func:`_unmerged` says."""
+    _sized(sheet, source)
     rows: list[list[str]] = []
+    spanned = 0
     for k, row in enumerate(sheet.iter_rows(values_only=True), start=1):
         if k > MAX_SAMPLES + 1000:  # the header, units and comment rows, with room
             raise MeasurementsError(source, f"an Excel sheet of more than {k - 1:,} rows: "
                                             "more than a sample list read here "
                                             f"({MAX_SAMPLES:,})")
+        spanned += len(row)
+        if len(row) > MAX_COLUMNS or spanned > MAX_CELLS:
+            raise MeasurementsError(source, _too_wide(
+                sheet.title, f"row {k} reaches column {_letters(len(row))} ({len(row):,} "
+                             "columns)" if len(row) > MAX_COLUMNS
+                else f"rows 1 to {k:,} span {spanned:,} cells", len(row)))
         cells = [_cell(v) for v in row]
         while cells and not cells[-1].strip():
             cells.pop()
@@ -146,6 +166,29 @@ def _lines(sheet, source: str, merges: list[tuple[int, int, int, int]] = ()) -> 
     while lines and not lines[-1]:
         lines.pop()
     return lines
+
+
+def _sized(sheet, source: str) -> None:
+    """Refuses a sheet whose declared range (its XML's dimension record) spans more than
+    a sample list's columns or cells, before a row is read; then forgets that range, so
+    that each row is read as wide as its own cells reach (a sheet that declares none,
+    or one too small, is weighed row by row in :func:`_lines`; one too small cut its
+    rows short, unsaid)."""
+    rows, columns = sheet.max_row, sheet.max_column
+    if rows and columns and (columns > MAX_COLUMNS or rows * columns > MAX_CELLS):
+        raise MeasurementsError(source, _too_wide(
+            sheet.title, f"declares cells up to {_letters(columns)}{rows} "
+                         f"({rows:,} rows of {columns:,} columns)", columns))
+    sheet.reset_dimensions()
+
+
+def _too_wide(title: str, found: str, columns: int) -> str:
+    """Why a sheet is refused for its width (``columns`` over :data:`MAX_COLUMNS`) or
+    its cells: what was ``found``, and the limit (a sample list has its angles and
+    values, one per channel or wavelength)."""
+    limit = (f"{MAX_COLUMNS:,} columns" if columns > MAX_COLUMNS else f"{MAX_CELLS:,} cells")
+    return (f"sheet {title!r} {found}: more than a sample list's ({limit}); clear the cells "
+            "beyond its samples (a stray value far right or down), or save it as CSV")
 
 
 #: The rows at the top of a sheet whose merged cells are read as a header's
@@ -289,6 +332,16 @@ def _column(letters: bytes) -> int:
     for ch in letters:
         n = n * 26 + ch - 64
     return n - 1
+
+
+def _letters(column: int) -> str:
+    """Excel's letters of the 1-based ``column`` (16384: ``XFD``; :func:`_column`
+    reads them back, 0-based)."""
+    letters = ""
+    while column > 0:
+        column, k = divmod(column - 1, 26)
+        letters = chr(65 + k) + letters
+    return letters
 
 
 def _cell(value) -> str:
