@@ -85,6 +85,11 @@ class InvalidRequest(ClientError, ValueError):
     with the message the server would answer with."""
 
 
+class UnreadableFile(ClientError, OSError):
+    """A file to upload that cannot be opened here (missing, a directory, no
+    permission): said in one line, before anything is sent."""
+
+
 class InvalidSetting(ClientError, ValueError):
     """A :class:`Client` made with a URL or a timeout it cannot use, or a :meth:`Client.
     wait` given a timeout or a poll interval it cannot use: said at once, not as
@@ -392,7 +397,12 @@ class Client:
         params = {"name": os.path.basename(os.fspath(path))}
         if sheet is not None:
             params["sheet"] = sheet
-        with open(path, "rb") as f:  # httpx streams a file in chunks, with its length
+        try:
+            f = open(path, "rb")  # noqa: SIM115 - closed below; httpx streams it in chunks
+        except OSError as e:
+            raise UnreadableFile(f"cannot upload {os.fspath(path)!r}: "
+                                 f"{e.strerror or e}") from None
+        with f:
             return self._json(
                 "POST", "/v1/tables", TableInfo.from_json, content=f, params=params,
                 headers={"Content-Type": "application/octet-stream"},

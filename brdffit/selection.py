@@ -295,7 +295,11 @@ def select(
     """
     # JAX's modules, imported here rather than by the threads below (see the imports)
     from brdffit.fitting import problem
+    from brdffit.fitting.inputs import refuse_blank_but_spikes
     from brdffit.fitting.sphere import SphereReference
+
+    if isinstance(table, MerlTable):  # once, not in each candidate's words
+        problem.cached(table, "blank-but-spikes", lambda: refuse_blank_but_spikes(table))
 
     t0 = time.perf_counter()
     # the fit's own options only; select sets parent_fit, init and bin_weight itself

@@ -96,9 +96,13 @@ REFUSED = {
 
 #: case -> raw values of a table that is fitted, honestly
 FITTED = {
+    "denormal bins among real ones": denormal_bins,
+}
+#: case -> raw values of a table that the reader takes and the fit refuses: nothing but a
+#: corrupt bin to fit (they were fitted 'good', black against black, at 100 dB)
+BLANK_BUT_A_SPIKE = {
     "one hot bin in zeros": lambda: hot_bin(1000.0),
     "one hot bin near the bound": lambda: hot_bin(0.5 * MAX_VALUE / SCALE[2]),
-    "denormal bins among real ones": denormal_bins,
 }
 
 
@@ -156,28 +160,21 @@ def test_odd_but_physical_tables_fit_honestly(case, model):
     table = merl.from_bytes(to_bytes(FITTED[case]()), source=case)
     r = fit(table, model, samples=4096)
     assert_honest(r)
-    if case.startswith("one hot bin"):
-        # Lambert cannot put one bin above zeros: its error says so, whatever the
-        # subsample saw.
-        if model == "lambert":
-            assert r.error["log_rmse"] > 1e-5 and r.error["rel_peak_error"] > 0.5
-        # The subsample misses the hot bin: it holds zeros, which a reflectance
-        # near 0 fits exactly. That is an optimum (solver.ZERO_SCALE), reached in
-        # few steps; it used to take every allowed step and end not converged.
-        if case == "one hot bin in zeros":
-            assert max(np.ravel(r.params["kd"])) < 1e-20
-            assert r.converged and r.steps < 100, (r.result, r.steps)
-        # a verdict that is not poor says it judged the look without the peak it misses
-        rel = r.error["rel_peak_error"]
-        if r.quality["verdict"] != "poor" and rel >= 0.99:
-            said = "misses the table's by" if rel <= 1 else "x the table's there"
-            assert any(n.startswith("at the table's brightest bin the fit") and said in n
-                       for n in r.notes), r.notes
-    else:  # 1000 dark bins among 1.1M: still the table's own parameters
-        assert r.converged
-        if model == "ggx":
-            assert r.params["alpha"] == pytest.approx(GGX["alpha"], rel=0.02)
-            np.testing.assert_allclose(r.params["ks"], GGX["ks"], rtol=0.02)
+    # 1000 dark bins among 1.1M: still the table's own parameters
+    assert r.converged
+    if model == "ggx":
+        assert r.params["alpha"] == pytest.approx(GGX["alpha"], rel=0.02)
+        np.testing.assert_allclose(r.params["ks"], GGX["ks"], rtol=0.02)
+
+
+@pytest.mark.parametrize("case", list(BLANK_BUT_A_SPIKE))
+def test_a_hot_bin_in_zeros_is_read_and_refused_as_blank_by_the_fit(case):
+    from brdffit.errors import FitInputError
+
+    table = merl.from_bytes(to_bytes(BLANK_BUT_A_SPIKE[case]()), source=case)
+    with pytest.raises(FitInputError, match=f"{case}: no reflectance to fit but 1 isolated "
+                                            "spike"):
+        fit(table, "lambert", samples=4096)
 
 
 def test_float32_overflow_of_the_full_table_error_falls_back_to_float64():
@@ -332,7 +329,9 @@ def test_cli_json_writes_a_missing_metric_as_null(capsys):
 @pytest.mark.contract  # the command line, through its main() in this process
 def test_cli_json_of_a_hot_bin_fit_is_strict_and_finite(tmp_path, model):
     path = tmp_path / "hot.binary"
-    path.write_bytes(to_bytes(hot_bin(1000.0)))
+    raw = every_bin(1.0)  # a dim table, ~7e-4 1/sr (zeros beside it are refused as blank)
+    raw[(slice(None), *HOT)] = 1000.0
+    path.write_bytes(to_bytes(raw))
     r = run_main("brdffit.cli", "fit", str(path), "--model", model, "--json", *FAST)
     assert r.returncode == 0, r.stderr
     d = strict_loads(r.stdout)
@@ -364,6 +363,32 @@ def test_a_lone_corrupt_bin_is_named_in_the_notes_and_leads_what_to_try():
         assert r.quality["next"][0]["try"].startswith("the table without its spikes")
     # a clean fit says nothing of spikes; neither does a bin outside what the fit used
     assert not any("every measured neighbour" in n for n in fit(base, "ggx", samples=4096).notes)
+
+
+def test_a_blank_table_with_corrupt_bins_is_refused_as_blank(tmp_path):
+    """Zeros everywhere but one bin of 1e6 (raw) passed the reader's blank check, which
+    reads the brightest bin, and was fitted 'good' at 100 dB, black against black: the
+    fit refuses it, naming the spike, in the library, the CLI and auto."""
+    from brdffit.errors import FitInputError
+    from brdffit.selection import select
+
+    zeros = np.zeros((3, *merl.SHAPE))
+    blank = _one_corrupt_bin(MerlTable(zeros, np.ones(merl.SHAPE, bool), "blank.binary"),
+                             at=(0, 0, 5), value=1.1e3)
+    with pytest.raises(FitInputError, match=r"no reflectance to fit but 1 isolated spike "
+                                             r"\(the brightest 1.1e\+03 1/sr .* bin \[0, 0, 5\]"):
+        fit(blank, "ggx", samples=4096)
+    with pytest.raises(FitInputError, match="a blank table"):
+        select(blank, ("lambert", "ggx"), samples=4096)
+    path = tmp_path / "spike.binary"
+    merl.write(path, blank)
+    done = run_main("brdffit.cli", "fit", str(path), "--samples", "4096")
+    assert done.returncode == 2 and "no reflectance to fit but 1 isolated spike" in done.stderr
+    assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    # a table with reflectance beside its spike is fitted, the spike named (above)
+    lit = _one_corrupt_bin(MerlTable(np.full((3, *merl.SHAPE), 1e-3),
+                                     np.ones(merl.SHAPE, bool), "lit.binary"), value=1.1e3)
+    assert fit(lit, "lambert", samples=4096).converged
 
 
 @pytest.mark.parametrize("alpha", [0.001, 0.01])

@@ -272,6 +272,19 @@ def test_list_cancel_and_delete(client, files):
     assert table_id not in [t.id for t in client.tables()]
 
 
+def test_a_file_that_cannot_be_read_is_said_in_one_line(tmp_path):
+    """Before anything is sent: a missing file or a directory is the client's own error,
+    one line (it was Python's FileNotFoundError / IsADirectoryError)."""
+    from brdffit.client import UnreadableFile
+
+    with Client("http://127.0.0.1:9") as client:  # nothing listens: nothing is sent
+        for path, words in ((tmp_path / "absent.binary", "No such file"),
+                            (tmp_path, "Is a directory")):
+            with pytest.raises(UnreadableFile, match=f"cannot upload .*: {words}") as e:
+                client.upload(path)
+            assert isinstance(e.value, ClientError) and "\n" not in str(e.value)
+
+
 def test_token_is_sent_and_a_401_explained():
     """The header the server checks (its own 401s: test_api.py), without a server."""
     seen = []

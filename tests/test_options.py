@@ -215,6 +215,18 @@ def test_options_refuse_bad_values_with_a_message():
     assert SelectionRule(candidates=("ggx", "lambert", "ggx")).candidates == ("ggx", "lambert")
 
 
+@pytest.mark.parametrize(("name", "value"), [("samples", 10**12), ("starts", 64),
+                                           ("max_steps", 20_000), ("loss", ["log"]),
+                                           ("solver", ("lm",)), ("precision", 64)])
+def test_fit_refuses_what_the_shells_refuse_before_any_work(noisy_table, name, value):
+    """``fit`` called directly is held to the ranges the command line and the service
+    offer (10**12 samples was a MemoryError of 7.3 TiB, a loss in a list a TypeError)."""
+    with pytest.raises(FitInputError, match=name):
+        fit(merl.read(noisy_table), "lambert", **{name: value})
+    with pytest.raises(FitInputError, match=name):
+        FitOptions(**{name: value})
+
+
 def test_cli_refuses_what_the_options_refuse(tmp_path):
     r = run_main("brdffit.cli", "fit", str(tmp_path / "absent.binary"), "--starts", "0")
     assert r.returncode == 2 and "starts must be an integer in 1 .. 32" in r.stderr

@@ -63,6 +63,7 @@ class TableInput:
         return self.table.source
 
     def prepare(self, bin_weight, samples, seed: int, precision: str, loss: str) -> Prepared:
+        cached(self.table, "blank-but-spikes", lambda: refuse_blank_but_spikes(self.table))
         return prepare(self.table, bin_weight, samples, seed, precision, loss)
 
     def start_table(self, prep: Prepared) -> MerlTable:
@@ -172,6 +173,30 @@ MERL_SCALES = ("MERL's .binary holds values to be scaled by 1/1500, 1.15/1500 an
 #: Why a sample list's may not be: a reflectance in percent, as many instruments export.
 SAMPLE_SCALES = ("Values in percent are 100 times a fraction (a reflectance factor R in % is "
                  "a BRDF of R / (100 pi) 1/sr)")
+
+
+def refuse_blank_but_spikes(table: MerlTable) -> bool:
+    """Refuse a table that is blank (every measured bin below ``merl.MIN_PEAK``, as
+    the reader refuses one) but for isolated spikes (``MerlTable.isolated_spikes``):
+    one corrupt bin of 1e6 in a table of zeros got past the reader's blank check, which
+    reads the brightest bin, and was fitted "good" at 100 dB, black against black, its
+    kd and ks at their bounds. Returns False (checked, once per table: ``cached``)."""
+    spikes = cached(table, "isolated-spikes", table.isolated_spikes)
+    if len(spikes) == 0:
+        return False
+    rest = table.rgb.max(axis=0).copy()
+    rest[tuple(spikes.T)] = 0.0
+    brightest = float(rest.max())
+    if brightest >= merl.MIN_PEAK:
+        return False
+    first = [int(x) for x in spikes[0]]
+    value = float(table.rgb[(slice(None), *first)].max())
+    raise FitInputError(
+        f"{table.source}: no reflectance to fit but {len(spikes):,} isolated spike"
+        f"{'s' if len(spikes) != 1 else ''} (the brightest {value:.3g} 1/sr at theta_h, "
+        f"theta_d, phi_d bin {first}, over {merl.SPIKE_FACTOR:,.0f}x every measured "
+        f"neighbour): every other measured bin is at most {brightest:.3g} 1/sr, below "
+        f"{merl.MIN_PEAK:g}: a blank table (zeros) with corrupt values")
 
 
 def _too_bright(prep: Prepared, what: str = "table",

@@ -52,6 +52,7 @@ from brdffit.fitting.options import (
     DEFAULT_SOLVER,
     DEFAULT_STARTS,
     PRECISIONS,
+    FitOptions,
     check_solver_precision,
 )
 from brdffit.fitting.physical import bound
@@ -437,6 +438,9 @@ def _check_options(loss, solver, precision, samples, starts, max_steps, physical
                    seed) -> tuple[int | None, int, int, int]:
     """Refuse, with the reason, options ``fit`` was called with directly (a
     ``FitOptions`` has checked its own already); the counts as Python ints."""
+    for name, value in (("loss", loss), ("solver", solver), ("precision", precision)):
+        if not isinstance(value, str):  # a list of one was a TypeError (unhashable)
+            raise FitInputError(f"{name} must be a name, got {value!r}")
     get_loss(loss)
     get_solver(solver)
     if precision not in PRECISIONS:
@@ -452,7 +456,12 @@ def _check_options(loss, solver, precision, samples, starts, max_steps, physical
         raise FitInputError(f"physical must be true or false, got {physical!r}")
     if not _integer(seed) or not 0 <= seed < 2**32:
         raise FitInputError(f"seed must be an integer in 0 .. 2**32 - 1, got {seed!r}")
-    return None if samples is None else int(samples), int(starts), int(max_steps), int(seed)
+    counts = None if samples is None else int(samples), int(starts), int(max_steps), int(seed)
+    # the ranges the command line and the service offer, from the one declaration: 10**12
+    # samples was a MemoryError (7.3 TiB) here, and 64 starts a solve of 64
+    FitOptions(loss=loss, solver=solver, samples=counts[0], precision=precision,
+               starts=counts[1], max_steps=counts[2], seed=counts[3], physical=physical)
+    return counts
 
 
 def _integer(x) -> bool:
