@@ -206,6 +206,32 @@ def _directory() -> Path | None:
     return None if base is None else _directory_in(base)
 
 
+def programs_kept() -> tuple[bool, bool]:
+    """Whether the cache keeps programs of this brdffit, and of another (what the
+    command line's compile notice says): each has its directory (one per fingerprint,
+    which every brdffit source file, the JAX versions, XLA_FLAGS and the CPU make).
+    Every edit of brdffit's code or upgrade of JAX starts an empty one and compiles
+    again (a default ggx fit: 6 programs, ~3 s of compiling); that was said as "first
+    use of these options on this machine" after the same fit had run a minute before."""
+    # the directory this process keeps its programs in (cached, and made where missing,
+    # by the compile anyway)
+    current = _directory()
+    if current is None:
+        return False, False
+
+    def holds_programs(folder) -> bool:
+        try:
+            return any(f.suffix == ".xla" for f in folder.iterdir())
+        except OSError:  # removed meanwhile (stale), or unreadable: no programs of use
+            return False
+
+    try:
+        others = [d for d in current.parent.iterdir() if d != current and d.is_dir()]
+    except OSError:
+        others = []
+    return holds_programs(current), any(map(holds_programs, others))
+
+
 @functools.cache
 def _directory_in(base: str) -> Path | None:
     root = Path(base) / "executables"

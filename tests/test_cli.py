@@ -174,3 +174,104 @@ def test_warmup_keeps_the_fits_for_the_next_process(tmp_path, monkeypatch):
     assert "(all loaded from the cache: nothing to compile)" in again.stderr, again.stderr
     bad = run_main("brdffit.cli", "warmup", "--models", "no_such_model")  # refused first
     assert bad.returncode == 2 and "no_such_model" in bad.stderr
+
+
+def test_fit_help_names_every_format_the_readers_take():
+    """The table's help listed ASTM, CSV/TSV and HDF5 while the readers also take .mat,
+    .npz and .xlsx: it is made from the readers' registry, every suffix in it."""
+    from brdffit.io.readers import READERS
+
+    r = run_main("brdffit.cli", "fit", "--help")
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())  # argparse's line breaks undone
+    table = text.split(" table the measured file", 1)[1].split(" options:", 1)[0]
+    for suffix in READERS:
+        assert suffix in table, (suffix, table)
+    for words in ("MERL", "ASTM E1392", "CSV", "HDF5", "MATLAB", "NumPy", "Excel"):
+        assert words in table, (words, table)
+
+
+def test_auto_names_the_command_line_flag_for_a_grey_specular(tmp_path):
+    """auto's reason on a grey specular said "mono_ks=True fits it", the library's
+    keyword: the command line says its own flag."""
+    path = tmp_path / "grey.binary"
+    r = run_main("data_synth", str(path), "--model", "ggx", "--param=kd=0.2,0.1,0.05",
+                 "--param=ks=0.5,0.5,0.5", "--param=alpha=0.15", "--param=f0=0.6")
+    assert r.returncode == 0, r.stderr
+    r = run_main("brdffit.cli", "fit", str(path), "--model", "auto", "--candidates", "ggx",
+                 "--samples", "2048")
+    assert r.returncode == 0, r.stderr
+    assert "a monochrome ks would do (6 values instead of 8; --mono-ks fits it)." in r.stdout, \
+        r.stdout
+    assert "mono_ks=True" not in r.stdout
+
+
+def test_a_physical_fit_says_so_and_what_its_bounds_cost(ggx_file):
+    """--physical printed the header of any fit ("ggx fit (log loss)") and nothing of the
+    bounds: the header says the fit is bounded, and a line the bounds' cost (against the
+    unconstrained fit's log_rmse), the largest albedo and which bounds are active."""
+    import dataclasses
+
+    from brdffit.cli.fit import format_result
+    from brdffit.fitting.result import FitResult
+
+    r = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--physical",
+                 "--samples", "2048")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert "ggx fit (log loss, physically bounded)" in lines[0], lines[0]
+    (bounds,) = [ln for ln in lines if ln.startswith("  physical bounds")]
+    assert bounds.startswith("  physical bounds (directional albedo <= 1, reflectances <= 1): "
+                             "none active, the unconstrained fit meets them (log_rmse "), bounds
+    plain = run_main("brdffit.cli", "fit", str(ggx_file), "--model", "ggx", "--samples", "2048",
+                     "--json")
+    free = FitResult.from_dict(json.loads(plain.stdout))
+    assert "physical" not in format_result(free)  # an unbounded fit says nothing of bounds
+    bounded = dataclasses.replace(free, physical={
+        "unconstrained_log_rmse": 0.0124, "log_rmse": 0.0130,
+        "relative_cost": 0.0130 / 0.0124 - 1, "albedo_max_before": [1.08, 0.9, 0.5],
+        "albedo_max_before_theta_deg": 89.0, "albedo_max_after": [0.9979, 0.8, 0.4],
+        "albedo_max_after_theta_deg": 89.0, "scale": 1.0, "unconstrained_result": "successful",
+        "active": ["range: ks[R] <= 1", "energy: albedo[R] <= 1 (largest 0.9979 at 89 deg)"],
+        "unconstrained_params": free.params})
+    text = format_result(bounded).splitlines()
+    at = next(i for i, ln in enumerate(text) if ln.startswith("  physical bounds"))
+    assert text[at] == ("  physical bounds (directional albedo <= 1, reflectances <= 1): "
+                        "log_rmse 0.013 against the unconstrained fit's 0.0124 (+4.8%); "
+                        "largest albedo 0.9979 at 89 deg (unconstrained 1.08 at 89 deg)")
+    assert text[at + 1] == ("    active: range: ks[R] <= 1; energy: albedo[R] <= 1 (largest "
+                            "0.9979 at 89 deg)")
+
+
+def test_the_compile_notice_says_when_the_programs_kept_are_another_brdffit_s(tmp_path,
+                                                                           monkeypatch):
+    """A cache whose programs were compiled by another brdffit (its code edited, or
+    another JAX: another fingerprint directory) and none by this one: the compile is
+    no "first use of these options on this machine", and says why it happens."""
+    import contextlib
+    import io
+
+    from brdffit.cli.fit import say_compiling_once
+
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(cache))
+    other = cache / "executables" / ("0" * 24)
+    other.mkdir(parents=True)
+    (other / "solve_batch-0.xla").write_bytes(b"")
+
+    def said() -> str:
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            say_compiling_once()("brdffit.fitting.problem.solve_batch", True)
+        return err.getvalue()
+
+    assert said() == (f"brdffit: compiling (seconds; brdffit or JAX changed since the programs "
+                      f"kept in {cache} were compiled; kept there for the next run)\n")
+    # once this brdffit keeps programs of its own, a compile is of options new to it, or
+    # not used since the change
+    from brdffit import executables
+
+    (executables._directory() / "solve_batch-1.xla").write_bytes(b"")
+    assert said() == (f"brdffit: first use of these options since brdffit or JAX last "
+                      f"changed: compiling (seconds; kept in {cache} for the next run)\n")
+    # (an empty cache: "first use of these options on this machine", test above)

@@ -559,6 +559,20 @@ def test_the_cli_names_the_viewers_whose_shading_it_does_not_model(tmp_path, cap
     assert "(it ignores ior: shades the rest)" in err, err
 
 
+def test_a_viewer_asked_of_a_target_without_viewers_is_refused_in_its_words():
+    """A Mitsuba export asked for three.js's viewer was refused as "the glTF export is
+    made for spec, threejs, blender; other targets have their renderer's own", which
+    read as the glTF export refusing it: said of the export asked for."""
+    r = result("gltf_pbr", GLTF)
+    with pytest.raises(ExportError) as e:
+        export(r, "mitsuba", viewer="threejs")
+    assert str(e.value) == ("viewer 'threejs' is for the glTF export (spec, threejs, "
+                            "blender); a Mitsuba export has its renderer's own shading")
+    with pytest.raises(ExportError) as e:
+        export(r, "gltf", viewer="unity")
+    assert str(e.value) == "viewer 'unity': the glTF export's viewers are spec, threejs, blender"
+
+
 @pytest.mark.slow
 def test_a_gltf_export_reports_its_fidelity_in_each_viewer_and_fits_for_one():
     """fidelity.viewers: the file's factors under the spec's definition and under

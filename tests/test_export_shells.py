@@ -93,7 +93,8 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
         ([str(fit_json), "--to", "gltf", "--target-model", "ggx"],
          f"gltf carries {', '.join(gltf.TARGET_MODELS)}, not 'ggx'"),
         ([str(fit_json), "--to", "mitsuba", "--viewer", "threejs"],
-         "viewer 'threejs': the glTF export is made for spec, threejs"),
+         "--viewer is for --to gltf (spec, threejs, blender); mitsuba and materialx have "
+         "their renderer's own shading"),
         ([str(fit_json), "--to", "gltf", "--measured", str(tmp_path / "none.binary")],
          "No such file"),
         # the path and what is wrong, not Python's "[Errno 2] ...: 'path'"
@@ -119,6 +120,39 @@ def test_cli_errors_are_one_line(fit_json, tmp_path):
     r = run_main("brdffit.cli", "export", str(other), "--to", "gltf")
     assert r.returncode == 2 and "not a fit result: no error, converged (" in r.stderr, r.stderr
     assert "__init__" not in r.stderr
+
+
+def test_cli_viewer_with_another_target_is_refused_before_the_export(fit_json):
+    """--viewer with --to mitsuba was refused after "exporting to mitsuba ...", in words
+    that read as the glTF export refusing it: refused first, in the flags' words."""
+    for target, viewer in (("mitsuba", "threejs"), ("materialx", "blender"),
+                           ("mitsuba", "spec")):
+        r = run_main("brdffit.cli", "export", str(fit_json), "--to", target, "--viewer", viewer)
+        assert r.returncode == 2 and r.stderr == (
+            "brdffit: error: --viewer is for --to gltf (spec, threejs, blender); mitsuba and "
+            "materialx have their renderer's own shading\n"), r.stderr
+
+
+def test_cli_stdout_is_one_document_for_each_target(fit_json):
+    """`brdffit export FIT --to T > file` is one document its parser reads: Mitsuba's
+    printed its RGB and its spectral scene back to back ("junk after document
+    element"). stdout is the first of the files, the one for Mitsuba's RGB variants;
+    stderr names the others, which --out writes."""
+    from xml.etree import ElementTree
+
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "mitsuba")
+    assert r.returncode == 0, r.stderr
+    assert ElementTree.fromstring(r.stdout).tag == "scene"
+    assert r.stdout.count("<scene") == 1
+    assert ("brdffit: standard output holds ggx_gltf_pbr.xml alone; --out DIR writes "
+            "ggx_gltf_pbr_spectral.xml too") in r.stderr, r.stderr
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "gltf")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["asset"]["version"] == "2.0"
+    assert "standard output holds" not in r.stderr  # the one file: nothing left out
+    r = run_main("brdffit.cli", "export", str(fit_json), "--to", "materialx")
+    assert r.returncode == 0, r.stderr
+    assert ElementTree.fromstring(r.stdout).tag == "materialx"
 
 
 def test_cli_reads_a_fit_json_with_a_bom_and_names_one_that_is_not_utf8(fit_json, tmp_path):

@@ -559,11 +559,14 @@ def test_cli_auto_prints_progress_on_stderr_and_json_on_stdout(tmp_path, capsys)
     assert "auto: [2/2] fitting oren_nayar ... log_rmse" in out.err
 
 
-def test_a_compile_notice_during_autos_progress_goes_on_a_line_of_its_own(capsys):
+def test_a_compile_notice_during_autos_progress_goes_on_a_line_of_its_own(capsys, tmp_path,
+                                                                          monkeypatch):
     """The first use of a candidate's options compiles while its progress line waits for
     its figures: the notice had run into it ("fitting gltf_pbr ...brdffit: first use")."""
     from brdffit.cli.fit import print_progress, say_compiling_once
 
+    # an empty cache: the notice's words depend on what a cache keeps (tests/test_cli.py)
+    monkeypatch.setenv("BRDFFIT_CACHE_DIR", str(tmp_path / "cache"))
     say = say_compiling_once()
     print_progress(0, 2, "lambert", None)
     say("lambert", True)

@@ -4,7 +4,8 @@ RESULT is the output of ``brdffit fit --json`` (the result schema, docs/results.
 ``-`` reads standard input), or a batch results file (``brdffit batch``, HDF5) with
 ``--table NAME`` and optionally ``--model MODEL`` (default: the table's best fit).
 The material goes to ``--out DIR``
-as the files a renderer loads, or to standard output; the warnings (every clamp and
+as the files a renderer loads, or to standard output as one document (the first file:
+Mitsuba's for its RGB variants; stderr names the others); the warnings (every clamp and
 approximation) and the fidelity go to standard error, or all of it as one JSON
 document with ``--json``. See docs/exports.md.
 """
@@ -26,6 +27,8 @@ from brdffit.models.catalogue import UnknownModelError
 
 #: The first bytes of every HDF5 file (a batch results file is one).
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: ``--viewer``'s choices: the viewers of the targets that have them (glTF's)
+VIEWER_CHOICES = tuple(dict.fromkeys(v for t in TARGETS.values() for v in t.viewers))
 
 
 def add_arguments(p) -> None:
@@ -51,7 +54,8 @@ def add_arguments(p) -> None:
     p.add_argument("--json", action="store_true",
                    help="print the whole export (material, warnings, fidelity) as JSON "
                         "(with --out, the files are written too)")
-    p.add_argument("--viewer", choices=("spec", "threejs", "blender"), default="spec",
+    # default None, not "spec": a --viewer given with another target is refused
+    p.add_argument("--viewer", choices=VIEWER_CHOICES, default=None,
                    help="with --to gltf: fit the factors for the spec's definition (default) "
                         "or for the way three.js or Blender (Cycles) shades them (a coat, "
                         "sheen or film fit keeps its layer where the viewer shades it)")
@@ -121,7 +125,7 @@ def _export(args):
         _say_exporting(args.target)
         try:
             return export(result, args.target, table=args.measured,
-                          target_model=args.target_model, viewer=args.viewer)
+                          target_model=args.target_model, viewer=args.viewer or "spec")
         except (ExportError, UnknownModelError) as e:  # the fit's: said with its file's name
             raise ExportError(f"{args.result}: {e}") from None
     if args.table is None:
@@ -137,12 +141,38 @@ def _export(args):
 
     return export_from_store(args.result, args.table, args.target, args.model,
                              table_file=args.measured, target_model=args.target_model,
-                             viewer=args.viewer)
+                             viewer=args.viewer or "spec")
+
+
+def _check_viewer(args) -> None:
+    """A ``--viewer`` given with a target that has no viewers is refused now, in the
+    flags' words: it was refused after the fit was read and "exporting to mitsuba" said,
+    by the library's words on the glTF export."""
+    if args.viewer is None or TARGETS[args.target].viewers:
+        return
+    with_viewers = [n for n, t in TARGETS.items() if t.viewers]
+    others = [n for n, t in TARGETS.items() if not t.viewers]
+    raise BrdffitError(f"--viewer is for --to {' or '.join(with_viewers)} "
+                       f"({', '.join(VIEWER_CHOICES)}); {' and '.join(others)} have their "
+                       "renderer's own shading")
+
+
+def _write_stdout(files: dict[str, str]) -> None:
+    """The material's document on stdout: the first of its files (the renderer's own:
+    Mitsuba's for its RGB variants), alone, so that ``> material.xml`` is one document
+    its parser reads (the RGB and spectral scenes printed back to back were "junk after
+    document element"); the others are named on stderr, for --out."""
+    (first, text), *rest = files.items()
+    sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    if rest:
+        print(f"brdffit: standard output holds {first} alone; --out DIR writes "
+              f"{', '.join(name for name, _ in rest)} too (docs/exports.md)", file=sys.stderr)
 
 
 def run(args) -> int:
     if args.glb and (args.target != "gltf" or not args.out):
         raise BrdffitError("--glb writes a binary glTF file: it needs --to gltf and --out DIR")
+    _check_viewer(args)
     folder = output_folder(args.out, "--out") if args.out else None  # before the export
     previous, executables.on_compile = executables.on_compile, say_compiling_once()
     try:
@@ -164,8 +194,7 @@ def run(args) -> int:
     for path in written:
         print(path)
     if not args.out:
-        for text in out.files.values():
-            sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        _write_stdout(out.files)
     fid = out.fidelity
     how = ("exact" if fid["exact"]
            else f"approximated, log_rmse to the fit {fid['log_rmse_to_fit']:.4g}"

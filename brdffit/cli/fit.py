@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import threading
@@ -91,11 +92,31 @@ def rule_from_args(args) -> SelectionRule | None:
     return SelectionRule.from_dict(given) if given else None
 
 
+#: The layout each reader of ``brdffit.io.readers.READERS`` reads, in words, by the
+#: reader's name; a reader added there without words here is still listed, by its
+#: suffixes (:func:`formats_help`).
+READER_WORDS = {
+    "read": "a MERL table", "read_astm": "ASTM E1392", "read_csv": "CSV/TSV with a header",
+    "read_text_samples": "ASTM or CSV by its content", "read_hdf5": "HDF5",
+    "read_mat": "MATLAB", "read_npz": "NumPy", "read_xlsx": "Excel",
+}
+
+
+def formats_help() -> str:
+    """Every layout the readers take, with its suffixes, from the readers' registry:
+    the help listed ASTM, CSV/TSV and HDF5 by hand, and not the .mat, .npz and .xlsx
+    readers added since."""
+    by_reader: dict = {}
+    for suffix, reader in readers.READERS.items():
+        by_reader.setdefault(reader, []).append(suffix)
+    return ", ".join(f"{READER_WORDS[r.__name__]} ({', '.join(s)})" if r.__name__ in READER_WORDS
+                     else ", ".join(s) for r, s in by_reader.items())
+
+
 def add_arguments(p) -> None:
-    p.add_argument("table", help="the measured file: a MERL .binary table, or samples as "
-                   "ASTM E1392 (.astm), CSV/TSV with a header, or HDF5 "
-                   "(docs/measurements.md; samples are fitted at their own directions); "
-                   "'-' reads it from standard input")
+    p.add_argument("table", help=f"the measured file, by its suffix: {formats_help()}; "
+                   "another suffix is read by its content (docs/measurements.md; samples "
+                   "are fitted at their own directions); '-' reads it from standard input")
     p.add_argument("--sheet", metavar="NAME",
                    help="an Excel workbook's sheet of samples to fit (default: its first "
                         "sheet that holds samples)")
@@ -136,8 +157,9 @@ N_BINS = GRID[0] * GRID[1] * GRID[2]
 def format_result(r: FitResult) -> str:
     """A human-readable summary of a fit: parameters with their standard errors and
     undetermined flags (docs/results.md), every metric, the bins used."""
-    lines = [f"{r.table}: {r.model} fit ({r.loss} loss), {r.result} after {r.steps} steps "
-             f"in {r.time_s:.2f} s" + ("" if r.converged else "  (NOT converged)")]
+    bounded = ", physically bounded" if r.physical is not None else ""
+    lines = [f"{r.table}: {r.model} fit ({r.loss} loss{bounded}), {r.result} after {r.steps} "
+             f"steps in {r.time_s:.2f} s" + ("" if r.converged else "  (NOT converged)")]
     u = r.uncertainty or {}
     se, flag = u.get("std_error", {}), u.get("undetermined", {})
     at_bound = u.get("at_bound", {})
@@ -180,6 +202,7 @@ def format_result(r: FitResult) -> str:
                      f"{e['held_out_log_rmse']:.4g}   cube_root_rmse "
                      f"{_g(e.get('held_out_cube_root_rmse'))}   rmse_cos "
                      f"{_g(e.get('held_out_rmse_cos'))} 1/sr")
+    lines += describe_physical(r.physical)
     lines += describe(r.quality)
     if r.full_table_error is not None:
         lines.append(f"  log_rmse = {r.full_table_error['log_rmse']:.4g} ({whole})   "
@@ -200,6 +223,33 @@ def format_result(r: FitResult) -> str:
             + (f", {outside:,} outside the scene" if r.scene is not None and outside > 0 else ""))
     lines += [f"  note: {n}" for n in r.notes]  # where the fit did other than asked
     return "\n".join(lines)
+
+
+def describe_physical(p: dict | None) -> list[str]:
+    """What a physically bounded fit's bounds did (its ``physical`` block, docs/results.md),
+    for a person: the bounded fit's log_rmse against the unconstrained one's, the largest
+    albedo, and the bounds that decided it. --physical printed nothing of them (the cost
+    was in --json alone)."""
+    if p is None:
+        return []
+    head = "  physical bounds (directional albedo <= 1, reflectances <= 1): "
+    after = max(p["albedo_max_after"])
+    if not p["active"] and p["scale"] == 1.0 and p["relative_cost"] in (0.0, None):
+        return [f"{head}none active, the unconstrained fit meets them (log_rmse "
+                f"{_g(p['log_rmse'])}, largest albedo {after:.4g} at "
+                f"{p['albedo_max_after_theta_deg']:g} deg)"]
+    cost = p["relative_cost"]
+    # a ratio beyond +100%: on a table the model made, the unconstrained fit's ~1e-8
+    # read "+7.5e+07%"
+    cost = ("n/a" if cost is None else f"{100 * cost:+.2g}%" if cost < 1
+            else f"{1 + cost:.3g}x")
+    unconstrained = ("" if p.get("unconstrained_result") in (None, "successful")
+                     else f", its solve {p['unconstrained_result']}")
+    return [f"{head}log_rmse {_g(p['log_rmse'])} against the unconstrained fit's "
+            f"{_g(p['unconstrained_log_rmse'])} ({cost}){unconstrained}; largest albedo "
+            f"{after:.4g} at {p['albedo_max_after_theta_deg']:g} deg (unconstrained "
+            f"{max(p['albedo_max_before']):.4g} at {p['albedo_max_before_theta_deg']:g} deg)",
+            "    active: " + ("; ".join(p["active"]) or "none")]
 
 
 #: From this far (theta_h, degrees) between the mirror and its nearest sample, a seen
@@ -294,12 +344,26 @@ def run(args) -> int:
         executables.on_compile = previous
     # auto: the ranking and its reason, then the chosen fit in full, as one fit prints
     # (its standard errors, every error figure, the bins or the samples' coverage, notes)
-    text = ("\n".join([format_selection(report.selection, chosen_params=False), "",
+    text = ("\n".join([format_selection(cli_words(report.selection), chosen_params=False), "",
                        format_result(report.chosen_fit)]) if report.selection is not None
             else format_result(report.chosen_fit) if len(report.ranking) == 1
             else format_models(report))
     return write_report(args, table, report, text,
                         measured if isinstance(measured, Measurements) else None)
+
+
+#: The library's keywords in auto's reason (``brdffit.selection``) -> this command's
+#: flags: "mono_ks=True fits it" told a command-line user a Python keyword.
+FLAG_WORDS = {"mono_ks=True": "--mono-ks"}
+
+
+def cli_words(selection):
+    """``selection`` with its reason in the command line's words (:data:`FLAG_WORDS`);
+    --json keeps the library's, as the service and Python callers read them."""
+    reason = selection.reason
+    for keyword, flag in FLAG_WORDS.items():
+        reason = reason.replace(keyword, flag)
+    return dataclasses.replace(selection, reason=reason)
 
 
 def format_models(report: FitReport) -> str:
@@ -318,8 +382,9 @@ def format_models(report: FitReport) -> str:
 
 def say_compiling_once():
     """``executables.on_compile`` for one command: the first compile says, on stderr,
-    why this run takes seconds (a first use of these options on this machine), and
-    whether the next run will load what it compiles. A program that is not kept (a
+    why this run takes seconds (a first use of these options on this machine, or a
+    brdffit or JAX other than the one whose programs the cache keeps), and whether the
+    next run will load what it compiles. A program that is not kept (a
     plugin model's, or any with the cache off) is compiled in every run, which its
     own line says, once."""
     lock = threading.Lock()
@@ -331,7 +396,15 @@ def say_compiling_once():
                 return
             said.add(kept)
         if kept:
-            _say_between_progress(f"brdffit: first use of these options on this machine: "
+            kept_here, kept_before = executables.programs_kept()
+            if kept_before and not kept_here:
+                _say_between_progress(f"brdffit: compiling (seconds; brdffit or JAX changed "
+                                      f"since the programs kept in {runtime.cache_dir()} "
+                                      "were compiled; kept there for the next run)")
+                return
+            first = ("since brdffit or JAX last changed" if kept_before
+                     else "on this machine")
+            _say_between_progress(f"brdffit: first use of these options {first}: "
                                   f"compiling (seconds; kept in {runtime.cache_dir()} for the "
                                   f"next run)")
             return

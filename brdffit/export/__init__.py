@@ -421,10 +421,16 @@ def _viewer_model(target: ExportTarget, viewer: str, target_model: str | None,
     if viewer == "spec":
         return target_model
     if viewer not in target.viewers:
-        made_for = [f"the {t.label} export is made for {', '.join(t.viewers)}"
-                    for t in TARGETS.values() if t.viewers]
-        raise ExportError(f"viewer {viewer!r}: {'; '.join(made_for)}; other targets have "
-                          "their renderer's own")
+        # said of the export asked for: it read as the glTF export refusing the viewer
+        # ("viewer 'threejs': the glTF export is made for ...; other targets have their
+        # renderer's own") when a Mitsuba export was asked for one
+        made_for = " or ".join(f"the {t.label} export ({', '.join(t.viewers)})"
+                               for t in TARGETS.values() if t.viewers)
+        if target.viewers:
+            raise ExportError(f"viewer {viewer!r}: the {target.label} export's viewers are "
+                              f"{', '.join(target.viewers)}")
+        raise ExportError(f"viewer {viewer!r} is for {made_for}; a {target.label} export has "
+                          "its renderer's own shading")
     shading = target.module.VIEWER_MODELS[viewer]
     if target_model is not None:
         if target_model not in shading:
