@@ -149,11 +149,37 @@ def test_user_init_is_used(synth_tables):
         ({"init": {"kd": "0.5"}}, "init: lambert: kd must be a number or three, got '0.5'"),
         ({"init": {"kd": True}}, "init: lambert: kd must be a number or three, got True"),
         ({"init": {"kd": [0.5, "0.5", 0.5]}}, "kd must be a number or three"),
+        # three values, nested: "needs 3 value(s), got 3" said nothing
+        ({"init": {"kd": [[0.5], [0.5], [0.5]]}},
+         r"kd needs 3 value\(s\), got an array of shape \[3, 1\], not a flat list"),
+        ({"init": {"kd": [0.5, 0.5]}}, r"kd needs 3 value\(s\), got 2"),
+        ({"loss": ["log"]}, "loss must be a name"),
     ],
 )
 def test_bad_options_raise_input_errors(kwargs, message, synth_tables):
     with pytest.raises(FitInputError, match=message):
         fit(synth_tables["lambert"], "lambert", **kwargs)
+
+
+def test_a_parent_fit_of_another_model_or_table_is_refused(synth_tables):
+    """A given parent fit is the one the model contains, of this table: another table's
+    was embedded as the start, another model's dropped without a word."""
+    from brdffit.io.merl import MerlTable
+
+    table = synth_tables["ggx"]
+    mine = MerlTable(table.rgb, table.mask, "mine.binary")
+    other = MerlTable(table.rgb, table.mask, "other.binary")
+    lambert = fit(mine, "lambert", samples=4096)
+    with pytest.raises(FitInputError, match="parent_fit is a lambert fit; oren_nayar contains "
+                                            "lambert|parent_fit is a lambert fit; ggx2 "
+                                            "contains ggx"):
+        fit(mine, "ggx2", samples=4096, parent_fit=lambert)
+    with pytest.raises(FitInputError, match="ggx contains none"):
+        fit(mine, "ggx", samples=4096, parent_fit=lambert)
+    with pytest.raises(FitInputError, match="parent_fit is a fit of other.binary .*, not of "
+                                            "mine.binary"):
+        fit(mine, "oren_nayar", samples=4096, parent_fit=fit(other, "lambert", samples=4096))
+    assert fit(mine, "oren_nayar", samples=4096, parent_fit=lambert).converged
 
 
 def test_a_scene_weight_far_from_one_is_only_its_shape(synth_tables):

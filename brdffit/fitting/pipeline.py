@@ -156,6 +156,8 @@ def fit(
             or isinstance(parent_fit, FitResult | Solved)):
         raise FitInputError(f"parent_fit must be the FitResult of {m.parent or 'the model'} "
                             f"{m.name} contains, got {type(parent_fit).__name__}")
+    if isinstance(parent_fit, FitResult):
+        _check_parent_fit(m, parent_fit, table)
     samples, starts, max_steps, seed = _check_options(loss, solver, precision, samples,
                                                       starts, max_steps, physical, seed)
     if physical:
@@ -592,6 +594,27 @@ def _worse_than_the_parent(result: FitResult, parent: FitResult) -> bool:
     gltf_clearcoat kept at its own optimum: -1.9 dB), its poor count unchanged."""
     mine, theirs = result.error.get("log_rmse"), parent.error.get("log_rmse")
     return mine is not None and theirs is not None and mine > NEVER_WORSE * theirs
+
+
+def _check_parent_fit(m, parent_fit: FitResult, table) -> None:
+    """Refuse a given parent fit that is not ``m``'s parent's, or is of another input
+    (by its name and measured count): one of another table was embedded as the start
+    (ggx2's alpha1 0.156 where its own fit finds 0.029), and one of another model was
+    dropped without a word."""
+    if m.parent is None:
+        raise FitInputError(f"parent_fit is for a model that contains another (ggx2 contains "
+                            f"ggx); {m.name} contains none")
+    if parent_fit.model != m.parent:
+        raise FitInputError(f"parent_fit is a {parent_fit.model} fit; {m.name} contains "
+                            f"{m.parent}: give {m.parent}'s fit of this table, or none")
+    source = getattr(table, "source", None)
+    measured = int(np.count_nonzero(table.mask)) if isinstance(table, MerlTable) else None
+    theirs = (parent_fit.samples or {}).get("measured")
+    if ((source is not None and parent_fit.table is not None and parent_fit.table != source)
+            or (measured is not None and theirs is not None and theirs != measured)):
+        raise FitInputError(f"parent_fit is a fit of {parent_fit.table} ({theirs} measured), "
+                            f"not of {source} ({measured} measured): give {m.parent}'s fit of "
+                            "this table, or none")
 
 
 def _parent_fit(source, table, m, parent_fit, prep, polish: bool, samples, again: dict):

@@ -322,8 +322,12 @@ class AbstractBRDFModel(eqx.Module):
             if v.size == 1 and spec.rgb:
                 v = np.full(3, float(v.reshape(())))
             if v.shape not in ((spec.size,), ()) or v.size != spec.size:
+                # by shape: [[0.1], [0.1], [0.1]] is 3 values, nested, and "needs 3,
+                # got 3" said nothing
+                got = (f"{v.size}" if v.ndim <= 1
+                       else f"an array of shape {list(v.shape)}, not a flat list")
                 raise ValueError(
-                    f"{self.name}: {spec.name} needs {spec.size} value(s), got {v.size}"
+                    f"{self.name}: {spec.name} needs {spec.size} value(s), got {got}"
                 )
             if not np.all(np.isfinite(v)):
                 raise ValueError(f"{self.name}: {spec.name} is not finite")
