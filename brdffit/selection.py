@@ -1391,7 +1391,9 @@ def format_selection(sel: Selection, chosen_params: bool = True) -> str:
     w = max([14, *(len(r["model"]) + 1 for r in sel.ranking)])
     head = (f"{'model':<{w}}{'k':>3} {'held-out' if held else 'log_rmse':>10} "
             + (f"{'full':>10} " if scene else "")
-            + f"{'excess':>9} {'PSNR dB':>8} " + (f"{'8 lights':>8} " if views else "")
+            # in the rule's units: dB below the best-looking under the render rule
+            + f"{'excess dB' if sel.rule == 'render_psnr_db' else 'excess':>9} {'PSNR dB':>8} "
+            + (f"{'8 lights':>8} " if views else "")
             + f"{'looks':>8} {'ns/eval':>8} {'BIC':>12}  status")
     lines = [f"{sel.table}: model selection ({sel.time_s:.1f} s)", head]
     for r in sel.ranking:

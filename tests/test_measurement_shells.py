@@ -26,7 +26,7 @@ def test_cli_fits_a_sample_file_at_its_own_directions(astm_file, tmp_path):
             "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    assert out["schema"] == "brdffit.fit/8"
+    assert out["schema"] == "brdffit.fit/9"
     assert out["input"]["format"] == "astm" and out["input"]["samples"] == 20_000
     assert out["input"]["fitted_at"] == "samples" and out["input"]["used"] == 4096
     assert "fitted at their own directions" in r.stderr  # said before the fit

@@ -327,7 +327,7 @@ def test_library_cli_api_and_batch_give_the_same_result_json(noisy_table, bright
         _same_fit(select(merl.read(path), candidates, **fast).to_dict(), library)
     else:
         library = fit(merl.read(path), model, **fast).to_dict()
-    assert list(library) == FitResult.keys() and library["schema"] == "brdffit.fit/8"
+    assert list(library) == FitResult.keys() and library["schema"] == "brdffit.fit/9"
     assert (library["physical"] is not None) == physical
     if physical:
         assert library["physical"]["active"][0] == "range: kd[R] <= 1"

@@ -40,7 +40,9 @@ def test_every_fit_carries_its_quality_and_it_round_trips():
     q = r.quality
     assert set(q) == {"render_psnr_db", "displayed_brightness_stops", "brightness_stops",
                       "displayed_colour_shift", "colour_shift", "estimate_error", "grazing",
-                      "basis", "sphere_measured", "verdict", "reason", "next"}
+                      "basis", "sphere_measured", "verdict", "reason", "next", "highlight"}
+    # the table resolves its highlight (GGX alpha 0.2), and the fit follows it
+    assert q["highlight"]["bins"] >= 3 and q["highlight"]["off_stops"] < 0.5, q["highlight"]
     assert set(q["grazing"]) == {"displayed_brightness_stops", "brightness_stops",
                                  "displayed_colour_shift", "colour_shift",
                                  "measured_colour_turn"}
@@ -590,3 +592,48 @@ def test_a_table_measured_on_part_of_the_sphere_is_not_vouched_good():
     assert q["verdict"] == "visible" and q["reason"].startswith(
         f"only {q['sphere_measured']:.0%} of the sphere's lit pixels have a measured bin")
     assert q["next"][0]["try"] == "a measurement of the directions the table lacks"
+
+
+def test_a_spike_the_table_does_not_hold_is_not_good_however_its_picture_reads():
+    """A table whose highlight spans several bins, fitted with a lobe far narrower: a
+    spike above the table's brightest bin beside a halo too dark, which the sphere's
+    saturated display cannot tell from the table (nickel's ggx2 under the render loss:
+    932x at the peak, 32.9 dB, 'good'). The highlight's row reads it; the verdict says
+    so, and a fit that follows the highlight is untouched."""
+    from brdffit.fitting.sphere import SphereReference
+
+    truth = {"kd": [0.05, 0.04, 0.03], "ks": [0.8, 0.7, 0.6], "alpha": 0.04, "f0": 0.9}
+    table = make_table("ggx", truth)[0]
+    ref = SphereReference(table)
+    ggx = models.get("ggx")
+    psnr, colour = ref.psnr_and_colour(ggx, truth)
+    exact = colour["highlight"]
+    assert exact is not None and exact["bins"] >= 3 and exact["off_stops"] < 0.05, exact
+    spike = {**truth, "alpha": 0.002}
+    _, spiked = ref.psnr_and_colour(ggx, spike)
+    assert spiked["highlight"]["off_stops"] > quality.HIGHLIGHT_OFF_STOPS, spiked["highlight"]
+    lo, hi = spiked["highlight"]["stops_range"]
+    assert lo < 0 < hi  # above the table at the peak, below it beside
+    # judged: a picture that reads good, with the spike's figures, is visible
+    good_key = {**colour["key"]}
+    seen = quality.quality(34.0, {"key": good_key, "grazing": None,
+                                  "highlight": spiked["highlight"]}, model=ggx, params=spike,
+                           loss="render", converged=True, rel_peak_error=300.0)
+    assert seen["verdict"] == "visible" and seen["reason"].startswith(quality.HIGHLIGHT_OFF)
+    assert "301x the table's" in seen["reason"] and "the picture alone: " in seen["reason"]
+    assert seen["highlight"] == spiked["highlight"]
+    # the same spike's figures with the fit below the table's peak (a highlight too
+    # dim: the model's reach, left to the picture), or the exact fit's, stay good
+    for highlight, rel in ((spiked["highlight"], 0.9), (exact, 300.0)):
+        block = quality.quality(34.0, {"key": good_key, "grazing": None,
+                                       "highlight": highlight}, model=ggx, params=truth,
+                                loss="render", converged=True, rel_peak_error=rel)
+        assert block["verdict"] == "good", block["reason"]
+    # a nested model's spike is sent to its parent, not told the bins are too coarse
+    two = quality.quality(34.0, {"key": good_key, "grazing": None,
+                                 "highlight": spiked["highlight"]}, model=models.get("ggx2"),
+                          params={"alpha1": 0.002, "ks1": [0.5] * 3, "alpha2": 0.1,
+                                  "ks2": [0.1] * 3},
+                          loss="render", converged=True, rel_peak_error=300.0)
+    tries = [s["try"] for s in two["next"]]
+    assert tries[0] == "--model ggx --loss render" and not any("narrower" in t for t in tries)

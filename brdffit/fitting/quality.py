@@ -192,6 +192,8 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     word, reason = _judged(psnr, key, basis)
     graze = colour.get("grazing")
     reason += _grazing_words(word, psnr, graze, basis)
+    highlight = colour.get("highlight")
+    word, reason = _highlight_judged(word, reason, highlight, rel_peak_error)
     block = {"render_psnr_db": psnr,
              "displayed_brightness_stops": key.get("displayed_brightness_stops"),
              "brightness_stops": key["brightness_stops"],
@@ -204,6 +206,8 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
                                            "measured_colour_turn")},
              "basis": basis,
              "verdict": word, "reason": reason, "next": []}
+    if highlight is not None:  # where the table resolves its highlight's shape
+        block["highlight"] = highlight
     if word != "good":
         block["next"] = next_steps(block, model=model, params=params, loss=loss,
                                    converged=converged, physical=physical, gains=gains,
@@ -211,6 +215,47 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
     elif not converged:  # it looks right, but its parameters are a point short of optimal
         block["next"] = [_CONVERGE]
     return block
+
+
+#: A fit whose highlight is further off the table than this (stops, the median over the
+#: bins where the table resolves its shape: :class:`brdffit.fitting.sphere._HighlightRow`)
+#: is not ``good``, whatever its picture: 2 stops is 4x. The sphere's display saturates
+#: in a bright highlight and cannot tell a glossy lobe from a spike beside a dark halo
+#: (nickel's ggx2 under the render loss: a peak 932x the table's, the halo beside it
+#: 4.5 stops off, 32.9 dB). Of the 100 MERL materials' ggx2 fits under the render loss,
+#: 10 put a peak over twice the table's with the highlight 2.1-5.1 stops off.
+HIGHLIGHT_OFF_STOPS = 2.0
+#: How the reason says it: ``brdffit.fitting.assemble`` then adds no note of the peak.
+HIGHLIGHT_OFF = "the highlight's shape is off"
+
+
+def _highlight_judged(word: str, reason: str, highlight: dict | None,
+                      rel_peak_error: float | None) -> tuple[str, str]:
+    """The verdict no better than ``visible`` where the fit puts a peak above the
+    table's brightest bin (``rel_peak_error`` over 1: more than twice its value) and
+    its highlight is more than :data:`HIGHLIGHT_OFF_STOPS` off the table over the bins
+    that resolve it: a spike the table does not hold, beside a halo too dark, which
+    the sphere's saturated display cannot show. The reason says where and by how much.
+
+    A highlight too dim (single-lobe fits of plastics' sharp coats: the fit at 1-10% of
+    the table's peak) is left to the picture: it is the fit's model's reach, and its
+    ``next`` steps name richer models already."""
+    if (highlight is None or not highlight["off_stops"] > HIGHLIGHT_OFF_STOPS
+            or not (_finite(rel_peak_error) and rel_peak_error > 1.0)):
+        return word, reason
+    lo, hi = highlight["theta_h_deg"]
+    least, most = highlight["stops_range"]
+    said = (f"{HIGHLIGHT_OFF}: at the table's brightest bin the fit is "
+            f"{1.0 + rel_peak_error:.3g}x the table's, and along the highlight (theta_d "
+            f"{highlight['theta_d_deg']:.3g} deg), over the {highlight['bins']} bins where "
+            f"the table resolves it (theta_h {lo:.2g}-{hi:.2g} deg), the fit is "
+            f"{highlight['off_stops']:.1f} stops off the table (the median; from "
+            f"{least:+.1f} to {most:+.1f}), "
+            f"which the sphere's display, saturated there, does not show (visible beyond "
+            f"{HIGHLIGHT_OFF_STOPS:g} stops)")
+    if word == "good":
+        return "visible", f"{said}; the picture alone: {reason}"
+    return word, f"{reason}; also {said}"
 
 
 def _judged(psnr: float | None, figures: dict, basis: str) -> tuple[str, str]:
@@ -299,20 +344,22 @@ def _colour_turning(look: dict) -> str | None:
     key light to the grazing one by more than :data:`TABLE_TURN` while the fit's is
     off beyond the good verdict's colour under either. (By the first alone,
     color-changing-paint3's ggx fit, 10.8 off under the key light and 2.3 at grazing,
-    was told only to add a coat: it matched the grazing colour, and missed the key.)"""
+    was told only to add a coat: it matched the grazing colour, and missed the key.)
+    The figures are the sphere's mean colours (in radiance), said so: the verdict's own
+    may be the displayed one, another number.)"""
     graze = look.get("grazing") or {}
     key_shift, graze_shift = look.get("colour_shift"), graze.get("colour_shift")
     if (_finite(graze_shift) and graze_shift > TURNING_COLOUR
             and (not _finite(key_shift) or graze_shift > 2 * key_shift)):
         return (f"the colour turns with the angle: at grazing light the fit is CIEDE2000 "
-                f"{graze_shift:.0f} off against "
+                f"{graze_shift:.0f} off in radiance against "
                 f"{key_shift or 0:.1f} under the key light")
     turn = graze.get("measured_colour_turn")
     worst = max((x for x in (key_shift, graze_shift) if _finite(x)), default=None)
     if _finite(turn) and turn > TABLE_TURN and worst is not None and worst > GOOD[2]:
         return (f"the colour turns with the angle: the table's own by CIEDE2000 {turn:.0f} "
                 f"from the key light to the grazing one, and the fit's is "
-                f"{_maybe(key_shift, '.1f')} off under the key light, "
+                f"{_maybe(key_shift, '.1f')} off in radiance under the key light, "
                 f"{_maybe(graze_shift, '.1f')} at grazing")
     return None
 
@@ -419,9 +466,17 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
     # has no bins: fitted where it was measured, it resolves a lobe of any width its
     # samples reach (a GGX alpha 0.005 list fits 0.00499, good).
     narrowest = min(lobes, default=None)
+    # ... but not where the table resolves its highlight over several bins and the fit's
+    # spike misses them (:func:`_highlight_judged`): the table holds that shape
+    resolved = HIGHLIGHT_OFF in look.get("reason", "")
+    if resolved and model.parent is not None:
+        add(f"--model {model.parent}",
+            f"{model.name}'s lobe became a spike the table does not hold, above its "
+            f"brightest bin; {model.parent}, its parent, has no such lobe to give it (gain "
+            "not measured on this table)")
     if (narrowest is not None and narrowest[0] < NARROW_ALPHA and loss == "render"
             and peak_far and narrowest[1] >= max(scale for _, scale in lobes)
-            and not on_samples):
+            and not on_samples and not resolved):
         add("nothing here: the highlight is narrower than the table's bins",
             f"alpha {narrowest[0]:.3g} is resolved by fewer than ~5 theta_h bins: a measured "
             "bin there averages a lobe that changes across it, which no model read at the "

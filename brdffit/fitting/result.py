@@ -38,13 +38,16 @@ STATUS_NAMES = ("successful", "nonlinear_max_steps_reached", "stalled", "nonfini
 #: ``quality.displayed_colour_shift`` (and the grazing light's): the colour of the
 #: picture the verdict judges, which it weighs with ``colour_shift`` (the worse of the
 #: two), and a table fit's ``quality.sphere_measured`` (below 0.9 a good verdict reads
-#: visible); an older result's verdict stays as it was stored.
-SCHEMA = "brdffit.fit/8"
+#: visible); an older result's verdict stays as it was stored. 9: a table fit's
+#: ``quality.highlight`` (the fit against the bins where the table resolves its
+#: highlight: a spike the table does not hold reads visible); an older result's verdict
+#: stays as it was stored.
+SCHEMA = "brdffit.fit/9"
 #: The versions :meth:`FitResult.from_dict` reads: a result of version 1 reads with
 #: its quality block as it was stored (the per-channel ``colour_shift``); one of
 #: versions 1 and 2 has no ``input`` (a MERL table's fit: null).
-READS = (SCHEMA, "brdffit.fit/7", "brdffit.fit/6", "brdffit.fit/5", "brdffit.fit/4",
-         "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
+READS = (SCHEMA, "brdffit.fit/8", "brdffit.fit/7", "brdffit.fit/6", "brdffit.fit/5",
+         "brdffit.fit/4", "brdffit.fit/3", "brdffit.fit/2", "brdffit.fit/1")
 
 
 @dataclass(frozen=True)

@@ -403,6 +403,82 @@ def table_exposure(luminance: np.ndarray, weight: np.ndarray | None = None) -> f
     return 0.35 / max(typical, 1e-6)
 
 
+#: The highlight's row (:class:`_HighlightRow`): theta_h bins from the table's brightest
+#: bin outwards, at its theta_d and phi_d. The bins are sqrt-spaced, so these reach
+#: from the peak to ~11 deg beside it (bin 32 begins at 11.4 deg), the width of a
+#: glossy metal's highlight.
+HIGHLIGHT_STEPS = (0, 1, 2, 3, 5, 7, 10, 13, 17, 21, 26, 32)
+#: A bin of that row whose measured f cos_i is at least this share of the peak's is in
+#: the highlight's core: what the table measured of the highlight's shape.
+HIGHLIGHT_CORE = 0.1
+#: The table resolves its highlight's shape where that many bins beside the peak are in
+#: its core (a near-mirror's drops below a tenth within a bin or two: chrome-steel).
+HIGHLIGHT_MIN_BINS = 3
+
+
+#: The highlight's row is read below this theta_d (deg): a table's brightest f cos_i is
+#: often at grazing, where its theta_h row leaves the hemisphere within a bin or two.
+HIGHLIGHT_MAX_THETA_D = 60.0
+
+
+class _HighlightRow:
+    """What a table measured of its highlight's shape: the bins of
+    :data:`HIGHLIGHT_STEPS` from its brightest bin below :data:`HIGHLIGHT_MAX_THETA_D`
+    (by f cos_i over the channels) outwards in theta_h, their directions and measured
+    luminance times cos_i.
+
+    The sphere's display saturates in a bright highlight: there, a fit whose highlight
+    is a spike 900x the table's at the peak and 10x too dark over the next 5 degrees
+    (nickel's ggx2 under the render loss) renders as the table does, 32.9 dB, and
+    ``good`` said nothing of a highlight that any renderer shows otherwise. The fit is
+    read at the same bins' centres, in the same evaluation as the colour's."""
+
+    def __init__(self, table: MerlTable):
+        grid = bin_grid()
+        flat = table.rgb.reshape(3, -1)
+        cos_i = np.maximum(grid.cos_i, 0.0)
+        brightness = flat.sum(axis=0) * cos_i
+        brightness[grid.theta_d >= np.radians(HIGHLIGHT_MAX_THETA_D)] = -np.inf
+        th, td, pd = np.unravel_index(int(np.argmax(brightness)), SHAPE)
+        self.theta_d_deg = float(np.degrees(grid.theta_d[np.ravel_multi_index((th, td, pd),
+                                                                              SHAPE)]))
+        rows = np.minimum(th + np.array(HIGHLIGHT_STEPS), N_THETA_H - 1)
+        bins = np.ravel_multi_index((rows, np.full_like(rows, td), np.full_like(rows, pd)),
+                                    SHAPE)
+        self.wi, self.wo = grid.wi[bins], grid.wo[bins]
+        self.cos_i = cos_i[bins]
+        self.theta_h_deg = np.degrees(grid.theta_h[bins])
+        measured = table.mask.reshape(-1)[bins] & grid.above_horizon[bins]
+        self.table = (flat[:, bins].T @ LUMINANCE) * self.cos_i
+        # each bin once (rows clipped at the grid's edge repeat), the peak's not
+        first = np.zeros(len(bins), bool)
+        first[np.unique(bins, return_index=True)[1]] = True
+        self.core = (measured & first & (np.arange(len(bins)) > 0)
+                     & (self.table >= HIGHLIGHT_CORE * self.table[0]) & (self.table[0] > 0))
+
+    def figures(self, f: np.ndarray) -> dict | None:
+        """How far the fit (its values ``f``, (n, 3), at the row's bins) is off the
+        table over the highlight's core: the median of |log2(fit / table)| of their
+        luminances times cos_i (``off_stops``; a fit black there counts as far off),
+        the least and largest log2(fit / table) (``stops_range``), the bins and their
+        theta_h. None where the table does not resolve the
+        highlight's shape (fewer than :data:`HIGHLIGHT_MIN_BINS` bins in its core)."""
+        n = int(self.core.sum())
+        if n < HIGHLIGHT_MIN_BINS:
+            return None
+        fit = (np.asarray(f, np.float64) @ LUMINANCE) * self.cos_i
+        table = self.table[self.core]
+        fit = fit[self.core]
+        if not np.all(np.isfinite(fit)):
+            return None  # a fit that cannot be measured is judged as such elsewhere
+        stops = np.log2(np.maximum(fit, 1e-12 * table) / table)
+        theta = self.theta_h_deg[self.core]
+        return {"bins": n, "theta_h_deg": [float(theta.min()), float(theta.max())],
+                "theta_d_deg": self.theta_d_deg,
+                "off_stops": float(np.median(np.abs(stops))),
+                "stops_range": [float(stops.min()), float(stops.max())]}
+
+
 class SphereReference:
     """A table's renders, made once, to score any number of models against.
 
@@ -437,6 +513,7 @@ class SphereReference:
         # the colour's integrals (no reference to the table itself is kept: a
         # reference is cached per table, weakly)
         self._colour = _TableColour(table)
+        self._highlight = _HighlightRow(table)
 
     @runtime.in_float64
     def psnr(self, model: AbstractBRDFModel, params: dict) -> float:
@@ -461,9 +538,15 @@ class SphereReference:
             self._light_of = np.repeat(np.arange(len(parts)), [len(a[0]) for a in parts])
         n = 3 * int(self._scored[4].sum())
         p = {k: np.asarray(v, dtype=np.float64) for k, v in params.items()}
-        se, finite, f_c, shown = _sphere_measures(model, p, *self._scored, self._colour.wi,
-                                                  self._colour.wo)
-        colour = self._colour.compare(self._colour.split(np.asarray(f_c, np.float64)))
+        # the highlight's row read in the colour's evaluation (a fixed count of bins:
+        # one compiled program for every table)
+        se, finite, f_c, shown = _sphere_measures(
+            model, p, *self._scored, np.concatenate([self._colour.wi, self._highlight.wi]),
+            np.concatenate([self._colour.wo, self._highlight.wo]))
+        f_c = np.asarray(f_c, np.float64)
+        n_c = len(self._colour.wi)
+        colour = self._colour.compare(self._colour.split(f_c[:n_c]))
+        colour["highlight"] = self._highlight.figures(f_c[n_c:])
         self._add_displayed(colour, np.asarray(shown, np.float64))
         if n == 0 or not bool(finite):
             return float("nan"), colour

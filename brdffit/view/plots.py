@@ -226,7 +226,8 @@ def error_map(table: MerlTable, result: FitResult | dict) -> bytes:
     result = as_result(result)
     fig = Figure(figsize=(12.0, 4.8), layout="constrained")
     _draw_error_map(fig, table, result)
-    fig.suptitle(f"{_title(table, result)}  |  averaged over φd and RGB; grey: no measured bin",
+    # two lines: on one, a long table name ran off both edges of the figure
+    fig.suptitle(f"{_title(table, result)}\naveraged over φd and RGB; grey: no measured bin",
                  fontsize=12)
     return png_bytes(fig)
 
@@ -839,11 +840,17 @@ def _looks_lines(look: dict | None) -> list[str]:
     if isinstance(shift, int | float):
         lines.append(f"colour          CIEDE2000 {shift:.1f}{' ' + where if where else ''}")
     steps = look.get("next") or []
-    if steps:
-        gain = "" if steps[0].get("gain_db") is None else f" ({steps[0]['gain_db']:+.1f} dB)"
+    # the first step, and where it says what nothing here can follow, the first one to
+    # run after it: "nothing here" alone hid a step the CLI printed beneath it
+    shown = steps[:1]
+    if steps and steps[0]["try"].startswith("nothing here"):
+        shown += [s for s in steps[1:] if not s["try"].startswith("nothing here")][:1]
+    for i, step in enumerate(shown):
+        gain = "" if step.get("gain_db") is None else f" ({step['gain_db']:+.1f} dB)"
         # wrapped, not cut: "--starts 8 --m…" could not be copied from the page
-        lines += textwrap.wrap(f"next: {steps[0]['try']}{gain}", 44, subsequent_indent="      ",
-                               break_on_hyphens=False, break_long_words=False)
+        lines += textwrap.wrap(f"{'next' if i == 0 else 'else'}: {step['try']}{gain}", 44,
+                               subsequent_indent="      ", break_on_hyphens=False,
+                               break_long_words=False)
     return lines
 
 
@@ -1038,7 +1045,10 @@ def ranking(selection: dict) -> bytes:
         right = 1.3 * (max(worst, min(limit, 3 * worst)) if worst > 0 else limit) or 1.0
         ax_err.set_xlim(0, right)
         ax_err.axvline(best, color="#333333", linewidth=1)
-        lines = [Line2D([], [], color="#333333", linewidth=1, label="best")]
+        # under the render rule the lowest log_rmse is reported, not what was ranked: a
+        # "best" line there stood beside a grey "too far" bar (green-fabric's ggx)
+        lines = [Line2D([], [], color="#333333", linewidth=1,
+                        label="lowest log_rmse (not ranked by)" if by_look else "best")]
         words = f"best + tolerance {selection['tolerance']:g} (in quadrature)"
         if by_look:
             pass  # the render rule chose by the PSNR: its window is drawn there
@@ -1059,23 +1069,30 @@ def ranking(selection: dict) -> bytes:
         # from a little below the lowest (and the poor line), not 0: 25 against 29 dB
         # looked alike on an axis from 0; the verdict's lines drawn
         low = max(0.0, 5.0 * np.floor((min([*psnrs, POOR[0]]) - 3.0) / 5.0))
-        ax_psnr.set_xlim(low, max(top + 0.35 * (top - low), low + 1.0))
-        for level, said in ((POOR[0], "poor below"), (GOOD[0], "good from")):
+        # the good line on the axis too: its label ran past the axis (chrome's ~23 dB)
+        ax_psnr.set_xlim(low, max(top + 0.35 * (top - low), low + 1.0, GOOD[0] + 4.0))
+        # each word on its own side of its line: 8 dB apart on a short axis, the two ran
+        # into each other
+        for level, said, side in ((POOR[0], "poor below", "right"),
+                                  (GOOD[0], "good from", "left")):
             ax_psnr.axvline(level, color="#888888", linewidth=0.8, linestyle=":")
-            ax_psnr.text(level, -0.72, f" {said} {level:g} dB", fontsize=7, va="center",
-                         color="#444444")
+            words = f"{said} {level:g} dB "if side == "right" else f" {said} {level:g} dB"
+            ax_psnr.text(level, -1.22 if by_look else -0.72, words, fontsize=7, va="center",
+                         ha=side, color="#444444")
         if by_look and top > 0:
             ax_psnr.axvline(top, color="#333333", linewidth=1)
             ax_psnr.axvline(top - ALIKE_DB, color="#333333", linewidth=1, linestyle="--")
-            # in a legend: written at the top it ran over the verdict lines' labels
-            ax_psnr.legend(handles=[
-                Line2D([], [], color="#333333", linewidth=1, label="best"),
-                Line2D([], [], color="#333333", linewidth=1, linestyle="--",
-                       label=f"best − {ALIKE_DB:g} dB")], loc="lower left", fontsize=7,
-                framealpha=0.9)
+            # named on a row of their own above the bars, under the verdict lines' row: a
+            # legend inside the axes covered the bottom bar (the chosen one), and their
+            # words on the verdict lines' row ran over them where the best is near 28 dB
+            ax_psnr.text(top, -0.72, " best", fontsize=7, va="center", ha="left",
+                         color="#333333")
+            ax_psnr.text(top - ALIKE_DB, -0.72, f"best − {ALIKE_DB:g} dB ", fontsize=7,
+                         va="center", ha="right", color="#333333")
     ax_err.set_yticks(y, [f"{r['model']} ({r['n_params']})" for r in rows])
-    ax_err.set_ylim(n - 0.5, -1.0)
-    ax_err.set_xlabel("log_rmse (lower is better)")
+    ax_err.set_ylim(n - 0.5, -1.5 if by_look else -1.0)  # a row for the lines' words
+    ax_err.set_xlabel("log_rmse (reported, not ranked by)" if by_look
+                      else "log_rmse (lower is better)")
     ax_psnr.set_xlabel("sphere PSNR under the render loss's eight lights, dB (higher is "
                        "better)" if by_look else "sphere PSNR, dB (higher is better)")
     ax_err.set_title("candidates in auto's order (parameter count)", fontsize=10)
