@@ -1094,8 +1094,8 @@ def choose_by_look(ok: list[dict], tolerance_db: float = RENDER_TOLERANCE_DB,
         why += (f", among the candidates that look {VERDICT_ORDER[best_verdict]}: "
                 f"{passed_over['model']} renders closer ({_psnr(passed_over):.1f} dB) but "
                 f"reads {VERDICT_ORDER[_verdict_rank(passed_over)]} (its brightness, as "
-                "displayed or in the light its highlight holds, or its colour is further "
-                "off, quality.reason)")
+                "displayed or in the light its highlight holds, its colour or its "
+                "highlight's shape is further off, quality.reason)")
     cheaper = [row for row in ok[: ok.index(c)] if row not in within and row in judged]
     if cheaper:
         why += "; cheaper ones look further off (" + ", ".join(

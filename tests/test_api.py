@@ -851,9 +851,19 @@ def test_results_are_plain_json(http, table_id):
 
 
 def test_a_single_hot_bin_table_fits_to_finite_metrics(http):
-    """Everything 0 but one bin: odd but physical, so fitted; every metric of the
-    result is a finite number on the wire, the job done, not failed."""
+    """A dim table but one hot bin: odd but physical, so fitted; every metric of the
+    result is a finite number on the wire, the job done, not failed. Zeros but that bin
+    are no reflectance to fit: the job fails, saying so."""
     r = http.post("/v1/tables", content=GOOD_HEADER + _with_raw(1000.0, one_bin=True, rest=0.0),
+                  params={"name": "blank-but-hot.binary"},
+                  headers={"Content-Type": "application/octet-stream"})
+    assert r.status_code == 201, r.text
+    r = http.post("/v1/fits", json={"table_id": r.json()["id"], "model": "lambert",
+                                    "options": FAST})
+    failed = wait_status(http, r.json()["id"], ("done", "failed"))
+    assert failed["status"] == "failed" and "no reflectance to fit but 1 isolated spike" in (
+        failed["reason"]), failed
+    r = http.post("/v1/tables", content=GOOD_HEADER + _with_raw(1000.0, one_bin=True, rest=1.0),
                   params={"name": "hot.binary"},
                   headers={"Content-Type": "application/octet-stream"})
     assert r.status_code == 201, r.text

@@ -50,7 +50,9 @@ def test_gltf_fit_exports_exactly_to_gltf_and_materialx():
     assert to_table < 1e-6 and abs(colour["brightness_stops"]) < 1e-6
     assert abs(colour["displayed_brightness_stops"]) < 1e-6 and psnr > 60
     assert colour["colour_shift"] < 1e-3
-    assert 0 < max(energy["albedo_max"]) < 1 and g.warnings == []
+    # metallic 0.4, as fitted: kept, and said (a measured material is a metal or not)
+    assert 0 < max(energy["albedo_max"]) < 1
+    assert [w for w in g.warnings if not w.startswith("class: 0.4 metal, as fitted")] == []
     (mat,) = g.material["materials"]
     assert g.material["asset"]["version"] == "2.0"
     assert mat["pbrMetallicRoughness"] == {"baseColorFactor": [0.8, 0.35, 0.1, 1.0],
@@ -823,3 +825,16 @@ def test_a_sample_lists_export_is_measured_on_the_bins_its_samples_fall_in(tmp_p
     r = fit(read_measured(path), "gltf_pbr")
     out = export(r, "gltf")
     assert out.fidelity["exact"] and out.fidelity["measured_on"] == "binned samples"
+
+
+def test_an_exact_copy_of_a_half_metal_says_so():
+    """A fabric's gltf_sheen fit at metallic 0.44 went to glTF without a word: kept (the
+    fit is the user's choice of class), and said; a metal or a dielectric is not."""
+    sheen = {"base_color": [0.6, 0.2, 0.3], "metallic": 0.44, "roughness": 0.6,
+             "sheen_color": [0.3, 0.1, 0.1], "sheen_roughness": 0.5}
+    said = [w for w in export(result("gltf_sheen", sheen), "gltf").warnings
+            if w.startswith("class: 0.44 metal, as fitted")]
+    assert len(said) == 1 and "gltf_pbr_dielectric" in said[0]
+    for metallic in (0.0, 1.0):
+        plain = export(result("gltf_sheen", {**sheen, "metallic": metallic}), "gltf")
+        assert not any(w.startswith("class:") for w in plain.warnings), plain.warnings

@@ -272,6 +272,30 @@ DIFFUSE_BODY = 0.1
 DIELECTRIC_WITH_BODY = 1.5
 
 
+#: The renderers' names of the metal fraction of their base (glTF's and Mitsuba's
+#: principled metallic, MaterialX's metalness).
+METAL_FRACTION = ("metallic", "metalness")
+
+
+def _half_metal_said(conv: Conversion) -> Conversion:
+    """An exact copy whose metal fraction is neither a metal's nor a dielectric's (a
+    fabric's gltf_sheen fit at metallic 0.44, exported without a word) keeps it, as the
+    fit is the user's choice of class, and says so: the renderers mean such values for
+    the seam between a metal and a dielectric, where a measured material is one."""
+    value = next((conv.params[k] for k in METAL_FRACTION if k in conv.params), None)
+    if value is None:
+        return conv
+    m = float(np.mean(value))
+    if not MIXTURE_METALLIC < m < 1.0 - MIXTURE_METALLIC:
+        return conv
+    conv.warnings.append(
+        f"class: {m:.3g} metal, as fitted (an exact copy of the fit): neither a metal nor "
+        "a dielectric, which renderers mean for the seam between the two; a measured "
+        "plastic or fabric is a dielectric (fit a dielectric model, e.g. "
+        "gltf_pbr_dielectric, or export a refit: target_model)")
+    return conv
+
+
 def dielectric_or_mixture(result: FitResult, conv: Conversion,
                           measured: MerlTable | None) -> tuple[Conversion, dict | None]:
     """For a refit that came out a metal mixture (glTF's ``gltf_pbr`` with metallic,
@@ -292,8 +316,10 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     from brdffit.fitting.starts import table_hints
 
     alt = CLASS_ALTERNATIVES.get(conv.target_model)
-    if conv.exact or alt is None or alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
-        return conv, None  # a fit of the target's model is the user's own choice of class
+    if conv.exact:  # a fit of the target's model is the user's own choice of class
+        return _half_metal_said(conv), None
+    if alt is None or alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
+        return conv, None
     reference = measured if measured is not None else fit_as_table(result)
     against = "the measured table" if measured is not None else f"the {result.model} fit"
     body = float(np.mean(table_hints(reference, usable_bins(reference).usable).kd))
