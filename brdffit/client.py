@@ -527,7 +527,9 @@ class Client:
 
     def cancel(self, job: JobRef) -> FitJob:
         """Cancel a queued or running job; returns it (``cancelled`` once its worker
-        is stopped, within a second or two). An already finished job: ApiError 409."""
+        is stopped, within a second or two; still ``running`` where the answer came
+        first: :meth:`wait` for it). A job that finished first, before or while it was
+        asked: ApiError 409."""
         return self._json("POST", f"/v1/fits/{_job_id(job)}/cancel", FitJob.from_json)
 
     def delete_fit(self, job: JobRef) -> None:

@@ -1067,3 +1067,41 @@ def test_an_error_quotes_at_most_a_few_hundred_characters_of_the_input(http, tab
     assert_error(r, 422, "(900,000 characters); choose one of")
     assert len(r.content) < 4000
     assert all(name in r.json()["detail"] for name in models.names())  # the list is whole
+
+
+def test_a_cancel_that_a_finishing_job_outran_is_a_409_not_a_200_done(tmp_path):
+    """POST /v1/fits/{id}/cancel on a running job whose worker ended it as the cancel
+    arrived answered 200 with the job ``done`` (the page said "Job ... is done" for a
+    cancel): it is the 409 of a job that had ended; one whose worker is still being
+    stopped is a 202, running. The route, on a real SQLite store; the queue's worker
+    stands in by finishing the job, or by not stopping at all."""
+    import asyncio
+
+    from fastapi import HTTPException, Response
+
+    from api.routes import fits as route
+
+    store = Store(tmp_path)
+    tmp = tmp_path / "t.binary"
+    merl.write(tmp, table("lambert"))
+    store.add_table("a" * 64, tmp, 1, "t.binary", {"measured_bins": 1_000_000})
+
+    class Finishing:  # the worker stored its results as the cancel arrived
+        def cancel_running(self, job_id):
+            store.finish(job_id, [], run_s=1.0)
+
+    class Stuck:  # the worker is not stopped within the route's wait
+        def cancel_running(self, job_id):
+            pass
+
+    job = store.create_job("a" * 64, FitRequest.of("lambert").to_dict())
+    store.claim_next()
+    with pytest.raises(HTTPException) as e:
+        asyncio.run(route.cancel_fit(job.id, store, Finishing(), Response()))
+    assert e.value.status_code == 409 and "ended (done) before the cancel reached" in (
+        e.value.detail)
+    other = store.create_job("a" * 64, FitRequest.of("ggx").to_dict())
+    store.claim_next()
+    answer = Response()
+    got = asyncio.run(route.cancel_fit(other.id, store, Stuck(), answer))
+    assert answer.status_code == 202 and got.status == "running"

@@ -454,23 +454,35 @@ CANCEL_WAIT_S = 2.0
     "/{job_id}/cancel",
     summary="Cancel a queued or running fit",
     responses={404: {"model": ErrorMessage, "description": "no such job"},
-               409: {"model": ErrorMessage, "description": "the job has already ended"}},
+               409: {"model": ErrorMessage, "description": "the job has already ended (also: "
+                     "it ended, done or failed, before the cancel reached its worker)"},
+               202: {"description": "its worker was still being stopped when the answer "
+                     "came: the job is running, and cancelled within seconds (poll it)"}},
 )
-async def cancel_fit(job_id: JobId, store: StoreDep, queue: QueueDep) -> JobOut:
+async def cancel_fit(job_id: JobId, store: StoreDep, queue: QueueDep,
+                     response: Response) -> JobOut:
     """A queued job is cancelled at once; a running one has its worker process
-    stopped (its partial work is dropped) and is ``cancelled`` within a second or so."""
+    stopped (its partial work is dropped) and is ``cancelled`` within a second or so.
+    A job that ended meanwhile is a 409, as one that had ended before: the answer was a
+    200 carrying ``done``, where 200 promises ``cancelled``."""
     if await run_in_threadpool(store.cancel_queued, job_id):
         return _out(await run_in_threadpool(_job_or_404, store, job_id))
     job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status != "running":
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} is {job.status}: there is nothing to cancel")
+    queue.cancel_running(job_id)
+    deadline = asyncio.get_running_loop().time() + CANCEL_WAIT_S
+    while job.status == "running" and asyncio.get_running_loop().time() < deadline:
+        await asyncio.sleep(0.05)
+        job = await run_in_threadpool(_job_or_404, store, job_id)
+    if job.status in ("done", "failed"):
+        raise HTTPException(status.HTTP_409_CONFLICT,
+                            f"fit job {job_id} ended ({job.status}) before the cancel reached "
+                            "its worker: there was nothing left to cancel; its results are kept")
     if job.status == "running":
-        queue.cancel_running(job_id)
-        deadline = asyncio.get_running_loop().time() + CANCEL_WAIT_S
-        while job.status == "running" and asyncio.get_running_loop().time() < deadline:
-            await asyncio.sleep(0.05)
-            job = await run_in_threadpool(_job_or_404, store, job_id)
-        return _out(job)
-    raise HTTPException(status.HTTP_409_CONFLICT,
-                        f"fit job {job_id} is {job.status}: there is nothing to cancel")
+        response.status_code = status.HTTP_202_ACCEPTED  # its worker is still being stopped
+    return _out(job)
 
 
 @router.delete(
