@@ -486,3 +486,20 @@ def test_the_ranking_draws_the_psnr_its_rule_ranked_by():
                    "chosen": "ggx", "reason": "Chose ggx by its sphere renders.",
                    "table": "t.binary"})
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_colour_maps_label_names_the_figure_it_is_and_the_verdicts_beside_it():
+    """The map shows the displayed picture's hue; its label gave that mean as "the
+    verdict's" where the verdict judged the radiance figure (1.5 beside a reason of 3.3:
+    color-changing-paint1's generalized_schlick)."""
+    from brdffit import FitResult
+    from brdffit.view.plots import _colour_label
+
+    def look(displayed, radiance):
+        q = {"displayed_colour_shift": displayed, "colour_shift": radiance}
+        return FitResult("ggx", {}, {}, True, "successful", 1, 0.1, {}, quality=q)
+
+    assert _colour_label(look(1.5, 3.3), 0) == ("mean as displayed: CIEDE2000 1.5\n"
+                                                "the verdict's: 3.3 in radiance")
+    assert _colour_label(look(1.5, 0.8), 0) == "mean as displayed: CIEDE2000 1.5"
+    assert _colour_label(look(None, 0.8), 0) is None and _colour_label(look(1.5, 3.3), 2) is None

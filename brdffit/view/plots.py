@@ -470,14 +470,22 @@ def _checker(size: int, cell: int = 4) -> np.ndarray:
     return np.where(((i + j) % 2 == 0)[..., None], light, light * 0.8)
 
 
-def _judged_colour_shift(result: FitResult, row: int) -> float | None:
-    """The verdict's colour shift (CIEDE2000 of the mean displayed colours) of the
-    sphere row ``row`` (0: the key light, 1: the grazing one; None for the others, and
-    where the fit has no verdict)."""
+def _colour_label(result: FitResult, row: int) -> str | None:
+    """The colour map's label for the sphere row ``row`` (0: the key light, 1: the
+    grazing one; None for the others, and where the fit has no verdict): the CIEDE2000
+    of the mean displayed colours, what the map's pixels show, and the verdict's own
+    figure beside it where that is the radiance one (color-changing-paint1's map read
+    1.5 where the verdict said 3.3, and the two looked at odds)."""
     q = result.quality or {}
     figures = q if row == 0 else q.get("grazing") if row == 1 else None
     value = (figures or {}).get("displayed_colour_shift")
-    return float(value) if isinstance(value, int | float) and np.isfinite(value) else None
+    if not (isinstance(value, int | float) and np.isfinite(value)):
+        return None
+    label = f"mean as displayed: CIEDE2000 {value:.1f}"
+    judged, where = judged_colour(figures)
+    if where == "in radiance" and isinstance(judged, int | float) and judged > value:
+        label += f"\nthe verdict's: {judged:.1f} in radiance"
+    return label
 
 
 #: What the spheres' caption says of their checkered pixels, where any are drawn (every
@@ -514,11 +522,11 @@ def _draw_spheres(fig, table: MerlTable, result: FitResult, size: int, lights=SP
         colour_img = np.where(np.isnan(colour), base, colour)
         axes[row, 3].imshow(colour_img, interpolation="nearest")
         axes[row, 0].set_ylabel(label + verdict_ev.get(row, ""), fontsize=label_size)
-        mean_de = _judged_colour_shift(result, row)
-        if mean_de is not None:
+        label_de = _colour_label(result, row)
+        if label_de is not None:
             # each pixel's tint saturates at TINT_FULL_DE, the verdict judges the mean
             # colour: a teal sphere read 0.8, and the two looked at odds (a review)
-            axes[row, 3].text(0.5, 0.02, f"verdict's mean: CIEDE2000 {mean_de:.1f}",
+            axes[row, 3].text(0.5, 0.02, label_de,
                               transform=axes[row, 3].transAxes, ha="center",
                               va="bottom", fontsize=label_size - 2, color="white",
                               bbox={"facecolor": "black", "alpha": 0.55, "pad": 1.5,
