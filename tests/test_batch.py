@@ -937,6 +937,27 @@ def test_a_scheduler_that_keeps_the_batch_waiting_is_said_to(table_dir, tmp_path
     assert not (tmp_path / "r.h5").exists()
 
 
+def test_an_address_where_nothing_listens_is_not_said_to_be_waited_for(table_dir, tmp_path,
+                                                                     monkeypatch):
+    """Nothing listening is tried for a few seconds, then refused; the batch said
+    "waiting up to 30 s for its answer" meanwhile, of an answer it never waited for:
+    that line is for an address that took the connection."""
+    import functools
+
+    from brdffit.batch import cluster, job
+    from brdffit.batch.progress import ProgressLine
+
+    monkeypatch.setattr(job, "SAY_WAITING_AFTER_S", 0.3)
+    monkeypatch.setattr(cluster, "_refused", functools.partial(cluster._refused, grace_s=1.5))
+    address = f"tcp://127.0.0.1:{free_port()}"
+    stream = io.StringIO()
+    with pytest.raises(OSError, match="nothing listens there .* for 1.5 s"):
+        job.run_batch([str(table_dir)], ["lambert"], tmp_path / "r.h5", scheduler=address,
+                      progress=ProgressLine(0, stream=stream))
+    assert stream.getvalue() == ""
+    assert not (tmp_path / "r.h5").exists()
+
+
 def test_bad_outputs_exit_2(table_dir, tmp_path, capsys):
     assert cli_main(["batch", str(table_dir), "--models", "ggx", "--out",
                      str(tmp_path / "no" / "r.h5")]) == 2
@@ -1184,6 +1205,52 @@ def test_an_interrupted_refit_goes_on_where_it_stopped(tmp_path, capsys):
     assert "2 stored fits made again (--refit)" in line and "going on" not in line
 
 
+def test_a_ctrl_c_once_every_fit_is_stored_is_no_interrupt(tmp_path, monkeypatch, capsys):
+    """The local cluster takes 2-3 s to shut down after the last result; a Ctrl-C then
+    made a complete batch an interrupted one: exit 130, no summary, and a --refit run's
+    mark kept in the file. Every fit is stored: the run is complete."""
+    from brdffit.batch import job
+
+    real_connect = job.connect
+
+    @contextlib.contextmanager
+    def ctrl_c_at_shutdown(*args, **kwargs):
+        with real_connect(*args, **kwargs) as client:
+            yield client
+            os.kill(os.getpid(), signal.SIGINT)  # as the cluster begins to shut down
+
+    d, _ = _two_lambert_tables(tmp_path)
+    out = tmp_path / "r.h5"
+    monkeypatch.setattr(job, "connect", ctrl_c_at_shutdown)
+    code = cli_main(["batch", str(d), "--models", "lambert", "--samples", "1024", "--starts",
+                     "1", "--out", str(out), "--workers", "1", "--quiet", "--refit"])
+    std = capsys.readouterr()
+    assert code == 0, std.err
+    assert "2 fits on 2 tables" in std.out and "interrupted" not in std.err
+    assert "refit_pending" not in read_results(out)["attrs"]
+    assert not os.path.exists(f"{out}.journal")
+
+
+def test_what_a_crashed_run_journaled_is_counted_in_fits(tmp_path, capsys):
+    """"recovered N results journaled" counted the journal's records, a table's record
+    beside each of its fits: 2 for 1 fit, beside a summary that counts fits."""
+    d, opts = _two_lambert_tables(tmp_path)
+    journal = []
+
+    def keep_the_first(table, fits):
+        if not journal:
+            journal.append((tmp_path / "a.h5.journal").read_text())
+
+    run_batch([str(d)], FitRequest(("lambert",), opts), tmp_path / "a.h5", workers=0,
+              progress=False, checkpoint_s=1000, on_result=keep_the_first)
+    (tmp_path / "b.h5.journal").write_text(journal[0])  # a run killed after its first fit
+    assert cli_main(["batch", str(d), "--models", "lambert", "--samples", "1024", "--starts",
+                     "1", "--out", str(tmp_path / "b.h5"), "--workers", "0", "--quiet"]) == 0
+    std = capsys.readouterr()
+    assert std.err == "recovered 1 fit journaled by an interrupted run\n"
+    assert "1 fit on 1 table" in std.out and "1 table was already done" in std.out
+
+
 def test_a_symbolic_link_named_as_out_is_written_through(tmp_path):
     """--out a link: the link was replaced by a file of its own, its target kept the
     old results, and the lock was per spelling (two batches could write one file)."""
@@ -1347,3 +1414,72 @@ def test_a_report_says_where_fits_of_other_options_stand_side_by_side(tmp_path, 
     capsys.readouterr()
     assert cli_main(["batch-report", str(out), "--json", "--no-png"]) == 0
     assert json.loads(capsys.readouterr().out)["mixed_options"] == {"samples": [1024, 2048]}
+
+
+# -- what a review of the batch found (session 41) -------------------------------------
+
+
+def test_a_report_of_a_file_with_no_table_yet_says_so(tmp_path, capsys):
+    """A results file with no tables yet: the text gave ``nan`` for each model's mean and
+    median (--json: null), and the figure a linear axis labelled "log scale", an empty
+    legend box and the win counts at its edge."""
+    out, png = tmp_path / "empty.h5", tmp_path / "empty.png"
+    with BatchStore(out) as store:
+        store.checkpoint({"models": ["lambert", "ggx"]})
+    assert cli_main(["batch-report", str(out), "--png", str(png)]) == 0
+    rows = capsys.readouterr().out.splitlines()[-2:]
+    assert [row.split() for row in rows] == [
+        [m, "0", "0", "0", "-", "-", "0", "0/0/0"] for m in ("lambert", "ggx")]
+    assert png.stat().st_size > 1000
+    err_axis, wins_axis = summary_figure(rank(out)).axes[:2]
+    assert "log scale" not in err_axis.get_ylabel() and err_axis.get_yscale() == "linear"
+    assert err_axis.get_legend() is None and wins_axis.get_legend() is None
+    assert [t.get_text() for t in err_axis.texts] == [
+        "no successful fit in this file yet: nothing to plot"]
+    assert [t.get_text() for t in wins_axis.texts] == ["no table has a best fit yet"]
+    assert wins_axis.get_xlim() == err_axis.get_xlim()
+
+
+def test_the_summary_figure_keeps_its_words_inside_and_off_the_bars():
+    """The right title ran off the figure ("... 1 tables wi"), the left axis's label past
+    its top, the legend of wins covered a tall bar and its count, and a failed table (no
+    fits) put a "not judged" entry without a dot in the left legend."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from brdffit.batch.report import ModelSummary, Ranking, TableRanking
+
+    poor = {"verdict": "poor"}
+    tables = [TableRanking("a", "/a.binary", "ok", "", {"lambert": 0.06, "ggx": 0.02},
+                           looks={"lambert": poor, "ggx": poor}),
+              TableRanking("b", "/b.binary", "failed", "/b.binary: not a MERL table", {})]
+    summary = [ModelSummary("ggx", 1, 0, 1, 0.02, 0.02, 0, {"poor": 1}),
+               ModelSummary("lambert", 1, 0, 0, 0.06, 0.06, 0, {"poor": 1})]
+    fig = summary_figure(Ranking({}, ["lambert", "ggx"], tables, summary), "r.h5")
+    FigureCanvasAgg(fig).draw()
+    renderer, inside = fig.canvas.get_renderer(), fig.bbox.padded(1)
+    err_axis, wins_axis = fig.axes[:2]
+    assert "1 table with failures" in wins_axis.get_title()
+    assert [t.get_text() for t in err_axis.get_legend().get_texts()] == ["poor"]
+    words = [err_axis.title, wins_axis.title, err_axis.yaxis.label, wins_axis.yaxis.label,
+             wins_axis.get_legend(), fig._suptitle]
+    for w in words:
+        box = w.get_window_extent(renderer)
+        assert inside.contains(box.x0, box.y0) and inside.contains(box.x1, box.y1), w
+    assert not wins_axis.get_legend().get_window_extent(renderer).overlaps(
+        wins_axis.get_window_extent(renderer))
+
+
+def test_a_broken_npz_in_a_batch_fails_as_the_npz_it_is_not(tmp_path):
+    """A folder's .npz that NumPy's zip reader cannot read was read as a CSV of the
+    wrong name: "no column for theta_i ... (the header has garbage)", or for a zip cut
+    short "a zip archive, not a text sample list" (an .npz is one)."""
+    d = tmp_path / "t"
+    d.mkdir()
+    (d / "text.npz").write_bytes(b"garbage")
+    (d / "cut.npz").write_bytes(b"PK\x03\x04garbage")
+    s = run_batch([str(d)], ["lambert"], tmp_path / "r.h5", workers=0, progress=False)
+    said = "not a readable .npz (NumPy's zip of arrays): "
+    assert sorted((os.path.basename(p), m.split(": ", 1)[1]) for p, m in s.failed_tables) == [
+        ("cut.npz", said + "a zip archive cut short or damaged (File is not a zip file)"),
+        ("text.npz", said + "text, not a zip archive (nor a sample list: no column for "
+                            "theta_i, phi_i, theta_o, phi_o (the header has garbage))")]

@@ -78,14 +78,16 @@ CONNECT_TIMEOUT_S = 30.0
 
 @contextlib.contextmanager
 def connect(workers: int = 1, scheduler: str | None = None,
-            timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator:
+            timeout_s: float = CONNECT_TIMEOUT_S,
+            listening: threading.Event | None = None) -> Iterator:
     """A ``distributed.Client``: to ``scheduler`` if given, else to ``workers`` local
-    worker processes, shut down on exit."""
+    worker processes, shut down on exit. ``listening``: set once the scheduler's address
+    takes the connection (:func:`scheduler_client`)."""
     require_dask()
     from distributed import Client, LocalCluster
 
     if scheduler:
-        with scheduler_client(scheduler, timeout_s) as client:
+        with scheduler_client(scheduler, timeout_s, listening) as client:
             yield client
         return
     if workers < 1:
@@ -150,14 +152,18 @@ def _release_sigint(held: bool) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def scheduler_client(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
+def scheduler_client(address: str, timeout_s: float = CONNECT_TIMEOUT_S,
+                     listening: threading.Event | None = None):
     """A ``distributed.Client`` of the scheduler at ``address``, or an ``OSError`` that
     says why there is none: nothing listens there (:func:`_refused`), or something does
     and does not answer as a Dask scheduler within ``timeout_s`` (:func:`_silent`), or
-    the client's own error."""
+    the client's own error. ``listening`` is set once nothing refuses the connection:
+    what is left to wait for is the answer (up to ``timeout_s``)."""
     from distributed import Client
 
     refused = _refused(address)
+    if not refused and listening is not None:
+        listening.set()
     why = f"nothing listens there ({refused})" if refused else _silent(address, timeout_s)
     if why:
         raise OSError(f"cannot reach the Dask scheduler at {address}: {why}")

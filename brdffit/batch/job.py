@@ -100,6 +100,7 @@ class BatchSummary:
     failed_tables: list[tuple[str, str]] = field(default_factory=list)
     failed_fits: list[tuple[str, str, str]] = field(default_factory=list)  # path, model, message
     recovered: int = 0  # journal records of an interrupted run folded into the file
+    recovered_fits: int = 0  # of them, fits (each fit's table has a record too)
     damaged: int = 0  # fits whose stored result did not read back: fitted again
     elapsed_s: float = 0.0
 
@@ -514,29 +515,56 @@ def _refit_changed(t: _Task, result: dict, fitted: dict[str, str | None],
     return None if gone else result
 
 
+class _Complete:
+    """Whether the run is complete: every result stored. From then on a Ctrl-C or
+    SIGTERM is no interrupt: it may cut short what is left (the local cluster takes 2-3
+    s to shut down after the last result), and the run ends as finished. A signal in
+    that window made a complete batch an interrupted one (exit 130, no summary, its
+    --refit mark kept). As a context manager, drops such a KeyboardInterrupt."""
+
+    complete = False
+
+    def __enter__(self) -> _Complete:
+        return self
+
+    def __exit__(self, kind, value, tb) -> bool:
+        return self.complete and kind is not None and issubclass(kind, KeyboardInterrupt)
+
+
 #: A scheduler not reached after this long is said to be waited for (:func:`_reached`).
 SAY_WAITING_AFTER_S = 2.0
 
 
 @contextlib.contextmanager
 def _reached(scheduler: str, progress: bool | ProgressLine) -> Iterator:
-    """``connect(scheduler=...)``, saying on stderr what the batch waits for where
-    that takes more than :data:`SAY_WAITING_AFTER_S`: an address that takes the
-    connection and never answers is waited for up to the connect timeout (30 s), and
-    the terminal stayed blank meanwhile. A quick connect or refusal says nothing."""
+    """``connect(scheduler=...)``, saying on stderr what the batch waits for where the
+    address took the connection and its answer takes more than
+    :data:`SAY_WAITING_AFTER_S`: such an address is waited for up to the connect timeout
+    (30 s), and the terminal stayed blank meanwhile. A quick connect or refusal says
+    nothing, nor does an address where nothing listens (refused after 5 s): the line
+    said "waiting up to 30 s for its answer" there too, of an answer never waited for."""
     line = progress if isinstance(progress, ProgressLine) else ProgressLine(
         0, enabled=bool(progress))
-    timer = threading.Timer(SAY_WAITING_AFTER_S, line.say, [
-        f"reaching the Dask scheduler at {scheduler} (waiting up to "
-        f"{CONNECT_TIMEOUT_S:g} s for its answer)"])
-    timer.daemon = True
+    listening, settled = threading.Event(), threading.Event()
+
+    def say_when_waiting() -> None:
+        if settled.wait(SAY_WAITING_AFTER_S):
+            return
+        listening.wait()  # set on settling too
+        if not settled.is_set():
+            line.say(f"reaching the Dask scheduler at {scheduler} (waiting up to "
+                     f"{CONNECT_TIMEOUT_S:g} s for its answer)")
+
+    waiter = threading.Thread(target=say_when_waiting, name="dask-waiting", daemon=True)
     with contextlib.ExitStack() as stack:
-        timer.start()
+        waiter.start()
         try:
             client = stack.enter_context(connect(scheduler=scheduler,
-                                                 timeout_s=CONNECT_TIMEOUT_S))
+                                                 timeout_s=CONNECT_TIMEOUT_S,
+                                                 listening=listening))
         finally:
-            timer.cancel()
+            settled.set()
+            listening.set()
         yield client
 
 
@@ -601,9 +629,11 @@ def run_batch(
     # an existing cluster is reached before the results file is touched: an address
     # that is wrong or down is refused with nothing written (it rewrote a resumed
     # file's models and options to the refused run's)
-    with (_reached(scheduler, progress) if scheduler else contextlib.nullcontext()) as remote, \
-            BatchStore(out) as store:
+    done = _Complete()
+    with done, (_reached(scheduler, progress) if scheduler else contextlib.nullcontext()
+                ) as remote, BatchStore(out) as store:
         summary.recovered = store.recovered
+        summary.recovered_fits = store.recovered_fits
         summary.damaged = len(store.damaged)
         paths = store.as_known(paths)
         summary.tables = len(paths)
@@ -651,24 +681,30 @@ def run_batch(
                 if stop_requested.is_set():
                     raise KeyboardInterrupt  # the signal's own exception was lost
 
-        finished = False
         try:
             if tasks and workers == 0 and not scheduler:
                 take(_run_in_process(tasks, request))
             elif tasks:
                 # closing(): on an interrupt the generator cancels its futures while
                 # the client is still connected, not whenever it is collected.
-                with (contextlib.nullcontext(remote) if remote is not None
-                      else connect(workers, scheduler)) as client, contextlib.closing(
+                with done, (contextlib.nullcontext(remote) if remote is not None
+                            else connect(workers, scheduler)) as client, contextlib.closing(
                         _run_on_dask(client, tasks, request, timeout_s)) as results:
                     take(results)
-            finished = True
+                    done.complete = True  # what follows is the cluster's shutdown
+            done.complete = True
         finally:
-            bar.finish()
-            if finished and refit:
+            with done:
+                bar.finish()
+            if done.complete and refit:
                 attrs["refit_pending"] = None  # done: a later --refit starts afresh
             # Interrupted or not, what was journaled goes into the file now; if
             # this process is killed instead, the next run replays the journal.
-            store.checkpoint(attrs)
+            try:
+                store.checkpoint(attrs)
+            except KeyboardInterrupt:
+                if not done.complete:
+                    raise
+                store.checkpoint(attrs)  # a complete run's file gets every result
     summary.elapsed_s = time.monotonic() - t0
     return summary

@@ -197,7 +197,8 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
     for s in sorted(r.summary, key=lambda s: (math.isnan(s.mean), s.mean)):
         looks = "/".join(str(s.looks.get(v, 0)) for v in VERDICTS)
         lines.append(f"{s.model:<{cols}} {s.fitted:>7} {s.failed:>7} {s.wins:>6} "
-                     f"{s.mean:>14.4g} {s.median:>10.4g} {s.not_converged:>10}  {looks}")
+                     f"{_number(s.mean):>14} {_number(s.median):>10} {s.not_converged:>10}  "
+                     f"{looks}")
     lines += _next_steps(r)
     if n_failed:
         lines += ["", "failures:"]
@@ -208,6 +209,12 @@ def format_ranking(r: Ranking, source: str = "", tolerance: float = DEFAULT_TOLE
             for m, msg in t.failed_models.items():
                 lines.append(f"  {t.path} [{m}]: {msg}")
     return "\n".join(lines)
+
+
+def _number(v: float) -> str:
+    """A mean or median in the report: ``-`` where there is none (no successful fit;
+    ``nan`` in the text, where --json gives null)."""
+    return f"{v:.4g}" if math.isfinite(v) else "-"
 
 
 def _next_steps(r: Ranking) -> list[str]:
@@ -254,30 +261,40 @@ def summary_figure(r: Ranking, source: str = ""):
     width = max(11.0, 4.0 + 0.9 * len(order))
     fig = Figure(figsize=(width, 5.2), layout="constrained")
     ax_err, ax_win = fig.subplots(1, 2, width_ratios=[3, 2])
-    data = [[e for t in r.tables if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0]
-            for m in order]
+    # each model's fits that a log axis shows (a failed table has none: its "not judged"
+    # entry in the legend had no dot)
+    fits = [[(e, _look(t, m)) for t in r.tables
+             if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0] for m in order]
     positions = list(range(1, len(order) + 1))
-    shown = [(p, d) for p, d in zip(positions, data, strict=True) if d]
+    shown = [(p, [e for e, _ in f]) for p, f in zip(positions, fits, strict=True) if f]
     if shown:
         ax_err.boxplot([d for _, d in shown], positions=[p for p, _ in shown], widths=0.5,
                        showfliers=False,  # the median black: orange is a look's colour
                        medianprops={"color": "black", "linewidth": 1.5})
-        for p, m in zip(positions, order, strict=True):
+        for p, f in zip(positions, fits, strict=True):
             # every table as a dot, coloured by how its fit looks: a box hides small
             # batches, and an error alone does not say whether the fit looks right
-            fits = [(e, _look(t, m)) for t in r.tables
-                    if math.isfinite(e := t.errors.get(m, math.nan)) and e > 0]
-            jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(fits))]
-            ax_err.scatter(jitter, [e for e, _ in fits], s=12, alpha=0.75, zorder=3,
-                           color=[LOOK_COLOURS[look] for _, look in fits])
+            jitter = [p + 0.18 * ((i * 0.618) % 1 - 0.5) for i in range(len(f))]
+            ax_err.scatter(jitter, [e for e, _ in f], s=12, alpha=0.75, zorder=3,
+                           color=[LOOK_COLOURS[look] for _, look in f])
         ax_err.set_yscale("log")
+        ax_err.legend(handles=[Line2D([], [], ls="", marker="o", color=c,
+                                      label=LOOK_LABELS[k])
+                               for k, c in LOOK_COLOURS.items()
+                               if any(look == k for f in fits for _, look in f)],
+                      title="the fit looks", fontsize=9, title_fontsize=9,
+                      loc="upper left")  # the best median first: its top is free; "best"
+        # is slow over thousands of dots
+        ax_err.grid(True, axis="y", which="major", alpha=0.3)
+    else:  # an empty axis said "log scale" on a linear one from 0 to 1
+        _nothing(ax_err, "no successful fit in this file yet: nothing to plot")
     ax_err.set_xticks(positions, order, rotation=30, ha="right")
     ax_err.set_xlim(0.4, len(order) + 0.6)
-    ax_err.set_ylabel(f"{METRIC} (full table, or a sample list's samples; log scale; "
-                      "lower is better)")
-    ax_err.set_title(f"error per model over {len(r.tables)} tables (best median first)",
-                     fontsize=11)
-    ax_err.grid(True, axis="y", which="major", alpha=0.3)
+    # two lines: in one it ran past the figure's top
+    ax_err.set_ylabel(f"{METRIC}, lower is better\n(full table, or a sample list's samples"
+                      + ("; log scale)" if shown else ")"))
+    ax_err.set_title(f"error per model over {_count(len(r.tables), 'table')}"
+                     + (" (best median first)" if shown else ""), fontsize=11)
     wins = [next((s.wins for s in r.summary if s.model == m), 0) for m in order]
     # each model's wins split by how the winning fit looks (quality.verdict)
     bottom = [0] * len(order)
@@ -287,28 +304,37 @@ def summary_figure(r: Ranking, source: str = ""):
             ax_win.bar(positions, counts, bottom=bottom, color=colour,
                        label=LOOK_LABELS[look])
             bottom = [b + c for b, c in zip(bottom, counts, strict=True)]
-    for p, w in zip(positions, wins, strict=True):
-        ax_win.annotate(str(w), (p, w), ha="center", va="bottom", fontsize=9,
-                        xytext=(0, 1), textcoords="offset points")
-    if any(wins):
-        ax_win.legend(title="the best fit looks", fontsize=9, title_fontsize=9,
-                      loc="upper right")
-    ax_err.legend(handles=[Line2D([], [], ls="", marker="o", color=c, label=LOOK_LABELS[k])
-                           for k, c in LOOK_COLOURS.items()
-                           if any(_look(t, m) == k for t in r.tables for m in order)],
-                  title="the fit looks", fontsize=9, title_fontsize=9,
-                  loc="upper left")  # the best median first: its top is free; "best" is
-    # slow over thousands of dots
     ax_win.set_xticks(positions, order, rotation=30, ha="right")
-    ax_win.set_ylabel("tables where it is the best fit")
-    ax_win.set_ylim(0, max(wins + [1]) * 1.15)
-    ax_win.yaxis.set_major_locator(MaxNLocator(integer=True))  # a count has no half tables
+    ax_win.set_xlim(0.4, len(order) + 0.6)  # as the left panel: no bar at an edge
+    if any(wins):
+        for p, w in zip(positions, wins, strict=True):
+            ax_win.annotate(str(w), (p, w), ha="center", va="bottom", fontsize=9,
+                            xytext=(0, 1), textcoords="offset points")
+        # beside the axes, not in them: at their upper right it covered a tall bar and
+        # its count
+        ax_win.legend(title="the best fit looks", fontsize=9, title_fontsize=9,
+                      loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
+        ax_win.set_ylim(0, max(wins) * 1.15)
+        ax_win.yaxis.set_major_locator(MaxNLocator(integer=True))  # no half tables
+        ax_win.set_ylabel("tables where it is the best fit")
+    else:
+        _nothing(ax_win, "no table has a best fit yet")
     n_failed = len(r.failed_tables)
-    ax_win.set_title("best model per table (ties go to fewer parameters)"
-                     + (f"; {n_failed} tables with failures" if n_failed else ""), fontsize=11)
+    # the failures on a line of their own: on the title's line they ran off the figure
+    ax_win.set_title("best model per table\n(ties go to fewer parameters"
+                     + (f"; {_count(n_failed, 'table')} with failures)" if n_failed
+                        else ")"), fontsize=11)
     name = os.path.basename(os.fspath(source)) if source else "batch"
-    fig.suptitle(f"{name}: {len(r.tables)} tables x {len(order)} models", fontsize=13)
+    fig.suptitle(f"{name}: {_count(len(r.tables), 'table')} x {_count(len(order), 'model')}",
+                 fontsize=13)
     return fig
+
+
+def _nothing(ax, why: str) -> None:
+    """An axis with nothing to show says so, without ticks of a scale it does not have."""
+    ax.set_yticks([])
+    ax.text(0.5, 0.5, why, transform=ax.transAxes, ha="center", va="center", fontsize=10,
+            color="0.35", wrap=True)
 
 
 #: The summary figure's colour for each look of a fit (None: not judged, e.g. a

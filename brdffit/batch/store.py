@@ -169,6 +169,7 @@ class BatchStore:
         self._pending: list[dict] = []  # journaled, not yet in the HDF5 file
         self._journal_fd: int | None = None
         self.recovered = 0  # records replayed from a previous run's journal
+        self.recovered_fits = 0  # of them, fits (the others are their tables' records)
         self.damaged: list[tuple[str, str]] = []  # (table path, model) fitted again
 
     # -- opening, closing ------------------------------------------------------------
@@ -547,6 +548,8 @@ class BatchStore:
                 continue  # a torn line from an older kill that a crash left mid-file
             self._apply(r)
             self.recovered += 1
+            if r.get("kind") == "fit":
+                self.recovered_fits += 1
 
 
 def _open(path: str) -> h5py.File:

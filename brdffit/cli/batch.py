@@ -153,14 +153,18 @@ def run(args) -> int:
               "command again to go on", file=sys.stderr)
         return EXIT_INTERRUPTED
     finally:
+        # this run's: a signal during a complete run's teardown left it set, and an
+        # in-process caller's next batch stopped at its first result
+        stop_requested.clear()
         sys.unraisablehook = previous_hook
         for name in _CANCEL_LOGGERS:
             logging.getLogger(name).removeFilter(lost_cancel)
         if main_thread:  # an in-process caller (a test) keeps its own handlers
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
-    if s.recovered:
-        print(f"recovered {s.recovered} results journaled by an interrupted run", file=sys.stderr)
+    if s.recovered_fits:  # fits, as the summary counts them (table records were counted too)
+        print(f"recovered {_count(s.recovered_fits, 'fit')} journaled by an interrupted run",
+              file=sys.stderr)
     if s.damaged:
         print(f"fitted again: {_count(s.damaged, 'fit')} whose stored result did not read back "
               "(a damaged file)", file=sys.stderr)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdffit.io import variables
+from brdffit.io import merl, variables
 from brdffit.io.measurements import MeasurementsError
 
 #: A zip archive's first bytes: an .npz file is one, of .npy members.
@@ -43,6 +43,34 @@ def is_npz(path: str | Path) -> bool:
     Excel workbook is a zip archive too)."""
     names = zip_members(path)
     return bool(names) and all(n.endswith(".npy") for n in names)
+
+
+#: How a file named .npz that is none is refused (``brdffit.io.readers.reader_for``): it
+#: was read as a CSV of another name, in a sample list's words ("no column for theta_i",
+#: "a zip archive, not a text sample list": an .npz is one).
+NOT_NPZ = "not a readable .npz (NumPy's zip of arrays)"
+
+
+def not_npz(path: str | Path, head: bytes) -> str | None:
+    """Why the file ``path``, of first bytes ``head``, is no .npz archive, in words for
+    a file named as one; None where it is one, or an archive of no arrays (its reader
+    says that)."""
+    if not head:
+        return "an empty file (0 bytes)"
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError) as e:
+        if head.startswith(ZIP_MAGIC):
+            return f"a zip archive cut short or damaged ({variables.said(e)})"
+        kind = merl.other_format(head)
+        hint = " (decompress it first)" if kind == "a gzip archive" else ""
+        return f"{kind or 'binary data'}, not a zip archive (by its first bytes){hint}"
+    others = [n for n in names if not n.endswith(".npy")]
+    if not others:
+        return None
+    more = f" and {len(others) - 3} more" if len(others) > 3 else ""
+    return f"a zip archive of other files ({', '.join(others[:3])}{more}), not of .npy arrays"
 
 
 def _declared(z: zipfile.ZipFile, source: str) -> list[tuple[str, tuple, np.dtype]]:

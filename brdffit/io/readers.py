@@ -47,6 +47,7 @@ file by its datasets' declared shapes: a few MB compressed may declare GBs).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -110,14 +111,36 @@ def reader_for(path: str | os.PathLike, name: str | None = None) -> Callable:
             head = f.read(named_arrays.HEAD_BYTES)
         if (container := _container(path, head)) is not None:
             return container
+        is_merl = head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes()
+        if reader is read_npz and not is_merl:
+            if head and not head.startswith(npz.ZIP_MAGIC) and text_samples.looks_like_text(
+                    head):
+                return _text_named_npz
+            # "a zip archive, not a text sample list", of a zip cut short: an .npz is one
+            why = npz.not_npz(path, head)
+            return read_npz if why is None else functools.partial(_not_npz, why=why)
         if reader in CONTAINER_READERS and text_samples.looks_like_text(head):
             # a CSV saved as .xlsx: "not a readable Excel workbook (File is not a zip
             # file)"; read as the text it is, as any layout named as another is
             return read_text_samples
-        if head[:merl.HEADER_BYTES] == np.asarray(merl.SHAPE, "<i4").tobytes():
-            # a MERL table named .csv
+        if is_merl:  # a MERL table named .csv
             return merl.read
     return reader
+
+
+def _not_npz(path: str | os.PathLike, why: str) -> Measurements:
+    raise MeasurementsError(str(path), f"{npz.NOT_NPZ}: {why}")
+
+
+def _text_named_npz(path: str | os.PathLike) -> Measurements:
+    """A text file named .npz: the sample list it is (a CSV saved under that name), or
+    refused as the .npz it is not: "garbage" was refused as a CSV ("no column for
+    theta_i ... (the header has garbage)"), of a file its user took for an .npz."""
+    try:
+        return read_text_samples(path)
+    except MeasurementsError as e:
+        raise MeasurementsError(str(path), f"{npz.NOT_NPZ}: text, not a zip archive (nor a "
+                                           f"sample list: {e.problem})") from None
 
 
 def read_measured(path: str | os.PathLike, name: str | None = None,
