@@ -25,6 +25,7 @@ import httpx
 import pytest
 
 from brdffit.export import validate as check
+from brdffit.fitting import options
 from brdffit.fitting.options import LOSSES
 from tests import api_fixtures as fx
 from tests.test_export_tools import gltf_validator  # noqa: F401 (a fixture, used by name)
@@ -116,6 +117,13 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         assert http.get("/page/..%2Fmain.py").status_code == 404
         page.locator("#model-boxes input[value=ggx]").wait_for(timeout=STEP_MS)
         assert page.locator("#loss-select option").count() == len(LOSSES)
+        # the numeric inputs offer the ranges the API takes (tolerance said max 1, not 10)
+        for field, name, of in [("samples", "samples", None), ("starts", "starts", None),
+                                ("max-steps", "max_steps", None),
+                                ("tolerance", "tolerance", options.SelectionRule)]:
+            held = options.spec(name, of)[1]
+            assert [float(page.get_attribute(f"#{field}-input", a)) for a in ("min", "max")
+                    ] == [held.least, held.most], field
         visit.shot("start")
 
         page.set_input_files("#upload-file", str(table_file))
@@ -131,6 +139,13 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         page.click("#fit-button")
         page.wait_for_function("document.querySelector('#job-stage').innerText"
                                ".match(/queued|running/)", timeout=STEP_MS)
+        # the job's row in the list follows the job line as it runs (it said "starting")
+        page.wait_for_function(
+            "() => { const r = document.querySelector('#jobs-table tr[data-job]'); "
+            "const c = r ? r.cells : []; return r !== null && c[1].innerText === 'running' "
+            "&& c[4].innerText.startsWith('fitting ') "
+            "&& document.querySelector('#job-stage').innerText.includes(c[4].innerText); }",
+            timeout=FIT_TIMEOUT_MS)
         visit.shot("fitting")
         page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
         job_id = http.get("/v1/fits").json()["items"][0]["id"]
@@ -162,7 +177,7 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         steps = job["result"]["quality"]["next"]
         assert page.locator("#next-steps").is_visible() == bool(steps)
         assert page.locator("#next-steps li").count() == len(steps)
-        _next_steps_set_up_the_form(page, job["result"])
+        _next_steps_set_up_the_form(page, job["result"], visit.shot)
 
         visit.wait_image("#plot-spheres")
         visit.wait_image("#plot-slices")
@@ -209,6 +224,24 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
             page.click("#json-button")
         saved = json.loads(Path(d.value.path()).read_text())
         assert saved["id"] == job_id and saved["result"]["model"] == chosen
+        # another row's exports are not the shown export's: the report goes with its row
+        other = page.locator("#results-table tbody tr:not(.best)").first
+        other.click()
+        assert page.locator("#export-report").inner_text() == ""
+        # an answer for a row no longer shown by then is dropped, its files not downloaded
+        downloads: list[str] = []
+        page.on("download", lambda d: downloads.append(d.suggested_filename))
+        best.click()
+        page.evaluate(HOLD_EXPORTS)
+        page.click("[data-export=gltf]")
+        page.wait_for_function("window.heldExports.length === 1", timeout=STEP_MS)
+        other.click()
+        page.evaluate("window.heldExports.forEach((release) => release())")
+        page.wait_for_function("!document.querySelector('[data-export=gltf]').disabled",
+                               timeout=STEP_MS)
+        assert page.locator("#export-report").inner_text() == "" and downloads == []
+        page.locator("#export-report").scroll_into_view_if_needed()
+        visit.shot("export-dropped", full=False)
 
         # The job is in the address: a reload opens it again, with its table chosen (a
         # reload lost both, and the form)
@@ -236,7 +269,10 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         table_row.get_by_role("button", name="Delete", exact=True).click()
         page.wait_for_function("document.querySelector('#message').innerText.includes('409')",
                                timeout=STEP_MS)
-        assert "with_fits=true" in visit.message()
+        # said in the page's terms: its button, not the API's query parameter
+        assert "use “Delete with its fits”" in visit.message()
+        assert "with_fits=true" not in visit.message()
+        visit.shot("delete-409", full=False)
 
         # Cancel a fit from the page, then delete the finished jobs from the list.
         page.locator("#tables-table tbody tr", has_text="ggx.binary").get_by_role(
@@ -249,6 +285,19 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         visit.shot("cancelled")
         jobs = http.get("/v1/fits").json()["items"]
         assert [j["status"] for j in jobs] == ["cancelled", "done"]
+        # a job link pasted into the address bar opens that job, without a reload; one
+        # no longer on the server says so and the address names the job shown again
+        page.evaluate("h => { location.hash = h; }", f"#job={job_id}")
+        page.locator("#results-panel").wait_for(state="visible", timeout=FIT_TIMEOUT_MS)
+        assert page.locator("#results-job").inner_text() == f"job {job_id[:8]}"
+        page.evaluate("() => { location.hash = '#job=0123456789abcdef'; }")
+        page.wait_for_function("document.querySelector('#message').innerText"
+                               ".includes('Job 01234567 of this address is no longer')",
+                               timeout=STEP_MS)
+        assert page.evaluate("location.hash") == f"#job={job_id}"
+        assert page.locator("#results-panel").is_visible()
+        page.evaluate("window.scrollTo(0, 0)")
+        visit.shot("hash-opened", full=False)
         for j in jobs:
             row = page.locator(f"#jobs-table tr[data-job='{j['id']}']")
             row.get_by_role("button", name="Delete").click()
@@ -269,14 +318,14 @@ def test_upload_fit_auto_plots_exports_errors_and_lists(browser, tmp_path, gltf_
         assert not re.search(r'HTTP/1.1" 5\d\d |Traceback', server.log()), server.log()[-3000:]
 
 
-def _next_steps_set_up_the_form(page, result: dict) -> None:
+def _next_steps_set_up_the_form(page, result: dict, shot) -> None:
     """Each next step the form can make has a button that sets the form as it says (the
     CLI's flags in the form's terms), and the request the form then makes is that fit;
     a step of advice has none. Shown on a result of steps of every kind, then put back."""
     steps = [
+        {"try": "--model auto --candidates gltf,gltf_iridescence --loss render",
+         "why": "layers", "gain_db": None},
         {"try": "--model ggx2", "why": "a second lobe", "gain_db": 2.5},
-        {"try": "--model auto --candidates gltf,gltf_iridescence", "why": "layers",
-         "gain_db": None},
         {"try": "--loss render", "why": "the look", "gain_db": None},
         {"try": "more starts and steps (--starts 8 --max-steps 400)", "why": "converge",
          "gain_db": None},
@@ -293,20 +342,33 @@ def _next_steps_set_up_the_form(page, result: dict) -> None:
     assert has_button == [True] * 5 + [False, False]
 
     def request_after(i: int) -> dict:
+        # set in code, the form fires no input event: the estimate is asked again all
+        # the same (it stayed as it was)
+        page.eval_on_selector("#fit-estimate", "e => { e.textContent = 'stale'; }")
         items.nth(i).locator("button.set-up").click()
         assert steps[i]["try"] in page.locator("#message").inner_text()
+        page.wait_for_function("document.querySelector('#fit-estimate').innerText"
+                               ".startsWith('estimated ~')", timeout=STEP_MS)
         return page.evaluate("() => fitRequest()")
 
+    # What a step does not name is as the job the steps are about had it (this job:
+    # auto, its default candidates and loss, tolerance 0.01), not left from the step
+    # before; a step to one model leaves auto's rule out (refused with a fixed model).
     body = request_after(0)
-    assert body["models"] == ["ggx2"] and page.is_checked("#mode-list")
-    body = request_after(1)
     assert body["models"] == "auto" and page.is_checked("#mode-auto")
-    assert page.locator("#model-boxes input:checked").count() == 0  # ggx2's tick went
     assert body["rule"]["candidates"] == ["gltf", "gltf_iridescence"]
+    assert body["options"]["loss"] == "render"
+    body = request_after(1)
+    assert body["models"] == ["ggx2"] and page.is_checked("#mode-list")
+    assert body["options"]["loss"] == result["loss"] and "rule" not in body
+    shot("next-step-set-up", full=False)
     body = request_after(2)
     assert body["options"]["loss"] == "render" and body["models"] == "auto"
+    assert page.locator("#model-boxes input:checked").count() == 0  # ggx2's tick went
+    assert body["rule"] == {"tolerance": 0.01}  # the job's, its default candidates blank
     body = request_after(3)
     assert (body["options"]["starts"], body["options"]["max_steps"]) == (8, 400)
+    assert body["options"]["loss"] == result["loss"]
     page.check("#physical-input")
     body = request_after(4)
     assert "physical" not in body["options"]
@@ -315,6 +377,20 @@ def _next_steps_set_up_the_form(page, result: dict) -> None:
     for selector in ("#candidates-input", "#starts-input", "#max-steps-input"):
         page.fill(selector, "")
     page.select_option("#loss-select", result["loss"])
+
+
+#: Export answers held in the page until the test releases them (an export takes seconds).
+HOLD_EXPORTS = """() => {
+  const realFetch = window.fetch;
+  window.heldExports = [];
+  window.fetch = async (path, init) => {
+    const response = await realFetch(path, init);
+    if (String(path).includes("/exports/")) {
+      await new Promise((release) => window.heldExports.push(release));
+    }
+    return response;
+  };
+}"""
 
 
 HOLD_REFUSAL_OF_WRONG_TOKEN = """() => {
@@ -448,6 +524,17 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
                                ".includes('two.xlsx')", timeout=STEP_MS)
         assert "sheet “sample B” of 2" in page.locator("#table-current").inner_text()
         visit.shot("token-sheet")
+        # the shown job's table deleted with its fits: the job goes from the screen and
+        # the address, as a deleted job does (its rows gave 404s)
+        assert page.evaluate("location.hash").startswith("#job=")
+        page.locator("#tables-table tbody tr", has_text="lab.astm").get_by_role(
+            "button", name="Delete with its fits").click()
+        page.wait_for_function("document.querySelector('#message').innerText"
+                               ".includes('Deleted table lab.astm')", timeout=STEP_MS)
+        assert page.locator("#results-panel").is_hidden()
+        assert page.locator("#job-state").is_hidden()
+        assert page.evaluate("location.hash") == ""
+        visit.shot("token-table-deleted")
         assert visit.outside == []
         assert visit.console_errors == []
         visit.close()

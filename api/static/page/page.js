@@ -16,6 +16,7 @@ const state = {
   polling: null, // timer id
   blobs: [],     // object URLs of the images shown (revoked when replaced)
   tableNames: new Map(),  // table id -> name, for the jobs list
+  choices: null, // /page/choices.json: the lists and the defaults the form starts with
 };
 
 const $ = (id) => document.getElementById(id);
@@ -227,7 +228,18 @@ async function useMaterial() {
 
 async function deleteTable(table, withFits) {
   if (withFits && !confirm(`Delete ${table.name} and every fit of it?`)) return;
-  await api("DELETE", `/v1/tables/${table.id}${withFits ? "?with_fits=true" : ""}`);
+  try {
+    await api("DELETE", `/v1/tables/${table.id}${withFits ? "?with_fits=true" : ""}`);
+  } catch (e) {
+    // the API's way out is a query parameter; on the page it is the button beside
+    if (e.status === 409 && e.detail.includes("?with_fits=true")) {
+      throw new ApiError(409, e.detail.replace(/pass \?with_fits=true/,
+        "use “Delete with its fits”"));
+    }
+    throw e;
+  }
+  // its fits went with it: the job shown, if one of them, is gone (its rows gave 404s)
+  if (withFits && state.job && state.job.table_id === table.id) forgetJob();
   if (state.table && state.table.id === table.id) {
     state.table = null;
     estimateSoon();
@@ -366,6 +378,10 @@ function showJob(job) {
     $("job-stage").textContent = `${job.status} (job ${job.id.slice(0, 8)}${took})`
       + (job.reason ? `: ${job.reason}` : "") + (job.note ? ` (${job.note})` : "");
   }
+  // its row in the jobs list says the same (it said "starting" through the whole fit);
+  // the list itself is fetched again when the job ends
+  const listed = $("jobs-table").querySelector(`tr[data-job="${CSS.escape(job.id)}"]`);
+  if (listed) listed.replaceWith(jobRow(job));
   if (ACTIVE.has(job.status)) {
     state.polling = setTimeout(() => poll(job.id), POLL_MS);
     $("results-panel").hidden = true;
@@ -387,15 +403,20 @@ async function cancelJob(job) {
   await refreshLists();
 }
 
+// The shown job is gone from the server: nothing of it stays on screen or in the address.
+function forgetJob() {
+  stopPolling();
+  state.job = null;
+  state.model = null;
+  history.replaceState(null, "", location.pathname + location.search);
+  $("results-panel").hidden = true;
+  $("job-state").hidden = true;
+}
+
 async function deleteJob(job) {
   if (!confirm(`Delete job ${job.id.slice(0, 8)} and its results?`)) return;
   await api("DELETE", `/v1/fits/${job.id}`);
-  if (state.job && state.job.id === job.id) {
-    state.job = null;
-    history.replaceState(null, "", location.pathname + location.search);
-    $("results-panel").hidden = true;
-    $("job-state").hidden = true;
-  }
+  if (state.job && state.job.id === job.id) forgetJob();
   say(`Deleted job ${job.id.slice(0, 8)}.`, "info");
   await refreshLists();
 }
@@ -526,9 +547,38 @@ function stepSettings(text) {
   return settings;
 }
 
-// The form set as a step says, the rest as it was (the table, the scene, the samples);
-// the user looks at it and starts the fit.
+// The form's models, loss, starts, steps, bounds and auto's rule as a request had them:
+// blank where it had the default, as the page starts (no request: the page's own start).
+function setFormFrom(request) {
+  const c = state.choices, d = c.defaults;
+  const o = (request && request.options) || {};
+  const models = request ? request.models : [c.auto];
+  const auto = models.length === 1 && models[0] === c.auto;
+  $(auto ? "mode-auto" : "mode-list").checked = true;
+  for (const box of document.querySelectorAll("#model-boxes input")) {
+    box.checked = !auto && models.includes(box.value);
+  }
+  const candidates = (request && request.rule && request.rule.candidates) || [];
+  $("candidates-input").value = !auto || candidates.join() === d.candidates.join()
+    ? "" : candidates.join(",");
+  $("loss-select").value = o.loss || c.default_loss;
+  $("starts-input").value = o.starts == null || o.starts === d.starts ? "" : String(o.starts);
+  $("max-steps-input").value = o.max_steps == null || o.max_steps === d.max_steps
+    ? "" : String(o.max_steps);
+  $("physical-input").checked = Boolean(o.physical);
+  const rule = (request && request.rule) || {};
+  $("tolerance-input").value = rule.tolerance == null || rule.tolerance === d.tolerance
+    ? "" : String(rule.tolerance);
+  $("mono-input").checked = Boolean(rule.mono_ks);
+}
+
+// The form set as a step says. A step is a change to the fit it was given for (quality.py
+// leaves "--loss render" out of a step for a fit under the render loss): what the step
+// does not name is set back as the shown job had it, not left from an earlier step
+// ("--model ggx3" after "... --loss render" kept the render loss). The table, the scene
+// and the samples stay as they are; the user looks and starts the fit.
 function applySettings(settings, text) {
+  setFormFrom(state.job && state.job.request);
   if (settings.model === "auto") {
     $("mode-auto").checked = true;
     // auto fits its candidates, not the ticked models: ticks left from an earlier step
@@ -536,6 +586,10 @@ function applySettings(settings, text) {
     for (const box of document.querySelectorAll("#model-boxes input")) box.checked = false;
   } else if (settings.model) {
     $("mode-list").checked = true;
+    // auto's rule with a fixed model is refused (422), not ignored: a step to one model
+    // is not set up to be refused
+    $("tolerance-input").value = "";
+    $("mono-input").checked = false;
     for (const box of document.querySelectorAll("#model-boxes input")) {
       box.checked = box.value === settings.model;
     }
@@ -545,8 +599,10 @@ function applySettings(settings, text) {
   if (settings.starts) $("starts-input").value = settings.starts;
   if (settings.max_steps) $("max-steps-input").value = settings.max_steps;
   if (settings.physical === false) $("physical-input").checked = false;
+  estimateSoon();  // set in code: no input event says the form changed
   $("fit-panel").scrollIntoView({ block: "start" });
-  say(`The form is set up for: ${text}. Start the fit when it reads as you want.`, "info");
+  const of = state.job ? ` (the rest as job ${state.job.id.slice(0, 8)} had it)` : "";
+  say(`The form is set up for: ${text}${of}. Start the fit when it reads as you want.`, "info");
 }
 
 // A physically bounded fit: what the bounds cost against the unconstrained fit.
@@ -560,6 +616,8 @@ function physicalNote(p) {
 }
 
 function showModel(model) {
+  // another model's files are not this one's (a new job's results clear it too)
+  if (model !== state.model) $("export-report").textContent = "";
   state.model = model;
   for (const row of $("results-table").querySelectorAll("tbody tr")) {
     row.classList.toggle("shown", row.dataset.model === model);
@@ -635,15 +693,21 @@ function download(name, blob) {
 async function exportTo(event) {
   const target = event.currentTarget.dataset.export;
   const report = $("export-report");
-  report.textContent = `Exporting ${state.model} to ${target}…`;
+  const jobId = state.job.id, model = state.model;
+  // an export takes seconds to a minute: its answer is for the job and row it was asked
+  // of; another shown by then does not get its report, nor its files downloaded
+  const stillShown = () => state.job && state.job.id === jobId && state.model === model;
+  report.textContent = `Exporting ${model} to ${target}…`;
   let out;
   try {
-    out = await api("GET", `/v1/fits/${state.job.id}/exports/${target}`
-      + `?model=${encodeURIComponent(state.model)}`);
+    out = await api("GET", `/v1/fits/${jobId}/exports/${target}`
+      + `?model=${encodeURIComponent(model)}`);
   } catch (e) {
+    if (!stillShown()) return;
     report.textContent = "";
     throw e;
   }
+  if (!stillShown()) return;
   report.textContent = "";
   const f = out.fidelity || {};
   const head = el("p");
@@ -757,6 +821,7 @@ async function loadChoices() {
   const [choices, models, materials] = await Promise.all([
     api("GET", "/page/choices.json"), api("GET", "/v1/models"), api("GET", "/v1/materials"),
   ]);
+  state.choices = choices;
   const loss = $("loss-select");
   loss.textContent = "";
   for (const name of choices.losses) loss.append(el("option", name, { value: name }));
@@ -790,13 +855,20 @@ async function start() {
   clearMessage();
   await loadChoices();
   await refreshLists();
-  const wanted = /^#job=([0-9a-f]+)$/.exec(location.hash);  // a reload, or a shared link
-  if (wanted) {
-    await openJob({ id: wanted[1] }).catch(() => {
-      history.replaceState(null, "", location.pathname + location.search);
-      say(`Job ${wanted[1].slice(0, 8)} of this address is no longer on the server.`, "info");
-    });
-  }
+  await openFromAddress();
+}
+
+// The job named in the address (#job=ID): at load (a reload, or a shared link) and when
+// only the hash changes (a link pasted into the address bar reloads nothing).
+async function openFromAddress() {
+  const wanted = /^#job=([0-9a-f]+)$/.exec(location.hash);
+  if (!wanted || (state.job && state.job.id === wanted[1])) return;
+  await openJob({ id: wanted[1] }).catch(() => {
+    // the address names the job shown again, if any: a reload opens what is on screen
+    history.replaceState(null, "", location.pathname + location.search
+      + (state.job ? `#job=${state.job.id}` : ""));
+    say(`Job ${wanted[1].slice(0, 8)} of this address is no longer on the server.`, "info");
+  });
 }
 
 let exposureTimer = null;
@@ -829,6 +901,7 @@ document.addEventListener("DOMContentLoaded", () => {
     b.addEventListener("click", guarded(showExtraPlot));
   }
   $("exposure").addEventListener("input", setExposure);
+  window.addEventListener("hashchange", () => openFromAddress());
   $("token-open").addEventListener("click", () => askForToken(
     "Enter or change the token (kept for this browser tab).", false));
   $("token-form").addEventListener("submit", guarded(async (event) => {
