@@ -456,7 +456,7 @@ def test_with_a_token_on_a_real_material(browser, tmp_path):
         # it is sent, in the words a refusal would use
         estimate = "document.querySelector('#fit-estimate').innerText"
         page.wait_for_function(f"{estimate}.startsWith('estimated ~')", timeout=STEP_MS)
-        assert " s of fitting, " in page.locator("#fit-estimate").inner_text()
+        assert " s of fitting once compiled, " in page.locator("#fit-estimate").inner_text()
         page.fill("#samples-input", "1458000")
         page.wait_for_function(f"{estimate}.startsWith(\"this fit is estimated over the "
                                "server's limits\")", timeout=STEP_MS)

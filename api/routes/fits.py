@@ -364,9 +364,10 @@ class EstimateOut(BaseModel):
     table_id: str
     models: list[str] = Field(description="the job's models, as it would list them ('auto': its "
                               "candidates are in detail)")
-    seconds: float = Field(description="estimated seconds of the job's worker, with this "
-                           "server's machine_factor (to compare with a done job's "
-                           "run_seconds, which it is above)")
+    seconds: float = Field(description="estimated seconds of the job's worker once its "
+                           "programs are compiled (a worker's first job of these options "
+                           "compiles first: seconds more), with this server's machine_factor "
+                           "(to compare with a done job's run_seconds, which it is above)")
     memory_mib: float = Field(description="estimated peak memory of the job's worker, MiB")
     machine_factor: float = Field(
         description="how much slower than the machine the estimate's constants were measured "

@@ -298,7 +298,7 @@ async function showEstimate() {
       const memory = cost.memory_mib >= 1024 ? `${fmt(cost.memory_mib / 1024, 2)} GiB`
         : `${Math.round(cost.memory_mib)} MiB`;
       text = cost.accepted
-        ? `estimated ~${fmt(cost.seconds, 2)} s of fitting, ${memory} at its peak`
+        ? `estimated ~${fmt(cost.seconds, 2)} s of fitting once compiled, ${memory} at its peak`
         : cost.over_limits;  // "this fit is estimated over the server's limits: ..."
       if (!cost.accepted) kind = "hint over";
     } catch (e) {
