@@ -48,7 +48,6 @@ except ModuleNotFoundError:
 DEFAULT_URL = "http://127.0.0.1:8000"
 
 
-
 def _fit_body(table_id: str, model, keywords: dict) -> dict:
     """A fit's body (``POST /v1/fits``): the request checked here, by the library the
     server runs, and sent in its one form (``FitRequest.to_dict()``)."""
@@ -63,6 +62,7 @@ def _fit_body(table_id: str, model, keywords: dict) -> dict:
         except BrdffitError as e:  # the library's own check, as the server makes it
             raise InvalidRequest(str(e)) from None
     return {"table_id": table_id, **request.to_dict()}
+
 
 class ClientError(BrdffitError):
     """Base of what :class:`Client` raises (besides ``TimeoutError``): a

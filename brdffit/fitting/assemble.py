@@ -19,7 +19,7 @@ import numpy as np
 from brdffit.fitting.inputs import Refit, SampleInput, TableInput
 from brdffit.fitting.loss import LOSS_METRIC
 from brdffit.fitting.problem import Prepared
-from brdffit.fitting.quality import HIGHLIGHT_OFF, NO_LOBE, quality
+from brdffit.fitting.quality import NO_LOBE, quality, spike_off_the_table
 from brdffit.fitting.result import FitResult
 
 
@@ -127,7 +127,7 @@ def _peak_missed(metrics: dict, look: dict, model=None, what: str = "bins") -> l
     rel = metrics.get("rel_peak_error")
     if look.get("verdict") == "poor" or rel is None or not rel >= PEAK_MISSED:
         return []
-    if HIGHLIGHT_OFF in look.get("reason", ""):
+    if spike_off_the_table(look.get("highlight"), rel):
         return []  # the verdict judged the highlight, and its reason says so
     at, its, few = PEAK_WORDS[what]
     if model is not None and model.name in NO_LOBE:

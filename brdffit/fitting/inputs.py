@@ -184,7 +184,7 @@ def refuse_blank_but_spikes(table: MerlTable) -> bool:
     spikes = cached(table, "isolated-spikes", table.isolated_spikes)
     if len(spikes) == 0:
         return False
-    rest = table.rgb.max(axis=0).copy()
+    rest = table.rgb.max(axis=0)  # a new array: the table's stays as it is
     rest[tuple(spikes.T)] = 0.0
     brightest = float(rest.max())
     if brightest >= merl.MIN_PEAK:

@@ -42,7 +42,6 @@ from brdffit import models, runtime
 from brdffit.errors import FitInputError
 from brdffit.fitting.assemble import PEAK_NOTE, assemble
 from brdffit.fitting.inputs import check_enough, fit_input
-from brdffit.fitting.loss import get_loss
 from brdffit.fitting.options import (
     DEFAULT_LOSS,
     DEFAULT_MAX_STEPS,
@@ -51,16 +50,13 @@ from brdffit.fitting.options import (
     DEFAULT_SEED,
     DEFAULT_SOLVER,
     DEFAULT_STARTS,
-    PRECISIONS,
     FitOptions,
-    check_solver_precision,
 )
 from brdffit.fitting.physical import bound
 from brdffit.fitting.problem import (
     DTYPES,
     LIVE_U,
     constrained,
-    get_solver,
     plain_params,
     report_pool,
     score_starts,
@@ -438,32 +434,19 @@ def _assembled(s: Solved, best, notes, n_solved: int, t0: float,
 
 def _check_options(loss, solver, precision, samples, starts, max_steps, physical,
                    seed) -> tuple[int | None, int, int, int]:
-    """Refuse, with the reason, options ``fit`` was called with directly (a
-    ``FitOptions`` has checked its own already); the counts as Python ints."""
+    """Refuse, with the reason, options ``fit`` was called with directly, by
+    ``FitOptions``: the one declaration of each option's values and range, what the
+    command line and the service offer (10**12 samples was a MemoryError of 7.3 TiB
+    here, and 64 starts a solve of 64). The counts as Python ints (numpy's integers are
+    counts too: one read from an array)."""
     for name, value in (("loss", loss), ("solver", solver), ("precision", precision)):
         if not isinstance(value, str):  # a list of one was a TypeError (unhashable)
             raise FitInputError(f"{name} must be a name, got {value!r}")
-    get_loss(loss)
-    get_solver(solver)
-    if precision not in PRECISIONS:
-        raise FitInputError(f"unknown precision {precision!r}; choose float64 or float32")
-    check_solver_precision(solver, precision)
-    if samples is not None and (not _integer(samples) or samples < 64):
-        raise FitInputError(f"samples must be an integer >= 64 or None, got {samples!r}")
-    if not _integer(starts) or starts < 1:
-        raise FitInputError(f"starts must be a positive integer, got {starts!r}")
-    if not _integer(max_steps) or max_steps < 1:
-        raise FitInputError(f"max_steps must be a positive integer, got {max_steps!r}")
-    if physical is not True and physical is not False:
-        raise FitInputError(f"physical must be true or false, got {physical!r}")
-    if not _integer(seed) or not 0 <= seed < 2**32:
-        raise FitInputError(f"seed must be an integer in 0 .. 2**32 - 1, got {seed!r}")
-    counts = None if samples is None else int(samples), int(starts), int(max_steps), int(seed)
-    # the ranges the command line and the service offer, from the one declaration: 10**12
-    # samples was a MemoryError (7.3 TiB) here, and 64 starts a solve of 64
-    FitOptions(loss=loss, solver=solver, samples=counts[0], precision=precision,
-               starts=counts[1], max_steps=counts[2], seed=counts[3], physical=physical)
-    return counts
+    samples, starts, max_steps, seed = (int(x) if _integer(x) else x
+                                        for x in (samples, starts, max_steps, seed))
+    FitOptions(loss=loss, solver=solver, samples=samples, precision=precision, starts=starts,
+               max_steps=max_steps, seed=seed, physical=physical)
+    return samples, starts, max_steps, seed
 
 
 def _integer(x) -> bool:

@@ -225,23 +225,30 @@ def quality(render_psnr_db: float, colour: dict, *, model, params: dict, loss: s
 #: 4.5 stops off, 32.9 dB). Of the 100 MERL materials' ggx2 fits under the render loss,
 #: 10 put a peak over twice the table's with the highlight 2.1-5.1 stops off.
 HIGHLIGHT_OFF_STOPS = 2.0
-#: How the reason says it: ``brdffit.fitting.assemble`` then adds no note of the peak.
+#: How the reason begins to say it (the tests read it).
 HIGHLIGHT_OFF = "the highlight's shape is off"
 
 
-def _highlight_judged(word: str, reason: str, highlight: dict | None,
-                      rel_peak_error: float | None) -> tuple[str, str]:
-    """The verdict no better than ``visible`` where the fit puts a peak above the
-    table's brightest bin (``rel_peak_error`` over 1: more than twice its value) and
-    its highlight is more than :data:`HIGHLIGHT_OFF_STOPS` off the table over the bins
-    that resolve it: a spike the table does not hold, beside a halo too dark, which
-    the sphere's saturated display cannot show. The reason says where and by how much.
+def spike_off_the_table(highlight: dict | None, rel_peak_error: float | None) -> bool:
+    """Whether the fit puts a peak above the table's brightest bin (``rel_peak_error``
+    over 1: more than twice its value) and its highlight is more than
+    :data:`HIGHLIGHT_OFF_STOPS` off the table over the bins that resolve it
+    (``highlight``, ``quality.highlight``): a spike the table does not hold, beside a
+    halo too dark, which the sphere's saturated display cannot show. The verdict, its
+    next steps and the fit's notes each read it here.
 
     A highlight too dim (single-lobe fits of plastics' sharp coats: the fit at 1-10% of
     the table's peak) is left to the picture: it is the fit's model's reach, and its
     ``next`` steps name richer models already."""
-    if (highlight is None or not highlight["off_stops"] > HIGHLIGHT_OFF_STOPS
-            or not (_finite(rel_peak_error) and rel_peak_error > 1.0)):
+    return (highlight is not None and highlight["off_stops"] > HIGHLIGHT_OFF_STOPS
+            and _finite(rel_peak_error) and rel_peak_error > 1.0)
+
+
+def _highlight_judged(word: str, reason: str, highlight: dict | None,
+                      rel_peak_error: float | None) -> tuple[str, str]:
+    """The verdict no better than ``visible`` where :func:`spike_off_the_table`; the
+    reason says where and by how much."""
+    if not spike_off_the_table(highlight, rel_peak_error):
         return word, reason
     lo, hi = highlight["theta_h_deg"]
     least, most = highlight["stops_range"]
@@ -468,7 +475,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
     narrowest = min(lobes, default=None)
     # ... but not where the table resolves its highlight over several bins and the fit's
     # spike misses them (:func:`_highlight_judged`): the table holds that shape
-    resolved = HIGHLIGHT_OFF in look.get("reason", "")
+    resolved = spike_off_the_table(look.get("highlight"), rel_peak_error)
     if resolved and model.parent is not None:
         add(f"--model {model.parent}",
             f"{model.name}'s lobe became a spike the table does not hold, above its "

@@ -404,9 +404,9 @@ def table_exposure(luminance: np.ndarray, weight: np.ndarray | None = None) -> f
 
 
 #: The highlight's row (:class:`_HighlightRow`): theta_h bins from the table's brightest
-#: bin outwards, at its theta_d and phi_d. The bins are sqrt-spaced, so these reach
-#: from the peak to ~11 deg beside it (bin 32 begins at 11.4 deg), the width of a
-#: glossy metal's highlight.
+#: bin below :data:`HIGHLIGHT_MAX_THETA_D` outwards, at its theta_d and phi_d. The bins
+#: are sqrt-spaced, so these reach from the peak to ~11 deg beside it (bin 32 begins at
+#: 11.4 deg), the width of a glossy metal's highlight.
 HIGHLIGHT_STEPS = (0, 1, 2, 3, 5, 7, 10, 13, 17, 21, 26, 32)
 #: A bin of that row whose measured f cos_i is at least this share of the peak's is in
 #: the highlight's core: what the table measured of the highlight's shape.
