@@ -11,9 +11,10 @@ accepts fits in what it promised, and it does not refuse jobs the machine can do
 A slower machine runs the same jobs longer (an Intel Xeon took 1.3-2.4x as long:
 ``bench/results/job_shapes_xeon.md``), and no constants can be within 2x on both. So a
 server measures its own: each done job stores the seconds its worker spent on it
-(``run_s``; not for a job that compiled programs, ``api.tasks``), and
-:func:`machine_factor` raises the estimate by the largest ratio of measured to
-estimated time among its recent jobs, with headroom. It never lowers it: on a faster
+(``run_s``), and :func:`machine_factor` raises the estimate by the largest ratio of
+measured to estimated time among its recent jobs that measure the machine (not one that
+compiled programs, ``api.tasks``, nor one that did work the estimate does not count,
+:func:`counts_the_work`), with headroom. It never lowers it: on a faster
 machine the constants stay above its jobs. Until a slower machine has run a job, its
 first estimates are low; the hard bound on a running job is the server's
 ``job_time_limit_s``, which stops it.
@@ -50,8 +51,8 @@ job compiles its programs, ~3 s per model on the Xeon (the default ggx job took 
 from an empty cache against 1.6 s, auto 14.8 s against 3.6 s:
 ``bench/results/job_shapes_cold.md``), and a job that compiled stores no worker time
 (``api.tasks``), so that one cold job does not teach the server that its machine is
-slow. Nor are auto's refits of an unconverged candidate counted, nor a
-scene's smaller set of bins (an overestimate).
+slow. Nor are auto's refits of an unconverged candidate counted (a job that made one
+teaches the server nothing either), nor a scene's smaller set of bins (an overestimate).
 """
 
 from __future__ import annotations
@@ -154,6 +155,48 @@ def _with_parents(names, parents: dict[str, str | None]) -> list[str]:
     return out
 
 
+def _polishes(options, usable_bins: int) -> bool:
+    """A fit of every bin runs the default subsample fit, then polishes on every bin."""
+    return options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
+
+
+def _counted_steps(name: str, options, polish: bool,
+                   described: list[dict]) -> tuple[int, int, int]:
+    """What the estimate counts of model ``name``'s fit: its solves (starts, and the
+    physically bounded ones), the steps of each, and the steps of its polish (0 without
+    one)."""
+    about = next((d for d in described if d["name"] == name), {})  # a `_mono`: not nested
+    nested = about.get("parent") is not None
+    solves = max(options.starts, about.get("least_starts", 1)) + (
+        PHYSICAL_SOLVES if options.physical else 0)
+    steps = min(options.max_steps, NESTED_STEPS if nested else TYPICAL_STEPS)
+    polish_steps = min(options.max_steps, NESTED_POLISH_STEPS if nested else POLISH_STEPS)
+    return solves, steps, polish_steps if polish else 0
+
+
+#: How far past the steps the estimate counts a job's fits may go and the job still
+#: measure its machine (:func:`counts_the_work`).
+COUNTED_STEPS_SLACK = 3
+
+
+def counts_the_work(request, fits: Iterable, usable_bins: int) -> bool:
+    """Whether the estimate counted the work these ``fits`` (``FitResult`` s of
+    ``request`` on a table of ``usable_bins``) did: no fit took more than
+    :data:`COUNTED_STEPS_SLACK` x the solver steps it counts (its starts x its steps).
+    A job that did more (auto's refit of an unconverged candidate, with 4 starts and 4x
+    the steps; a table whose fits crawl for hundreds of steps) ran longer for its table,
+    not for its machine: :func:`machine_factor` is not taught by it (one such job made
+    every later estimate 5x too high, and the server refused fits it runs in a second)."""
+    described = catalogue.describe()
+    polish = _polishes(request.options, usable_bins)
+    for r in fits:
+        solves, steps, polish_steps = _counted_steps(r.model, request.options, polish,
+                                                     described)
+        if r.starts * r.steps > COUNTED_STEPS_SLACK * (solves * steps + polish_steps):
+            return False
+    return True
+
+
 def estimate(request, usable_bins: int, machine: float = 1.0,
              extra: dict[str, float] | None = None,
              extra_mib: dict[str, float] | None = None) -> Estimate:
@@ -173,10 +216,9 @@ def estimate(request, usable_bins: int, machine: float = 1.0,
     # a `_mono` variant (ggx_mono) fits fewer numbers than its base, and no parent
     n_params.update({d["name"] + catalogue.MONO_SUFFIX: d["mono_n_params"]
                      for d in described if d.get("mono_n_params")})
-    least_starts = {d["name"]: d.get("least_starts", 1) for d in described}
     parents = {d["name"]: d.get("parent") for d in described}
     options = request.options
-    polish = options.samples is None and usable_bins > 4 * DEFAULT_SAMPLES
+    polish = _polishes(options, usable_bins)
     samples = (min(DEFAULT_SAMPLES, usable_bins) if polish else
                usable_bins if options.samples is None else min(options.samples, usable_bins))
     starts = options.starts
@@ -189,15 +231,11 @@ def estimate(request, usable_bins: int, machine: float = 1.0,
     seconds = SECONDS_PER_JOB
     for name in fitted:
         k = n_params.get(name, max(n_params.values()))  # a plugin model: assume the largest
-        nested = parents.get(name) is not None
         memory = max(memory, BYTES_PER_SAMPLE_PARAM * largest_solve * (k + 1))
-        solves = max(starts, least_starts.get(name, 1)) + (
-            PHYSICAL_SOLVES if options.physical else 0)
-        steps = min(options.max_steps, NESTED_STEPS if nested else TYPICAL_STEPS)
+        solves, steps, polish_steps = _counted_steps(name, options, polish, described)
         seconds += model_factor * per_model + step_factor * SECONDS_PER_UNIT_STEP * (
             samples * k * solves * steps)
         if polish:
-            polish_steps = min(options.max_steps, NESTED_POLISH_STEPS if nested else POLISH_STEPS)
             seconds += SECONDS_PER_POLISH + (
                 step_factor * SECONDS_PER_POLISH_UNIT_STEP * usable_bins * k * polish_steps)
         base = name.removesuffix(catalogue.MONO_SUFFIX)

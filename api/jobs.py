@@ -183,7 +183,8 @@ class JobQueue:
         else:
             if outcome.ok:
                 settle = (self.store.finish, (job.id, outcome.value, outcome.notes,
-                                              outcome.seconds), "done")
+                                              outcome.seconds, outcome.measures_machine),
+                          "done")
             else:
                 if outcome.internal:
                     log.error("job %s failed:\n%s", job.id, outcome.traceback)

@@ -39,9 +39,9 @@ STATUSES = ("queued", "running", "done", "failed", "cancelled")
 FINISHED = ("done", "failed", "cancelled")
 
 #: ``PRAGMA user_version`` of the layout below. 0: the first layout (no
-#: ``cancelled``, no progress); 1: no ``run_s``; :meth:`Store._migrate` brings it up
-#: to date.
-SCHEMA_VERSION = 2
+#: ``cancelled``, no progress); 1: no ``run_s``; 2: ``run_s`` only where it measures the
+#: machine (no ``run_measures``); :meth:`Store._migrate` brings it up to date.
+SCHEMA_VERSION = 3
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS tables (
@@ -69,7 +69,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     finished_at REAL,
     stage       TEXT,                      -- what a running job is doing
     fraction    REAL,                      -- how much of it is done, 0 .. 1
-    run_s       REAL                       -- seconds its worker spent on it (done jobs)
+    run_s       REAL,                      -- seconds its worker spent on it (done jobs)
+    run_measures INTEGER                   -- 1: run_s measures the machine (Store.recent_runs)
 );
 CREATE INDEX IF NOT EXISTS jobs_by_status ON jobs (status, seq);
 CREATE INDEX IF NOT EXISTS jobs_by_table ON jobs (table_id, seq);
@@ -292,6 +293,9 @@ class Store:
                 columns = {r["name"] for r in con.execute("PRAGMA table_info(jobs)")}
                 if "run_s" not in columns:  # version 1
                     con.execute("ALTER TABLE jobs ADD COLUMN run_s REAL")
+                if "run_measures" not in columns:  # version 2 stored run_s only where it did
+                    con.execute("ALTER TABLE jobs ADD COLUMN run_measures INTEGER")
+                    con.execute("UPDATE jobs SET run_measures = 1 WHERE run_s IS NOT NULL")
             con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             con.execute("COMMIT")
         except BaseException:
@@ -386,10 +390,11 @@ class Store:
         return _job(rows[0]) if rows else None
 
     def finish(self, job_id: str, results: list[dict], notes=(),
-               run_s: float | None = None) -> None:
+               run_s: float | None = None, measures_machine: bool = False) -> None:
         """The job is done with ``results``; ``notes`` (what happened on the way, e.g.
         a model that could not be fitted beside others) go to its note; ``run_s``: the
-        seconds its worker spent on it (:meth:`recent_runs`)."""
+        seconds its worker spent on it; ``measures_machine``: they measure its machine
+        (:meth:`recent_runs`: no compiling, no work the estimate does not count)."""
         with self._connect() as con:
             row = con.execute("SELECT note FROM jobs WHERE id = ?", (job_id,)).fetchone()
             note = row["note"] if row else None
@@ -397,19 +402,22 @@ class Store:
                 note = _add_note(note, text)
             con.execute(
                 "UPDATE jobs SET status = 'done', results = ?, reason = NULL, note = ?, "
-                "finished_at = ?, run_s = ? WHERE id = ? AND status = 'running'",
-                (jsonout.dumps(results), note, time.time(), run_s, job_id),
+                "finished_at = ?, run_s = ?, run_measures = ? WHERE id = ? "
+                "AND status = 'running'",
+                (jsonout.dumps(results), note, time.time(), run_s,
+                 int(bool(measures_machine and run_s is not None)), job_id),
             )
 
     def recent_runs(self, limit: int) -> list[tuple[dict, int, float]]:
-        """The ``limit`` latest done jobs whose worker time is known, newest first: each
+        """The ``limit`` latest done jobs whose worker time measures the machine (stored
+        so by :meth:`finish`), newest first: each
         job's request (``FitRequest.to_dict()``), its table's measured bins and the
         seconds its worker spent on it (the cost estimate's measure of the machine)."""
         with self._connect() as con:
             rows = con.execute(
                 "SELECT jobs.models, jobs.options, jobs.run_s, tables.summary FROM jobs "
                 "JOIN tables ON tables.id = jobs.table_id "
-                "WHERE jobs.status = 'done' AND jobs.run_s IS NOT NULL "
+                "WHERE jobs.status = 'done' AND jobs.run_s IS NOT NULL AND jobs.run_measures = 1 "
                 "ORDER BY jobs.finished_at DESC LIMIT ?", (limit,)).fetchall()
         out = []
         for row in rows:

@@ -24,7 +24,7 @@ _reporter = None
 #: JAX's events for making a program (tracing, lowering, XLA's compile). A job that
 #: spent more than COMPILING_SHARE of its time on them is no measure of the machine's
 #: speed, as the cost estimate counts it (``api.estimate``: a worker whose cache is
-#: empty compiles once, then never again): its worker time is not stored. (Not the
+#: empty compiles once, then never again): its worker time is stored, not learnt from. (Not the
 #: time less its compiling: the fits compile on several threads at once, and the
 #: summed events outran the job's wall time on a cold ggx job.)
 COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
@@ -68,6 +68,7 @@ def fit_models(table_path: str, source: str, request: dict,
     candidate's, the chosen one carrying its ``selection``), its notes the models
     that could not be fitted beside ones that could. ``measured_input``: the table
     was binned from uploaded samples (its summary's ``input``); every fit carries it."""
+    from api.estimate import counts_the_work
     from brdffit.jsonout import strict
     from brdffit.request import FitRequest, run
 
@@ -87,11 +88,14 @@ def fit_models(table_path: str, source: str, request: dict,
         report("storing the results", 1.0)
         wall = time.perf_counter() - t0
         compiled = _compiling_s[0] - compiling0 > COMPILING_SHARE * wall
+        # a sample list's bins, beyond a table's polish size or not, only loosen the count
+        counted = counts_the_work(request, fitted.fits.values(),
+                                  getattr(table, "n_measured", 0))
         # Strict before it is stored and served: a metric a fit could not measure is null.
         return Outcome.success([strict(r.to_dict()) for r in fitted.fits.values()],
                                notes=[f"{m} could not be fitted: {why}"
                                       for m, why in fitted.failed.items()],
-                               seconds=None if compiled else wall)
+                               seconds=wall, measures_machine=counted and not compiled)
     except Exception as e:  # noqa: BLE001 - a failure is the job's outcome, not a crash
         return Outcome.failure(e)
 

@@ -27,7 +27,8 @@ class Outcome:
     rather than bad input (its ``traceback`` is kept for the log, never shown to
     the user as the reason); ``notes`` says what happened on the way (a model of
     several that could not be fitted); ``seconds`` how long the work took where it
-    ran (the service's cost estimate learns its workers' speed from it).
+    ran, and ``measures_machine`` whether the service's cost estimate may learn its
+    workers' speed from that (no compiling in it, nothing the estimate leaves out).
     """
 
     ok: bool
@@ -38,10 +39,13 @@ class Outcome:
     traceback: str | None = None
     notes: tuple[str, ...] = field(default=())
     seconds: float | None = None
+    measures_machine: bool = False
 
     @classmethod
-    def success(cls, value, notes=(), seconds: float | None = None) -> Outcome:
-        return cls(ok=True, value=value, notes=tuple(notes), seconds=seconds)
+    def success(cls, value, notes=(), seconds: float | None = None,
+                measures_machine: bool = False) -> Outcome:
+        return cls(ok=True, value=value, notes=tuple(notes), seconds=seconds,
+                   measures_machine=measures_machine)
 
     @classmethod
     def failure(cls, error: BaseException) -> Outcome:

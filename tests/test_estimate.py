@@ -9,10 +9,11 @@ needs the benchmark run again.
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
-from api.estimate import MACHINE_HEADROOM, _with_parents, estimate, machine_factor
+from api.estimate import MACHINE_HEADROOM, _with_parents, counts_the_work, estimate, machine_factor
 from brdffit.request import FitRequest
 
 pytestmark = pytest.mark.unit
@@ -127,3 +128,25 @@ def test_a_grey_specular_variant_counts_its_own_parameters(base):
                    for m in (base, mono))
     assert grey.seconds <= plain.seconds and grey.memory_mib <= plain.memory_mib
     assert catalogue.n_params(mono) < catalogue.n_params(base)
+
+
+def test_the_measured_jobs_teach_the_machine_and_an_uncounted_refit_does_not():
+    """A job's worker time teaches the server its machine's speed only where the
+    estimate counted the job's work: every measured shape's fit did (its starts and
+    steps as the benchmark recorded them); auto's refit of an unconverged candidate
+    (4 starts, hundreds of steps: a scene's beckmann took 638) did not, and it once made
+    every later estimate 5x too high."""
+    usable, rows = _rows()
+    fixed = [r for r in rows if r["request"]["model"] != "auto"]
+    assert len(fixed) >= 5
+    for row in fixed:
+        request = _request(row["request"])
+        for run in row["runs"]:
+            fit = SimpleNamespace(model=request.fitted_models[0], starts=run["starts"],
+                                  steps=run["steps"])
+            assert counts_the_work(request, [fit], usable), (row["shape"], run)
+    auto = FitRequest.of("auto")
+    ggx = SimpleNamespace(model="ggx", starts=1, steps=25)
+    assert counts_the_work(auto, [ggx], usable)
+    refit = SimpleNamespace(model="beckmann", starts=4, steps=638)
+    assert not counts_the_work(auto, [ggx, refit], usable)

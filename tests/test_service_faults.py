@@ -252,11 +252,31 @@ def test_a_version_1_database_gains_the_worker_time_keeping_its_jobs(tmp_path):
     assert store.recent_runs(10) == []  # its worker time is unknown: it teaches nothing
     job = store.create_job("t", {"models": ["lambert"], "options": {}})
     store.claim_next()
-    store.finish(job.id, [], run_s=2.5)
+    store.finish(job.id, [], run_s=2.5, measures_machine=True)
     assert store.recent_runs(10) == [(store.get_job(job.id).request, 1000, 2.5)]
     con = sqlite3.connect(tmp_path / "brdffit.sqlite3")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == 2
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 3
     con.close()
+
+
+def test_a_version_2_databases_worker_times_still_measure_the_machine(tmp_path):
+    """Version 2 stored a job's worker time only where it measured the machine; version
+    3 stores every done job's, and says which measure it (``run_measures``)."""
+    _old_database(tmp_path / "brdffit.sqlite3",
+                  "'queued', 'running', 'done', 'failed', 'cancelled'",
+                  ", stage TEXT, fraction REAL, run_s REAL", """
+        PRAGMA user_version = 2;
+        INSERT INTO tables VALUES ('t', 1, 'old.binary', '{"measured_bins": 1000}', 0);
+        INSERT INTO jobs (id, table_id, models, options, status, created_at, finished_at, run_s)
+            VALUES ('measured', 't', '["ggx"]', '{}', 'done', 0, 2, 3.5),
+                   ('compiled', 't', '["ggx"]', '{}', 'done', 0, 1, NULL);""")
+    store = Store(tmp_path)
+    assert [run for _, _, run in store.recent_runs(10)] == [3.5]
+    job = store.create_job("t", {"models": ["lambert"], "options": {}})
+    store.claim_next()
+    store.finish(job.id, [], run_s=9.0)  # e.g. it compiled first: kept, not learnt from
+    assert store.get_job(job.id).run_s == 9.0
+    assert [run for _, _, run in store.recent_runs(10)] == [3.5]
 
 
 # -- bounds ------------------------------------------------------------------------------

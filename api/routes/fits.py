@@ -269,9 +269,10 @@ class JobOut(BaseModel):
     started_at: datetime | None = None
     finished_at: datetime | None = None
     run_seconds: float | None = Field(
-        None, description="seconds its worker spent on it, reading the table and fitting "
-        "(what the server's cost estimate learns its machine's speed from); null until "
-        "done, and for a job that compiled programs first")
+        None, description="seconds its worker spent on it, reading the table and fitting, "
+        "compiling included where it compiled programs first (the server's cost estimate "
+        "learns its machine's speed from the jobs that did not compile and did the work "
+        "it counts); null until done")
     result: FitResultOut | None = Field(None, description="the best fit, once done")
     results: list[FitResultOut] | None = Field(None, description="every model's fit, in order")
 
