@@ -67,7 +67,7 @@ def test_upload_fit_wait_result_plot(client, files):
     assert isinstance(job, FitJob) and job.status in ("queued", "running")
     done = client.wait(job, timeout=240)
     assert done.status == "done" and done.attempts == 1
-    assert done.run_seconds is None or done.run_seconds > 0  # None: its worker compiled
+    assert done.run_seconds > 0  # compiling included, where its worker compiled first
 
     best = client.result(job)
     assert isinstance(best, FitResult) and best.model == "ggx"
