@@ -47,7 +47,9 @@ def safe_normalize(v: Float[Array, "... 3"], xp=jnp) -> Float[Array, "... 3"]:
     sq = xp.sum(v * v, axis=-1, keepdims=True)
     ok = sq > TINY
     unit = v / xp.sqrt(xp.where(ok, sq, 1.0))
-    return xp.where(ok, unit, xp.array([0.0, 0.0, 1.0], dtype=v.dtype))
+    # unit's dtype, not v's: numpy float64 directions under JAX's float32 are float32
+    # here, and asking JAX for float64 there warns from this line
+    return xp.where(ok, unit, xp.array([0.0, 0.0, 1.0], dtype=unit.dtype))
 
 
 def sin_from_cos(c: Float[Array, ...]) -> Float[Array, ...]:
