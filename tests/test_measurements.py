@@ -1154,6 +1154,16 @@ def test_spectral_samples_are_projected_to_rgb_under_d65(tmp_path):
     with pytest.raises(MerlFormatError, match="keep one kind"):
         read_measured(both)
     assert spectra.wavelength_of("theta_i_deg") is None
+    # a wavelength's word with its number names a spectral column, in nm (lambda_400,
+    # ... were two columns "saying which wavelength a row holds: keep one")
+    for name, nm in (("lambda_400", 400.0), ("WL450", 450.0), ("λ_532.5", 532.5),
+                     ("wavelength_600nm", 600.0)):
+        assert spectra.wavelength_of(name) == nm, name
+    assert spectra.wavelength_of("lambda") is None and spectra.wavelength_of("450") is None
+    steps.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,"
+                     + ",".join(f"lambda_{w}" for w in range(400, 751, 50)) + "\n30,0,40,180,"
+                     + ",".join(["0.5"] * 8) + "\n")
+    np.testing.assert_allclose(read_measured(steps).rgb, 0.5, rtol=0.02)
 
 
 # -- files as they come: a sweep of 213 malformed and unusual inputs (2026-12-04) -----------
@@ -1559,6 +1569,15 @@ def test_azimuths_in_radians_under_a_degrees_header_are_noted_not_refused(tmp_pa
     path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n"
                     + "\n".join(",".join(repr(float(x)) for x in r) for r in rows) + "\n")
     assert "azimuths_within_deg" not in read_measured(path).provenance
+    # an in-plane list, phi_o 0 or pi in radians under degrees (it reaches no further
+    # than pi): noted too; the same list in degrees, 0 or 180, is not
+    rows[:, 1], rows[:, 3] = 0.0, np.where(np.arange(len(rows)) % 2, np.pi, 0.0)
+    for pi, noted in (("3.14159265", True), ("3.1416", True), ("180", False)):
+        path.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n" + "\n".join(
+            ",".join(pi if (j == 3 and x) else repr(float(x)) for j, x in enumerate(r))
+            for r in rows) + "\n")
+        said = read_measured(path).provenance
+        assert ("azimuths_within_deg" in said) == noted, pi
 
 
 def test_spectra_with_thousands_of_wavelengths_project_as_interpolation_does():
@@ -2276,6 +2295,19 @@ def test_files_as_lab_tools_write_them(tmp_path):
     with pytest.raises(MeasurementsError, match=r"no value columns.*'r \[a.u.\]', 'g \[a.u.\]'"
                                                 r", 'b \[a.u.\]': a unit that is not 1/sr"):
         read_measured(au)
+    # a reflectance factor's units row (1, BRF, reflectance): the values refused as not
+    # a BRDF, saying what a BRF is (it read as no units row, and the angles were called
+    # unitless); a first data row of ones is still a data row
+    for unit in ("1", "BRF", "reflectance", "[reflectance factor]"):
+        au.write_text(f"theta_i,phi_i,theta_o,phi_o,r,g,b\ndeg,deg,deg,deg,{unit},{unit},"
+                      f"{unit}\n10,0,20,180,1,1,1\n")
+        with pytest.raises(MeasurementsError, match=r"'b \[.*\]': a unit that is not 1/sr.*"
+                                                    r"a reflectance factor \(BRF\) is pi times "
+                                                    r"the BRDF: divide the values by pi"):
+            read_measured(au)
+    au.write_text("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,r,g,b\n1,1,1,1,1,1,1\n"
+                  "10,0,20,180,1,1,1\n")
+    assert len(read_measured(au).rgb) == 2
     # a units row in a radiance's units: refused as radiances (it read as no units row,
     # and the angles were called unitless)
     for unit in ("W/(m2 sr)", "[W m-2 sr-1]", "cd/m2"):

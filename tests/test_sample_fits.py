@@ -495,3 +495,26 @@ def test_a_lone_corrupt_sample_is_named_and_a_sharp_real_peak_is_not():
               sample_material("chrome-steel", "uniform", 3000, seed=1),
               sample_material("black-obsidian", "cornell", 60, seed=60)):
         assert isolated_spikes(m, on_the_surface(m)).size == 0, m.source
+
+
+def test_an_in_plane_list_with_radian_azimuths_under_degrees_is_told_so(tmp_path):
+    """An in-plane lab file's azimuths are 0 and pi: in radians under a degrees header
+    they reach no further than pi, which the radians note did not read (it asked for
+    azimuths beyond pi). Fitted as 3.14-degree azimuths, kd came out 1.1 against 0.2 and
+    the verdict poor, with next steps none of which could help; now the fit's note asks
+    and its first next step says how to name the columns."""
+    meas, _ = sample_model("ggx", None, "in_plane", 600, noise=0.02, seed=3)
+    path = tmp_path / "ip.csv"
+    write_samples(meas, path)
+    lines = path.read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    rows = np.loadtxt(lines[header + 1:], delimiter=",")
+    assert lines[header].startswith("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg")
+    assert set(np.unique(rows[:, [1, 3]])) <= {0.0, 180.0}
+    rows[:, [1, 3]] = np.radians(rows[:, [1, 3]])
+    path.write_text(lines[header] + "\n" + "\n".join(
+        ",".join(f"{x:.9g}" for x in row) for row in rows) + "\n")
+    r = fit(read_measured(path), "ggx", samples=4096, starts=1)
+    assert any("are they radians?" in note and "within 3.14 degrees" in note
+               for note in r.notes), r.notes
+    assert r.quality["next"][0]["try"].startswith("name the azimuth columns phi_i_rad")

@@ -350,11 +350,16 @@ class SampleInput:
         notes, steps = notes + dark_notes, steps + dark_steps
         within = self.meas.provenance.get("azimuths_within_deg")
         if within is not None:
+            radians = ("if they are radians, name their columns phi_i_rad and phi_o_rad "
+                       "(HDF5: their units 'radians')")
             notes.append(
                 f"every azimuth lies within {within:.3g} degrees (the file says degrees) and "
                 "most are not whole numbers: are they radians? Read as degrees, every "
-                "direction lies within 6.3 degrees of one plane; if they are radians, name "
-                "their columns phi_i_rad and phi_o_rad (HDF5: their units 'radians')")
+                f"direction lies within {within:.2g} degrees of one plane; {radians}")
+            steps = [{"try": "name the azimuth columns phi_i_rad and phi_o_rad if they are "
+                             "radians (HDF5: their units 'radians')",
+                      "why": f"every azimuth lies within {within:.3g} degrees, and most are "
+                             "not whole numbers", "gain_db": None}, *steps]
         spike_notes, spike_steps = self._samples.spike_finding(self.meas, prep)
         return (notes + self._samples.duplicate_note(self.meas, prep)
                 + self._samples.zero_note(self.meas, prep) + spike_notes,

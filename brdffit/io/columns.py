@@ -272,14 +272,19 @@ def polar_unit_checked(raw: list[np.ndarray], scales: list[float], source: str) 
 
 #: From this many samples, azimuths are judged by :func:`azimuths_within`.
 _AZIMUTHS_JUDGED_FROM = 20
+#: pi as a file writes it (3.14, 3.1416, 3.14159265): an in-plane list's other azimuth
+_PI_AS_WRITTEN = 2e-3
 
 
 def azimuths_within(raw: list[np.ndarray], scales: list[float]) -> dict:
     """``{"azimuths_within_deg": x}`` where the azimuths are said to be in degrees yet
-    all lie within 2 pi, reach beyond pi, and are mostly not whole degrees: radians under
-    a degrees header, most likely (every direction then sits within 6.3 degrees of one
-    azimuth, and the fit was made without a word). Only noted (the fit's notes), not
-    refused: a list measured close to its plane of incidence reads so too."""
+    all lie within 2 pi, reach beyond pi (or, an in-plane list's, are each 0 or pi), and
+    are mostly not whole degrees: radians under a degrees header, most likely (every
+    direction then sits within 6.3 degrees of one azimuth, and the fit was made without
+    a word; an in-plane list of phi_o 0 or 3.14159 read as degrees was fitted kd 1.1,
+    poor, with next steps none of which could help). Only noted (the fit's notes and
+    its first next step), not refused: a list measured close to its plane of incidence
+    reads so too."""
     if raw[0].size < _AZIMUTHS_JUDGED_FROM or any(scale == 1.0 for scale in scales[1::2]):
         return {}
     azimuth = np.abs(np.concatenate(raw[1::2]))
@@ -288,7 +293,8 @@ def azimuths_within(raw: list[np.ndarray], scales: list[float]) -> dict:
         return {}
     largest = float(azimuth.max())
     whole = np.mean(azimuth == np.round(azimuth))
-    if largest <= 2 * np.pi + 1e-6 and largest > np.pi and whole < 0.5:
+    in_plane = bool(np.all(np.abs(azimuth - np.pi) < _PI_AS_WRITTEN))
+    if largest <= 2 * np.pi + 1e-6 and (largest > np.pi or in_plane) and whole < 0.5:
         return {"azimuths_within_deg": largest}
     return {}
 

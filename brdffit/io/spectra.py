@@ -114,15 +114,19 @@ def interpolation_matrix(lam: np.ndarray, grid: np.ndarray) -> np.ndarray:
 
 
 def wavelength_of(name: str) -> float | None:
-    """The wavelength (nm) a CSV column names (``450nm``, ``f_450nm``, ``nm450``,
-    ``450``-free names are not spectral), or None."""
+    """The wavelength (nm) a CSV column names (``450nm``, ``f_450nm``, ``nm450``, and a
+    wavelength's word with its number, ``lambda_450``, ``wl450``, ``λ450``, in nm: a
+    spectrum in other units is refused by its span, :func:`to_rgb`; a bare ``450`` is not
+    spectral), or None. (``lambda_400``, ``lambda_410``, ... were read as two columns
+    that each say which wavelength a row holds, and the message said to keep one.)"""
     import re
 
-    m = re.fullmatch(r"(?:f_?|r_?|brdf_?)?(\d+(?:\.\d+)?)\s*nm|nm_?(\d+(?:\.\d+)?)",
+    m = re.fullmatch(r"(?:f_?|r_?|brdf_?)?(\d+(?:\.\d+)?)\s*nm|nm_?(\d+(?:\.\d+)?)|"
+                     r"(?:lambda|λ|wl|wavelength)_?(\d+(?:\.\d+)?)(?:\s*_?nm)?",
                      name.strip().lower())
     if m is None:
         return None
-    return float(m[1] or m[2])
+    return float(m[1] or m[2] or m[3])
 
 
 def projected(values: np.ndarray, wavelengths, source: str, row_numbers=None):

@@ -192,6 +192,9 @@ def _other_units(seen: dict[str, int]) -> str:
     other = [n for n in other if n not in by_power]
     said = (f"; {', '.join(repr(n) for n in other)}: a unit that is not 1/sr (a BRDF's; "
             "a reflectance in % or a radiance is not one)" if other else "")
+    if any(re.search(rf"[\[(]\s*(?:{_DIMENSIONLESS})\s*[\])]", n, re.IGNORECASE) for n in other):
+        said += ("; a reflectance factor (BRF) is pi times the BRDF: divide the values by "
+                 "pi and give them in 1/sr")
     radiances = [n for n in seen if RADIANCE.fullmatch(n)] + by_power
     if radiances:
         said += f"; {', '.join(repr(n) for n in radiances)}: a radiance, not a BRDF: {RADIANCE_IS}"
@@ -605,8 +608,15 @@ def _degrees_in_astm(rows: np.ndarray, cols: dict, names: list[str], source: str
 #: a radiance's, not a BRDF's (read case-insensitively).
 _POWER_UNIT = r"[mµuk]?w\b.*|cd\s*/.*|nits?\b"
 
+#: A dimensionless value's unit (a reflectance factor, BRF: pi times a BRDF), as a units
+#: row or a column's brackets write it.
+_DIMENSIONLESS = r"1|brf|rf|reflectance(?:\s+factor)?|unitless|dimensionless"
 #: What a units row under the header may hold, cell by cell.
-_UNIT_CELL = re.compile(r"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|nm|-|"
+_UNIT_CELL = re.compile(rf"(deg|degrees?|rad|radians?|°|1\s*/\s*sr|sr\s*\^?\s*-\s*1|%|nm|-|"
+                        # a reflectance factor's: read as units, so that the values are
+                        # refused as not a BRDF's (the angles' units row was not read, and
+                        # the message said the angles had none)
+                        rf"{_DIMENSIONLESS}|"
                         # arbitrary units: read as a row of units, so that the values'
                         # columns are refused as not a BRDF's, not the angles' as unitless
                         r"a\.?\s*u\.?|arb\.?(\s*units?)?|"
@@ -638,6 +648,8 @@ def _units_row(row: tuple[int, str] | None, delimiter: str | None, width: int,
         return None
     cells = [_unbracketed(c) for c in _cells(row[1], delimiter, source, row[0])]
     if len(cells) != width or not any(cells) or not all(_UNIT_CELL.fullmatch(c) for c in cells):
+        return None
+    if all(_a_number(c) for c in cells if c):  # a data row of ones ("1" is a unit too)
         return None
     return cells
 
