@@ -37,20 +37,22 @@ MAX_THETA_DEG = 85.0
 
 
 def layout_angles(layout: str, n: int, seed: int = 0) -> tuple[np.ndarray, ...]:
-    """(theta_i, phi_i, theta_o, phi_o) in radians of about ``n`` samples of ``layout``
-    (``in_plane`` rounds ``n`` to its six scans)."""
+    """(theta_i, phi_i, theta_o, phi_o) in radians of ``n`` samples of ``layout``
+    (``in_plane``: its six scans share them, the first ``n % 6`` one sample more; at
+    least 2 a scan, so ``n`` >= 12; it wrote 198 samples for 200, 12 for 7)."""
     if layout not in LAYOUTS:
         raise ValueError(f"unknown layout {layout!r}; choose one of {', '.join(LAYOUTS)}")
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
+    lights = np.radians(np.arange(0.0, 76.0, 15.0))
+    least = 2 * lights.size if layout == "in_plane" else 1
+    if n < least:
+        raise ValueError(f"n must be >= {least}{' (2 a scan of its 6 lights)' if least > 1 else ''}"
+                         f" for layout {layout}, got {n}")
     rng = np.random.default_rng(seed)
     top = np.radians(MAX_THETA_DEG)
     if layout == "in_plane":
-        lights = np.radians(np.arange(0.0, 76.0, 15.0))
-        per = max(n // lights.size, 2)
-        sweep = np.linspace(-top, top, per)
+        per = [n // lights.size + (k < n % lights.size) for k in range(lights.size)]
         theta_i = np.repeat(lights, per)
-        signed = np.tile(sweep, lights.size)
+        signed = np.concatenate([np.linspace(-top, top, m) for m in per])
         # the view on the far side of the normal (phi = 180 deg) holds the mirror
         return (theta_i, np.zeros_like(theta_i), np.abs(signed),
                 np.where(signed >= 0, np.pi, 0.0))

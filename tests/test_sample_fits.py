@@ -247,6 +247,12 @@ def test_layouts_are_what_they_say():
         assert all(np.all(a <= np.radians(85) + 1e-12) for a in (angles[0], angles[2]))
     with pytest.raises(ValueError, match="unknown layout"):
         layout_angles("spiral", 10)
+    # as many samples as asked (in_plane wrote 198 for 200, 12 for 7)
+    for layout in LAYOUTS:
+        for n in (12, 200, 401):
+            assert all(a.size == n for a in layout_angles(layout, n, seed=3)), (layout, n)
+    with pytest.raises(ValueError, match=r"n must be >= 12 \(2 a scan of its 6 lights\)"):
+        layout_angles("in_plane", 7)
 
 
 def test_a_real_material_sampled_sparsely_gets_the_verdict_its_sphere_would():
