@@ -838,3 +838,75 @@ def test_an_exact_copy_of_a_half_metal_says_so():
     for metallic in (0.0, 1.0):
         plain = export(result("gltf_sheen", {**sheen, "metallic": metallic}), "gltf")
         assert not any(w.startswith("class:") for w in plain.warnings), plain.warnings
+
+
+def test_a_layers_tint_or_roughness_at_its_upper_bound_is_a_clamp_unless_the_layer_is_nil():
+    """A sheen's or a coat's roughness, a specular colour, at the top of the renderer's
+    range: the fit wanted more (red-plastic's sheen left glTF at sheenRoughnessFactor
+    0.99999975, unsaid). A weight of 1 is a material, not a clamp; and a layer of no
+    weight shapes nothing, so its parameters at a bound are no clamp either (a lambert
+    fit's MaterialX refit: specular_IOR 1, specular_color 1)."""
+    from brdffit.export.conversion import bound_warnings
+
+    def clamped(model, params):
+        return [w.split(" = ")[0] for w in bound_warnings(model, params)]
+
+    sheen = {**GLTF, "sheen_color": [0.3, 0.2, 0.1], "sheen_roughness": 0.99999975}
+    assert clamped("gltf_sheen", sheen) == ["clamp: sheen_roughness"]
+    assert clamped("gltf_sheen", {**sheen, "sheen_color": [0.0] * 3}) == []
+    coat = {"base_color": [0.5] * 3, "metalness": 0.0, "specular_color": [1.0, 0.7, 0.2],
+            "specular_roughness": 0.3, "specular_IOR": 1.5, "coat": 1.0,
+            "coat_roughness": 0.99999962}
+    assert clamped("standard_surface_coat", coat) == ["clamp: specular_color",
+                                                      "clamp: coat_roughness"]
+    assert clamped("standard_surface_coat", {**coat, "coat": 0.0, "specular_IOR": 1.0}) == []
+
+
+def test_a_refit_keeps_the_fits_loss_and_a_file_rendering_below_its_fit_is_said(monkeypatch):
+    """A render-loss fit converted to another renderer's model is refitted under the
+    render loss (under the log loss nickel's rough_conductor left glTF 17 dB below the
+    fit's picture); and where a file's sphere renders over 3 dB below the fit's own, a
+    warning says so."""
+    from brdffit.export import _renders_below_the_fit
+    from brdffit.export.conversion import convert
+    from brdffit.fitting import pipeline
+
+    asked = {}
+    real = pipeline.fit
+
+    def fit(table, model, **kw):
+        asked.update(kw)
+        return real(table, model, **{**kw, "loss": "log"})  # the point is what was asked
+
+    monkeypatch.setattr(pipeline, "fit", fit)
+    conv = convert(result("ggx", {"kd": [0.1] * 3, "ks": [0.5] * 3, "alpha": 0.2, "f0": 0.9},
+                          loss="render"), ("gltf_pbr",))
+    assert asked["loss"] == "render"
+    assert "fit at every bin above the horizon with the render loss;" in conv.warnings[0]
+    fitted = result("ggx", {}, quality={"render_psnr_db": 31.8})
+    (said,) = _renders_below_the_fit(fitted, {"render_psnr_db": 14.1})
+    assert said.startswith("fidelity: the file's sphere renders 14.1 dB from the table, "
+                           "17.7 dB below the ggx fit's own 31.8 dB")
+    assert _renders_below_the_fit(fitted, {"render_psnr_db": 29.0}) == []
+    assert _renders_below_the_fit(result("ggx", {}), {"render_psnr_db": 14.1}) == []
+
+
+def test_the_cli_finds_a_fits_table_beside_its_json(tmp_path, monkeypatch):
+    """A fit's JSON names its table as typed where it was fitted; exported from another
+    directory, the table was not found, and the material was made without it (a car
+    paint left MaterialX as 88% metal there and as a dielectric beside its table)."""
+    from brdffit.cli.export import _table_beside
+
+    (tmp_path / "fits").mkdir()
+    (tmp_path / "fits" / "gold.binary").write_bytes(b"")
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    fitted = dataclasses.replace(result("ggx", {}), table="gold.binary")
+    found = _table_beside(fitted, str(tmp_path / "fits" / "gold.json"))
+    assert found.table == str(tmp_path / "fits" / "gold.binary")
+    # here, absolute, read from stdin, or beside neither: as it was
+    (tmp_path / "elsewhere" / "gold.binary").write_bytes(b"")
+    assert _table_beside(fitted, str(tmp_path / "fits" / "gold.json")) is fitted
+    assert _table_beside(fitted, "-") is fitted
+    gone = dataclasses.replace(fitted, table="missing.binary")
+    assert _table_beside(gone, str(tmp_path / "fits" / "gold.json")) is gone

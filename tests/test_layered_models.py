@@ -550,17 +550,31 @@ def test_an_export_without_the_layer_says_what_was_lost():
     """A layer the target's model lacks is named with the refit's log_rmse to the fit
     (MaterialX's standard_surface here has no sheen; Mitsuba's principled has Burley's,
     so a sheen exported there is not called lost)."""
-    from brdffit.export import _layer_warning
+    from brdffit.export import TARGETS, _layer_warning
     from brdffit.export.conversion import Conversion
 
-    (lost,) = _layer_warning("gltf_sheen", Conversion("standard_surface", {}, False, 0.0239))
+    materialx, mitsuba, gltf = (TARGETS[t] for t in ("materialx", "mitsuba", "gltf"))
+    (lost,) = _layer_warning("gltf_sheen", Conversion("standard_surface", {}, False, 0.0239),
+                             materialx)
     assert lost.startswith("layer: the sheen of the gltf_sheen fit has no counterpart in "
                            "standard_surface") and "log_rmse 0.0239 to the fit" in lost
-    (coat,) = _layer_warning("principled_clearcoat", Conversion("principled", {}, False, 0.01))
+    # the target's model that keeps it is named (the warning read as if the renderer
+    # had no such layer)
+    assert lost.endswith("; standard_surface_sheen keeps it: export with target_model "
+                         "standard_surface_sheen (brdffit export --target-model "
+                         "standard_surface_sheen)")
+    (coat,) = _layer_warning("principled_clearcoat", Conversion("principled", {}, False, 0.01),
+                             mitsuba)
     assert "the clearcoat of the principled_clearcoat fit" in coat
-    assert _layer_warning("gltf_sheen", Conversion("principled", {}, False, 0.02)) == []
-    assert _layer_warning("gltf_clearcoat", Conversion("gltf_clearcoat", {}, True, 0.0)) == []
-    assert _layer_warning("ggx", Conversion("gltf_pbr", {}, False, 0.01)) == []
+    assert "principled_clearcoat keeps it" in coat
+    (film,) = _layer_warning("gltf_iridescence", Conversion("standard_surface", {}, False,
+                                                            0.01), materialx)
+    assert "keeps it" not in film  # MaterialX's models here have no thin film
+    assert _layer_warning("gltf_sheen", Conversion("principled", {}, False, 0.02),
+                          mitsuba) == []
+    assert _layer_warning("gltf_clearcoat", Conversion("gltf_clearcoat", {}, True, 0.0),
+                          gltf) == []
+    assert _layer_warning("ggx", Conversion("gltf_pbr", {}, False, 0.01), gltf) == []
 
 
 def _log_rule(rows):

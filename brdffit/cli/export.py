@@ -12,7 +12,9 @@ document with ``--json``. See docs/exports.md.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -101,6 +103,19 @@ def _read_result(source: str) -> FitResult:
         raise BrdffitError(f"{source}: not a fit result: {e}") from None
 
 
+def _table_beside(result: FitResult, source: str) -> FitResult:
+    """``result`` with its table's path found beside its JSON file (``source``) where it
+    names the table relative to where it was fitted and that is not here: the same fit
+    exported from another directory was made without its table (a car paint left
+    MaterialX as 88% metal there and as a dielectric beside it, the weighing between
+    them needing the table)."""
+    table = result.table
+    if source == "-" or not table or os.path.isabs(table) or os.path.isfile(table):
+        return result
+    beside = Path(source).parent / table
+    return dataclasses.replace(result, table=str(beside)) if beside.is_file() else result
+
+
 def _is_store(source: str) -> bool:
     if source == "-":
         return False
@@ -121,7 +136,7 @@ def _export(args):
         if args.table is not None or args.model is not None:
             raise BrdffitError(f"{args.result}: a fit result holds one fit; --table and "
                                "--model choose a fit of a batch results file (brdffit batch)")
-        result = _read_result(args.result)
+        result = _table_beside(_read_result(args.result), args.result)
         _say_exporting(args.target)
         try:
             return export(result, args.target, table=args.measured,

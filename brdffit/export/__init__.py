@@ -194,7 +194,9 @@ def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, l
         return own, not changed, changed
     return None, False, [f"fidelity: log_rmse_to_table not measured: the fitted table "
                          f"{source or '(unnamed)'} is not at hand (pass the table: "
-                         "export(..., table=...), brdffit export --measured PATH)"]
+                         "export(..., table=...), brdffit export --measured PATH); nor is "
+                         "what needs it: a metal mixture is kept unweighed against a "
+                         "dielectric, a viewer's model fitted to the fit, not the table"]
 
 
 def _another_table(result: FitResult, table: MerlTable) -> list[str]:
@@ -355,7 +357,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if spec.viewers and measured is not None:
         fidelity["viewers"] = _viewer_fidelity(spec, measured, conv.params, shaded_as,
                                                fidelity)
-    warnings += _looks_warning(result) + _layer_warning(result.model, conv)
+    warnings += (_looks_warning(result) + _renders_below_the_fit(result, fidelity)
+                 + _layer_warning(result.model, conv, spec))
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
     name = name or _material_name(result)
@@ -371,10 +374,12 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
                   {**fidelity, **energy}, conv.params, warnings + notes, result.table, variants)
 
 
-def _layer_warning(source_model: str, conv) -> list[str]:
+def _layer_warning(source_model: str, conv, spec: ExportTarget) -> list[str]:
     """A warning where the fit has a layer (a coat, a sheen) that the exported model
     has not: the export is refitted without it, and its log_rmse to the fit is what
-    that cost (with the rest of the conversion)."""
+    that cost (with the rest of the conversion); where another of the target's models
+    has the layer, it says which (Mitsuba's principled_clearcoat keeps a coat that its
+    default, rough_conductor, has not: the warning read as if Mitsuba had no coat)."""
     from brdffit import models
 
     lost = [k for k in models.get(source_model).layers
@@ -382,9 +387,14 @@ def _layer_warning(source_model: str, conv) -> list[str]:
     if not lost or conv.exact:
         return []
     what = " and ".join(lost)
+    keeps = next((m for m in spec.target_models
+                  if set(lost) <= set(models.get(m).layers)), None)
+    kept = ("" if keeps is None else
+            f"; {keeps} keeps it: export with target_model {keeps} (brdffit export "
+            f"--target-model {keeps})")
     return [f"layer: the {what} of the {source_model} fit has no counterpart in "
             f"{conv.target_model}: refitted without it, log_rmse {conv.log_rmse_to_fit:.4g} "
-            f"to the fit (the {what} lost, with the rest of the conversion)"]
+            f"to the fit (the {what} lost, with the rest of the conversion){kept}"]
 
 
 def _looks_warning(result: FitResult) -> list[str]:
@@ -399,6 +409,24 @@ def _looks_warning(result: FitResult) -> list[str]:
     # its own brackets
     return [f"the {result.model} fit looks {look['verdict']} beside its table: "
             f"{look.get('reason', '')}{hint}"]
+
+
+#: How far (dB) an export's sphere may render below its fit's before it is said: 3 dB
+#: is twice the squared error, a difference a person sees (the render rule's own margin).
+RENDERS_BELOW_DB = 3.0
+
+
+def _renders_below_the_fit(result: FitResult, fidelity: dict) -> list[str]:
+    """A warning where the file's sphere renders well below the fit's own against the
+    same table (a conversion's loss: nickel's render-loss rough_conductor left glTF at
+    14.1 dB against the fit's 31.8, with no word but the refit's log_rmse)."""
+    own = (result.quality or {}).get("render_psnr_db")
+    got = fidelity.get("render_psnr_db")
+    if own is None or got is None or got >= own - RENDERS_BELOW_DB:
+        return []
+    return [f"fidelity: the file's sphere renders {got:.1f} dB from the table, "
+            f"{own - got:.1f} dB below the {result.model} fit's own {own:.1f} dB (what the "
+            "conversion lost); fit the target's model to the table for an exact export"]
 
 
 def _implied_viewer(target: ExportTarget, viewer: str, target_model: str | None) -> str:
