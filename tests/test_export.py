@@ -910,3 +910,20 @@ def test_the_cli_finds_a_fits_table_beside_its_json(tmp_path, monkeypatch):
     assert _table_beside(fitted, "-") is fitted
     gone = dataclasses.replace(fitted, table="missing.binary")
     assert _table_beside(gone, str(tmp_path / "fits" / "gold.json")) is gone
+
+
+def test_exports_for_a_viewer_or_as_another_model_have_names_of_their_own():
+    """One fit exported for the spec and for three.js, or as two of Mitsuba's models,
+    into one folder: the second overwrote the first (both gold_gltf_pbr.gltf)."""
+    from brdffit.export import _material_name
+
+    r = result("gltf_pbr", GLTF)
+    assert _material_name(r) == "gold_gltf_pbr"
+    assert _material_name(r, "threejs") == "gold_gltf_pbr_threejs"
+    assert _material_name(r, "spec", "principled_clearcoat") == \
+        "gold_gltf_pbr_as_principled_clearcoat"
+    assert _material_name(r, "spec", "gltf_pbr") == "gold_gltf_pbr"  # its own model
+    made = fit_as_table(r)
+    spec, threejs = (export(r, "gltf", table=made, viewer=v) for v in ("spec", "threejs"))
+    assert list(spec.files) == ["gold_gltf_pbr.gltf"]
+    assert list(threejs.files) == ["gold_gltf_pbr_threejs.gltf"]

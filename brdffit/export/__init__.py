@@ -151,14 +151,23 @@ class Export:
         return cls(**d)
 
 
-def _material_name(result: FitResult) -> str:
+def _material_name(result: FitResult, viewer: str = "spec",
+                   target_model: str | None = None) -> str:
     """The table's file name without its layout's suffix, and the model: a sample list's
-    material was ``lab.csv_ggx`` (files ``lab.csv_ggx.gltf``), a MERL table's ``gold_ggx``."""
+    material was ``lab.csv_ggx`` (files ``lab.csv_ggx.gltf``), a MERL table's ``gold_ggx``;
+    an export for a viewer, or as a model asked for, says which (``gold_ggx_threejs``,
+    ``gold_ggx_as_principled_clearcoat``): they shared the first's file name, and the
+    second export into one folder overwrote the first without a word."""
     from brdffit.io.readers import READERS
 
     stem = (result.table or "material").replace("\\", "/").rsplit("/", 1)[-1]
     base, suffix = os.path.splitext(stem)
-    return f"{base if base and suffix.lower() in READERS else stem}_{result.model}"
+    name = f"{base if base and suffix.lower() in READERS else stem}_{result.model}"
+    if viewer != "spec":
+        name += f"_{viewer}"
+    elif target_model is not None and target_model != result.model:
+        name += f"_as_{target_model}"
+    return name
 
 
 def _measured_table(result: FitResult, table) -> tuple[MerlTable | None, bool, list[str]]:
@@ -297,6 +306,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
         raise ExportError(f"the {result.model} fit's parameters are not a {result.model} "
                           f"material ({e})") from None
     module = spec.module
+    asked_model = target_model
     viewer = _implied_viewer(spec, viewer, target_model)
     target_model = _viewer_model(spec, viewer, target_model, result)
     if target_model is not None and target_model not in spec.shaded_as:
@@ -361,7 +371,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
                  + _layer_warning(result.model, conv, spec))
     energy, energy_warnings = energy_report(shaded_as or conv.target_model, conv.params)
     warnings += energy_warnings
-    name = name or _material_name(result)
+    name = name or _material_name(result, viewer, asked_model)
     variants = None
     if spec.variants:  # both variant families' dictionaries, in the JSON too
         made = module.variants(conv.params)
