@@ -838,6 +838,17 @@ def test_an_exact_copy_of_a_half_metal_says_so():
     for metallic in (0.0, 1.0):
         plain = export(result("gltf_sheen", {**sheen, "metallic": metallic}), "gltf")
         assert not any(w.startswith("class:") for w in plain.warnings), plain.warnings
+    # refits that are not weighed against a dielectric say it too: a layered fit to
+    # MaterialX's sheen, a viewer's, one asked for (metallic 0.28-0.51 went unsaid)
+    for target, kw in (("materialx", {}), ("gltf", {"viewer": "threejs"}),
+                       ("gltf", {"target_model": "gltf_pbr"})):
+        made = export(result("gltf_sheen", sheen), target, **kw)
+        fraction = next(float(np.mean(made.target_params[k])) for k in
+                        ("metallic", "metalness") if k in made.target_params)
+        said = [w for w in made.warnings if w.startswith("class:")]
+        assert 0.05 < fraction < 0.95, (target, kw, fraction)  # the refits stay half-metal
+        assert len(said) == 1 and "refit came out (not weighed" in said[0], made.warnings
+        assert "brdffit fit TABLE --model " in said[0]
 
 
 def test_a_layers_tint_or_roughness_at_its_upper_bound_is_a_clamp_unless_the_layer_is_nil():

@@ -286,7 +286,7 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     name and the fit's model, ``gold_ggx``).
     """
     from brdffit import models
-    from brdffit.export.conversion import convert, dielectric_or_mixture
+    from brdffit.export.conversion import convert, dielectric_or_mixture, half_metal_said
     from brdffit.export.energy import energy_report
     from brdffit.fitting.problem import table_error
 
@@ -338,6 +338,8 @@ def export(result: FitResult, target: str, *, table: MerlTable | str | os.PathLi
     if viewer == "spec" and target_model is None:
         # a plastic or a fabric is exported as a dielectric where the evidence says so
         conv, material_class = dielectric_or_mixture(result, conv, source)
+    else:
+        conv = half_metal_said(conv)
     # the brdffit model that evaluates the file as the renderer shades it, checked
     # against the renderer's own evaluation (None: the renderer's shading of this
     # node is not modelled, so nothing about it can be measured)

@@ -315,22 +315,34 @@ DIELECTRIC_WITH_BODY = 1.5
 METAL_FRACTION = ("metallic", "metalness")
 
 
-def _half_metal_said(conv: Conversion) -> Conversion:
-    """An exact copy whose metal fraction is neither a metal's nor a dielectric's (a
-    fabric's gltf_sheen fit at metallic 0.44, exported without a word) keeps it, as the
-    fit is the user's choice of class, and says so: the renderers mean such values for
-    the seam between a metal and a dielectric, where a measured material is one."""
-    value = next((conv.params[k] for k in METAL_FRACTION if k in conv.params), None)
+#: A base model's dielectric form to fit, by the metal fraction's name, for the advice.
+_DIELECTRIC_TO_FIT = {"metallic": "gltf_pbr_dielectric",
+                      "metalness": "standard_surface_dielectric"}
+
+
+def half_metal_said(conv: Conversion) -> Conversion:
+    """A material whose metal fraction is neither a metal's nor a dielectric's keeps it
+    and says so, where it was not weighed against a dielectric (:func:`dielectric_or_mixture`
+    weighs a refit of a base model for the spec): an exact copy (a fabric's gltf_sheen
+    fit at metallic 0.44), the fit being the user's choice of class; a layered model's
+    refit, a viewer's, one asked for by ``target_model`` (metallic 0.28-0.51, exported
+    without a word). Renderers mean such values for the seam between a metal and a
+    dielectric, where a measured material is one."""
+    name, value = next(((k, conv.params[k]) for k in METAL_FRACTION if k in conv.params),
+                       (None, None))
     if value is None:
         return conv
     m = float(np.mean(value))
     if not MIXTURE_METALLIC < m < 1.0 - MIXTURE_METALLIC:
         return conv
+    how = ("as fitted (an exact copy of the fit)" if conv.exact else
+           f"as the {conv.target_model} refit came out (not weighed against a dielectric: "
+           "the export of a base model for the spec is)")
     conv.warnings.append(
-        f"class: {m:.3g} metal, as fitted (an exact copy of the fit): neither a metal nor "
-        "a dielectric, which renderers mean for the seam between the two; a measured "
-        "plastic or fabric is a dielectric (fit a dielectric model, e.g. "
-        "gltf_pbr_dielectric, or export a refit: target_model)")
+        f"class: {m:.3g} metal, {how}: neither a metal nor a dielectric, which renderers "
+        "mean for the seam between the two; a measured plastic or fabric is a dielectric "
+        f"(fit a dielectric model to the table, e.g. brdffit fit TABLE --model "
+        f"{_DIELECTRIC_TO_FIT[name]}, whose export has {name} 0)")
     return conv
 
 
@@ -354,9 +366,9 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     from brdffit.fitting.starts import table_hints
 
     alt = CLASS_ALTERNATIVES.get(conv.target_model)
-    if conv.exact:  # a fit of the target's model is the user's own choice of class
-        return _half_metal_said(conv), None
-    if alt is None or alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
+    if conv.exact or alt is None:  # an exact fit is the user's own choice of class
+        return half_metal_said(conv), None
+    if alt.metal_fraction(conv.params) <= MIXTURE_METALLIC:
         return conv, None
     reference = measured if measured is not None else fit_as_table(result)
     against = "the measured table" if measured is not None else f"the {result.model} fit"
@@ -379,7 +391,10 @@ def dielectric_or_mixture(result: FitResult, conv: Conversion,
     close = err_d <= DIELECTRIC_TOLERANCE * err_m
     bodied = body >= DIFFUSE_BODY and err_d <= DIELECTRIC_WITH_BODY * err_m
     if not (close or bodied):
-        why = (f"its diffuse body ({body:.3g}) is a metal's" if body < DIFFUSE_BODY else
+        # not "a metal's": a dark fabric's body (red-fabric, 0.07) is under it too
+        why = (f"its diffuse body ({body:.3g}) is under the {DIFFUSE_BODY:g} that lets a "
+               "dielectric cost more (metals' are 0.001-0.03, plastics' and most fabrics' "
+               "0.11-0.28)" if body < DIFFUSE_BODY else
                f"more than {DIELECTRIC_WITH_BODY:g}x even with a diffuse body ({body:.3g})")
         conv.warnings.append(
             f"class: kept the metal mixture (metal fraction {metallic:.3g}): as a dielectric "
