@@ -503,3 +503,18 @@ def test_the_colour_maps_label_names_the_figure_it_is_and_the_verdicts_beside_it
                                                 "the verdict's: 3.3 in radiance")
     assert _colour_label(look(1.5, 0.8), 0) == "mean as displayed: CIEDE2000 1.5"
     assert _colour_label(look(None, 0.8), 0) is None and _colour_label(look(1.5, 3.3), 2) is None
+
+
+def test_a_sample_lists_slices_are_where_its_samples_are():
+    """An in-plane list's binned samples are all at phi_d 0 or 180: its report's slices
+    at 90 promised dots that never appeared. They are drawn at the fullest phi_d."""
+    from brdffit.fitting.samples import binned
+    from brdffit.view.plots import _fullest_phi_d
+    from data_synth.sparse import sample_model
+
+    in_plane, _ = sample_model("ggx", None, "in_plane", 600, seed=3)
+    table = binned(in_plane)[0]
+    fullest = _fullest_phi_d(table)
+    assert min(fullest, 180.0 - fullest) < 1.0
+    i_pd = int(fullest)  # bins of 1 degree: the centre 0.5 is bin 0, 179.5 bin 179
+    assert table.mask[:, :, i_pd].sum() == table.mask.sum(axis=(0, 1)).max() > 0

@@ -138,6 +138,14 @@ def slices(
     return png_bytes(fig)
 
 
+def _fullest_phi_d(table: MerlTable) -> float:
+    """The centre (degrees) of the phi_d bin holding most measured bins: a sample list's
+    slices, where its samples lie (an in-plane list's are all at phi_d 0 or 180, and its
+    report's slices at 90 promised dots that never appeared)."""
+    counts = table.mask.sum(axis=(0, 1))
+    return float(np.degrees(bin_centres(0, 0, int(np.argmax(counts)))[2]))
+
+
 def _phi_d_centres(phi_d_deg) -> list[float]:
     """The centre (degrees) of the phi_d bin each of ``phi_d_deg`` falls in."""
     out = []
@@ -734,8 +742,10 @@ def report(table: MerlTable, result: FitResult | dict, *,
         sph.suptitle(f"sphere renders, one exposure for table and fit"
                      f"{_exposure_words(exposure_ev)}{_CHECKERED if checkered else ''}"
                      f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
-    _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (90.0,))
-    sli.suptitle("slices: fit (lines), and the few samples' bins on them (dots)"
+    phi_d = _fullest_phi_d(table) if of_samples else 90.0
+    _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (phi_d,))
+    sli.suptitle(f"slices at φd = {_phi_d_centres((phi_d,))[0]:.1f}°, where the samples' "
+                 "bins are most: fit (lines), and the samples' bins on them (dots)"
                  if of_samples else "slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
     err.suptitle("error per bin, averaged over φd and RGB; grey: no measured bin", fontsize=11)
