@@ -1239,6 +1239,14 @@ def _all_poor_warning(ok: list[dict], loss: str = "render") -> str:
     poor under the log loss, ggx2 good at 30.2 dB under the render loss)."""
     if not ok or any(row.get("verdict") != "poor" for row in ok):
         return ""
+    if not any(math.isfinite(_psnr(row)) for row in ok):
+        # no candidate could be compared: not "the best render lambert, -inf dB", nor
+        # the render loss, which fits the same unmeasured pixels (a table of grazing
+        # bins alone, fitted exactly)
+        return (" Warning: no candidate's look could be compared: the table measures "
+                "none of the sphere's pixels, so every verdict reads poor for want of a "
+                "comparison, not for a measured difference; the ranking's log_rmse is "
+                "what the table measures.")
     top = max(ok, key=_psnr)
     # the eight lights named: the chosen fit's verdict quotes its two-light sphere, and
     # black-obsidian read "the best render ggx2, 14.0 dB" above "sphere render 14.5 dB"

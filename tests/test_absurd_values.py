@@ -399,3 +399,20 @@ def test_a_mirror_peak_is_no_spike(alpha):
         table, _ = make_table("ggx", {"kd": [0.0, 0.0, 0.0], "ks": [1.0, 1.0, 1.0],
                                       "alpha": alpha, "f0": 0.9}, seed=1, noise=noise)
         assert table.isolated_spikes().shape == (0, 3)
+
+
+def test_a_peak_beside_a_neighbour_with_a_channel_at_zero_is_no_spike():
+    """A sparse noisy table's true peak (317 1/sr) beside its one measured neighbour,
+    whose one channel noise had clipped to 0 (249, 0, 339), was named a corrupt spike
+    "over 1,000x" that 0, and the first step was to delete it. Each bin is read by its
+    brightest channel; a corrupt channel is still caught."""
+    rgb = np.full((3, *merl.SHAPE), 0.05)
+    mask = np.zeros(merl.SHAPE, bool)
+    mask[1, 76, 149] = mask[1, 76, 150] = mask[40, 40, 90] = True
+    rgb[:, 1, 76, 149] = (317.0, 280.0, 300.0)
+    rgb[:, 1, 76, 150] = (249.0, 0.0, 339.0)
+    table = MerlTable(rgb, mask, "sparse.binary")
+    assert table.isolated_spikes().shape == (0, 3)
+    rgb[2, 1, 76, 149] = 9.3e5  # one channel corrupt, 2,700x the neighbour's brightest
+    np.testing.assert_array_equal(MerlTable(rgb, mask, "c.binary").isolated_spikes(),
+                                  [[1, 76, 149]])

@@ -637,3 +637,36 @@ def test_a_spike_the_table_does_not_hold_is_not_good_however_its_picture_reads()
                           loss="render", converged=True, rel_peak_error=300.0)
     tries = [s["try"] for s in two["next"]]
     assert tries[0] == "--model ggx --loss render" and not any("narrower" in t for t in tries)
+
+
+def test_no_lobe_more_is_advised_where_the_fits_own_lobe_is_absent():
+    """A noisy diffuse table's ggx fit (ks within its error of 0) read visible and was
+    told ggx2; ggx2's and ggx3's fits ended at the same log_rmse, every lobe absent, and
+    were told ggx3 and ggx4. A lobe more cannot gain where the data show none."""
+    from brdffit import models
+    from brdffit.fitting.pipeline import fit
+    from brdffit.fitting.quality import without_lobes_on_noise
+    from data_synth import make_table
+
+    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]}, noise=0.3, seed=7)
+    r = fit(table, "ggx", samples=4096)
+    assert r.uncertainty["why"]["alpha"].startswith("no lobe")
+    assert r.quality["verdict"] != "good" and r.quality["next"]
+    assert not any(s["try"] == "--model ggx2" for s in r.quality["next"]), r.quality["next"]
+    absent = {"why": {"alpha1": "no lobe: ks1 within 2 standard errors of 0 in every channel"}}
+    look = {"verdict": "visible", "next": [{"try": "--model ggx3", "why": "", "gain_db": None}]}
+    (step,) = without_lobes_on_noise(look, models.get("ggx2"), absent)["next"]
+    assert step["try"].startswith("nothing here: the fit's lobe is absent")
+    assert without_lobes_on_noise(look, models.get("ggx2"), {"why": {}}) == look
+
+
+def test_auto_over_a_table_no_sphere_pixel_measures_says_so():
+    """Every candidate's verdict poor because nothing could be compared (a table of
+    grazing bins alone, fitted exactly): not "the best render lambert, -inf dB", nor the
+    render loss, which fits the same unmeasured pixels."""
+    from brdffit.selection import _all_poor_warning
+
+    rows = [{"model": m, "verdict": "poor", "psnr_db": None} for m in ("lambert", "ggx")]
+    said = _all_poor_warning(rows, loss="log")
+    assert said.startswith(" Warning: no candidate's look could be compared")
+    assert "-inf" not in said and "--loss render" not in said

@@ -70,6 +70,24 @@ def test_a_pure_diffuse_table_flags_the_lobe_shape():
     assert u["undetermined"]["kd"] == [False, False, False]
 
 
+def test_an_absent_lobes_shape_is_undetermined_at_a_bound_and_in_every_lobe():
+    """A shape held at its bound beside a lobe that is not there is held by the bound,
+    not the data (a noisy diffuse table's phong read n = 0.1 "at bound", determined);
+    and ggx3's and ggx4's later lobes are lobes too (ggx4's alpha4 beside a ks4 of 1e-12
+    read 0.0011111 +- 3.6e-05, determined)."""
+    from brdffit.fitting.uncertainty import LOBE_SCALE
+
+    table, _ = make_table("lambert", {"kd": [0.5, 0.35, 0.2]}, noise=0.3, seed=7)
+    u = fit(table, "phong", samples=SAMPLES).uncertainty
+    assert u["at_bound"]["n"] and u["undetermined"]["n"] is True, u
+    assert u["why"]["n"].startswith("no lobe")
+    # every lobe's shape names its scale
+    for model in ("ggx2", "ggx3", "ggx4"):
+        names = {s.name for s in get(model).param_specs}
+        for shape in names & {"alpha", "alpha1", "alpha2", "alpha3", "alpha4"}:
+            assert set(LOBE_SCALE[shape]) & names, (model, shape)
+
+
 def test_ks_and_f0_trade_off_without_grazing_bins():
     """With only small difference angles the Fresnel term is ~f0 everywhere: the lobe
     scales with ks f0, and the two cannot be told apart."""

@@ -19,7 +19,7 @@ import numpy as np
 from brdffit.fitting.inputs import Refit, SampleInput, TableInput
 from brdffit.fitting.loss import LOSS_METRIC
 from brdffit.fitting.problem import Prepared
-from brdffit.fitting.quality import NO_LOBE, quality, spike_off_the_table
+from brdffit.fitting.quality import NO_LOBE, quality, spike_off_the_table, without_lobes_on_noise
 from brdffit.fitting.result import FitResult
 
 
@@ -72,6 +72,7 @@ def assemble(source: TableInput | SampleInput, model, u: np.ndarray, params: dic
                    converged=result == "successful", physical=physical, basis=measured.basis,
                    rel_peak_error=metrics.get("rel_peak_error"))
     look, fitted_input = source.judged(look, measured, found)
+    look = without_lobes_on_noise(look, model, found)
     found_notes, found_steps = source.findings(prep)
     if found_steps and look.get("verdict") != "good":  # the data's fault comes first
         look = {**look, "next": [*found_steps, *look.get("next", [])]}

@@ -624,6 +624,34 @@ def _layer_more(model) -> list[tuple[str, tuple[str, ...]]]:
     return out
 
 
+def without_lobes_on_noise(look: dict | None, model, uncertainty: dict | None) -> dict | None:
+    """``look`` without the steps that add a lobe, where the fit's own lobe is absent
+    (its shape ``no lobe``: the lobe's scale within 2 standard errors of 0): a lobe
+    more cannot gain where the data show none, and the difference the verdict sees is
+    another (a noisy diffuse table's ggx fit, ks at 0, read visible at 24.5 dB and was
+    told ggx2; its ggx2 and ggx3 fits ended at the same log_rmse, every lobe absent,
+    and were told ggx3 and ggx4). Left as it is where a step remains; else one that
+    says so."""
+    if not look or not look.get("next") or not uncertainty or model.name in NO_LOBE:
+        return look
+    why = uncertainty.get("why") or {}
+    absent = [name for name, reason in why.items() if reason.startswith("no lobe")]
+    if not absent:
+        return look
+    name = model.name
+    more = {f"--model {m}" for m in ("ggx2", "ggx3", "ggx4") if m != name}
+    kept = [step for step in look["next"] if step["try"] not in more]
+    if len(kept) == len(look["next"]):
+        return look
+    if not kept:
+        kept = [{"try": "nothing here: the fit's lobe is absent, so no lobe more would gain",
+                 "why": f"{', '.join(absent)}: no lobe (its scale within "
+                        "2 standard errors of 0); what the verdict sees is not a missing "
+                        "lobe: the table's noise, or a shape beyond the analytic models "
+                        "here", "gain_db": None}]
+    return {**look, "next": kept}
+
+
 def _last_steps(model) -> list[dict]:
     """What a layered fit that is not good is told where nothing read off its figures
     applies: that nothing here is richer (a verdict that is not good never comes with

@@ -62,8 +62,10 @@ STRONG_CORRELATION = 0.95
 LOOSE = 0.5
 #: The scale parameter(s) of the lobe that each shape parameter shapes: a shape
 #: means nothing once its lobe is indistinguishable from zero.
-LOBE_SCALE = {"alpha": ("ks",), "n": ("ks",), "f0": ("ks", "ks1", "ks2"), "eta": ("ks",),
-              "alpha1": ("ks1",), "alpha2": ("ks2",)}
+LOBE_SCALE = {"alpha": ("ks",), "n": ("ks",), "f0": ("ks", "ks1", "ks2", "ks3", "ks4"),
+              "eta": ("ks",), "alpha1": ("ks1",), "alpha2": ("ks2",), "alpha3": ("ks3",),
+              "alpha4": ("ks4",)}  # ggx3's and ggx4's: ggx4's alpha4 beside a ks4 of 1e-12
+#                                    read 0.0011111 +- 3.6e-05, determined
 #: A lobe is significant when some channel of its scale is this many standard
 #: errors above 0.
 SIGNIFICANT = 2.0
@@ -229,14 +231,17 @@ def parameter_uncertainty(model: AbstractBRDFModel, u: np.ndarray, data: LossDat
     for i in range(p):
         lobe = [x for x in LOBE_SCALE.get(names[i], ()) if x in names_of(model)]
         weight = layer_weight.get(names[i])
-        if at_bound[i]:
-            reasons.append(None)
-        elif lobe and not significant(lobe):
+        # an absent lobe's or layer's shape is undetermined at a bound too: there the
+        # bound, not the data, holds it (a noisy diffuse table's phong read n = 0.1 "at
+        # bound" and determined beside a ks of 0.006 +- 0.005)
+        if lobe and not significant(lobe):
             reasons.append(f"no lobe: {' and '.join(lobe)} within {SIGNIFICANT:g} standard "
                            "errors of 0 in every channel")
         elif weight is not None and not significant((weight,), lobe=False):
             reasons.append(f"no layer: {weight} within {SIGNIFICANT:g} standard errors of 0"
                            f"{' in every channel' if _is_rgb(model, weight) else ''}")
+        elif at_bound[i]:
+            reasons.append(None)
         elif no_effect[i]:
             reasons.append("no effect: the residuals do not depend on it")
         elif flat_partners[i]:

@@ -123,8 +123,8 @@ class MerlTable:
 
     def isolated_spikes(self) -> np.ndarray:
         """Measured bins over :data:`SPIKE_FACTOR` times every measured grid neighbour
-        (theta_h, theta_d and phi_d +-1; phi_d wraps, as reciprocity makes it) in some
-        channel: indices (k, 3) into the grid, brightest first. A reflectance changes
+        (theta_h, theta_d and phi_d +-1; phi_d wraps, as reciprocity makes it), each by
+        its brightest channel: indices (k, 3) into the grid, brightest first. A reflectance changes
         by less than that from one bin to the next, even at a mirror's peak; one such
         bin is a corrupt value, which a least-squares fit follows (a bin at 9e11 1/sr
         made a ggx of ks 1e6). Only bins above SPIKE_FACTOR times the table's typical
@@ -146,9 +146,13 @@ class MerlTable:
             i, j = np.clip(i, 0, N_THETA_H - 1), np.clip(j, 0, N_THETA_D - 1)
             seen = inside & mask[i, j, k]
             neighbour = np.maximum(neighbour, np.where(seen, rgb[:, i, j, k], -np.inf))
-        value = rgb[:, th, td, pd]
-        spike = np.any(np.isfinite(neighbour)
-                       & (value > SPIKE_FACTOR * np.maximum(neighbour, 0.0)), axis=0)
+        # by each one's brightest channel: a noisy sparse table's true peak (317 1/sr)
+        # beside a neighbour whose one channel noise had clipped to 0 (249, 0, 339) read
+        # as a corrupt spike "over 1,000x" that 0; a corrupt channel is still its bin's
+        # brightest by far
+        value = rgb[:, th, td, pd].max(axis=0)
+        spike = (np.isfinite(neighbour).any(axis=0)
+                 & (value > SPIKE_FACTOR * np.maximum(neighbour.max(axis=0), 0.0)))
         out = cand[spike]
         return out[np.argsort(-rgb[:, out[:, 0], out[:, 1], out[:, 2]].max(axis=0),
                               kind="stable")]
