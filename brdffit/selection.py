@@ -52,6 +52,7 @@ from brdffit.fitting.options import (
 )
 from brdffit.fitting.quality import (
     ALIKE_DB,
+    SPHERE_COMPARED_MIN,
     VERDICTS,
     describe,
     of_the_whole_sphere,
@@ -399,6 +400,8 @@ def _add_row(rows: list, row: dict, r: FitResult, m, scene, reference, views=Non
         # how the candidate looks beside the measurement (brdffit.fitting.quality)
         verdict=(r.quality or {}).get("verdict"),
         radiance_verdict=radiance_verdict(r.quality),
+        # the share of the verdict's sphere the table measures (absent for samples)
+        sphere_measured=(r.quality or {}).get("sphere_measured"),
         status="fitted" if math.isfinite(err) else "failed",
     )
     rows.append(row)
@@ -1239,14 +1242,14 @@ def _all_poor_warning(ok: list[dict], loss: str = "render") -> str:
     poor under the log loss, ggx2 good at 30.2 dB under the render loss)."""
     if not ok or any(row.get("verdict") != "poor" for row in ok):
         return ""
-    if not any(math.isfinite(_psnr(row)) for row in ok):
+    if all(not math.isfinite(_psnr(row)) or _compared_too_little(row) for row in ok):
         # no candidate could be compared: not "the best render lambert, -inf dB", nor
         # the render loss, which fits the same unmeasured pixels (a table of grazing
-        # bins alone, fitted exactly)
+        # bins alone, fitted exactly; one of 0.1% of its bins)
         return (" Warning: no candidate's look could be compared: the table measures "
-                "none of the sphere's pixels, so every verdict reads poor for want of a "
-                "comparison, not for a measured difference; the ranking's log_rmse is "
-                "what the table measures.")
+                "none or too few of the sphere's pixels, so every verdict reads poor for "
+                "want of a comparison, not for a measured difference; the ranking's "
+                "log_rmse is what the table measures.")
     top = max(ok, key=_psnr)
     # the eight lights named: the chosen fit's verdict quotes its two-light sphere, and
     # black-obsidian read "the best render ggx2, 14.0 dB" above "sphere render 14.5 dB"
@@ -1260,6 +1263,13 @@ def _all_poor_warning(ok: list[dict], loss: str = "render") -> str:
                 "quality.next says what to try.")
     return f"{said}: no model here reproduces this material; the chosen fit's quality.next " \
         "says what to try."
+
+
+def _compared_too_little(row: dict) -> bool:
+    """Whether a row's verdict rests on too few of the sphere's pixels to compare
+    (``quality.SPHERE_COMPARED_MIN``)."""
+    share = row.get("sphere_measured")
+    return share is not None and share < SPHERE_COMPARED_MIN
 
 
 def _render_gains(chosen: dict, ok: list[dict], on_scene: bool = False) -> list[tuple]:

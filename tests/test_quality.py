@@ -670,3 +670,23 @@ def test_auto_over_a_table_no_sphere_pixel_measures_says_so():
     said = _all_poor_warning(rows, loss="log")
     assert said.startswith(" Warning: no candidate's look could be compared")
     assert "-inf" not in said and "--loss render" not in said
+
+
+def test_a_verdict_on_a_few_dozen_pixels_judges_nothing():
+    """A GGX table with 99.9% of its bins missing, fitted to its truth, read poor on a
+    colour of 0.09% of the sphere's pixels, was told its colour turns, and auto passed
+    it over for a ggx2 of absent lobes. Below 1% measured, the look is not compared."""
+    from brdffit.selection import _all_poor_warning
+
+    look = {"verdict": "poor", "reason": "colour off by CIEDE2000 6.5 in radiance",
+            "render_psnr_db": 31.2, "next": [{"try": "--model generalized_schlick"}]}
+    judged = quality.on_part_of_the_sphere(look, 0.0009)
+    assert judged["verdict"] == "poor" and judged["sphere_measured"] == 0.0009
+    assert judged["reason"].startswith("the fit's look could not be compared: only 0.09%")
+    assert [s["try"] for s in judged["next"]] == ["a measurement of the directions a "
+                                                  "picture shows"]
+    assert quality.on_part_of_the_sphere(look, 0.5)["reason"].startswith("colour off")
+    rows = [{"model": m, "verdict": "poor", "psnr_db": 31.2, "sphere_measured": 0.0009}
+            for m in ("ggx", "ggx2")]
+    assert _all_poor_warning(rows, loss="log").startswith(
+        " Warning: no candidate's look could be compared")

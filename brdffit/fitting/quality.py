@@ -668,6 +668,9 @@ def _last_steps(model) -> list[dict]:
 #: theta_h > 40 deg (55% of the pixels measured) had lambert "good" at 34.4 dB, which
 #: judged against the whole table is 19.9 dB: the highlight was not compared.
 SPHERE_MEASURED = 0.9
+#: ... and below this share, none: a few dozen pixels' colour and brightness are the
+#: noise of the bins under them, which no verdict can rest on.
+SPHERE_COMPARED_MIN = 0.01
 
 
 def on_part_of_the_sphere(look: dict | None, share: float) -> dict | None:
@@ -680,6 +683,19 @@ def on_part_of_the_sphere(look: dict | None, share: float) -> dict | None:
     look = {**look, "sphere_measured": round(float(share), 4)}
     if share >= SPHERE_MEASURED or look.get("render_psnr_db") is None:
         return look  # (nothing compared: the reason says so already)
+    if share < SPHERE_COMPARED_MIN:
+        # a few dozen pixels judged nothing: a GGX table with 99.9% of its bins missing,
+        # fitted to its truth, read poor on a colour "6.5" of 0.09% of the sphere, was
+        # told its colour turns, and auto passed it over for a ggx2 of absent lobes
+        return {**look, "verdict": "poor",
+                "reason": f"the fit's look could not be compared: only {share:.2%} of the "
+                          "sphere's lit pixels have a measured bin, too few to judge it "
+                          f"(it is judged from {SPHERE_COMPARED_MIN:.0%}); its log_rmse is "
+                          "its error on the bins the table has",
+                "next": [{"try": "a measurement of the directions a picture shows",
+                          "why": "the table measures too little of the verdict's sphere for "
+                                 "any fit of it to be judged by how it looks",
+                          "gain_db": None}]}
     said = (f"only {share:.0%} of the sphere's lit pixels have a measured bin (the rest "
             "are not compared)")
     if look["verdict"] != "good":
