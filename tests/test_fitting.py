@@ -397,3 +397,24 @@ def test_oren_nayar_stops_at_lamberts_optimum_where_no_roughness_lowers_the_loss
     r = fit(rough, "oren_nayar")
     assert not any("no gain" in n for n in r.notes)
     assert r.params["sigma"] == pytest.approx(0.3, rel=0.05)
+
+
+def test_a_lobe_held_at_its_narrowest_bound_is_noted():
+    """A GGX table of alpha 3e-4 (below the model's 1e-3) came back alpha 0.001 and ks
+    11x too low at +-0.3%, "good", with no word of the bound. A lobe that is there,
+    held at the narrow end of the range, is noted; one at its broad end, or an absent
+    lobe's shape, is not."""
+    from brdffit import models
+    from brdffit.fitting.assemble import _lobe_at_its_narrowest
+
+    ggx, phong = models.get("ggx"), models.get("phong")
+    held = {"at_bound": {"alpha": True, "f0": True}, "why": {}}
+    (said,) = _lobe_at_its_narrowest(ggx, {"alpha": 0.001, "f0": 1.0}, held)
+    assert said.startswith("alpha is held at its bound 0.001, the narrowest ggx holds")
+    assert _lobe_at_its_narrowest(ggx, {"alpha": 2.0}, held) == []  # its broad end
+    absent = {**held, "why": {"alpha": "no lobe: ks within 2 standard errors of 0"}}
+    assert _lobe_at_its_narrowest(ggx, {"alpha": 0.001}, absent) == []
+    assert _lobe_at_its_narrowest(ggx, {"alpha": 0.001}, None) == []
+    top = next(s.upper for s in phong.param_specs if s.name == "n")
+    (said,) = _lobe_at_its_narrowest(phong, {"n": top}, {"at_bound": {"n": True}, "why": {}})
+    assert said.startswith(f"n is held at its bound {top:g}")
