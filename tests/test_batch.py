@@ -1028,7 +1028,13 @@ def test_a_log_gets_the_progress_where_the_batch_ended():
     bar.finish()  # interrupted here
     lines = log.getvalue().splitlines()
     assert len(lines) == 2 and " 0/10 tables" in lines[0] and " 2/10 tables" in lines[1], lines
-    assert "1 failed" in lines[1]
+    assert "1 failed" in lines[1] and "  4 fits stored  " in lines[1]
+    # a table's fits counted before the table is (its other fits still running)
+    part = io.StringIO()
+    bar = ProgressLine(2, stream=part)
+    bar.update(fits=1, failed=False, tables=0)
+    bar.draw(force=True)
+    assert "0/2 tables  1 fit stored  " in part.getvalue(), part.getvalue()
     done = io.StringIO()
     bar = ProgressLine(1, stream=done)
     bar.update(fits=1, failed=False)  # the last table: printed at once

@@ -1,4 +1,4 @@
-"""A batch's progress line on stderr: tables done, fits/s, ETA.
+"""A batch's progress line on stderr: tables done, fits stored, fits/s, ETA.
 
 On a terminal the line redraws in place; otherwise (a log file, CI) it prints a
 plain line at most every ``interval_s`` seconds, so logs stay short.
@@ -57,7 +57,10 @@ class ProgressLine:
         eta = per_table * (self.total - self.tables)
         width = 24
         filled = int(width * self.tables / self.total) if self.total else width
+        # the fits stored so far beside the tables: a table counts once all its fits are
+        # in, and a slow first table read "0/8 tables" with fits already stored
         parts = [f"[{'#' * filled}{'.' * (width - filled)}] {self.tables}/{self.total} tables",
+                 f"{self.fits} fit{'' if self.fits == 1 else 's'} stored",
                  f"{rate:.2f} fits/s", f"elapsed {format_duration(elapsed)}",
                  f"ETA {format_duration(eta) if self.tables < self.total else '0s'}"]
         if self.failed_tables:
