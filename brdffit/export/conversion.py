@@ -315,11 +315,6 @@ DIELECTRIC_WITH_BODY = 1.5
 METAL_FRACTION = ("metallic", "metalness")
 
 
-#: A base model's dielectric form to fit, by the metal fraction's name, for the advice.
-_DIELECTRIC_TO_FIT = {"metallic": "gltf_pbr_dielectric",
-                      "metalness": "standard_surface_dielectric"}
-
-
 def half_metal_said(conv: Conversion) -> Conversion:
     """A material whose metal fraction is neither a metal's nor a dielectric's keeps it
     and says so, where it was not weighed against a dielectric (:func:`dielectric_or_mixture`
@@ -342,8 +337,16 @@ def half_metal_said(conv: Conversion) -> Conversion:
         f"class: {m:.3g} metal, {how}: neither a metal nor a dielectric, which renderers "
         "mean for the seam between the two; a measured plastic or fabric is a dielectric "
         f"(fit a dielectric model to the table, e.g. brdffit fit TABLE --model "
-        f"{_DIELECTRIC_TO_FIT[name]}, whose export has {name} 0)")
+        f"{_dielectric_to_fit(name)}, whose export has {name} 0)")
     return conv
+
+
+def _dielectric_to_fit(metal_fraction: str) -> str:
+    """The dielectric model :data:`CLASS_ALTERNATIVES` weighs against the base model whose
+    metal fraction is named ``metal_fraction`` (gltf_pbr's ``metallic``:
+    gltf_pbr_dielectric), for a half-metal's advice."""
+    return next(alt.dielectrics[0].model for alt in CLASS_ALTERNATIVES.values()
+                if metal_fraction in {s.name for s in models.get(alt.mixture_model).param_specs})
 
 
 def dielectric_or_mixture(result: FitResult, conv: Conversion,

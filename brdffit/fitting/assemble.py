@@ -11,6 +11,7 @@ no success.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 
@@ -128,9 +129,11 @@ def _lobe_at_its_narrowest(model, params: dict, found: dict | None) -> list[str]
     out = []
     for spec in model.param_specs:
         name = spec.name
-        narrow = ((name.startswith("alpha") and name[5:].isdigit() or name == "alpha")
-                  and spec.lower) or (name == "n" and spec.upper)
-        if not narrow or at_bound.get(name) is not True or name in why:
+        # a lobe's width: the narrow end of alpha, alpha1 .. alpha4 is their lower bound,
+        # of a Phong exponent its upper one
+        narrow = (spec.lower if re.fullmatch(r"alpha\d?", name) else
+                  spec.upper if name == "n" else None)
+        if narrow is None or at_bound.get(name) is not True or name in why:
             continue
         value = float(np.ravel(params[name])[0])
         if not np.isclose(value, narrow, rtol=1e-3):

@@ -402,7 +402,7 @@ def next_steps(look: dict, *, model, params: dict, loss: str, converged: bool,
         # nothing compared: another model or loss would be judged on nothing again (a
         # table measured at grazing alone, fitted exactly, was advised ggx2 and the
         # render loss)
-        add("a measurement of the directions a picture shows",
+        add(MEASURE_THE_SPHERE,
             "the table measures none of the verdict's sphere pixels, so no fit of it can be "
             "judged by how it looks; its log_rmse is still its error on the bins it has")
         return steps
@@ -638,8 +638,9 @@ def without_lobes_on_noise(look: dict | None, model, uncertainty: dict | None) -
     absent = [name for name, reason in why.items() if reason.startswith("no lobe")]
     if not absent:
         return look
-    name = model.name
-    more = {f"--model {m}" for m in ("ggx2", "ggx3", "ggx4") if m != name}
+    # the steps next_steps adds a lobe by: ggx2 (the richer model of ggx and beckmann)
+    # and each MORE_LOBES model
+    more = {f"--model {m}" for m in ("ggx2", *MORE_LOBES.values())}
     kept = [step for step in look["next"] if step["try"] not in more]
     if len(kept) == len(look["next"]):
         return look
@@ -671,6 +672,8 @@ SPHERE_MEASURED = 0.9
 #: ... and below this share, none: a few dozen pixels' colour and brightness are the
 #: noise of the bins under them, which no verdict can rest on.
 SPHERE_COMPARED_MIN = 0.01
+#: The step where the table measures none, or too little, of the verdict's sphere.
+MEASURE_THE_SPHERE = "a measurement of the directions a picture shows"
 
 
 def on_part_of_the_sphere(look: dict | None, share: float) -> dict | None:
@@ -692,7 +695,7 @@ def on_part_of_the_sphere(look: dict | None, share: float) -> dict | None:
                           "sphere's lit pixels have a measured bin, too few to judge it "
                           f"(it is judged from {SPHERE_COMPARED_MIN:.0%}); its log_rmse is "
                           "its error on the bins the table has",
-                "next": [{"try": "a measurement of the directions a picture shows",
+                "next": [{"try": MEASURE_THE_SPHERE,
                           "why": "the table measures too little of the verdict's sphere for "
                                  "any fit of it to be judged by how it looks",
                           "gain_db": None}]}

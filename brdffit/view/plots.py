@@ -744,7 +744,7 @@ def report(table: MerlTable, result: FitResult | dict, *,
                      f"{_few_samples(table, result, 'the spheres and slices')}", fontsize=11)
     phi_d = _fullest_phi_d(table) if of_samples else 90.0
     _draw_slices(sli, table, result, (1.0, 30.0, 60.0, 80.0), (phi_d,))
-    sli.suptitle(f"slices at φd = {_phi_d_centres((phi_d,))[0]:.1f}°, where the samples' "
+    sli.suptitle(f"slices at φd = {phi_d:.1f}°, where the samples' "
                  "bins are most: fit (lines), and the samples' bins on them (dots)"
                  if of_samples else "slices: measured (dots), fit (lines)", fontsize=11)
     _draw_error_map(err, table, result)
