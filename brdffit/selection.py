@@ -1156,13 +1156,15 @@ def _why_not_the_layer(chosen: dict, base: dict, parent: dict | None, rule: str)
                 f"{_psnr(parent):.1f} dB): a layer is taken only where its render agrees")
     rendered = math.isfinite(_psnr(chosen)) and math.isfinite(_psnr(base))
     if rule == "render_psnr_db":
-        if (_verdict_rank(chosen) < _verdict_rank(base) or _psnr(chosen) >= _psnr(base)
-                or not rendered):
+        if (_verdict_rank(chosen) < _verdict_rank(base) or not rendered
+                or _psnr(chosen) > _psnr(base) + RENDER_TOLERANCE_DB):
             return ""
-        return (f"{chosen['model']} renders no closer than {base['model']} "
+        closer = (f"renders only {_psnr(chosen) - _psnr(base):.1f} dB closer than"
+                  if _psnr(chosen) > _psnr(base) else "renders no closer than")
+        return (f"{chosen['model']} {closer} {base['model']} "
                 f"({_psnr(chosen):.1f} against {_psnr(base):.1f} dB), the choice among the "
-                f"candidates without a layer, and reads no better ({_look_words(chosen)}): "
-                "its layer is not taken")
+                f"candidates without a layer, within the rule's {RENDER_TOLERANCE_DB:g} dB, "
+                f"and reads no better ({_look_words(chosen)}): its layer is not taken")
     if chosen["log_rmse"] > (1.0 + LAYER_LOG_RMSE_SLACK) * base["log_rmse"]:
         return (f"{chosen['model']} passes the rule at log_rmse {_fmt(chosen['log_rmse'])}, "
                 f"above {_fmt(base['log_rmse'])} of {base['model']}, the choice among the "
@@ -1201,10 +1203,15 @@ def _layer_no_worse_than_without(chosen: dict, reason: str, ok: list[dict], rule
     - under either rule, rendering more than :data:`LAYER_RENDER_SLACK_DB` worse than
       the base its layer was added to: under the log loss a layer can buy log_rmse at
       grazing bins and cost the look;
-    - under the render rule, reading no better and rendering no closer than the choice
-      without a layer: the rule's 0.5 dB window otherwise lets a layered model with
-      fewer values than ggx2 (principled_clearcoat's 9 against 12) win on a render no
-      closer, a layer that bought nothing the render loss's lights saw;
+    - under the render rule, reading no better and rendering no more than the rule's
+      :data:`RENDER_TOLERANCE_DB` closer than the choice without a layer: the rule's
+      0.5 dB window otherwise lets a layered model with fewer values than ggx2
+      (principled_clearcoat's 9 against 12) win on a render no closer, a layer that
+      bought nothing the render loss's lights saw; and a layer within that window
+      bought a look the rule calls alike, fitted to the very lights it is measured
+      under (red-fabric2's gltf_sheen, 0.3 dB closer than generalized_schlick under
+      the render loss's lights, rendered 2.7 dB further off under bench.render_loss's
+      independent ones: its sheen missed the rim light's forward scatter);
     - under the log_rmse rule, a log_rmse above that choice's by more than
       :data:`LAYER_LOG_RMSE_SLACK`, or a render more than :data:`LAYER_RENDER_SLACK_DB`
       worse: a cheaper layered model within the tolerance otherwise replaces a closer
