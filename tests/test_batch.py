@@ -1043,6 +1043,44 @@ def test_a_log_gets_the_progress_where_the_batch_ended():
 
 
 @pytest.mark.unit
+def test_the_progress_line_moves_while_no_result_comes():
+    """A first table that compiles for a minute showed one unchanging line. Within
+    ``ticking`` the line is redrawn without results: on a terminal its elapsed time
+    moves; in a log a line comes every ``interval_s`` (the batch is seen alive), none
+    more often; the ticker stops when the batch does."""
+    import io
+    import threading
+
+    from brdffit.batch.progress import ProgressLine
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    term = Terminal()
+    bar = ProgressLine(3, stream=term)
+    bar.t0 -= 65.0  # a minute in, nothing done
+    with bar.ticking(every_s=0.02):
+        time.sleep(0.5)  # a terminal's line is redrawn at most every 0.2 s
+    drawn = term.getvalue().split("\r\x1b[2K")[1:]
+    assert len(drawn) >= 2 and all("0/3 tables" in d for d in drawn), drawn
+    assert "elapsed 1m05s" in drawn[0] and "ETA ?" in drawn[0], drawn[0]
+    assert not any(t.name == "brdffit-progress" for t in threading.enumerate())
+    log = io.StringIO()
+    bar = ProgressLine(3, stream=log, interval_s=0.1)
+    bar.draw(force=True)
+    with bar.ticking(every_s=0.02):
+        time.sleep(0.35)
+    lines = log.getvalue().splitlines()
+    assert 3 <= len(lines) <= 5 and all("0/3 tables" in line for line in lines), lines
+    quiet = io.StringIO()  # progress off: no thread, nothing drawn
+    bar = ProgressLine(3, stream=quiet, enabled=False)
+    with bar.ticking(every_s=0.02):
+        time.sleep(0.05)
+    assert quiet.getvalue() == ""
+
+
+@pytest.mark.unit
 def test_the_summary_line_counts_in_words():
     from brdffit.batch.job import BatchSummary
     from brdffit.cli.batch import summary_line

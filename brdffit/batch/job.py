@@ -682,16 +682,18 @@ def run_batch(
                     raise KeyboardInterrupt  # the signal's own exception was lost
 
         try:
-            if tasks and workers == 0 and not scheduler:
-                take(_run_in_process(tasks, request))
-            elif tasks:
-                # closing(): on an interrupt the generator cancels its futures while
-                # the client is still connected, not whenever it is collected.
-                with done, (contextlib.nullcontext(remote) if remote is not None
-                            else connect(workers, scheduler)) as client, contextlib.closing(
-                        _run_on_dask(client, tasks, request, timeout_s)) as results:
-                    take(results)
-                    done.complete = True  # what follows is the cluster's shutdown
+            with bar.ticking():
+                if tasks and workers == 0 and not scheduler:
+                    take(_run_in_process(tasks, request))
+                elif tasks:
+                    # closing(): on an interrupt the generator cancels its futures
+                    # while the client is still connected, not whenever it is collected.
+                    with done, (contextlib.nullcontext(remote) if remote is not None
+                                else connect(workers, scheduler)) as client, \
+                            contextlib.closing(_run_on_dask(client, tasks, request,
+                                                            timeout_s)) as results:
+                        take(results)
+                        done.complete = True  # what follows is the cluster's shutdown
             done.complete = True
         finally:
             with done:

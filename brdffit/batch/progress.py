@@ -1,12 +1,16 @@
 """A batch's progress line on stderr: tables done, fits stored, fits/s, ETA.
 
 On a terminal the line redraws in place; otherwise (a log file, CI) it prints a
-plain line at most every ``interval_s`` seconds, so logs stay short.
+plain line at most every ``interval_s`` seconds, so logs stay short. While a batch
+runs (:meth:`ProgressLine.ticking`) the line is also redrawn between results: a first
+table that compiles for a minute showed one unchanging line, as if the batch hung.
 """
 
 from __future__ import annotations
 
+import contextlib
 import sys
+import threading
 import time
 
 
@@ -38,6 +42,8 @@ class ProgressLine:
         self.t0 = time.monotonic()
         self._last_draw = float("-inf")
         self._last_counts: tuple | None = None  # what the last line in a log said
+        # results and the ticker (:meth:`ticking`) draw from two threads
+        self._lock = threading.Lock()
 
     def _counts(self) -> tuple:
         return self.tables, self.fits, self.failed_tables
@@ -72,30 +78,56 @@ class ProgressLine:
     def draw(self, force: bool = False) -> None:
         if not self.enabled:
             return
-        now = time.monotonic()
-        if not force and now - self._last_draw < self.interval_s and self.tables < self.total:
+        with self._lock:
+            now = time.monotonic()
+            if (not force and now - self._last_draw < self.interval_s
+                    and self.tables < self.total):
+                return
+            self._last_draw = now
+            if self.tty:
+                self.stream.write("\r\x1b[2K" + self.line())
+            else:
+                self._last_counts = self._counts()
+                self.stream.write(self.line() + "\n")
+            self.stream.flush()
+
+    @contextlib.contextmanager
+    def ticking(self, every_s: float = 1.0):
+        """Within it, the line is redrawn every ``every_s`` seconds (at most every
+        ``interval_s`` in a log) whether or not a result came: its elapsed time moves
+        while the first fits compile, and a log shows the batch alive."""
+        if not self.enabled:
+            yield self
             return
-        self._last_draw = now
-        if self.tty:
-            self.stream.write("\r\x1b[2K" + self.line())
-        else:
-            self._last_counts = self._counts()
-            self.stream.write(self.line() + "\n")
-        self.stream.flush()
+        stop = threading.Event()
+
+        def tick():
+            while not stop.wait(every_s):
+                self.draw()
+
+        ticker = threading.Thread(target=tick, name="brdffit-progress", daemon=True)
+        ticker.start()
+        try:
+            yield self
+        finally:
+            stop.set()
+            ticker.join()
 
     def say(self, text: str) -> None:
         """One line of its own (a wait before the first count: reaching a scheduler)."""
         if self.enabled:
-            self.stream.write(text + "\n")
-            self.stream.flush()
+            with self._lock:
+                self.stream.write(text + "\n")
+                self.stream.flush()
 
     def finish(self) -> None:
         """The last line: in a log (not a TTY) the count where the batch ended, done or
         interrupted (an interrupted one printed none since the last 30 s)."""
         if not self.enabled:
             return
-        if self.tty:
-            self.stream.write("\n")
-        elif self._last_counts != self._counts():
-            self.stream.write(self.line() + "\n")
-        self.stream.flush()
+        with self._lock:
+            if self.tty:
+                self.stream.write("\n")
+            elif self._last_counts != self._counts():
+                self.stream.write(self.line() + "\n")
+            self.stream.flush()
